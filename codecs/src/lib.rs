@@ -1,0 +1,23 @@
+//! Motion-capture clips and the codecs that compress them.
+//!
+//! This crate holds everything that works on motion data and knows nothing of studies:
+//! - the clip model ([`Skeleton`], [`Clip`]) with readers and writers for Acclaim ASF/AMC and BVH,
+//! - forward kinematics ([`fk`]) in `f64`,
+//! - the body-part and hierarchy map the perceptual codecs weight channels by ([`bodymap`]),
+//! - a procedurally generated walking figure for demos and tests ([`synth`]),
+//! - (codec issue) wavelets, the seeds' codecs, the bitstream container and error metrics.
+//!
+//! ```
+//! let clip = codecs::synth::walking_clip(&codecs::synth::WalkParams::default());
+//! let positions = codecs::fk::positions(&clip);
+//! assert_eq!(positions.frames(), clip.frames());
+//! ```
+
+pub mod clip;
+pub mod error;
+
+pub use clip::{
+    Axis, BodyPart, Channel, ChannelKind, Clip, ClipError, Joint, Rest, Skeleton, SkeletonFormat,
+    Units,
+};
+pub use error::{Limits, ParseError};

@@ -1,0 +1,39 @@
+//! The `study` command: a thin layer that parses arguments and wires the library crates.
+//!
+//! Each command group lives in its own module with an `Args` type and a `run` function; this
+//! file only dispatches.
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+mod clip_cmd;
+
+/// Perceptual user studies of motion-capture compression.
+#[derive(Debug, Parser)]
+#[command(name = "study", version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Inspect, convert and evaluate motion clips (ASF/AMC, BVH).
+    #[command(subcommand)]
+    Clip(clip_cmd::ClipCommand),
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Clip(cmd) => clip_cmd::run(cmd),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(err) => {
+            eprintln!("error: {err:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
