@@ -385,6 +385,19 @@ impl Clip {
         Ok(Clip { skeleton, frame_rate_hz, channels, frames, data })
     }
 
+    /// Builds a clip whose matrix was sized from `skeleton.channel_layout()` by this crate.
+    pub(crate) fn from_valid_parts(
+        skeleton: Skeleton,
+        frame_rate_hz: f64,
+        frames: usize,
+        data: Vec<f64>,
+    ) -> Clip {
+        let channels = skeleton.channel_layout();
+        debug_assert_eq!(channels.len() * frames, data.len());
+        debug_assert!(frame_rate_hz.is_finite() && frame_rate_hz > 0.0);
+        Clip { skeleton, frame_rate_hz, channels, frames, data }
+    }
+
     /// Number of frames.
     pub fn frames(&self) -> usize {
         self.frames

@@ -8,12 +8,12 @@ use std::path::PathBuf;
 #[non_exhaustive]
 pub enum ParseError {
     /// The file could not be opened or read.
-    #[error("{path}: cannot read: {source}")]
+    #[error("{path}: cannot read: {err}")]
     Io {
         /// The file.
         path: PathBuf,
         /// The OS error.
-        source: std::io::Error,
+        err: std::io::Error,
     },
     /// A value is not a number (or not a finite one).
     #[error("{path}:{line}: {what}: `{text}` is not a finite number")]
@@ -141,4 +141,26 @@ impl Default for Limits {
             max_values: 200_000_000,
         }
     }
+}
+
+/// Why a clip could not be written.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum WriteError {
+    /// The file could not be created or written.
+    #[error("{path}: cannot write: {err}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The OS error.
+        err: std::io::Error,
+    },
+    /// The clip cannot be expressed in the requested format.
+    #[error("{path}: {reason}")]
+    Unsupported {
+        /// The file.
+        path: PathBuf,
+        /// Why not.
+        reason: String,
+    },
 }

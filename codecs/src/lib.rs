@@ -13,11 +13,22 @@
 //! assert_eq!(positions.frames(), clip.frames());
 //! ```
 
+pub mod amc;
+pub mod asf;
+pub mod bodymap;
+pub mod bvh;
 pub mod clip;
+pub mod convert;
+pub mod data;
 pub mod error;
+pub mod fk;
+pub mod io;
+pub mod math;
+pub mod synth;
+mod text;
 
 pub use clip::{
     Axis, BodyPart, Channel, ChannelKind, Clip, ClipError, Joint, Rest, Skeleton, SkeletonFormat,
     Units,
 };
-pub use error::{Limits, ParseError};
+pub use error::{Limits, ParseError, WriteError};

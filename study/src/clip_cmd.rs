@@ -1,10 +1,287 @@
-//! `study clip ...`: inspect, convert and evaluate motion clips.
+//! `study clip ...`: inspect, convert and export motion clips.
+
+use std::fmt::Write as _;
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use codecs::{Clip, SkeletonFormat, fk, io, synth};
+
+/// Where a clip comes from: `--asf A --amc M`, one `.bvh`, or the built-in demo walk.
+#[derive(Debug, Clone, clap::Args)]
+pub struct ClipInput {
+    /// Motion files: `.bvh` files, or `.amc` files with one `.asf` among them or in `--asf`.
+    pub files: Vec<PathBuf>,
+    /// ASF skeleton for AMC motion.
+    #[arg(long, value_name = "SKEL")]
+    pub asf: Option<PathBuf>,
+    /// AMC motion (needs `--asf`).
+    #[arg(long, value_name = "MOTION")]
+    pub amc: Vec<PathBuf>,
+    /// Use the built-in generated walk instead of files.
+    #[arg(long)]
+    pub demo: bool,
+    /// Length unit of BVH files in cm, overriding the inferred one (BVH states no unit).
+    #[arg(long, value_name = "CM")]
+    pub bvh_unit_cm: Option<f64>,
+}
+
+/// A loaded clip and the name to show for it.
+pub struct Loaded {
+    /// Display name (file or `demo-walk`).
+    pub name: String,
+    /// The clip.
+    pub clip: Clip,
+}
+
+impl ClipInput {
+    /// Loads every clip the arguments name.
+    ///
+    /// # Errors
+    /// When a file cannot be read or the arguments do not name a clip.
+    pub fn load(&self) -> Result<Vec<Loaded>> {
+        let mut out = Vec::new();
+        if self.demo {
+            out.push(Loaded {
+                name: "demo-walk".into(),
+                clip: synth::walking_clip(&synth::WalkParams::default()),
+            });
+        }
+        let ext = |p: &Path, e: &str| p.extension().is_some_and(|x| x.eq_ignore_ascii_case(e));
+        let mut asf = self.asf.clone();
+        let mut motions: Vec<PathBuf> = self.amc.clone();
+        for f in &self.files {
+            if ext(f, "asf") {
+                if asf.is_some() {
+                    bail!("more than one ASF skeleton given ({})", f.display());
+                }
+                asf = Some(f.clone());
+            } else {
+                motions.push(f.clone());
+            }
+        }
+        for m in &motions {
+            let clip = if ext(m, "bvh") {
+                let mut clip = io::read_clip(None, m)?;
+                if let Some(cm) = self.bvh_unit_cm {
+                    if !(cm.is_finite() && cm > 0.0) {
+                        bail!("--bvh-unit-cm must be a positive number of centimetres");
+                    }
+                    clip.skeleton.units.cm_per_unit = cm;
+                    clip.skeleton.units.declared = true;
+                }
+                clip
+            } else {
+                io::read_clip(asf.as_deref(), m)?
+            };
+            out.push(Loaded { name: m.display().to_string(), clip });
+        }
+        if out.is_empty() {
+            bail!("no clip given: pass a .bvh file, --asf SKEL --amc MOTION, or --demo");
+        }
+        Ok(out)
+    }
+
+    /// Loads exactly one clip.
+    ///
+    /// # Errors
+    /// When the arguments name none or several.
+    pub fn load_one(&self) -> Result<Loaded> {
+        let mut all = self.load()?;
+        if all.len() != 1 {
+            bail!("expected one clip, the arguments name {}", all.len());
+        }
+        Ok(all.remove(0))
+    }
+}
 
 /// Clip subcommands.
 #[derive(Debug, clap::Subcommand)]
-pub enum ClipCommand {}
+pub enum ClipCommand {
+    /// Joints, channels, frames, rate, units, bone lengths, ranges and warnings.
+    Info(ClipInput),
+    /// World positions of every joint (FK) as CSV `frame,joint,x,y,z` or NumPy `.npy`.
+    Positions {
+        #[command(flatten)]
+        input: ClipInput,
+        /// Write CSV here (default: standard output).
+        #[arg(long, value_name = "OUT", conflicts_with = "npy")]
+        csv: Option<PathBuf>,
+        /// Write a float64 array of shape (frames, joints, 3) here; joint names go to
+        /// `OUT.joints.txt`.
+        #[arg(long, value_name = "OUT")]
+        npy: Option<PathBuf>,
+        /// Positions in centimetres instead of file units.
+        #[arg(long)]
+        cm: bool,
+    },
+    /// Convert between formats: ASF/AMC → BVH, or rewrite in the same format.
+    Convert {
+        #[command(flatten)]
+        input: ClipInput,
+        /// Output motion file (`.bvh` or `.amc`).
+        #[arg(short, long, value_name = "OUT")]
+        output: PathBuf,
+        /// Output skeleton for `.amc` output.
+        #[arg(long, value_name = "SKEL")]
+        out_asf: Option<PathBuf>,
+    },
+}
 
 /// Runs a clip subcommand.
-pub fn run(cmd: ClipCommand) -> anyhow::Result<()> {
-    match cmd {}
+///
+/// # Errors
+/// Any read, write or argument error, with the file named.
+pub fn run(cmd: ClipCommand) -> Result<()> {
+    match cmd {
+        ClipCommand::Info(input) => {
+            let mut stdout = std::io::stdout().lock();
+            for loaded in input.load()? {
+                stdout.write_all(info_text(&loaded.name, &loaded.clip).as_bytes())?;
+            }
+            Ok(())
+        }
+        ClipCommand::Positions { input, csv, npy, cm } => {
+            let loaded = input.load_one()?;
+            let pos = fk::positions(&loaded.clip);
+            let scale = if cm { pos.cm_per_unit } else { 1.0 };
+            if let Some(path) = npy {
+                write_npy(&path, &pos, scale)?;
+                let names = path.with_extension("joints.txt");
+                std::fs::write(&names, pos.names.join("\n") + "\n")
+                    .with_context(|| format!("writing {}", names.display()))?;
+                return Ok(());
+            }
+            let text = positions_csv(&pos, scale);
+            match csv {
+                Some(path) => std::fs::write(&path, text)
+                    .with_context(|| format!("writing {}", path.display()))?,
+                None => std::io::stdout().lock().write_all(text.as_bytes())?,
+            }
+            Ok(())
+        }
+        ClipCommand::Convert { input, output, out_asf } => {
+            let loaded = input.load_one()?;
+            let amc_out = output.extension().is_some_and(|e| e.eq_ignore_ascii_case("amc"));
+            if amc_out && out_asf.is_none() && loaded.clip.skeleton.format == SkeletonFormat::Asf {
+                bail!("AMC output needs --out-asf for its skeleton");
+            }
+            io::write_clip(&loaded.clip, &output, out_asf.as_deref())?;
+            eprintln!("wrote {}", output.display());
+            Ok(())
+        }
+    }
+}
+
+fn positions_csv(pos: &fk::Positions, scale: f64) -> String {
+    let mut s = String::with_capacity(pos.frames() * pos.joint_count() * 48);
+    s.push_str("frame,joint,x,y,z\n");
+    for f in 0..pos.frames() {
+        for (j, name) in pos.names.iter().enumerate() {
+            let p = pos.point(f, j);
+            let _ = writeln!(s, "{f},{name},{},{},{}", p[0] * scale, p[1] * scale, p[2] * scale);
+        }
+    }
+    s
+}
+
+/// Writes a NumPy v1.0 `.npy` file of little-endian float64, shape (frames, joints, 3).
+fn write_npy(path: &Path, pos: &fk::Positions, scale: f64) -> Result<()> {
+    let mut header = format!(
+        "{{'descr': '<f8', 'fortran_order': False, 'shape': ({}, {}, 3), }}",
+        pos.frames(),
+        pos.joint_count()
+    );
+    // Magic (6) + version (2) + header length (2) + header, padded with spaces to a multiple
+    // of 64 and ended by a newline.
+    let total = 10 + header.len() + 1;
+    header.push_str(&" ".repeat((64 - total % 64) % 64));
+    header.push('\n');
+    let mut bytes = Vec::with_capacity(10 + header.len() + pos.frames() * pos.joint_count() * 24);
+    bytes.extend_from_slice(b"\x93NUMPY\x01\x00");
+    bytes.extend_from_slice(&u16::try_from(header.len())?.to_le_bytes());
+    bytes.extend_from_slice(header.as_bytes());
+    for f in 0..pos.frames() {
+        for p in pos.frame(f) {
+            for v in p {
+                bytes.extend_from_slice(&(v * scale).to_le_bytes());
+            }
+        }
+    }
+    std::fs::write(path, bytes).with_context(|| format!("writing {}", path.display()))
+}
+
+/// The report of `study clip info` for one clip.
+pub fn info_text(name: &str, clip: &Clip) -> String {
+    let sk = &clip.skeleton;
+    let u = sk.units;
+    let mut s = String::new();
+    let fmt = match sk.format {
+        SkeletonFormat::Asf => "ASF/AMC",
+        SkeletonFormat::Bvh => "BVH",
+    };
+    let _ = writeln!(s, "{name}");
+    let _ = writeln!(s, "  format      {fmt} (skeleton `{}`)", sk.name);
+    let points = sk.joints.len();
+    let end_sites = sk.joints.iter().filter(|j| j.end_site).count();
+    let _ = writeln!(s, "  joints      {points} points ({end_sites} end sites)");
+    let _ = writeln!(s, "  DOF         {} channels", clip.channel_count());
+    let _ = writeln!(s, "  frames      {}", clip.frames());
+    let _ = writeln!(s, "  frame rate  {:.4} Hz", clip.frame_rate_hz);
+    let _ = writeln!(s, "  duration    {:.3} s", clip.duration_s());
+    let _ = writeln!(
+        s,
+        "  units       1 unit = {:.4} cm ({}), angles in degrees",
+        u.cm_per_unit,
+        if u.declared { "declared by the file" } else { "inferred from the skeleton's height" }
+    );
+    let _ = writeln!(s, "  bones       name  part  depth  length_cm");
+    for j in sk.joints.iter().filter(|j| j.parent.is_some()) {
+        let _ = writeln!(
+            s,
+            "    {:<14} {:<10} {:>2} {:>9.3}",
+            j.name,
+            j.body_part.name(),
+            j.chain_depth,
+            j.rest.length() * u.cm_per_unit
+        );
+    }
+    let _ = writeln!(s, "  channels    name  min  max");
+    let mut warnings = Vec::new();
+    for c in 0..clip.channel_count() {
+        let v = clip.channel(c);
+        let (lo, hi) =
+            v.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| (l.min(x), h.max(x)));
+        let cname = clip.channel_name(c);
+        let _ = writeln!(s, "    {cname:<22} {lo:>11.4} {hi:>11.4}");
+        let ch = clip.channels()[c];
+        if clip.frames() > 1 && lo == hi {
+            warnings.push(format!("{cname} is constant ({lo})"));
+        }
+        if ch.kind.is_rotation() {
+            let wraps = v.windows(2).filter(|w| (w[1] - w[0]).abs() > 180.0).count();
+            if wraps > 0 {
+                warnings.push(format!("{cname} jumps by more than 180° between frames {wraps} times (Euler wrap)"));
+            }
+        }
+        let joint = &sk.joints[ch.joint];
+        let k = joint.dofs.iter().position(|d| *d == ch.kind);
+        if let Some((min, max)) = k.and_then(|k| joint.limits.get(k)) {
+            let out = v.iter().filter(|&&x| x < *min || x > *max).count();
+            if out > 0 {
+                warnings.push(format!(
+                    "{cname} is outside its ASF limits ({min}, {max}) in {out} frames"
+                ));
+            }
+        }
+    }
+    if warnings.is_empty() {
+        let _ = writeln!(s, "  warnings    none");
+    } else {
+        let _ = writeln!(s, "  warnings    {}", warnings.len());
+        for w in warnings {
+            let _ = writeln!(s, "    - {w}");
+        }
+    }
+    s
 }

@@ -1,0 +1,222 @@
+//! Acclaim AMC motion files.
+//!
+//! An AMC file lists, per frame, a frame number and one line per bone with that bone's dof
+//! values in the ASF `dof` order. Bones without dofs need no line. Frames must be numbered
+//! consecutively; every bone with dofs must appear once per frame. `:RADIANS` values are
+//! converted to degrees. AMC carries no frame rate; CMU captures at 120 Hz.
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use crate::clip::{Clip, Skeleton, SkeletonFormat};
+use crate::error::{Limits, ParseError, WriteError};
+use crate::text::{fmt_num, lines, number, read_text, syntax};
+
+/// The frame rate of CMU AMC files, which do not state one.
+pub const CMU_FRAME_RATE_HZ: f64 = 120.0;
+
+/// Reads an AMC file for `skeleton` at [`CMU_FRAME_RATE_HZ`] with the default limits.
+///
+/// # Errors
+/// A [`ParseError`] naming the file, line and reason.
+pub fn read_amc(path: &Path, skeleton: &Skeleton) -> Result<Clip, ParseError> {
+    read_amc_with(path, skeleton, CMU_FRAME_RATE_HZ, &Limits::default())
+}
+
+/// Reads an AMC file with an explicit frame rate and limits.
+///
+/// # Errors
+/// A [`ParseError`] naming the file, line and reason.
+pub fn read_amc_with(
+    path: &Path,
+    skeleton: &Skeleton,
+    frame_rate_hz: f64,
+    limits: &Limits,
+) -> Result<Clip, ParseError> {
+    let text = read_text(path, limits)?;
+    parse_amc(&text, path, skeleton, frame_rate_hz, limits)
+}
+
+/// Parses AMC text for `skeleton`. `path` is used only in error messages.
+///
+/// # Errors
+/// A [`ParseError`] naming the file, line and reason: unknown bone, wrong number of values,
+/// non-numeric value, non-consecutive frame numbers, a frame missing a bone, no frames.
+pub fn parse_amc(
+    text: &str,
+    path: &Path,
+    skeleton: &Skeleton,
+    frame_rate_hz: f64,
+    limits: &Limits,
+) -> Result<Clip, ParseError> {
+    if skeleton.format != SkeletonFormat::Asf {
+        return Err(syntax(path, 0, "an AMC file needs an ASF skeleton"));
+    }
+    if !(frame_rate_hz.is_finite() && frame_rate_hz > 0.0) {
+        return Err(syntax(path, 0, format!("frame rate {frame_rate_hz} Hz is not positive")));
+    }
+    // Offset of each joint's first channel in a frame.
+    let mut offsets = Vec::with_capacity(skeleton.joints.len());
+    let mut n = 0;
+    for j in &skeleton.joints {
+        offsets.push(n);
+        n += j.dofs.len();
+    }
+    let mut radians = false;
+    let mut values: Vec<f64> = Vec::new(); // frame-major while reading
+    let mut frame = vec![0.0; n];
+    let mut seen = vec![false; skeleton.joints.len()];
+    let mut frames = 0usize;
+    let mut frame_number: Option<i64> = None;
+    let mut frame_line = 0;
+    let mut last_line = 0;
+
+    let finish = |seen: &mut Vec<bool>,
+                  frame: &[f64],
+                  values: &mut Vec<f64>,
+                  frames: usize,
+                  line: usize|
+     -> Result<(), ParseError> {
+        for (j, joint) in skeleton.joints.iter().enumerate() {
+            if !joint.dofs.is_empty() && !seen[j] {
+                return Err(ParseError::MissingBone {
+                    path: path.to_path_buf(),
+                    line,
+                    frame: frames,
+                    name: joint.name.clone(),
+                });
+            }
+        }
+        values.extend_from_slice(frame);
+        seen.iter_mut().for_each(|s| *s = false);
+        Ok(())
+    };
+
+    for (ln, raw) in lines(text) {
+        last_line = ln;
+        let line = raw.trim();
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        if let Some(kw) = line.strip_prefix(':') {
+            if frame_number.is_some() {
+                return Err(syntax(path, ln, "header keyword after the first frame"));
+            }
+            match kw.trim().to_ascii_uppercase().as_str() {
+                "FULLY-SPECIFIED" => {}
+                "DEGREES" => radians = false,
+                "RADIANS" => radians = true,
+                other => return Err(syntax(path, ln, format!("unknown header `:{other}`"))),
+            }
+            continue;
+        }
+        let mut toks = line.split_whitespace();
+        let first = toks.next().unwrap_or_default();
+        let rest: Vec<&str> = toks.collect();
+        if rest.is_empty() && first.bytes().all(|b| b.is_ascii_digit()) {
+            let num: i64 = first.parse().map_err(|_| syntax(path, ln, "frame number too large"))?;
+            if let Some(prev) = frame_number {
+                finish(&mut seen, &frame, &mut values, frames, ln)?;
+                if num != prev + 1 {
+                    return Err(ParseError::FrameCount {
+                        path: path.to_path_buf(),
+                        line: ln,
+                        detail: format!("frame {num} follows frame {prev}"),
+                    });
+                }
+            }
+            frames += 1;
+            if frames > limits.max_frames || frames.saturating_mul(n) > limits.max_values {
+                return Err(ParseError::TooLarge {
+                    path: path.to_path_buf(),
+                    line: ln,
+                    what: "number of frames".into(),
+                    value: frames as u64,
+                    limit: limits.max_frames.min(limits.max_values / n.max(1)) as u64,
+                });
+            }
+            frame_number = Some(num);
+            frame_line = ln;
+            continue;
+        }
+        if frame_number.is_none() {
+            return Err(syntax(path, ln, format!("bone line `{first}` before the first frame number")));
+        }
+        let Some(j) = skeleton.joint_index(first) else {
+            return Err(ParseError::UnknownBone { path: path.to_path_buf(), line: ln, name: first.into() });
+        };
+        let joint = &skeleton.joints[j];
+        if seen[j] {
+            return Err(syntax(path, ln, format!("bone {first} appears twice in frame {frames}")));
+        }
+        if rest.len() != joint.dofs.len() {
+            return Err(ParseError::WrongCount {
+                path: path.to_path_buf(),
+                line: ln,
+                what: format!("bone {first}"),
+                expected: joint.dofs.len(),
+                found: rest.len(),
+            });
+        }
+        let what = format!("bone {first}");
+        for (k, tok) in rest.iter().enumerate() {
+            let v = number(path, ln, &what, tok)?;
+            frame[offsets[j] + k] =
+                if radians && joint.dofs[k].is_rotation() { v.to_degrees() } else { v };
+        }
+        seen[j] = true;
+    }
+    if frame_number.is_none() {
+        return Err(ParseError::Truncated {
+            path: path.to_path_buf(),
+            line: last_line,
+            expected: "at least one frame".into(),
+        });
+    }
+    finish(&mut seen, &frame, &mut values, frames, last_line.max(frame_line))?;
+    // frame-major -> channel-major
+    let mut data = vec![0.0; values.len()];
+    for f in 0..frames {
+        for c in 0..n {
+            data[c * frames + f] = values[f * n + c];
+        }
+    }
+    Clip::new(skeleton.clone(), frame_rate_hz, frames, data)
+        .map_err(|e| syntax(path, last_line, e.to_string()))
+}
+
+/// Writes a clip as AMC text (`:FULLY-SPECIFIED`, `:DEGREES`, frames numbered from 1, bones in
+/// skeleton order, shortest exact number format).
+///
+/// # Errors
+/// [`WriteError::Unsupported`] when the clip's skeleton is not an ASF skeleton.
+pub fn write_amc(clip: &Clip, path: &Path) -> Result<String, WriteError> {
+    let sk = &clip.skeleton;
+    if sk.format != SkeletonFormat::Asf {
+        return Err(WriteError::Unsupported {
+            path: path.to_path_buf(),
+            reason: "AMC needs an ASF skeleton; write BVH or convert the clip".into(),
+        });
+    }
+    let mut s = String::with_capacity(clip.frames() * clip.channel_count() * 10);
+    let _ = writeln!(s, "# AMC written by study {}", env!("CARGO_PKG_VERSION"));
+    let _ = writeln!(s, ":FULLY-SPECIFIED");
+    let _ = writeln!(s, ":DEGREES");
+    for f in 0..clip.frames() {
+        let _ = writeln!(s, "{}", f + 1);
+        let mut c = 0;
+        for j in &sk.joints {
+            if j.dofs.is_empty() {
+                continue;
+            }
+            s.push_str(&j.name);
+            for _ in &j.dofs {
+                s.push(' ');
+                s.push_str(&fmt_num(clip.value(c, f)));
+                c += 1;
+            }
+            s.push('\n');
+        }
+    }
+    Ok(s)
+}

@@ -1,0 +1,77 @@
+//! Reading and writing clips by file name: `.asf` + `.amc`, or one `.bvh`.
+
+use std::path::Path;
+
+use crate::clip::{Clip, SkeletonFormat};
+use crate::error::{Limits, ParseError, WriteError};
+use crate::{amc, asf, bvh, convert, text};
+
+fn has_ext(p: &Path, e: &str) -> bool {
+    p.extension().is_some_and(|x| x.eq_ignore_ascii_case(e))
+}
+
+/// Reads a clip: an AMC motion with its ASF skeleton, or a BVH file (`asf` must then be
+/// `None`). AMC clips get CMU's 120 Hz.
+///
+/// # Errors
+/// A [`ParseError`] naming the file, line and reason; also when the pair of files does not
+/// make sense (an AMC without an ASF, a BVH with one, an unknown extension).
+pub fn read_clip(asf_path: Option<&Path>, motion: &Path) -> Result<Clip, ParseError> {
+    let limits = Limits::default();
+    if has_ext(motion, "bvh") {
+        if let Some(a) = asf_path {
+            return Err(text::syntax(a, 0, "a BVH file carries its own skeleton; give no ASF"));
+        }
+        return bvh::read_bvh_with(motion, &limits);
+    }
+    if has_ext(motion, "amc") {
+        let Some(a) = asf_path else {
+            return Err(text::syntax(motion, 0, "an AMC motion needs its ASF skeleton (--asf)"));
+        };
+        let skeleton = asf::read_asf_with(a, &limits)?;
+        return amc::read_amc_with(motion, &skeleton, amc::CMU_FRAME_RATE_HZ, &limits);
+    }
+    Err(text::syntax(motion, 0, "unknown motion file type: expected .amc or .bvh"))
+}
+
+fn write_file(path: &Path, contents: &str) -> Result<(), WriteError> {
+    let io = |err| WriteError::Io { path: path.to_path_buf(), err };
+    // Write beside the target and rename, so a crash never leaves half a clip.
+    let tmp = path.with_extension(format!(
+        "{}.tmp",
+        path.extension().map(|e| e.to_string_lossy().into_owned()).unwrap_or_default()
+    ));
+    std::fs::write(&tmp, contents).map_err(io)?;
+    std::fs::rename(&tmp, path).map_err(io)
+}
+
+/// Writes a clip by the motion file's extension: `.bvh` (an ASF clip is converted), or `.amc`
+/// (with its skeleton written to `asf_path` when given).
+///
+/// # Errors
+/// [`WriteError`] on I/O failure or when the clip cannot be expressed in that format (a BVH
+/// clip as AMC).
+pub fn write_clip(clip: &Clip, motion: &Path, asf_path: Option<&Path>) -> Result<(), WriteError> {
+    if has_ext(motion, "bvh") {
+        let bvh_clip = if clip.skeleton.format == SkeletonFormat::Asf {
+            convert::asf_to_bvh(clip).map_err(|e| WriteError::Unsupported {
+                path: motion.to_path_buf(),
+                reason: e.to_string(),
+            })?
+        } else {
+            clip.clone()
+        };
+        return write_file(motion, &bvh::write_bvh(&bvh_clip, motion)?);
+    }
+    if has_ext(motion, "amc") {
+        let text = amc::write_amc(clip, motion)?;
+        if let Some(a) = asf_path {
+            write_file(a, &asf::write_asf(&clip.skeleton, a)?)?;
+        }
+        return write_file(motion, &text);
+    }
+    Err(WriteError::Unsupported {
+        path: motion.to_path_buf(),
+        reason: "unknown motion file type: expected .amc or .bvh".into(),
+    })
+}
