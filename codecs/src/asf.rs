@@ -384,7 +384,7 @@ pub fn parse_asf(text: &str, path: &Path, limits: &Limits) -> Result<Skeleton, P
             b.line,
         ));
     }
-    let joints = order_by_hierarchy(path, root, drafts, &hierarchy)?;
+    let joints = order_by_hierarchy(path, root, &drafts, &hierarchy)?;
     let mut skeleton = Skeleton {
         name,
         format: SkeletonFormat::Asf,
@@ -418,7 +418,7 @@ fn push_limits(path: &Path, ln: usize, text: &str, out: &mut Vec<f64>) -> Result
 fn order_by_hierarchy(
     path: &Path,
     root: Joint,
-    drafts: Vec<(Joint, usize)>,
+    drafts: &[(Joint, usize)],
     hierarchy: &[(usize, String, Vec<String>)],
 ) -> Result<Vec<Joint>, ParseError> {
     // parent name per bone, from the hierarchy section

@@ -188,6 +188,7 @@ fn parse_joint(
 ///
 /// # Errors
 /// A [`ParseError`] naming the file, line and reason.
+#[expect(clippy::too_many_lines, reason = "hierarchy, header and frames read in one pass")]
 pub fn parse_bvh(text: &str, path: &Path, limits: &Limits) -> Result<Clip, ParseError> {
     // Split into hierarchy tokens (up to MOTION) and motion lines.
     let mut toks = Vec::new();
@@ -242,7 +243,7 @@ pub fn parse_bvh(text: &str, path: &Path, limits: &Limits) -> Result<Clip, Parse
     }
     // Limits before allocation: the declared count against the limits and the bytes left
     // (every value needs at least two bytes: a digit and a separator).
-    let values = declared.checked_mul(n).unwrap_or(usize::MAX);
+    let values = declared.saturating_mul(n);
     let bytes_left = text.len();
     if declared > limits.max_frames || values > limits.max_values || values / 2 > bytes_left {
         return Err(ParseError::TooLarge {
