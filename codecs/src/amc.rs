@@ -54,7 +54,11 @@ pub fn parse_amc(
         return Err(syntax(path, 0, "an AMC file needs an ASF skeleton"));
     }
     if !(frame_rate_hz.is_finite() && frame_rate_hz > 0.0) {
-        return Err(syntax(path, 0, format!("frame rate {frame_rate_hz} Hz is not positive")));
+        return Err(syntax(
+            path,
+            0,
+            format!("frame rate {frame_rate_hz} Hz is not positive"),
+        ));
     }
     // Offset of each joint's first channel in a frame.
     let mut offsets = Vec::with_capacity(skeleton.joints.len());
@@ -115,7 +119,9 @@ pub fn parse_amc(
         let first = toks.next().unwrap_or_default();
         let rest: Vec<&str> = toks.collect();
         if rest.is_empty() && first.bytes().all(|b| b.is_ascii_digit()) {
-            let num: i64 = first.parse().map_err(|_| syntax(path, ln, "frame number too large"))?;
+            let num: i64 = first
+                .parse()
+                .map_err(|_| syntax(path, ln, "frame number too large"))?;
             if let Some(prev) = frame_number {
                 finish(&mut seen, &frame, &mut values, frames, ln)?;
                 if num != prev + 1 {
@@ -141,14 +147,26 @@ pub fn parse_amc(
             continue;
         }
         if frame_number.is_none() {
-            return Err(syntax(path, ln, format!("bone line `{first}` before the first frame number")));
+            return Err(syntax(
+                path,
+                ln,
+                format!("bone line `{first}` before the first frame number"),
+            ));
         }
         let Some(j) = skeleton.joint_index(first) else {
-            return Err(ParseError::UnknownBone { path: path.to_path_buf(), line: ln, name: first.into() });
+            return Err(ParseError::UnknownBone {
+                path: path.to_path_buf(),
+                line: ln,
+                name: first.into(),
+            });
         };
         let joint = &skeleton.joints[j];
         if seen[j] {
-            return Err(syntax(path, ln, format!("bone {first} appears twice in frame {frames}")));
+            return Err(syntax(
+                path,
+                ln,
+                format!("bone {first} appears twice in frame {frames}"),
+            ));
         }
         if rest.len() != joint.dofs.len() {
             return Err(ParseError::WrongCount {
@@ -162,8 +180,11 @@ pub fn parse_amc(
         let what = format!("bone {first}");
         for (k, tok) in rest.iter().enumerate() {
             let v = number(path, ln, &what, tok)?;
-            frame[offsets[j] + k] =
-                if radians && joint.dofs[k].is_rotation() { v.to_degrees() } else { v };
+            frame[offsets[j] + k] = if radians && joint.dofs[k].is_rotation() {
+                v.to_degrees()
+            } else {
+                v
+            };
         }
         seen[j] = true;
     }
@@ -174,7 +195,13 @@ pub fn parse_amc(
             expected: "at least one frame".into(),
         });
     }
-    finish(&mut seen, &frame, &mut values, frames, last_line.max(frame_line))?;
+    finish(
+        &mut seen,
+        &frame,
+        &mut values,
+        frames,
+        last_line.max(frame_line),
+    )?;
     // frame-major -> channel-major
     let mut data = vec![0.0; values.len()];
     for f in 0..frames {

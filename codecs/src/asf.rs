@@ -61,9 +61,17 @@ struct BoneDraft {
 
 fn axis_order(path: &Path, line: usize, tok: &str) -> Result<[Axis; 3], ParseError> {
     let axes: Vec<Axis> = tok.chars().filter_map(Axis::from_letter).collect();
-    if tok.len() != 3 || axes.len() != 3 || axes[0] == axes[1] || axes[1] == axes[2] || axes[0] == axes[2]
+    if tok.len() != 3
+        || axes.len() != 3
+        || axes[0] == axes[1]
+        || axes[1] == axes[2]
+        || axes[0] == axes[2]
     {
-        return Err(syntax(path, line, format!("`{tok}` is not an axis order such as XYZ")));
+        return Err(syntax(
+            path,
+            line,
+            format!("`{tok}` is not an axis order such as XYZ"),
+        ));
     }
     Ok([axes[0], axes[1], axes[2]])
 }
@@ -76,7 +84,11 @@ fn channel(path: &Path, line: usize, tok: &str) -> Result<ChannelKind, ParseErro
     match (kind, axis, cs.next()) {
         (Some('r'), Some(a), None) => Ok(ChannelKind::Rotation(a)),
         (Some('t'), Some(a), None) => Ok(ChannelKind::Translation(a)),
-        _ => Err(ParseError::UnknownChannel { path: path.to_path_buf(), line, name: tok.into() }),
+        _ => Err(ParseError::UnknownChannel {
+            path: path.to_path_buf(),
+            line,
+            name: tok.into(),
+        }),
     }
 }
 
@@ -102,7 +114,10 @@ fn limit_pairs(
 ///
 /// # Errors
 /// A [`ParseError`] naming the file, line and reason.
-#[expect(clippy::too_many_lines, reason = "one state machine over the file's sections")]
+#[expect(
+    clippy::too_many_lines,
+    reason = "one state machine over the file's sections"
+)]
 pub fn parse_asf(text: &str, path: &Path, limits: &Limits) -> Result<Skeleton, ParseError> {
     let mut section = Section::None;
     let mut name = String::new();
@@ -215,12 +230,19 @@ pub fn parse_asf(text: &str, path: &Path, limits: &Limits) -> Result<Skeleton, P
                             limit: limits.max_joints as u64,
                         });
                     }
-                    current = Some(BoneDraft { line: ln, ..BoneDraft::default() });
+                    current = Some(BoneDraft {
+                        line: ln,
+                        ..BoneDraft::default()
+                    });
                     in_limits = false;
                     continue;
                 }
                 let Some(bone) = current.as_mut() else {
-                    return Err(syntax(path, ln, format!("`{}` outside a begin/end block", toks[0])));
+                    return Err(syntax(
+                        path,
+                        ln,
+                        format!("`{}` outside a begin/end block", toks[0]),
+                    ));
                 };
                 if in_limits && toks[0].starts_with('(') {
                     push_limits(path, ln, line, &mut bone.limit_values)?;
@@ -286,7 +308,9 @@ pub fn parse_asf(text: &str, path: &Path, limits: &Limits) -> Result<Skeleton, P
                             return Err(syntax(
                                 path,
                                 ln,
-                                format!("bone {bone_name}: only rx, ry, rz dofs are supported on bones"),
+                                format!(
+                                    "bone {bone_name}: only rx, ry, rz dofs are supported on bones"
+                                ),
                             ));
                         }
                         bone.dofs = dofs;
@@ -358,14 +382,19 @@ pub fn parse_asf(text: &str, path: &Path, limits: &Limits) -> Result<Skeleton, P
         let Some(bname) = b.name else {
             return Err(syntax(path, b.line, "bone block without a name"));
         };
-        let direction = b.direction.ok_or_else(|| {
-            syntax(path, b.line, format!("bone {bname} has no direction"))
-        })?;
-        let length =
-            b.length.ok_or_else(|| syntax(path, b.line, format!("bone {bname} has no length")))?;
+        let direction = b
+            .direction
+            .ok_or_else(|| syntax(path, b.line, format!("bone {bname} has no direction")))?;
+        let length = b
+            .length
+            .ok_or_else(|| syntax(path, b.line, format!("bone {bname} has no length")))?;
         let (axis, order) = b.axis.unwrap_or(([0.0; 3], [Axis::X, Axis::Y, Axis::Z]));
         if drafts.iter().any(|(j, _)| j.name == bname) || bname == "root" {
-            return Err(syntax(path, b.line, format!("bone {bname} is defined twice")));
+            return Err(syntax(
+                path,
+                b.line,
+                format!("bone {bname} is defined twice"),
+            ));
         }
         drafts.push((
             Joint {
@@ -375,7 +404,11 @@ pub fn parse_asf(text: &str, path: &Path, limits: &Limits) -> Result<Skeleton, P
                 dofs: b.dofs,
                 axis_deg: axis.map(to_deg),
                 axis_order: order,
-                limits: b.limits.into_iter().map(|(lo, hi)| (to_deg(lo), to_deg(hi))).collect(),
+                limits: b
+                    .limits
+                    .into_iter()
+                    .map(|(lo, hi)| (to_deg(lo), to_deg(hi)))
+                    .collect(),
                 id: b.id,
                 end_site: false,
                 body_part: BodyPart::Torso,
@@ -397,7 +430,10 @@ pub fn parse_asf(text: &str, path: &Path, limits: &Limits) -> Result<Skeleton, P
 }
 
 fn push_limits(path: &Path, ln: usize, text: &str, out: &mut Vec<f64>) -> Result<(), ParseError> {
-    let cleaned: String = text.chars().map(|c| if c == '(' || c == ')' { ' ' } else { c }).collect();
+    let cleaned: String = text
+        .chars()
+        .map(|c| if c == '(' || c == ')' { ' ' } else { c })
+        .collect();
     for tok in cleaned.split_whitespace() {
         // Limits may be unbounded (`inf`); values elsewhere must be finite.
         let v = match tok.to_ascii_lowercase().as_str() {
@@ -425,14 +461,26 @@ fn order_by_hierarchy(
     let mut parent_of: Vec<Option<String>> = vec![None; drafts.len()];
     for (ln, parent, children) in hierarchy {
         if parent != "root" && !drafts.iter().any(|(j, _)| &j.name == parent) {
-            return Err(ParseError::UnknownBone { path: path.to_path_buf(), line: *ln, name: parent.clone() });
+            return Err(ParseError::UnknownBone {
+                path: path.to_path_buf(),
+                line: *ln,
+                name: parent.clone(),
+            });
         }
         for child in children {
             let Some(k) = drafts.iter().position(|(j, _)| &j.name == child) else {
-                return Err(ParseError::UnknownBone { path: path.to_path_buf(), line: *ln, name: child.clone() });
+                return Err(ParseError::UnknownBone {
+                    path: path.to_path_buf(),
+                    line: *ln,
+                    name: child.clone(),
+                });
             };
             if parent_of[k].is_some() {
-                return Err(syntax(path, *ln, format!("bone {child} is given two parents")));
+                return Err(syntax(
+                    path,
+                    *ln,
+                    format!("bone {child} is given two parents"),
+                ));
             }
             parent_of[k] = Some(parent.clone());
         }
@@ -504,7 +552,11 @@ pub fn write_asf(skeleton: &Skeleton, path: &Path) -> Result<String, WriteError>
         }
     }
     let _ = writeln!(s, ":root");
-    let order: Vec<String> = root.dofs.iter().map(|d| d.asf_name().to_ascii_uppercase()).collect();
+    let order: Vec<String> = root
+        .dofs
+        .iter()
+        .map(|d| d.asf_name().to_ascii_uppercase())
+        .collect();
     let _ = writeln!(s, "  order {}", order.join(" "));
     let _ = writeln!(s, "  axis {}", axis_order_text(root.axis_order));
     let _ = writeln!(s, "  position {}", num3(root.rest.vector()));
@@ -520,13 +572,22 @@ pub fn write_asf(skeleton: &Skeleton, path: &Path) -> Result<String, WriteError>
             Rest::Bone { direction, length } => (*direction, *length),
             Rest::Offset(v) => {
                 let l = j.rest.length();
-                let d = if l > 0.0 { [v[0] / l, v[1] / l, v[2] / l] } else { [0.0; 3] };
+                let d = if l > 0.0 {
+                    [v[0] / l, v[1] / l, v[2] / l]
+                } else {
+                    [0.0; 3]
+                };
                 (d, l)
             }
         };
         let _ = writeln!(s, "    direction {}", num3(direction));
         let _ = writeln!(s, "    length {}", fmt_num(length));
-        let _ = writeln!(s, "    axis {} {}", num3(j.axis_deg), axis_order_text(j.axis_order));
+        let _ = writeln!(
+            s,
+            "    axis {} {}",
+            num3(j.axis_deg),
+            axis_order_text(j.axis_order)
+        );
         if !j.dofs.is_empty() {
             let dofs: Vec<String> = j.dofs.iter().map(|d| d.asf_name()).collect();
             let _ = writeln!(s, "    dof {}", dofs.join(" "));
@@ -540,8 +601,10 @@ pub fn write_asf(skeleton: &Skeleton, path: &Path) -> Result<String, WriteError>
     let _ = writeln!(s, ":hierarchy");
     let _ = writeln!(s, "  begin");
     for (i, j) in skeleton.joints.iter().enumerate() {
-        let children: Vec<&str> =
-            skeleton.children(i).map(|c| skeleton.joints[c].name.as_str()).collect();
+        let children: Vec<&str> = skeleton
+            .children(i)
+            .map(|c| skeleton.joints[c].name.as_str())
+            .collect();
         if !children.is_empty() {
             let _ = writeln!(s, "    {} {}", j.name, children.join(" "));
         }

@@ -13,16 +13,17 @@ use crate::clip::{BodyPart, Skeleton, Units};
 use crate::math::{Vec3, add};
 
 const LEG: &[&str] = &[
-    "hip", "upleg", "upperleg", "thigh", "femur", "knee", "leg", "tibia", "shin", "calf",
-    "ankle", "foot", "toe", "heel",
+    "hip", "upleg", "upperleg", "thigh", "femur", "knee", "leg", "tibia", "shin", "calf", "ankle",
+    "foot", "toe", "heel",
 ];
 const ARM: &[&str] = &[
     "clavicle", "collar", "shoulder", "scapula", "humerus", "arm", "elbow", "radius", "ulna",
     "wrist", "hand", "finger", "thumb", "index", "middle", "ring", "pinky",
 ];
 const HEAD: &[&str] = &["neck", "head", "skull", "jaw", "eye", "nose"];
-const TORSO: &[&str] =
-    &["hips", "pelvis", "root", "spine", "chest", "back", "thorax", "abdomen", "waist", "torso"];
+const TORSO: &[&str] = &[
+    "hips", "pelvis", "root", "spine", "chest", "back", "thorax", "abdomen", "waist", "torso",
+];
 
 #[derive(Clone, Copy, PartialEq)]
 enum Side {
@@ -68,10 +69,18 @@ pub fn part_from_name(name: &str) -> Option<BodyPart> {
         // "leg" never occur in arm names.
         let leg = has(&rest, LEG) && !has(&rest, &["arm", "hand", "finger", "thumb"]);
         if leg {
-            return Some(if side == Side::Left { BodyPart::LeftLeg } else { BodyPart::RightLeg });
+            return Some(if side == Side::Left {
+                BodyPart::LeftLeg
+            } else {
+                BodyPart::RightLeg
+            });
         }
         if has(&rest, ARM) {
-            return Some(if side == Side::Left { BodyPart::LeftArm } else { BodyPart::RightArm });
+            return Some(if side == Side::Left {
+                BodyPart::LeftArm
+            } else {
+                BodyPart::RightArm
+            });
         }
         if has(&rest, HEAD) {
             return Some(BodyPart::Head);
@@ -114,7 +123,10 @@ pub fn assign(skeleton: &mut Skeleton) {
         parts.push(part);
     }
     let parts: Vec<BodyPart> = if parts.iter().all(Option::is_some) {
-        parts.into_iter().map(|p| p.unwrap_or(BodyPart::Torso)).collect()
+        parts
+            .into_iter()
+            .map(|p| p.unwrap_or(BodyPart::Torso))
+            .collect()
     } else {
         by_topology(skeleton)
     };
@@ -159,7 +171,11 @@ fn by_topology(skeleton: &Skeleton) -> Vec<BodyPart> {
         let sub = subtree(skeleton, c);
         let m = mean_point(&pts, &sub);
         if m[1] < root_y {
-            let part = if m[0] >= pts[0][0] { BodyPart::LeftLeg } else { BodyPart::RightLeg };
+            let part = if m[0] >= pts[0][0] {
+                BodyPart::LeftLeg
+            } else {
+                BodyPart::RightLeg
+            };
             for i in sub {
                 parts[i] = part;
             }
@@ -179,8 +195,10 @@ fn by_topology(skeleton: &Skeleton) -> Vec<BodyPart> {
         if kids.len() < 2 {
             break;
         }
-        let mut scored: Vec<(usize, Vec3)> =
-            kids.iter().map(|&k| (k, mean_point(&pts, &subtree(skeleton, k)))).collect();
+        let mut scored: Vec<(usize, Vec3)> = kids
+            .iter()
+            .map(|&k| (k, mean_point(&pts, &subtree(skeleton, k))))
+            .collect();
         scored.sort_by(|a, b| b.1[1].total_cmp(&a.1[1]));
         for (rank, (k, m)) in scored.into_iter().enumerate() {
             let part = if rank == 0 {
@@ -207,8 +225,11 @@ fn by_topology(skeleton: &Skeleton) -> Vec<BodyPart> {
 /// say the unit was inferred.
 pub fn infer_bvh_units(skeleton: &Skeleton) -> Units {
     let pts = rest_points(skeleton);
-    let (lo, hi) =
-        pts.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), p| (l.min(p[1]), h.max(p[1])));
+    let (lo, hi) = pts
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), p| {
+            (l.min(p[1]), h.max(p[1]))
+        });
     let height = hi - lo;
     let mut best = 1.0;
     if height.is_finite() && height > 0.0 {
@@ -221,5 +242,10 @@ pub fn infer_bvh_units(skeleton: &Skeleton) -> Units {
             }
         }
     }
-    Units { cm_per_unit: best, asf_length: 1.0, asf_mass: 1.0, declared: false }
+    Units {
+        cm_per_unit: best,
+        asf_length: 1.0,
+        asf_mass: 1.0,
+        declared: false,
+    }
 }

@@ -11,7 +11,9 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use crate::bodymap;
-use crate::clip::{Axis, BodyPart, ChannelKind, Clip, Joint, Rest, Skeleton, SkeletonFormat, Units};
+use crate::clip::{
+    Axis, BodyPart, ChannelKind, Clip, Joint, Rest, Skeleton, SkeletonFormat, Units,
+};
 use crate::error::{Limits, ParseError, WriteError};
 use crate::text::{fmt_num, lines, number, numbers, read_text, syntax};
 
@@ -40,11 +42,15 @@ struct Tokens<'a> {
 
 impl<'a> Tokens<'a> {
     fn next(&mut self, path: &Path, expected: &str) -> Result<(usize, &'a str), ParseError> {
-        let t = self.toks.get(self.pos).copied().ok_or_else(|| ParseError::Truncated {
-            path: path.to_path_buf(),
-            line: self.last_line,
-            expected: expected.into(),
-        })?;
+        let t = self
+            .toks
+            .get(self.pos)
+            .copied()
+            .ok_or_else(|| ParseError::Truncated {
+                path: path.to_path_buf(),
+                line: self.last_line,
+                expected: expected.into(),
+            })?;
         self.pos += 1;
         Ok(t)
     }
@@ -54,7 +60,11 @@ impl<'a> Tokens<'a> {
         if t == word {
             Ok(ln)
         } else {
-            Err(syntax(path, ln, format!("expected `{word}`, found `{}`", clip_tok(t))))
+            Err(syntax(
+                path,
+                ln,
+                format!("expected `{word}`, found `{}`", clip_tok(t)),
+            ))
         }
     }
 }
@@ -69,7 +79,11 @@ fn bvh_channel(path: &Path, line: usize, tok: &str) -> Result<ChannelKind, Parse
     match (axis, &lower.get(1..)) {
         (Some(a), Some("position")) => Ok(ChannelKind::Translation(a)),
         (Some(a), Some("rotation")) => Ok(ChannelKind::Rotation(a)),
-        _ => Err(ParseError::UnknownChannel { path: path.to_path_buf(), line, name: clip_tok(tok) }),
+        _ => Err(ParseError::UnknownChannel {
+            path: path.to_path_buf(),
+            line,
+            name: clip_tok(tok),
+        }),
     }
 }
 
@@ -116,9 +130,13 @@ fn parse_joint(
     }
     let ln = t.expect(path, "CHANNELS")?;
     let (l, tok) = t.next(path, "the channel count")?;
-    let n: usize = tok
-        .parse()
-        .map_err(|_| syntax(path, l, format!("channel count `{}` is not a whole number", clip_tok(tok))))?;
+    let n: usize = tok.parse().map_err(|_| {
+        syntax(
+            path,
+            l,
+            format!("channel count `{}` is not a whole number", clip_tok(tok)),
+        )
+    })?;
     if n > 6 {
         return Err(ParseError::TooLarge {
             path: path.to_path_buf(),
@@ -177,7 +195,10 @@ fn parse_joint(
                 return Err(syntax(
                     path,
                     l,
-                    format!("expected `JOINT`, `End Site` or `}}`, found `{}`", clip_tok(other)),
+                    format!(
+                        "expected `JOINT`, `End Site` or `}}`, found `{}`",
+                        clip_tok(other)
+                    ),
                 ));
             }
         }
@@ -188,7 +209,10 @@ fn parse_joint(
 ///
 /// # Errors
 /// A [`ParseError`] naming the file, line and reason.
-#[expect(clippy::too_many_lines, reason = "hierarchy, header and frames read in one pass")]
+#[expect(
+    clippy::too_many_lines,
+    reason = "hierarchy, header and frames read in one pass"
+)]
 pub fn parse_bvh(text: &str, path: &Path, limits: &Limits) -> Result<Clip, ParseError> {
     // Split into hierarchy tokens (up to MOTION) and motion lines.
     let mut toks = Vec::new();
@@ -202,22 +226,36 @@ pub fn parse_bvh(text: &str, path: &Path, limits: &Limits) -> Result<Clip, Parse
         }
         toks.extend(line.split_whitespace().map(|t| (ln, t)));
     }
-    let mut t = Tokens { toks, pos: 0, last_line };
+    let mut t = Tokens {
+        toks,
+        pos: 0,
+        last_line,
+    };
     t.expect(path, "HIERARCHY")?;
     t.expect(path, "ROOT")?;
     let (_, root_name) = t.next(path, "the root's name")?;
     let mut joints = vec![new_joint(root_name.to_string(), None)];
     parse_joint(&mut t, path, &mut joints, 0, limits, 0)?;
     if let Some(&(ln, extra)) = t.toks.get(t.pos) {
-        return Err(syntax(path, ln, format!("unexpected `{}` after the hierarchy", clip_tok(extra))));
+        return Err(syntax(
+            path,
+            ln,
+            format!("unexpected `{}` after the hierarchy", clip_tok(extra)),
+        ));
     }
     let Some(motion_line) = motion_start else {
-        return Err(ParseError::Truncated { path: path.to_path_buf(), line: last_line, expected: "`MOTION`".into() });
+        return Err(ParseError::Truncated {
+            path: path.to_path_buf(),
+            line: last_line,
+            expected: "`MOTION`".into(),
+        });
     };
     let n: usize = joints.iter().map(|j| j.dofs.len()).sum();
 
     // Header lines after MOTION.
-    let mut rest = lines(text).skip(motion_line).filter(|(_, l)| !l.trim().is_empty());
+    let mut rest = lines(text)
+        .skip(motion_line)
+        .filter(|(_, l)| !l.trim().is_empty());
     let (fl, frames_line) = rest.next().ok_or_else(|| ParseError::Truncated {
         path: path.to_path_buf(),
         line: motion_line,
@@ -237,7 +275,12 @@ pub fn parse_bvh(text: &str, path: &Path, limits: &Limits) -> Result<Clip, Parse
         .trim()
         .strip_prefix("Frame Time:")
         .ok_or_else(|| syntax(path, tl, "expected `Frame Time: seconds`"))?;
-    let frame_time_s = numbers::<1>(path, tl, "Frame Time", &time_tok.split_whitespace().collect::<Vec<_>>())?[0];
+    let frame_time_s = numbers::<1>(
+        path,
+        tl,
+        "Frame Time",
+        &time_tok.split_whitespace().collect::<Vec<_>>(),
+    )?[0];
     if frame_time_s <= 0.0 {
         return Err(syntax(path, tl, "Frame Time must be positive"));
     }
@@ -292,7 +335,11 @@ pub fn parse_bvh(text: &str, path: &Path, limits: &Limits) -> Result<Clip, Parse
         });
     }
     if declared == 0 {
-        return Err(ParseError::FrameCount { path: path.to_path_buf(), line: fl, detail: "no frames".into() });
+        return Err(ParseError::FrameCount {
+            path: path.to_path_buf(),
+            line: fl,
+            detail: "no frames".into(),
+        });
     }
     let name = joints[0].name.clone();
     let mut skeleton = Skeleton {
@@ -304,7 +351,8 @@ pub fn parse_bvh(text: &str, path: &Path, limits: &Limits) -> Result<Clip, Parse
     };
     skeleton.units = bodymap::infer_bvh_units(&skeleton);
     bodymap::assign(&mut skeleton);
-    Clip::new(skeleton, 1.0 / frame_time_s, declared, data).map_err(|e| syntax(path, tl, e.to_string()))
+    Clip::new(skeleton, 1.0 / frame_time_s, declared, data)
+        .map_err(|e| syntax(path, tl, e.to_string()))
 }
 
 /// Writes a BVH clip (tabs for nesting, shortest exact numbers).
@@ -349,7 +397,11 @@ fn write_joint(s: &mut String, sk: &Skeleton, i: usize, depth: usize) {
         let _ = writeln!(s, "{tabs}JOINT {}", j.name);
     }
     let _ = writeln!(s, "{tabs}{{");
-    let _ = writeln!(s, "{tabs}\tOFFSET {}", j.rest.vector().map(fmt_num).join(" "));
+    let _ = writeln!(
+        s,
+        "{tabs}\tOFFSET {}",
+        j.rest.vector().map(fmt_num).join(" ")
+    );
     if !j.end_site {
         let names: Vec<String> = j.dofs.iter().map(|d| d.bvh_name()).collect();
         let _ = writeln!(s, "{tabs}\tCHANNELS {} {}", names.len(), names.join(" "));

@@ -163,9 +163,11 @@ impl Rest {
     /// The rest vector in file units (`direction × length` or the offset).
     pub fn vector(&self) -> [f64; 3] {
         match self {
-            Rest::Bone { direction, length } => {
-                [direction[0] * length, direction[1] * length, direction[2] * length]
-            }
+            Rest::Bone { direction, length } => [
+                direction[0] * length,
+                direction[1] * length,
+                direction[2] * length,
+            ],
             Rest::Offset(v) => *v,
         }
     }
@@ -221,7 +223,12 @@ pub struct Units {
 
 impl Default for Units {
     fn default() -> Self {
-        Units { cm_per_unit: 1.0, asf_length: 1.0, asf_mass: 1.0, declared: false }
+        Units {
+            cm_per_unit: 1.0,
+            asf_length: 1.0,
+            asf_mass: 1.0,
+            declared: false,
+        }
     }
 }
 
@@ -264,12 +271,20 @@ impl Skeleton {
 
     /// Children of joint `i`, in file order.
     pub fn children(&self, i: usize) -> impl Iterator<Item = usize> + '_ {
-        self.joints.iter().enumerate().filter(move |(_, j)| j.parent == Some(i)).map(|(k, _)| k)
+        self.joints
+            .iter()
+            .enumerate()
+            .filter(move |(_, j)| j.parent == Some(i))
+            .map(|(k, _)| k)
     }
 
     /// Maximum chain depth `h` of a body part (thesis eq. 6.2), or `None` if no joint has it.
     pub fn chain_height(&self, part: BodyPart) -> Option<usize> {
-        self.joints.iter().filter(|j| j.body_part == part).map(|j| j.chain_depth).max()
+        self.joints
+            .iter()
+            .filter(|j| j.body_part == part)
+            .map(|j| j.chain_depth)
+            .max()
     }
 
     /// Length in file units of the bone a joint's rotation swings.
@@ -282,14 +297,17 @@ impl Skeleton {
             SkeletonFormat::Asf => {
                 if self.joints[i].parent.is_none() {
                     // The root moves the whole body: use its longest child bone.
-                    self.children(i).map(|c| self.joints[c].rest.length()).fold(0.0, f64::max)
+                    self.children(i)
+                        .map(|c| self.joints[c].rest.length())
+                        .fold(0.0, f64::max)
                 } else {
                     self.joints[i].rest.length()
                 }
             }
-            SkeletonFormat::Bvh => {
-                self.children(i).map(|c| self.joints[c].rest.length()).fold(0.0, f64::max)
-            }
+            SkeletonFormat::Bvh => self
+                .children(i)
+                .map(|c| self.joints[c].rest.length())
+                .fold(0.0, f64::max),
         }
     }
 
@@ -380,9 +398,19 @@ impl Clip {
             return Err(ClipError::FrameRate(frame_rate_hz));
         }
         if channels.len().checked_mul(frames) != Some(data.len()) {
-            return Err(ClipError::Shape { got: data.len(), channels: channels.len(), frames });
+            return Err(ClipError::Shape {
+                got: data.len(),
+                channels: channels.len(),
+                frames,
+            });
         }
-        Ok(Clip { skeleton, frame_rate_hz, channels, frames, data })
+        Ok(Clip {
+            skeleton,
+            frame_rate_hz,
+            channels,
+            frames,
+            data,
+        })
     }
 
     /// Builds a clip whose matrix was sized from `skeleton.channel_layout()` by this crate.
@@ -395,7 +423,13 @@ impl Clip {
         let channels = skeleton.channel_layout();
         debug_assert_eq!(channels.len() * frames, data.len());
         debug_assert!(frame_rate_hz.is_finite() && frame_rate_hz > 0.0);
-        Clip { skeleton, frame_rate_hz, channels, frames, data }
+        Clip {
+            skeleton,
+            frame_rate_hz,
+            channels,
+            frames,
+            data,
+        }
     }
 
     /// Number of frames.

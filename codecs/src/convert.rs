@@ -44,8 +44,12 @@ pub fn asf_to_bvh(clip: &Clip) -> Result<Clip, ClipError> {
             Some(p) => sk.joints[p].rest.vector(),
         };
         let dofs = if j.parent.is_none() {
-            let mut d: Vec<ChannelKind> =
-                j.dofs.iter().copied().filter(|k| !k.is_rotation()).collect();
+            let mut d: Vec<ChannelKind> = j
+                .dofs
+                .iter()
+                .copied()
+                .filter(|k| !k.is_rotation())
+                .collect();
             d.extend(ZYX);
             d
         } else if j.dofs.is_empty() {

@@ -41,7 +41,9 @@ pub fn mocap_dir() -> Option<PathBuf> {
 /// Every clip in the shared folder: each `.bvh`, and each `.amc` paired with the `.asf` of the
 /// same stem or, failing that, the folder's only other ASF (CMU's `02_01.amc` uses `12.asf`).
 pub fn shared_clips() -> Vec<ClipFiles> {
-    let Some(dir) = mocap_dir() else { return Vec::new() };
+    let Some(dir) = mocap_dir() else {
+        return Vec::new();
+    };
     let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
         .map(|rd| rd.filter_map(|e| e.ok().map(|e| e.path())).collect())
         .unwrap_or_default();
@@ -50,9 +52,16 @@ pub fn shared_clips() -> Vec<ClipFiles> {
     let asfs: Vec<&PathBuf> = files.iter().filter(|p| ext(p, "asf")).collect();
     let mut out = Vec::new();
     for p in &files {
-        let stem = p.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+        let stem = p
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default();
         if ext(p, "bvh") {
-            out.push(ClipFiles { name: stem, asf: None, motion: p.clone() });
+            out.push(ClipFiles {
+                name: stem,
+                asf: None,
+                motion: p.clone(),
+            });
         } else if ext(p, "amc") {
             let asf = asfs
                 .iter()
@@ -69,13 +78,18 @@ pub fn shared_clips() -> Vec<ClipFiles> {
                         !files.iter().any(|m| {
                             ext(m, "amc")
                                 && m.file_stem().is_some_and(|ms| {
-                                    s.as_deref().is_some_and(|s| ms.to_string_lossy().starts_with(s))
+                                    s.as_deref()
+                                        .is_some_and(|s| ms.to_string_lossy().starts_with(s))
                                 })
                         })
                     })
                 });
             if let Some(a) = asf {
-                out.push(ClipFiles { name: stem, asf: Some((*a).clone()), motion: p.clone() });
+                out.push(ClipFiles {
+                    name: stem,
+                    asf: Some((*a).clone()),
+                    motion: p.clone(),
+                });
             }
         }
     }

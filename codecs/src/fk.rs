@@ -130,12 +130,20 @@ impl Kinematics {
                 (SkeletonFormat::Asf, Some(_)) => mul(&mul(&self.axis[j].0, &m), &self.axis[j].1),
                 (SkeletonFormat::Bvh, _) => m,
             };
-            out.push(LocalTransform { rotation, translation: t });
+            out.push(LocalTransform {
+                rotation,
+                translation: t,
+            });
         }
     }
 
     /// World points (and, in `rotations`, world rotations) from local transforms.
-    pub fn world(&self, local: &[LocalTransform], points: &mut Vec<Vec3>, rotations: &mut Vec<Mat3>) {
+    pub fn world(
+        &self,
+        local: &[LocalTransform],
+        points: &mut Vec<Vec3>,
+        rotations: &mut Vec<Mat3>,
+    ) {
         points.clear();
         rotations.clear();
         for (j, lt) in local.iter().enumerate() {
@@ -187,7 +195,12 @@ pub fn positions(clip: &Clip) -> Positions {
         points.extend_from_slice(&frame_points);
     }
     Positions {
-        names: clip.skeleton.joints.iter().map(|j| j.name.clone()).collect(),
+        names: clip
+            .skeleton
+            .joints
+            .iter()
+            .map(|j| j.name.clone())
+            .collect(),
         parents: clip.skeleton.joints.iter().map(|j| j.parent).collect(),
         cm_per_unit: clip.skeleton.units.cm_per_unit,
         frames: clip.frames(),

@@ -20,26 +20,43 @@ pub fn read_clip(asf_path: Option<&Path>, motion: &Path) -> Result<Clip, ParseEr
     let limits = Limits::default();
     if has_ext(motion, "bvh") {
         if let Some(a) = asf_path {
-            return Err(text::syntax(a, 0, "a BVH file carries its own skeleton; give no ASF"));
+            return Err(text::syntax(
+                a,
+                0,
+                "a BVH file carries its own skeleton; give no ASF",
+            ));
         }
         return bvh::read_bvh_with(motion, &limits);
     }
     if has_ext(motion, "amc") {
         let Some(a) = asf_path else {
-            return Err(text::syntax(motion, 0, "an AMC motion needs its ASF skeleton (--asf)"));
+            return Err(text::syntax(
+                motion,
+                0,
+                "an AMC motion needs its ASF skeleton (--asf)",
+            ));
         };
         let skeleton = asf::read_asf_with(a, &limits)?;
         return amc::read_amc_with(motion, &skeleton, amc::CMU_FRAME_RATE_HZ, &limits);
     }
-    Err(text::syntax(motion, 0, "unknown motion file type: expected .amc or .bvh"))
+    Err(text::syntax(
+        motion,
+        0,
+        "unknown motion file type: expected .amc or .bvh",
+    ))
 }
 
 fn write_file(path: &Path, contents: &str) -> Result<(), WriteError> {
-    let io = |err| WriteError::Io { path: path.to_path_buf(), err };
+    let io = |err| WriteError::Io {
+        path: path.to_path_buf(),
+        err,
+    };
     // Write beside the target and rename, so a crash never leaves half a clip.
     let tmp = path.with_extension(format!(
         "{}.tmp",
-        path.extension().map(|e| e.to_string_lossy().into_owned()).unwrap_or_default()
+        path.extension()
+            .map(|e| e.to_string_lossy().into_owned())
+            .unwrap_or_default()
     ));
     std::fs::write(&tmp, contents).map_err(io)?;
     std::fs::rename(&tmp, path).map_err(io)

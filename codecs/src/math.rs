@@ -33,7 +33,11 @@ pub fn mul(a: &Mat3, b: &Mat3) -> Mat3 {
 
 /// Transpose (the inverse of a rotation).
 pub fn transpose(a: &Mat3) -> Mat3 {
-    [[a[0][0], a[1][0], a[2][0]], [a[0][1], a[1][1], a[2][1]], [a[0][2], a[1][2], a[2][2]]]
+    [
+        [a[0][0], a[1][0], a[2][0]],
+        [a[0][1], a[1][1], a[2][1]],
+        [a[0][2], a[1][2], a[2][2]],
+    ]
 }
 
 /// Matrix times column vector.
@@ -99,7 +103,10 @@ mod tests {
         let axes = [Axis::X, Axis::Y, Axis::Z];
         let angles = [10.0, -20.0, 35.0];
         let fixed = euler_fixed(&axes, &angles);
-        let expect = mul(&rot_axis(Axis::Z, 35.0), &mul(&rot_axis(Axis::Y, -20.0), &rot_axis(Axis::X, 10.0)));
+        let expect = mul(
+            &rot_axis(Axis::Z, 35.0),
+            &mul(&rot_axis(Axis::Y, -20.0), &rot_axis(Axis::X, 10.0)),
+        );
         assert!(close(&fixed, &expect));
         let listed = euler_listed(&[Axis::Z, Axis::Y, Axis::X], &[35.0, -20.0, 10.0]);
         assert!(close(&listed, &expect));
@@ -107,7 +114,11 @@ mod tests {
 
     #[test]
     fn zyx_decomposition_round_trips() {
-        for &(z, y, x) in &[(10.0, 20.0, 30.0), (-170.0, 80.0, 5.0), (45.0, -60.0, -120.0)] {
+        for &(z, y, x) in &[
+            (10.0, 20.0, 30.0),
+            (-170.0, 80.0, 5.0),
+            (45.0, -60.0, -120.0),
+        ] {
             let r = euler_listed(&[Axis::Z, Axis::Y, Axis::X], &[z, y, x]);
             let [z2, y2, x2] = to_euler_zyx_deg(&r);
             let r2 = euler_listed(&[Axis::Z, Axis::Y, Axis::X], &[z2, y2, x2]);
@@ -119,6 +130,12 @@ mod tests {
     fn rotation_about_z_turns_x_into_y() {
         let v = mul_vec(&rot_axis(Axis::Z, 90.0), &[1.0, 0.0, 0.0]);
         assert!((v[0]).abs() < 1e-15 && (v[1] - 1.0).abs() < 1e-15);
-        assert!(close(&mul(&rot_axis(Axis::Y, 33.0), &transpose(&rot_axis(Axis::Y, 33.0))), &IDENTITY));
+        assert!(close(
+            &mul(
+                &rot_axis(Axis::Y, 33.0),
+                &transpose(&rot_axis(Axis::Y, 33.0))
+            ),
+            &IDENTITY
+        ));
     }
 }

@@ -9,7 +9,9 @@
 use std::f64::consts::TAU;
 
 use crate::bodymap;
-use crate::clip::{Axis, BodyPart, ChannelKind, Clip, Joint, Rest, Skeleton, SkeletonFormat, Units};
+use crate::clip::{
+    Axis, BodyPart, ChannelKind, Clip, Joint, Rest, Skeleton, SkeletonFormat, Units,
+};
 
 /// Parameters of the generated walk.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -55,7 +57,10 @@ fn bone(name: &str, parent: usize, dir: [f64; 3], length: f64, dofs: Vec<Channel
     Joint {
         name: name.into(),
         parent: Some(parent),
-        rest: Rest::Bone { direction: dir.map(|d| d / n), length },
+        rest: Rest::Bone {
+            direction: dir.map(|d| d / n),
+            length,
+        },
         dofs,
         axis_deg: [0.0; 3],
         axis_order: [Axis::X, Axis::Y, Axis::Z],
@@ -88,27 +93,116 @@ pub fn walker_skeleton() -> Skeleton {
         joints.len() - 1
     };
     for (side, s) in [("l", 1.0), ("r", -1.0)] {
-        let hip = add(bone(&format!("{side}hipjoint"), 0, [0.73 * s, -0.56, 0.39], 2.8, vec![]));
-        let femur = add(bone(&format!("{side}femur"), hip, [0.2 * s, -1.0, 0.0], 7.2, vec![rx(), ry(), rz()]));
-        let tibia = add(bone(&format!("{side}tibia"), femur, [0.1 * s, -1.0, 0.0], 7.4, vec![rx()]));
-        let foot = add(bone(&format!("{side}foot"), tibia, [0.0, -0.3, 1.0], 2.0, vec![rx(), rz()]));
-        add(bone(&format!("{side}toes"), foot, [0.0, 0.0, 1.0], 1.0, vec![rx()]));
+        let hip = add(bone(
+            &format!("{side}hipjoint"),
+            0,
+            [0.73 * s, -0.56, 0.39],
+            2.8,
+            vec![],
+        ));
+        let femur = add(bone(
+            &format!("{side}femur"),
+            hip,
+            [0.2 * s, -1.0, 0.0],
+            7.2,
+            vec![rx(), ry(), rz()],
+        ));
+        let tibia = add(bone(
+            &format!("{side}tibia"),
+            femur,
+            [0.1 * s, -1.0, 0.0],
+            7.4,
+            vec![rx()],
+        ));
+        let foot = add(bone(
+            &format!("{side}foot"),
+            tibia,
+            [0.0, -0.3, 1.0],
+            2.0,
+            vec![rx(), rz()],
+        ));
+        add(bone(
+            &format!("{side}toes"),
+            foot,
+            [0.0, 0.0, 1.0],
+            1.0,
+            vec![rx()],
+        ));
     }
-    let lowerback = add(bone("lowerback", 0, [0.0, 1.0, -0.05], 2.1, vec![rx(), ry(), rz()]));
-    let upperback = add(bone("upperback", lowerback, [0.0, 1.0, 0.0], 2.1, vec![rx(), ry(), rz()]));
-    let thorax = add(bone("thorax", upperback, [0.0, 1.0, 0.0], 2.1, vec![rx(), ry(), rz()]));
-    let neck = add(bone("lowerneck", thorax, [0.0, 1.0, 0.05], 1.7, vec![rx(), ry(), rz()]));
-    add(bone("head", neck, [0.0, 1.0, 0.0], 1.9, vec![rx(), ry(), rz()]));
+    let lowerback = add(bone(
+        "lowerback",
+        0,
+        [0.0, 1.0, -0.05],
+        2.1,
+        vec![rx(), ry(), rz()],
+    ));
+    let upperback = add(bone(
+        "upperback",
+        lowerback,
+        [0.0, 1.0, 0.0],
+        2.1,
+        vec![rx(), ry(), rz()],
+    ));
+    let thorax = add(bone(
+        "thorax",
+        upperback,
+        [0.0, 1.0, 0.0],
+        2.1,
+        vec![rx(), ry(), rz()],
+    ));
+    let neck = add(bone(
+        "lowerneck",
+        thorax,
+        [0.0, 1.0, 0.05],
+        1.7,
+        vec![rx(), ry(), rz()],
+    ));
+    add(bone(
+        "head",
+        neck,
+        [0.0, 1.0, 0.0],
+        1.9,
+        vec![rx(), ry(), rz()],
+    ));
     for (side, s) in [("l", 1.0), ("r", -1.0)] {
-        let clav = add(bone(&format!("{side}clavicle"), thorax, [s, 0.25, 0.0], 3.4, vec![ry(), rz()]));
-        let hum = add(bone(&format!("{side}humerus"), clav, [s, 0.0, 0.0], 5.2, vec![rx(), ry(), rz()]));
-        let rad = add(bone(&format!("{side}radius"), hum, [s, 0.0, 0.0], 3.6, vec![ry()]));
-        add(bone(&format!("{side}hand"), rad, [s, 0.0, 0.0], 1.6, vec![rz()]));
+        let clav = add(bone(
+            &format!("{side}clavicle"),
+            thorax,
+            [s, 0.25, 0.0],
+            3.4,
+            vec![ry(), rz()],
+        ));
+        let hum = add(bone(
+            &format!("{side}humerus"),
+            clav,
+            [s, 0.0, 0.0],
+            5.2,
+            vec![rx(), ry(), rz()],
+        ));
+        let rad = add(bone(
+            &format!("{side}radius"),
+            hum,
+            [s, 0.0, 0.0],
+            3.6,
+            vec![ry()],
+        ));
+        add(bone(
+            &format!("{side}hand"),
+            rad,
+            [s, 0.0, 0.0],
+            1.6,
+            vec![rz()],
+        ));
     }
     let mut skeleton = Skeleton {
         name: "synthetic-walker".into(),
         format: SkeletonFormat::Asf,
-        units: Units { cm_per_unit: CM_PER_UNIT, asf_length: 0.45, asf_mass: 1.0, declared: true },
+        units: Units {
+            cm_per_unit: CM_PER_UNIT,
+            asf_length: 0.45,
+            asf_mass: 1.0,
+            declared: true,
+        },
         joints,
         documentation: vec!["procedurally generated walking figure (no captured data)".into()],
     };
@@ -126,8 +220,16 @@ pub fn walking_clip(params: &WalkParams) -> Clip {
     let rate = ok(params.frame_rate_hz, d.frame_rate_hz);
     let duration = ok(params.duration_s, d.duration_s).min(3600.0);
     let cycle = ok(params.cycle_hz, d.cycle_hz);
-    let amp = if params.amplitude.is_finite() { params.amplitude } else { 1.0 };
-    let speed = if params.speed_cm_s.is_finite() { params.speed_cm_s } else { d.speed_cm_s };
+    let amp = if params.amplitude.is_finite() {
+        params.amplitude
+    } else {
+        1.0
+    };
+    let speed = if params.speed_cm_s.is_finite() {
+        params.speed_cm_s
+    } else {
+        d.speed_cm_s
+    };
     let skeleton = walker_skeleton();
     let frames = ((duration * rate).round() as usize).max(2);
     let layout = skeleton.channel_layout();
@@ -139,8 +241,16 @@ pub fn walking_clip(params: &WalkParams) -> Clip {
             let j = &skeleton.joints[ch.joint];
             let limb = !matches!(j.body_part, BodyPart::Torso | BodyPart::Head);
             // Limb bones are `l...`/`r...`; match on the name without the side letter.
-            let base = if limb { j.name.get(1..).unwrap_or("") } else { j.name.as_str() };
-            let side = if limb && j.name.starts_with('r') { 0.5 } else { 0.0 };
+            let base = if limb {
+                j.name.get(1..).unwrap_or("")
+            } else {
+                j.name.as_str()
+            };
+            let side = if limb && j.name.starts_with('r') {
+                0.5
+            } else {
+                0.0
+            };
             let p = ph + TAU * side; // right limbs half a cycle later
             let v = match (base, ch.kind) {
                 _ if j.name == "root" => match ch.kind {
@@ -162,7 +272,11 @@ pub fn walking_clip(params: &WalkParams) -> Clip {
                     s * 16.0 * amp * p.sin()
                 }
                 ("humerus", ChannelKind::Rotation(Axis::Z)) => {
-                    if side == 0.0 { -72.0 } else { 72.0 }
+                    if side == 0.0 {
+                        -72.0
+                    } else {
+                        72.0
+                    }
                 }
                 ("radius", _) => {
                     let s = if side == 0.0 { -1.0 } else { 1.0 };

@@ -7,7 +7,10 @@ use crate::error::{Limits, ParseError};
 
 /// Reads a whole file as text, refusing files over `limits.max_file_bytes` before reading.
 pub(crate) fn read_text(path: &Path, limits: &Limits) -> Result<String, ParseError> {
-    let io = |err| ParseError::Io { path: path.to_path_buf(), err };
+    let io = |err| ParseError::Io {
+        path: path.to_path_buf(),
+        err,
+    };
     let file = std::fs::File::open(path).map_err(io)?;
     let len = file.metadata().map_err(io)?.len();
     if len > limits.max_file_bytes {
@@ -20,7 +23,9 @@ pub(crate) fn read_text(path: &Path, limits: &Limits) -> Result<String, ParseErr
         });
     }
     let mut bytes = Vec::with_capacity(len as usize);
-    file.take(limits.max_file_bytes + 1).read_to_end(&mut bytes).map_err(io)?;
+    file.take(limits.max_file_bytes + 1)
+        .read_to_end(&mut bytes)
+        .map_err(io)?;
     String::from_utf8(bytes).or_else(|e| {
         // Mocap files are ASCII; a stray Latin-1 byte in a comment should not stop a lab.
         let bytes = e.into_bytes();
@@ -88,7 +93,11 @@ pub(crate) fn fmt_num(v: f64) -> String {
 
 /// A syntax error at a line.
 pub(crate) fn syntax(path: &Path, line: usize, reason: impl Into<String>) -> ParseError {
-    ParseError::Syntax { path: path.to_path_buf(), line, reason: reason.into() }
+    ParseError::Syntax {
+        path: path.to_path_buf(),
+        line,
+        reason: reason.into(),
+    }
 }
 
 #[cfg(test)]
@@ -103,7 +112,17 @@ mod tests {
 
     #[test]
     fn fmt_num_round_trips() {
-        for v in [10.4194, -1.6201e-14, 0.0, -0.0, 101.5481, 1e300, 5.0, -7.125, 0.1 + 0.2] {
+        for v in [
+            10.4194,
+            -1.6201e-14,
+            0.0,
+            -0.0,
+            101.5481,
+            1e300,
+            5.0,
+            -7.125,
+            0.1 + 0.2,
+        ] {
             let s = fmt_num(v);
             assert_eq!(s.parse::<f64>().unwrap().to_bits(), v.to_bits(), "{s}");
         }

@@ -9,7 +9,11 @@ use codecs::{Clip, SkeletonFormat, asf, bvh, convert, fk, io};
 fn clips() -> Vec<ClipFiles> {
     let c = shared_clips();
     if std::env::var_os("CI").is_some() {
-        assert!(c.len() >= 5, "expected the 5 shared clips, found {}", c.len());
+        assert!(
+            c.len() >= 5,
+            "expected the 5 shared clips, found {}",
+            c.len()
+        );
     }
     c
 }
@@ -69,7 +73,10 @@ fn writers_round_trip_every_value_bit_for_bit() {
         let clip = load(&c);
         match clip.skeleton.format {
             SkeletonFormat::Asf => {
-                let (a, m) = (tmp(&format!("{}.asf", c.name)), tmp(&format!("{}.amc", c.name)));
+                let (a, m) = (
+                    tmp(&format!("{}.asf", c.name)),
+                    tmp(&format!("{}.amc", c.name)),
+                );
                 io::write_clip(&clip, &m, Some(&a)).unwrap();
                 let back = io::read_clip(Some(&a), &m).unwrap();
                 assert_eq!(back.skeleton, clip.skeleton, "{}", c.name);
@@ -107,7 +114,11 @@ fn asf_to_bvh_conversion_keeps_every_joint_position() {
         for (ai, name) in pa.names.iter().enumerate() {
             // ASF point of bone j (its end) = BVH point of j's first child or end site.
             let bj = read.skeleton.joint_index(name).unwrap();
-            let bi = if ai == 0 { bj } else { read.skeleton.children(bj).next().unwrap() };
+            let bi = if ai == 0 {
+                bj
+            } else {
+                read.skeleton.children(bj).next().unwrap()
+            };
             for f in 0..pa.frames() {
                 let (p, q) = (pa.point(f, ai), pb.point(f, bi));
                 for k in 0..3 {
@@ -115,7 +126,11 @@ fn asf_to_bvh_conversion_keeps_every_joint_position() {
                 }
             }
         }
-        assert!(worst < 1e-6, "{}: conversion moved a joint by {worst} units", c.name);
+        assert!(
+            worst < 1e-6,
+            "{}: conversion moved a joint by {worst} units",
+            c.name
+        );
     }
 }
 
@@ -125,17 +140,27 @@ fn asf_to_bvh_conversion_keeps_every_joint_position() {
 /// order or a missing `C·M·Cᵀ` makes it tens of units/s.
 #[test]
 fn planted_toes_do_not_slide() {
-    for c in clips().into_iter().filter(|c| c.asf.is_some() && c.name != "02_01") {
+    for c in clips()
+        .into_iter()
+        .filter(|c| c.asf.is_some() && c.name != "02_01")
+    {
         let clip = load(&c);
         let speed = planted_toe_speed(&clip);
         eprintln!("{}: median planted toe speed {speed:.2} units/s", c.name);
-        assert!(speed < 4.0, "{}: median planted toe speed {speed} units/s", c.name);
+        assert!(
+            speed < 4.0,
+            "{}: median planted toe speed {speed} units/s",
+            c.name
+        );
     }
 }
 
 fn planted_toe_speed(clip: &Clip) -> f64 {
     let p = fk::positions(clip);
-    let toes: Vec<usize> = ["ltoes", "rtoes"].iter().filter_map(|n| clip.skeleton.joint_index(n)).collect();
+    let toes: Vec<usize> = ["ltoes", "rtoes"]
+        .iter()
+        .filter_map(|n| clip.skeleton.joint_index(n))
+        .collect();
     let floor = (0..p.frames())
         .flat_map(|f| toes.iter().map(move |&t| (f, t)))
         .map(|(f, t)| p.point(f, t)[1])
@@ -192,7 +217,12 @@ fn bvh_body_parts_by_name_agree_with_topology() {
         codecs::bodymap::assign(&mut anon);
         let by_topo: Vec<_> = anon.joints.iter().map(|j| j.body_part).collect();
         let agree = by_name.iter().zip(&by_topo).filter(|(a, b)| a == b).count();
-        assert_eq!(agree, by_name.len(), "{}: {by_name:?} vs {by_topo:?}", c.name);
+        assert_eq!(
+            agree,
+            by_name.len(),
+            "{}: {by_name:?} vs {by_topo:?}",
+            c.name
+        );
         let hips = sk.joint_index("Hips").unwrap();
         assert_eq!(sk.joints[hips].body_part, codecs::BodyPart::Torso);
         let toe = sk.joint_index("LeftToe").unwrap();

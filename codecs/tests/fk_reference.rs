@@ -14,8 +14,14 @@ fn reference(args: &[&Path]) -> Vec<(usize, String, [f64; 3])> {
         .arg(&script)
         .args(args)
         .output()
-        .unwrap_or_else(|e| panic!("python3 is needed for the FK reference (scripts/test installs it): {e}"));
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        .unwrap_or_else(|e| {
+            panic!("python3 is needed for the FK reference (scripts/test installs it): {e}")
+        });
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let text = String::from_utf8(out.stdout).unwrap();
     text.lines()
         .skip(1)
@@ -24,7 +30,11 @@ fn reference(args: &[&Path]) -> Vec<(usize, String, [f64; 3])> {
             (
                 f[0].parse().unwrap(),
                 f[1].to_string(),
-                [f[2].parse().unwrap(), f[3].parse().unwrap(), f[4].parse().unwrap()],
+                [
+                    f[2].parse().unwrap(),
+                    f[3].parse().unwrap(),
+                    f[4].parse().unwrap(),
+                ],
             )
         })
         .collect()
@@ -33,7 +43,11 @@ fn reference(args: &[&Path]) -> Vec<(usize, String, [f64; 3])> {
 fn compare(clip: &Clip, args: &[&Path], what: &str) {
     let ours = fk::positions(clip);
     let theirs = reference(args);
-    assert_eq!(theirs.len(), ours.frames() * ours.joint_count(), "{what}: point count");
+    assert_eq!(
+        theirs.len(),
+        ours.frames() * ours.joint_count(),
+        "{what}: point count"
+    );
     let mut worst: f64 = 0.0;
     for (k, (f, name, p)) in theirs.iter().enumerate() {
         let j = k % ours.joint_count();
@@ -44,7 +58,10 @@ fn compare(clip: &Clip, args: &[&Path], what: &str) {
             worst = worst.max((p[a] - q[a]).abs());
         }
     }
-    assert!(worst <= 1e-4, "{what}: FK differs from the reference by {worst} units");
+    assert!(
+        worst <= 1e-4,
+        "{what}: FK differs from the reference by {worst} units"
+    );
 }
 
 #[test]
@@ -52,7 +69,12 @@ fn fk_matches_the_independent_reference_on_every_shared_clip() {
     let clips = codecs::data::shared_clips();
     for c in &clips {
         let clip = io::read_clip(c.asf.as_deref(), &c.motion).unwrap();
-        let args: Vec<&Path> = c.asf.iter().map(PathBuf::as_path).chain([c.motion.as_path()]).collect();
+        let args: Vec<&Path> = c
+            .asf
+            .iter()
+            .map(PathBuf::as_path)
+            .chain([c.motion.as_path()])
+            .collect();
         compare(&clip, &args, &c.name);
     }
 }

@@ -38,7 +38,10 @@ fn inputs() -> &'static Inputs {
         let skeleton = asf::parse_asf(&asf.1, &asf.0, &Limits::default()).unwrap();
         // The first 40 frames keep each case fast; every structure of the file is still there.
         let (amc_path, amc_text) = read("02_01.amc");
-        let cut = amc_text.find("\n41\r").or_else(|| amc_text.find("\n41\n")).unwrap_or(amc_text.len());
+        let cut = amc_text
+            .find("\n41\r")
+            .or_else(|| amc_text.find("\n41\n"))
+            .unwrap_or(amc_text.len());
         let (bvh_path, bvh_text) = read("131_01.bvh");
         let bvh_short = shorten_bvh(&bvh_text, 40);
         Inputs {
@@ -149,8 +152,15 @@ fn apply(text: &str, m: &Mutation) -> String {
 fn check(result: Result<impl Sized, ParseError>, path: &Path) {
     if let Err(e) = result {
         let msg = e.to_string();
-        assert!(msg.contains(&path.display().to_string()), "error does not name the file: {msg}");
-        assert!(msg.len() < 600, "unbounded error message: {} bytes", msg.len());
+        assert!(
+            msg.contains(&path.display().to_string()),
+            "error does not name the file: {msg}"
+        );
+        assert!(
+            msg.len() < 600,
+            "unbounded error message: {} bytes",
+            msg.len()
+        );
     }
 }
 
@@ -197,8 +207,17 @@ fn declared_sizes_are_checked_before_allocating() {
     let chans = inp.bvh.1.replacen("CHANNELS 6", "CHANNELS 4000000000", 1);
     let e = err(bvh::parse_bvh(&chans, p, &Limits::default()));
     assert!(e.contains("channels of one joint"), "{e}");
-    let small = Limits { max_frames: 10, ..Limits::default() };
-    let e = err(amc::parse_amc(&inp.amc.1, &inp.amc.0, &inp.skeleton, 120.0, &small));
+    let small = Limits {
+        max_frames: 10,
+        ..Limits::default()
+    };
+    let e = err(amc::parse_amc(
+        &inp.amc.1,
+        &inp.amc.0,
+        &inp.skeleton,
+        120.0,
+        &small,
+    ));
     assert!(e.contains("number of frames"), "{e}");
 }
 
@@ -210,7 +229,10 @@ fn each_kind_of_bad_input_gets_its_own_clear_error() {
     let amc = |t: &str| err(amc::parse_amc(t, ap, sk, 120.0, &Limits::default()));
     // unknown bone
     let e = amc(&at.replacen("lowerback ", "lowerbak ", 1));
-    assert!(e.contains("unknown bone `lowerbak`") && e.contains(":6:"), "{e}");
+    assert!(
+        e.contains("unknown bone `lowerbak`") && e.contains(":6:"),
+        "{e}"
+    );
     // wrong number of values
     let e = amc(&at.replacen("rtibia 11.5302", "rtibia 11.5302 1.0", 1));
     assert!(e.contains("bone rtibia: expected 1 values, found 2"), "{e}");
@@ -222,7 +244,10 @@ fn each_kind_of_bad_input_gets_its_own_clear_error() {
     assert!(e.contains("frame 1 has no line for bone `ltoes`"), "{e}");
     // frame numbering
     let e = amc(&at.replacen("\n2\r", "\n3\r", 1));
-    assert!(e.contains("frame count mismatch: frame 3 follows frame 1"), "{e}");
+    assert!(
+        e.contains("frame count mismatch: frame 3 follows frame 1"),
+        "{e}"
+    );
     // truncated in the middle of a bone line
     let cut = at.rfind("lfemur").unwrap();
     let e = amc(&format!("{} 1.0", &at[..cut + 6]));
@@ -259,7 +284,13 @@ fn crlf_lf_and_mixed_line_endings_read_the_same() {
     let mixed: String = lf
         .split_inclusive('\n')
         .enumerate()
-        .map(|(i, l)| if i % 2 == 0 { l.replace('\n', "\r\n") } else { l.to_string() })
+        .map(|(i, l)| {
+            if i % 2 == 0 {
+                l.replace('\n', "\r\n")
+            } else {
+                l.to_string()
+            }
+        })
         .collect();
     let a = bvh::parse_bvh(&lf, &inp.bvh.0, &Limits::default()).unwrap();
     let b = bvh::parse_bvh(&crlf, &inp.bvh.0, &Limits::default()).unwrap();
@@ -280,7 +311,14 @@ fn bones_without_dof_lines_and_radians_headers_are_read() {
     let j = inp.skeleton.joint_index("lhipjoint").unwrap();
     assert!(inp.skeleton.joints[j].dofs.is_empty());
     // The same motion in radians reads back to the same degrees.
-    let deg = amc::parse_amc(&inp.amc.1, &inp.amc.0, &inp.skeleton, 120.0, &Limits::default()).unwrap();
+    let deg = amc::parse_amc(
+        &inp.amc.1,
+        &inp.amc.0,
+        &inp.skeleton,
+        120.0,
+        &Limits::default(),
+    )
+    .unwrap();
     let mut rad = String::from(":FULLY-SPECIFIED\n:RADIANS\n");
     let mut c = 0;
     for line in inp.amc.1.lines().skip(3) {
@@ -294,7 +332,11 @@ fn bones_without_dof_lines_and_radians_headers_are_read() {
         rad.push_str(toks[0]);
         for (k, t) in toks[1..].iter().enumerate() {
             let v: f64 = t.parse().unwrap();
-            let v = if inp.skeleton.joints[j].dofs[k].is_rotation() { v.to_radians() } else { v };
+            let v = if inp.skeleton.joints[j].dofs[k].is_rotation() {
+                v.to_radians()
+            } else {
+                v
+            };
             rad.push_str(&format!(" {v:?}"));
         }
         rad.push('\n');

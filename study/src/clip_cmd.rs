@@ -74,7 +74,10 @@ impl ClipInput {
             } else {
                 io::read_clip(asf.as_deref(), m)?
             };
-            out.push(Loaded { name: m.display().to_string(), clip });
+            out.push(Loaded {
+                name: m.display().to_string(),
+                clip,
+            });
         }
         if out.is_empty() {
             bail!("no clip given: pass a .bvh file, --asf SKEL --amc MOTION, or --demo");
@@ -141,7 +144,12 @@ pub fn run(cmd: ClipCommand) -> Result<()> {
             }
             Ok(())
         }
-        ClipCommand::Positions { input, csv, npy, cm } => {
+        ClipCommand::Positions {
+            input,
+            csv,
+            npy,
+            cm,
+        } => {
             let loaded = input.load_one()?;
             let pos = fk::positions(&loaded.clip);
             let scale = if cm { pos.cm_per_unit } else { 1.0 };
@@ -160,9 +168,15 @@ pub fn run(cmd: ClipCommand) -> Result<()> {
             }
             Ok(())
         }
-        ClipCommand::Convert { input, output, out_asf } => {
+        ClipCommand::Convert {
+            input,
+            output,
+            out_asf,
+        } => {
             let loaded = input.load_one()?;
-            let amc_out = output.extension().is_some_and(|e| e.eq_ignore_ascii_case("amc"));
+            let amc_out = output
+                .extension()
+                .is_some_and(|e| e.eq_ignore_ascii_case("amc"));
             if amc_out && out_asf.is_none() && loaded.clip.skeleton.format == SkeletonFormat::Asf {
                 bail!("AMC output needs --out-asf for its skeleton");
             }
@@ -179,7 +193,13 @@ fn positions_csv(pos: &fk::Positions, scale: f64) -> String {
     for f in 0..pos.frames() {
         for (j, name) in pos.names.iter().enumerate() {
             let p = pos.point(f, j);
-            let _ = writeln!(s, "{f},{name},{},{},{}", p[0] * scale, p[1] * scale, p[2] * scale);
+            let _ = writeln!(
+                s,
+                "{f},{name},{},{},{}",
+                p[0] * scale,
+                p[1] * scale,
+                p[2] * scale
+            );
         }
     }
     s
@@ -233,7 +253,11 @@ pub fn info_text(name: &str, clip: &Clip) -> String {
         s,
         "  units       1 unit = {:.4} cm ({}), angles in degrees",
         u.cm_per_unit,
-        if u.declared { "declared by the file" } else { "inferred from the skeleton's height" }
+        if u.declared {
+            "declared by the file"
+        } else {
+            "inferred from the skeleton's height"
+        }
     );
     let _ = writeln!(s, "  bones       name  part  depth  length_cm");
     for j in sk.joints.iter().filter(|j| j.parent.is_some()) {
@@ -250,8 +274,11 @@ pub fn info_text(name: &str, clip: &Clip) -> String {
     let mut warnings = Vec::new();
     for c in 0..clip.channel_count() {
         let v = clip.channel(c);
-        let (lo, hi) =
-            v.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| (l.min(x), h.max(x)));
+        let (lo, hi) = v
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| {
+                (l.min(x), h.max(x))
+            });
         let cname = clip.channel_name(c);
         let _ = writeln!(s, "    {cname:<22} {lo:>11.4} {hi:>11.4}");
         let ch = clip.channels()[c];
@@ -261,7 +288,9 @@ pub fn info_text(name: &str, clip: &Clip) -> String {
         if ch.kind.is_rotation() {
             let wraps = v.windows(2).filter(|w| (w[1] - w[0]).abs() > 180.0).count();
             if wraps > 0 {
-                warnings.push(format!("{cname} jumps by more than 180° between frames {wraps} times (Euler wrap)"));
+                warnings.push(format!(
+                    "{cname} jumps by more than 180° between frames {wraps} times (Euler wrap)"
+                ));
             }
         }
         let joint = &sk.joints[ch.joint];
