@@ -88,6 +88,8 @@ impl StimulusManifest {
 
     /// The reference stimulus of clip `clip`.
     pub fn reference_of(&self, clip: &str) -> Option<&Stimulus> {
-        self.stimuli.iter().find(|s| s.clip == clip && s.codec == REFERENCE_CODEC)
+        self.stimuli
+            .iter()
+            .find(|s| s.clip == clip && s.codec == REFERENCE_CODEC)
     }
 }
