@@ -2,7 +2,7 @@
 //! without the shared clips.
 //!
 //! The skeleton is an ASF skeleton with CMU bone names and CMU-like proportions (units of
-//! 1/0.45 inch), 25 joints and 47 channels; the motion is a periodic gait: hips, knees and
+//! 1/0.45 inch), 24 joints and 49 channels; the motion is a periodic gait: hips, knees and
 //! ankles follow smooth phase-locked curves, arms swing against the legs, the spine twists and
 //! the root moves forward with a vertical bob. It contains no captured data.
 
@@ -42,25 +42,57 @@ impl Default for WalkParams {
 
 const CM_PER_UNIT: f64 = 2.54 / 0.45;
 
-fn rx() -> ChannelKind {
-    ChannelKind::Rotation(Axis::X)
-}
-fn ry() -> ChannelKind {
-    ChannelKind::Rotation(Axis::Y)
-}
-fn rz() -> ChannelKind {
-    ChannelKind::Rotation(Axis::Z)
+/// One bone of the generated skeleton: name, parent, direction (left side; x is mirrored for
+/// the right), length in units, rotation dofs.
+struct BoneSpec {
+    name: &'static str,
+    parent: &'static str,
+    dir: [f64; 3],
+    length: f64,
+    dofs: &'static str,
 }
 
-fn bone(name: &str, parent: usize, dir: [f64; 3], length: f64, dofs: Vec<ChannelKind>) -> Joint {
-    let n = (dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]).sqrt();
+const fn spec(
+    name: &'static str,
+    parent: &'static str,
+    dir: [f64; 3],
+    length: f64,
+    dofs: &'static str,
+) -> BoneSpec {
+    BoneSpec {
+        name,
+        parent,
+        dir,
+        length,
+        dofs,
+    }
+}
+
+/// Limb bones are listed once without their side letter; torso and head bones have none.
+const LIMBS: [BoneSpec; 9] = [
+    spec("hipjoint", "root", [0.73, -0.56, 0.39], 2.8, ""),
+    spec("femur", "hipjoint", [0.2, -1.0, 0.0], 7.2, "xyz"),
+    spec("tibia", "femur", [0.1, -1.0, 0.0], 7.4, "x"),
+    spec("foot", "tibia", [0.0, -0.3, 1.0], 2.0, "xz"),
+    spec("toes", "foot", [0.0, 0.0, 1.0], 1.0, "x"),
+    spec("clavicle", "thorax", [1.0, 0.25, 0.0], 3.4, "yz"),
+    spec("humerus", "clavicle", [1.0, 0.0, 0.0], 5.2, "xyz"),
+    spec("radius", "humerus", [1.0, 0.0, 0.0], 3.6, "y"),
+    spec("hand", "radius", [1.0, 0.0, 0.0], 1.6, "z"),
+];
+const SPINE: [BoneSpec; 5] = [
+    spec("lowerback", "root", [0.0, 1.0, -0.05], 2.1, "xyz"),
+    spec("upperback", "lowerback", [0.0, 1.0, 0.0], 2.1, "xyz"),
+    spec("thorax", "upperback", [0.0, 1.0, 0.0], 2.1, "xyz"),
+    spec("lowerneck", "thorax", [0.0, 1.0, 0.05], 1.7, "xyz"),
+    spec("head", "lowerneck", [0.0, 1.0, 0.0], 1.9, "xyz"),
+];
+
+fn joint(name: String, parent: Option<usize>, rest: Rest, dofs: Vec<ChannelKind>) -> Joint {
     Joint {
-        name: name.into(),
-        parent: Some(parent),
-        rest: Rest::Bone {
-            direction: dir.map(|d| d / n),
-            length,
-        },
+        name,
+        parent,
+        rest,
         dofs,
         axis_deg: [0.0; 3],
         axis_order: [Axis::X, Axis::Y, Axis::Z],
@@ -72,127 +104,55 @@ fn bone(name: &str, parent: usize, dir: [f64; 3], length: f64, dofs: Vec<Channel
     }
 }
 
-/// The generated skeleton (CMU bone names, ASF conventions).
+/// The generated skeleton (CMU bone names, ASF conventions): root, both legs, the spine to
+/// the head, both arms, in that order.
 pub fn walker_skeleton() -> Skeleton {
     let t = ChannelKind::Translation;
-    let mut joints = vec![Joint {
-        name: "root".into(),
-        parent: None,
-        rest: Rest::Offset([0.0; 3]),
-        dofs: vec![t(Axis::X), t(Axis::Y), t(Axis::Z), rx(), ry(), rz()],
-        axis_deg: [0.0; 3],
-        axis_order: [Axis::X, Axis::Y, Axis::Z],
-        limits: Vec::new(),
-        id: None,
-        end_site: false,
-        body_part: BodyPart::Torso,
-        chain_depth: 0,
-    }];
-    let mut add = |j: Joint| {
-        joints.push(j);
-        joints.len() - 1
-    };
-    for (side, s) in [("l", 1.0), ("r", -1.0)] {
-        let hip = add(bone(
-            &format!("{side}hipjoint"),
-            0,
-            [0.73 * s, -0.56, 0.39],
-            2.8,
-            vec![],
-        ));
-        let femur = add(bone(
-            &format!("{side}femur"),
-            hip,
-            [0.2 * s, -1.0, 0.0],
-            7.2,
-            vec![rx(), ry(), rz()],
-        ));
-        let tibia = add(bone(
-            &format!("{side}tibia"),
-            femur,
-            [0.1 * s, -1.0, 0.0],
-            7.4,
-            vec![rx()],
-        ));
-        let foot = add(bone(
-            &format!("{side}foot"),
-            tibia,
-            [0.0, -0.3, 1.0],
-            2.0,
-            vec![rx(), rz()],
-        ));
-        add(bone(
-            &format!("{side}toes"),
-            foot,
-            [0.0, 0.0, 1.0],
-            1.0,
-            vec![rx()],
-        ));
-    }
-    let lowerback = add(bone(
-        "lowerback",
-        0,
-        [0.0, 1.0, -0.05],
-        2.1,
-        vec![rx(), ry(), rz()],
-    ));
-    let upperback = add(bone(
-        "upperback",
-        lowerback,
-        [0.0, 1.0, 0.0],
-        2.1,
-        vec![rx(), ry(), rz()],
-    ));
-    let thorax = add(bone(
-        "thorax",
-        upperback,
-        [0.0, 1.0, 0.0],
-        2.1,
-        vec![rx(), ry(), rz()],
-    ));
-    let neck = add(bone(
-        "lowerneck",
-        thorax,
-        [0.0, 1.0, 0.05],
-        1.7,
-        vec![rx(), ry(), rz()],
-    ));
-    add(bone(
-        "head",
-        neck,
-        [0.0, 1.0, 0.0],
-        1.9,
-        vec![rx(), ry(), rz()],
-    ));
-    for (side, s) in [("l", 1.0), ("r", -1.0)] {
-        let clav = add(bone(
-            &format!("{side}clavicle"),
-            thorax,
-            [s, 0.25, 0.0],
-            3.4,
-            vec![ry(), rz()],
-        ));
-        let hum = add(bone(
-            &format!("{side}humerus"),
-            clav,
-            [s, 0.0, 0.0],
-            5.2,
-            vec![rx(), ry(), rz()],
-        ));
-        let rad = add(bone(
-            &format!("{side}radius"),
-            hum,
-            [s, 0.0, 0.0],
-            3.6,
-            vec![ry()],
-        ));
-        add(bone(
-            &format!("{side}hand"),
-            rad,
-            [s, 0.0, 0.0],
-            1.6,
-            vec![rz()],
-        ));
+    let r = ChannelKind::Rotation;
+    let root_dofs = vec![
+        t(Axis::X),
+        t(Axis::Y),
+        t(Axis::Z),
+        r(Axis::X),
+        r(Axis::Y),
+        r(Axis::Z),
+    ];
+    let mut joints = vec![joint(
+        "root".into(),
+        None,
+        Rest::Offset([0.0; 3]),
+        root_dofs,
+    )];
+    let legs = &LIMBS[..5];
+    let arms = &LIMBS[5..];
+    let sides = [("l", 1.0), ("r", -1.0)];
+    let groups: [(&[BoneSpec], bool); 3] = [(legs, true), (&SPINE, false), (arms, true)];
+    for (specs, sided) in groups {
+        for (side, mirror) in if sided { &sides[..] } else { &sides[..1] } {
+            for b in specs {
+                let prefix = if sided { *side } else { "" };
+                let name = format!("{prefix}{}", b.name);
+                let parent_name = if LIMBS.iter().any(|l| l.name == b.parent) {
+                    format!("{prefix}{}", b.parent)
+                } else {
+                    b.parent.to_string()
+                };
+                let parent = joints.iter().position(|j| j.name == parent_name);
+                let dir = [b.dir[0] * mirror, b.dir[1], b.dir[2]];
+                let norm = (dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]).sqrt();
+                let rest = Rest::Bone {
+                    direction: dir.map(|d| d / norm),
+                    length: b.length,
+                };
+                let dofs = b
+                    .dofs
+                    .chars()
+                    .filter_map(Axis::from_letter)
+                    .map(r)
+                    .collect();
+                joints.push(joint(name, parent, rest, dofs));
+            }
+        }
     }
     let mut skeleton = Skeleton {
         name: "synthetic-walker".into(),

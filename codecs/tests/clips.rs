@@ -3,6 +3,7 @@
 
 use std::path::PathBuf;
 
+use codecs::BodyPart::{Head, LeftArm, LeftLeg, RightArm, RightLeg, Torso};
 use codecs::data::{ClipFiles, shared_clips};
 use codecs::{Clip, SkeletonFormat, asf, bvh, convert, fk, io};
 
@@ -188,7 +189,6 @@ fn asf_body_parts_and_chain_depths_match_the_cmu_names() {
         let sk = asf::read_asf(c.asf.as_deref().unwrap()).unwrap();
         let part = |n: &str| sk.joints[sk.joint_index(n).unwrap()].body_part;
         let depth = |n: &str| sk.joints[sk.joint_index(n).unwrap()].chain_depth;
-        use codecs::BodyPart::*;
         assert_eq!(part("ltoes"), LeftLeg);
         assert_eq!(part("rfemur"), RightLeg);
         assert_eq!(part("lowerback"), Torso);

@@ -4,6 +4,7 @@
 //! an unbounded allocation abort the test). 2,000+ cases per format.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
 
+use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
@@ -337,7 +338,7 @@ fn bones_without_dof_lines_and_radians_headers_are_read() {
             } else {
                 v
             };
-            rad.push_str(&format!(" {v:?}"));
+            write!(rad, " {v:?}").unwrap();
         }
         rad.push('\n');
         c += 1;

@@ -282,7 +282,9 @@ pub fn info_text(name: &str, clip: &Clip) -> String {
         let cname = clip.channel_name(c);
         let _ = writeln!(s, "    {cname:<22} {lo:>11.4} {hi:>11.4}");
         let ch = clip.channels()[c];
-        if clip.frames() > 1 && lo == hi {
+        #[expect(clippy::float_cmp, reason = "constant means every value is identical")]
+        let constant = lo == hi;
+        if clip.frames() > 1 && constant {
             warnings.push(format!("{cname} is constant ({lo})"));
         }
         if ch.kind.is_rotation() {
