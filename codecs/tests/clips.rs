@@ -250,3 +250,47 @@ fn synthetic_walk_is_a_valid_clip_that_walks_forward() {
     let back = io::read_clip(Some(&a), &m).unwrap();
     assert_same_values(&clip, &back, "walk");
 }
+
+/// Thesis ch. 5 works on quaternions: Euler → quaternion → Euler must keep every joint where
+/// it was (≤ 1e-6 of the skeleton's scale), including across Euler wraps.
+#[test]
+fn quaternion_round_trip_keeps_every_joint_position() {
+    let mut all = clips().into_iter().map(|c| load(&c)).collect::<Vec<_>>();
+    all.push(codecs::synth::walking_clip(
+        &codecs::synth::WalkParams::default(),
+    ));
+    for clip in all {
+        let back = codecs::quat::from_quaternions(&codecs::quat::to_quaternions(&clip));
+        let (a, b) = (fk::positions(&clip), fk::positions(&back));
+        let scale = clip
+            .skeleton
+            .joints
+            .iter()
+            .map(|j| j.rest.length())
+            .fold(0.0, f64::max);
+        let mut worst: f64 = 0.0;
+        for f in 0..a.frames() {
+            for j in 0..a.joint_count() {
+                let (p, q) = (a.point(f, j), b.point(f, j));
+                for k in 0..3 {
+                    worst = worst.max((p[k] - q[k]).abs());
+                }
+            }
+        }
+        assert!(
+            worst <= 1e-6 * scale,
+            "{}: moved by {worst}",
+            clip.skeleton.name
+        );
+        // Unwrapping keeps channels continuous: no new jumps over 180 degrees.
+        for c in 0..clip.channel_count() {
+            let jumps = |x: &Clip| {
+                x.channel(c)
+                    .windows(2)
+                    .filter(|w| (w[1] - w[0]).abs() > 180.0)
+                    .count()
+            };
+            assert!(jumps(&back) <= jumps(&clip), "{}", clip.channel_name(c));
+        }
+    }
+}
