@@ -120,33 +120,11 @@ impl Quat {
         ]
     }
 
-    /// Hamilton product `self · other` (apply `other` first).
-    #[must_use]
-    pub fn mul(self, o: Quat) -> Quat {
-        Quat {
-            w: self.w * o.w - self.x * o.x - self.y * o.y - self.z * o.z,
-            x: self.w * o.x + self.x * o.w + self.y * o.z - self.z * o.y,
-            y: self.w * o.y - self.x * o.z + self.y * o.w + self.z * o.x,
-            z: self.w * o.z + self.x * o.y - self.y * o.x + self.z * o.w,
-        }
-    }
-
     /// Conjugate (the inverse of a unit quaternion).
     #[must_use]
     pub fn conj(self) -> Quat {
         Quat {
             w: self.w,
-            x: -self.x,
-            y: -self.y,
-            z: -self.z,
-        }
-    }
-
-    /// Negation (the same rotation on the other hemisphere).
-    #[must_use]
-    pub fn neg(self) -> Quat {
-        Quat {
-            w: -self.w,
             x: -self.x,
             y: -self.y,
             z: -self.z,
@@ -185,7 +163,7 @@ impl Quat {
         let mut d = self.dot(o);
         let o = if d < 0.0 {
             d = -d;
-            o.neg()
+            -o
         } else {
             o
         };
@@ -213,7 +191,7 @@ impl Quat {
 
     /// Logarithm of a unit quaternion: the rotation vector divided by two (radians).
     pub fn log(self) -> Vec3 {
-        let q = if self.w < 0.0 { self.neg() } else { self };
+        let q = if self.w < 0.0 { -self } else { self };
         let v = (q.x * q.x + q.y * q.y + q.z * q.z).sqrt();
         if v < 1e-15 {
             return [q.x, q.y, q.z];
@@ -248,6 +226,34 @@ impl Quat {
     pub fn distance(self, o: Quat) -> f64 {
         let d = self.dot(o);
         (2.0 * d * d - 1.0).clamp(-1.0, 1.0).acos()
+    }
+}
+
+/// Hamilton product `a · b` (apply `b` first).
+impl std::ops::Mul for Quat {
+    type Output = Quat;
+
+    fn mul(self, o: Quat) -> Quat {
+        Quat {
+            w: self.w * o.w - self.x * o.x - self.y * o.y - self.z * o.z,
+            x: self.w * o.x + self.x * o.w + self.y * o.z - self.z * o.y,
+            y: self.w * o.y - self.x * o.z + self.y * o.w + self.z * o.x,
+            z: self.w * o.z + self.x * o.y - self.y * o.x + self.z * o.w,
+        }
+    }
+}
+
+/// Negation: the same rotation on the other hemisphere.
+impl std::ops::Neg for Quat {
+    type Output = Quat;
+
+    fn neg(self) -> Quat {
+        Quat {
+            w: -self.w,
+            x: -self.x,
+            y: -self.y,
+            z: -self.z,
+        }
     }
 }
 
@@ -340,11 +346,9 @@ fn rotation_channels(clip: &Clip, joint: usize) -> (Vec<Axis>, Vec<usize>) {
     let mut axes = Vec::new();
     let mut rows = Vec::new();
     for (c, ch) in clip.channels().iter().enumerate() {
-        if ch.joint == joint {
-            if let ChannelKind::Rotation(a) = ch.kind {
-                axes.push(a);
-                rows.push(c);
-            }
+        if let (true, ChannelKind::Rotation(a)) = (ch.joint == joint, ch.kind) {
+            axes.push(a);
+            rows.push(c);
         }
     }
     (axes, rows)
@@ -357,9 +361,9 @@ fn channel_rotation(format: SkeletonFormat, axes: &[Axis], angles: &[f64]) -> Qu
         let r = Quat::from_axis(a, v);
         q = match format {
             // ASF: fixed axes in listed order, each new rotation applied on the left.
-            SkeletonFormat::Asf => r.mul(q),
+            SkeletonFormat::Asf => r * q,
             // BVH: product in listed order.
-            SkeletonFormat::Bvh => q.mul(r),
+            SkeletonFormat::Bvh => q * r,
         };
     }
     q
@@ -382,7 +386,7 @@ pub fn to_quaternions(clip: &Clip) -> QuatClip {
             angles.extend(rows.iter().map(|&c| clip.value(c, f)));
             let mut q = channel_rotation(clip.skeleton.format, &axes, &angles);
             if f > 0 && q.dot(prev) < 0.0 {
-                q = q.neg();
+                q = -q;
             }
             prev = q;
             track.push(q);
@@ -501,11 +505,7 @@ mod tests {
         let m = a.slerp(b, 0.25);
         assert!(m.distance(Quat::from_axis(Axis::Z, 35.0)) < 1e-9);
         // Takes the short way round even when b is given on the other hemisphere.
-        assert!(
-            a.slerp(b.neg(), 0.5)
-                .distance(Quat::from_axis(Axis::Z, 60.0))
-                < 1e-9
-        );
+        assert!(a.slerp(-b, 0.5).distance(Quat::from_axis(Axis::Z, 60.0)) < 1e-9);
     }
 
     #[test]
@@ -515,7 +515,7 @@ mod tests {
         assert!((v[1] - 25f64.to_radians()).abs() < 1e-12);
         assert!(Quat::exp(v).distance(q) < 1e-9);
         assert!((Quat::IDENTITY.distance(q) - 50f64.to_radians()).abs() < 1e-9);
-        assert!((q.distance(q.neg())).abs() < 1e-7);
+        assert!((q.distance(-q)).abs() < 1e-7);
         assert!((unwrap_near(-179.0, 179.0) - 181.0).abs() < 1e-12);
     }
 }
