@@ -8,6 +8,7 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 
 mod clip_cmd;
+mod primitives_cmd;
 
 /// Perceptual user studies of motion-capture compression.
 #[derive(Debug, Parser)]
@@ -22,12 +23,16 @@ enum Command {
     /// Inspect, convert and evaluate motion clips (ASF/AMC, BVH).
     #[command(subcommand)]
     Clip(clip_cmd::ClipCommand),
+    /// Build and inspect the primitive database of the incremental codec (thesis ch. 5).
+    #[command(subcommand)]
+    Primitives(primitives_cmd::PrimitivesCommand),
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Clip(cmd) => clip_cmd::run(cmd),
+        Command::Primitives(cmd) => primitives_cmd::run(cmd),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,0 +1,143 @@
+//! `study primitives ...`: build and inspect the primitive database of thesis ch. 5.
+
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use codecs::primitives::{Database, SegmentParams, TrainParams};
+use codecs::{Clip, io};
+
+/// Primitive-database subcommands.
+#[derive(Debug, clap::Subcommand)]
+pub enum PrimitivesCommand {
+    /// Train a database on clips (offline): `.bvh` files, or `.asf` followed by its `.amc`
+    /// files (each AMC uses the last ASF before it).
+    Train {
+        /// Training clips.
+        #[arg(required = true)]
+        clips: Vec<PathBuf>,
+        /// Output database file.
+        #[arg(short, long, value_name = "DB")]
+        output: PathBuf,
+        /// Largest number of primitives per joint (thesis: 25).
+        #[arg(long, default_value_t = 25)]
+        k_max: usize,
+        /// Clustering error bound in radians (thesis: 0.01).
+        #[arg(long, default_value_t = 0.01)]
+        error_bound: f64,
+        /// Longest segment in frames, S_M of Table 5.4 (16, 32, 64).
+        #[arg(long, default_value_t = 32)]
+        max_frames: usize,
+        /// Seed of the k-means++ seeding.
+        #[arg(long, default_value_t = 0x5EED)]
+        seed: u64,
+    },
+    /// Print a database's joints, primitive counts and clustering errors.
+    Info {
+        /// The database file.
+        db: PathBuf,
+    },
+}
+
+/// Loads clips given as `.bvh`, or `.asf` followed by `.amc` files.
+fn load_clips(files: &[PathBuf]) -> Result<Vec<Clip>> {
+    let ext = |p: &Path, e: &str| p.extension().is_some_and(|x| x.eq_ignore_ascii_case(e));
+    let mut asf: Option<&Path> = None;
+    let mut clips = Vec::new();
+    for f in files {
+        if ext(f, "asf") {
+            asf = Some(f);
+        } else if ext(f, "amc") {
+            let Some(a) = asf else {
+                bail!(
+                    "{}: an AMC file needs an ASF before it on the command line",
+                    f.display()
+                );
+            };
+            clips.push(io::read_clip(Some(a), f)?);
+        } else {
+            clips.push(io::read_clip(None, f)?);
+        }
+    }
+    if clips.is_empty() {
+        bail!("no training clips given");
+    }
+    Ok(clips)
+}
+
+/// Runs a primitives subcommand.
+///
+/// # Errors
+/// Read, write and argument errors, with the file named.
+pub fn run(cmd: PrimitivesCommand) -> Result<()> {
+    match cmd {
+        PrimitivesCommand::Train {
+            clips,
+            output,
+            k_max,
+            error_bound,
+            max_frames,
+            seed,
+        } => {
+            if !(error_bound.is_finite() && error_bound > 0.0) {
+                bail!("--error-bound must be a positive number of radians");
+            }
+            if !(16..=4096).contains(&max_frames) {
+                bail!("--max-frames must be between 16 and 4096");
+            }
+            if !(1..=4096).contains(&k_max) {
+                bail!("--k-max must be between 1 and 4096");
+            }
+            let loaded = load_clips(&clips)?;
+            let refs: Vec<&Clip> = loaded.iter().collect();
+            let params = TrainParams {
+                k_max,
+                k_start: TrainParams::default().k_start.min(k_max),
+                error_bound_rad: error_bound,
+                segment: SegmentParams {
+                    min_frames: 15,
+                    max_frames,
+                },
+                seed,
+                ..TrainParams::default()
+            };
+            let frames: usize = loaded.iter().map(Clip::frames).sum();
+            eprintln!("training on {} clips, {frames} frames", loaded.len());
+            let db = Database::train(&refs, &params, |done, total| {
+                eprint!("\r  joints clustered: {done}/{total}");
+            });
+            eprintln!();
+            db.write(&output)?;
+            eprintln!(
+                "wrote {} ({} bytes, fingerprint {:08x})",
+                output.display(),
+                db.to_bytes().len(),
+                db.fingerprint()
+            );
+            Ok(())
+        }
+        PrimitivesCommand::Info { db } => {
+            let d = Database::read(&db).with_context(|| "reading the primitive database")?;
+            let mut out = std::io::stdout().lock();
+            writeln!(out, "{}", db.display())?;
+            writeln!(out, "  fingerprint  {:08x}", d.fingerprint())?;
+            writeln!(
+                out,
+                "  segments     {}..{} frames, normalized to 16",
+                d.segment.min_frames, d.segment.max_frames
+            )?;
+            writeln!(out, "  joint            K  segments  error_rad")?;
+            for j in &d.joints {
+                writeln!(
+                    out,
+                    "    {:<14} {:>2} {:>9} {:>10.5}",
+                    j.joint,
+                    j.primitives.len(),
+                    j.segments,
+                    j.error_rad
+                )?;
+            }
+            Ok(())
+        }
+    }
+}
