@@ -11,9 +11,7 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use crate::bodymap;
-use crate::clip::{
-    Axis, BodyPart, ChannelKind, Clip, Joint, Rest, Skeleton, SkeletonFormat, Units,
-};
+use crate::clip::{Axis, ChannelKind, Clip, Joint, Rest, Skeleton, SkeletonFormat, Units};
 use crate::error::{Limits, ParseError, WriteError};
 use crate::text::{fmt_num, lines, number, numbers, read_text, syntax};
 
@@ -88,19 +86,7 @@ fn bvh_channel(path: &Path, line: usize, tok: &str) -> Result<ChannelKind, Parse
 }
 
 fn new_joint(name: String, parent: Option<usize>) -> Joint {
-    Joint {
-        name,
-        parent,
-        rest: Rest::Offset([0.0; 3]),
-        dofs: Vec::new(),
-        axis_deg: [0.0; 3],
-        axis_order: [Axis::X, Axis::Y, Axis::Z],
-        limits: Vec::new(),
-        id: None,
-        end_site: false,
-        body_part: BodyPart::Torso,
-        chain_depth: 0,
-    }
+    Joint::new(name, parent, Rest::Offset([0.0; 3]), Vec::new())
 }
 
 /// Parses the block after a joint's name: `{ OFFSET .. CHANNELS .. children }`.

@@ -208,6 +208,26 @@ pub struct Joint {
     pub chain_depth: usize,
 }
 
+impl Joint {
+    /// A joint with no ASF axis, limits or id, not an end site, in the torso chain at depth 0
+    /// (readers then set what their format gives and [`crate::bodymap::assign`] the chain).
+    pub fn new(name: String, parent: Option<usize>, rest: Rest, dofs: Vec<ChannelKind>) -> Joint {
+        Joint {
+            name,
+            parent,
+            rest,
+            dofs,
+            axis_deg: [0.0; 3],
+            axis_order: [Axis::X, Axis::Y, Axis::Z],
+            limits: Vec::new(),
+            id: None,
+            end_site: false,
+            body_part: BodyPart::Torso,
+            chain_depth: 0,
+        }
+    }
+}
+
 /// Length and angle units of a skeleton.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Units {

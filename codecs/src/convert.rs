@@ -58,33 +58,22 @@ pub fn asf_to_bvh(clip: &Clip) -> Result<Clip, ClipError> {
             ZYX.to_vec()
         };
         bvh_index[i] = joints.len();
-        joints.push(Joint {
-            name: j.name.clone(),
-            parent,
-            rest: Rest::Offset(offset),
-            dofs,
-            axis_deg: [0.0; 3],
-            axis_order: [Axis::X, Axis::Y, Axis::Z],
-            limits: Vec::new(),
-            id: None,
-            end_site: false,
-            body_part: j.body_part,
-            chain_depth: j.chain_depth,
-        });
+        let mut joint = Joint::new(j.name.clone(), parent, Rest::Offset(offset), dofs);
+        joint.body_part = j.body_part;
+        joint.chain_depth = j.chain_depth;
+        joints.push(joint);
         if j.parent.is_some() && sk.children(i).next().is_none() {
-            joints.push(Joint {
-                name: format!("{}_End", j.name),
-                parent: Some(bvh_index[i]),
-                rest: Rest::Offset(j.rest.vector()),
-                dofs: Vec::new(),
-                axis_deg: [0.0; 3],
-                axis_order: [Axis::X, Axis::Y, Axis::Z],
-                limits: Vec::new(),
-                id: None,
-                end_site: true,
-                body_part: j.body_part,
-                chain_depth: j.chain_depth + 1,
-            });
+            let name = format!("{}_End", j.name);
+            let mut end = Joint::new(
+                name,
+                Some(bvh_index[i]),
+                Rest::Offset(j.rest.vector()),
+                vec![],
+            );
+            end.end_site = true;
+            end.body_part = j.body_part;
+            end.chain_depth = j.chain_depth + 1;
+            joints.push(end);
         }
     }
     let skeleton = Skeleton {

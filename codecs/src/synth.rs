@@ -88,22 +88,6 @@ const SPINE: [BoneSpec; 5] = [
     spec("head", "lowerneck", [0.0, 1.0, 0.0], 1.9, "xyz"),
 ];
 
-fn joint(name: String, parent: Option<usize>, rest: Rest, dofs: Vec<ChannelKind>) -> Joint {
-    Joint {
-        name,
-        parent,
-        rest,
-        dofs,
-        axis_deg: [0.0; 3],
-        axis_order: [Axis::X, Axis::Y, Axis::Z],
-        limits: Vec::new(),
-        id: None,
-        end_site: false,
-        body_part: BodyPart::Torso,
-        chain_depth: 0,
-    }
-}
-
 /// The generated skeleton (CMU bone names, ASF conventions): root, both legs, the spine to
 /// the head, both arms, in that order.
 pub fn walker_skeleton() -> Skeleton {
@@ -117,7 +101,7 @@ pub fn walker_skeleton() -> Skeleton {
         r(Axis::Y),
         r(Axis::Z),
     ];
-    let mut joints = vec![joint(
+    let mut joints = vec![Joint::new(
         "root".into(),
         None,
         Rest::Offset([0.0; 3]),
@@ -150,7 +134,7 @@ pub fn walker_skeleton() -> Skeleton {
                     .filter_map(Axis::from_letter)
                     .map(r)
                     .collect();
-                joints.push(joint(name, parent, rest, dofs));
+                joints.push(Joint::new(name, parent, rest, dofs));
             }
         }
     }
