@@ -24,6 +24,7 @@ pub mod error;
 pub mod fk;
 pub mod io;
 pub mod math;
+pub mod playback;
 pub mod primitives;
 pub mod quat;
 pub mod synth;
