@@ -1,6 +1,83 @@
 //! The on-disk record of study sessions.
 //!
-//! Holds (protocols issue): per session a `trials.csv` appended one row per trial with flush
-//! and fsync before the next trial, an atomically replaced `session.json` manifest, a session
-//! lock, torn-row detection, resume by replay, and readers that load a results folder back into
-//! typed records for the analysis crate.
+//! One directory per study run ([`store::RunManifest`] in `run.json`), one sub-directory per
+//! session with a `trials.csv` appended one row per trial with flush and fsync before the next
+//! trial ([`store::SessionLog`]), an atomically replaced `session.json`
+//! ([`store::SessionManifest`]), a lock file against two writers, torn-row detection on resume,
+//! and readers that load a results directory back into typed records for the analysis crate.
+//! Formats are versioned and documented in `docs/results-format.md`.
+
+use std::path::PathBuf;
+
+pub mod store;
+pub mod trials;
+
+pub use store::{RunManifest, SessionLog, SessionManifest, SessionResults, read_results_dir};
+pub use trials::{TornRow, TrialsFile, read_trials};
+
+/// Everything that can go wrong reading or writing results.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ResultsError {
+    /// An I/O call failed.
+    #[error("{}: {op}: {source}", path.display())]
+    Io {
+        /// File or directory.
+        path: PathBuf,
+        /// What was being done.
+        op: &'static str,
+        /// Cause.
+        source: std::io::Error,
+    },
+    /// Refusing to overwrite existing results.
+    #[error("{} already exists; results are never overwritten (use --resume to continue, or another folder)", path.display())]
+    Exists {
+        /// The existing path.
+        path: PathBuf,
+    },
+    /// Another live process holds the session lock.
+    #[error("{} is locked by process {pid}; two runners may not write one session", path.display())]
+    Locked {
+        /// Lock file.
+        path: PathBuf,
+        /// Holder's process id.
+        pid: u32,
+    },
+    /// A file is larger than its reader's limit.
+    #[error("{}: {bytes} bytes is over the {limit}-byte limit", path.display())]
+    TooLarge {
+        /// File.
+        path: PathBuf,
+        /// Its size.
+        bytes: u64,
+        /// The limit.
+        limit: u64,
+    },
+    /// A malformed row or header.
+    #[error("{}: line {line}, column {column}: {message}", path.display())]
+    Malformed {
+        /// File.
+        path: PathBuf,
+        /// 1-based line.
+        line: usize,
+        /// 1-based column (CSV field number, or character for JSON).
+        column: usize,
+        /// What is wrong.
+        message: String,
+    },
+    /// A session directory has a trial log but no `session.json` (interrupted before its first
+    /// manifest write).
+    #[error("{}: trials.csv without session.json; the session was interrupted (resume it)", dir.display())]
+    MissingManifest {
+        /// Session directory.
+        dir: PathBuf,
+    },
+    /// A value cannot be written in the format (e.g. a line break in an id).
+    #[error("column {column}: cannot write: {reason}")]
+    Unwritable {
+        /// Column name.
+        column: &'static str,
+        /// Why.
+        reason: String,
+    },
+}

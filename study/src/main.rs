@@ -9,6 +9,7 @@ use clap::{Parser, Subcommand};
 
 mod clip_cmd;
 mod primitives_cmd;
+mod study_cmd;
 
 /// Perceptual user studies of motion-capture compression.
 #[derive(Debug, Parser)]
@@ -26,6 +27,10 @@ enum Command {
     /// Build and inspect the primitive database of the incremental codec (thesis ch. 5).
     #[command(subcommand)]
     Primitives(primitives_cmd::PrimitivesCommand),
+    /// Validate a study file and list every problem at once.
+    Check(study_cmd::CheckArgs),
+    /// Dry-run sessions with simulated observers into a results directory.
+    Simulate(study_cmd::SimulateArgs),
 }
 
 fn main() -> ExitCode {
@@ -33,6 +38,8 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Clip(cmd) => clip_cmd::run(cmd),
         Command::Primitives(cmd) => primitives_cmd::run(cmd),
+        Command::Check(args) => study_cmd::check(&args),
+        Command::Simulate(args) => study_cmd::simulate(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -4,7 +4,7 @@
 //! `α(i) = (ω(i) − ω(i−1))/h` (eq. 5.2) are vectors; the text chops at "zero-crossings of the
 //! angular acceleration", which for a vector we read as sign changes of the acceleration's
 //! component along the velocity, `α(i)·ω̂(i)`, i.e. the frames where the angular speed stops
-//! rising or falling (the motion beats of [KPS03]). A segment ends at the first such crossing
+//! rising or falling (the motion beats of KPS03). A segment ends at the first such crossing
 //! at least `min_frames` (15) after its start, or after `max_frames` (`S_M`) frames if none
 //! comes; the rest of the clip forms the last, possibly shorter, segment.
 

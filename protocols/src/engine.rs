@@ -1,0 +1,524 @@
+//! The protocol engines: deterministic state machines from study + seed + responses to the
+//! next trial.
+//!
+//! A [`Session`] is built from a validated [`StudyDefinition`] and a subject index. MOS and DSCQS
+//! sessions plan every trial up front from the study seed and the subject index (familiarization
+//! block spanning the quality range, shuffled test trials, hidden repeats, reference positions);
+//! staircase sessions decide each trial from the staircases' state and a per-trial random
+//! stream. Nothing depends on the wall clock except the time limit, whose clock the caller
+//! passes in, so replaying logged responses regenerates the logged trials exactly (resume).
+
+use serde::{Deserialize, Serialize};
+
+use crate::record::{Answer, Arrangement, Block, Outcome, Position, Protocol, Response, Trial};
+use crate::rng::{StudyRng, purpose};
+use crate::staircase::{Staircase, StaircaseError};
+use crate::study::{Condition, RatingScale, ReferencePlacement, StudyDefinition, Track};
+
+/// Where a session stands.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SessionStatus {
+    /// Trials remain.
+    Running,
+    /// Every planned trial was answered (MOS, DSCQS) or every staircase stopped.
+    Complete,
+    /// The session time limit ended the session; the rest was not shown.
+    TimeLimit,
+}
+
+/// Why an engine refused a call.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum EngineError {
+    /// `respond` without a trial pending.
+    #[error("no trial is waiting for a response")]
+    NoPendingTrial,
+    /// The answer does not fit the protocol.
+    #[error("trial {trial}: a {protocol} trial needs {expected}, got {got:?}")]
+    WrongAnswer {
+        /// Trial index.
+        trial: u32,
+        /// Protocol.
+        protocol: Protocol,
+        /// What was expected.
+        expected: &'static str,
+        /// What came.
+        got: Answer,
+    },
+    /// A rating is not on the study's scale.
+    #[error("trial {trial}: rating {value} is not on the scale {min}..={max} (step {step:?})")]
+    OffScale {
+        /// Trial index.
+        trial: u32,
+        /// The rating.
+        value: f64,
+        /// Scale minimum.
+        min: f64,
+        /// Scale maximum.
+        max: f64,
+        /// Scale step.
+        step: Option<f64>,
+    },
+    /// A staircase level has no stimulus (the study file changed or was not validated).
+    #[error("staircase {track:?}: no stimulus for level {level}")]
+    NoStimulus {
+        /// Track name.
+        track: String,
+        /// Level.
+        level: f64,
+    },
+    /// More replays than the study allows.
+    #[error("trial {trial}: {replays} replays, the study allows {max}")]
+    TooManyReplays {
+        /// Trial index.
+        trial: u32,
+        /// Replays in the response.
+        replays: u32,
+        /// `presentation.max_replays`.
+        max: u32,
+    },
+    /// Staircase state error.
+    #[error(transparent)]
+    Staircase(#[from] StaircaseError),
+    /// Replay regenerated a trial different from the logged one.
+    #[error(
+        "trial {trial}: logged {field} {logged:?} but the study file now gives {regenerated:?}; \
+         the study file (or the manifest) changed since this session was recorded"
+    )]
+    ReplayMismatch {
+        /// Trial index.
+        trial: u32,
+        /// Field that differs.
+        field: &'static str,
+        /// Logged value.
+        logged: String,
+        /// Regenerated value.
+        regenerated: String,
+    },
+}
+
+#[derive(Debug, Clone)]
+struct Stairs {
+    tracks: Vec<Track>,
+    staircases: Vec<Staircase>,
+    tolerance: f64,
+}
+
+/// A subject's session: the state machine of one protocol.
+#[derive(Debug, Clone)]
+pub struct Session {
+    protocol: Protocol,
+    subject: u32,
+    seed: u64,
+    arrangement: Arrangement,
+    placement: ReferencePlacement,
+    scale: RatingScale,
+    time_limit_ms: Option<u64>,
+    break_every: Option<u32>,
+    max_replays: Option<u32>,
+    plan: Vec<Trial>,
+    stairs: Option<Stairs>,
+    next_index: u32,
+    pending: Option<Trial>,
+    status: SessionStatus,
+}
+
+fn place(placement: ReferencePlacement, arrangement: Arrangement, rng: &mut StudyRng) -> Position {
+    match placement {
+        ReferencePlacement::Fixed(p) => p,
+        ReferencePlacement::Random => {
+            let first = match arrangement {
+                Arrangement::SideBySide => Position::Left,
+                Arrangement::Sequential => Position::First,
+                Arrangement::Abab => Position::A,
+            };
+            if rng.coin() { first } else { first.other() }
+        }
+    }
+}
+
+impl Session {
+    /// The session of subject `subject` (0-based) of `study`.
+    ///
+    /// # Errors
+    /// [`EngineError::Staircase`] if staircase settings are invalid (not possible for a
+    /// validated study).
+    pub fn new(study: &StudyDefinition, subject: u32) -> Result<Self, EngineError> {
+        let arrangement = study.presentation.arrangement;
+        let placement = study.presentation.reference_position;
+        let mut plan = Vec::new();
+        let mut stairs = None;
+        match study.protocol {
+            Protocol::Mos | Protocol::Dscqs => {
+                plan = plan_trials(study, subject, arrangement, placement);
+            }
+            Protocol::Staircase => {
+                if let Some(sc) = &study.staircase {
+                    let staircases = sc
+                        .tracks
+                        .iter()
+                        .map(|t| Staircase::new(t.settings.clone()))
+                        .collect::<Result<Vec<_>, _>>()?;
+                    stairs = Some(Stairs {
+                        tracks: sc.tracks.clone(),
+                        staircases,
+                        tolerance: sc.level_tolerance,
+                    });
+                }
+            }
+        }
+        Ok(Self {
+            protocol: study.protocol,
+            subject,
+            seed: study.seed,
+            arrangement,
+            placement,
+            scale: study.scale,
+            time_limit_ms: study.session.time_limit_ms,
+            break_every: study.session.break_every_trials,
+            max_replays: study.presentation.max_replays,
+            plan,
+            stairs,
+            next_index: 0,
+            pending: None,
+            status: SessionStatus::Running,
+        })
+    }
+
+    /// Protocol of this session.
+    pub fn protocol(&self) -> Protocol {
+        self.protocol
+    }
+
+    /// Where the session stands.
+    pub fn status(&self) -> SessionStatus {
+        self.status
+    }
+
+    /// Trials answered so far.
+    pub fn answered(&self) -> u32 {
+        self.next_index
+    }
+
+    /// The next trial, or `None` when the session is over (see [`Self::status`]).
+    ///
+    /// `elapsed_ms` is the session clock; at or past the time limit no new trial starts and
+    /// the session ends with [`SessionStatus::TimeLimit`]. Calling again before responding
+    /// returns the same trial.
+    ///
+    /// # Errors
+    /// [`EngineError::NoStimulus`] when a staircase level has no stimulus.
+    pub fn next_trial(&mut self, elapsed_ms: u64) -> Result<Option<Trial>, EngineError> {
+        if let Some(t) = &self.pending {
+            return Ok(Some(t.clone()));
+        }
+        if self.status != SessionStatus::Running {
+            return Ok(None);
+        }
+        let index = self.next_index;
+        let mut trial = match &self.stairs {
+            None => {
+                let Some(t) = self.plan.get(index as usize) else {
+                    self.status = SessionStatus::Complete;
+                    return Ok(None);
+                };
+                t.clone()
+            }
+            Some(st) => {
+                let open: Vec<usize> = (0..st.staircases.len())
+                    .filter(|&k| !st.staircases[k].is_finished())
+                    .collect();
+                if open.is_empty() {
+                    self.status = SessionStatus::Complete;
+                    return Ok(None);
+                }
+                if self.time_limit_ms.is_some_and(|l| elapsed_ms >= l) {
+                    self.status = SessionStatus::TimeLimit;
+                    return Ok(None);
+                }
+                // Staircases are interleaved at random among those still running.
+                let mut rng = StudyRng::new(
+                    self.seed,
+                    &[u64::from(self.subject), purpose::TRIAL, u64::from(index)],
+                );
+                let k = open[rng.index(open.len())];
+                let reference_position = place(self.placement, self.arrangement, &mut rng);
+                let track = &st.tracks[k];
+                let level = st.staircases[k]
+                    .next_level()
+                    .unwrap_or(track.settings.start);
+                let Some(stimulus) = track.stimulus_at(level, st.tolerance) else {
+                    return Err(EngineError::NoStimulus {
+                        track: track.name.clone(),
+                        level,
+                    });
+                };
+                Trial {
+                    index,
+                    block: Block::Test,
+                    condition: track.name.clone(),
+                    stimulus: stimulus.to_string(),
+                    reference: track.reference.clone(),
+                    arrangement: self.arrangement,
+                    reference_position,
+                    staircase: Some(k as u32),
+                    level: Some(level),
+                    break_before: false,
+                }
+            }
+        };
+        if self.time_limit_ms.is_some_and(|l| elapsed_ms >= l) {
+            self.status = SessionStatus::TimeLimit;
+            return Ok(None);
+        }
+        trial.break_before = index > 0
+            && self
+                .break_every
+                .is_some_and(|n| n > 0 && index.is_multiple_of(n));
+        self.pending = Some(trial.clone());
+        Ok(Some(trial))
+    }
+
+    /// Scores `response` to the pending trial and advances the session.
+    ///
+    /// # Errors
+    /// [`EngineError::NoPendingTrial`], [`EngineError::WrongAnswer`],
+    /// [`EngineError::OffScale`] or [`EngineError::TooManyReplays`]; the trial stays pending on
+    /// error.
+    pub fn respond(&mut self, response: &Response) -> Result<Outcome, EngineError> {
+        let Some(trial) = self.pending.as_ref() else {
+            return Err(EngineError::NoPendingTrial);
+        };
+        if let Some(max) = self.max_replays
+            && response.replays > max
+        {
+            return Err(EngineError::TooManyReplays {
+                trial: trial.index,
+                replays: response.replays,
+                max,
+            });
+        }
+        let wrong = |expected| EngineError::WrongAnswer {
+            trial: trial.index,
+            protocol: self.protocol,
+            expected,
+            got: response.answer,
+        };
+        let on_scale = |v: f64| {
+            if self.scale.accepts(v) {
+                Ok(v)
+            } else {
+                Err(EngineError::OffScale {
+                    trial: trial.index,
+                    value: v,
+                    min: self.scale.min,
+                    max: self.scale.max,
+                    step: self.scale.step,
+                })
+            }
+        };
+        let outcome = match (self.protocol, response.answer) {
+            (Protocol::Mos, Answer::Rating(v)) => Outcome {
+                score: on_scale(v)?,
+                score_reference: None,
+                score_test: None,
+                correct: None,
+                reversal: None,
+            },
+            (Protocol::Mos, _) => return Err(wrong("a rating")),
+            (Protocol::Dscqs, Answer::Pair { a, b }) => {
+                let (a, b) = (on_scale(a)?, on_scale(b)?);
+                let (r, t) = if trial.reference_position == Position::A {
+                    (a, b)
+                } else {
+                    (b, a)
+                };
+                // BT.500 DSCQS: the difference reference minus test is the per-trial score.
+                Outcome {
+                    score: r - t,
+                    score_reference: Some(r),
+                    score_test: Some(t),
+                    correct: None,
+                    reversal: None,
+                }
+            }
+            (Protocol::Dscqs, _) => return Err(wrong("ratings of A and B")),
+            (Protocol::Staircase, Answer::Choice(p)) if p.fits(trial.arrangement) => {
+                // Thesis ch. 5: picking the original motion is the correct answer.
+                let correct = p == trial.reference_position;
+                let k = trial.staircase.unwrap_or(0) as usize;
+                let step = match self.stairs.as_mut().and_then(|s| s.staircases.get_mut(k)) {
+                    Some(sc) => sc.add_response(correct)?,
+                    None => return Err(EngineError::NoPendingTrial),
+                };
+                Outcome {
+                    score: if correct { 1.0 } else { 0.0 },
+                    score_reference: None,
+                    score_test: None,
+                    correct: Some(correct),
+                    reversal: Some(step.reversal),
+                }
+            }
+            (Protocol::Staircase, _) => {
+                return Err(wrong("a choice of a position of this arrangement"));
+            }
+        };
+        self.pending = None;
+        self.next_index += 1;
+        Ok(outcome)
+    }
+
+    /// Replays one logged trial: regenerates the trial, checks it equals `logged`, feeds the
+    /// logged response and checks the scoring equals `logged_outcome`.
+    ///
+    /// # Errors
+    /// [`EngineError::ReplayMismatch`] naming the first field that differs, or any error of
+    /// [`Self::next_trial`] / [`Self::respond`].
+    pub fn replay(
+        &mut self,
+        logged: &Trial,
+        response: &Response,
+        logged_outcome: &Outcome,
+    ) -> Result<(), EngineError> {
+        // Logged trials were all shown before any time limit: replay ignores the clock.
+        let regenerated = self.next_trial(0)?;
+        let mismatch = |field, l: String, r: String| EngineError::ReplayMismatch {
+            trial: logged.index,
+            field,
+            logged: l,
+            regenerated: r,
+        };
+        let Some(t) = regenerated else {
+            return Err(mismatch(
+                "trial",
+                format!("{}", logged.index),
+                "end of session".into(),
+            ));
+        };
+        let checks: [(&'static str, String, String); 9] = [
+            ("index", logged.index.to_string(), t.index.to_string()),
+            ("block", logged.block.to_string(), t.block.to_string()),
+            ("condition", logged.condition.clone(), t.condition.clone()),
+            ("stimulus", logged.stimulus.clone(), t.stimulus.clone()),
+            ("reference", logged.reference.clone(), t.reference.clone()),
+            (
+                "arrangement",
+                logged.arrangement.to_string(),
+                t.arrangement.to_string(),
+            ),
+            (
+                "reference_position",
+                logged.reference_position.to_string(),
+                t.reference_position.to_string(),
+            ),
+            (
+                "staircase",
+                format!("{:?}", logged.staircase),
+                format!("{:?}", t.staircase),
+            ),
+            (
+                "level",
+                format!("{:?}", logged.level),
+                format!("{:?}", t.level),
+            ),
+        ];
+        for (field, l, r) in checks {
+            if l != r {
+                return Err(mismatch(field, l, r));
+            }
+        }
+        let outcome = self.respond(response)?;
+        if outcome != *logged_outcome {
+            return Err(mismatch(
+                "outcome",
+                format!("{logged_outcome:?}"),
+                format!("{outcome:?}"),
+            ));
+        }
+        Ok(())
+    }
+
+    /// Trials planned but not shown (after a time limit, or still to come).
+    pub fn not_shown(&self) -> Vec<Trial> {
+        let from = self.next_index as usize + usize::from(self.pending.is_some());
+        self.plan
+            .get(from..)
+            .map(<[Trial]>::to_vec)
+            .unwrap_or_default()
+    }
+
+    /// Staircase name and threshold (mean of the last reversals) for each interleaved staircase.
+    pub fn thresholds(&self) -> Vec<(String, Option<f64>)> {
+        self.stairs
+            .as_ref()
+            .map(|s| {
+                s.tracks
+                    .iter()
+                    .zip(&s.staircases)
+                    .map(|(t, sc)| (t.name.clone(), sc.threshold()))
+                    .collect()
+            })
+            .unwrap_or_default()
+    }
+}
+
+/// MOS / DSCQS plan (paper 000 section IV): familiarization spanning the quality range first
+/// (shuffled), then the test conditions shuffled per subject with hidden repeats inserted.
+fn plan_trials(
+    study: &StudyDefinition,
+    subject: u32,
+    arrangement: Arrangement,
+    placement: ReferencePlacement,
+) -> Vec<Trial> {
+    let mut rng = StudyRng::new(study.seed, &[u64::from(subject), purpose::PLAN]);
+    let mut fam: Vec<&Condition> = study.familiarization.iter().collect();
+    rng.shuffle(&mut fam);
+    let mut test: Vec<(usize, Block)> = (0..study.conditions.len())
+        .map(|c| (c, Block::Test))
+        .collect();
+    rng.shuffle(&mut test);
+    let n_rep = (study.session.hidden_repeats as usize).min(test.len());
+    let mut pick: Vec<usize> = (0..test.len()).collect();
+    // Partial Fisher-Yates: the first n_rep entries are a uniform sample of conditions.
+    for i in 0..n_rep {
+        let j = i + rng.index(pick.len() - i);
+        pick.swap(i, j);
+    }
+    for &orig in &pick[..n_rep] {
+        let pos = test
+            .iter()
+            .position(|&(c, b)| b == Block::Test && c == orig)
+            .unwrap_or(0);
+        // Never next to its original (before or after) when there is room, so the repeat
+        // stays hidden: insertion indices pos and pos + 1 are skipped.
+        let slots = test.len() + 1;
+        let at = if slots > 2 {
+            let k = rng.index(slots - 2);
+            if k < pos { k } else { k + 2 }
+        } else {
+            rng.index(slots)
+        };
+        test.insert(at, (orig, Block::HiddenRepeat));
+    }
+    let test = test
+        .into_iter()
+        .filter_map(|(c, b)| study.conditions.get(c).map(|c| (c, b)));
+    fam.into_iter()
+        .map(|c| (c, Block::Familiarization))
+        .chain(test)
+        .enumerate()
+        .map(|(i, (c, block))| Trial {
+            index: i as u32,
+            block,
+            condition: c.stimulus.clone(),
+            stimulus: c.stimulus.clone(),
+            reference: c.reference.clone(),
+            arrangement,
+            reference_position: place(placement, arrangement, &mut rng),
+            staircase: None,
+            level: None,
+            break_before: false,
+        })
+        .collect()
+}

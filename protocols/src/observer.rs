@@ -1,0 +1,240 @@
+//! Simulated observers, so a whole study can be dry-run before a subject comes in.
+//!
+//! A rating observer turns a stimulus's objective error into a latent quality (an exponential
+//! fall from the top of the scale), adds a per-subject bias and per-trial noise, and snaps the
+//! result to the scale. A 2AFC observer answers correctly with the probability of a Weibull or
+//! logistic psychometric function of the level, with guess rate 1/2 and a lapse rate. Every
+//! answer draws from a stream seeded by (seed, subject, trial index), so an answer does not
+//! depend on how many answers came before it in this process (resume gives the same answers).
+
+use crate::manifest::REFERENCE_CODEC;
+use crate::record::{Answer, Position, Protocol, Response, Trial};
+use crate::rng::{StudyRng, purpose};
+use crate::study::{Metric, Psychometric, RatingScale, SimulationSettings, StudyDefinition};
+
+/// Why an observer could not answer.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum ObserverError {
+    /// A test stimulus has no objective metrics in the manifest.
+    #[error("stimulus {id:?} has no metrics in the manifest; a simulated rating needs them")]
+    NoMetrics {
+        /// Stimulus id.
+        id: String,
+    },
+    /// The stimulus is not in the manifest.
+    #[error("stimulus {id:?} is not in the manifest")]
+    UnknownStimulus {
+        /// Stimulus id.
+        id: String,
+    },
+    /// A 2AFC trial without a level.
+    #[error("trial {trial} has no staircase level")]
+    NoLevel {
+        /// Trial index.
+        trial: u32,
+    },
+}
+
+/// A 2AFC psychometric function with guess rate γ = 1/2 and lapse λ:
+/// `p(x) = γ + (1 - γ - λ) F(x)`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PsychometricFunction {
+    /// Family of `F`.
+    pub family: Psychometric,
+    /// α: Weibull scale (F = 1 - 1/e) or logistic midpoint (F = 1/2).
+    pub threshold: f64,
+    /// β: slope.
+    pub slope: f64,
+    /// λ: lapse rate.
+    pub lapse: f64,
+}
+
+/// Guess rate of a two-alternative forced choice.
+pub const GUESS_2AFC: f64 = 0.5;
+
+impl PsychometricFunction {
+    /// `F(x)`, the detection probability without guessing and lapses.
+    pub fn detect(&self, x: f64) -> f64 {
+        match self.family {
+            Psychometric::Weibull => {
+                if x <= 0.0 {
+                    0.0
+                } else {
+                    1.0 - (-(x / self.threshold).powf(self.slope)).exp()
+                }
+            }
+            Psychometric::Logistic => 1.0 / (1.0 + (-self.slope * (x - self.threshold)).exp()),
+        }
+    }
+
+    /// Probability of a correct 2AFC answer at level `x`.
+    pub fn p_correct(&self, x: f64) -> f64 {
+        GUESS_2AFC + (1.0 - GUESS_2AFC - self.lapse) * self.detect(x)
+    }
+
+    /// The level at which `p_correct` equals `p`, or `None` when `p` is out of reach.
+    pub fn level_for(&self, p: f64) -> Option<f64> {
+        let f = (p - GUESS_2AFC) / (1.0 - GUESS_2AFC - self.lapse);
+        if !(f > 0.0 && f < 1.0) {
+            return None;
+        }
+        Some(match self.family {
+            Psychometric::Weibull => self.threshold * (-(1.0 - f).ln()).powf(1.0 / self.slope),
+            Psychometric::Logistic => self.threshold - ((1.0 - f) / f).ln() / self.slope,
+        })
+    }
+}
+
+/// A simulated subject.
+#[derive(Debug, Clone)]
+pub struct Observer {
+    seed: u64,
+    subject: u32,
+    protocol: Protocol,
+    settings: SimulationSettings,
+    scale: RatingScale,
+    bias: f64,
+    allow_replay: bool,
+    study: StudyDefinition,
+}
+
+impl Observer {
+    /// Subject `subject` of a simulation seeded with `seed` for `study`.
+    pub fn new(study: &StudyDefinition, seed: u64, subject: u32) -> Self {
+        let mut rng = StudyRng::new(seed, &[u64::from(subject), purpose::OBSERVER_SUBJECT]);
+        let bias = study.simulation.bias_sd * rng.normal();
+        Self {
+            seed,
+            subject,
+            protocol: study.protocol,
+            settings: study.simulation.clone(),
+            scale: study.scale,
+            bias,
+            allow_replay: study.presentation.max_replays != Some(0),
+            study: study.clone(),
+        }
+    }
+
+    /// The psychometric function of the 2AFC observer.
+    pub fn psychometric(&self) -> PsychometricFunction {
+        PsychometricFunction {
+            family: self.settings.psychometric,
+            threshold: self.settings.threshold,
+            slope: self.settings.slope,
+            lapse: self.settings.lapse,
+        }
+    }
+
+    /// Latent quality of a stimulus before bias and noise, in scale units.
+    ///
+    /// # Errors
+    /// [`ObserverError`] when the stimulus or its metrics are missing.
+    pub fn latent_quality(&self, id: &str) -> Result<f64, ObserverError> {
+        let s = self
+            .study
+            .manifest
+            .get(id)
+            .ok_or_else(|| ObserverError::UnknownStimulus { id: id.to_string() })?;
+        let m = if s.codec == REFERENCE_CODEC {
+            0.0
+        } else {
+            let m = s
+                .metrics
+                .ok_or_else(|| ObserverError::NoMetrics { id: id.to_string() })?;
+            match self.settings.metric {
+                Metric::RmsCm => m.rms_cm,
+                Metric::MaxCm => m.max_cm,
+                Metric::MeanAngleDeg => m.mean_angle_deg,
+            }
+        };
+        let range = self.scale.max - self.scale.min;
+        Ok(self.scale.min + range * (-m.max(0.0) / self.settings.quality_scale).exp())
+    }
+
+    fn rate(&self, id: &str, rng: &mut StudyRng) -> Result<f64, ObserverError> {
+        let q = self.latent_quality(id)? + self.bias + self.settings.noise_sd * rng.normal();
+        Ok(self.scale.snap(q))
+    }
+
+    /// This observer's response to `trial`.
+    ///
+    /// # Errors
+    /// [`ObserverError`] when the stimulus cannot be rated.
+    pub fn respond(&self, trial: &Trial) -> Result<Response, ObserverError> {
+        let mut rng = StudyRng::new(
+            self.seed,
+            &[
+                u64::from(self.subject),
+                purpose::OBSERVER_TRIAL,
+                u64::from(trial.index),
+            ],
+        );
+        let answer = match self.protocol {
+            Protocol::Mos => Answer::Rating(self.rate(&trial.stimulus, &mut rng)?),
+            Protocol::Dscqs => {
+                let r = self.rate(&trial.reference, &mut rng)?;
+                let t = self.rate(&trial.stimulus, &mut rng)?;
+                if trial.reference_position == Position::A {
+                    Answer::Pair { a: r, b: t }
+                } else {
+                    Answer::Pair { a: t, b: r }
+                }
+            }
+            Protocol::Staircase => {
+                let level = trial
+                    .level
+                    .ok_or(ObserverError::NoLevel { trial: trial.index })?;
+                let correct = rng.unit_f64() < self.psychometric().p_correct(level);
+                Answer::Choice(if correct {
+                    trial.reference_position
+                } else {
+                    trial.reference_position.other()
+                })
+            }
+        };
+        let base = self.settings.response_time_ms as f64;
+        let response_time_ms = (base * (0.5 + rng.unit_f64())).round() as u64;
+        let replays = u32::from(self.allow_replay && rng.below(10) == 0);
+        Ok(Response {
+            answer,
+            response_time_ms,
+            replays,
+            dropped_frames: 0,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn weibull_inverse_round_trips() {
+        let f = PsychometricFunction {
+            family: Psychometric::Weibull,
+            threshold: 0.012,
+            slope: 3.5,
+            lapse: 0.02,
+        };
+        for p in [0.6, 0.707, 0.8035, 0.9] {
+            let x = f.level_for(p).unwrap();
+            assert!((f.p_correct(x) - p).abs() < 1e-12);
+        }
+        assert!(
+            f.level_for(0.99).is_none(),
+            "above 1 - lapse/2 is out of reach"
+        );
+        let g = PsychometricFunction {
+            family: Psychometric::Logistic,
+            threshold: 1.0,
+            slope: 4.0,
+            lapse: 0.0,
+        };
+        assert!((g.p_correct(g.level_for(0.75).unwrap()) - 0.75).abs() < 1e-12);
+        assert!(
+            (g.level_for(0.75).unwrap() - 1.0).abs() < 1e-12,
+            "logistic midpoint is the 75 % point"
+        );
+    }
+}

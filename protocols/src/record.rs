@@ -1,0 +1,216 @@
+//! Trials, responses and the per-trial record that the results store writes.
+//!
+//! These types are the contract between an engine, a runner (window or simulated observer) and
+//! the results store: the engine emits a [`Trial`], the runner returns a [`Response`], the engine
+//! scores it into an [`Outcome`], and the store logs all three as one [`TrialRecord`].
+
+use std::fmt;
+use std::str::FromStr;
+
+use serde::{Deserialize, Serialize};
+
+/// Which protocol a study runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Protocol {
+    /// Mean opinion score, test beside reference, one rating (paper 000 section IV).
+    Mos,
+    /// Double stimulus continuous quality scale (ITU-R BT.500, thesis ch. 6.4).
+    Dscqs,
+    /// Two-alternative forced choice with adaptive staircases (thesis ch. 5).
+    Staircase,
+}
+
+/// Which part of a session a trial belongs to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Block {
+    /// Familiarization trial: shown first, not scored in analyses.
+    Familiarization,
+    /// Scored test trial.
+    Test,
+    /// Hidden repeat of a test trial (consistency check), scored.
+    HiddenRepeat,
+}
+
+/// Where something is shown: a side of the screen, an interval, or a DSCQS slot.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Position {
+    /// Left half of a side-by-side display.
+    Left,
+    /// Right half of a side-by-side display.
+    Right,
+    /// First interval of a sequential display.
+    First,
+    /// Second interval of a sequential display.
+    Second,
+    /// DSCQS slot A (shown first and third).
+    A,
+    /// DSCQS slot B (shown second and fourth).
+    B,
+}
+
+/// How the two stimuli of a trial are laid out.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Arrangement {
+    /// Both at once, side by side.
+    SideBySide,
+    /// One after the other.
+    Sequential,
+    /// DSCQS: A B A B.
+    Abab,
+}
+
+macro_rules! text_enum {
+    ($ty:ty, $($variant:path => $text:literal),+ $(,)?) => {
+        impl $ty {
+            /// The name used in files.
+            pub fn as_str(self) -> &'static str {
+                match self { $($variant => $text),+ }
+            }
+        }
+        impl fmt::Display for $ty {
+            fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+                f.write_str(self.as_str())
+            }
+        }
+        impl FromStr for $ty {
+            type Err = String;
+            fn from_str(s: &str) -> Result<Self, String> {
+                match s {
+                    $($text => Ok($variant),)+
+                    _ => Err(format!("expected one of {}, got {s:?}", [$($text),+].join(", "))),
+                }
+            }
+        }
+    };
+}
+
+text_enum!(Protocol, Protocol::Mos => "mos", Protocol::Dscqs => "dscqs", Protocol::Staircase => "staircase");
+text_enum!(Block, Block::Familiarization => "familiarization", Block::Test => "test", Block::HiddenRepeat => "hidden_repeat");
+text_enum!(Position, Position::Left => "left", Position::Right => "right", Position::First => "first",
+    Position::Second => "second", Position::A => "a", Position::B => "b");
+text_enum!(Arrangement, Arrangement::SideBySide => "side_by_side", Arrangement::Sequential => "sequential",
+    Arrangement::Abab => "abab");
+
+impl Position {
+    /// The other position of the same arrangement.
+    #[must_use]
+    pub fn other(self) -> Self {
+        match self {
+            Self::Left => Self::Right,
+            Self::Right => Self::Left,
+            Self::First => Self::Second,
+            Self::Second => Self::First,
+            Self::A => Self::B,
+            Self::B => Self::A,
+        }
+    }
+
+    /// Whether this position belongs to `arrangement`.
+    pub fn fits(self, arrangement: Arrangement) -> bool {
+        matches!(
+            (arrangement, self),
+            (Arrangement::SideBySide, Self::Left | Self::Right)
+                | (Arrangement::Sequential, Self::First | Self::Second)
+                | (Arrangement::Abab, Self::A | Self::B)
+        )
+    }
+}
+
+/// One trial as an engine plans it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Trial {
+    /// 0-based index within the session.
+    pub index: u32,
+    /// Familiarization, test or hidden repeat.
+    pub block: Block,
+    /// Condition label: the test stimulus id (MOS, DSCQS) or the staircase name.
+    pub condition: String,
+    /// Test (compressed / distorted) stimulus id.
+    pub stimulus: String,
+    /// Reference stimulus id.
+    pub reference: String,
+    /// Layout of the two stimuli.
+    pub arrangement: Arrangement,
+    /// Where the reference is (hidden from the subject).
+    pub reference_position: Position,
+    /// Staircase index (staircase protocol only).
+    pub staircase: Option<u32>,
+    /// Staircase level of this trial (staircase protocol only).
+    pub level: Option<f64>,
+    /// A rest break is due before this trial.
+    pub break_before: bool,
+}
+
+/// What the subject answered.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub enum Answer {
+    /// One rating of the test stimulus (MOS).
+    Rating(f64),
+    /// Ratings of slot A and slot B (DSCQS).
+    Pair {
+        /// Rating of slot A.
+        a: f64,
+        /// Rating of slot B.
+        b: f64,
+    },
+    /// The position the subject picked as more natural and smooth (2AFC).
+    Choice(Position),
+}
+
+/// A subject's response to one trial.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Response {
+    /// The answer.
+    pub answer: Answer,
+    /// Time from the end of the presentation to the answer, ms.
+    pub response_time_ms: u64,
+    /// How many times the subject replayed the stimuli.
+    pub replays: u32,
+    /// Frames the display dropped during this trial.
+    pub dropped_frames: u32,
+}
+
+/// The engine's scoring of a response.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Outcome {
+    /// MOS: the rating; DSCQS: reference score minus test score (BT.500 difference);
+    /// staircase: 1 correct, 0 wrong.
+    pub score: f64,
+    /// DSCQS: rating of the reference.
+    pub score_reference: Option<f64>,
+    /// DSCQS: rating of the test stimulus.
+    pub score_test: Option<f64>,
+    /// Staircase: the subject picked the original.
+    pub correct: Option<bool>,
+    /// Staircase: this trial was a reversal point.
+    pub reversal: Option<bool>,
+}
+
+/// One row of `trials.csv`: a trial, its response, its scoring and when it happened.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TrialRecord {
+    /// Study name.
+    pub study: String,
+    /// Subject id.
+    pub subject: String,
+    /// Session number of this subject (1-based).
+    pub session: u32,
+    /// Protocol.
+    pub protocol: Protocol,
+    /// The trial.
+    pub trial: Trial,
+    /// The response.
+    pub response: Response,
+    /// The scoring.
+    pub outcome: Outcome,
+    /// Session clock the engine used for the time limit when the trial was answered, ms.
+    pub elapsed_ms: u64,
+    /// Wall-clock time of the answer, ms since the Unix epoch.
+    pub wall_clock_ms: u64,
+    /// Monotonic clock of the answer, ms since this runner process started the session.
+    pub monotonic_ms: u64,
+}

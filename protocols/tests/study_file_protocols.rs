@@ -1,0 +1,231 @@
+//! Study file validation: examples load, every mistake is reported at once with its key path,
+//! and 2,400 mutated study files give errors, never panics.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
+
+mod common;
+
+use common::{example, example_text, parse};
+use protocols::rng::StudyRng;
+use protocols::{Protocol, StudyError};
+
+fn issues(text: &str) -> Vec<(String, String)> {
+    match parse(text) {
+        Err(StudyError::Invalid { issues, .. }) => {
+            issues.into_iter().map(|i| (i.key, i.reason)).collect()
+        }
+        other => panic!("expected Invalid, got {other:?}"),
+    }
+}
+
+#[test]
+fn examples_are_valid() {
+    assert_eq!(example("mos.toml").protocol, Protocol::Mos);
+    assert_eq!(example("dscqs.toml").protocol, Protocol::Dscqs);
+    let s = example("staircase.toml");
+    let sc = s.staircase.unwrap();
+    assert_eq!(sc.tracks.len(), 2);
+    assert!((sc.tracks[0].settings.start - 0.024).abs() < 1e-15);
+}
+
+#[test]
+fn every_mistake_is_reported_at_once_with_its_key_path() {
+    let text = example_text("staircase.toml")
+        .replace("step = 0.002", "step = 0.0")
+        .replace("start = 0.024", "start = 0.5")
+        .replace("n_down = 2", "n_down = \"two\"\ncolour = 3")
+        .replace("clip = \"dance\"", "clip = \"salsa\"")
+        .replace("loop = true", "loop = 1");
+    let got = issues(&text);
+    let keys: Vec<&str> = got.iter().map(|(k, _)| k.as_str()).collect();
+    for want in [
+        "staircase.step",
+        "staircase.start",
+        "staircase.n_down",
+        "staircase.colour",
+        "staircase.tracks[1].clip",
+        "presentation.loop",
+    ] {
+        assert!(keys.contains(&want), "missing {want} in {got:#?}");
+    }
+    assert!(
+        got.iter()
+            .any(|(k, r)| k == "staircase.colour" && r.contains("unknown key"))
+    );
+    assert!(
+        got.iter()
+            .any(|(k, r)| k == "staircase.n_down" && r.contains("expected an integer"))
+    );
+    assert!(
+        got.iter()
+            .any(|(k, r)| k == "staircase.start" && r.contains("above max"))
+    );
+}
+
+#[test]
+fn unknown_stimulus_and_wrong_types_in_mos() {
+    let text = example_text("mos.toml")
+        .replace("[conditions]\nclips = [\"walk\", \"dance\"]\ncodecs = [\"wavelet-perceptual\", \"wavelet-bone\", \"wavelet-uniform\"]\ntarget_cr = [10, 20, 30, 40, 50, 60, 70]",
+                 "[conditions]\nstimuli = [\"walk/wavelet-bone/cr10\", \"walk/nope\", \"walk/reference\", 5]")
+        .replace("hidden_repeats = 8", "hidden_repeats = 8\nbreak_every = 3")
+        .replace("protocol = \"mos\"", "protocol = \"mos\"\nseed2 = 1");
+    let got = issues(&text);
+    let has = |k: &str, r: &str| got.iter().any(|(gk, gr)| gk == k && gr.contains(r));
+    assert!(
+        has("conditions.stimuli[1]", "not in the manifest"),
+        "{got:#?}"
+    );
+    assert!(has("conditions.stimuli[2]", "is a reference"), "{got:#?}");
+    assert!(
+        has("conditions.stimuli[3]", "expected a string"),
+        "{got:#?}"
+    );
+    assert!(has("session.break_every", "unknown key"), "{got:#?}");
+    assert!(has("seed2", "unknown key"), "{got:#?}");
+    assert!(
+        has("session.hidden_repeats", "only 1 conditions"),
+        "{got:#?}"
+    );
+}
+
+#[test]
+fn a_level_without_stimulus_is_an_error() {
+    // max 0.05 reaches t_l levels up to 0.05; the manifest stops at 0.040.
+    let got = issues(&example_text("staircase.toml").replace("max = 0.040", "max = 0.050"));
+    assert!(
+        got.iter()
+            .any(|(k, r)| k == "staircase.tracks[0].clip" && r.contains("no stimulus")),
+        "{got:#?}"
+    );
+    // An odd step puts levels between the stimuli.
+    let got = issues(&example_text("staircase.toml").replace("step = 0.002", "step = 0.003"));
+    assert!(
+        got.iter().any(|(_, r)| r.contains("reachable level")),
+        "{got:#?}"
+    );
+}
+
+#[test]
+fn syntax_errors_name_line_and_column() {
+    let err = parse("format_version = 1\nname = \"x\nprotocol = 3").unwrap_err();
+    match err {
+        StudyError::Syntax { line, column, .. } => {
+            assert!(line >= 2 && column >= 1, "{line}:{column}");
+        }
+        other => panic!("{other:?}"),
+    }
+}
+
+#[test]
+fn unsupported_version_is_rejected() {
+    let got =
+        issues(&example_text("dscqs.toml").replace("format_version = 1", "format_version = 2"));
+    assert!(got.iter().any(|(k, _)| k == "format_version"));
+}
+
+fn mutate(text: &str, rng: &mut StudyRng) -> String {
+    let mut s: Vec<u8> = text.as_bytes().to_vec();
+    let tokens: [&[u8]; 14] = [
+        b"=",
+        b"[",
+        b"]",
+        b"\"",
+        b"-1",
+        b"0",
+        b"1e400",
+        b"nan",
+        b"[[staircase.tracks]]",
+        b"\n",
+        b"{",
+        b"x = 1\n",
+        b"true",
+        b"99999999999999999999",
+    ];
+    for _ in 0..=rng.below(3) {
+        let at = rng.index(s.len() + 1);
+        match rng.below(6) {
+            0 if !s.is_empty() => {
+                let end = (at + 1 + rng.index(12)).min(s.len());
+                s.drain(at.min(s.len())..end);
+            }
+            1 => {
+                let tok = tokens[rng.index(tokens.len())];
+                s.splice(at..at, tok.iter().copied());
+            }
+            2 if at < s.len() => s[at] = (rng.below(95) + 32) as u8,
+            3 => {
+                // Replace a number somewhere with another value.
+                let text = String::from_utf8_lossy(&s).into_owned();
+                let lines: Vec<&str> = text.lines().collect();
+                let i = rng.index(lines.len().max(1));
+                let mut out: Vec<String> = lines.iter().map(|l| (*l).to_string()).collect();
+                if let Some(l) = out.get_mut(i)
+                    && let Some(eq) = l.find('=')
+                {
+                    let vals = [
+                        "0",
+                        "-3",
+                        "0.0",
+                        "\"\"",
+                        "[]",
+                        "1e9",
+                        "4294967296",
+                        "\"random\"",
+                        "false",
+                        "0.5",
+                    ];
+                    *l = format!("{}= {}", &l[..eq], vals[rng.index(vals.len())]);
+                }
+                s = out.join("\n").into_bytes();
+            }
+            4 => {
+                // Drop a whole line.
+                let text = String::from_utf8_lossy(&s).into_owned();
+                let mut lines: Vec<&str> = text.lines().collect();
+                if !lines.is_empty() {
+                    lines.remove(rng.index(lines.len()));
+                }
+                s = lines.join("\n").into_bytes();
+            }
+            _ => {
+                // Duplicate a line (duplicate keys, repeated tables).
+                let text = String::from_utf8_lossy(&s).into_owned();
+                let mut lines: Vec<&str> = text.lines().collect();
+                if !lines.is_empty() {
+                    let i = rng.index(lines.len());
+                    lines.insert(i, lines[i]);
+                }
+                s = lines.join("\n").into_bytes();
+            }
+        }
+    }
+    String::from_utf8_lossy(&s).into_owned()
+}
+
+#[test]
+fn mutated_study_files_give_errors_never_panics() {
+    let mut rng = StudyRng::new(2026, &[]);
+    let mut errors = 0;
+    let mut oks = 0;
+    for name in ["mos.toml", "dscqs.toml", "staircase.toml"] {
+        let text = example_text(name);
+        for _ in 0..800 {
+            let m = mutate(&text, &mut rng);
+            match parse(&m) {
+                Ok(_) => oks += 1,
+                Err(e) => {
+                    let msg = e.to_string();
+                    assert!(!msg.is_empty());
+                    if let StudyError::Invalid { issues, .. } = &e {
+                        assert!(!issues.is_empty());
+                    }
+                    errors += 1;
+                }
+            }
+        }
+    }
+    assert_eq!(errors + oks, 2400);
+    assert!(
+        errors > 1200,
+        "most mutations are caught: {errors} errors, {oks} still valid"
+    );
+}

@@ -1,0 +1,519 @@
+//! Results directories: session logs, manifests, the session lock, crash-safe writes.
+//!
+//! Crash safety, in the order a power cut could strike: a trial row is written with one
+//! `write_all`, then `sync_data`, before [`SessionLog::append`] returns, so the next trial never
+//! starts before its predecessor is on disk; manifests are written to a temporary file, synced,
+//! renamed over the old one and the directory synced, so a reader sees the old or the new
+//! manifest, never half of one; new files appear only through a rename of a complete temporary
+//! file or `create_new`, so nothing existing is overwritten.
+
+use std::collections::BTreeMap;
+use std::fs::{self, File, OpenOptions};
+use std::io::{Read as _, Write as _};
+use std::path::{Path, PathBuf};
+
+use protocols::{Protocol, TrialRecord};
+use serde::{Deserialize, Serialize};
+
+use crate::ResultsError;
+use crate::trials::{HEADER, TornRow, TrialsFile, encode_row, read_trials, torn_path};
+
+/// Version of `session.json` and `run.json` written by this build.
+pub const MANIFEST_FORMAT_VERSION: u32 = 1;
+/// Largest manifest accepted by the readers, bytes.
+pub const MAX_MANIFEST_BYTES: u64 = 16 << 20;
+/// Most session directories read from one results directory.
+pub const MAX_SESSIONS: usize = 100_000;
+/// File name of the session log.
+pub const TRIALS_FILE: &str = "trials.csv";
+/// File name of the session manifest.
+pub const SESSION_FILE: &str = "session.json";
+/// File name of the run manifest.
+pub const RUN_FILE: &str = "run.json";
+/// File name of the session lock.
+pub const LOCK_FILE: &str = "session.lock";
+
+fn io(path: &Path, op: &'static str) -> impl FnOnce(std::io::Error) -> ResultsError {
+    let path = path.to_path_buf();
+    move |source| ResultsError::Io { path, op, source }
+}
+
+/// Reads a whole file after checking its size against `limit`.
+///
+/// # Errors
+/// [`ResultsError::Io`] or [`ResultsError::TooLarge`].
+pub fn read_limited(path: &Path, limit: u64) -> Result<Vec<u8>, ResultsError> {
+    let mut f = File::open(path).map_err(io(path, "open"))?;
+    let len = f.metadata().map_err(io(path, "stat"))?.len();
+    if len > limit {
+        return Err(ResultsError::TooLarge {
+            path: path.to_path_buf(),
+            bytes: len,
+            limit,
+        });
+    }
+    let mut buf = Vec::with_capacity(len as usize);
+    std::io::Read::by_ref(&mut f)
+        .take(limit + 1)
+        .read_to_end(&mut buf)
+        .map_err(io(path, "read"))?;
+    if buf.len() as u64 > limit {
+        return Err(ResultsError::TooLarge {
+            path: path.to_path_buf(),
+            bytes: buf.len() as u64,
+            limit,
+        });
+    }
+    Ok(buf)
+}
+
+/// fsync of a directory, so a rename or a new entry in it survives a power cut (Linux).
+///
+/// # Errors
+/// [`ResultsError::Io`].
+pub fn sync_dir(dir: &Path) -> Result<(), ResultsError> {
+    File::open(dir)
+        .and_then(|d| d.sync_all())
+        .map_err(io(dir, "fsync directory"))
+}
+
+/// Writes `bytes` to `path` atomically: temporary file, fsync, rename, fsync of the directory.
+///
+/// # Errors
+/// [`ResultsError::Io`].
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), ResultsError> {
+    let dir = path.parent().unwrap_or(Path::new("."));
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let tmp = dir.join(format!(".{name}.tmp-{}", std::process::id()));
+    {
+        let mut f = OpenOptions::new()
+            .write(true)
+            .create(true)
+            .truncate(true)
+            .open(&tmp)
+            .map_err(io(&tmp, "create"))?;
+        f.write_all(bytes).map_err(io(&tmp, "write"))?;
+        f.sync_all().map_err(io(&tmp, "fsync"))?;
+    }
+    fs::rename(&tmp, path).map_err(io(path, "rename"))?;
+    sync_dir(dir)
+}
+
+/// Writes `bytes` to a new file `path`, failing if it exists: temporary file, fsync, hard
+/// link (which refuses an existing target), fsync of the directory.
+///
+/// # Errors
+/// [`ResultsError::Exists`] or [`ResultsError::Io`].
+pub fn write_new(path: &Path, bytes: &[u8]) -> Result<(), ResultsError> {
+    let dir = path.parent().unwrap_or(Path::new("."));
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let tmp = dir.join(format!(".{name}.new-{}", std::process::id()));
+    {
+        let mut f = OpenOptions::new()
+            .write(true)
+            .create(true)
+            .truncate(true)
+            .open(&tmp)
+            .map_err(io(&tmp, "create"))?;
+        f.write_all(bytes).map_err(io(&tmp, "write"))?;
+        f.sync_all().map_err(io(&tmp, "fsync"))?;
+    }
+    let linked = fs::hard_link(&tmp, path);
+    let _ = fs::remove_file(&tmp);
+    match linked {
+        Ok(()) => sync_dir(dir),
+        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => Err(ResultsError::Exists {
+            path: path.to_path_buf(),
+        }),
+        Err(e) => Err(ResultsError::Io {
+            path: path.to_path_buf(),
+            op: "link",
+            source: e,
+        }),
+    }
+}
+
+/// A session lock: `session.lock` holding the writer's process id, removed on drop.
+///
+/// A lock whose process no longer exists (`/proc/<pid>` absent on Linux) is stale, left by a
+/// crash, and is taken over. Process ids can be reused; a reused id makes a stale lock look
+/// live, which errs on the safe side (the runner refuses and names the file to remove).
+#[derive(Debug)]
+pub struct SessionLock {
+    path: PathBuf,
+}
+
+fn pid_alive(pid: u32) -> bool {
+    let proc_root = Path::new("/proc");
+    if !proc_root.join("self").exists() {
+        return true; // no procfs: cannot tell, assume alive
+    }
+    proc_root.join(pid.to_string()).exists()
+}
+
+impl SessionLock {
+    /// Takes the lock of session directory `dir`.
+    ///
+    /// # Errors
+    /// [`ResultsError::Locked`] when a live process holds it, [`ResultsError::Io`] otherwise.
+    pub fn acquire(dir: &Path) -> Result<Self, ResultsError> {
+        let path = dir.join(LOCK_FILE);
+        let me = std::process::id();
+        for _ in 0..3 {
+            match write_new(&path, format!("{me}\n").as_bytes()) {
+                Ok(()) => return Ok(Self { path }),
+                Err(ResultsError::Exists { .. }) => {
+                    let text = fs::read_to_string(&path).unwrap_or_default();
+                    match text.trim().parse::<u32>() {
+                        Ok(pid) if pid == me || pid_alive(pid) => {
+                            return Err(ResultsError::Locked { path, pid });
+                        }
+                        // Dead holder or unreadable content (lock files are written whole through a
+                        // hard link, so garbage means something else wrote it): stale.
+                        _ => {
+                            let _ = fs::remove_file(&path);
+                        }
+                    }
+                }
+                Err(e) => return Err(e),
+            }
+        }
+        Err(ResultsError::Locked { path, pid: 0 })
+    }
+}
+
+impl Drop for SessionLock {
+    fn drop(&mut self) {
+        let _ = fs::remove_file(&self.path);
+    }
+}
+
+/// How a session ended (or that it has not).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SessionState {
+    /// Started, not finished (or interrupted).
+    Running,
+    /// Every trial done.
+    Complete,
+    /// Ended by the session time limit.
+    TimeLimit,
+}
+
+/// Display the session ran on (a simulated session records `simulated`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DisplayInfo {
+    /// Description (monitor model, or `simulated`).
+    pub description: String,
+    /// Width, pixels.
+    pub width_px: u32,
+    /// Height, pixels.
+    pub height_px: u32,
+    /// Refresh rate, Hz.
+    pub refresh_hz: f64,
+}
+
+/// `session.json` (format version 1).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SessionManifest {
+    /// [`MANIFEST_FORMAT_VERSION`].
+    pub format_version: u32,
+    /// Study name.
+    pub study: String,
+    /// [`protocols::study::content_hash`] of the study file.
+    pub study_hash: String,
+    /// Protocol.
+    pub protocol: Protocol,
+    /// Subject id.
+    pub subject: String,
+    /// 0-based subject index the trial plan derives from.
+    pub subject_index: u32,
+    /// Session number (1-based).
+    pub session: u32,
+    /// Study seed the plan derives from.
+    pub plan_seed: u64,
+    /// Seed of the simulated observer, for simulated sessions.
+    pub observer_seed: Option<u64>,
+    /// `study` version that wrote the session.
+    pub software_version: String,
+    /// Subject fields collected before the session.
+    pub subject_fields: BTreeMap<String, String>,
+    /// Start, ms since the Unix epoch.
+    pub started_ms: u64,
+    /// End, ms since the Unix epoch.
+    pub ended_ms: Option<u64>,
+    /// State.
+    pub status: SessionState,
+    /// Trials logged in `trials.csv`.
+    pub trials_logged: u32,
+    /// Stimulus ids planned but not shown (time limit).
+    pub not_shown: Vec<String>,
+    /// Staircase thresholds (name, mean of the last reversals), staircase sessions only.
+    pub thresholds: Vec<(String, Option<f64>)>,
+    /// How often the session was resumed.
+    pub resumes: u32,
+    /// Torn rows set aside on resume (file names in the session directory).
+    pub torn_rows: Vec<String>,
+    /// Display.
+    pub display: Option<DisplayInfo>,
+}
+
+/// `run.json` (format version 1): what a results directory is a run of.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RunManifest {
+    /// [`MANIFEST_FORMAT_VERSION`].
+    pub format_version: u32,
+    /// Study name.
+    pub study: String,
+    /// Hash of the study file.
+    pub study_hash: String,
+    /// Copy of the study file kept in the run directory.
+    pub study_file: String,
+    /// Study seed.
+    pub plan_seed: u64,
+    /// Observer seed (simulated runs).
+    pub observer_seed: Option<u64>,
+    /// Subjects planned.
+    pub subjects: u32,
+    /// `study` version.
+    pub software_version: String,
+    /// Created, ms since the Unix epoch.
+    pub created_ms: u64,
+}
+
+fn json_error(path: &Path, e: &serde_json::Error) -> ResultsError {
+    ResultsError::Malformed {
+        path: path.to_path_buf(),
+        line: e.line(),
+        column: e.column(),
+        message: e.to_string(),
+    }
+}
+
+/// Reads a JSON manifest.
+///
+/// # Errors
+/// [`ResultsError::Malformed`] with line and column, or I/O and size errors.
+pub fn read_json<T: for<'de> Deserialize<'de>>(path: &Path) -> Result<T, ResultsError> {
+    let bytes = read_limited(path, MAX_MANIFEST_BYTES)?;
+    serde_json::from_slice(&bytes).map_err(|e| json_error(path, &e))
+}
+
+/// Writes a JSON manifest atomically.
+///
+/// # Errors
+/// [`ResultsError::Io`].
+pub fn write_json<T: Serialize>(path: &Path, value: &T) -> Result<(), ResultsError> {
+    let mut text = serde_json::to_string_pretty(value).map_err(|e| ResultsError::Unwritable {
+        column: "json",
+        reason: e.to_string(),
+    })?;
+    text.push('\n');
+    write_atomic(path, text.as_bytes())
+}
+
+/// The append-only trial log of one session, holding the session lock.
+#[derive(Debug)]
+pub struct SessionLog {
+    dir: PathBuf,
+    file: File,
+    rows: u32,
+    _lock: SessionLock,
+}
+
+/// What [`SessionLog::resume`] found.
+#[derive(Debug)]
+pub struct Resumed {
+    /// The reopened log.
+    pub log: SessionLog,
+    /// Rows already logged.
+    pub records: Vec<TrialRecord>,
+    /// A torn last row that was set aside, and where it went.
+    pub torn: Option<(TornRow, PathBuf)>,
+}
+
+impl SessionLog {
+    /// Creates session directory `dir` (which must not exist) with an empty `trials.csv`.
+    ///
+    /// # Errors
+    /// [`ResultsError::Exists`] when `dir` exists, I/O errors otherwise.
+    pub fn create(dir: &Path) -> Result<Self, ResultsError> {
+        match fs::create_dir(dir) {
+            Ok(()) => {}
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
+                return Err(ResultsError::Exists {
+                    path: dir.to_path_buf(),
+                });
+            }
+            Err(e) => {
+                return Err(ResultsError::Io {
+                    path: dir.to_path_buf(),
+                    op: "create directory",
+                    source: e,
+                });
+            }
+        }
+        if let Some(parent) = dir.parent() {
+            sync_dir(parent)?;
+        }
+        let lock = SessionLock::acquire(dir)?;
+        let trials = dir.join(TRIALS_FILE);
+        write_new(&trials, format!("{HEADER}\n").as_bytes())?;
+        Self::open_append(dir, 0, lock)
+    }
+
+    fn open_append(dir: &Path, rows: u32, lock: SessionLock) -> Result<Self, ResultsError> {
+        let trials = dir.join(TRIALS_FILE);
+        let file = OpenOptions::new()
+            .append(true)
+            .open(&trials)
+            .map_err(io(&trials, "open for append"))?;
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            file,
+            rows,
+            _lock: lock,
+        })
+    }
+
+    /// Reopens an interrupted session: takes the lock, reads the log, sets a torn last row
+    /// aside in `trials.csv.torn-<n>` (copied and synced before `trials.csv` is cut back to
+    /// its complete rows), and returns the logged records. A session directory without
+    /// `trials.csv` (crash right after creating it) gets a fresh one.
+    ///
+    /// # Errors
+    /// [`ResultsError::Locked`], [`ResultsError::Malformed`] for a bad row that is not the
+    /// torn last one, I/O errors.
+    pub fn resume(dir: &Path) -> Result<Resumed, ResultsError> {
+        let lock = SessionLock::acquire(dir)?;
+        let trials = dir.join(TRIALS_FILE);
+        if !trials.exists() {
+            write_new(&trials, format!("{HEADER}\n").as_bytes())?;
+        }
+        let TrialsFile {
+            records,
+            complete_bytes,
+            torn,
+        } = read_trials(&trials)?;
+        let torn = match torn {
+            Some(t) => {
+                let aside = torn_path(&trials);
+                write_new(&aside, &t.bytes)?;
+                let f = OpenOptions::new()
+                    .write(true)
+                    .open(&trials)
+                    .map_err(io(&trials, "open"))?;
+                f.set_len(complete_bytes).map_err(io(&trials, "truncate"))?;
+                f.sync_all().map_err(io(&trials, "fsync"))?;
+                Some((t, aside))
+            }
+            None => None,
+        };
+        let log = Self::open_append(dir, records.len() as u32, lock)?;
+        Ok(Resumed { log, records, torn })
+    }
+
+    /// Session directory.
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    /// Rows in the log.
+    pub fn rows(&self) -> u32 {
+        self.rows
+    }
+
+    /// Appends one row; it is on disk (written and `sync_data`) when this returns.
+    ///
+    /// # Errors
+    /// [`ResultsError::Unwritable`] or [`ResultsError::Io`].
+    pub fn append(&mut self, record: &TrialRecord) -> Result<(), ResultsError> {
+        let line = encode_row(record)?;
+        let path = self.dir.join(TRIALS_FILE);
+        self.file
+            .write_all(line.as_bytes())
+            .map_err(io(&path, "append"))?;
+        self.file.flush().map_err(io(&path, "flush"))?;
+        self.file.sync_data().map_err(io(&path, "fsync"))?;
+        self.rows += 1;
+        Ok(())
+    }
+
+    /// Replaces `session.json` atomically.
+    ///
+    /// # Errors
+    /// [`ResultsError::Io`].
+    pub fn write_manifest(&self, manifest: &SessionManifest) -> Result<(), ResultsError> {
+        write_json(&self.dir.join(SESSION_FILE), manifest)
+    }
+}
+
+/// One session read back from a results directory.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SessionResults {
+    /// Session directory.
+    pub dir: PathBuf,
+    /// Its manifest.
+    pub manifest: SessionManifest,
+    /// Its trials (complete rows).
+    pub trials: TrialsFile,
+}
+
+/// Loads every session of a results directory (sub-directories holding `session.json`),
+/// sorted by directory name. A sub-directory with `trials.csv` but no `session.json` is an
+/// error ([`ResultsError::MissingManifest`]), never skipped.
+///
+/// # Errors
+/// The first malformed file, named with line and column.
+pub fn read_results_dir(dir: &Path) -> Result<(RunManifest, Vec<SessionResults>), ResultsError> {
+    let run: RunManifest = read_json(&dir.join(RUN_FILE))?;
+    let mut dirs = Vec::new();
+    for entry in fs::read_dir(dir).map_err(io(dir, "list"))? {
+        let entry = entry.map_err(io(dir, "list"))?;
+        let p = entry.path();
+        if p.join(TRIALS_FILE).is_file() && !p.join(SESSION_FILE).is_file() {
+            // A crash between creating the log and the first manifest write: say so rather
+            // than skip the session (`study simulate --resume` completes it).
+            return Err(ResultsError::MissingManifest { dir: p });
+        }
+        if p.join(SESSION_FILE).is_file() {
+            dirs.push(p);
+            if dirs.len() > MAX_SESSIONS {
+                return Err(ResultsError::TooLarge {
+                    path: dir.to_path_buf(),
+                    bytes: dirs.len() as u64,
+                    limit: MAX_SESSIONS as u64,
+                });
+            }
+        }
+    }
+    dirs.sort();
+    let mut out = Vec::with_capacity(dirs.len());
+    for d in dirs {
+        let manifest: SessionManifest = read_json(&d.join(SESSION_FILE))?;
+        let trials = read_trials(&d.join(TRIALS_FILE))?;
+        out.push(SessionResults {
+            dir: d,
+            manifest,
+            trials,
+        });
+    }
+    Ok((run, out))
+}
+
+/// Parses `session.json` text (for tests and tools that hold the bytes).
+///
+/// # Errors
+/// [`ResultsError::Malformed`].
+pub fn parse_session_manifest(bytes: &[u8], path: &Path) -> Result<SessionManifest, ResultsError> {
+    serde_json::from_slice(bytes).map_err(|e| json_error(path, &e))
+}

@@ -1,0 +1,397 @@
+//! The results store: row round trip, fsynced append, torn-row detection and setting aside,
+//! the session lock (live and stale), never overwriting, atomic manifests, readers with
+//! file/line/column errors, and 2,400 mutated results files that give errors, never panics.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use proptest::prelude::*;
+use protocols::rng::StudyRng;
+use protocols::{
+    Answer, Arrangement, Block, Outcome, Position, Protocol, Response, Trial, TrialRecord,
+};
+use results::store::{
+    DisplayInfo, MANIFEST_FORMAT_VERSION, SessionLock, SessionState, read_json, write_json,
+};
+use results::trials::{HEADER, encode_row, parse_trials};
+use results::{
+    ResultsError, RunManifest, SessionLog, SessionManifest, read_results_dir, read_trials,
+};
+
+fn scratch(name: &str) -> PathBuf {
+    let d = Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("results-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn record(i: u32, protocol: Protocol, rng: &mut StudyRng) -> TrialRecord {
+    let (arrangement, answer, outcome, level, staircase) = match protocol {
+        Protocol::Mos => (
+            Arrangement::SideBySide,
+            Answer::Rating(1.0 + 0.5 * rng.below(9) as f64),
+            Outcome {
+                score: 3.5,
+                score_reference: None,
+                score_test: None,
+                correct: None,
+                reversal: None,
+            },
+            None,
+            None,
+        ),
+        Protocol::Dscqs => (
+            Arrangement::Abab,
+            Answer::Pair {
+                a: rng.unit_f64() * 100.0,
+                b: 17.25,
+            },
+            Outcome {
+                score: -12.5,
+                score_reference: Some(40.0),
+                score_test: Some(52.5),
+                correct: None,
+                reversal: None,
+            },
+            None,
+            None,
+        ),
+        Protocol::Staircase => (
+            Arrangement::Sequential,
+            Answer::Choice(Position::Second),
+            Outcome {
+                score: 1.0,
+                score_reference: None,
+                score_test: None,
+                correct: Some(true),
+                reversal: Some(rng.coin()),
+            },
+            Some(0.024 - 0.002 * f64::from(i % 7)),
+            Some(i % 3),
+        ),
+    };
+    let reference_position = match arrangement {
+        Arrangement::SideBySide => Position::Left,
+        Arrangement::Sequential => Position::Second,
+        Arrangement::Abab => Position::B,
+    };
+    TrialRecord {
+        study: "study, \"quoted\"".into(),
+        subject: format!("S{i:03}"),
+        session: 1,
+        protocol,
+        trial: Trial {
+            index: i,
+            block: if i == 0 {
+                Block::Familiarization
+            } else {
+                Block::Test
+            },
+            condition: "walk/wavelet,cr10".into(),
+            stimulus: "walk/wavelet/cr10".into(),
+            reference: "walk/reference".into(),
+            arrangement,
+            reference_position,
+            staircase,
+            level,
+            break_before: i % 5 == 4,
+        },
+        response: Response {
+            answer,
+            response_time_ms: rng.below(10_000),
+            replays: 2,
+            dropped_frames: 1,
+        },
+        outcome,
+        elapsed_ms: u64::from(i) * 1000,
+        wall_clock_ms: 1_795_000_000_000 + u64::from(i),
+        monotonic_ms: u64::from(i) * 999,
+    }
+}
+
+fn manifest(trials: u32) -> SessionManifest {
+    SessionManifest {
+        format_version: MANIFEST_FORMAT_VERSION,
+        study: "s".into(),
+        study_hash: "00ff".into(),
+        protocol: Protocol::Mos,
+        subject: "S001".into(),
+        subject_index: 0,
+        session: 1,
+        plan_seed: 1,
+        observer_seed: None,
+        software_version: "0.1.0".into(),
+        subject_fields: BTreeMap::from([("age".to_string(), "31".to_string())]),
+        started_ms: 1,
+        ended_ms: None,
+        status: SessionState::Running,
+        trials_logged: trials,
+        not_shown: vec![],
+        thresholds: vec![("walk".into(), Some(0.012))],
+        resumes: 0,
+        torn_rows: vec![],
+        display: Some(DisplayInfo {
+            description: "19in 1440x900".into(),
+            width_px: 1440,
+            height_px: 900,
+            refresh_hz: 60.0,
+        }),
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 200, ..ProptestConfig::default() })]
+    #[test]
+    fn rows_round_trip(seed in any::<u64>(), which in 0_usize..3, n in 1_u32..20) {
+        let protocol = [Protocol::Mos, Protocol::Dscqs, Protocol::Staircase][which];
+        let mut rng = StudyRng::new(seed, &[]);
+        let recs: Vec<TrialRecord> = (0..n).map(|i| record(i, protocol, &mut rng)).collect();
+        let mut text = format!("{HEADER}\n");
+        for r in &recs {
+            text.push_str(&encode_row(r).unwrap());
+        }
+        let parsed = parse_trials(text.as_bytes(), Path::new("t.csv")).unwrap();
+        prop_assert_eq!(parsed.records, recs);
+        prop_assert!(parsed.torn.is_none());
+    }
+}
+
+#[test]
+fn ids_with_line_breaks_are_refused() {
+    let mut rng = StudyRng::new(1, &[]);
+    let mut r = record(1, Protocol::Mos, &mut rng);
+    r.trial.stimulus = "a\nb".into();
+    assert!(matches!(
+        encode_row(&r),
+        Err(ResultsError::Unwritable {
+            column: "stimulus",
+            ..
+        })
+    ));
+}
+
+#[test]
+fn append_then_read_back_and_never_overwrite() {
+    let root = scratch("append");
+    let dir = root.join("S001_s1");
+    let mut rng = StudyRng::new(2, &[]);
+    let recs: Vec<TrialRecord> = (0..5)
+        .map(|i| record(i, Protocol::Staircase, &mut rng))
+        .collect();
+    {
+        let mut log = SessionLog::create(&dir).unwrap();
+        for r in &recs {
+            log.append(r).unwrap();
+        }
+        log.write_manifest(&manifest(5)).unwrap();
+        // A second writer on the same session is refused while the first holds the lock.
+        assert!(matches!(
+            SessionLog::resume(&dir),
+            Err(ResultsError::Locked { .. })
+        ));
+    }
+    assert!(matches!(
+        SessionLog::create(&dir),
+        Err(ResultsError::Exists { .. })
+    ));
+    assert_eq!(read_trials(&dir.join("trials.csv")).unwrap().records, recs);
+    let run = RunManifest {
+        format_version: 1,
+        study: "s".into(),
+        study_hash: "00ff".into(),
+        study_file: "study.toml".into(),
+        plan_seed: 1,
+        observer_seed: None,
+        subjects: 1,
+        software_version: "0.1.0".into(),
+        created_ms: 0,
+    };
+    write_json(&root.join("run.json"), &run).unwrap();
+    let (r, sessions) = read_results_dir(&root).unwrap();
+    assert_eq!(r, run);
+    assert_eq!(sessions.len(), 1);
+    assert_eq!(sessions[0].manifest, manifest(5));
+    assert_eq!(sessions[0].trials.records, recs);
+    // A session interrupted before its first manifest write is reported, not skipped.
+    drop(SessionLog::create(&root.join("S002_s1")).unwrap());
+    assert!(matches!(
+        read_results_dir(&root),
+        Err(ResultsError::MissingManifest { .. })
+    ));
+}
+
+#[test]
+fn torn_last_row_is_detected_set_aside_and_reported() {
+    let root = scratch("torn");
+    let dir = root.join("S001_s1");
+    let mut rng = StudyRng::new(3, &[]);
+    let recs: Vec<TrialRecord> = (0..4).map(|i| record(i, Protocol::Mos, &mut rng)).collect();
+    {
+        let mut log = SessionLog::create(&dir).unwrap();
+        for r in &recs {
+            log.append(r).unwrap();
+        }
+    }
+    // Power cut mid-write: half of a fifth row without its line break.
+    let row = encode_row(&record(4, Protocol::Mos, &mut rng)).unwrap();
+    let torn = &row.as_bytes()[..row.len() / 2];
+    let path = dir.join("trials.csv");
+    let mut bytes = std::fs::read(&path).unwrap();
+    bytes.extend_from_slice(torn);
+    std::fs::write(&path, &bytes).unwrap();
+    let read = read_trials(&path).unwrap();
+    assert_eq!(read.records, recs, "complete rows are all there");
+    let t = read.torn.clone().unwrap();
+    assert_eq!(t.line, 6);
+    assert_eq!(t.bytes, torn);
+    let resumed = SessionLog::resume(&dir).unwrap();
+    assert_eq!(resumed.records, recs);
+    let (row, aside) = resumed.torn.clone().unwrap();
+    assert_eq!(row.bytes, torn);
+    assert_eq!(
+        std::fs::read(&aside).unwrap(),
+        torn,
+        "set aside, not dropped"
+    );
+    let mut log = resumed.log;
+    log.append(&recs[0]).unwrap();
+    drop(log);
+    let again = read_trials(&path).unwrap();
+    assert_eq!(again.records.len(), 5);
+    assert!(again.torn.is_none());
+    // A row of NUL bytes (what some file systems show after a crash) is torn too.
+    let mut bytes = std::fs::read(&path).unwrap();
+    bytes.extend_from_slice(&[0; 40]);
+    bytes.push(b'\n');
+    assert!(parse_trials(&bytes, &path).unwrap().torn.is_some());
+}
+
+#[test]
+fn stale_lock_is_taken_over_live_lock_is_not() {
+    let dir = scratch("lock");
+    // pid_max on Linux is at most 2^22, so this process cannot exist.
+    std::fs::write(dir.join("session.lock"), "4194305\n").unwrap();
+    let lock = SessionLock::acquire(&dir).unwrap();
+    assert_eq!(
+        std::fs::read_to_string(dir.join("session.lock"))
+            .unwrap()
+            .trim(),
+        std::process::id().to_string()
+    );
+    assert!(matches!(
+        SessionLock::acquire(&dir),
+        Err(ResultsError::Locked { .. })
+    ));
+    drop(lock);
+    assert!(!dir.join("session.lock").exists());
+    // PID 1 is alive.
+    std::fs::write(dir.join("session.lock"), "1\n").unwrap();
+    assert!(matches!(
+        SessionLock::acquire(&dir),
+        Err(ResultsError::Locked { pid: 1, .. })
+    ));
+}
+
+#[test]
+fn malformed_rows_name_file_line_and_column() {
+    let mut rng = StudyRng::new(4, &[]);
+    let good = encode_row(&record(1, Protocol::Dscqs, &mut rng)).unwrap();
+    let bad = good.replacen(",abab,", ",abba,", 1);
+    let text = format!("{HEADER}\n{good}{bad}{good}");
+    match parse_trials(text.as_bytes(), Path::new("x/trials.csv")) {
+        Err(ResultsError::Malformed {
+            path,
+            line,
+            column,
+            message,
+        }) => {
+            assert_eq!(path, Path::new("x/trials.csv"));
+            assert_eq!(line, 3);
+            assert_eq!(column, 11, "arrangement is column 11");
+            assert!(message.contains("arrangement"), "{message}");
+        }
+        other => panic!("{other:?}"),
+    }
+    let json = b"{\n  \"format_version\": 1,\n  \"study\": 5\n}";
+    match results::store::parse_session_manifest(json, Path::new("session.json")) {
+        Err(ResultsError::Malformed { line, .. }) => assert_eq!(line, 3),
+        other => panic!("{other:?}"),
+    }
+}
+
+#[test]
+fn atomic_manifest_replace_leaves_no_temporary() {
+    let dir = scratch("atomic");
+    let p = dir.join("session.json");
+    write_json(&p, &manifest(1)).unwrap();
+    write_json(&p, &manifest(2)).unwrap();
+    let m: SessionManifest = read_json(&p).unwrap();
+    assert_eq!(m.trials_logged, 2);
+    let names: Vec<String> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(names, vec!["session.json".to_string()]);
+}
+
+#[test]
+fn mutated_results_files_give_errors_never_panics() {
+    let mut rng = StudyRng::new(5, &[]);
+    let mut text = format!("{HEADER}\n");
+    for (i, p) in [Protocol::Mos, Protocol::Dscqs, Protocol::Staircase]
+        .into_iter()
+        .cycle()
+        .take(9)
+        .enumerate()
+    {
+        text.push_str(&encode_row(&record(i as u32, p, &mut rng)).unwrap());
+    }
+    let json = serde_json::to_vec_pretty(&manifest(9)).unwrap();
+    let (mut errs, mut oks) = (0, 0);
+    for case in 0..2400 {
+        let src: &[u8] = if case % 4 == 3 {
+            &json
+        } else {
+            text.as_bytes()
+        };
+        let mut b = src.to_vec();
+        for _ in 0..=rng.below(3) {
+            let at = rng.index(b.len());
+            match rng.below(5) {
+                0 => b[at] = rng.below(256) as u8,
+                1 => {
+                    b.remove(at);
+                }
+                2 => b.insert(at, [b',', b'"', b'\n', b'-', b'9', 0xff][rng.index(6)]),
+                3 => b.truncate(at),
+                _ => {
+                    let end = (at + rng.index(40)).min(b.len());
+                    let chunk = b[at..end].to_vec();
+                    b.splice(at..at, chunk);
+                }
+            }
+        }
+        let result = if case % 4 == 3 {
+            results::store::parse_session_manifest(&b, Path::new("session.json")).map(|_| ())
+        } else {
+            parse_trials(&b, Path::new("trials.csv")).map(|_| ())
+        };
+        match result {
+            Ok(()) => oks += 1,
+            Err(e) => {
+                assert!(!e.to_string().is_empty());
+                if let ResultsError::Malformed { line, column, .. } = e {
+                    assert!(line >= 1 && column >= 1 || case % 4 == 3, "{line}:{column}");
+                }
+                errs += 1;
+            }
+        }
+    }
+    assert_eq!(errs + oks, 2400);
+    assert!(
+        errs > 1000,
+        "{errs} errors, {oks} accepted (a truncation at a row end is a valid shorter file)"
+    );
+}

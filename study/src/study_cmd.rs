@@ -1,0 +1,358 @@
+//! `study check` and `study simulate`: validate a study file, and dry-run whole sessions with
+//! simulated observers through the same engines and results store a real session uses.
+
+use std::fs;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+
+use anyhow::{Context as _, bail};
+use clap::Args;
+use protocols::observer::Observer;
+use protocols::study::content_hash;
+use protocols::{Protocol, Session, SessionStatus, StudyDefinition, TrialRecord};
+use results::store::{
+    DisplayInfo, MANIFEST_FORMAT_VERSION, RUN_FILE, SESSION_FILE, SessionLock, SessionState,
+    read_json, write_json, write_new,
+};
+use results::{RunManifest, SessionLog, SessionManifest};
+
+/// Arguments of `study check`.
+#[derive(Debug, Args)]
+pub struct CheckArgs {
+    /// Study file (TOML).
+    pub study: PathBuf,
+}
+
+/// Arguments of `study simulate`.
+#[derive(Debug, Args)]
+pub struct SimulateArgs {
+    /// Study file (TOML).
+    pub study: PathBuf,
+    /// Number of simulated subjects.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=100_000))]
+    pub subjects: u32,
+    /// Seed of the simulated observers (the trial plans derive from the study file's seed).
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Results directory to create (never overwritten).
+    #[arg(short = 'o', long = "output")]
+    pub output: PathBuf,
+    /// Pause before each answer, ms (paces trials for kill tests).
+    #[arg(long, default_value_t = 0)]
+    pub trial_delay_ms: u64,
+    /// Continue an interrupted run in an existing results directory.
+    #[arg(long)]
+    pub resume: bool,
+}
+
+/// `study check STUDY.toml`: every problem at once, or a summary of the study.
+///
+/// # Errors
+/// The study file's problems.
+pub fn check(args: &CheckArgs) -> anyhow::Result<()> {
+    use std::fmt::Write as _;
+    let study = StudyDefinition::load(&args.study)?;
+    let mut text = String::new();
+    writeln!(text, "{}: ok", args.study.display())?;
+    writeln!(text, "  name: {}", study.name)?;
+    writeln!(text, "  protocol: {}", study.protocol)?;
+    writeln!(text, "  seed: {}", study.seed)?;
+    match study.protocol {
+        Protocol::Mos | Protocol::Dscqs => {
+            let n = study.familiarization.len()
+                + study.conditions.len()
+                + study.session.hidden_repeats as usize;
+            writeln!(
+                text,
+                "  trials per session: {n} ({} familiarization, {} conditions, {} hidden repeats)",
+                study.familiarization.len(),
+                study.conditions.len(),
+                study.session.hidden_repeats
+            )?;
+            let est_min = n as f64 * study.trial_presentation_ms() as f64 / 60_000.0;
+            writeln!(
+                text,
+                "  presentation time: {est_min:.1} min without answers"
+            )?;
+        }
+        Protocol::Staircase => {
+            if let Some(sc) = &study.staircase {
+                for t in &sc.tracks {
+                    writeln!(
+                        text,
+                        "  staircase {:?}: clip {:?}, {} stimulus levels of {} from {} to {}",
+                        t.name,
+                        t.clip,
+                        t.levels.len(),
+                        sc.param,
+                        t.levels.first().map_or(0.0, |l| l.0),
+                        t.levels.last().map_or(0.0, |l| l.0)
+                    )?;
+                }
+            }
+        }
+    }
+    if let Some(ms) = study.session.time_limit_ms {
+        writeln!(text, "  time limit: {:.1} min", ms as f64 / 60_000.0)?;
+    }
+    std::io::Write::write_all(&mut std::io::stdout(), text.as_bytes())?;
+    Ok(())
+}
+
+fn now_ms() -> u64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(0, |d| d.as_millis() as u64)
+}
+
+fn subject_id(index: u32) -> String {
+    format!("S{:03}", index + 1)
+}
+
+/// `study simulate`: runs `--subjects` complete simulated sessions into a results directory.
+///
+/// # Errors
+/// Study file problems, an existing output without `--resume`, a resume whose logged trials
+/// the study no longer regenerates, I/O errors.
+pub fn simulate(args: &SimulateArgs) -> anyhow::Result<()> {
+    let study_bytes =
+        fs::read(&args.study).with_context(|| format!("reading {}", args.study.display()))?;
+    let study = StudyDefinition::load(&args.study)?;
+    let hash = content_hash(&study_bytes);
+    let out = &args.output;
+    let run = RunManifest {
+        format_version: MANIFEST_FORMAT_VERSION,
+        study: study.name.clone(),
+        study_hash: hash.clone(),
+        study_file: "study.toml".into(),
+        plan_seed: study.seed,
+        observer_seed: Some(args.seed),
+        subjects: args.subjects,
+        software_version: env!("CARGO_PKG_VERSION").into(),
+        created_ms: now_ms(),
+    };
+    if args.resume {
+        if !out.is_dir() {
+            bail!("{}: no results directory to resume", out.display());
+        }
+        let run_path = out.join(RUN_FILE);
+        if run_path.exists() {
+            let old: RunManifest = read_json(&run_path)?;
+            if old.observer_seed != run.observer_seed
+                || old.subjects != run.subjects
+                || old.plan_seed != run.plan_seed
+            {
+                bail!(
+                    "{}: recorded with --seed {:?}, {} subjects, study seed {}; resume with the same values",
+                    run_path.display(),
+                    old.observer_seed,
+                    old.subjects,
+                    old.plan_seed
+                );
+            }
+            if old.study_hash != hash {
+                eprintln!(
+                    "note: the study file changed since this run started (hash {} -> {hash}); logged trials are checked by replay",
+                    old.study_hash
+                );
+            }
+        } else {
+            write_json(&run_path, &run)?;
+        }
+    } else {
+        if let Some(parent) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
+            fs::create_dir_all(parent).with_context(|| format!("creating {}", parent.display()))?;
+        }
+        fs::create_dir(out).map_err(|e| {
+            if e.kind() == std::io::ErrorKind::AlreadyExists {
+                anyhow::anyhow!(
+                    "{} already exists; results are never overwritten (use --resume to continue)",
+                    out.display()
+                )
+            } else {
+                anyhow::anyhow!("creating {}: {e}", out.display())
+            }
+        })?;
+        write_new(&out.join(RUN_FILE), &serde_json::to_vec_pretty(&run)?)?;
+    }
+    let copy = out.join("study.toml");
+    if !copy.exists() {
+        write_new(&copy, &study_bytes)?;
+    }
+    for subject in 0..args.subjects {
+        let dir = out.join(format!("{}_s1", subject_id(subject)));
+        let summary = run_subject(&study, &hash, args, subject, &dir)
+            .with_context(|| format!("session {}", dir.display()))?;
+        eprintln!("{summary}");
+    }
+    Ok(())
+}
+
+fn new_manifest(
+    study: &StudyDefinition,
+    hash: &str,
+    args: &SimulateArgs,
+    subject: u32,
+) -> SessionManifest {
+    SessionManifest {
+        format_version: MANIFEST_FORMAT_VERSION,
+        study: study.name.clone(),
+        study_hash: hash.to_string(),
+        protocol: study.protocol,
+        subject: subject_id(subject),
+        subject_index: subject,
+        session: 1,
+        plan_seed: study.seed,
+        observer_seed: Some(args.seed),
+        software_version: env!("CARGO_PKG_VERSION").into(),
+        subject_fields: study
+            .session
+            .subject_fields
+            .iter()
+            .map(|f| (f.clone(), "simulated".to_string()))
+            .collect(),
+        started_ms: now_ms(),
+        ended_ms: None,
+        status: SessionState::Running,
+        trials_logged: 0,
+        not_shown: Vec::new(),
+        thresholds: Vec::new(),
+        resumes: 0,
+        torn_rows: Vec::new(),
+        display: Some(DisplayInfo {
+            description: "simulated".into(),
+            width_px: 0,
+            height_px: 0,
+            refresh_hz: 0.0,
+        }),
+    }
+}
+
+#[expect(
+    clippy::too_many_lines,
+    reason = "resume, run loop and final manifest of one session read best in one place"
+)]
+fn run_subject(
+    study: &StudyDefinition,
+    hash: &str,
+    args: &SimulateArgs,
+    subject: u32,
+    dir: &Path,
+) -> anyhow::Result<String> {
+    let mut engine = Session::new(study, subject)?;
+    let (mut log, logged, mut manifest) = if args.resume && dir.exists() {
+        let manifest_path = dir.join(SESSION_FILE);
+        let old: Option<SessionManifest> = if manifest_path.exists() {
+            Some(read_json(&manifest_path)?)
+        } else {
+            None
+        };
+        if let Some(m) = &old
+            && m.status != SessionState::Running
+        {
+            // A crash after the final manifest write can leave the lock behind: take the
+            // stale lock over and release it (refused if a live runner holds it).
+            drop(SessionLock::acquire(dir)?);
+            return Ok(format!(
+                "{}: already {:?}, {} trials",
+                m.subject, m.status, m.trials_logged
+            ));
+        }
+        let resumed = SessionLog::resume(dir)?;
+        let mut m = old.unwrap_or_else(|| new_manifest(study, hash, args, subject));
+        m.resumes += 1;
+        if let Some((row, aside)) = &resumed.torn {
+            let name = aside
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            eprintln!(
+                "warning: {}: line {} was torn ({} bytes, power cut mid-write?); set aside in {name}",
+                dir.join("trials.csv").display(),
+                row.line,
+                row.bytes.len()
+            );
+            m.torn_rows.push(name);
+        }
+        (resumed.log, resumed.records, m)
+    } else {
+        (
+            SessionLog::create(dir)?,
+            Vec::new(),
+            new_manifest(study, hash, args, subject),
+        )
+    };
+    for rec in &logged {
+        engine
+            .replay(&rec.trial, &rec.response, &rec.outcome)
+            .with_context(|| "cannot resume: replaying the logged responses")?;
+    }
+    manifest.trials_logged = log.rows();
+    log.write_manifest(&manifest)?;
+
+    let observer = Observer::new(study, args.seed, subject);
+    let mut clock_ms = logged.last().map_or(0, |r| r.elapsed_ms);
+    let monotonic_base = logged.last().map_or(0, |r| r.monotonic_ms);
+    let started = Instant::now();
+    let per_trial_ms = study.trial_presentation_ms();
+    while let Some(trial) = engine.next_trial(clock_ms)? {
+        let response = observer.respond(&trial)?;
+        if args.trial_delay_ms > 0 {
+            std::thread::sleep(Duration::from_millis(args.trial_delay_ms));
+        }
+        let outcome = engine.respond(&response)?;
+        // Simulated session clock: the presentation (again for each replay), the answer and
+        // the gap before the next trial; deterministic, so the time limit replays exactly.
+        clock_ms += per_trial_ms * (1 + u64::from(response.replays))
+            + response.response_time_ms
+            + study.presentation.gap_ms;
+        let record = TrialRecord {
+            study: study.name.clone(),
+            subject: subject_id(subject),
+            session: 1,
+            protocol: study.protocol,
+            trial,
+            response,
+            outcome,
+            elapsed_ms: clock_ms,
+            wall_clock_ms: now_ms(),
+            monotonic_ms: monotonic_base + started.elapsed().as_millis() as u64,
+        };
+        log.append(&record)?;
+    }
+    manifest.status = match engine.status() {
+        SessionStatus::TimeLimit => SessionState::TimeLimit,
+        SessionStatus::Complete | SessionStatus::Running => SessionState::Complete,
+    };
+    manifest.trials_logged = log.rows();
+    manifest.ended_ms = Some(now_ms());
+    manifest.not_shown = engine.not_shown().into_iter().map(|t| t.stimulus).collect();
+    manifest.thresholds = engine.thresholds();
+    log.write_manifest(&manifest)?;
+    let thresholds: Vec<String> = manifest
+        .thresholds
+        .iter()
+        .map(|(n, t)| {
+            format!(
+                "{n}={}",
+                t.map_or_else(|| "n/a".to_string(), |v| format!("{v:.4}"))
+            )
+        })
+        .collect();
+    Ok(format!(
+        "{}: {:?}, {} trials{}{}",
+        manifest.subject,
+        manifest.status,
+        manifest.trials_logged,
+        if manifest.not_shown.is_empty() {
+            String::new()
+        } else {
+            format!(", {} not shown", manifest.not_shown.len())
+        },
+        if thresholds.is_empty() {
+            String::new()
+        } else {
+            format!(", thresholds {}", thresholds.join(" "))
+        }
+    ))
+}

@@ -1,0 +1,187 @@
+//! `study check` and `study simulate` end to end on the shipped examples: MOS, DSCQS and
+//! staircase runs write complete results directories that the readers load back.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use protocols::{Block, Protocol};
+use results::store::SessionState;
+
+fn examples() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples")
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let d = Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("simulate-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    d
+}
+
+fn study() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_study"))
+}
+
+#[test]
+fn simulate_writes_complete_results_for_every_protocol() {
+    for (file, protocol, per_session) in [
+        ("mos.toml", Protocol::Mos, Some(54)),
+        ("dscqs.toml", Protocol::Dscqs, Some(18)),
+        ("staircase.toml", Protocol::Staircase, None),
+    ] {
+        let out = scratch(file);
+        let st = study()
+            .arg("simulate")
+            .arg(examples().join(file))
+            .args(["--subjects", "2", "--seed", "3", "-o"])
+            .arg(&out)
+            .output()
+            .unwrap();
+        assert!(
+            st.status.success(),
+            "{file}: {}",
+            String::from_utf8_lossy(&st.stderr)
+        );
+        let (run, sessions) = results::read_results_dir(&out).unwrap();
+        assert_eq!(run.subjects, 2);
+        assert_eq!(run.observer_seed, Some(3));
+        assert!(out.join("study.toml").is_file());
+        assert_eq!(sessions.len(), 2);
+        for s in &sessions {
+            assert_eq!(s.manifest.protocol, protocol);
+            assert_eq!(s.manifest.status, SessionState::Complete);
+            assert_eq!(s.manifest.trials_logged as usize, s.trials.records.len());
+            if let Some(n) = per_session {
+                assert_eq!(s.trials.records.len(), n, "{file}");
+            }
+            for (i, r) in s.trials.records.iter().enumerate() {
+                assert_eq!(r.trial.index as usize, i);
+                assert_eq!(r.protocol, protocol);
+            }
+            match protocol {
+                Protocol::Mos => {
+                    // Simulated ratings follow quality: compression ratio 10 beats 70 on average.
+                    let mean = |suffix: &str| {
+                        let v: Vec<f64> = s
+                            .trials
+                            .records
+                            .iter()
+                            .filter(|r| {
+                                r.trial.block != Block::Familiarization
+                                    && r.trial.stimulus.ends_with(suffix)
+                            })
+                            .map(|r| r.outcome.score)
+                            .collect();
+                        v.iter().sum::<f64>() / v.len() as f64
+                    };
+                    assert!(
+                        mean("cr10") > mean("cr70") + 0.5,
+                        "{} vs {}",
+                        mean("cr10"),
+                        mean("cr70")
+                    );
+                }
+                Protocol::Dscqs => assert!(
+                    s.trials
+                        .records
+                        .iter()
+                        .all(|r| r.outcome.score_reference.is_some())
+                ),
+                Protocol::Staircase => {
+                    assert_eq!(s.manifest.thresholds.len(), 2);
+                    assert!(
+                        s.manifest
+                            .thresholds
+                            .iter()
+                            .all(|(_, t)| t.is_some_and(|t| (0.002..=0.040).contains(&t)))
+                    );
+                }
+            }
+        }
+        // Never overwritten.
+        let again = study()
+            .arg("simulate")
+            .arg(examples().join(file))
+            .args(["--subjects", "2", "-o"])
+            .arg(&out)
+            .output()
+            .unwrap();
+        assert!(!again.status.success());
+        assert!(String::from_utf8_lossy(&again.stderr).contains("never overwritten"));
+    }
+}
+
+#[test]
+fn check_lists_every_problem_and_fails() {
+    let dir = scratch("check");
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::copy(examples().join("stimuli.json"), dir.join("stimuli.json")).unwrap();
+    let text = std::fs::read_to_string(examples().join("staircase.toml"))
+        .unwrap()
+        .replace("step = 0.002", "step = 0")
+        .replace("n_up = 1", "n_up = 1\nn_upp = 1");
+    std::fs::write(dir.join("bad.toml"), text).unwrap();
+    let out = study()
+        .arg("check")
+        .arg(dir.join("bad.toml"))
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("staircase.step") && err.contains("staircase.n_upp"),
+        "{err}"
+    );
+    let ok = study()
+        .arg("check")
+        .arg(examples().join("mos.toml"))
+        .output()
+        .unwrap();
+    assert!(ok.status.success());
+    assert!(String::from_utf8_lossy(&ok.stdout).contains("trials per session: 54"));
+}
+
+#[test]
+fn resume_with_a_changed_study_is_a_clear_error() {
+    let dir = scratch("changed");
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::copy(examples().join("stimuli.json"), dir.join("stimuli.json")).unwrap();
+    let original = std::fs::read_to_string(examples().join("mos.toml")).unwrap();
+    std::fs::write(dir.join("s.toml"), &original).unwrap();
+    let out = dir.join("out");
+    assert!(
+        study()
+            .arg("simulate")
+            .arg(dir.join("s.toml"))
+            .args(["-o"])
+            .arg(&out)
+            .status()
+            .unwrap()
+            .success()
+    );
+    // Pretend the session was interrupted, then change the familiarization block.
+    let m = out.join("S001_s1/session.json");
+    let text = std::fs::read_to_string(&m)
+        .unwrap()
+        .replace("\"complete\"", "\"running\"");
+    std::fs::write(&m, text).unwrap();
+    std::fs::write(
+        dir.join("s.toml"),
+        original.replace("familiarization = 4", "familiarization = 3"),
+    )
+    .unwrap();
+    let r = study()
+        .arg("simulate")
+        .arg(dir.join("s.toml"))
+        .args(["--resume", "-o"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(!r.status.success());
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert!(
+        err.contains("study file") && err.contains("changed"),
+        "{err}"
+    );
+}
