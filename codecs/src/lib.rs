@@ -23,6 +23,7 @@ pub mod data;
 pub mod error;
 pub mod fk;
 pub mod io;
+pub mod markers;
 pub mod math;
 pub mod playback;
 pub mod primitives;

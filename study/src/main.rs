@@ -8,6 +8,7 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 
 mod clip_cmd;
+mod markers_cmd;
 mod primitives_cmd;
 mod study_cmd;
 
@@ -24,6 +25,9 @@ enum Command {
     /// Inspect, convert and evaluate motion clips (ASF/AMC, BVH).
     #[command(subcommand)]
     Clip(clip_cmd::ClipCommand),
+    /// Skeletons from raw markers: synthetic captures and GDKE solving (C3D/CSV in, BVH out).
+    #[command(subcommand)]
+    Markers(markers_cmd::MarkersCommand),
     /// Build and inspect the primitive database of the incremental codec (thesis ch. 5).
     #[command(subcommand)]
     Primitives(primitives_cmd::PrimitivesCommand),
@@ -37,6 +41,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Clip(cmd) => clip_cmd::run(cmd),
+        Command::Markers(cmd) => markers_cmd::run(cmd),
         Command::Primitives(cmd) => primitives_cmd::run(cmd),
         Command::Check(args) => study_cmd::check(&args),
         Command::Simulate(args) => study_cmd::simulate(&args),

@@ -1,0 +1,54 @@
+//! GDKE (closed form, seed 003 eq. 5) against the iterative Levenberg-Marquardt least-squares
+//! sphere fit on the same noisy samples of a spherical joint (σ = 2 mm, R = 300 mm), for
+//! N = 100 (the paper's typical preprocessing count) and N = 1000.
+#![allow(clippy::unwrap_used, clippy::expect_used, missing_docs)]
+
+use std::hint::black_box;
+use std::time::Duration;
+
+use codecs::markers::gdke::{GdkeOptions, LsqOptions, gdke, least_squares_sphere};
+use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+fn gaussian(rng: &mut ChaCha8Rng) -> f64 {
+    let u1: f64 = 1.0 - rng.random::<f64>();
+    let u2: f64 = rng.random::<f64>();
+    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+}
+
+/// Points on a cap of a sphere (±60° flexion, ±35° abduction) with Gaussian noise.
+fn samples(n: usize, seed: u64) -> Vec<[f64; 3]> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let (r, sigma) = (300.0, 2.0);
+    let c0 = [100.0, -50.0, 900.0];
+    (0..n)
+        .map(|_| {
+            let a = (rng.random::<f64>() * 2.0 - 1.0) * 60f64.to_radians();
+            let b = (rng.random::<f64>() * 2.0 - 1.0) * 35f64.to_radians();
+            let d = [b.sin(), -a.cos() * b.cos(), a.sin() * b.cos()];
+            [0, 1, 2].map(|k| c0[k] + r * d[k] + sigma * gaussian(&mut rng))
+        })
+        .collect()
+}
+
+fn bench(c: &mut Criterion) {
+    for n in [100usize, 1000] {
+        let pts = samples(n, 42);
+        let mut g = c.benchmark_group(format!("sphere-fit/N={n}"));
+        g.throughput(Throughput::Elements(n as u64));
+        g.sample_size(50)
+            .warm_up_time(Duration::from_millis(300))
+            .measurement_time(Duration::from_secs(2));
+        let opts = GdkeOptions::default();
+        g.bench_function("gdke", |b| b.iter(|| gdke(black_box(&pts), &opts).unwrap()));
+        let lsq = LsqOptions::default();
+        g.bench_function("least-squares-lm", |b| {
+            b.iter(|| least_squares_sphere(black_box(&pts), None, &lsq).unwrap());
+        });
+        g.finish();
+    }
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);

@@ -1,0 +1,640 @@
+//! Marker trajectories: a markers × frames set of positions in millimetres with gaps, read
+//! from and written to C3D (via `c3dio`) and a simple CSV (`frame,marker,x,y,z`).
+//!
+//! Missing samples are `None`, never zeros: in C3D a negative residual marks a sample invalid,
+//! and a sample at exactly (0, 0, 0) is the "zeroed" missing point of seed 003 (section 2.4).
+
+use std::fmt::Write as _;
+use std::panic::AssertUnwindSafe;
+use std::path::Path;
+
+use super::{MarkerError, MarkerLimits};
+
+/// Marker positions in millimetres over frames; `None` is a gap.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MarkerSet {
+    names: Vec<String>,
+    frames: usize,
+    /// Frames per second.
+    pub frame_rate_hz: f64,
+    /// Frame-major samples: `samples[frame * markers + marker]`.
+    samples: Vec<Option<[f64; 3]>>,
+}
+
+impl MarkerSet {
+    /// A set with every sample missing.
+    pub fn new(names: Vec<String>, frames: usize, frame_rate_hz: f64) -> MarkerSet {
+        let samples = vec![None; names.len() * frames];
+        MarkerSet {
+            names,
+            frames,
+            frame_rate_hz,
+            samples,
+        }
+    }
+
+    /// Marker names, in column order.
+    pub fn names(&self) -> &[String] {
+        &self.names
+    }
+
+    /// Number of markers.
+    pub fn marker_count(&self) -> usize {
+        self.names.len()
+    }
+
+    /// Number of frames.
+    pub fn frames(&self) -> usize {
+        self.frames
+    }
+
+    /// Index of the marker called `name`.
+    pub fn marker_index(&self, name: &str) -> Option<usize> {
+        self.names.iter().position(|n| n == name)
+    }
+
+    /// Position of `marker` at `frame` in mm, `None` for a gap or out of range.
+    pub fn get(&self, frame: usize, marker: usize) -> Option<[f64; 3]> {
+        if marker >= self.names.len() {
+            return None;
+        }
+        self.samples
+            .get(frame * self.names.len() + marker)
+            .copied()
+            .flatten()
+    }
+
+    /// Sets (or, with `None`, clears) a sample; out-of-range indices are ignored. A sample
+    /// with a non-finite coordinate is stored as a gap.
+    pub fn set(&mut self, frame: usize, marker: usize, position_mm: Option<[f64; 3]>) {
+        if marker >= self.names.len() {
+            return;
+        }
+        let value = position_mm.filter(|p| p.iter().all(|v| v.is_finite()));
+        if let Some(s) = self.samples.get_mut(frame * self.names.len() + marker) {
+            *s = value;
+        }
+    }
+
+    /// Number of gaps.
+    pub fn gap_count(&self) -> usize {
+        self.samples.iter().filter(|s| s.is_none()).count()
+    }
+}
+
+fn file_len(path: &Path, limits: &MarkerLimits) -> Result<u64, MarkerError> {
+    let len = std::fs::metadata(path)
+        .map_err(|err| MarkerError::Io {
+            path: path.to_path_buf(),
+            err,
+        })?
+        .len();
+    if len > limits.max_file_bytes {
+        return Err(MarkerError::Limit {
+            path: path.to_path_buf(),
+            what: "file size in bytes",
+            value: len,
+            max: limits.max_file_bytes,
+        });
+    }
+    Ok(len)
+}
+
+fn check_shape(
+    path: &Path,
+    markers: usize,
+    frames: usize,
+    limits: &MarkerLimits,
+) -> Result<(), MarkerError> {
+    let lim = |what, value: usize, max: usize| {
+        if value > max {
+            Err(MarkerError::Limit {
+                path: path.to_path_buf(),
+                what,
+                value: value as u64,
+                max: max as u64,
+            })
+        } else {
+            Ok(())
+        }
+    };
+    lim("marker count", markers, limits.max_markers)?;
+    lim("frame count", frames, limits.max_frames)?;
+    lim(
+        "sample count",
+        markers.saturating_mul(frames),
+        limits.max_samples,
+    )
+}
+
+/// Reads a CSV marker file with [`MarkerLimits::default`]; see [`parse_csv`].
+///
+/// # Errors
+/// [`MarkerError::Io`], [`MarkerError::Limit`] or [`MarkerError::Csv`].
+pub fn read_csv(path: &Path) -> Result<MarkerSet, MarkerError> {
+    read_csv_with(path, &MarkerLimits::default())
+}
+
+/// Reads a CSV marker file under `limits` (the file size is checked before reading).
+///
+/// # Errors
+/// [`MarkerError::Io`], [`MarkerError::Limit`] or [`MarkerError::Csv`].
+pub fn read_csv_with(path: &Path, limits: &MarkerLimits) -> Result<MarkerSet, MarkerError> {
+    file_len(path, limits)?;
+    let bytes = std::fs::read(path).map_err(|err| MarkerError::Io {
+        path: path.to_path_buf(),
+        err,
+    })?;
+    let text = String::from_utf8(bytes).map_err(|e| MarkerError::Csv {
+        path: path.to_path_buf(),
+        line: 1 + e.as_bytes()[..e.utf8_error().valid_up_to()]
+            .split(|&b| b == b'\n')
+            .count()
+            - 1,
+        reason: "not valid UTF-8".into(),
+    })?;
+    parse_csv(&text, path, limits)
+}
+
+/// Parses CSV text: optional `# frame_rate_hz = R` comment lines (default 120 Hz), the header
+/// `frame,marker,x,y,z`, then one row per sample with a 0-based frame index, a marker name and
+/// coordinates in mm. Samples not listed, or listed with all three coordinates empty, are gaps.
+/// Markers are numbered in order of first appearance.
+///
+/// # Errors
+/// [`MarkerError::Csv`] naming the line for a missing header, a wrong field count, a bad
+/// number, a duplicated sample; [`MarkerError::Limit`] when the shape exceeds `limits`.
+#[expect(
+    clippy::too_many_lines,
+    reason = "one pass over the lines, each check next to its error"
+)]
+pub fn parse_csv(text: &str, path: &Path, limits: &MarkerLimits) -> Result<MarkerSet, MarkerError> {
+    let err = |line: usize, reason: String| MarkerError::Csv {
+        path: path.to_path_buf(),
+        line,
+        reason,
+    };
+    let mut rate_hz = 120.0;
+    let mut header_seen = false;
+    let mut names: Vec<String> = Vec::new();
+    let mut index: std::collections::HashMap<String, usize> = std::collections::HashMap::new();
+    let mut rows: Vec<(usize, usize, Option<[f64; 3]>, usize)> = Vec::new();
+    let mut max_frame = None;
+    for (i, raw) in text.lines().enumerate() {
+        let line_no = i + 1;
+        let line = raw.trim();
+        if line.is_empty() {
+            continue;
+        }
+        if let Some(comment) = line.strip_prefix('#') {
+            if let Some((k, v)) = comment.split_once('=')
+                && k.trim() == "frame_rate_hz"
+            {
+                rate_hz = v
+                    .trim()
+                    .parse::<f64>()
+                    .ok()
+                    .filter(|r| r.is_finite() && *r > 0.0)
+                    .ok_or_else(|| {
+                        err(
+                            line_no,
+                            format!("frame_rate_hz {:?} is not a positive number", v.trim()),
+                        )
+                    })?;
+            }
+            continue;
+        }
+        let fields: Vec<&str> = line.split(',').map(str::trim).collect();
+        if !header_seen {
+            if fields != ["frame", "marker", "x", "y", "z"] {
+                return Err(err(
+                    line_no,
+                    format!("expected the header `frame,marker,x,y,z`, found {line:?}"),
+                ));
+            }
+            header_seen = true;
+            continue;
+        }
+        if fields.len() != 5 {
+            return Err(err(
+                line_no,
+                format!(
+                    "expected 5 fields (frame,marker,x,y,z), found {}",
+                    fields.len()
+                ),
+            ));
+        }
+        let frame: usize = fields[0].parse().map_err(|_| {
+            err(
+                line_no,
+                format!("frame {:?} is not a non-negative integer", fields[0]),
+            )
+        })?;
+        if frame >= limits.max_frames {
+            return Err(MarkerError::Limit {
+                path: path.to_path_buf(),
+                what: "frame count",
+                value: frame as u64 + 1,
+                max: limits.max_frames as u64,
+            });
+        }
+        let name = fields[1];
+        if name.is_empty() {
+            return Err(err(line_no, "empty marker name".into()));
+        }
+        let marker = if let Some(&m) = index.get(name) {
+            m
+        } else {
+            if names.len() >= limits.max_markers {
+                return Err(MarkerError::Limit {
+                    path: path.to_path_buf(),
+                    what: "marker count",
+                    value: names.len() as u64 + 1,
+                    max: limits.max_markers as u64,
+                });
+            }
+            index.insert(name.to_string(), names.len());
+            names.push(name.to_string());
+            names.len() - 1
+        };
+        let position = if fields[2..].iter().all(|f| f.is_empty()) {
+            None
+        } else {
+            let mut p = [0.0; 3];
+            for (k, f) in fields[2..].iter().enumerate() {
+                p[k] = f
+                    .parse::<f64>()
+                    .ok()
+                    .filter(|v| v.is_finite())
+                    .ok_or_else(|| {
+                        err(
+                            line_no,
+                            format!("{} {:?} is not a finite number", ["x", "y", "z"][k], f),
+                        )
+                    })?;
+            }
+            Some(p)
+        };
+        max_frame = Some(max_frame.map_or(frame, |m: usize| m.max(frame)));
+        rows.push((frame, marker, position, line_no));
+    }
+    if !header_seen {
+        return Err(err(1, "missing the header `frame,marker,x,y,z`".into()));
+    }
+    let frames = max_frame.map_or(0, |m| m + 1);
+    check_shape(path, names.len(), frames, limits)?;
+    let mut set = MarkerSet::new(names, frames, rate_hz);
+    let mut seen = vec![false; set.samples.len()];
+    let markers = set.marker_count();
+    for (frame, marker, position, line_no) in rows {
+        let k = frame * markers + marker;
+        if seen[k] {
+            return Err(err(
+                line_no,
+                format!(
+                    "marker {:?} appears twice in frame {frame}",
+                    set.names[marker]
+                ),
+            ));
+        }
+        seen[k] = true;
+        set.samples[k] = position;
+    }
+    Ok(set)
+}
+
+/// Formats a marker set as CSV (gaps are omitted rows); [`parse_csv`] reads it back exactly.
+pub fn format_csv(set: &MarkerSet) -> String {
+    let mut out = String::with_capacity(32 * set.samples.len() + 64);
+    let _ = writeln!(out, "# frame_rate_hz = {}", set.frame_rate_hz);
+    out.push_str("frame,marker,x,y,z\n");
+    for f in 0..set.frames {
+        for (m, name) in set.names.iter().enumerate() {
+            if let Some([x, y, z]) = set.get(f, m) {
+                let _ = writeln!(out, "{f},{name},{x},{y},{z}");
+            }
+        }
+    }
+    out
+}
+
+/// Writes a marker set as CSV.
+///
+/// # Errors
+/// [`MarkerError::Io`].
+pub fn write_csv(set: &MarkerSet, path: &Path) -> Result<(), MarkerError> {
+    std::fs::write(path, format_csv(set)).map_err(|err| MarkerError::Io {
+        path: path.to_path_buf(),
+        err,
+    })
+}
+
+fn c3d_err(path: &Path, reason: impl Into<String>) -> MarkerError {
+    MarkerError::C3d {
+        path: path.to_path_buf(),
+        reason: reason.into(),
+    }
+}
+
+/// Checks the 512-byte C3D header against the file length before `c3dio` allocates from it:
+/// the header's marker and frame counts must fit in the file.
+fn check_c3d_header(bytes: &[u8], path: &Path, limits: &MarkerLimits) -> Result<(), MarkerError> {
+    if bytes.len() < 1024 {
+        return Err(c3d_err(
+            path,
+            format!(
+                "{} bytes: shorter than a header and a parameter block",
+                bytes.len()
+            ),
+        ));
+    }
+    if bytes[1] != 0x50 {
+        return Err(c3d_err(
+            path,
+            format!("header byte 2 is {:#04x}, not 0x50", bytes[1]),
+        ));
+    }
+    let param_block = bytes[0] as usize;
+    if param_block < 2 || param_block * 512 > bytes.len() {
+        return Err(c3d_err(
+            path,
+            format!("parameter section starts at block {param_block}, outside the file"),
+        ));
+    }
+    // Processor type: parameter block byte 4 (0x54 Intel, 0x55 DEC, 0x56 MIPS big-endian).
+    let processor = bytes[(param_block - 1) * 512 + 3];
+    let big = match processor {
+        0x54 | 0x55 => false,
+        0x56 => true,
+        other => {
+            return Err(c3d_err(
+                path,
+                format!("unknown processor type {other:#04x}"),
+            ));
+        }
+    };
+    let word = |i: usize| {
+        let b = [bytes[i], bytes[i + 1]];
+        if big {
+            u16::from_be_bytes(b)
+        } else {
+            u16::from_le_bytes(b)
+        }
+    };
+    let markers = word(2) as usize;
+    let analog = word(4) as usize;
+    let (first, last) = (word(6), word(8));
+    if last < first {
+        return Err(c3d_err(
+            path,
+            format!("last frame {last} precedes first frame {first}"),
+        ));
+    }
+    let frames = (last - first) as usize + 1;
+    check_shape(path, markers, frames, limits)?;
+    let data_block = word(16) as usize;
+    if data_block < 2 || data_block.saturating_sub(1) * 512 > bytes.len() {
+        return Err(c3d_err(
+            path,
+            format!("data section starts at block {data_block}, outside the file"),
+        ));
+    }
+    // Integer samples are 8 bytes per point and 2 per analog value; anything smaller than
+    // that cannot be a valid file.
+    let need = frames.saturating_mul(markers.saturating_mul(8).saturating_add(analog * 2));
+    let have = bytes.len() - (data_block - 1) * 512;
+    if need > have {
+        return Err(c3d_err(
+            path,
+            format!(
+                "header claims {markers} markers × {frames} frames, but the data section holds only {have} bytes"
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Reads a C3D file with [`MarkerLimits::default`]; see [`read_c3d_with`].
+///
+/// # Errors
+/// See [`read_c3d_with`].
+pub fn read_c3d(path: &Path) -> Result<MarkerSet, MarkerError> {
+    read_c3d_with(path, &MarkerLimits::default())
+}
+
+/// Reads the 3-D points of a C3D file: labels from `POINT:LABELS`, units from `POINT:UNITS`
+/// (`mm`, `cm` or `m`, converted to mm; empty means mm), and a gap wherever the residual is
+/// negative, a coordinate is not finite, or the point is exactly (0, 0, 0).
+///
+/// # Errors
+/// [`MarkerError::Io`], [`MarkerError::Limit`] (checked on the file size and the header's
+/// counts before parsing), or [`MarkerError::C3d`] for a malformed file.
+pub fn read_c3d_with(path: &Path, limits: &MarkerLimits) -> Result<MarkerSet, MarkerError> {
+    file_len(path, limits)?;
+    let bytes = std::fs::read(path).map_err(|err| MarkerError::Io {
+        path: path.to_path_buf(),
+        err,
+    })?;
+    parse_c3d(&bytes, path, limits)
+}
+
+/// Parses C3D bytes; `path` is only used in errors. See [`read_c3d_with`].
+///
+/// # Errors
+/// [`MarkerError::Limit`] or [`MarkerError::C3d`].
+pub fn parse_c3d(
+    bytes: &[u8],
+    path: &Path,
+    limits: &MarkerLimits,
+) -> Result<MarkerSet, MarkerError> {
+    check_c3d_header(bytes, path, limits)?;
+    // c3dio indexes its input without bounds checks in places; a malformed file that passes
+    // the header checks above must still end as an error, not a crash.
+    let parsed = std::panic::catch_unwind(AssertUnwindSafe(|| {
+        c3dio::C3d::from_bytes(bytes).map_err(Box::new)
+    }))
+    .map_err(|_| {
+        c3d_err(
+            path,
+            "malformed file (the parser stopped on inconsistent data)",
+        )
+    })?
+    .map_err(|e| c3d_err(path, format!("{e:?}")))?;
+    let points = &parsed.points;
+    let markers = points.points.cols();
+    let frames = points.points.rows();
+    check_shape(path, markers, frames, limits)?;
+    let unit: String = points
+        .units
+        .iter()
+        .collect::<String>()
+        .trim()
+        .to_ascii_lowercase();
+    let mm_per_unit = match unit.as_str() {
+        "" | "mm" => 1.0,
+        "cm" => 10.0,
+        "m" => 1000.0,
+        other => {
+            return Err(c3d_err(
+                path,
+                format!("POINT:UNITS {other:?} is not mm, cm or m"),
+            ));
+        }
+    };
+    let mut names: Vec<String> = (0..markers)
+        .map(|m| {
+            points
+                .labels
+                .get(m)
+                .map(|l| l.trim().to_string())
+                .filter(|l| !l.is_empty())
+                .unwrap_or_else(|| format!("M{m:03}"))
+        })
+        .collect();
+    // Labels must be unique for the segment file to name them.
+    for m in 0..names.len() {
+        if names[..m].contains(&names[m]) {
+            names[m] = format!("{}#{m}", names[m]);
+        }
+    }
+    let rate = f64::from(points.frame_rate);
+    let rate = if rate.is_finite() && rate > 0.0 {
+        rate
+    } else {
+        120.0
+    };
+    let mut set = MarkerSet::new(names, frames, rate);
+    for f in 0..frames {
+        for m in 0..markers {
+            let Some(p) = points.points.get(f, m) else {
+                continue;
+            };
+            let xyz = [
+                f64::from(p.point[0]),
+                f64::from(p.point[1]),
+                f64::from(p.point[2]),
+            ];
+            let zeroed = xyz.iter().all(|v| *v == 0.0);
+            if p.residual < 0.0 || zeroed {
+                continue;
+            }
+            set.set(f, m, Some(xyz.map(|v| v * mm_per_unit)));
+        }
+    }
+    Ok(set)
+}
+
+/// Writes a marker set as a floating-point C3D file (units mm, gaps as zeroed points with a
+/// residual of −1, i.e. invalid).
+///
+/// # Errors
+/// [`MarkerError::C3d`] when the set has more than 65 535 frames or markers (the header's
+/// 16-bit counts) or `c3dio` refuses the file, [`MarkerError::Io`].
+pub fn write_c3d(set: &MarkerSet, path: &Path) -> Result<(), MarkerError> {
+    if set.frames == 0 || set.frames > 65_535 || set.marker_count() > 65_535 {
+        return Err(c3d_err(
+            path,
+            format!(
+                "{} markers × {} frames: C3D needs 1 to 65 535 of each",
+                set.marker_count(),
+                set.frames
+            ),
+        ));
+    }
+    let mut c3d = c3dio::C3d::new();
+    for group in [
+        "POINT",
+        "ANALOG",
+        "FORCE_PLATFORM",
+        "EVENT",
+        "EVENT_CONTEXT",
+        "MANUFACTURER",
+        "SEG",
+    ] {
+        c3d.parameters.insert_group(group, String::new());
+    }
+    let pts = &mut c3d.points;
+    pts.labels.clone_from(&set.names);
+    pts.descriptions = vec![String::new(); set.marker_count()];
+    pts.units = ['m', 'm', ' ', ' '];
+    pts.frame_rate = set.frame_rate_hz as f32;
+    pts.scale_factor = 1.0;
+    pts.format = c3dio::DataFormat::Float;
+    pts.first_frame = 1;
+    pts.last_frame = set.frames as u16;
+    for f in 0..set.frames {
+        let row: Vec<c3dio::MarkerPoint> = (0..set.marker_count())
+            .map(|m| {
+                if let Some([x, y, z]) = set.get(f, m) {
+                    c3dio::MarkerPoint::new(x as f32, y as f32, z as f32)
+                } else {
+                    let mut gap = c3dio::MarkerPoint::new(0.0, 0.0, 0.0);
+                    gap.residual = -1.0;
+                    gap
+                }
+            })
+            .collect();
+        pts.points.push_row(row);
+    }
+    let tmp = path.with_extension("c3d.tmp.c3d");
+    std::panic::catch_unwind(AssertUnwindSafe(|| c3d.write_path(tmp.clone()).map(|_| ())))
+        .map_err(|_| c3d_err(path, "the C3D writer stopped"))?
+        .map_err(|e| c3d_err(path, format!("{e:?}")))?;
+    // c3dio does not pad the data section to whole 512-byte blocks, which its own reader
+    // (and the C3D specification) expects.
+    let io = |err| MarkerError::Io {
+        path: path.to_path_buf(),
+        err,
+    };
+    let len = std::fs::metadata(&tmp).map_err(io)?.len();
+    if len % 512 != 0 {
+        use std::io::Write as _;
+        let mut file = std::fs::OpenOptions::new()
+            .append(true)
+            .open(&tmp)
+            .map_err(io)?;
+        file.write_all(&vec![0u8; (512 - len % 512) as usize])
+            .map_err(io)?;
+    }
+    std::fs::rename(&tmp, path).map_err(|err| MarkerError::Io {
+        path: path.to_path_buf(),
+        err,
+    })
+}
+
+/// Reads a marker file by extension: `.c3d` or `.csv`.
+///
+/// # Errors
+/// As [`read_c3d`] / [`read_csv`]; [`MarkerError::Csv`] at line 0 for another extension.
+pub fn read_markers(path: &Path) -> Result<MarkerSet, MarkerError> {
+    match ext(path).as_deref() {
+        Some("c3d") => read_c3d(path),
+        Some("csv") => read_csv(path),
+        _ => Err(MarkerError::Csv {
+            path: path.to_path_buf(),
+            line: 0,
+            reason: "unknown marker file type: expected .c3d or .csv".into(),
+        }),
+    }
+}
+
+/// Writes a marker file by extension: `.c3d` or `.csv`.
+///
+/// # Errors
+/// As [`write_c3d`] / [`write_csv`]; [`MarkerError::Csv`] at line 0 for another extension.
+pub fn write_markers(set: &MarkerSet, path: &Path) -> Result<(), MarkerError> {
+    match ext(path).as_deref() {
+        Some("c3d") => write_c3d(set, path),
+        Some("csv") => write_csv(set, path),
+        _ => Err(MarkerError::Csv {
+            path: path.to_path_buf(),
+            line: 0,
+            reason: "unknown marker file type: expected .c3d or .csv".into(),
+        }),
+    }
+}
+
+fn ext(path: &Path) -> Option<String> {
+    path.extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+}

@@ -1,0 +1,787 @@
+//! Segment/marker assignment files, segment frames (seed 003, section 2.5) and the solver
+//! that turns a marker set into a BVH [`Clip`].
+//!
+//! The assignment file is TOML:
+//!
+//! ```toml
+//! hinge_condition = 1000.0   # optional: condition number above which a joint is a hinge
+//! still_std_mm = 5.0         # optional: a marker moving less than this is "not moving"
+//!
+//! [[segment]]
+//! name = "pelvis"            # the root: no parent, at least 3 markers
+//! markers = ["LASI", "RASI", "SACR"]
+//!
+//! [[segment]]
+//! name = "lfemur"
+//! parent = "pelvis"          # parents are listed before their children
+//! markers = ["LTHI", "LKNE", "LTHI2"]
+//! ```
+//!
+//! Solving runs root to leaf (section 2.5): the root's frame comes from its markers; for each
+//! child segment every marker is expressed in the parent's frame, `x = Mᵀ(x′ − p)` (section
+//! 2.3 step 2), and all of them are fitted together by the pooled GDKE
+//! ([`gdke_pooled`], eq. 5 summed over markers); for a hinge the
+//! centre is the axis point in the plane through the mean of the markers (eq. 6), and a
+//! segment may impose `joint = "hinge"` or `"spherical"` instead of the automatic
+//! classification. A joint that does not move is reported as such and placed at its markers'
+//! centroid. The per-frame
+//! centre is `c_jk = x_k + M_k·v_j` with the parent's origin and axes. The child's frame comes
+//! from three markers, two markers and the centre, or one marker, the centre and the hinge
+//! axis (section 2.5 cases 3, 2, 1); it is then refined each frame by a least-squares rigid fit
+//! (Kabsch) of all the segment's visible markers and its centre, so that gaps in one marker do
+//! not lose the frame. A frame that still cannot be determined holds the nearest valid one.
+
+use std::path::{Path, PathBuf};
+
+use nalgebra::{Matrix3, Vector3};
+
+use super::MarkerError;
+use super::data::MarkerSet;
+use super::gdke::{GdkeOptions, JointKind, KindHint, gdke_pooled};
+use crate::clip::{
+    Axis, BodyPart, ChannelKind, Clip, Joint, Rest, Skeleton, SkeletonFormat, Units,
+};
+use crate::math::{Mat3, to_euler_zyx_deg};
+
+/// One segment of the assignment file.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SegmentSpec {
+    /// Segment (and output joint) name.
+    pub name: String,
+    /// Index of the parent segment, `None` for the root.
+    pub parent: Option<usize>,
+    /// Names of the markers fixed to the segment.
+    pub markers: Vec<String>,
+    /// Joint classification: `joint = "auto" | "spherical" | "hinge"` (default auto).
+    pub kind: KindHint,
+}
+
+/// A parsed assignment file.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SegmentMap {
+    /// The file it came from (used in errors).
+    pub path: PathBuf,
+    /// Segments, parents before children; index 0 is the root.
+    pub segments: Vec<SegmentSpec>,
+    /// GDKE classification thresholds (`hinge_condition`, `still_std_mm`).
+    pub gdke: GdkeOptions,
+}
+
+/// Maximum size of an assignment file in bytes.
+pub const MAX_SEGMENT_FILE_BYTES: u64 = 1 << 20;
+
+/// Reads an assignment file; see [`parse_segments`].
+///
+/// # Errors
+/// [`MarkerError::Io`], [`MarkerError::Limit`] for a file over 1 MiB, [`MarkerError::Segments`].
+pub fn read_segments(path: &Path) -> Result<SegmentMap, MarkerError> {
+    let io = |err| MarkerError::Io {
+        path: path.to_path_buf(),
+        err,
+    };
+    let len = std::fs::metadata(path).map_err(io)?.len();
+    if len > MAX_SEGMENT_FILE_BYTES {
+        return Err(MarkerError::Limit {
+            path: path.to_path_buf(),
+            what: "segment file size in bytes",
+            value: len,
+            max: MAX_SEGMENT_FILE_BYTES,
+        });
+    }
+    let bytes = std::fs::read(path).map_err(io)?;
+    let text = String::from_utf8(bytes).map_err(|_| MarkerError::Segments {
+        path: path.to_path_buf(),
+        key: "(file)".into(),
+        reason: "not valid UTF-8".into(),
+    })?;
+    parse_segments(&text, path)
+}
+
+/// Parses assignment-file text. Errors name the key path, e.g. `segment[2].parent`.
+///
+/// # Errors
+/// [`MarkerError::Segments`] for invalid TOML, unknown keys, wrong types, a missing or
+/// duplicated name, an unknown or later-listed parent, no root or more than one, a root with
+/// fewer than 3 markers, a segment without markers or a marker on two segments.
+#[expect(
+    clippy::too_many_lines,
+    reason = "one walk over the TOML tree, each check next to its key path"
+)]
+pub fn parse_segments(text: &str, path: &Path) -> Result<SegmentMap, MarkerError> {
+    let err = |key: &str, reason: String| MarkerError::Segments {
+        path: path.to_path_buf(),
+        key: key.to_string(),
+        reason,
+    };
+    let table: toml::Table = text
+        .parse()
+        .map_err(|e: toml::de::Error| err("(file)", e.message().to_string()))?;
+    let mut gdke = GdkeOptions {
+        hinge_condition: 1e3,
+        still_std: 5.0,
+    };
+    let mut list = None;
+    for (key, value) in &table {
+        match key.as_str() {
+            "hinge_condition" | "still_std_mm" => {
+                let v = match value {
+                    toml::Value::Float(f) => *f,
+                    toml::Value::Integer(i) => *i as f64,
+                    _ => return Err(err(key, "expected a number".into())),
+                };
+                if !(v.is_finite() && v > 0.0) {
+                    return Err(err(key, format!("{v} is not a positive number")));
+                }
+                if key == "hinge_condition" {
+                    gdke.hinge_condition = v;
+                } else {
+                    gdke.still_std = v;
+                }
+            }
+            "segment" => match value {
+                toml::Value::Array(a) => list = Some(a),
+                _ => {
+                    return Err(err(key, "expected an array of tables ([[segment]])".into()));
+                }
+            },
+            other => {
+                return Err(err(
+                    other,
+                    "unknown key (expected hinge_condition, still_std_mm or [[segment]])".into(),
+                ));
+            }
+        }
+    }
+    let Some(list) = list else {
+        return Err(err("segment", "no [[segment]] tables".into()));
+    };
+    let mut segments: Vec<SegmentSpec> = Vec::with_capacity(list.len());
+    let mut marker_owner: std::collections::HashMap<String, String> =
+        std::collections::HashMap::new();
+    for (i, item) in list.iter().enumerate() {
+        let at = |k: &str| format!("segment[{i}]{k}");
+        let toml::Value::Table(t) = item else {
+            return Err(err(&at(""), "expected a table".into()));
+        };
+        let mut name = None;
+        let mut parent = None;
+        let mut markers = None;
+        let mut kind = KindHint::Auto;
+        for (k, v) in t {
+            match (k.as_str(), v) {
+                ("name", toml::Value::String(s)) => name = Some(s.clone()),
+                ("parent", toml::Value::String(s)) => parent = Some(s.clone()),
+                ("markers", toml::Value::Array(a)) => {
+                    let mut names = Vec::with_capacity(a.len());
+                    for (m, v) in a.iter().enumerate() {
+                        let toml::Value::String(s) = v else {
+                            return Err(err(
+                                &at(&format!(".markers[{m}]")),
+                                "expected a string".into(),
+                            ));
+                        };
+                        if s.is_empty() {
+                            return Err(err(
+                                &at(&format!(".markers[{m}]")),
+                                "empty marker name".into(),
+                            ));
+                        }
+                        names.push(s.clone());
+                    }
+                    markers = Some(names);
+                }
+                ("joint", toml::Value::String(s)) => {
+                    kind = match s.as_str() {
+                        "auto" => KindHint::Auto,
+                        "spherical" => KindHint::Spherical,
+                        "hinge" => KindHint::Hinge,
+                        other => {
+                            return Err(err(
+                                &at(".joint"),
+                                format!("{other:?} is not auto, spherical or hinge"),
+                            ));
+                        }
+                    };
+                }
+                ("name" | "parent" | "joint", _) => {
+                    return Err(err(&at(&format!(".{k}")), "expected a string".into()));
+                }
+                ("markers", _) => {
+                    return Err(err(
+                        &at(".markers"),
+                        "expected an array of marker names".into(),
+                    ));
+                }
+                (other, _) => {
+                    return Err(err(
+                        &at(&format!(".{other}")),
+                        "unknown key (expected name, parent, markers, joint)".into(),
+                    ));
+                }
+            }
+        }
+        let Some(name) = name.filter(|n| !n.trim().is_empty()) else {
+            return Err(err(&at(".name"), "missing or empty segment name".into()));
+        };
+        if segments.iter().any(|s| s.name == name) {
+            return Err(err(
+                &at(".name"),
+                format!("segment {name:?} is listed twice"),
+            ));
+        }
+        let parent = match parent {
+            None => {
+                if i != 0 {
+                    return Err(err(
+                        &at(".parent"),
+                        "missing: only the first segment (the root) has no parent".into(),
+                    ));
+                }
+                None
+            }
+            Some(p) => {
+                if i == 0 {
+                    return Err(err(
+                        &at(".parent"),
+                        "the first segment is the root and has no parent".into(),
+                    ));
+                }
+                let Some(k) = segments.iter().position(|s| s.name == p) else {
+                    return Err(err(
+                        &at(".parent"),
+                        format!("parent {p:?} is not a segment listed before this one"),
+                    ));
+                };
+                Some(k)
+            }
+        };
+        let Some(markers) = markers.filter(|m| !m.is_empty()) else {
+            return Err(err(&at(".markers"), "missing or empty marker list".into()));
+        };
+        if parent.is_none() && markers.len() < 3 {
+            return Err(err(
+                &at(".markers"),
+                format!("the root needs at least 3 markers, found {}", markers.len()),
+            ));
+        }
+        for (m, marker) in markers.iter().enumerate() {
+            if let Some(owner) = marker_owner.insert(marker.clone(), name.clone()) {
+                return Err(err(
+                    &at(&format!(".markers[{m}]")),
+                    format!("marker {marker:?} is already on segment {owner:?}"),
+                ));
+            }
+        }
+        segments.push(SegmentSpec {
+            name,
+            parent,
+            markers,
+            kind,
+        });
+    }
+    if segments.is_empty() {
+        return Err(err("segment", "no segments".into()));
+    }
+    Ok(SegmentMap {
+        path: path.to_path_buf(),
+        segments,
+        gdke,
+    })
+}
+
+/// A segment's pose in one frame: origin `x_k` and axes `M_k` (columns).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Frame {
+    /// Origin in world coordinates (mm).
+    pub origin: Vector3<f64>,
+    /// Axes as columns; a rotation matrix.
+    pub axes: Matrix3<f64>,
+}
+
+impl Frame {
+    /// `Mᵀ(x′ − p)`: a world point in this frame (seed 003, section 2.3 step 2).
+    pub fn to_local(&self, world: &Vector3<f64>) -> Vector3<f64> {
+        self.axes.transpose() * (world - self.origin)
+    }
+
+    /// `p + M·v`: a local point in world coordinates (section 2.5, `c_jk = x_jk + M_jk·v_j`).
+    pub fn to_world(&self, local: &Vector3<f64>) -> Vector3<f64> {
+        self.origin + self.axes * local
+    }
+}
+
+/// Section 2.5 axes from an origin `o` and two further points `p1`, `p2` (cases 2 and 3):
+/// `x̂ = (p2 − o)×(p1 − o)` normalised, `ẑ = (p1 − o)×x̂` normalised, `ŷ = ẑ×x̂`.
+/// `None` when the points are (nearly) collinear.
+pub fn frame_from_points(o: &Vector3<f64>, p1: &Vector3<f64>, p2: &Vector3<f64>) -> Option<Frame> {
+    let a = p1 - o;
+    let b = p2 - o;
+    let x = b.cross(&a);
+    let scale = a.norm() * b.norm();
+    if scale.is_nan() || scale <= 0.0 || x.norm() <= 1e-9 * scale {
+        return None;
+    }
+    axes_from(o, &a, &x.normalize())
+}
+
+/// Section 2.5 case 1: one marker `o`, the joint centre `c` and the hinge axis `n` (world):
+/// `x̂ = n̂`, `ẑ = (c − o)×x̂` normalised, `ŷ = ẑ×x̂`.
+pub fn frame_from_axis(o: &Vector3<f64>, c: &Vector3<f64>, n: &Vector3<f64>) -> Option<Frame> {
+    let norm = n.norm();
+    if norm.is_nan() || norm <= 0.0 {
+        return None;
+    }
+    axes_from(o, &(c - o), &(n / norm))
+}
+
+fn axes_from(o: &Vector3<f64>, a: &Vector3<f64>, x: &Vector3<f64>) -> Option<Frame> {
+    let z = a.cross(x);
+    let zn = z.norm();
+    if zn.is_nan() || zn <= 1e-9 * a.norm() {
+        return None;
+    }
+    let z = z / zn;
+    let y = z.cross(x);
+    Some(Frame {
+        origin: *o,
+        axes: Matrix3::from_columns(&[*x, y, z]),
+    })
+}
+
+/// Least-squares rigid fit (Kabsch): the frame that best maps `local` points onto `world`
+/// points. `None` with fewer than 3 pairs or (nearly) collinear points.
+pub fn rigid_fit(local: &[Vector3<f64>], world: &[Vector3<f64>]) -> Option<Frame> {
+    let n = local.len();
+    if n < 3 || world.len() != n {
+        return None;
+    }
+    let lc = local.iter().sum::<Vector3<f64>>() / n as f64;
+    let wc = world.iter().sum::<Vector3<f64>>() / n as f64;
+    let mut h = Matrix3::zeros();
+    for (l, w) in local.iter().zip(world) {
+        h += (l - lc) * (w - wc).transpose();
+    }
+    let svd = h.svd(true, true);
+    let (u, v_t) = (svd.u?, svd.v_t?);
+    let mut s = svd.singular_values;
+    s.as_mut_slice().sort_by(|a, b| b.total_cmp(a));
+    if s[1].is_nan() || s[1] <= 1e-9 * s[0].max(f64::MIN_POSITIVE) {
+        return None;
+    }
+    let v = v_t.transpose();
+    let d = (v * u.transpose()).determinant().signum();
+    let r = v * Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, d)) * u.transpose();
+    Some(Frame {
+        origin: wc - r * lc,
+        axes: r,
+    })
+}
+
+/// What the solver found for one segment's joint.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SolvedJoint {
+    /// Segment name.
+    pub segment: String,
+    /// Joint classification (the root is reported as `NotMoving`: it has no centre).
+    pub kind: JointKind,
+    /// Centre `v_j` in the parent's frame (mm); the root's joint point in its own frame.
+    pub centre_parent_mm: [f64; 3],
+    /// Markers whose fits made the centre.
+    pub markers_used: usize,
+    /// Frames where the segment's frame had to be held from a neighbour.
+    pub held_frames: usize,
+}
+
+/// A solved capture: the BVH clip (units mm) and what each joint turned out to be.
+#[derive(Debug, Clone)]
+pub struct Solved {
+    /// Skeleton and joint rotations; one BVH joint per segment plus an end site per leaf.
+    pub clip: Clip,
+    /// One entry per segment, in segment order.
+    pub joints: Vec<SolvedJoint>,
+    /// Index of each segment's joint in `clip.skeleton.joints`.
+    pub joint_of_segment: Vec<usize>,
+}
+
+fn v3(p: [f64; 3]) -> Vector3<f64> {
+    Vector3::new(p[0], p[1], p[2])
+}
+
+fn solve_err(segment: &str, reason: String) -> MarkerError {
+    MarkerError::Solve {
+        segment: segment.to_string(),
+        reason,
+    }
+}
+
+/// Fills `None` frames with the nearest earlier (else later) valid frame; returns how many
+/// were filled, or `None` when no frame is valid.
+fn hold(frames: &mut [Option<Frame>]) -> Option<usize> {
+    let first = frames.iter().position(Option::is_some)?;
+    let mut held = 0;
+    let mut last = frames[first];
+    for f in frames.iter_mut() {
+        if f.is_none() {
+            *f = last;
+            held += 1;
+        } else {
+            last = *f;
+        }
+    }
+    Some(held)
+}
+
+struct Canon {
+    /// Canonical frame per frame (section 2.5), before the rigid refinement.
+    frames: Vec<Option<Frame>>,
+}
+
+/// Solves a marker set with an assignment map into a BVH clip (see the module docs).
+///
+/// # Errors
+/// [`MarkerError::Segments`] when the map names a marker the set lacks;
+/// [`MarkerError::Solve`] when a segment's frame can never be determined (markers always
+/// missing or collinear), or a one-marker segment is not a hinge.
+#[expect(
+    clippy::too_many_lines,
+    reason = "one root-to-leaf pass, kept in one place"
+)]
+pub fn solve(set: &MarkerSet, map: &SegmentMap) -> Result<Solved, MarkerError> {
+    let frames = set.frames();
+    let Some(root) = map.segments.first() else {
+        return Err(MarkerError::Segments {
+            path: map.path.clone(),
+            key: "segment".into(),
+            reason: "no segments".into(),
+        });
+    };
+    if frames == 0 {
+        return Err(solve_err(&root.name, "the marker set has no frames".into()));
+    }
+    if root.parent.is_some()
+        || map
+            .segments
+            .iter()
+            .enumerate()
+            .any(|(i, s)| s.parent.is_some_and(|p| p >= i))
+    {
+        return Err(MarkerError::Segments {
+            path: map.path.clone(),
+            key: "segment".into(),
+            reason: "the first segment must be the root and parents must precede children".into(),
+        });
+    }
+    // Resolve marker names.
+    let mut marker_ix: Vec<Vec<usize>> = Vec::with_capacity(map.segments.len());
+    for (i, s) in map.segments.iter().enumerate() {
+        let mut ix = Vec::with_capacity(s.markers.len());
+        for (m, name) in s.markers.iter().enumerate() {
+            let Some(k) = set.marker_index(name) else {
+                return Err(MarkerError::Segments {
+                    path: map.path.clone(),
+                    key: format!("segment[{i}].markers[{m}]"),
+                    reason: format!("marker {name:?} is not in the marker data"),
+                });
+            };
+            ix.push(k);
+        }
+        marker_ix.push(ix);
+    }
+    let n_seg = map.segments.len();
+    let mut seg_frames: Vec<Vec<Frame>> = Vec::with_capacity(n_seg);
+    let mut joints: Vec<SolvedJoint> = Vec::with_capacity(n_seg);
+    // Joint point of each segment in its own frame (u_j).
+    let mut own_point: Vec<Vector3<f64>> = Vec::with_capacity(n_seg);
+    // Marker columns rigid with each segment.
+    let mut rigid_of: Vec<Vec<usize>> = Vec::with_capacity(n_seg);
+    // Marker templates in each segment's frame (for end sites).
+    let mut centroids: Vec<Vector3<f64>> = Vec::with_capacity(n_seg);
+    for (si, seg) in map.segments.iter().enumerate() {
+        let mk = &marker_ix[si];
+        let pos = |f: usize, k: usize| set.get(f, mk[k]).map(v3);
+        // Joint centre relative to the parent (GDKE per marker).
+        let mut centre_world: Vec<Option<Vector3<f64>>> = vec![None; frames];
+        let mut axis_world: Vec<Option<Vector3<f64>>> = vec![None; frames];
+        let mut solved = SolvedJoint {
+            segment: seg.name.clone(),
+            kind: JointKind::NotMoving,
+            centre_parent_mm: [0.0; 3],
+            markers_used: 0,
+            held_frames: 0,
+        };
+        if let Some(p) = seg.parent {
+            let pf = &seg_frames[p];
+            let mut tracks: Vec<Vec<[f64; 3]>> = Vec::with_capacity(mk.len());
+            for k in 0..mk.len() {
+                tracks.push(
+                    (0..frames)
+                        .filter_map(|f| pos(f, k).map(|x| pf[f].to_local(&x)))
+                        .map(|v| [v.x, v.y, v.z])
+                        .collect(),
+                );
+            }
+            let refs: Vec<&[[f64; 3]]> = tracks.iter().map(Vec::as_slice).collect();
+            let fit = match gdke_pooled(&refs, &map.gdke, seg.kind) {
+                Ok(fit) => fit,
+                Err(MarkerError::TooFewSamples { got, .. }) => {
+                    return Err(solve_err(
+                        &seg.name,
+                        format!("its markers are seen in at most {got} frames, at least 4 needed"),
+                    ));
+                }
+                Err(e) => return Err(e),
+            };
+            let (centre, kind, used) = (
+                v3(fit.centre),
+                fit.kind,
+                tracks.iter().filter(|t| t.len() >= 4).count(),
+            );
+            solved.kind = kind;
+            solved.centre_parent_mm = [centre.x, centre.y, centre.z];
+            solved.markers_used = used;
+            for f in 0..frames {
+                centre_world[f] = Some(pf[f].to_world(&centre));
+                if let JointKind::Hinge { axis } = kind {
+                    axis_world[f] = Some(pf[f].axes * v3(axis));
+                }
+            }
+        }
+        // Canonical frames (section 2.5).
+        let canon = Canon {
+            frames: (0..frames)
+                .map(|f| match mk.len() {
+                    0 => None,
+                    1 => {
+                        let (o, c, n) = (pos(f, 0)?, centre_world[f]?, axis_world[f]?);
+                        frame_from_axis(&o, &c, &n)
+                    }
+                    2 => frame_from_points(&pos(f, 0)?, &pos(f, 1)?, &centre_world[f]?),
+                    _ => frame_from_points(&pos(f, 0)?, &pos(f, 1)?, &pos(f, 2)?),
+                })
+                .collect(),
+        };
+        if mk.len() == 1 && !matches!(solved.kind, JointKind::Hinge { .. }) {
+            return Err(solve_err(
+                &seg.name,
+                "a segment with one marker needs a hinge joint (section 2.5 case 1), but this joint is not one".into(),
+            ));
+        }
+        // Markers rigid with this segment: its own, plus, when its joint does not move, those
+        // rigid with its parent (a still joint makes one rigid body, and more markers spread
+        // wider give a steadier frame).
+        let mut rigid: Vec<usize> = mk.clone();
+        if solved.kind == JointKind::NotMoving
+            && let Some(p) = seg.parent
+        {
+            rigid.extend(rigid_of[p].iter().copied());
+        }
+        let posr = |f: usize, k: usize| set.get(f, rigid[k]).map(v3);
+        let nr = rigid.len();
+        // Templates: mean local position of each marker (and the centre) over canonical frames.
+        let mut sums = vec![(Vector3::zeros(), 0usize); nr + 1];
+        for (f, cf) in canon.frames.iter().enumerate() {
+            let Some(cf) = cf else { continue };
+            for (k, s) in sums.iter_mut().enumerate().take(nr) {
+                if let Some(x) = posr(f, k) {
+                    s.0 += cf.to_local(&x);
+                    s.1 += 1;
+                }
+            }
+            if let Some(c) = centre_world[f] {
+                sums[nr].0 += cf.to_local(&c);
+                sums[nr].1 += 1;
+            }
+        }
+        let template: Vec<Option<Vector3<f64>>> = sums
+            .iter()
+            .map(|(s, n)| (*n > 0).then(|| s / *n as f64))
+            .collect();
+        // Final frames: rigid fit of visible markers and the centre, else the canonical frame.
+        let mut fitted: Vec<Option<Frame>> = (0..frames)
+            .map(|f| {
+                if mk.len() >= 2 {
+                    let mut l = Vec::with_capacity(nr + 1);
+                    let mut w = Vec::with_capacity(nr + 1);
+                    for (k, t) in template.iter().enumerate().take(nr) {
+                        if let (Some(t), Some(x)) = (*t, posr(f, k)) {
+                            l.push(t);
+                            w.push(x);
+                        }
+                    }
+                    if let (Some(t), Some(c)) = (template[nr], centre_world[f]) {
+                        l.push(t);
+                        w.push(c);
+                    }
+                    rigid_fit(&l, &w).or(canon.frames[f])
+                } else {
+                    canon.frames[f]
+                }
+            })
+            .collect();
+        let Some(held) = hold(&mut fitted) else {
+            return Err(solve_err(
+                &seg.name,
+                "its frame cannot be determined in any frame (markers missing or collinear)".into(),
+            ));
+        };
+        solved.held_frames = held;
+        let fitted: Vec<Frame> = fitted.into_iter().flatten().collect();
+        // Marker centroid in the segment's frame (end sites, root point).
+        let present: Vec<Vector3<f64>> = template[..mk.len()].iter().flatten().copied().collect();
+        let centroid = present.iter().sum::<Vector3<f64>>() / present.len().max(1) as f64;
+        let u = if seg.parent.is_some() {
+            // u_j: the joint centre in the segment's own frame, averaged over frames.
+            let mut s = Vector3::zeros();
+            for (f, fr) in fitted.iter().enumerate() {
+                if let Some(c) = centre_world[f] {
+                    s += fr.to_local(&c);
+                }
+            }
+            s / frames as f64
+        } else {
+            solved.centre_parent_mm = [centroid.x, centroid.y, centroid.z];
+            centroid
+        };
+        own_point.push(u);
+        rigid_of.push(rigid);
+        centroids.push(centroid);
+        seg_frames.push(fitted);
+        joints.push(solved);
+    }
+    build_clip(set, map, &seg_frames, &joints, &own_point, &centroids)
+}
+
+#[expect(
+    clippy::too_many_lines,
+    reason = "skeleton and channel matrix built in one place"
+)]
+fn build_clip(
+    set: &MarkerSet,
+    map: &SegmentMap,
+    seg_frames: &[Vec<Frame>],
+    joints: &[SolvedJoint],
+    own_point: &[Vector3<f64>],
+    centroids: &[Vector3<f64>],
+) -> Result<Solved, MarkerError> {
+    let n_seg = map.segments.len();
+    let frames = set.frames();
+    // Depth-first pre-order, so that the BVH hierarchy and the channel order agree.
+    let mut order = Vec::with_capacity(n_seg);
+    let mut stack = vec![0usize];
+    while let Some(s) = stack.pop() {
+        order.push(s);
+        let kids: Vec<usize> = (0..n_seg)
+            .filter(|&k| map.segments[k].parent == Some(s))
+            .collect();
+        stack.extend(kids.into_iter().rev());
+    }
+    let rot = [
+        ChannelKind::Rotation(Axis::Z),
+        ChannelKind::Rotation(Axis::Y),
+        ChannelKind::Rotation(Axis::X),
+    ];
+    let mut skel_joints: Vec<Joint> = Vec::with_capacity(2 * n_seg);
+    let mut joint_of_segment = vec![0usize; n_seg];
+    let joint = |name: String,
+                 parent: Option<usize>,
+                 offset: Vector3<f64>,
+                 dofs: Vec<ChannelKind>,
+                 end: bool| Joint {
+        name,
+        parent,
+        rest: Rest::Offset([offset.x, offset.y, offset.z]),
+        dofs,
+        axis_deg: [0.0; 3],
+        axis_order: [Axis::X, Axis::Y, Axis::Z],
+        limits: Vec::new(),
+        id: None,
+        end_site: end,
+        body_part: BodyPart::Torso,
+        chain_depth: 0,
+    };
+    for &s in &order {
+        let seg = &map.segments[s];
+        let (parent, offset, dofs) = match seg.parent {
+            None => {
+                let mut d = vec![
+                    ChannelKind::Translation(Axis::X),
+                    ChannelKind::Translation(Axis::Y),
+                    ChannelKind::Translation(Axis::Z),
+                ];
+                d.extend(rot);
+                (None, Vector3::zeros(), d)
+            }
+            Some(p) => (
+                Some(joint_of_segment[p]),
+                v3(joints[s].centre_parent_mm) - own_point[p],
+                rot.to_vec(),
+            ),
+        };
+        joint_of_segment[s] = skel_joints.len();
+        skel_joints.push(joint(seg.name.clone(), parent, offset, dofs, false));
+        let leaf = !map.segments.iter().any(|c| c.parent == Some(s));
+        if leaf {
+            let mut off = centroids[s] - own_point[s];
+            if off.norm() < 1e-6 {
+                off = Vector3::new(0.0, 1.0, 0.0);
+            }
+            skel_joints.push(joint(
+                format!("{}_End", seg.name),
+                Some(joint_of_segment[s]),
+                off,
+                Vec::new(),
+                true,
+            ));
+        }
+    }
+    let mut skeleton = Skeleton {
+        name: map.segments[0].name.clone(),
+        format: SkeletonFormat::Bvh,
+        units: Units {
+            cm_per_unit: 0.1,
+            asf_length: 1.0,
+            asf_mass: 1.0,
+            declared: true,
+        },
+        joints: skel_joints,
+        documentation: vec!["solved from markers by GDKE (seed 003)".into()],
+    };
+    crate::bodymap::assign(&mut skeleton);
+    let channels = skeleton.channel_count();
+    let mut data = vec![0.0; channels * frames];
+    let mut c = 0;
+    for &s in &order {
+        let seg = &map.segments[s];
+        for f in 0..frames {
+            let fr = &seg_frames[s][f];
+            let local = match seg.parent {
+                None => {
+                    let p = fr.to_world(&own_point[s]);
+                    for k in 0..3 {
+                        data[(c + k) * frames + f] = p[k];
+                    }
+                    fr.axes
+                }
+                Some(p) => seg_frames[p][f].axes.transpose() * fr.axes,
+            };
+            let m: Mat3 = [
+                [local[(0, 0)], local[(0, 1)], local[(0, 2)]],
+                [local[(1, 0)], local[(1, 1)], local[(1, 2)]],
+                [local[(2, 0)], local[(2, 1)], local[(2, 2)]],
+            ];
+            let zyx = to_euler_zyx_deg(&m);
+            let base = if seg.parent.is_none() { c + 3 } else { c };
+            for k in 0..3 {
+                data[(base + k) * frames + f] = zyx[k];
+            }
+        }
+        c += if seg.parent.is_none() { 6 } else { 3 };
+    }
+    let clip = Clip::new(skeleton, set.frame_rate_hz, frames, data)
+        .map_err(|e| solve_err(&map.segments[0].name, format!("cannot build the clip: {e}")))?;
+    Ok(Solved {
+        clip,
+        joints: joints.to_vec(),
+        joint_of_segment,
+    })
+}

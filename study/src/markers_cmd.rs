@@ -1,0 +1,129 @@
+//! `study markers ...`: synthetic marker captures and skeleton solving by GDKE (issue 9).
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result, bail};
+use codecs::markers::{data, gdke::JointKind, segments, synth};
+
+use crate::clip_cmd::ClipInput;
+
+/// Marker subcommands.
+#[derive(Debug, clap::Subcommand)]
+pub enum MarkersCommand {
+    /// Generate markers (C3D or CSV) from a clip: three per bone, Gaussian noise, gaps.
+    Synth {
+        #[command(flatten)]
+        input: ClipInput,
+        /// Output marker file (`.c3d` or `.csv`), in mm.
+        #[arg(short, long, value_name = "OUT")]
+        output: PathBuf,
+        /// Noise σ on each coordinate, mm.
+        #[arg(long, default_value_t = 2.0, value_name = "MM")]
+        noise_mm: f64,
+        /// Probability that a sample is missing.
+        #[arg(long, default_value_t = 0.005, value_name = "P")]
+        gap_probability: f64,
+        /// Distance of the markers from the bone line, cm.
+        #[arg(long, default_value_t = 6.0, value_name = "CM")]
+        offset_cm: f64,
+        /// Seed of the noise generator.
+        #[arg(long, default_value_t = 9)]
+        seed: u64,
+        /// Also write the matching segment assignment file (TOML) here.
+        #[arg(long, value_name = "TOML")]
+        segments_out: Option<PathBuf>,
+    },
+    /// Solve a skeleton and joint rotations from markers and write them as BVH.
+    Solve {
+        /// Marker file (`.c3d` or `.csv`).
+        markers: PathBuf,
+        /// Segment/marker assignment file (TOML).
+        #[arg(long, value_name = "FILE")]
+        segments: PathBuf,
+        /// Output motion file (`.bvh`).
+        #[arg(short, long, value_name = "OUT")]
+        output: PathBuf,
+    },
+}
+
+/// Runs a markers subcommand.
+///
+/// # Errors
+/// Any read, write, argument or solve error, with the file named.
+pub fn run(cmd: MarkersCommand) -> Result<()> {
+    match cmd {
+        MarkersCommand::Synth {
+            input,
+            output,
+            noise_mm,
+            gap_probability,
+            offset_cm,
+            seed,
+            segments_out,
+        } => {
+            let loaded = input.load_one()?;
+            let options = synth::SynthOptions {
+                noise_mm,
+                gap_probability,
+                offset_cm,
+                seed,
+            };
+            let capture = synth::synth_capture(&loaded.clip, &options)?;
+            data::write_markers(&capture.markers, &output)?;
+            eprintln!(
+                "wrote {}: {} markers × {} frames, {} gaps",
+                output.display(),
+                capture.markers.marker_count(),
+                capture.markers.frames(),
+                capture.markers.gap_count()
+            );
+            if let Some(path) = segments_out {
+                std::fs::write(&path, synth::segment_map_toml(&loaded.clip))
+                    .with_context(|| format!("writing {}", path.display()))?;
+                eprintln!("wrote {}", path.display());
+            }
+            Ok(())
+        }
+        MarkersCommand::Solve {
+            markers,
+            segments: seg_path,
+            output,
+        } => {
+            if !output
+                .extension()
+                .is_some_and(|e| e.eq_ignore_ascii_case("bvh"))
+            {
+                bail!("{}: the solved clip is written as .bvh", output.display());
+            }
+            let set = data::read_markers(&markers)?;
+            let map = segments::read_segments(&seg_path)?;
+            let solved = segments::solve(&set, &map)?;
+            codecs::io::write_clip(&solved.clip, &output, None)?;
+            for (i, j) in solved.joints.iter().enumerate() {
+                let kind = match j.kind {
+                    _ if i == 0 => "root".to_string(),
+                    JointKind::Spherical => "spherical".to_string(),
+                    JointKind::Hinge { axis } => {
+                        format!(
+                            "hinge, axis ({:.3}, {:.3}, {:.3})",
+                            axis[0], axis[1], axis[2]
+                        )
+                    }
+                    JointKind::NotMoving => "not moving".to_string(),
+                };
+                let c = j.centre_parent_mm;
+                eprintln!(
+                    "{:<14} {kind:<34} centre ({:.1}, {:.1}, {:.1}) mm, {} markers, {} held frames",
+                    j.segment, c[0], c[1], c[2], j.markers_used, j.held_frames
+                );
+            }
+            eprintln!(
+                "wrote {}: {} joints, {} frames",
+                output.display(),
+                solved.clip.skeleton.joints.len(),
+                solved.clip.frames()
+            );
+            Ok(())
+        }
+    }
+}
