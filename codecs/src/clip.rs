@@ -309,25 +309,20 @@ impl Skeleton {
 
     /// Length in file units of the bone a joint's rotation swings.
     ///
-    /// For ASF this is the joint's own bone. For BVH a joint's rotation moves its children, so
-    /// this is the longest child offset (0 for end sites). The perceptual codecs weight a
-    /// channel by this length (paper 000, step 3; thesis eq. 6.4 factor).
+    /// For ASF this is the joint's own bone (the root: its longest child bone). For BVH a
+    /// joint's rotation moves its children, so this is the longest child offset (0 for end
+    /// sites). A zero-length link (CMU BVH: `Hips` → `LHipJoint` at `OFFSET 0 0 0`) swings
+    /// the bones below it, so it counts with the length those swing. The perceptual codecs
+    /// weight a channel by this length (paper 000, step 3; thesis eq. 6.4 factor).
     pub fn swung_length(&self, i: usize) -> f64 {
-        match self.format {
-            SkeletonFormat::Asf => {
-                if self.joints[i].parent.is_none() {
-                    // The root moves the whole body: use its longest child bone.
-                    self.children(i)
-                        .map(|c| self.joints[c].rest.length())
-                        .fold(0.0, f64::max)
-                } else {
-                    self.joints[i].rest.length()
-                }
-            }
-            SkeletonFormat::Bvh => self
-                .children(i)
-                .map(|c| self.joints[c].rest.length())
-                .fold(0.0, f64::max),
+        let through = |c: usize| {
+            let l = self.joints[c].rest.length();
+            if l > 0.0 { l } else { self.swung_length(c) }
+        };
+        let children = || self.children(i).map(through).fold(0.0, f64::max);
+        match (self.format, self.joints[i].parent) {
+            (SkeletonFormat::Asf, Some(_)) => through(i),
+            (SkeletonFormat::Asf, None) | (SkeletonFormat::Bvh, _) => children(),
         }
     }
 

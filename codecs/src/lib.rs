@@ -15,21 +15,27 @@
 
 pub mod amc;
 pub mod asf;
+pub mod bitstream;
 pub mod bodymap;
 pub mod bvh;
 pub mod clip;
+pub mod codec;
 pub mod convert;
 pub mod data;
+pub mod entropy;
 pub mod error;
 pub mod fk;
 pub mod io;
 pub mod markers;
 pub mod math;
+pub mod metrics;
 pub mod playback;
 pub mod primitives;
 pub mod quat;
+pub mod rate;
 pub mod synth;
 mod text;
+pub mod wavelet;
 
 pub use clip::{
     Axis, BodyPart, Channel, ChannelKind, Clip, ClipError, Joint, Rest, Skeleton, SkeletonFormat,

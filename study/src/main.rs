@@ -8,6 +8,7 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 
 mod clip_cmd;
+mod codec_cmd;
 mod markers_cmd;
 mod primitives_cmd;
 mod study_cmd;
@@ -31,6 +32,14 @@ enum Command {
     /// Build and inspect the primitive database of the incremental codec (thesis ch. 5).
     #[command(subcommand)]
     Primitives(primitives_cmd::PrimitivesCommand),
+    /// Encode one clip with a codec: writes the bitstream and the decoded clip.
+    Encode(codec_cmd::EncodeArgs),
+    /// Decode a bitstream for its skeleton into a clip file.
+    Decode(codec_cmd::DecodeArgs),
+    /// Build a stimulus set (clips × codecs × rates) with stimuli.json and rd.csv.
+    Sweep(codec_cmd::SweepArgs),
+    /// List the codecs and their parameters.
+    Codecs,
     /// Validate a study file and list every problem at once.
     Check(study_cmd::CheckArgs),
     /// Dry-run sessions with simulated observers into a results directory.
@@ -43,6 +52,13 @@ fn main() -> ExitCode {
         Command::Clip(cmd) => clip_cmd::run(cmd),
         Command::Markers(cmd) => markers_cmd::run(cmd),
         Command::Primitives(cmd) => primitives_cmd::run(cmd),
+        Command::Encode(args) => codec_cmd::encode(&args),
+        Command::Decode(args) => codec_cmd::decode(&args),
+        Command::Sweep(args) => codec_cmd::sweep(&args),
+        Command::Codecs => {
+            codec_cmd::list();
+            Ok(())
+        }
         Command::Check(args) => study_cmd::check(&args),
         Command::Simulate(args) => study_cmd::simulate(&args),
     };

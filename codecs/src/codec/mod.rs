@@ -1,0 +1,297 @@
+//! The seeds' codecs and the baselines behind one [`Codec`] trait and a registry by name.
+//!
+//! | name | id | what |
+//! | --- | --- | --- |
+//! | `raw-f32` | 1 | the channel matrix as IEEE float32 (the seeds' CR = 1 reference) |
+//! | `zstd` | 2 | lossless zstd (level 19) of the float32 channel matrix |
+//! | `wavelet-perceptual` | 3 | paper 000 / thesis ch. 3: `A_i = l_i·v_i` |
+//! | `wavelet-standard` | 4 | same share α for every channel (the paper's "standard wavelet") |
+//! | `wavelet-bone` | 5 | bone length only, `A_i = l_i` |
+//! | `spiht` | 6 | thesis ch. 6: 1-D SPIHT, perceptual bit allocation eq. 6.1-6.3 |
+//! | `spiht-uniform` | 7 | 1-D SPIHT with equal bit shares (allocation ablation) |
+//!
+//! Every lossy codec takes either its native parameters or `cr` (a target compression ratio);
+//! [`crate::rate::encode_to_cr`] reaches a target within ±2 %.
+
+use std::collections::BTreeMap;
+
+use crate::bitstream::{Bitstream, BitstreamError, StreamLimits};
+use crate::clip::{Clip, ClipError, Skeleton};
+
+mod prep;
+pub mod raw;
+pub mod spiht;
+pub mod wavelet_codec;
+
+pub use prep::{unwrap_degrees, wrap_degrees};
+pub use spiht::{SpihtCodec, crowd_budgets};
+pub use wavelet_codec::{Selection, TranslationRule, WaveletCodec};
+
+/// Codec parameters by name (`alpha`, `qp`, `window`, `cr`, ...), as the manifest stores them.
+pub type Params = BTreeMap<String, f64>;
+
+/// Why a clip could not be encoded or a stream decoded.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum CodecError {
+    /// The container is invalid or made for another skeleton.
+    #[error(transparent)]
+    Bitstream(#[from] BitstreamError),
+    /// The decoded matrix does not fit the skeleton.
+    #[error(transparent)]
+    Clip(#[from] ClipError),
+    /// A parameter is unknown or out of range.
+    #[error("codec `{codec}`: parameter `{key}` = {value}: {detail}")]
+    Param {
+        /// Codec name.
+        codec: &'static str,
+        /// Parameter.
+        key: String,
+        /// Value given.
+        value: f64,
+        /// What is allowed.
+        detail: String,
+    },
+    /// The stream names another codec.
+    #[error("stream is coded with codec id {found}, not `{codec}` (id {expected})")]
+    WrongCodec {
+        /// This codec.
+        codec: &'static str,
+        /// Its id.
+        expected: u8,
+        /// Id in the stream.
+        found: u8,
+    },
+    /// The payload is malformed.
+    #[error("codec `{codec}`: corrupt payload at byte {offset}: {detail}")]
+    Payload {
+        /// Codec name.
+        codec: &'static str,
+        /// Byte offset in the payload (approximate for entropy-coded data).
+        offset: usize,
+        /// What is wrong.
+        detail: String,
+    },
+    /// The clip is too large for the format.
+    #[error("clip of {channels} channels × {frames} frames exceeds the format's limits")]
+    TooLarge {
+        /// Channels.
+        channels: usize,
+        /// Frames.
+        frames: usize,
+    },
+    /// A target compression ratio cannot be reached.
+    #[error("codec `{codec}`: target CR {target} not reachable (closest {closest:.3})")]
+    Rate {
+        /// Codec name.
+        codec: &'static str,
+        /// Target.
+        target: f64,
+        /// Closest CR reached.
+        closest: f64,
+    },
+}
+
+/// What the rate controller may search over to reach a target compression ratio.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum RateControl {
+    /// The codec takes `cr` natively and reaches it exactly.
+    Native,
+    /// Bisect this parameter (CR decreases as it grows) in `[min, max]`, on a log scale.
+    Search {
+        /// Parameter name.
+        key: &'static str,
+        /// Smallest value.
+        min: f64,
+        /// Largest value.
+        max: f64,
+    },
+    /// Lossless or fixed-rate: no target can be asked for.
+    None,
+}
+
+/// A motion codec.
+pub trait Codec: Send + Sync {
+    /// Registry name (`wavelet-perceptual`, ...).
+    fn name(&self) -> &'static str;
+    /// Bitstream id.
+    fn id(&self) -> u8;
+    /// One line for `study codecs`.
+    fn description(&self) -> &'static str;
+    /// Default parameters (every key the codec accepts).
+    fn default_params(&self) -> Params;
+    /// How a target CR is reached.
+    fn rate_control(&self) -> RateControl;
+    /// Encodes a clip.
+    ///
+    /// # Errors
+    /// [`CodecError::Param`] for a bad parameter, [`CodecError::TooLarge`] for a clip beyond
+    /// the format.
+    fn encode(&self, clip: &Clip, params: &Params) -> Result<Bitstream, CodecError>;
+    /// Decodes a stream for `skeleton`.
+    ///
+    /// # Errors
+    /// Any [`CodecError`]; never panics on malformed input.
+    fn decode(&self, stream: &Bitstream, skeleton: &Skeleton) -> Result<Clip, CodecError>;
+}
+
+/// Every codec, in id order.
+pub fn registry() -> Vec<Box<dyn Codec>> {
+    vec![
+        Box::new(raw::RawF32),
+        Box::new(raw::ZstdLossless),
+        Box::new(WaveletCodec::new(Selection::Perceptual)),
+        Box::new(WaveletCodec::new(Selection::Standard)),
+        Box::new(WaveletCodec::new(Selection::BoneLength)),
+        Box::new(SpihtCodec::new(true)),
+        Box::new(SpihtCodec::new(false)),
+    ]
+}
+
+/// The codec called `name`.
+pub fn by_name(name: &str) -> Option<Box<dyn Codec>> {
+    registry().into_iter().find(|c| c.name() == name)
+}
+
+/// The codec with bitstream id `id`.
+pub fn by_id(id: u8) -> Option<Box<dyn Codec>> {
+    registry().into_iter().find(|c| c.id() == id)
+}
+
+/// Decodes any stream with the codec its header names.
+///
+/// # Errors
+/// [`CodecError::WrongCodec`] for an unknown id, otherwise as [`Codec::decode`].
+pub fn decode_any(stream: &Bitstream, skeleton: &Skeleton) -> Result<Clip, CodecError> {
+    let codec = by_id(stream.codec_id).ok_or(CodecError::WrongCodec {
+        codec: "any",
+        expected: 0,
+        found: stream.codec_id,
+    })?;
+    codec.decode(stream, skeleton)
+}
+
+/// Merges `given` over the defaults, refusing unknown keys.
+pub(crate) fn merged(codec: &dyn Codec, given: &Params) -> Result<Params, CodecError> {
+    let mut p = codec.default_params();
+    for (k, &v) in given {
+        if !p.contains_key(k) {
+            return Err(CodecError::Param {
+                codec: codec.name(),
+                key: k.clone(),
+                value: v,
+                detail: format!(
+                    "unknown; accepted: {}",
+                    p.keys().cloned().collect::<Vec<_>>().join(", ")
+                ),
+            });
+        }
+        if !v.is_finite() {
+            return Err(CodecError::Param {
+                codec: codec.name(),
+                key: k.clone(),
+                value: v,
+                detail: "not finite".into(),
+            });
+        }
+        p.insert(k.clone(), v);
+    }
+    Ok(p)
+}
+
+/// Reads an integer parameter within `[lo, hi]`.
+pub(crate) fn int_param(
+    codec: &'static str,
+    p: &Params,
+    key: &str,
+    lo: i64,
+    hi: i64,
+) -> Result<i64, CodecError> {
+    let v = p.get(key).copied().unwrap_or(f64::NAN);
+    if v.fract() != 0.0 || !(lo as f64..=hi as f64).contains(&v) {
+        return Err(CodecError::Param {
+            codec,
+            key: key.to_string(),
+            value: v,
+            detail: format!("must be an integer in {lo}..={hi}"),
+        });
+    }
+    Ok(v as i64)
+}
+
+/// Reads a real parameter within `[lo, hi]`.
+pub(crate) fn real_param(
+    codec: &'static str,
+    p: &Params,
+    key: &str,
+    lo: f64,
+    hi: f64,
+) -> Result<f64, CodecError> {
+    let v = p.get(key).copied().unwrap_or(f64::NAN);
+    if !(lo..=hi).contains(&v) {
+        return Err(CodecError::Param {
+            codec,
+            key: key.to_string(),
+            value: v,
+            detail: format!("must be in {lo}..={hi}"),
+        });
+    }
+    Ok(v)
+}
+
+/// Header fields shared by every codec; checks the clip fits the format.
+pub(crate) fn header(
+    codec: &dyn Codec,
+    clip: &Clip,
+    params: Params,
+    payload: Vec<u8>,
+) -> Result<Bitstream, CodecError> {
+    let limits = StreamLimits::default();
+    let too_large = || CodecError::TooLarge {
+        channels: clip.channel_count(),
+        frames: clip.frames(),
+    };
+    let channels = u32::try_from(clip.channel_count()).map_err(|_| too_large())?;
+    let frames = u32::try_from(clip.frames()).map_err(|_| too_large())?;
+    if channels > limits.max_channels
+        || frames > limits.max_frames
+        || u64::from(channels) * u64::from(frames) > limits.max_values
+    {
+        return Err(too_large());
+    }
+    Ok(Bitstream {
+        codec_id: codec.id(),
+        params,
+        fingerprint: clip.skeleton.fingerprint(),
+        channels,
+        frames,
+        frame_rate_hz: clip.frame_rate_hz,
+        payload,
+    })
+}
+
+/// Checks the stream belongs to `codec` and `skeleton`.
+pub(crate) fn check_stream(
+    codec: &dyn Codec,
+    stream: &Bitstream,
+    skeleton: &Skeleton,
+) -> Result<(), CodecError> {
+    if stream.codec_id != codec.id() {
+        return Err(CodecError::WrongCodec {
+            codec: codec.name(),
+            expected: codec.id(),
+            found: stream.codec_id,
+        });
+    }
+    stream.check_skeleton(skeleton)?;
+    let limits = StreamLimits::default();
+    if stream.frames > limits.max_frames
+        || u64::from(stream.channels) * u64::from(stream.frames) > limits.max_values
+    {
+        return Err(CodecError::TooLarge {
+            channels: stream.channels as usize,
+            frames: stream.frames as usize,
+        });
+    }
+    Ok(())
+}

@@ -1,0 +1,215 @@
+//! Objective error of a decoded clip against its reference, via forward kinematics.
+//!
+//! - joint position error in cm (FK points × `cm_per_unit`): RMS and max per joint and overall,
+//!   and the RMS over joints of every frame (the per-frame error curve);
+//! - mean absolute angle error over rotation channels, in degrees, taken modulo 360°;
+//! - foot sliding: on the reference, a foot (the deepest point of each leg chain) is in contact
+//!   in frames where it is within [`CONTACT_HEIGHT_CM`] of its lowest height (y up); the
+//!   metric is the difference (decoded − reference) of the mean horizontal foot speed over
+//!   those frames, in cm/s. Positive means the decoded clip slides more.
+
+use crate::clip::{BodyPart, Clip};
+use crate::fk;
+
+/// A foot within this height of its lowest point counts as in contact.
+pub const CONTACT_HEIGHT_CM: f64 = 4.0;
+
+/// Error metrics of a decoded clip.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Metrics {
+    /// Joint position RMS over all joints and frames, cm.
+    pub rms_cm: f64,
+    /// Largest joint position error, cm.
+    pub max_cm: f64,
+    /// Mean absolute angle error over rotation channels and frames, degrees.
+    pub mean_angle_deg: f64,
+    /// Foot-sliding difference (decoded − reference mean contact speed), cm/s; `None` when the
+    /// skeleton has no leg chains.
+    pub foot_slide_cm_s: Option<f64>,
+    /// Joint names, in FK point order.
+    pub joint_names: Vec<String>,
+    /// RMS error per joint, cm.
+    pub joint_rms_cm: Vec<f64>,
+    /// Max error per joint, cm.
+    pub joint_max_cm: Vec<f64>,
+    /// RMS error over joints of each frame, cm.
+    pub frame_rms_cm: Vec<f64>,
+}
+
+/// Why two clips cannot be compared.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum MetricsError {
+    /// The clips differ in skeleton or shape.
+    #[error("clips differ: {0}")]
+    Mismatch(String),
+}
+
+/// Compares `decoded` with `reference`.
+///
+/// # Errors
+/// [`MetricsError::Mismatch`] when the skeletons or shapes differ.
+#[expect(
+    clippy::too_many_lines,
+    reason = "the four metrics share the FK positions"
+)]
+pub fn compare(reference: &Clip, decoded: &Clip) -> Result<Metrics, MetricsError> {
+    if reference.frames() != decoded.frames()
+        || reference.channel_count() != decoded.channel_count()
+    {
+        return Err(MetricsError::Mismatch(format!(
+            "{}×{} vs {}×{}",
+            reference.channel_count(),
+            reference.frames(),
+            decoded.channel_count(),
+            decoded.frames()
+        )));
+    }
+    if reference.skeleton.fingerprint() != decoded.skeleton.fingerprint() {
+        return Err(MetricsError::Mismatch(
+            "skeleton fingerprints differ".into(),
+        ));
+    }
+    let a = fk::positions(reference);
+    let b = fk::positions(decoded);
+    let cm = reference.skeleton.units.cm_per_unit;
+    let (frames, joints) = (a.frames(), a.joint_count());
+    let mut joint_sq = vec![0.0; joints];
+    let mut joint_max = vec![0.0f64; joints];
+    let mut frame_rms = Vec::with_capacity(frames);
+    let mut total_sq = 0.0;
+    for f in 0..frames {
+        let mut fs = 0.0;
+        for j in 0..joints {
+            let (p, q) = (a.point(f, j), b.point(f, j));
+            let d2 =
+                ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)) * cm * cm;
+            joint_sq[j] += d2;
+            joint_max[j] = joint_max[j].max(d2.sqrt());
+            fs += d2;
+        }
+        total_sq += fs;
+        frame_rms.push(if joints > 0 {
+            (fs / joints as f64).sqrt()
+        } else {
+            0.0
+        });
+    }
+    let nf = frames.max(1) as f64;
+    let joint_rms: Vec<f64> = joint_sq.iter().map(|s| (s / nf).sqrt()).collect();
+    let rms_cm = (total_sq / (nf * joints.max(1) as f64)).sqrt();
+    let max_cm = joint_max.iter().copied().fold(0.0, f64::max);
+
+    let mut angle_sum = 0.0;
+    let mut angle_n = 0usize;
+    for (c, ch) in reference.channels().iter().enumerate() {
+        if ch.kind.is_rotation() {
+            for (x, y) in reference.channel(c).iter().zip(decoded.channel(c)) {
+                let d = (x - y).rem_euclid(360.0);
+                angle_sum += d.min(360.0 - d);
+                angle_n += 1;
+            }
+        }
+    }
+    let mean_angle_deg = if angle_n > 0 {
+        angle_sum / angle_n as f64
+    } else {
+        0.0
+    };
+
+    let feet: Vec<usize> = [BodyPart::LeftLeg, BodyPart::RightLeg]
+        .iter()
+        .filter_map(|&part| {
+            let sk = &reference.skeleton;
+            (0..sk.joints.len())
+                .filter(|&j| sk.joints[j].body_part == part)
+                .max_by_key(|&j| sk.joints[j].chain_depth)
+        })
+        .collect();
+    let foot_slide_cm_s = if feet.is_empty() || frames < 2 {
+        None
+    } else {
+        let rate = reference.frame_rate_hz;
+        let (mut ra, mut rb, mut n) = (0.0, 0.0, 0usize);
+        for &j in &feet {
+            let low = (0..frames)
+                .map(|f| a.point(f, j)[1])
+                .fold(f64::INFINITY, f64::min);
+            for f in 1..frames {
+                if (a.point(f, j)[1] - low) * cm <= CONTACT_HEIGHT_CM {
+                    let speed = |p: &fk::Positions| {
+                        let (u, v) = (p.point(f, j), p.point(f - 1, j));
+                        ((u[0] - v[0]).powi(2) + (u[2] - v[2]).powi(2)).sqrt() * cm * rate
+                    };
+                    ra += speed(&a);
+                    rb += speed(&b);
+                    n += 1;
+                }
+            }
+        }
+        (n > 0).then(|| (rb - ra) / n as f64)
+    };
+    Ok(Metrics {
+        rms_cm,
+        max_cm,
+        mean_angle_deg,
+        foot_slide_cm_s,
+        joint_names: a.names.clone(),
+        joint_rms_cm: joint_rms,
+        joint_max_cm: joint_max,
+        frame_rms_cm: frame_rms,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::synth::{WalkParams, walking_clip};
+
+    #[test]
+    fn identical_clips_have_zero_error() {
+        let clip = walking_clip(&WalkParams {
+            duration_s: 1.0,
+            ..WalkParams::default()
+        });
+        let m = compare(&clip, &clip).unwrap();
+        assert!(m.rms_cm.abs() < 1e-12 && m.max_cm.abs() < 1e-12 && m.mean_angle_deg.abs() < 1e-12);
+        assert!(m.foot_slide_cm_s.unwrap().abs() < 1e-12);
+        assert_eq!(m.frame_rms_cm.len(), clip.frames());
+    }
+
+    #[test]
+    fn root_offset_is_measured_in_cm() {
+        let clip = walking_clip(&WalkParams {
+            duration_s: 1.0,
+            ..WalkParams::default()
+        });
+        let mut moved = clip.clone();
+        let tx = clip
+            .channels()
+            .iter()
+            .position(|c| !c.kind.is_rotation())
+            .unwrap();
+        for v in moved.channel_mut(tx) {
+            *v += 1.0;
+        }
+        let m = compare(&clip, &moved).unwrap();
+        let cm = clip.skeleton.units.cm_per_unit;
+        assert!(
+            (m.rms_cm - cm).abs() < 1e-9 && (m.max_cm - cm).abs() < 1e-9,
+            "{m:?}"
+        );
+        assert!(m.mean_angle_deg.abs() < 1e-12);
+        // 360° apart is no angle error.
+        let mut turned = clip.clone();
+        let rx = clip
+            .channels()
+            .iter()
+            .position(|c| c.kind.is_rotation())
+            .unwrap();
+        for v in turned.channel_mut(rx) {
+            *v += 360.0;
+        }
+        assert!(compare(&clip, &turned).unwrap().mean_angle_deg < 1e-9);
+    }
+}
