@@ -1,5 +1,52 @@
 //! Statistics over study results and the reports a paper needs.
 //!
-//! Holds (analysis issue): MOS, DMOS, confidence intervals, paired and Welch t-tests, BT.500
-//! observer screening, staircase thresholds and psychometric fits, and the tables and plots that
-//! `study report` writes.
+//! Computes, the way the seeds and the standards do: MOS with Student-t and BT.500 normal
+//! confidence intervals ([`descriptive`]), DSCQS and ACR-HR DMOS ([`dmos`]), paired / Welch /
+//! Student t-tests with Holm correction ([`ttest`]), power analysis ([`power`]), BT.500 Annex 2
+//! observer screening ([`screening`]), staircase thresholds ([`staircase`]), maximum-likelihood
+//! psychometric fits with bootstrap CIs ([`psychometric`]), rate findings ([`findings`]), and
+//! the tables, plots and report that `study report` writes.
+//!
+//! Inputs are plain types ([`Rating`], [`DscqsPair`], [`StaircaseTrack`], [`TwoAfcTrial`]) so
+//! the statistics do not depend on the results store's file format.
+//!
+//! ```
+//! use analysis::{summarize, ttest::{paired, Alternative}};
+//! let proposed = [4.5, 4.0, 5.0, 4.5, 4.0];
+//! let wavelet = [3.5, 4.0, 4.0, 3.0, 3.5];
+//! let s = summarize(&proposed, 0.95)?;
+//! assert!((s.mean - 4.4).abs() < 1e-12);
+//! let test = paired(&proposed, &wavelet, Alternative::Greater)?.expect("defined");
+//! assert!(test.p < 0.05);
+//! # Ok::<(), analysis::AnalysisError>(())
+//! ```
+
+pub mod descriptive;
+mod dist;
+pub mod dmos;
+mod error;
+pub mod export;
+pub mod findings;
+pub mod from_results;
+mod panel;
+pub mod plots;
+pub mod power;
+pub mod psychometric;
+pub mod report;
+pub mod screening;
+pub mod staircase;
+pub mod study;
+pub mod synthetic;
+pub mod tables;
+pub mod ttest;
+
+pub use descriptive::{
+    Ci, CiMethod, ConditionStats, Rating, Summary, condition_stats, from_summary_statistics,
+    summarize,
+};
+pub use dmos::{DscqsPair, acr_hr_dmos, dscqs_dmos, zscore_by_subject};
+pub use error::AnalysisError;
+pub use findings::{ConditionInfo, Limit, RateFinding, RatePoint, rate_findings};
+pub use psychometric::{PsychometricFit, TwoAfcTrial};
+pub use staircase::{StaircaseStep, StaircaseTrack};
+pub use ttest::{Alternative, TTest, Undefined};

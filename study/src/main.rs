@@ -11,6 +11,7 @@ mod clip_cmd;
 mod codec_cmd;
 mod markers_cmd;
 mod primitives_cmd;
+mod report_cmd;
 mod study_cmd;
 
 /// Perceptual user studies of motion-capture compression.
@@ -44,6 +45,9 @@ enum Command {
     Check(study_cmd::CheckArgs),
     /// Dry-run sessions with simulated observers into a results directory.
     Simulate(study_cmd::SimulateArgs),
+    /// Every table and figure of a results directory: MOS / DMOS with CIs, t-tests, screening,
+    /// thresholds, psychometric fit (report.md, report.html, CSV / Markdown / LaTeX, SVG / PNG).
+    Report(report_cmd::ReportArgs),
 }
 
 fn main() -> ExitCode {
@@ -61,6 +65,7 @@ fn main() -> ExitCode {
         }
         Command::Check(args) => study_cmd::check(&args),
         Command::Simulate(args) => study_cmd::simulate(&args),
+        Command::Report(args) => report_cmd::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,0 +1,169 @@
+//! Differential scores: DSCQS difference scores (BT.500; thesis §6.4.1), the ACR-HR differential
+//! viewer score of ITU-T P.910, and per-subject z-scoring.
+
+use std::collections::{BTreeMap, HashMap};
+
+use serde::Serialize;
+
+use crate::descriptive::{ConditionStats, Rating, mean_of, sample_variance, summarize};
+use crate::error::{AnalysisError, check_confidence};
+
+/// One DSCQS presentation: a subject scored the hidden reference and the test version of a
+/// condition.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct DscqsPair {
+    /// Subject id.
+    pub subject: u32,
+    /// Condition id of the test (compressed) version.
+    pub condition: u32,
+    /// Score given to the reference.
+    pub reference_score: f64,
+    /// Score given to the test version.
+    pub test_score: f64,
+}
+
+/// DMOS per condition from DSCQS pairs: each subject's difference (reference − test) is averaged
+/// over that subject's presentations of the condition, then summarised across subjects
+/// ("the average value of this difference would be the DSCQS value", thesis §6.4.1).
+///
+/// # Errors
+/// [`AnalysisError::NonFinite`] for NaN or infinite scores; confidence outside (0, 1).
+pub fn dscqs_dmos(
+    pairs: &[DscqsPair],
+    confidence: f64,
+) -> Result<Vec<ConditionStats>, AnalysisError> {
+    check_confidence(confidence)?;
+    let mut per: BTreeMap<(u32, u32), (f64, usize)> = BTreeMap::new();
+    for (index, p) in pairs.iter().enumerate() {
+        let d = p.reference_score - p.test_score;
+        if !d.is_finite() {
+            return Err(AnalysisError::NonFinite {
+                what: "DSCQS score",
+                index,
+                value: d,
+            });
+        }
+        let e = per.entry((p.condition, p.subject)).or_insert((0.0, 0));
+        e.0 += d;
+        e.1 += 1;
+    }
+    summarize_subject_means(
+        per.into_iter().map(|((c, _), (s, k))| (c, s / k as f64)),
+        confidence,
+    )
+}
+
+fn summarize_subject_means(
+    values: impl Iterator<Item = (u32, f64)>,
+    confidence: f64,
+) -> Result<Vec<ConditionStats>, AnalysisError> {
+    let mut groups: BTreeMap<u32, Vec<f64>> = BTreeMap::new();
+    for (c, v) in values {
+        groups.entry(c).or_default().push(v);
+    }
+    groups
+        .into_iter()
+        .map(|(condition, v)| {
+            Ok(ConditionStats {
+                condition,
+                summary: summarize(&v, confidence)?,
+            })
+        })
+        .collect()
+}
+
+/// ACR-HR differential MOS (ITU-T P.910, hidden reference removal): for every rating of a test
+/// condition, DV = V(test) − V(reference) + 5, where V(reference) is the same subject's score of
+/// the hidden reference of that condition (averaged if the subject rated it more than once).
+/// DV is summarised per condition over all of its ratings.
+///
+/// `reference_of` maps test condition ids to the id of their hidden reference; ratings of
+/// conditions not in the map (the references themselves) are skipped. P.910 notes that DV above
+/// 5 is possible (a test version rated above its reference); it is kept, not clipped, so the
+/// mean stays unbiased.
+///
+/// # Errors
+/// [`AnalysisError::MissingReference`] when a subject rated a test condition but never its
+/// reference; [`AnalysisError::NonFinite`] for bad scores.
+pub fn acr_hr_dmos<S: std::hash::BuildHasher>(
+    ratings: &[Rating],
+    reference_of: &HashMap<u32, u32, S>,
+    confidence: f64,
+) -> Result<Vec<ConditionStats>, AnalysisError> {
+    check_confidence(confidence)?;
+    let references: std::collections::HashSet<u32> = reference_of.values().copied().collect();
+    let mut ref_scores: HashMap<(u32, u32), (f64, usize)> = HashMap::new();
+    for (index, r) in ratings.iter().enumerate() {
+        if !r.score.is_finite() {
+            return Err(AnalysisError::NonFinite {
+                what: "rating score",
+                index,
+                value: r.score,
+            });
+        }
+        if references.contains(&r.condition) {
+            let e = ref_scores
+                .entry((r.subject, r.condition))
+                .or_insert((0.0, 0));
+            e.0 += r.score;
+            e.1 += 1;
+        }
+    }
+    let mut dvs = Vec::new();
+    for r in ratings {
+        let Some(&reference) = reference_of.get(&r.condition) else {
+            continue;
+        };
+        let Some(&(sum, k)) = ref_scores.get(&(r.subject, reference)) else {
+            return Err(AnalysisError::MissingReference {
+                subject: r.subject,
+                condition: r.condition,
+                reference,
+            });
+        };
+        dvs.push((r.condition, r.score - sum / k as f64 + 5.0));
+    }
+    summarize_subject_means(dvs.into_iter(), confidence)
+}
+
+/// Replaces each score by its per-subject z-score, (x − mean_s)/SD_s with the sample SD
+/// (divisor n − 1), removing each subject's offset and scale use (BT.500 Annex 2 §2.2 notes).
+///
+/// # Errors
+/// [`AnalysisError::UndefinedZScore`] when a subject has fewer than two ratings or gives every
+/// stimulus the same score; [`AnalysisError::NonFinite`] for bad scores.
+pub fn zscore_by_subject(ratings: &[Rating]) -> Result<Vec<Rating>, AnalysisError> {
+    let mut by_subject: HashMap<u32, Vec<f64>> = HashMap::new();
+    for (index, r) in ratings.iter().enumerate() {
+        if !r.score.is_finite() {
+            return Err(AnalysisError::NonFinite {
+                what: "rating score",
+                index,
+                value: r.score,
+            });
+        }
+        by_subject.entry(r.subject).or_default().push(r.score);
+    }
+    let mut params: HashMap<u32, (f64, f64)> = HashMap::with_capacity(by_subject.len());
+    for (subject, scores) in &by_subject {
+        if scores.len() < 2 {
+            return Err(AnalysisError::UndefinedZScore { subject: *subject });
+        }
+        let m = mean_of(scores);
+        let sd = sample_variance(scores, m).max(0.0).sqrt();
+        if sd.is_nan() || sd <= 0.0 {
+            return Err(AnalysisError::UndefinedZScore { subject: *subject });
+        }
+        params.insert(*subject, (m, sd));
+    }
+    Ok(ratings
+        .iter()
+        .map(|r| {
+            let (m, sd) = params.get(&r.subject).copied().unwrap_or((0.0, 1.0));
+            Rating {
+                score: (r.score - m) / sd,
+                ..*r
+            }
+        })
+        .collect())
+}

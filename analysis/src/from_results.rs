@@ -1,0 +1,289 @@
+//! Conversion of the results store's typed trial records (`results::SessionResults`, rows of
+//! `protocols::TrialRecord`) into this crate's plain inputs, with errors that name the file,
+//! line and column of a record the analysis cannot use.
+
+use std::collections::{BTreeMap, HashMap};
+use std::path::{Path, PathBuf};
+
+use protocols::manifest::{REFERENCE_CODEC, StimulusManifest};
+use protocols::{Answer, Block, Protocol, TrialRecord};
+use results::SessionResults;
+use results::store::{SESSION_FILE, TRIALS_FILE};
+
+use crate::descriptive::Rating;
+use crate::dmos::DscqsPair;
+use crate::error::AnalysisError;
+use crate::findings::ConditionInfo;
+use crate::psychometric::TwoAfcTrial;
+use crate::staircase::{StaircaseStep, StaircaseTrack};
+use crate::study::StudyData;
+
+/// A results directory turned into analysis inputs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ConvertedResults {
+    /// The data, with subjects and conditions numbered.
+    pub data: StudyData,
+    /// The protocol every session ran.
+    pub protocol: Protocol,
+    /// Subject names, indexed by the numeric subject id used in `data`.
+    pub subjects: Vec<String>,
+    /// Stimulus ids, indexed by the numeric condition id used in `data`.
+    pub stimuli: Vec<String>,
+}
+
+struct Interner {
+    ids: HashMap<String, u32>,
+    names: Vec<String>,
+}
+
+impl Interner {
+    fn new() -> Self {
+        Self {
+            ids: HashMap::new(),
+            names: Vec::new(),
+        }
+    }
+
+    fn id(&mut self, name: &str) -> u32 {
+        if let Some(&id) = self.ids.get(name) {
+            return id;
+        }
+        let id = self.names.len() as u32;
+        self.ids.insert(name.to_owned(), id);
+        self.names.push(name.to_owned());
+        id
+    }
+}
+
+fn bad(
+    path: &Path,
+    index: usize,
+    column: &'static str,
+    message: impl Into<String>,
+) -> AnalysisError {
+    // Row i of `records` is line i + 2 of trials.csv (line 1 is the header).
+    AnalysisError::BadRecord {
+        path: path.to_path_buf(),
+        line: index + 2,
+        column,
+        message: message.into(),
+    }
+}
+
+fn check_scale(
+    path: &Path,
+    index: usize,
+    column: &'static str,
+    v: f64,
+    scale: Option<(f64, f64)>,
+) -> Result<(), AnalysisError> {
+    if !v.is_finite() {
+        return Err(bad(path, index, column, format!("score {v} is not finite")));
+    }
+    if let Some((lo, hi)) = scale
+        && (v < lo || v > hi)
+    {
+        return Err(bad(
+            path,
+            index,
+            column,
+            format!("score {v} is outside the scale [{lo}, {hi}]"),
+        ));
+    }
+    Ok(())
+}
+
+/// Converts every session of a results directory. Familiarization trials are dropped; hidden
+/// repeats are kept as repeated ratings. `scale` (min, max) rejects scores outside the study's
+/// rating scale. Stimuli rated as tests whose clip's reference was also rated (a hidden
+/// reference) get an ACR-HR mapping in `reference_of`. A condition's compression ratio is the
+/// stimulus' target ratio when it has one, else the achieved ratio.
+///
+/// # Errors
+/// [`AnalysisError::MixedProtocols`] when sessions ran different protocols;
+/// [`AnalysisError::BadRecord`] naming `trials.csv`, line and column for a record whose answer
+/// does not fit its protocol, a missing staircase level, a score outside the scale, or a
+/// stimulus missing from the manifest.
+pub fn convert(
+    sessions: &[SessionResults],
+    manifest: &StimulusManifest,
+    scale: Option<(f64, f64)>,
+) -> Result<ConvertedResults, AnalysisError> {
+    let Some(first) = sessions.first() else {
+        return Err(AnalysisError::TooFew {
+            what: "sessions in the results directory",
+            needed: 1,
+            got: 0,
+        });
+    };
+    let protocol = first.manifest.protocol;
+    let mut subjects = Interner::new();
+    let mut stimuli = Interner::new();
+    let mut data = StudyData::default();
+    let mut tracks: BTreeMap<(u32, u32, u32), StaircaseTrack> = BTreeMap::new();
+    for session in sessions {
+        if session.manifest.protocol != protocol {
+            return Err(AnalysisError::MixedProtocols {
+                path: session.dir.join(SESSION_FILE),
+                expected: protocol.as_str().to_owned(),
+                found: session.manifest.protocol.as_str().to_owned(),
+            });
+        }
+        let path: PathBuf = session.dir.join(TRIALS_FILE);
+        let subject = subjects.id(&session.manifest.subject);
+        for (index, record) in session.trials.records.iter().enumerate() {
+            if record.protocol != protocol {
+                return Err(bad(
+                    &path,
+                    index,
+                    "protocol",
+                    format!("{} row in a {} study", record.protocol, protocol),
+                ));
+            }
+            if record.trial.block == Block::Familiarization {
+                continue;
+            }
+            convert_record(
+                record,
+                &path,
+                index,
+                subject,
+                &mut stimuli,
+                &mut data,
+                &mut tracks,
+                scale,
+            )?;
+        }
+    }
+    for (id, name) in stimuli.names.iter().enumerate() {
+        let Some(s) = manifest.get(name) else {
+            return Err(AnalysisError::BadRecord {
+                path: PathBuf::from("stimuli.json"),
+                line: 0,
+                column: "stimulus",
+                message: format!(
+                    "stimulus {name:?} rated in the results is not in the stimulus manifest"
+                ),
+            });
+        };
+        let reference = s.codec == REFERENCE_CODEC;
+        data.conditions.push(ConditionInfo {
+            id: id as u32,
+            codec: s.codec.clone(),
+            clip: s.clip.clone(),
+            // The nominal (target) ratio groups codecs made for the same rate, as the seeds'
+            // tables do ("20:1"); the achieved ratio stands in when there was no target.
+            compression_ratio: (!reference).then_some(s.target_cr.unwrap_or(s.achieved_cr)),
+        });
+    }
+    if protocol == Protocol::Mos {
+        for c in &data.conditions {
+            if c.compression_ratio.is_some()
+                && let Some(r) = manifest.reference_of(&c.clip)
+                && let Some(&rid) = stimuli.ids.get(&r.id)
+            {
+                data.reference_of.insert(c.id, rid);
+            }
+        }
+    }
+    data.staircases = tracks.into_values().collect();
+    Ok(ConvertedResults {
+        data,
+        protocol,
+        subjects: subjects.names,
+        stimuli: stimuli.names,
+    })
+}
+
+#[expect(
+    clippy::too_many_arguments,
+    reason = "one record's context; a struct would only rename the same eight values"
+)]
+fn convert_record(
+    record: &TrialRecord,
+    path: &Path,
+    index: usize,
+    subject: u32,
+    stimuli: &mut Interner,
+    data: &mut StudyData,
+    tracks: &mut BTreeMap<(u32, u32, u32), StaircaseTrack>,
+    scale: Option<(f64, f64)>,
+) -> Result<(), AnalysisError> {
+    match record.protocol {
+        Protocol::Mos => {
+            let Answer::Rating(score) = record.response.answer else {
+                return Err(bad(path, index, "response", "a MOS trial needs one rating"));
+            };
+            check_scale(path, index, "score", score, scale)?;
+            let condition = stimuli.id(&record.trial.stimulus);
+            data.ratings.push(Rating {
+                subject,
+                condition,
+                score,
+            });
+        }
+        Protocol::Dscqs => {
+            let reference_score = record
+                .outcome
+                .score_reference
+                .ok_or_else(|| bad(path, index, "score_reference", "missing"))?;
+            let test_score = record
+                .outcome
+                .score_test
+                .ok_or_else(|| bad(path, index, "score_test", "missing"))?;
+            check_scale(path, index, "score_reference", reference_score, scale)?;
+            check_scale(path, index, "score_test", test_score, scale)?;
+            let condition = stimuli.id(&record.trial.stimulus);
+            data.dscqs.push(DscqsPair {
+                subject,
+                condition,
+                reference_score,
+                test_score,
+            });
+            // The absolute test ratings also give a MOS table, screening and repeats.
+            data.ratings.push(Rating {
+                subject,
+                condition,
+                score: test_score,
+            });
+        }
+        Protocol::Staircase => {
+            let staircase = record
+                .trial
+                .staircase
+                .ok_or_else(|| bad(path, index, "staircase", "missing staircase index"))?;
+            let level = record
+                .trial
+                .level
+                .ok_or_else(|| bad(path, index, "level", "missing staircase level"))?;
+            if !level.is_finite() {
+                return Err(bad(
+                    path,
+                    index,
+                    "level",
+                    format!("level {level} is not finite"),
+                ));
+            }
+            let correct = record
+                .outcome
+                .correct
+                .ok_or_else(|| bad(path, index, "correct", "missing"))?;
+            let reversal = record.outcome.reversal.unwrap_or(false);
+            tracks
+                .entry((subject, record.session, staircase))
+                .or_insert_with(|| StaircaseTrack {
+                    subject,
+                    label: record.trial.condition.clone(),
+                    steps: Vec::new(),
+                })
+                .steps
+                .push(StaircaseStep {
+                    level,
+                    correct,
+                    reversal,
+                });
+            data.two_afc.push(TwoAfcTrial { level, correct });
+        }
+    }
+    Ok(())
+}

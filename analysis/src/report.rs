@@ -1,0 +1,191 @@
+//! A report: sections of text, tables and figures, written as `report.md` and `report.html`
+//! (SVGs inlined) plus every table as CSV / Markdown / LaTeX and every figure as SVG / PNG.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use crate::error::AnalysisError;
+use crate::plots::Figure;
+use crate::tables::{Table, html_escape};
+
+/// One element of a section.
+#[derive(Debug, Clone, PartialEq)]
+#[non_exhaustive]
+pub enum Block {
+    /// A paragraph of plain text.
+    Text(String),
+    /// A table.
+    Table(Table),
+    /// A figure, written as `figures/<name>.svg` and `.png`.
+    Figure {
+        /// File stem.
+        name: String,
+        /// The figure.
+        figure: Figure,
+    },
+}
+
+/// A titled section.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Section {
+    /// Heading.
+    pub heading: String,
+    /// Contents in order.
+    pub blocks: Vec<Block>,
+}
+
+impl Section {
+    /// Appends a paragraph.
+    pub fn text(&mut self, text: impl Into<String>) -> &mut Self {
+        self.blocks.push(Block::Text(text.into()));
+        self
+    }
+
+    /// Appends a table.
+    pub fn table(&mut self, table: Table) -> &mut Self {
+        self.blocks.push(Block::Table(table));
+        self
+    }
+
+    /// Appends a figure.
+    pub fn figure(&mut self, name: impl Into<String>, figure: Figure) -> &mut Self {
+        self.blocks.push(Block::Figure {
+            name: name.into(),
+            figure,
+        });
+        self
+    }
+}
+
+/// A whole report.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Report {
+    /// Title (first heading).
+    pub title: String,
+    /// Sections in order.
+    pub sections: Vec<Section>,
+}
+
+/// What [`Report::write`] produced.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct WrittenFiles {
+    /// Every file written, in order.
+    pub files: Vec<PathBuf>,
+}
+
+impl Report {
+    /// An empty report.
+    pub fn new(title: impl Into<String>) -> Self {
+        Self {
+            title: title.into(),
+            sections: Vec::new(),
+        }
+    }
+
+    /// Starts a new section and returns it for filling.
+    pub fn section(&mut self, heading: impl Into<String>) -> &mut Section {
+        self.sections.push(Section {
+            heading: heading.into(),
+            blocks: Vec::new(),
+        });
+        let last = self.sections.len() - 1;
+        &mut self.sections[last]
+    }
+
+    /// Every table in the report.
+    pub fn tables(&self) -> impl Iterator<Item = &Table> {
+        self.sections
+            .iter()
+            .flat_map(|s| s.blocks.iter())
+            .filter_map(|b| match b {
+                Block::Table(t) => Some(t),
+                _ => None,
+            })
+    }
+
+    /// Writes `report.md`, `report.html`, `tables/*.{csv,md,tex}` and `figures/*.{svg,png}`
+    /// into `dir` (created if missing). With `png` false only SVGs are drawn.
+    ///
+    /// # Errors
+    /// [`AnalysisError::Io`] naming the file that could not be written; [`AnalysisError::Plot`]
+    /// when a figure fails to draw.
+    pub fn write(&self, dir: &Path, png: bool) -> Result<WrittenFiles, AnalysisError> {
+        let tables_dir = dir.join("tables");
+        let figures_dir = dir.join("figures");
+        for d in [dir, &tables_dir, &figures_dir] {
+            std::fs::create_dir_all(d).map_err(|e| AnalysisError::io(d, e))?;
+        }
+        let mut written = WrittenFiles::default();
+        let put =
+            |files: &mut Vec<PathBuf>, path: PathBuf, text: &str| -> Result<(), AnalysisError> {
+                std::fs::write(&path, text).map_err(|e| AnalysisError::io(&path, e))?;
+                files.push(path);
+                Ok(())
+            };
+        let mut md = format!("# {}\n\n", self.title);
+        let mut html = format!(
+            "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>{0}</title>\n<style>body{{font-family:sans-serif;max-width:60em;margin:auto}}table{{border-collapse:collapse;margin:1em 0}}td,th{{border:1px solid #aaa;padding:2px 6px;text-align:right}}caption{{font-weight:bold}}</style></head><body>\n<h1>{0}</h1>\n",
+            html_escape(&self.title)
+        );
+        for section in &self.sections {
+            let _ = write!(md, "## {}\n\n", section.heading);
+            let _ = writeln!(html, "<h2>{}</h2>", html_escape(&section.heading));
+            for block in &section.blocks {
+                match block {
+                    Block::Text(t) => {
+                        let _ = write!(md, "{t}\n\n");
+                        let _ = writeln!(html, "<p>{}</p>", html_escape(t));
+                    }
+                    Block::Table(t) => {
+                        put(
+                            &mut written.files,
+                            tables_dir.join(format!("{}.csv", t.name)),
+                            &t.to_csv(),
+                        )?;
+                        put(
+                            &mut written.files,
+                            tables_dir.join(format!("{}.md", t.name)),
+                            &t.to_markdown(),
+                        )?;
+                        put(
+                            &mut written.files,
+                            tables_dir.join(format!("{}.tex", t.name)),
+                            &t.to_latex(),
+                        )?;
+                        let _ = writeln!(md, "{}", t.to_markdown());
+                        html.push_str(&t.to_html());
+                    }
+                    Block::Figure { name, figure } => {
+                        let svg = figure.render_svg()?;
+                        put(
+                            &mut written.files,
+                            figures_dir.join(format!("{name}.svg")),
+                            &svg,
+                        )?;
+                        if png {
+                            let path = figures_dir.join(format!("{name}.png"));
+                            figure.render_png(&path)?;
+                            written.files.push(path);
+                        }
+                        let _ = write!(md, "![{}](figures/{name}.svg)\n\n", figure.title());
+                        let body = svg.trim_start_matches(|c| c != '<');
+                        let body = if body.starts_with("<?xml") {
+                            body.split_once("?>").map_or(body, |(_, rest)| rest)
+                        } else {
+                            body
+                        };
+                        let _ = writeln!(
+                            html,
+                            "<figure>{body}<figcaption>{}</figcaption></figure>",
+                            html_escape(figure.title())
+                        );
+                    }
+                }
+            }
+        }
+        html.push_str("</body></html>\n");
+        put(&mut written.files, dir.join("report.md"), &md)?;
+        put(&mut written.files, dir.join("report.html"), &html)?;
+        Ok(written)
+    }
+}

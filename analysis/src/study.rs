@@ -1,0 +1,550 @@
+//! The whole analysis of a study, as `study report` runs it: from plain trial data to every
+//! statistic, then to a [`Report`] of tables and figures.
+
+use std::collections::{BTreeMap, BTreeSet, HashMap};
+
+use serde::Serialize;
+
+use crate::descriptive::{CiMethod, ConditionStats, Rating, condition_stats};
+use crate::dmos::{DscqsPair, acr_hr_dmos, dscqs_dmos, zscore_by_subject};
+use crate::error::AnalysisError;
+use crate::findings::{ConditionInfo, Limit, RateFinding, rate_findings};
+use crate::panel::Panel;
+use crate::plots::{Figure, RateSeries};
+use crate::psychometric::{
+    BootstrapCi, BootstrapOptions, FitOptions, GroupedTrials, PsychometricFit, TwoAfcTrial,
+    bootstrap_threshold,
+};
+use crate::report::Report;
+use crate::screening::{
+    RepeatConsistency, ScreeningReport, repeats_of_panel, screening_of_panel, without_subjects,
+};
+use crate::staircase::{StaircaseTrack, ThresholdSummary, staircase_thresholds};
+use crate::tables::{self, ComparisonRow, fmt_opt};
+use crate::ttest::{Alternative, holm, paired};
+
+/// Everything a study logged, in the analysis crate's plain types.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct StudyData {
+    /// What each condition id is.
+    pub conditions: Vec<ConditionInfo>,
+    /// Opinion scores (ACR / side-by-side MOS studies, thesis ch. 3).
+    pub ratings: Vec<Rating>,
+    /// Test condition → hidden reference condition, for ACR-HR DMOS (P.910); may be empty.
+    pub reference_of: HashMap<u32, u32>,
+    /// DSCQS pairs (thesis ch. 6).
+    pub dscqs: Vec<DscqsPair>,
+    /// Staircase tracks (thesis ch. 5).
+    pub staircases: Vec<StaircaseTrack>,
+    /// All 2AFC trials, for the psychometric fit.
+    pub two_afc: Vec<TwoAfcTrial>,
+}
+
+/// Options of the analysis.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ReportOptions {
+    /// Confidence level of all intervals.
+    pub confidence: f64,
+    /// Which interval decides findings and is printed in tables.
+    pub ci_method: CiMethod,
+    /// MOS limit for rate findings (4.5 in thesis §3.3).
+    pub mos_limit: f64,
+    /// DMOS limit for rate findings (0.2 in thesis §6.4.3).
+    pub dmos_limit: f64,
+    /// Codec every other codec is compared against with a one-tailed test ("A scores higher
+    /// than the baseline"); `None` compares all pairs two-tailed.
+    pub baseline_codec: Option<String>,
+    /// Reversals averaged per staircase (3 in thesis §5.4).
+    pub last_reversals: usize,
+    /// Percent correct (fraction) at which the psychometric threshold is read.
+    pub percent_correct: f64,
+    /// Psychometric fit options.
+    pub fit: FitOptions,
+    /// Bootstrap options.
+    pub bootstrap: BootstrapOptions,
+    /// Also compute MOS on per-subject z-scores.
+    pub zscore: bool,
+    /// Draw figures.
+    pub figures: bool,
+}
+
+impl Default for ReportOptions {
+    fn default() -> Self {
+        Self {
+            confidence: 0.95,
+            ci_method: CiMethod::StudentT,
+            mos_limit: 4.5,
+            dmos_limit: 0.2,
+            baseline_codec: None,
+            last_reversals: 3,
+            percent_correct: 0.75,
+            fit: FitOptions::default(),
+            bootstrap: BootstrapOptions::default(),
+            zscore: false,
+            figures: true,
+        }
+    }
+}
+
+/// Every statistic of a study.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct StudyAnalysis {
+    /// MOS per condition, all observers.
+    pub mos: Vec<ConditionStats>,
+    /// BT.500 screening of the rating panel (when there are ratings).
+    pub screening: Option<ScreeningReport>,
+    /// MOS per condition without the rejected observers (when any were rejected).
+    pub mos_screened: Option<Vec<ConditionStats>>,
+    /// MOS of per-subject z-scores (when asked for).
+    pub mos_zscored: Option<Vec<ConditionStats>>,
+    /// Hidden-repeat consistency per subject.
+    pub repeats: Vec<RepeatConsistency>,
+    /// Paired t-tests between codecs at the same clip and ratio, Holm-corrected.
+    pub comparisons: Vec<ComparisonRow>,
+    /// MOS rate findings.
+    pub mos_findings: Vec<RateFinding>,
+    /// DMOS per condition (DSCQS, or ACR-HR when references are given).
+    pub dmos: Vec<ConditionStats>,
+    /// DMOS rate findings.
+    pub dmos_findings: Vec<RateFinding>,
+    /// Staircase thresholds.
+    pub thresholds: Option<ThresholdSummary>,
+    /// Psychometric fit and bootstrap CI of its threshold.
+    pub psychometric: Option<(PsychometricFit, BootstrapCi)>,
+}
+
+/// Computes every statistic the data allow.
+///
+/// # Errors
+/// Any input error of the underlying computations (non-finite scores, missing references,
+/// invalid options).
+pub fn analyze(data: &StudyData, options: &ReportOptions) -> Result<StudyAnalysis, AnalysisError> {
+    let panel = Panel::new(&data.ratings)?;
+    let mos = condition_stats(&data.ratings, options.confidence)?;
+    let (screening, mos_screened) = if data.ratings.is_empty() {
+        (None, None)
+    } else {
+        let s = screening_of_panel(&data.ratings, &panel);
+        let rejected = s.rejected();
+        let screened = if rejected.is_empty() {
+            None
+        } else {
+            Some(condition_stats(
+                &without_subjects(&data.ratings, &rejected),
+                options.confidence,
+            )?)
+        };
+        (Some(s), screened)
+    };
+    let mos_zscored = if options.zscore && !data.ratings.is_empty() {
+        Some(condition_stats(
+            &zscore_by_subject(&data.ratings)?,
+            options.confidence,
+        )?)
+    } else {
+        None
+    };
+    let repeats = repeats_of_panel(&data.ratings, &panel);
+    let comparisons = compare_codecs(data, &panel, options)?;
+    let mos_findings = rate_findings(
+        &data.conditions,
+        &mos,
+        Limit::MosAtLeast(options.mos_limit),
+        options.ci_method,
+    );
+    let dmos = if !data.dscqs.is_empty() {
+        dscqs_dmos(&data.dscqs, options.confidence)?
+    } else if !data.reference_of.is_empty() {
+        acr_hr_dmos(&data.ratings, &data.reference_of, options.confidence)?
+    } else {
+        Vec::new()
+    };
+    let dmos_findings = rate_findings(
+        &data.conditions,
+        &dmos,
+        Limit::DmosBelow(options.dmos_limit),
+        options.ci_method,
+    );
+    let thresholds = if data.staircases.is_empty() {
+        None
+    } else {
+        Some(staircase_thresholds(
+            &data.staircases,
+            options.last_reversals,
+            options.confidence,
+        )?)
+    };
+    let psychometric = if data.two_afc.is_empty() {
+        None
+    } else {
+        let grouped = GroupedTrials::from_trials(&data.two_afc);
+        Some(bootstrap_threshold(
+            &grouped,
+            &options.fit,
+            options.percent_correct,
+            &options.bootstrap,
+        )?)
+    };
+    Ok(StudyAnalysis {
+        mos,
+        screening,
+        mos_screened,
+        mos_zscored,
+        repeats,
+        comparisons,
+        mos_findings,
+        dmos,
+        dmos_findings,
+        thresholds,
+        psychometric,
+    })
+}
+
+/// Paired comparisons between codecs that share a clip and compression ratio. Each subject's
+/// repeats are averaged first; only subjects who rated both conditions enter a test.
+fn compare_codecs(
+    data: &StudyData,
+    panel: &Panel,
+    options: &ReportOptions,
+) -> Result<Vec<ComparisonRow>, AnalysisError> {
+    // Per condition index: (subject index, that subject's mean score), sorted by subject
+    // because the panel's cells run in (subject, condition) order.
+    let mut per_condition: Vec<Vec<(u32, f64)>> = vec![Vec::new(); panel.conditions.len()];
+    for (start, end) in panel.cells() {
+        let first = panel.order[start] as usize;
+        let sum: f64 = panel.order[start..end]
+            .iter()
+            .map(|&r| data.ratings[r as usize].score)
+            .sum();
+        per_condition[panel.c[first] as usize].push((panel.s[first], sum / (end - start) as f64));
+    }
+    let by_condition: BTreeMap<u32, &Vec<(u32, f64)>> = panel
+        .conditions
+        .iter()
+        .copied()
+        .zip(per_condition.iter())
+        .collect();
+    // Group conditions by (clip, ratio bits).
+    let mut groups: BTreeMap<(String, u64), Vec<&ConditionInfo>> = BTreeMap::new();
+    for c in &data.conditions {
+        if let Some(cr) = c.compression_ratio
+            && by_condition.contains_key(&c.id)
+        {
+            groups
+                .entry((c.clip.clone(), cr.to_bits()))
+                .or_default()
+                .push(c);
+        }
+    }
+    let mut rows = Vec::new();
+    for ((clip, cr_bits), mut conds) in groups {
+        conds.sort_by(|a, b| a.codec.cmp(&b.codec));
+        let mut pairs = Vec::new();
+        match &options.baseline_codec {
+            Some(base) => {
+                if let Some(b) = conds.iter().find(|c| &c.codec == base) {
+                    pairs.extend(
+                        conds
+                            .iter()
+                            .filter(|c| &c.codec != base)
+                            .map(|a| (*a, *b, Alternative::Greater)),
+                    );
+                }
+            }
+            None => {
+                for (i, a) in conds.iter().enumerate() {
+                    for b in &conds[i + 1..] {
+                        pairs.push((*a, *b, Alternative::TwoSided));
+                    }
+                }
+            }
+        }
+        for (a, b, alt) in pairs {
+            let (Some(sa), Some(sb)) = (by_condition.get(&a.id), by_condition.get(&b.id)) else {
+                continue;
+            };
+            // Merge join on subject: only subjects who rated both conditions.
+            let (mut xa, mut xb) = (Vec::new(), Vec::new());
+            let (mut i, mut j) = (0, 0);
+            while i < sa.len() && j < sb.len() {
+                match sa[i].0.cmp(&sb[j].0) {
+                    std::cmp::Ordering::Less => i += 1,
+                    std::cmp::Ordering::Greater => j += 1,
+                    std::cmp::Ordering::Equal => {
+                        xa.push(sa[i].1);
+                        xb.push(sb[j].1);
+                        i += 1;
+                        j += 1;
+                    }
+                }
+            }
+            let test = paired(&xa, &xb, alt)?;
+            let mean = |v: &[f64]| {
+                if v.is_empty() {
+                    f64::NAN
+                } else {
+                    v.iter().sum::<f64>() / v.len() as f64
+                }
+            };
+            rows.push(ComparisonRow {
+                clip: clip.clone(),
+                compression_ratio: Some(f64::from_bits(cr_bits)),
+                first: (a.codec.clone(), mean(&xa)),
+                second: (b.codec.clone(), mean(&xb)),
+                test,
+                p_holm: None,
+            });
+        }
+    }
+    // Holm across the family of defined tests.
+    let defined: Vec<(usize, f64)> = rows
+        .iter()
+        .enumerate()
+        .filter_map(|(i, r)| r.test.as_ref().ok().map(|t| (i, t.p)))
+        .collect();
+    let adjusted = holm(&defined.iter().map(|d| d.1).collect::<Vec<_>>())?;
+    for ((i, _), p) in defined.iter().zip(adjusted) {
+        rows[*i].p_holm = Some(p);
+    }
+    Ok(rows)
+}
+
+fn rate_series(findings: &[RateFinding], method: CiMethod) -> Vec<RateSeries> {
+    findings
+        .iter()
+        .map(|f| RateSeries {
+            label: format!("{} / {}", f.codec, f.clip),
+            points: f
+                .points
+                .iter()
+                .map(|p| {
+                    let ci = p.summary.ci(method);
+                    (
+                        p.compression_ratio,
+                        p.summary.mean,
+                        ci.map_or(p.summary.mean, |c| c.lower),
+                        ci.map_or(p.summary.mean, |c| c.upper),
+                    )
+                })
+                .collect(),
+        })
+        .collect()
+}
+
+impl StudyAnalysis {
+    /// Lays the statistics out as a report: tables shaped like the seeds' and the figures.
+    #[expect(
+        clippy::too_many_lines,
+        reason = "one linear layout of every section; splitting it would scatter the report's order"
+    )]
+    pub fn to_report(&self, data: &StudyData, options: &ReportOptions, title: &str) -> Report {
+        let mut report = Report::new(title);
+        let conf = format!("{:.0} %", options.confidence * 100.0);
+        if !self.mos.is_empty() {
+            let s = report.section("Mean opinion scores");
+            s.text(format!(
+                "{} ratings from {} subjects. Mean ± {conf} confidence interval ({:?}); thesis Table 3.1 layout.",
+                data.ratings.len(),
+                data.ratings.iter().map(|r| r.subject).collect::<BTreeSet<_>>().len(),
+                options.ci_method
+            ));
+            s.table(tables::mos_table(
+                "mos",
+                "MOS per condition (all observers)",
+                &data.conditions,
+                &self.mos,
+                options.ci_method,
+            ));
+            if let Some(screened) = &self.mos_screened {
+                s.table(tables::mos_table(
+                    "mos_screened",
+                    "MOS per condition without rejected observers",
+                    &data.conditions,
+                    screened,
+                    options.ci_method,
+                ));
+            }
+            if let Some(z) = &self.mos_zscored {
+                s.table(tables::mos_table(
+                    "mos_zscored",
+                    "Mean of per-subject z-scores per condition",
+                    &data.conditions,
+                    z,
+                    options.ci_method,
+                ));
+            }
+            s.table(tables::findings_table(
+                "mos_findings",
+                &format!(
+                    "Highest CR whose lower CI bound stays ≥ MOS {}",
+                    options.mos_limit
+                ),
+                &self.mos_findings,
+            ));
+            if options.figures {
+                s.figure(
+                    "mos_vs_cr",
+                    Figure::RateCurves {
+                        title: "MOS vs compression ratio".to_owned(),
+                        y_label: "MOS".to_owned(),
+                        series: rate_series(&self.mos_findings, options.ci_method),
+                        limit: Some(options.mos_limit),
+                    },
+                );
+                let mut per: BTreeMap<u32, Vec<f64>> = BTreeMap::new();
+                for r in &data.ratings {
+                    per.entry(r.subject).or_default().push(r.score);
+                }
+                s.figure(
+                    "score_distributions",
+                    Figure::ScoreDistributions {
+                        title: "Scores per subject".to_owned(),
+                        per_subject: per.into_iter().collect(),
+                    },
+                );
+            }
+        }
+        if !self.comparisons.is_empty() {
+            let s = report.section("Comparisons");
+            s.text("Paired t-tests on per-subject mean scores at equal clip and ratio; p values Holm-corrected across the table (thesis Tables 3.2, 3.3).");
+            s.table(tables::ttest_table(
+                "ttests",
+                "Paired t-tests between codecs",
+                &self.comparisons,
+            ));
+        }
+        if let Some(screening) = &self.screening {
+            let s = report.section("Observer screening");
+            let rejected = screening.rejected();
+            s.text(if rejected.is_empty() {
+                "BT.500 Annex 2 §2.3.1: no observer rejected.".to_owned()
+            } else {
+                format!(
+                    "BT.500 Annex 2 §2.3.1: rejected {} ((P+Q)/JKR > 0.05 and |P−Q|/(P+Q) < 0.3); MOS is reported with and without them.",
+                    rejected.iter().map(ToString::to_string).collect::<Vec<_>>().join(", ")
+                )
+            });
+            s.table(tables::screening_table(
+                "screening",
+                "BT.500 observer screening",
+                screening,
+            ));
+            let rows: Vec<Vec<String>> = self
+                .repeats
+                .iter()
+                .filter(|r| r.pairs > 0)
+                .map(|r| {
+                    vec![
+                        r.subject.to_string(),
+                        r.pairs.to_string(),
+                        fmt_opt(r.mean_abs_difference, 3),
+                    ]
+                })
+                .collect();
+            if !rows.is_empty() {
+                s.table(tables::Table {
+                    name: "repeats".to_owned(),
+                    caption: "Hidden-repeat consistency (mean |repeat − first|)".to_owned(),
+                    columns: vec![
+                        "Subject".to_owned(),
+                        "Repeats".to_owned(),
+                        "Mean abs. difference".to_owned(),
+                    ],
+                    rows,
+                });
+            }
+        }
+        if !self.dmos.is_empty() {
+            let s = report.section("Differential MOS");
+            s.table(tables::dmos_table(
+                "dmos",
+                "DMOS per condition and clip (thesis Table 6.3 layout)",
+                &data.conditions,
+                &self.dmos,
+            ));
+            s.table(tables::mos_table(
+                "dmos_ci",
+                "DMOS with confidence intervals",
+                &data.conditions,
+                &self.dmos,
+                options.ci_method,
+            ));
+            s.table(tables::findings_table(
+                "dmos_findings",
+                &format!(
+                    "Highest CR whose upper CI bound stays < DMOS {}",
+                    options.dmos_limit
+                ),
+                &self.dmos_findings,
+            ));
+            if options.figures {
+                s.figure(
+                    "dmos_vs_cr",
+                    Figure::RateCurves {
+                        title: "DMOS vs compression ratio".to_owned(),
+                        y_label: "DMOS".to_owned(),
+                        series: rate_series(&self.dmos_findings, options.ci_method),
+                        limit: Some(options.dmos_limit),
+                    },
+                );
+            }
+        }
+        if let Some(t) = &self.thresholds {
+            let s = report.section("Staircase thresholds");
+            s.text(format!(
+                "Mean of the last {} reversals per staircase, averaged per subject (thesis §5.4).",
+                t.last_reversals
+            ));
+            s.table(tables::threshold_table(
+                "thresholds",
+                "Staircase thresholds across subjects",
+                t,
+            ));
+            if options.figures {
+                s.figure(
+                    "staircases",
+                    Figure::Staircases {
+                        title: "Staircase tracks".to_owned(),
+                        level_label: "Level".to_owned(),
+                        tracks: data.staircases.clone(),
+                    },
+                );
+            }
+        }
+        if let Some((fit, ci)) = &self.psychometric {
+            let s = report.section("Psychometric function");
+            s.text(format!(
+                "Maximum-likelihood {:?} fit to {} 2AFC trials (guess rate {}, lapse {:.4}); threshold at {:.0} % correct = {:.5}, {:.0} % parametric bootstrap CI [{:.5}, {:.5}] from {} replicates (seed {}).",
+                fit.shape,
+                fit.trials,
+                fit.guess_rate,
+                fit.lapse,
+                options.percent_correct * 100.0,
+                ci.threshold,
+                ci.confidence * 100.0,
+                ci.lower,
+                ci.upper,
+                ci.replicates,
+                ci.seed
+            ));
+            if options.figures {
+                s.figure(
+                    "psychometric",
+                    Figure::Psychometric {
+                        title: "Psychometric function".to_owned(),
+                        level_label: "Level".to_owned(),
+                        data: GroupedTrials::from_trials(&data.two_afc),
+                        fit: *fit,
+                        threshold: Some((
+                            options.percent_correct,
+                            ci.threshold,
+                            ci.lower,
+                            ci.upper,
+                        )),
+                    },
+                );
+            }
+        }
+        report
+    }
+}

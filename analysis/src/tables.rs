@@ -1,0 +1,460 @@
+//! Result tables shaped like the seeds' tables, written as CSV, Markdown and LaTeX (booktabs).
+//!
+//! Undefined statistics print as `n/a` (never `NaN`).
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+
+use serde::Serialize;
+
+use crate::descriptive::{CiMethod, ConditionStats};
+use crate::findings::{ConditionInfo, RateFinding};
+use crate::screening::ScreeningReport;
+use crate::staircase::ThresholdSummary;
+use crate::ttest::TTestOutcome;
+
+/// Text printed for a statistic that is undefined for the data.
+pub const UNDEFINED: &str = "n/a";
+
+/// A rectangular table of already formatted cells.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct Table {
+    /// File stem, e.g. `mos` (written as `mos.csv`, `mos.md`, `mos.tex`).
+    pub name: String,
+    /// Caption, as in the seeds ("Table 3.1: Results of user study …").
+    pub caption: String,
+    /// Column headers.
+    pub columns: Vec<String>,
+    /// Rows; each has `columns.len()` cells.
+    pub rows: Vec<Vec<String>>,
+}
+
+/// Formats a number with `decimals` decimals, or [`UNDEFINED`].
+pub fn fmt_opt(value: Option<f64>, decimals: usize) -> String {
+    match value {
+        Some(v) if v.is_finite() => format!("{v:.decimals$}"),
+        _ => UNDEFINED.to_owned(),
+    }
+}
+
+/// Formats a p value: fixed decimals down to 0.001, scientific below (Table 3.2 prints 1.07E-06).
+pub fn fmt_p(p: Option<f64>) -> String {
+    match p {
+        Some(v) if v.is_finite() && v >= 0.001 => format!("{v:.3}"),
+        Some(v) if v.is_finite() => format!("{v:.2e}"),
+        _ => UNDEFINED.to_owned(),
+    }
+}
+
+fn csv_field(s: &str) -> String {
+    if s.contains([',', '"', '\n', '\r']) {
+        format!("\"{}\"", s.replace('"', "\"\""))
+    } else {
+        s.to_owned()
+    }
+}
+
+fn md_cell(s: &str) -> String {
+    s.replace('|', "\\|").replace('\n', " ")
+}
+
+/// Escapes LaTeX special characters.
+pub fn latex_escape(s: &str) -> String {
+    let mut out = String::with_capacity(s.len());
+    for c in s.chars() {
+        match c {
+            '&' | '%' | '$' | '#' | '_' | '{' | '}' => {
+                out.push('\\');
+                out.push(c);
+            }
+            '~' => out.push_str("\\textasciitilde{}"),
+            '^' => out.push_str("\\textasciicircum{}"),
+            '\\' => out.push_str("\\textbackslash{}"),
+            '±' => out.push_str("$\\pm$"),
+            _ => out.push(c),
+        }
+    }
+    out
+}
+
+impl Table {
+    /// RFC 4180 CSV with a header row.
+    pub fn to_csv(&self) -> String {
+        let mut out = String::new();
+        let line = |cells: &[String]| {
+            cells
+                .iter()
+                .map(|c| csv_field(c))
+                .collect::<Vec<_>>()
+                .join(",")
+        };
+        out.push_str(&line(&self.columns));
+        out.push('\n');
+        for row in &self.rows {
+            out.push_str(&line(row));
+            out.push('\n');
+        }
+        out
+    }
+
+    /// GitHub-flavoured Markdown with the caption in bold above.
+    pub fn to_markdown(&self) -> String {
+        let mut out = format!("**{}**\n\n", md_cell(&self.caption));
+        let _ = writeln!(
+            out,
+            "| {} |",
+            self.columns
+                .iter()
+                .map(|c| md_cell(c))
+                .collect::<Vec<_>>()
+                .join(" | ")
+        );
+        let _ = writeln!(
+            out,
+            "|{}",
+            self.columns.iter().map(|_| " --- |").collect::<String>()
+        );
+        for row in &self.rows {
+            let _ = writeln!(
+                out,
+                "| {} |",
+                row.iter()
+                    .map(|c| md_cell(c))
+                    .collect::<Vec<_>>()
+                    .join(" | ")
+            );
+        }
+        out
+    }
+
+    /// A LaTeX `table` with a booktabs `tabular` (needs `\usepackage{booktabs}`).
+    pub fn to_latex(&self) -> String {
+        let mut out = String::from("\\begin{table}[ht]\n\\centering\n");
+        let _ = writeln!(out, "\\caption{{{}}}", latex_escape(&self.caption));
+        let _ = writeln!(out, "\\label{{tab:{}}}", latex_escape(&self.name));
+        let _ = writeln!(
+            out,
+            "\\begin{{tabular}}{{l{}}}",
+            "r".repeat(self.columns.len().saturating_sub(1))
+        );
+        out.push_str("\\toprule\n");
+        let row = |cells: &[String]| {
+            cells
+                .iter()
+                .map(|c| latex_escape(c))
+                .collect::<Vec<_>>()
+                .join(" & ")
+        };
+        let _ = writeln!(out, "{} \\\\", row(&self.columns));
+        out.push_str("\\midrule\n");
+        for r in &self.rows {
+            let _ = writeln!(out, "{} \\\\", row(r));
+        }
+        out.push_str("\\bottomrule\n\\end{tabular}\n\\end{table}\n");
+        out
+    }
+
+    /// An HTML `<table>` with escaped cells.
+    pub fn to_html(&self) -> String {
+        let mut out = format!(
+            "<table>\n<caption>{}</caption>\n<thead><tr>",
+            html_escape(&self.caption)
+        );
+        for c in &self.columns {
+            let _ = write!(out, "<th>{}</th>", html_escape(c));
+        }
+        out.push_str("</tr></thead>\n<tbody>\n");
+        for r in &self.rows {
+            out.push_str("<tr>");
+            for c in r {
+                let _ = write!(out, "<td>{}</td>", html_escape(c));
+            }
+            out.push_str("</tr>\n");
+        }
+        out.push_str("</tbody>\n</table>\n");
+        out
+    }
+}
+
+/// Escapes `&`, `<`, `>` and `"` for HTML.
+pub fn html_escape(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
+}
+
+fn ratio(cr: Option<f64>) -> String {
+    cr.map_or_else(
+        || "ref".to_owned(),
+        |x| {
+            if x.fract() == 0.0 {
+                format!("{x:.0}:1")
+            } else {
+                format!("{x:.1}:1")
+            }
+        },
+    )
+}
+
+/// Mean ± CI per condition, shaped like thesis Table 3.1 (clip, CR, average score, SD, CI).
+pub fn mos_table(
+    name: &str,
+    caption: &str,
+    conditions: &[ConditionInfo],
+    stats: &[ConditionStats],
+    method: CiMethod,
+) -> Table {
+    let by_id: BTreeMap<u32, &ConditionInfo> = conditions.iter().map(|c| (c.id, c)).collect();
+    let mut rows: Vec<(String, String, f64, Vec<String>)> = stats
+        .iter()
+        .map(|s| {
+            let info = by_id.get(&s.condition);
+            let codec =
+                info.map_or_else(|| format!("condition {}", s.condition), |i| i.codec.clone());
+            let clip = info.map_or_else(String::new, |i| i.clip.clone());
+            let cr = info.and_then(|i| i.compression_ratio);
+            let ci = s.summary.ci(method);
+            let cells = vec![
+                codec.clone(),
+                clip.clone(),
+                ratio(cr),
+                s.summary.n.to_string(),
+                format!("{:.3}", s.summary.mean),
+                fmt_opt(s.summary.sd, 3),
+                fmt_opt(ci.map(|c| c.half_width), 3),
+                fmt_opt(ci.map(|c| c.lower), 3),
+                fmt_opt(ci.map(|c| c.upper), 3),
+            ];
+            (codec, clip, cr.unwrap_or(0.0), cells)
+        })
+        .collect();
+    rows.sort_by(|a, b| a.0.cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.total_cmp(&b.2)));
+    let ci_label = match method {
+        CiMethod::StudentT => "CI ± (t)",
+        CiMethod::NormalZ => "CI ± (z)",
+    };
+    Table {
+        name: name.to_owned(),
+        caption: caption.to_owned(),
+        columns: [
+            "Codec", "Clip", "CR", "n", "Mean", "SD", ci_label, "Lower", "Upper",
+        ]
+        .map(String::from)
+        .to_vec(),
+        rows: rows.into_iter().map(|r| r.3).collect(),
+    }
+}
+
+/// One row of a comparison table (thesis Tables 3.2 and 3.3).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ComparisonRow {
+    /// Clip.
+    pub clip: String,
+    /// Compression ratio.
+    pub compression_ratio: Option<f64>,
+    /// Label and mean of the first method.
+    pub first: (String, f64),
+    /// Label and mean of the second method.
+    pub second: (String, f64),
+    /// The test.
+    pub test: TTestOutcome,
+    /// Holm-adjusted p value within the table's family.
+    pub p_holm: Option<f64>,
+}
+
+/// A t-test table like thesis Table 3.2: clip, CR, both means, t, df, p, Holm p, effect size.
+pub fn ttest_table(name: &str, caption: &str, rows: &[ComparisonRow]) -> Table {
+    Table {
+        name: name.to_owned(),
+        caption: caption.to_owned(),
+        columns: [
+            "Clip",
+            "CR",
+            "Method A",
+            "Mean A",
+            "Method B",
+            "Mean B",
+            "t",
+            "df",
+            "p",
+            "p (Holm)",
+            "Effect size",
+        ]
+        .map(String::from)
+        .to_vec(),
+        rows: rows
+            .iter()
+            .map(|r| {
+                let (t, df, p, d) = match &r.test {
+                    Ok(t) => (
+                        fmt_opt(Some(t.t), 3),
+                        fmt_opt(Some(t.df), 2),
+                        fmt_p(Some(t.p)),
+                        fmt_opt(Some(t.effect_size), 3),
+                    ),
+                    Err(u) => {
+                        let why = u.to_string();
+                        (
+                            why,
+                            UNDEFINED.to_owned(),
+                            UNDEFINED.to_owned(),
+                            UNDEFINED.to_owned(),
+                        )
+                    }
+                };
+                vec![
+                    r.clip.clone(),
+                    ratio(r.compression_ratio),
+                    r.first.0.clone(),
+                    format!("{:.3}", r.first.1),
+                    r.second.0.clone(),
+                    format!("{:.3}", r.second.1),
+                    t,
+                    df,
+                    p,
+                    fmt_p(r.p_holm),
+                    d,
+                ]
+            })
+            .collect(),
+    }
+}
+
+/// DMOS per codec (rows) and clip (columns), shaped like thesis Table 6.3 (weightings × motions).
+pub fn dmos_table(
+    name: &str,
+    caption: &str,
+    conditions: &[ConditionInfo],
+    stats: &[ConditionStats],
+) -> Table {
+    let by_id: BTreeMap<u32, &ConditionInfo> = conditions.iter().map(|c| (c.id, c)).collect();
+    let mut clips: Vec<String> = Vec::new();
+    let mut grid: BTreeMap<String, BTreeMap<String, f64>> = BTreeMap::new();
+    for s in stats {
+        let Some(info) = by_id.get(&s.condition) else {
+            continue;
+        };
+        let row = match info.compression_ratio {
+            Some(cr) => format!("{} @ {}", info.codec, ratio(Some(cr))),
+            None => info.codec.clone(),
+        };
+        if !clips.contains(&info.clip) {
+            clips.push(info.clip.clone());
+        }
+        grid.entry(row)
+            .or_default()
+            .insert(info.clip.clone(), s.summary.mean);
+    }
+    clips.sort();
+    let mut columns = vec!["Condition".to_owned()];
+    columns.extend(clips.iter().cloned());
+    Table {
+        name: name.to_owned(),
+        caption: caption.to_owned(),
+        columns,
+        rows: grid
+            .into_iter()
+            .map(|(row, cells)| {
+                let mut r = vec![row];
+                r.extend(clips.iter().map(|c| fmt_opt(cells.get(c).copied(), 2)));
+                r
+            })
+            .collect(),
+    }
+}
+
+/// Staircase threshold summary like thesis §5.4 (subjects, mean, SD, min, max, CI).
+pub fn threshold_table(name: &str, caption: &str, t: &ThresholdSummary) -> Table {
+    let s = t.summary.as_ref();
+    let ci = s.and_then(|s| s.ci_t);
+    Table {
+        name: name.to_owned(),
+        caption: caption.to_owned(),
+        columns: [
+            "Subjects",
+            "Unconverged",
+            "Last k reversals",
+            "Mean",
+            "SD",
+            "Min",
+            "Max",
+            "95% CI lower",
+            "95% CI upper",
+        ]
+        .map(String::from)
+        .to_vec(),
+        rows: vec![vec![
+            t.per_subject.len().to_string(),
+            t.unconverged.len().to_string(),
+            t.last_reversals.to_string(),
+            fmt_opt(s.map(|s| s.mean), 4),
+            fmt_opt(s.and_then(|s| s.sd), 4),
+            fmt_opt(t.min, 4),
+            fmt_opt(t.max, 4),
+            fmt_opt(ci.map(|c| c.lower), 4),
+            fmt_opt(ci.map(|c| c.upper), 4),
+        ]],
+    }
+}
+
+/// BT.500 screening counts and decisions per observer.
+pub fn screening_table(name: &str, caption: &str, report: &ScreeningReport) -> Table {
+    Table {
+        name: name.to_owned(),
+        caption: caption.to_owned(),
+        columns: [
+            "Subject",
+            "P",
+            "Q",
+            "Presentations",
+            "(P+Q)/JKR",
+            "|P−Q|/(P+Q)",
+            "Rejected",
+        ]
+        .map(String::from)
+        .to_vec(),
+        rows: report
+            .observers
+            .iter()
+            .map(|o| {
+                vec![
+                    o.subject.to_string(),
+                    o.p.to_string(),
+                    o.q.to_string(),
+                    o.presentations.to_string(),
+                    format!("{:.3}", o.outlier_fraction),
+                    fmt_opt(o.asymmetry, 3),
+                    if o.rejected {
+                        "yes".to_owned()
+                    } else {
+                        "no".to_owned()
+                    },
+                ]
+            })
+            .collect(),
+    }
+}
+
+/// The rate findings: per codec and clip, the highest CR within the limit.
+pub fn findings_table(name: &str, caption: &str, findings: &[RateFinding]) -> Table {
+    Table {
+        name: name.to_owned(),
+        caption: caption.to_owned(),
+        columns: ["Codec", "Clip", "Ratios tested", "Highest passing CR"]
+            .map(String::from)
+            .to_vec(),
+        rows: findings
+            .iter()
+            .map(|f| {
+                vec![
+                    f.codec.clone(),
+                    f.clip.clone(),
+                    f.points.len().to_string(),
+                    f.highest_passing_ratio
+                        .map_or_else(|| "none".to_owned(), |x| ratio(Some(x))),
+                ]
+            })
+            .collect(),
+    }
+}

@@ -1,0 +1,322 @@
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
+//! Typed records of the results store → analysis inputs, and the errors that name the place.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+use analysis::AnalysisError;
+use analysis::from_results::convert;
+use analysis::study::{ReportOptions, analyze};
+use protocols::manifest::{Stimulus, StimulusManifest};
+use protocols::{
+    Answer, Arrangement, Block, Outcome, Position, Protocol, Response, Trial, TrialRecord,
+};
+use results::store::{SessionManifest, SessionState};
+use results::{SessionResults, TrialsFile};
+
+fn stimulus(id: &str, clip: &str, codec: &str, cr: f64) -> Stimulus {
+    Stimulus {
+        id: id.into(),
+        clip: clip.into(),
+        codec: codec.into(),
+        params: BTreeMap::new(),
+        target_cr: None,
+        achieved_cr: cr,
+        bytes: 0,
+        file: format!("{id}.amc"),
+        skeleton: None,
+        bitstream: None,
+        metrics: None,
+        encode_ms: None,
+        decode_ms: None,
+    }
+}
+
+fn manifest() -> StimulusManifest {
+    StimulusManifest {
+        version: 1,
+        stimuli: vec![
+            stimulus("walk/ref", "walk", "reference", 1.0),
+            stimulus("walk/p/cr20", "walk", "perceptual", 20.0),
+            stimulus("walk/w/cr20", "walk", "wavelet", 20.0),
+        ],
+    }
+}
+
+fn record(
+    protocol: Protocol,
+    subject: &str,
+    index: u32,
+    block: Block,
+    stimulus: &str,
+    answer: Answer,
+    outcome: Outcome,
+) -> TrialRecord {
+    TrialRecord {
+        study: "s".into(),
+        subject: subject.into(),
+        session: 1,
+        protocol,
+        trial: Trial {
+            index,
+            block,
+            condition: stimulus.into(),
+            stimulus: stimulus.into(),
+            reference: "walk/ref".into(),
+            arrangement: Arrangement::SideBySide,
+            reference_position: Position::Left,
+            staircase: None,
+            level: None,
+            break_before: false,
+        },
+        response: Response {
+            answer,
+            response_time_ms: 900,
+            replays: 0,
+            dropped_frames: 0,
+        },
+        outcome,
+        elapsed_ms: 0,
+        wall_clock_ms: 0,
+        monotonic_ms: 0,
+    }
+}
+
+fn outcome(score: f64) -> Outcome {
+    Outcome {
+        score,
+        score_reference: None,
+        score_test: None,
+        correct: None,
+        reversal: None,
+    }
+}
+
+fn session(subject: &str, protocol: Protocol, records: Vec<TrialRecord>) -> SessionResults {
+    SessionResults {
+        dir: PathBuf::from(format!("/results/{subject}-1")),
+        manifest: SessionManifest {
+            format_version: 1,
+            study: "s".into(),
+            study_hash: "0".into(),
+            protocol,
+            subject: subject.into(),
+            subject_index: 0,
+            session: 1,
+            plan_seed: 1,
+            observer_seed: None,
+            software_version: "test".into(),
+            subject_fields: BTreeMap::new(),
+            started_ms: 0,
+            ended_ms: None,
+            status: SessionState::Complete,
+            trials_logged: records.len() as u32,
+            not_shown: vec![],
+            thresholds: vec![],
+            resumes: 0,
+            torn_rows: vec![],
+            display: None,
+        },
+        trials: TrialsFile {
+            records,
+            complete_bytes: 0,
+            torn: None,
+        },
+    }
+}
+
+fn mos_session(subject: &str, scores: [f64; 3]) -> SessionResults {
+    let r = |i, block, stim: &str, v: f64| {
+        record(
+            Protocol::Mos,
+            subject,
+            i,
+            block,
+            stim,
+            Answer::Rating(v),
+            outcome(v),
+        )
+    };
+    session(
+        subject,
+        Protocol::Mos,
+        vec![
+            r(0, Block::Familiarization, "walk/w/cr20", 1.0),
+            r(1, Block::Test, "walk/p/cr20", scores[0]),
+            r(2, Block::Test, "walk/w/cr20", scores[1]),
+            r(3, Block::Test, "walk/ref", scores[2]),
+            r(4, Block::HiddenRepeat, "walk/p/cr20", scores[0]),
+        ],
+    )
+}
+
+#[test]
+fn mos_sessions_become_ratings_with_conditions_and_hidden_reference() {
+    let sessions = vec![
+        mos_session("ann", [4.5, 3.5, 5.0]),
+        mos_session("bob", [4.0, 3.0, 4.5]),
+        mos_session("cy", [4.5, 4.0, 5.0]),
+    ];
+    let c = convert(&sessions, &manifest(), Some((1.0, 5.0))).unwrap();
+    assert_eq!(c.protocol, Protocol::Mos);
+    assert_eq!(c.subjects, vec!["ann", "bob", "cy"]);
+    // Familiarization dropped, the hidden repeat kept.
+    assert_eq!(c.data.ratings.len(), 12);
+    let p = c.stimuli.iter().position(|s| s == "walk/p/cr20").unwrap() as u32;
+    let r = c.stimuli.iter().position(|s| s == "walk/ref").unwrap() as u32;
+    let info = c.data.conditions.iter().find(|i| i.id == p).unwrap();
+    assert_eq!(
+        (
+            info.codec.as_str(),
+            info.clip.as_str(),
+            info.compression_ratio
+        ),
+        ("perceptual", "walk", Some(20.0))
+    );
+    assert_eq!(
+        c.data
+            .conditions
+            .iter()
+            .find(|i| i.id == r)
+            .unwrap()
+            .compression_ratio,
+        None
+    );
+    assert_eq!(c.data.reference_of.get(&p), Some(&r));
+    let a = analyze(
+        &c.data,
+        &ReportOptions {
+            figures: false,
+            ..ReportOptions::default()
+        },
+    )
+    .unwrap();
+    let mos_p = a.mos.iter().find(|s| s.condition == p).unwrap();
+    assert!((mos_p.summary.mean - (4.5 * 2.0 + 4.0 * 2.0 + 4.5 * 2.0) / 6.0).abs() < 1e-12);
+    // ACR-HR: DV = V(test) − V(ref) + 5 per rating, e.g. ann 4.5 − 5 + 5 = 4.5.
+    let dmos_p = a.dmos.iter().find(|s| s.condition == p).unwrap();
+    assert!((dmos_p.summary.mean - (4.5 + 4.5 + 4.5 + 4.5 + 4.5 + 4.5) / 6.0).abs() < 1e-12);
+}
+
+#[test]
+fn score_outside_the_scale_names_file_line_and_column() {
+    let sessions = vec![mos_session("ann", [4.5, 6.0, 5.0])];
+    let err = convert(&sessions, &manifest(), Some((1.0, 5.0))).unwrap_err();
+    match &err {
+        AnalysisError::BadRecord {
+            path, line, column, ..
+        } => {
+            assert_eq!(path, &PathBuf::from("/results/ann-1/trials.csv"));
+            assert_eq!((*line, *column), (4, "score"));
+        }
+        other => panic!("{other:?}"),
+    }
+    assert!(
+        err.to_string()
+            .contains("/results/ann-1/trials.csv: line 4, column score")
+    );
+}
+
+#[test]
+fn mixed_protocols_and_unknown_stimuli_are_errors() {
+    let mut dscqs = mos_session("bob", [4.0, 3.0, 4.5]);
+    dscqs.manifest.protocol = Protocol::Dscqs;
+    let err = convert(
+        &[mos_session("ann", [4.5, 3.5, 5.0]), dscqs],
+        &manifest(),
+        None,
+    )
+    .unwrap_err();
+    assert!(
+        matches!(err, AnalysisError::MixedProtocols { .. }),
+        "{err:?}"
+    );
+    let mut odd = mos_session("ann", [4.5, 3.5, 5.0]);
+    odd.trials.records[2].trial.stimulus = "run/x/cr9".into();
+    let err = convert(&[odd], &manifest(), None).unwrap_err();
+    assert!(err.to_string().contains("run/x/cr9"), "{err}");
+    let mut wrong = mos_session("ann", [4.5, 3.5, 5.0]);
+    wrong.trials.records[1].response.answer = Answer::Choice(Position::Left);
+    let err = convert(&[wrong], &manifest(), None).unwrap_err();
+    assert!(
+        matches!(
+            err,
+            AnalysisError::BadRecord {
+                line: 3,
+                column: "response",
+                ..
+            }
+        ),
+        "{err:?}"
+    );
+}
+
+#[test]
+fn staircase_records_become_tracks_and_2afc_trials() {
+    let levels = [
+        0.024, 0.024, 0.022, 0.022, 0.020, 0.022, 0.022, 0.020, 0.022,
+    ];
+    let correct = [true, true, true, true, false, true, true, false, true];
+    let records = levels
+        .iter()
+        .zip(correct)
+        .enumerate()
+        .map(|(i, (&level, c))| {
+            let mut r = record(
+                Protocol::Staircase,
+                "ann",
+                i as u32,
+                Block::Test,
+                "walk/p/cr20",
+                Answer::Choice(Position::Left),
+                Outcome {
+                    score: f64::from(u8::from(c)),
+                    score_reference: None,
+                    score_test: None,
+                    correct: Some(c),
+                    reversal: Some(i == 4 || i == 6 || i == 7),
+                },
+            );
+            r.trial.staircase = Some(0);
+            r.trial.level = Some(level);
+            r.trial.condition = "t_l".into();
+            r
+        })
+        .collect();
+    let c = convert(
+        &[session("ann", Protocol::Staircase, records)],
+        &manifest(),
+        None,
+    )
+    .unwrap();
+    assert_eq!(c.data.staircases.len(), 1);
+    assert_eq!(c.data.two_afc.len(), 9);
+    let t = &c.data.staircases[0];
+    assert_eq!(t.label, "t_l");
+    assert_eq!(t.reversal_levels(), vec![0.020, 0.022, 0.020]);
+    assert!((t.threshold(3).unwrap() - 0.062 / 3.0).abs() < 1e-15);
+    let mut bad = session("ann", Protocol::Staircase, vec![]);
+    let mut r = record(
+        Protocol::Staircase,
+        "ann",
+        0,
+        Block::Test,
+        "walk/p/cr20",
+        Answer::Choice(Position::Left),
+        outcome(1.0),
+    );
+    r.trial.staircase = Some(0);
+    bad.trials.records.push(r);
+    let err = convert(&[bad], &manifest(), None).unwrap_err();
+    assert!(
+        matches!(
+            err,
+            AnalysisError::BadRecord {
+                line: 2,
+                column: "level",
+                ..
+            }
+        ),
+        "{err:?}"
+    );
+}

@@ -1,0 +1,327 @@
+//! `study report RESULTS -o DIR`: every table and figure of a results directory.
+
+use std::path::PathBuf;
+
+use analysis::psychometric::{BootstrapOptions, FitOptions, Lapse, Shape};
+use analysis::study::{ReportOptions, analyze};
+use analysis::{CiMethod, export, from_results};
+use anyhow::{Context, Result};
+use protocols::StudyDefinition;
+
+/// Which confidence interval decides findings and fills the tables.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum CiArg {
+    /// Student t with n − 1 degrees of freedom.
+    T,
+    /// Normal approximation of BT.500 (1.96·S/√N at 95 %).
+    Z,
+}
+
+/// Psychometric function family of the fit.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum ShapeArg {
+    /// 1 − exp(−(x/α)^β).
+    Weibull,
+    /// 1 / (1 + exp(−β(x − α))).
+    Logistic,
+}
+
+/// Arguments of `study report`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct ReportArgs {
+    /// Results directory written by `study run` or `study simulate`.
+    pub results: PathBuf,
+    /// Output directory for report.md, report.html, tables/ and figures/.
+    #[arg(short, long, value_name = "DIR")]
+    pub output: PathBuf,
+    /// Study file (default: the copy named in RESULTS/run.json); gives the stimulus manifest
+    /// and the rating scale.
+    #[arg(long, value_name = "TOML")]
+    pub study: Option<PathBuf>,
+    /// Codec every other codec is tested against, one-tailed ("scores higher than"); without
+    /// it all pairs are tested two-tailed.
+    #[arg(long, value_name = "CODEC")]
+    pub baseline: Option<String>,
+    /// Confidence level of every interval.
+    #[arg(long, default_value_t = 0.95)]
+    pub confidence: f64,
+    /// Interval used in tables and findings.
+    #[arg(long, value_enum, default_value_t = CiArg::T)]
+    pub ci: CiArg,
+    /// MOS a rate must keep (lower CI bound) to count as unnoticed (thesis §3.3: 4.5).
+    #[arg(long, default_value_t = 4.5)]
+    pub mos_limit: f64,
+    /// DMOS a rate must stay under (upper CI bound) (thesis §6.4.3: 0.2).
+    #[arg(long, default_value_t = 0.2)]
+    pub dmos_limit: f64,
+    /// Reversals averaged per staircase (thesis §5.4: 3).
+    #[arg(long, default_value_t = 3)]
+    pub reversals: usize,
+    /// Percent correct (fraction) at which the psychometric threshold is read.
+    #[arg(long, default_value_t = 0.75)]
+    pub percent_correct: f64,
+    /// Psychometric function family.
+    #[arg(long, value_enum, default_value_t = ShapeArg::Weibull)]
+    pub shape: ShapeArg,
+    /// Upper bound of the fitted lapse rate.
+    #[arg(long, default_value_t = 0.06)]
+    pub lapse_max: f64,
+    /// Bootstrap replicates of the threshold CI.
+    #[arg(long, default_value_t = 1000)]
+    pub bootstrap: usize,
+    /// Seed of the bootstrap RNG (logged in the report).
+    #[arg(long, default_value_t = 0x5EED)]
+    pub seed: u64,
+    /// Also tabulate MOS of per-subject z-scores.
+    #[arg(long)]
+    pub zscore: bool,
+    /// Write SVG figures only (no PNG).
+    #[arg(long)]
+    pub no_png: bool,
+}
+
+/// Runs `study report`.
+///
+/// # Errors
+/// Unreadable or malformed results (named by file, line and column), a study file that does
+/// not load, or an output that cannot be written.
+pub fn run(args: &ReportArgs) -> Result<()> {
+    let (run, sessions) = results::read_results_dir(&args.results)?;
+    let study_path = args
+        .study
+        .clone()
+        .unwrap_or_else(|| args.results.join(&run.study_file));
+    let study = StudyDefinition::load(&study_path).with_context(|| {
+        format!(
+            "loading the study file {} (pass --study to name another)",
+            study_path.display()
+        )
+    })?;
+    let converted = from_results::convert(
+        &sessions,
+        &study.manifest,
+        Some((study.scale.min, study.scale.max)),
+    )?;
+    let options = ReportOptions {
+        confidence: args.confidence,
+        ci_method: match args.ci {
+            CiArg::T => CiMethod::StudentT,
+            CiArg::Z => CiMethod::NormalZ,
+        },
+        mos_limit: args.mos_limit,
+        dmos_limit: args.dmos_limit,
+        baseline_codec: args.baseline.clone(),
+        last_reversals: args.reversals,
+        percent_correct: args.percent_correct,
+        fit: FitOptions {
+            shape: match args.shape {
+                ShapeArg::Weibull => Shape::Weibull,
+                ShapeArg::Logistic => Shape::Logistic,
+            },
+            guess_rate: 0.5,
+            lapse: Lapse::Free {
+                max: args.lapse_max,
+            },
+        },
+        bootstrap: BootstrapOptions {
+            replicates: args.bootstrap,
+            confidence: args.confidence,
+            seed: args.seed,
+        },
+        zscore: args.zscore,
+        figures: true,
+    };
+    let analysis = analyze(&converted.data, &options)?;
+    let title = format!(
+        "Study {} ({} protocol, {} sessions)",
+        run.study,
+        converted.protocol,
+        sessions.len()
+    );
+    let mut report = analysis.to_report(&converted.data, &options, &title);
+    let names = report.section("Subjects and stimuli");
+    names.text(format!(
+        "Subject ids in the tables: {}. Condition ids: {}.",
+        converted
+            .subjects
+            .iter()
+            .enumerate()
+            .map(|(i, s)| format!("{i} = {s}"))
+            .collect::<Vec<_>>()
+            .join(", "),
+        converted
+            .stimuli
+            .iter()
+            .enumerate()
+            .map(|(i, s)| format!("{i} = {s}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    ));
+    let written = report.write(&args.output, !args.no_png)?;
+    let tidy = args.output.join("ratings.csv");
+    std::fs::write(
+        &tidy,
+        export::tidy_csv(&converted.data.ratings, &converted.data.conditions),
+    )
+    .with_context(|| format!("writing {}", tidy.display()))?;
+    let sureal = args.output.join("sureal_dataset.py");
+    std::fs::write(
+        &sureal,
+        export::sureal_dataset(
+            &run.study,
+            &converted.data.ratings,
+            &converted.data.conditions,
+            study.scale.max,
+        ),
+    )
+    .with_context(|| format!("writing {}", sureal.display()))?;
+    println!(
+        "{}: {} files ({} ratings, {} DSCQS pairs, {} staircases, {} 2AFC trials); open {}",
+        args.output.display(),
+        written.files.len() + 2,
+        converted.data.ratings.len(),
+        converted.data.dscqs.len(),
+        converted.data.staircases.len(),
+        converted.data.two_afc.len(),
+        args.output.join("report.html").display()
+    );
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
+    use clap::Parser;
+
+    use crate::{Cli, Command};
+
+    fn parse(args: &[&str]) -> Command {
+        Cli::try_parse_from(args).unwrap().command
+    }
+
+    /// `study simulate` → `study report` on the three example studies: every table and figure
+    /// is written; then a score edited outside the scale is an error naming file and line.
+    #[test]
+    #[expect(
+        clippy::too_many_lines,
+        reason = "one scenario: simulate, report, corrupt, report"
+    )]
+    fn simulate_then_report_writes_tables_and_figures() {
+        let examples = concat!(env!("CARGO_MANIFEST_DIR"), "/../examples");
+        let root = std::env::temp_dir().join(format!("study-report-test-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&root);
+        let expected: [(&str, &[&str], &[&str]); 3] = [
+            (
+                "mos",
+                &["mos", "ttests", "screening", "mos_findings"],
+                &["mos_vs_cr", "score_distributions"],
+            ),
+            (
+                "dscqs",
+                &["mos", "dmos", "dmos_ci", "dmos_findings", "ttests"],
+                &["dmos_vs_cr", "mos_vs_cr"],
+            ),
+            (
+                "staircase",
+                &["thresholds"],
+                &["staircases", "psychometric"],
+            ),
+        ];
+        for (name, tables, figures) in expected {
+            let toml = format!("{examples}/{name}.toml");
+            let results = root.join(format!("{name}-results"));
+            let out = root.join(format!("{name}-report"));
+            let Command::Simulate(sim) = parse(&[
+                "study",
+                "simulate",
+                &toml,
+                "--subjects",
+                "6",
+                "--seed",
+                "2",
+                "-o",
+                results.to_str().unwrap(),
+            ]) else {
+                panic!("simulate did not parse");
+            };
+            crate::study_cmd::simulate(&sim).unwrap();
+            let Command::Report(args) = parse(&[
+                "study",
+                "report",
+                results.to_str().unwrap(),
+                "--study",
+                &toml,
+                "-o",
+                out.to_str().unwrap(),
+                "--bootstrap",
+                "50",
+                "--no-png",
+            ]) else {
+                panic!("report did not parse");
+            };
+            super::run(&args).unwrap();
+            for t in tables {
+                for ext in ["csv", "md", "tex"] {
+                    assert!(
+                        out.join("tables").join(format!("{t}.{ext}")).is_file(),
+                        "{name}: {t}.{ext}"
+                    );
+                }
+            }
+            for f in figures {
+                assert!(
+                    out.join("figures").join(format!("{f}.svg")).is_file(),
+                    "{name}: {f}.svg"
+                );
+            }
+            for f in [
+                "report.md",
+                "report.html",
+                "ratings.csv",
+                "sureal_dataset.py",
+            ] {
+                assert!(out.join(f).is_file(), "{name}: {f}");
+            }
+        }
+        // Corrupt one MOS rating: 9 on a 1-5 scale.
+        let results = root.join("mos-results");
+        let session = std::fs::read_dir(&results)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .find(|p| p.join("trials.csv").is_file())
+            .unwrap();
+        let trials = session.join("trials.csv");
+        let text = std::fs::read_to_string(&trials).unwrap();
+        let mut lines: Vec<String> = text.lines().map(str::to_owned).collect();
+        let header: Vec<&str> = lines[0].split(',').collect();
+        let (response, score) = (
+            header.iter().position(|c| *c == "response").unwrap(),
+            header.iter().position(|c| *c == "score").unwrap(),
+        );
+        let row = lines.iter().position(|l| l.contains(",test,")).unwrap();
+        let mut fields: Vec<String> = lines[row].split(',').map(str::to_owned).collect();
+        fields[response] = "9".into();
+        fields[score] = "9".into();
+        lines[row] = fields.join(",");
+        std::fs::write(&trials, lines.join("\n") + "\n").unwrap();
+        let Command::Report(args) = parse(&[
+            "study",
+            "report",
+            results.to_str().unwrap(),
+            "--study",
+            &format!("{examples}/mos.toml"),
+            "-o",
+            root.join("bad-report").to_str().unwrap(),
+            "--no-png",
+        ]) else {
+            panic!("report did not parse");
+        };
+        let err = format!("{:#}", super::run(&args).unwrap_err());
+        assert!(
+            err.contains("trials.csv") && err.contains(&format!("line {}", row + 1)),
+            "{err}"
+        );
+        std::fs::remove_dir_all(&root).unwrap();
+    }
+}
