@@ -109,6 +109,59 @@ fn subject_id(index: u32) -> String {
     format!("S{:03}", index + 1)
 }
 
+/// Keeps the study file and its stimulus manifest inside the results directory, so that the
+/// folder is self-contained: `study report RESULTS` finds both without the original files, and
+/// a lab can archive one folder. The copy's `stimuli` key is pointed at the manifest copy.
+///
+/// # Errors
+/// The study text is not TOML (it was validated already, so only a race could cause this) or
+/// the copies cannot be written.
+pub fn archive_study(
+    out: &Path,
+    original: &Path,
+    study_bytes: &[u8],
+    study: &StudyDefinition,
+) -> anyhow::Result<()> {
+    let copy = out.join("study.toml");
+    if copy.exists() {
+        return Ok(());
+    }
+    let text = std::str::from_utf8(study_bytes)
+        .with_context(|| format!("{} is not UTF-8", original.display()))?;
+    let mut table: toml::Table = text
+        .parse()
+        .with_context(|| format!("re-reading {}", original.display()))?;
+    // The manifest's file paths are relative to its own folder: make them absolute in the
+    // copy so they still name the clips from inside the results directory.
+    let base = original.parent().unwrap_or(Path::new("."));
+    let manifest_dir = table
+        .get("stimuli")
+        .and_then(toml::Value::as_str)
+        .map(|m| base.join(m))
+        .and_then(|m| m.parent().map(Path::to_path_buf))
+        .unwrap_or_else(|| base.to_path_buf());
+    let manifest_dir = fs::canonicalize(&manifest_dir).unwrap_or(manifest_dir);
+    let mut manifest = study.manifest.clone();
+    let absolute = |p: &str| manifest_dir.join(p).display().to_string();
+    for st in &mut manifest.stimuli {
+        st.file = absolute(&st.file);
+        st.skeleton = st.skeleton.as_deref().map(absolute);
+        st.bitstream = st.bitstream.as_deref().map(absolute);
+    }
+    table.insert("stimuli".into(), toml::Value::String("stimuli.json".into()));
+    let body = toml::to_string(&table).context("writing the study copy")?;
+    let header = format!(
+        "# Copy of {} kept with its results; `stimuli` points at the manifest copy beside it.\n",
+        original.display()
+    );
+    write_new(
+        &out.join("stimuli.json"),
+        &serde_json::to_vec_pretty(&manifest)?,
+    )?;
+    write_new(&copy, format!("{header}{body}").as_bytes())?;
+    Ok(())
+}
+
 /// `study simulate`: runs `--subjects` complete simulated sessions into a results directory.
 ///
 /// # Errors
@@ -175,10 +228,7 @@ pub fn simulate(args: &SimulateArgs) -> anyhow::Result<()> {
         })?;
         write_new(&out.join(RUN_FILE), &serde_json::to_vec_pretty(&run)?)?;
     }
-    let copy = out.join("study.toml");
-    if !copy.exists() {
-        write_new(&copy, &study_bytes)?;
-    }
+    archive_study(out, &args.study, &study_bytes, &study)?;
     for subject in 0..args.subjects {
         let dir = out.join(format!("{}_s1", subject_id(subject)));
         let summary = run_subject(&study, &hash, args, subject, &dir)
