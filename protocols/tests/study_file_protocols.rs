@@ -64,7 +64,7 @@ fn every_mistake_is_reported_at_once_with_its_key_path() {
 #[test]
 fn unknown_stimulus_and_wrong_types_in_mos() {
     let text = example_text("mos.toml")
-        .replace("[conditions]\nclips = [\"walk\", \"dance\"]\ncodecs = [\"wavelet-perceptual\", \"wavelet-bone\", \"wavelet-uniform\"]\ntarget_cr = [10, 20, 30, 40, 50, 60, 70]",
+        .replace("[conditions]\nclips = [\"walk\", \"dance\"]\ncodecs = [\"wavelet-perceptual\", \"wavelet-bone\", \"wavelet-standard\"]\ntarget_cr = [10, 20, 30, 40, 50, 60, 70]",
                  "[conditions]\nstimuli = [\"walk/wavelet-bone/cr10\", \"walk/nope\", \"walk/reference\", 5]")
         .replace("hidden_repeats = 8", "hidden_repeats = 8\nbreak_every = 3")
         .replace("protocol = \"mos\"", "protocol = \"mos\"\nseed2 = 1");

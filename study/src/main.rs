@@ -9,6 +9,7 @@ use clap::{Parser, Subcommand};
 
 mod clip_cmd;
 mod codec_cmd;
+mod demo_cmd;
 mod markers_cmd;
 mod primitives_cmd;
 mod report_cmd;
@@ -25,6 +26,9 @@ struct Cli {
 #[derive(Debug, Subcommand)]
 enum Command {
     /// Inspect, convert and evaluate motion clips (ASF/AMC, BVH).
+    /// Run a short study on generated motion end to end (no files needed): stimuli, MOS,
+    /// DSCQS and staircase sessions with simulated observers, reports.
+    Demo(demo_cmd::DemoArgs),
     #[command(subcommand)]
     Clip(clip_cmd::ClipCommand),
     /// Skeletons from raw markers: synthetic captures and GDKE solving (C3D/CSV in, BVH out).
@@ -53,6 +57,7 @@ enum Command {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
+        Command::Demo(args) => demo_cmd::run(&args),
         Command::Clip(cmd) => clip_cmd::run(cmd),
         Command::Markers(cmd) => markers_cmd::run(cmd),
         Command::Primitives(cmd) => primitives_cmd::run(cmd),
