@@ -82,24 +82,33 @@ pub fn sync_dir(dir: &Path) -> Result<(), ResultsError> {
 /// # Errors
 /// [`ResultsError::Io`].
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), ResultsError> {
-    let dir = path.parent().unwrap_or(Path::new("."));
+    let (dir, tmp) = write_synced_temp(path, "tmp", bytes)?;
+    fs::rename(&tmp, path).map_err(io(path, "rename"))?;
+    sync_dir(&dir)
+}
+
+/// Writes `bytes` to a fresh temporary file beside `path` (`.<name>.<tag>-<pid>`) and fsyncs
+/// it; returns the directory and the temporary file.
+fn write_synced_temp(
+    path: &Path,
+    tag: &str,
+    bytes: &[u8],
+) -> Result<(PathBuf, PathBuf), ResultsError> {
+    let dir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
     let name = path
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
-    let tmp = dir.join(format!(".{name}.tmp-{}", std::process::id()));
-    {
-        let mut f = OpenOptions::new()
-            .write(true)
-            .create(true)
-            .truncate(true)
-            .open(&tmp)
-            .map_err(io(&tmp, "create"))?;
-        f.write_all(bytes).map_err(io(&tmp, "write"))?;
-        f.sync_all().map_err(io(&tmp, "fsync"))?;
-    }
-    fs::rename(&tmp, path).map_err(io(path, "rename"))?;
-    sync_dir(dir)
+    let tmp = dir.join(format!(".{name}.{tag}-{}", std::process::id()));
+    let mut f = OpenOptions::new()
+        .write(true)
+        .create(true)
+        .truncate(true)
+        .open(&tmp)
+        .map_err(io(&tmp, "create"))?;
+    f.write_all(bytes).map_err(io(&tmp, "write"))?;
+    f.sync_all().map_err(io(&tmp, "fsync"))?;
+    Ok((dir, tmp))
 }
 
 /// Writes `bytes` to a new file `path`, failing if it exists: temporary file, fsync, hard
@@ -108,26 +117,11 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), ResultsError> {
 /// # Errors
 /// [`ResultsError::Exists`] or [`ResultsError::Io`].
 pub fn write_new(path: &Path, bytes: &[u8]) -> Result<(), ResultsError> {
-    let dir = path.parent().unwrap_or(Path::new("."));
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let tmp = dir.join(format!(".{name}.new-{}", std::process::id()));
-    {
-        let mut f = OpenOptions::new()
-            .write(true)
-            .create(true)
-            .truncate(true)
-            .open(&tmp)
-            .map_err(io(&tmp, "create"))?;
-        f.write_all(bytes).map_err(io(&tmp, "write"))?;
-        f.sync_all().map_err(io(&tmp, "fsync"))?;
-    }
+    let (dir, tmp) = write_synced_temp(path, "new", bytes)?;
     let linked = fs::hard_link(&tmp, path);
     let _ = fs::remove_file(&tmp);
     match linked {
-        Ok(()) => sync_dir(dir),
+        Ok(()) => sync_dir(&dir),
         Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => Err(ResultsError::Exists {
             path: path.to_path_buf(),
         }),
