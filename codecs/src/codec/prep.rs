@@ -36,6 +36,16 @@ pub fn wrap_degrees(x: &mut [f64]) {
     }
 }
 
+/// The decoder's inverse of [`unwrapped_matrix`]: wraps the flagged channels of a
+/// channel-major matrix back into (−180°, 180°].
+pub(crate) fn wrap_flagged(data: &mut [f64], frames: usize, flags: &[bool]) {
+    for (c, &f) in flags.iter().enumerate() {
+        if f {
+            wrap_degrees(&mut data[c * frames..(c + 1) * frames]);
+        }
+    }
+}
+
 /// Channel-major copy of a clip with rotation channels unwrapped, and a flag per channel that
 /// says whether unwrapping changed it (those are wrapped back after decoding).
 pub(crate) fn unwrapped_matrix(clip: &Clip) -> (Vec<f64>, Vec<bool>) {

@@ -32,7 +32,7 @@
 //! energy codes), then per segment `u32` budget `B_T`, `u32` bits present `L`, and `⌈L/8⌉`
 //! bytes.
 
-use super::prep::{unwrapped_matrix, wrap_degrees};
+use super::prep::{unwrapped_matrix, wrap_flagged};
 use super::{
     Codec, CodecError, Params, RateControl, check_stream, header, int_param, merged, real_param,
 };
@@ -807,11 +807,7 @@ impl Codec for SpihtCodec {
         if pos != pl.len() {
             return Err(self.err(pos, "trailing bytes in payload"));
         }
-        for (c, &f) in flags.iter().enumerate() {
-            if f {
-                wrap_degrees(&mut data[c * frames..(c + 1) * frames]);
-            }
-        }
+        wrap_flagged(&mut data, frames, &flags);
         Ok(Clip::new(
             skeleton.clone(),
             stream.frame_rate_hz,

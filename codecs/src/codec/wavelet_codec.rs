@@ -38,7 +38,7 @@
 //! wrapped back into (−180°, 180°] after decoding, for the channels where unwrapping changed
 //! something (one flag per channel in the stream).
 
-use super::prep::{channel_lengths, is_translation, unwrapped_matrix, wrap_degrees};
+use super::prep::{channel_lengths, is_translation, unwrapped_matrix, wrap_flagged};
 use super::{
     Codec, CodecError, Params, RateControl, check_stream, header, int_param, merged, real_param,
 };
@@ -361,7 +361,6 @@ impl Codec for WaveletCodec {
         self.encode_native(clip, p)
     }
 
-    #[expect(clippy::too_many_lines, reason = "mirrors the encoder step by step")]
     fn decode(&self, stream: &Bitstream, skeleton: &Skeleton) -> Result<Clip, CodecError> {
         check_stream(self, stream, skeleton)?;
         let name = self.name();
@@ -455,11 +454,7 @@ impl Codec for WaveletCodec {
         if dec.overrun() > 0 || dec.position() + 1 < stream.payload.len() {
             return Err(corrupt(&dec, "payload length does not match its content"));
         }
-        for (c, &f) in flags.iter().enumerate() {
-            if f {
-                wrap_degrees(&mut data[c * frames..(c + 1) * frames]);
-            }
-        }
+        wrap_flagged(&mut data, frames, &flags);
         Ok(Clip::new(
             skeleton.clone(),
             stream.frame_rate_hz,
