@@ -26,10 +26,13 @@ pub(crate) fn t_sf(t: f64, df: f64) -> Option<f64> {
     Some(dist.sf(t))
 }
 
-/// The `p` quantile of Student's t, refined by Newton steps on the CDF (statrs' inverse
-/// incomplete beta is good to roughly 1e-10; the golden tests ask for 1e-9 relative).
-pub(crate) fn t_quantile(p: f64, df: f64) -> Option<f64> {
-    let dist = students_t(df)?;
+/// Polishes `dist.inverse_cdf(p)` with Newton steps on the CDF, working in the tail nearer to
+/// `p` to avoid cancellation (statrs' inverses are good to roughly 1e-10; the golden tests ask
+/// for 1e-9 relative). `None` unless 0 < p < 1.
+fn polished_quantile<D>(dist: &D, p: f64) -> Option<f64>
+where
+    D: Continuous<f64, f64> + ContinuousCDF<f64, f64>,
+{
     if !(p > 0.0 && p < 1.0) {
         return None;
     }
@@ -39,7 +42,6 @@ pub(crate) fn t_quantile(p: f64, df: f64) -> Option<f64> {
         if density.is_nan() || density <= 0.0 {
             break;
         }
-        // Work in the tail nearer to p to avoid cancellation.
         let err = if p < 0.5 {
             dist.cdf(x) - p
         } else {
@@ -54,27 +56,14 @@ pub(crate) fn t_quantile(p: f64, df: f64) -> Option<f64> {
     Some(x)
 }
 
-/// The `p` quantile of the standard normal, refined by Newton steps.
+/// The `p` quantile of Student's t.
+pub(crate) fn t_quantile(p: f64, df: f64) -> Option<f64> {
+    polished_quantile(&students_t(df)?, p)
+}
+
+/// The `p` quantile of the standard normal.
 pub(crate) fn z_quantile(p: f64) -> Option<f64> {
-    let dist = Normal::new(0.0, 1.0).ok()?;
-    if !(p > 0.0 && p < 1.0) {
-        return None;
-    }
-    let mut x = dist.inverse_cdf(p);
-    for _ in 0..3 {
-        let density = dist.pdf(x);
-        let err = if p < 0.5 {
-            dist.cdf(x) - p
-        } else {
-            (1.0 - p) - dist.sf(x)
-        };
-        let step = err / density;
-        if !step.is_finite() {
-            break;
-        }
-        x -= step;
-    }
-    Some(x)
+    polished_quantile(&Normal::new(0.0, 1.0).ok()?, p)
 }
 
 /// Standard normal upper tail P(Z ≥ z).

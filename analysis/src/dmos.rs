@@ -7,6 +7,7 @@ use serde::Serialize;
 
 use crate::descriptive::{ConditionStats, Rating, mean_of, sample_variance, summarize};
 use crate::error::{AnalysisError, check_confidence};
+use crate::panel::check_scores;
 
 /// One DSCQS presentation: a subject scored the hidden reference and the test version of a
 /// condition.
@@ -93,14 +94,8 @@ pub fn acr_hr_dmos<S: std::hash::BuildHasher>(
     check_confidence(confidence)?;
     let references: std::collections::HashSet<u32> = reference_of.values().copied().collect();
     let mut ref_scores: HashMap<(u32, u32), (f64, usize)> = HashMap::new();
-    for (index, r) in ratings.iter().enumerate() {
-        if !r.score.is_finite() {
-            return Err(AnalysisError::NonFinite {
-                what: "rating score",
-                index,
-                value: r.score,
-            });
-        }
+    check_scores(ratings)?;
+    for r in ratings {
         if references.contains(&r.condition) {
             let e = ref_scores
                 .entry((r.subject, r.condition))
@@ -133,15 +128,9 @@ pub fn acr_hr_dmos<S: std::hash::BuildHasher>(
 /// [`AnalysisError::UndefinedZScore`] when a subject has fewer than two ratings or gives every
 /// stimulus the same score; [`AnalysisError::NonFinite`] for bad scores.
 pub fn zscore_by_subject(ratings: &[Rating]) -> Result<Vec<Rating>, AnalysisError> {
+    check_scores(ratings)?;
     let mut by_subject: HashMap<u32, Vec<f64>> = HashMap::new();
-    for (index, r) in ratings.iter().enumerate() {
-        if !r.score.is_finite() {
-            return Err(AnalysisError::NonFinite {
-                what: "rating score",
-                index,
-                value: r.score,
-            });
-        }
+    for r in ratings {
         by_subject.entry(r.subject).or_default().push(r.score);
     }
     let mut params: HashMap<u32, (f64, f64)> = HashMap::with_capacity(by_subject.len());

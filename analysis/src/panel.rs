@@ -78,25 +78,35 @@ pub(crate) struct Panel {
     pub reps: u32,
 }
 
+/// Refuses more rating rows than [`MAX_ROWS`].
+pub(crate) fn check_row_count(ratings: &[Rating]) -> Result<(), AnalysisError> {
+    if ratings.len() > MAX_ROWS {
+        return Err(AnalysisError::TooLarge {
+            what: "rating rows",
+            count: ratings.len(),
+            limit: MAX_ROWS,
+        });
+    }
+    Ok(())
+}
+
+/// Refuses the first rating whose score is not finite, naming its row.
+pub(crate) fn check_scores(ratings: &[Rating]) -> Result<(), AnalysisError> {
+    match ratings.iter().position(|r| !r.score.is_finite()) {
+        Some(index) => Err(AnalysisError::NonFinite {
+            what: "rating score",
+            index,
+            value: ratings[index].score,
+        }),
+        None => Ok(()),
+    }
+}
+
 impl Panel {
     /// Indexes `ratings`, checking every score is finite.
     pub fn new(ratings: &[Rating]) -> Result<Self, AnalysisError> {
-        if ratings.len() > MAX_ROWS {
-            return Err(AnalysisError::TooLarge {
-                what: "rating rows",
-                count: ratings.len(),
-                limit: MAX_ROWS,
-            });
-        }
-        for (index, r) in ratings.iter().enumerate() {
-            if !r.score.is_finite() {
-                return Err(AnalysisError::NonFinite {
-                    what: "rating score",
-                    index,
-                    value: r.score,
-                });
-            }
-        }
+        check_row_count(ratings)?;
+        check_scores(ratings)?;
         let (subjects, s) = dense(&ratings.iter().map(|r| r.subject).collect::<Vec<_>>());
         let (conditions, c) = dense(&ratings.iter().map(|r| r.condition).collect::<Vec<_>>());
         // Two stable counting sorts (by condition, then by subject) order the rows by
@@ -153,22 +163,8 @@ pub(crate) type Grouped = (Vec<u32>, Vec<usize>, Vec<f64>);
 /// Scores grouped by condition with one counting pass: (condition ids, offsets, scores) where
 /// the scores of condition `ids[k]` are `scores[offsets[k]..offsets[k + 1]]` in row order.
 pub(crate) fn group_by_condition(ratings: &[Rating]) -> Result<Grouped, AnalysisError> {
-    if ratings.len() > MAX_ROWS {
-        return Err(AnalysisError::TooLarge {
-            what: "rating rows",
-            count: ratings.len(),
-            limit: MAX_ROWS,
-        });
-    }
-    for (index, r) in ratings.iter().enumerate() {
-        if !r.score.is_finite() {
-            return Err(AnalysisError::NonFinite {
-                what: "rating score",
-                index,
-                value: r.score,
-            });
-        }
-    }
+    check_row_count(ratings)?;
+    check_scores(ratings)?;
     let (ids, c) = dense(&ratings.iter().map(|r| r.condition).collect::<Vec<_>>());
     let mut offsets = vec![0usize; ids.len() + 1];
     for k in &c {
