@@ -129,6 +129,21 @@ pub enum ClipCommand {
         #[arg(long, value_name = "SKEL")]
         out_asf: Option<PathBuf>,
     },
+    /// Render stills of the clips side by side as the study window draws them (offscreen,
+    /// no display needed), e.g. a reference and its decoded stimulus for a figure.
+    Render {
+        #[command(flatten)]
+        input: ClipInput,
+        /// Clip times to draw, seconds (one row of panes per time).
+        #[arg(long, value_delimiter = ',', default_value = "0")]
+        times: Vec<f64>,
+        /// Size of one pane, pixels.
+        #[arg(long, default_value_t = 480)]
+        pane: u32,
+        /// Output PNG.
+        #[arg(short, long, value_name = "OUT")]
+        output: PathBuf,
+    },
 }
 
 /// Runs a clip subcommand.
@@ -184,7 +199,65 @@ pub fn run(cmd: ClipCommand) -> Result<()> {
             eprintln!("wrote {}", output.display());
             Ok(())
         }
+        ClipCommand::Render {
+            input,
+            times,
+            pane,
+            output,
+        } => render(&input.load()?, &times, pane, &output),
     }
+}
+
+/// Draws every clip (columns) at every time (rows) with the first clip's camera, so a
+/// reference and its stimuli are framed alike.
+fn render(clips: &[Loaded], times: &[f64], pane: u32, output: &Path) -> Result<()> {
+    use crate::gui::render::{Offscreen, Pane};
+    use crate::gui::scene::{Figure, FrameShapes, View};
+    let Some(first) = clips.first() else {
+        bail!("no clip to render");
+    };
+    if !(64..=4096).contains(&pane) {
+        bail!("--pane {pane}: expected 64..=4096 pixels");
+    }
+    if let Some(t) = times.iter().find(|t| !t.is_finite() || **t < 0.0) {
+        bail!("--times: {t} is not a time in seconds");
+    }
+    let (cols, rows) = (clips.len() as u32, times.len() as u32);
+    if u64::from(cols * pane) * u64::from(rows * pane) > 1 << 26 {
+        bail!("{cols}×{rows} panes of {pane} px is too large an image");
+    }
+    let view = View::framing(&first.clip);
+    let mut shapes = Vec::new();
+    for t in times {
+        for c in clips {
+            let mut s = FrameShapes::default();
+            Figure::new(&c.clip, &view).shapes_at(*t, &mut s);
+            shapes.push(s);
+        }
+    }
+    let panes: Vec<Pane<'_>> = shapes
+        .iter()
+        .enumerate()
+        .map(|(k, s)| Pane {
+            x: (k as u32 % cols) * pane,
+            y: (k as u32 / cols) * pane,
+            width: pane,
+            height: pane,
+            view: &view,
+            shapes: s,
+        })
+        .collect();
+    let mut offscreen = Offscreen::new(4)?;
+    let image = offscreen.render(cols * pane, rows * pane, &panes)?;
+    image.write_png(output)?;
+    eprintln!(
+        "wrote {} ({} × {} panes, adapter {})",
+        output.display(),
+        cols,
+        rows,
+        offscreen.adapter().name
+    );
+    Ok(())
 }
 
 fn positions_csv(pos: &fk::Positions, scale: f64) -> String {

@@ -10,9 +10,13 @@ use clap::{Parser, Subcommand};
 mod clip_cmd;
 mod codec_cmd;
 mod demo_cmd;
+mod gui;
 mod markers_cmd;
 mod primitives_cmd;
 mod report_cmd;
+mod run_cmd;
+mod session;
+mod stimuli;
 mod study_cmd;
 
 /// Perceptual user studies of motion-capture compression.
@@ -25,10 +29,14 @@ struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
-    /// Inspect, convert and evaluate motion clips (ASF/AMC, BVH).
     /// Run a short study on generated motion end to end (no files needed): stimuli, MOS,
     /// DSCQS and staircase sessions with simulated observers, reports.
     Demo(demo_cmd::DemoArgs),
+    /// Run one subject's session in the study window (MOS, DSCQS or 2AFC staircase).
+    Run(run_cmd::RunArgs),
+    /// Measure the display: refresh rate, frame-interval mean/SD/max and dropped frames.
+    DisplayTest(run_cmd::DisplayTestArgs),
+    /// Inspect, convert and evaluate motion clips (ASF/AMC, BVH).
     #[command(subcommand)]
     Clip(clip_cmd::ClipCommand),
     /// Skeletons from raw markers: synthetic captures and GDKE solving (C3D/CSV in, BVH out).
@@ -58,6 +66,8 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Demo(args) => demo_cmd::run(&args),
+        Command::Run(args) => run_cmd::run(&args),
+        Command::DisplayTest(args) => run_cmd::display_test(&args),
         Command::Clip(cmd) => clip_cmd::run(cmd),
         Command::Markers(cmd) => markers_cmd::run(cmd),
         Command::Primitives(cmd) => primitives_cmd::run(cmd),

@@ -1,0 +1,334 @@
+//! How a trial is presented, as a schedule of timed steps, and when its response is accepted.
+//!
+//! Pure (no drawing): the window asks [`Presentation::at`] what to show at the current
+//! presentation time and [`Presentation::accepts_response`] whether an answer counts yet.
+//! Side by side (MOS, 2AFC): both clips together, `playback_count` times. Sequential: first,
+//! grey, second. DSCQS (ITU-R BT.500): A, grey, B, grey, A, B, each labelled.
+
+use protocols::record::{Arrangement, Position, Trial};
+use protocols::study::PresentationSettings;
+
+/// What one step shows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Show {
+    /// Both stimuli side by side: left and right.
+    Both,
+    /// One stimulus, full width: the one at this position.
+    One(Position),
+    /// A mid-grey field (between sequential stimuli).
+    Grey,
+}
+
+/// One timed step of a presentation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Step {
+    /// What is shown.
+    pub show: Show,
+    /// Label drawn above the stimulus ("A", "B"), if any.
+    pub label: Option<&'static str>,
+    /// Duration, seconds.
+    pub duration_s: f64,
+}
+
+/// What to draw at one instant.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Frame {
+    /// What is shown.
+    pub show: Show,
+    /// Its label.
+    pub label: Option<&'static str>,
+    /// Clip time to pose the stimuli at, seconds.
+    pub clip_time_s: f64,
+    /// True once the whole required presentation has been shown.
+    pub finished: bool,
+}
+
+/// The schedule of one trial and where its playback stands.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Presentation {
+    steps: Vec<Step>,
+    arrangement: Arrangement,
+    loop_after: bool,
+    start_s: f64,
+    shown_once: bool,
+    replays: u32,
+    max_replays: Option<u32>,
+}
+
+/// The stimulus id shown at `position` of `trial`.
+pub fn stimulus_at(trial: &Trial, position: Position) -> &str {
+    if position == trial.reference_position {
+        &trial.reference
+    } else {
+        &trial.stimulus
+    }
+}
+
+impl Presentation {
+    /// The schedule of `trial` for clips of `clip_s` seconds, starting at presentation time
+    /// `now_s`.
+    pub fn new(
+        trial: &Trial,
+        settings: &PresentationSettings,
+        clip_s: f64,
+        now_s: f64,
+    ) -> Presentation {
+        let clip_s = if clip_s.is_finite() && clip_s > 0.0 {
+            clip_s
+        } else {
+            1.0
+        };
+        let gap = settings.gap_ms as f64 / 1e3;
+        let plays = settings.playback_count.max(1);
+        let mut steps = Vec::new();
+        let grey = |steps: &mut Vec<Step>| {
+            if gap > 0.0 {
+                steps.push(Step {
+                    show: Show::Grey,
+                    label: None,
+                    duration_s: gap,
+                });
+            }
+        };
+        match trial.arrangement {
+            Arrangement::SideBySide => {
+                for _ in 0..plays {
+                    steps.push(Step {
+                        show: Show::Both,
+                        label: None,
+                        duration_s: clip_s,
+                    });
+                }
+            }
+            Arrangement::Sequential => {
+                for k in 0..plays {
+                    if k > 0 {
+                        grey(&mut steps);
+                    }
+                    for (i, p) in [Position::First, Position::Second].into_iter().enumerate() {
+                        if i > 0 {
+                            grey(&mut steps);
+                        }
+                        steps.push(Step {
+                            show: Show::One(p),
+                            label: Some(if i == 0 { "1" } else { "2" }),
+                            duration_s: clip_s,
+                        });
+                    }
+                }
+            }
+            Arrangement::Abab => {
+                // BT.500 DSCQS: A, grey, B, grey, A, B (the second pair is when votes are cast).
+                for (i, p) in [Position::A, Position::B, Position::A, Position::B]
+                    .into_iter()
+                    .enumerate()
+                {
+                    if i == 1 || i == 2 {
+                        grey(&mut steps);
+                    }
+                    steps.push(Step {
+                        show: Show::One(p),
+                        label: Some(if p == Position::A { "A" } else { "B" }),
+                        duration_s: clip_s,
+                    });
+                }
+            }
+        }
+        Presentation {
+            steps,
+            arrangement: trial.arrangement,
+            loop_after: settings.loop_playback,
+            start_s: now_s,
+            shown_once: false,
+            replays: 0,
+            max_replays: settings.max_replays,
+        }
+    }
+
+    /// The steps.
+    #[cfg(test)]
+    pub fn steps(&self) -> &[Step] {
+        &self.steps
+    }
+
+    /// Total duration of one pass, seconds.
+    #[cfg(test)]
+    pub fn duration_s(&self) -> f64 {
+        self.steps.iter().map(|s| s.duration_s).sum()
+    }
+
+    /// What to draw at presentation time `now_s`; marks the presentation shown once its
+    /// end has been reached.
+    pub fn at(&mut self, now_s: f64) -> Frame {
+        let mut t = (now_s - self.start_s).max(0.0);
+        for s in &self.steps {
+            if t < s.duration_s {
+                return Frame {
+                    show: s.show,
+                    label: s.label,
+                    clip_time_s: t,
+                    finished: self.shown_once,
+                };
+            }
+            t -= s.duration_s;
+        }
+        self.shown_once = true;
+        let last = self.steps.last().copied().unwrap_or(Step {
+            show: Show::Grey,
+            label: None,
+            duration_s: 0.0,
+        });
+        match self.arrangement {
+            // Side by side: keep looping (if the study says so) or hold the last frame while
+            // the subject answers.
+            Arrangement::SideBySide => Frame {
+                show: Show::Both,
+                label: None,
+                clip_time_s: if self.loop_after {
+                    t % last.duration_s.max(1e-3)
+                } else {
+                    last.duration_s
+                },
+                finished: true,
+            },
+            // Sequential and DSCQS: a grey field with the voting question.
+            Arrangement::Sequential | Arrangement::Abab => Frame {
+                show: Show::Grey,
+                label: None,
+                clip_time_s: 0.0,
+                finished: true,
+            },
+        }
+    }
+
+    /// Whether an answer counts now: only after the stimuli were shown as required.
+    pub fn accepts_response(&self) -> bool {
+        self.shown_once
+    }
+
+    /// Replays used.
+    pub fn replays(&self) -> u32 {
+        self.replays
+    }
+
+    /// Whether the study allows another replay.
+    pub fn can_replay(&self) -> bool {
+        self.shown_once && self.max_replays.is_none_or(|m| self.replays < m)
+    }
+
+    /// Starts the presentation again at `now_s` (a replay, once shown; answers stay allowed).
+    pub fn replay(&mut self, now_s: f64) -> bool {
+        if !self.can_replay() {
+            return false;
+        }
+        self.replays += 1;
+        self.start_s = now_s;
+        true
+    }
+
+    /// Starts over from the beginning, as if never shown (after an experimenter pause).
+    pub fn restart(&mut self, now_s: f64) {
+        self.start_s = now_s;
+        self.shown_once = false;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use protocols::record::Block;
+    use protocols::study::ReferencePlacement;
+
+    fn trial(arrangement: Arrangement, reference_position: Position) -> Trial {
+        Trial {
+            index: 0,
+            block: Block::Test,
+            condition: "c".into(),
+            stimulus: "test".into(),
+            reference: "ref".into(),
+            arrangement,
+            reference_position,
+            staircase: None,
+            level: None,
+            break_before: false,
+        }
+    }
+
+    fn settings(arrangement: Arrangement, gap_ms: u64, plays: u32) -> PresentationSettings {
+        PresentationSettings {
+            arrangement,
+            reference_position: ReferencePlacement::Random,
+            playback_count: plays,
+            max_replays: Some(1),
+            loop_playback: false,
+            gap_ms,
+            stimulus_duration_ms: 2000,
+        }
+    }
+
+    #[test]
+    fn dscqs_shows_a_grey_b_grey_a_b_then_asks() {
+        let t = trial(Arrangement::Abab, Position::B);
+        let mut p = Presentation::new(&t, &settings(Arrangement::Abab, 500, 1), 2.0, 10.0);
+        let shows: Vec<(Show, Option<&str>)> =
+            p.steps().iter().map(|s| (s.show, s.label)).collect();
+        assert_eq!(
+            shows,
+            [
+                (Show::One(Position::A), Some("A")),
+                (Show::Grey, None),
+                (Show::One(Position::B), Some("B")),
+                (Show::Grey, None),
+                (Show::One(Position::A), Some("A")),
+                (Show::One(Position::B), Some("B")),
+            ]
+        );
+        assert!((p.duration_s() - 9.0).abs() < 1e-12);
+        assert_eq!(stimulus_at(&t, Position::B), "ref");
+        assert_eq!(stimulus_at(&t, Position::A), "test");
+        // A 10-12, grey 12-12.5, B 12.5-14.5, grey 14.5-15, A 15-17, B 17-19.
+        let f = p.at(10.0 + 3.25);
+        assert_eq!(f.show, Show::One(Position::B));
+        assert!((f.clip_time_s - 0.75).abs() < 1e-9 && !f.finished);
+        assert_eq!(p.at(14.75).show, Show::Grey);
+        assert_eq!(p.at(17.5).show, Show::One(Position::B));
+        assert!(!p.accepts_response());
+        let f = p.at(19.01);
+        assert!(f.finished && f.show == Show::Grey && p.accepts_response());
+    }
+
+    #[test]
+    fn side_by_side_plays_the_required_count_then_holds() {
+        let t = trial(Arrangement::SideBySide, Position::Left);
+        let mut p = Presentation::new(&t, &settings(Arrangement::SideBySide, 0, 2), 1.5, 0.0);
+        assert_eq!(p.steps().len(), 2);
+        assert!(!p.at(2.9).finished);
+        assert!(!p.accepts_response());
+        let f = p.at(3.2);
+        assert!(f.finished && (f.clip_time_s - 1.5).abs() < 1e-12);
+        assert!(p.can_replay());
+        assert!(p.replay(4.0));
+        // A replay keeps answers allowed but the study allows only one.
+        assert!(p.accepts_response() && !p.can_replay() && !p.replay(9.0));
+        assert_eq!(p.replays(), 1);
+        assert!((p.at(4.5).clip_time_s - 0.5).abs() < 1e-12);
+        p.restart(20.0);
+        assert!(!p.accepts_response());
+    }
+
+    #[test]
+    fn sequential_inserts_grey_between_the_intervals() {
+        let t = trial(Arrangement::Sequential, Position::Second);
+        let p = Presentation::new(&t, &settings(Arrangement::Sequential, 300, 1), 1.0, 0.0);
+        let shows: Vec<Show> = p.steps().iter().map(|s| s.show).collect();
+        assert_eq!(
+            shows,
+            [
+                Show::One(Position::First),
+                Show::Grey,
+                Show::One(Position::Second)
+            ]
+        );
+        assert_eq!(stimulus_at(&t, Position::First), "test");
+    }
+}

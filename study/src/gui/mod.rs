@@ -1,0 +1,19 @@
+//! The study window: a wgpu skeleton renderer, the subject's screens in egui, frame timing,
+//! and the eframe (winit + wgpu) window that hosts them.
+//!
+//! Layers, each testable on its own: [`scene`] (poses → shapes, camera; no GPU), [`render`]
+//! (wgpu pipelines, also offscreen), [`flow`] (a trial's presentation schedule), [`timing`]
+//! (frame intervals and drops), [`screens`] (egui screens over a session, driven by
+//! `egui_kittest` in tests) and [`window`] (the native window).
+
+pub mod flow;
+pub mod render;
+pub mod scene;
+pub mod screens;
+pub mod timing;
+pub mod window;
+
+#[cfg(test)]
+mod render_tests;
+#[cfg(test)]
+mod ui_tests;

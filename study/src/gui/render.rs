@@ -1,0 +1,678 @@
+//! The wgpu skeleton renderer: instanced low-polygon cylinders and spheres and a ground grid,
+//! drawn into any render pass (the window's egui pass through a paint callback, or an
+//! offscreen texture for tests and screenshots).
+//!
+//! Each viewport has a *slot* (uniforms + instance buffer): `prepare` uploads a viewport's
+//! camera and shapes, `paint` records three draw calls (ground, bones, joints). It knows
+//! nothing of trials.
+
+use std::sync::Arc;
+
+use anyhow::Context as _;
+use egui_wgpu::wgpu;
+use wgpu::util::DeviceExt as _;
+
+use super::scene::{FrameShapes, Instance, View};
+
+/// Background behind the skeletons (the ground fades into it), gamma-space RGB.
+pub const BACKGROUND: [f32; 3] = [0.20, 0.21, 0.24];
+
+const GLOBALS_BYTES: u64 = 112;
+const VERTEX_BYTES: u64 = 24;
+
+/// Formats of the pass the renderer draws into.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Targets {
+    /// Colour target format.
+    pub color: wgpu::TextureFormat,
+    /// Depth format, if the pass has a depth attachment.
+    pub depth: Option<wgpu::TextureFormat>,
+    /// MSAA sample count (1 = off).
+    pub samples: u32,
+}
+
+struct Mesh {
+    vertices: wgpu::Buffer,
+    indices: wgpu::Buffer,
+    count: u32,
+}
+
+struct Slot {
+    globals: wgpu::Buffer,
+    bind_group: wgpu::BindGroup,
+    instances: wgpu::Buffer,
+    capacity: usize,
+    bones: u32,
+    joints: u32,
+}
+
+/// Pipelines, meshes and per-viewport slots.
+pub struct SkeletonRenderer {
+    mesh_pipeline: wgpu::RenderPipeline,
+    ground_pipeline: wgpu::RenderPipeline,
+    layout: wgpu::BindGroupLayout,
+    cylinder: Mesh,
+    sphere: Mesh,
+    slots: Vec<Slot>,
+    bytes: Vec<u8>,
+}
+
+fn floats(v: &[f32]) -> Vec<u8> {
+    v.iter().flat_map(|f| f.to_le_bytes()).collect()
+}
+
+fn mesh(device: &wgpu::Device, label: &str, vertices: &[f32], indices: &[u16]) -> Mesh {
+    Mesh {
+        vertices: device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(label),
+            contents: &floats(vertices),
+            usage: wgpu::BufferUsages::VERTEX,
+        }),
+        indices: device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(label),
+            contents: &indices
+                .iter()
+                .flat_map(|i| i.to_le_bytes())
+                .collect::<Vec<u8>>(),
+            usage: wgpu::BufferUsages::INDEX,
+        }),
+        count: indices.len() as u32,
+    }
+}
+
+/// A unit cylinder along +y from 0 to 1, radius 1, open ends (joint spheres cover them).
+fn cylinder_mesh(segments: u16) -> (Vec<f32>, Vec<u16>) {
+    let mut v = Vec::new();
+    let mut idx = Vec::new();
+    for s in 0..=segments {
+        let a = f32::from(s) / f32::from(segments) * std::f32::consts::TAU;
+        let (x, z) = (a.cos(), a.sin());
+        for y in [0.0, 1.0] {
+            v.extend_from_slice(&[x, y, z, x, 0.0, z]);
+        }
+    }
+    for s in 0..segments {
+        let b = s * 2;
+        // Counter-clockwise seen from outside (wgpu's default front face).
+        idx.extend_from_slice(&[b, b + 1, b + 2, b + 1, b + 3, b + 2]);
+    }
+    (v, idx)
+}
+
+/// A unit sphere of `rings` × `sectors` quads.
+fn sphere_mesh(rings: u16, sectors: u16) -> (Vec<f32>, Vec<u16>) {
+    let mut v = Vec::new();
+    let mut idx = Vec::new();
+    for r in 0..=rings {
+        let phi = f32::from(r) / f32::from(rings) * std::f32::consts::PI;
+        for s in 0..=sectors {
+            let th = f32::from(s) / f32::from(sectors) * std::f32::consts::TAU;
+            let p = [phi.sin() * th.cos(), phi.cos(), phi.sin() * th.sin()];
+            v.extend_from_slice(&[p[0], p[1], p[2], p[0], p[1], p[2]]);
+        }
+    }
+    let w = sectors + 1;
+    for r in 0..rings {
+        for s in 0..sectors {
+            let a = r * w + s;
+            idx.extend_from_slice(&[a, a + 1, a + w, a + 1, a + w + 1, a + w]);
+        }
+    }
+    (v, idx)
+}
+
+impl SkeletonRenderer {
+    /// Builds the pipelines for passes with `targets`.
+    #[expect(
+        clippy::too_many_lines,
+        reason = "two pipeline descriptors spelled out field by field read best together"
+    )]
+    pub fn new(device: &wgpu::Device, targets: Targets) -> SkeletonRenderer {
+        let shader = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("skeleton"),
+            source: wgpu::ShaderSource::Wgsl(include_str!("skeleton.wgsl").into()),
+        });
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("skeleton globals"),
+            entries: &[wgpu::BindGroupLayoutEntry {
+                binding: 0,
+                visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Uniform,
+                    has_dynamic_offset: false,
+                    min_binding_size: wgpu::BufferSize::new(GLOBALS_BYTES),
+                },
+                count: None,
+            }],
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("skeleton"),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let depth_stencil = targets.depth.map(|format| wgpu::DepthStencilState {
+            format,
+            depth_write_enabled: Some(true),
+            depth_compare: Some(wgpu::CompareFunction::Less),
+            stencil: wgpu::StencilState::default(),
+            bias: wgpu::DepthBiasState::default(),
+        });
+        let multisample = wgpu::MultisampleState {
+            count: targets.samples.max(1),
+            ..wgpu::MultisampleState::default()
+        };
+        let color = [Some(wgpu::ColorTargetState {
+            format: targets.color,
+            blend: None,
+            write_mask: wgpu::ColorWrites::ALL,
+        })];
+        let vertex_attrs = wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3];
+        let instance_attrs = wgpu::vertex_attr_array![
+            2 => Float32x3, 3 => Float32x4, 4 => Float32x3, 5 => Float32x4
+        ];
+        let buffers = [
+            Some(wgpu::VertexBufferLayout {
+                array_stride: VERTEX_BYTES,
+                step_mode: wgpu::VertexStepMode::Vertex,
+                attributes: &vertex_attrs,
+            }),
+            Some(wgpu::VertexBufferLayout {
+                array_stride: Instance::BYTES as u64,
+                step_mode: wgpu::VertexStepMode::Instance,
+                attributes: &instance_attrs,
+            }),
+        ];
+        let mesh_pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("skeleton meshes"),
+            layout: Some(&pipeline_layout),
+            vertex: wgpu::VertexState {
+                module: &shader,
+                entry_point: Some("vs_mesh"),
+                compilation_options: wgpu::PipelineCompilationOptions::default(),
+                buffers: &buffers,
+            },
+            primitive: wgpu::PrimitiveState {
+                cull_mode: Some(wgpu::Face::Back),
+                ..wgpu::PrimitiveState::default()
+            },
+            depth_stencil: depth_stencil.clone(),
+            multisample,
+            fragment: Some(wgpu::FragmentState {
+                module: &shader,
+                entry_point: Some("fs_mesh"),
+                compilation_options: wgpu::PipelineCompilationOptions::default(),
+                targets: &color,
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
+        let ground_pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("ground"),
+            layout: Some(&pipeline_layout),
+            vertex: wgpu::VertexState {
+                module: &shader,
+                entry_point: Some("vs_ground"),
+                compilation_options: wgpu::PipelineCompilationOptions::default(),
+                buffers: &[],
+            },
+            primitive: wgpu::PrimitiveState::default(),
+            depth_stencil,
+            multisample,
+            fragment: Some(wgpu::FragmentState {
+                module: &shader,
+                entry_point: Some("fs_ground"),
+                compilation_options: wgpu::PipelineCompilationOptions::default(),
+                targets: &color,
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
+        let (cv, ci) = cylinder_mesh(10);
+        let (sv, si) = sphere_mesh(6, 10);
+        SkeletonRenderer {
+            mesh_pipeline,
+            ground_pipeline,
+            layout,
+            cylinder: mesh(device, "cylinder", &cv, &ci),
+            sphere: mesh(device, "sphere", &sv, &si),
+            slots: Vec::new(),
+            bytes: Vec::new(),
+        }
+    }
+
+    /// Uploads viewport `slot`'s camera (for a viewport of aspect `aspect`) and shapes.
+    pub fn prepare(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        slot: usize,
+        view: &View,
+        aspect: f32,
+        shapes: &FrameShapes,
+    ) {
+        while self.slots.len() <= slot {
+            let globals = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("skeleton globals"),
+                size: GLOBALS_BYTES,
+                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("skeleton globals"),
+                layout: &self.layout,
+                entries: &[wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: globals.as_entire_binding(),
+                }],
+            });
+            self.slots.push(Slot {
+                globals,
+                bind_group,
+                instances: instance_buffer(device, 64),
+                capacity: 64,
+                bones: 0,
+                joints: 0,
+            });
+        }
+        let vp = view.view_proj(aspect);
+        let mut g: Vec<f32> = vp.iter().flatten().copied().collect();
+        let light = [0.35f32, 0.85, 0.4];
+        let n = light.iter().map(|v| v * v).sum::<f32>().sqrt();
+        g.extend_from_slice(&[light[0] / n, light[1] / n, light[2] / n, 0.35]);
+        // Shader layout: x, z = ground centre, y = half side, w = height.
+        g.extend_from_slice(&[
+            view.target[0],
+            view.ground_half,
+            view.target[2],
+            view.ground_y,
+        ]);
+        g.extend_from_slice(&[view.grid, 0.0, 0.0, 0.0]);
+        let count = shapes.bones.len() + shapes.joints.len();
+        let Some(s) = self.slots.get_mut(slot) else {
+            return;
+        };
+        queue.write_buffer(&s.globals, 0, &floats(&g));
+        if count > s.capacity {
+            s.capacity = count.next_power_of_two();
+            s.instances = instance_buffer(device, s.capacity);
+        }
+        self.bytes.clear();
+        for i in shapes.bones.iter().chain(&shapes.joints) {
+            i.write(&mut self.bytes);
+        }
+        if !self.bytes.is_empty() {
+            queue.write_buffer(&s.instances, 0, &self.bytes);
+        }
+        s.bones = shapes.bones.len() as u32;
+        s.joints = shapes.joints.len() as u32;
+    }
+
+    /// Records slot `slot`'s draw calls into `pass` (viewport already set by the caller).
+    pub fn paint(&self, pass: &mut wgpu::RenderPass<'_>, slot: usize) {
+        let Some(s) = self.slots.get(slot) else {
+            return;
+        };
+        pass.set_bind_group(0, &s.bind_group, &[]);
+        pass.set_pipeline(&self.ground_pipeline);
+        pass.draw(0..6, 0..1);
+        pass.set_pipeline(&self.mesh_pipeline);
+        pass.set_vertex_buffer(1, s.instances.slice(..));
+        for (mesh, range) in [
+            (&self.cylinder, 0..s.bones),
+            (&self.sphere, s.bones..s.bones + s.joints),
+        ] {
+            if range.is_empty() {
+                continue;
+            }
+            pass.set_vertex_buffer(0, mesh.vertices.slice(..));
+            pass.set_index_buffer(mesh.indices.slice(..), wgpu::IndexFormat::Uint16);
+            pass.draw_indexed(0..mesh.count, 0, range);
+        }
+    }
+}
+
+fn instance_buffer(device: &wgpu::Device, capacity: usize) -> wgpu::Buffer {
+    device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("skeleton instances"),
+        size: (capacity * Instance::BYTES) as u64,
+        usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    })
+}
+
+/// What one egui viewport draws: a camera and the shapes of one frame.
+pub struct SkeletonCallback {
+    /// Renderer slot (0 = left / single viewport, 1 = right).
+    pub slot: usize,
+    /// The clip's camera.
+    pub view: View,
+    /// Viewport aspect ratio.
+    pub aspect: f32,
+    /// Shapes at this frame's presentation time.
+    pub shapes: Arc<FrameShapes>,
+}
+
+impl egui_wgpu::CallbackTrait for SkeletonCallback {
+    fn prepare(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        _screen: &egui_wgpu::ScreenDescriptor,
+        _encoder: &mut wgpu::CommandEncoder,
+        resources: &mut egui_wgpu::CallbackResources,
+    ) -> Vec<wgpu::CommandBuffer> {
+        if let Some(r) = resources.get_mut::<SkeletonRenderer>() {
+            r.prepare(
+                device,
+                queue,
+                self.slot,
+                &self.view,
+                self.aspect,
+                &self.shapes,
+            );
+        }
+        Vec::new()
+    }
+
+    fn paint(
+        &self,
+        _info: egui::PaintCallbackInfo,
+        pass: &mut wgpu::RenderPass<'static>,
+        resources: &egui_wgpu::CallbackResources,
+    ) {
+        if let Some(r) = resources.get::<SkeletonRenderer>() {
+            r.paint(pass, self.slot);
+        }
+    }
+}
+
+/// An RGBA8 image read back from the GPU, rows top to bottom.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Image {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// `width × height × 4` bytes.
+    pub rgba: Vec<u8>,
+}
+
+impl Image {
+    /// The pixel at (x, y).
+    #[cfg(test)]
+    pub fn pixel(&self, x: u32, y: u32) -> [u8; 4] {
+        let i = ((y * self.width + x) * 4) as usize;
+        let mut p = [0; 4];
+        if let Some(s) = self.rgba.get(i..i + 4) {
+            p.copy_from_slice(s);
+        }
+        p
+    }
+
+    /// Writes the image as PNG.
+    ///
+    /// # Errors
+    /// I/O or encoder errors, naming the file.
+    pub fn write_png(&self, path: &std::path::Path) -> anyhow::Result<()> {
+        let file =
+            std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
+        let mut enc = png::Encoder::new(std::io::BufWriter::new(file), self.width, self.height);
+        enc.set_color(png::ColorType::Rgba);
+        enc.set_depth(png::BitDepth::Eight);
+        let mut w = enc
+            .write_header()
+            .with_context(|| format!("writing {}", path.display()))?;
+        w.write_image_data(&self.rgba)
+            .with_context(|| format!("writing {}", path.display()))?;
+        w.finish()
+            .with_context(|| format!("writing {}", path.display()))?;
+        Ok(())
+    }
+
+    /// Reads an RGBA8 PNG.
+    ///
+    /// # Errors
+    /// The file cannot be read or is not an 8-bit RGBA PNG, naming the file.
+    #[cfg(test)]
+    pub fn read_png(path: &std::path::Path) -> anyhow::Result<Image> {
+        let file =
+            std::fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
+        let mut dec = png::Decoder::new(std::io::BufReader::new(file))
+            .read_info()
+            .with_context(|| format!("{}: not a PNG", path.display()))?;
+        let info = dec.info();
+        if info.color_type != png::ColorType::Rgba || info.bit_depth != png::BitDepth::Eight {
+            anyhow::bail!("{}: expected an 8-bit RGBA PNG", path.display());
+        }
+        let (width, height) = (info.width, info.height);
+        if u64::from(width) * u64::from(height) > 1 << 26 {
+            anyhow::bail!("{}: {width}×{height} is too large", path.display());
+        }
+        let mut rgba = vec![0; (width * height * 4) as usize];
+        dec.next_frame(&mut rgba)
+            .with_context(|| format!("{}: corrupt PNG data", path.display()))?;
+        Ok(Image {
+            width,
+            height,
+            rgba,
+        })
+    }
+}
+
+/// One viewport of an offscreen frame.
+pub struct Pane<'a> {
+    /// Left edge, pixels.
+    pub x: u32,
+    /// Top edge, pixels.
+    pub y: u32,
+    /// Width, pixels.
+    pub width: u32,
+    /// Height, pixels.
+    pub height: u32,
+    /// Camera.
+    pub view: &'a View,
+    /// Shapes.
+    pub shapes: &'a FrameShapes,
+}
+
+/// A headless device rendering into textures: the display-free core of the renderer.
+pub struct Offscreen {
+    device: wgpu::Device,
+    queue: wgpu::Queue,
+    info: wgpu::AdapterInfo,
+    renderer: SkeletonRenderer,
+    samples: u32,
+}
+
+/// Colour format of offscreen frames.
+const OFFSCREEN_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
+const OFFSCREEN_DEPTH: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+
+impl Offscreen {
+    /// Opens the first adapter wgpu finds (Mesa's lavapipe on a machine without a GPU) with
+    /// `samples`-times MSAA.
+    ///
+    /// # Errors
+    /// No adapter (no Vulkan driver installed) or no device.
+    pub fn new(samples: u32) -> anyhow::Result<Offscreen> {
+        let instance =
+            wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        let adapter =
+            pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions::default()))
+                .context(
+                "no graphics adapter (on Debian: apt-get install mesa-vulkan-drivers libvulkan1)",
+            )?;
+        let (device, queue) =
+            pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor::default()))
+                .context("opening the graphics device")?;
+        let samples = samples.max(1);
+        let renderer = SkeletonRenderer::new(
+            &device,
+            Targets {
+                color: OFFSCREEN_FORMAT,
+                depth: Some(OFFSCREEN_DEPTH),
+                samples,
+            },
+        );
+        Ok(Offscreen {
+            device,
+            queue,
+            info: adapter.get_info(),
+            renderer,
+            samples,
+        })
+    }
+
+    /// The adapter in use.
+    pub fn adapter(&self) -> &wgpu::AdapterInfo {
+        &self.info
+    }
+
+    /// Renders `panes` into a `width × height` frame cleared to [`BACKGROUND`].
+    ///
+    /// # Errors
+    /// The frame cannot be read back.
+    #[expect(
+        clippy::too_many_lines,
+        reason = "targets, pass and readback of one frame in wgpu's descriptor style"
+    )]
+    pub fn render(&mut self, width: u32, height: u32, panes: &[Pane<'_>]) -> anyhow::Result<Image> {
+        let size = wgpu::Extent3d {
+            width,
+            height,
+            depth_or_array_layers: 1,
+        };
+        let texture = |format, samples, usage| {
+            self.device.create_texture(&wgpu::TextureDescriptor {
+                label: Some("offscreen"),
+                size,
+                mip_level_count: 1,
+                sample_count: samples,
+                dimension: wgpu::TextureDimension::D2,
+                format,
+                usage,
+                view_formats: &[],
+            })
+        };
+        let resolved = texture(
+            OFFSCREEN_FORMAT,
+            1,
+            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+        );
+        let msaa = (self.samples > 1).then(|| {
+            texture(
+                OFFSCREEN_FORMAT,
+                self.samples,
+                wgpu::TextureUsages::RENDER_ATTACHMENT,
+            )
+        });
+        let depth = texture(
+            OFFSCREEN_DEPTH,
+            self.samples,
+            wgpu::TextureUsages::RENDER_ATTACHMENT,
+        );
+        let resolved_view = resolved.create_view(&wgpu::TextureViewDescriptor::default());
+        let msaa_view = msaa
+            .as_ref()
+            .map(|t| t.create_view(&wgpu::TextureViewDescriptor::default()));
+        let depth_view = depth.create_view(&wgpu::TextureViewDescriptor::default());
+        for (k, p) in panes.iter().enumerate() {
+            let aspect = p.width as f32 / p.height.max(1) as f32;
+            self.renderer
+                .prepare(&self.device, &self.queue, k, p.view, aspect, p.shapes);
+        }
+        let mut encoder = self
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
+        {
+            let (view, resolve_target) = match &msaa_view {
+                Some(m) => (m, Some(&resolved_view)),
+                None => (&resolved_view, None),
+            };
+            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("offscreen"),
+                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                    view,
+                    depth_slice: None,
+                    resolve_target,
+                    ops: wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(wgpu::Color {
+                            r: f64::from(BACKGROUND[0]),
+                            g: f64::from(BACKGROUND[1]),
+                            b: f64::from(BACKGROUND[2]),
+                            a: 1.0,
+                        }),
+                        store: wgpu::StoreOp::Store,
+                    },
+                })],
+                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                    view: &depth_view,
+                    depth_ops: Some(wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(1.0),
+                        store: wgpu::StoreOp::Discard,
+                    }),
+                    stencil_ops: None,
+                }),
+                ..wgpu::RenderPassDescriptor::default()
+            });
+            for (k, p) in panes.iter().enumerate() {
+                pass.set_viewport(
+                    p.x as f32,
+                    p.y as f32,
+                    p.width as f32,
+                    p.height as f32,
+                    0.0,
+                    1.0,
+                );
+                self.renderer.paint(&mut pass, k);
+            }
+        }
+        let row = (width * 4).div_ceil(256) * 256;
+        let readback = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("readback"),
+            size: u64::from(row) * u64::from(height),
+            usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+            mapped_at_creation: false,
+        });
+        encoder.copy_texture_to_buffer(
+            resolved.as_image_copy(),
+            wgpu::TexelCopyBufferInfo {
+                buffer: &readback,
+                layout: wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(row),
+                    rows_per_image: Some(height),
+                },
+            },
+            size,
+        );
+        self.queue.submit([encoder.finish()]);
+        let slice = readback.slice(..);
+        let (tx, rx) = std::sync::mpsc::channel();
+        slice.map_async(wgpu::MapMode::Read, move |r| {
+            let _ = tx.send(r);
+        });
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .context("waiting for the frame")?;
+        rx.recv()
+            .context("the frame was never mapped")?
+            .context("mapping the frame")?;
+        let data = slice
+            .get_mapped_range()
+            .map_err(|e| anyhow::anyhow!("{e:?}"))
+            .context("reading the frame")?;
+        let mut rgba = Vec::with_capacity((width * height * 4) as usize);
+        for y in 0..height {
+            let start = (y * row) as usize;
+            rgba.extend_from_slice(&data[start..start + (width * 4) as usize]);
+        }
+        drop(data);
+        readback.unmap();
+        Ok(Image {
+            width,
+            height,
+            rgba,
+        })
+    }
+}

@@ -1,0 +1,318 @@
+//! The subject's screens driven as a screen reader sees them (`egui_kittest`, AccessKit
+//! roles and labels), over real sessions written to a temporary results folder.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use egui::Key;
+use egui_kittest::Harness;
+use egui_kittest::kittest::{NodeT as _, Queryable as _};
+use protocols::StudyDefinition;
+use protocols::record::{Answer, Position};
+use results::store::{SESSION_FILE, SessionState, TRIALS_FILE, read_json};
+use results::trials::read_trials;
+
+use super::screens::{Exit, StudyUi, Texts};
+use super::timing::FrameClock;
+use crate::session::{Opened, Recorder};
+use crate::stimuli::StimulusLibrary;
+
+/// Seconds per kittest step.
+const DT: f32 = 0.05;
+
+struct Fixture {
+    dir: PathBuf,
+    study_path: PathBuf,
+}
+
+impl Drop for Fixture {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}
+
+fn fixture(name: &str, study_body: &str) -> Fixture {
+    let dir = std::env::temp_dir().join(format!(
+        "study-ui-{name}-{}-{}",
+        std::process::id(),
+        std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_nanos())
+    ));
+    std::fs::create_dir_all(&dir).unwrap();
+    // A one-second walk: short presentations keep the tests quick.
+    let clip = codecs::synth::walking_clip(&codecs::synth::WalkParams {
+        duration_s: 1.0,
+        // AMC files carry no rate: CMU's 120 Hz is assumed when they are read back.
+        frame_rate_hz: 120.0,
+        ..codecs::synth::WalkParams::default()
+    });
+    codecs::io::write_clip(&clip, &dir.join("walk.amc"), Some(&dir.join("walk.asf"))).unwrap();
+    let stim = |id: &str, codec: &str, cr: f64, rms: f64| {
+        serde_json::json!({
+            "id": id, "clip": "walk", "codec": codec,
+            "target_cr": if codec == "reference" { serde_json::Value::Null } else { cr.into() },
+            "achieved_cr": cr, "file": "walk.amc", "skeleton": "walk.asf",
+            "params": if codec == "reference" { serde_json::json!({}) } else { serde_json::json!({"cr": cr}) },
+            "metrics": { "rms_cm": rms, "max_cm": rms * 3.0, "mean_angle_deg": rms }
+        })
+    };
+    let manifest = serde_json::json!({
+        "version": 1,
+        "stimuli": [
+            stim("walk/reference", "reference", 1.0, 0.0),
+            stim("walk/x/cr10", "x", 10.0, 0.5),
+            stim("walk/x/cr20", "x", 20.0, 1.5),
+        ]
+    });
+    std::fs::write(
+        dir.join("stimuli.json"),
+        serde_json::to_vec_pretty(&manifest).unwrap(),
+    )
+    .unwrap();
+    let study_path = dir.join("study.toml");
+    std::fs::write(
+        &study_path,
+        format!(
+            "format_version = 1\nname = \"ui-{name}\"\nstimuli = \"stimuli.json\"\nseed = 3\n{study_body}"
+        ),
+    )
+    .unwrap();
+    Fixture { dir, study_path }
+}
+
+const MOS: &str = "protocol = \"mos\"\n\
+    [conditions]\nclips = [\"walk\"]\ncodecs = [\"x\"]\ntarget_cr = [10, 20]\n\
+    [presentation]\nplayback_count = 1\nmax_replays = 1\n\
+    [session]\nfamiliarization = 0\nhidden_repeats = 0\nsubject_fields = [\"age\"]\n";
+
+const DSCQS: &str = "protocol = \"dscqs\"\n\
+    [conditions]\nclips = [\"walk\"]\ncodecs = [\"x\"]\ntarget_cr = [10]\n\
+    [presentation]\ngap_ms = 200\n\
+    [scale]\nkind = \"categorical\"\n\
+    [session]\nfamiliarization = 0\nhidden_repeats = 0\n";
+
+const AFC: &str = "protocol = \"staircase\"\n\
+    [presentation]\narrangement = \"side_by_side\"\n\
+    [staircase]\nparam = \"cr\"\ncodec = \"x\"\nstart = 20\nstep = 10\nmin = 10\nmax = 20\n\
+    stop_reversals = 2\nmax_trials = 3\n\
+    [[staircase.tracks]]\nclip = \"walk\"\n";
+
+struct Run {
+    fx: Fixture,
+    session_dir: PathBuf,
+}
+
+fn harness(fx: Fixture) -> (Harness<'static, (StudyUi, FrameClock)>, Run) {
+    let study = StudyDefinition::load(&fx.study_path).unwrap();
+    let session_dir = fx.dir.join("results").join("S01_s1");
+    std::fs::create_dir_all(session_dir.parent().unwrap()).unwrap();
+    let manifest = fresh_manifest(&study);
+    let Opened::Ready { recorder, .. } =
+        Recorder::open(&study, 0, &session_dir, false, manifest).unwrap()
+    else {
+        panic!("new session reported finished");
+    };
+    let library = StimulusLibrary::new(&study, &fx.study_path);
+    let ui = StudyUi::new(Arc::new(study), library, recorder, Texts::default(), false);
+    let h = Harness::builder()
+        .with_size(egui::vec2(1280.0, 720.0))
+        .with_step_dt(DT)
+        .build_ui_state(
+            |ui, (screens, clock): &mut (StudyUi, FrameClock)| screens.ui(ui, clock),
+            (ui, FrameClock::new(None)),
+        );
+    (h, Run { fx, session_dir })
+}
+
+fn fresh_manifest(study: &StudyDefinition) -> results::SessionManifest {
+    results::SessionManifest {
+        format_version: results::store::MANIFEST_FORMAT_VERSION,
+        study: study.name.clone(),
+        study_hash: "test".into(),
+        protocol: study.protocol,
+        subject: "S01".into(),
+        subject_index: 0,
+        session: 1,
+        plan_seed: study.seed,
+        observer_seed: None,
+        software_version: "test".into(),
+        subject_fields: std::collections::BTreeMap::new(),
+        started_ms: 0,
+        ended_ms: None,
+        status: SessionState::Running,
+        trials_logged: 0,
+        not_shown: Vec::new(),
+        thresholds: Vec::new(),
+        resumes: 0,
+        torn_rows: Vec::new(),
+        display: None,
+    }
+}
+
+fn rows(dir: &Path) -> Vec<protocols::TrialRecord> {
+    let path = dir.join(TRIALS_FILE);
+    if !path.exists() {
+        return Vec::new();
+    }
+    read_trials(&path).unwrap().records
+}
+
+/// Runs long enough for a one-second presentation (or DSCQS's A B A B) to finish.
+fn watch(h: &mut Harness<'_, (StudyUi, FrameClock)>, seconds: f32) {
+    h.run_steps((seconds / DT).ceil() as usize + 2);
+}
+
+fn begin(h: &mut Harness<'_, (StudyUi, FrameClock)>) {
+    h.run_steps(2);
+    h.get_by_label("Begin").click();
+    h.run_steps(2);
+}
+
+#[test]
+fn a_mos_trial_is_rated_by_clicking_four_and_a_half() {
+    let (mut h, run) = harness(fixture("mos", MOS));
+    h.run_steps(2);
+    // The subject field must be filled before the session can begin.
+    let age = h.get_by_role_and_label(egui::accesskit::Role::TextInput, "age");
+    age.focus();
+    h.run_steps(1);
+    h.get_by_role_and_label(egui::accesskit::Role::TextInput, "age")
+        .type_text("31");
+    h.run_steps(2);
+    h.get_by_label("Begin").click();
+    h.run_steps(2);
+    assert!(h.query_by_label("Trial 1 of 2").is_some());
+    watch(&mut h, 1.2);
+    h.get_by_label("4.5").click();
+    h.run_steps(1);
+    h.get_by_label("Continue").click();
+    h.run_steps(2);
+    let r = rows(&run.session_dir);
+    assert_eq!(r.len(), 1);
+    assert_eq!(r[0].response.answer, Answer::Rating(4.5));
+    // The second trial, by keyboard: 3, up (3.5), Enter.
+    watch(&mut h, 1.2);
+    h.key_press(Key::Num3);
+    h.run_steps(1);
+    h.key_press(Key::ArrowUp);
+    h.run_steps(1);
+    h.key_press(Key::Enter);
+    h.run_steps(3);
+    let r = rows(&run.session_dir);
+    assert_eq!(r.len(), 2);
+    assert_eq!(r[1].response.answer, Answer::Rating(3.5));
+    assert!(matches!(h.state().0.exit(), Some(Exit::Finished(_))));
+    let m: results::SessionManifest = read_json(&run.session_dir.join(SESSION_FILE)).unwrap();
+    assert_eq!(m.status, SessionState::Complete);
+    assert_eq!(m.subject_fields.get("age").map(String::as_str), Some("31"));
+    drop(run.fx);
+}
+
+#[test]
+fn a_response_before_the_stimulus_finished_is_ignored() {
+    let (mut h, run) = harness(fixture("early", AFC));
+    begin(&mut h);
+    // Half-way through the presentation: the arrow key and the button do nothing.
+    h.run_steps(5);
+    h.key_press(Key::ArrowRight);
+    h.run_steps(2);
+    assert!(rows(&run.session_dir).is_empty());
+    assert!(h.get_by_label("Right").accesskit_node().is_disabled());
+    h.get_by_label("Right").click();
+    h.run_steps(2);
+    assert!(rows(&run.session_dir).is_empty());
+    // Once shown, the right arrow answers.
+    watch(&mut h, 1.0);
+    h.key_press(Key::ArrowRight);
+    h.run_steps(2);
+    let r = rows(&run.session_dir);
+    assert_eq!(r.len(), 1);
+    assert_eq!(r[0].response.answer, Answer::Choice(Position::Right));
+    assert_eq!(
+        r[0].outcome.correct,
+        Some(r[0].trial.reference_position == Position::Right)
+    );
+    assert!(r[0].response.response_time_ms > 0);
+    drop(run.fx);
+}
+
+#[test]
+fn a_dscqs_pair_is_rated_twice() {
+    let (mut h, run) = harness(fixture("dscqs", DSCQS));
+    begin(&mut h);
+    // A, grey, B, grey, A, B: 4 × 1 s + 2 × 0.2 s.
+    watch(&mut h, 4.6);
+    let fours: Vec<_> = h.get_all_by_label("4").collect();
+    assert_eq!(fours.len(), 2, "one row of ratings for A and one for B");
+    fours[0].click();
+    h.run_steps(1);
+    let twos: Vec<_> = h.get_all_by_label("2").collect();
+    twos[1].click();
+    h.run_steps(1);
+    h.get_by_label("Continue").click();
+    h.run_steps(3);
+    let r = rows(&run.session_dir);
+    assert_eq!(r.len(), 1);
+    assert_eq!(r[0].response.answer, Answer::Pair { a: 4.0, b: 2.0 });
+    let (reference, test) = if r[0].trial.reference_position == Position::A {
+        (4.0, 2.0)
+    } else {
+        (2.0, 4.0)
+    };
+    assert_eq!(r[0].outcome.score_reference, Some(reference));
+    assert_eq!(r[0].outcome.score_test, Some(test));
+    assert!(matches!(h.state().0.exit(), Some(Exit::Finished(_))));
+    drop(run.fx);
+}
+
+#[test]
+fn pause_and_quit_need_confirmation_and_record_nothing() {
+    let (mut h, run) = harness(fixture("pause", AFC));
+    begin(&mut h);
+    watch(&mut h, 1.2);
+    // The experimenter's chord opens the pause; answer keys are ignored under it.
+    h.key_press_modifiers(egui::Modifiers::CTRL | egui::Modifiers::SHIFT, Key::P);
+    h.run_steps(2);
+    assert!(h.query_by_label("Paused by the experimenter").is_some());
+    h.key_press(Key::ArrowLeft);
+    h.run_steps(2);
+    assert!(rows(&run.session_dir).is_empty());
+    // Quit asks once more; Back returns to the trial, shown again from the start.
+    h.get_by_label("Quit session…").click();
+    h.run_steps(2);
+    assert!(h.query_by_label("Quit the session?").is_some());
+    assert!(h.state().0.exit().is_none());
+    h.get_by_label("Back").click();
+    h.run_steps(2);
+    assert!(
+        h.get_by_label("Left").accesskit_node().is_disabled(),
+        "the trial restarts its presentation"
+    );
+    watch(&mut h, 1.2);
+    h.key_press(Key::ArrowLeft);
+    h.run_steps(2);
+    assert_eq!(rows(&run.session_dir).len(), 1);
+    // Now quit for real: nothing else is recorded and the session stays resumable.
+    h.key_press_modifiers(egui::Modifiers::CTRL | egui::Modifiers::SHIFT, Key::P);
+    h.run_steps(2);
+    h.get_by_label("Quit session…").click();
+    h.run_steps(2);
+    h.get_by_label("Quit and save").click();
+    h.run_steps(2);
+    assert_eq!(h.state().0.exit(), Some(&Exit::Quit { logged: 1 }));
+    assert_eq!(rows(&run.session_dir).len(), 1);
+    let m: results::SessionManifest = read_json(&run.session_dir.join(SESSION_FILE)).unwrap();
+    assert_eq!(m.status, SessionState::Running);
+    drop(run.fx);
+}
+
+#[test]
+fn closing_the_window_mid_session_asks_first() {
+    let (mut h, run) = harness(fixture("close", AFC));
+    begin(&mut h);
+    assert!(!h.state_mut().0.close_requested());
+    h.run_steps(2);
+    assert!(h.query_by_label("Quit the session?").is_some());
+    drop(run.fx);
+}

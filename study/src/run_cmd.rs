@@ -1,0 +1,483 @@
+//! `study run`: one subject's session in the study window, and `study display-test`: the
+//! window's frame timing on this display.
+
+use std::fmt::Write as _;
+use std::fs;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use anyhow::{Context as _, bail};
+use clap::Args;
+use protocols::StudyDefinition;
+use protocols::study::content_hash;
+use results::store::{DisplayInfo, MANIFEST_FORMAT_VERSION, RUN_FILE, SessionState, write_new};
+use results::{RunManifest, SessionManifest};
+
+use crate::gui::render::BACKGROUND;
+use crate::gui::scene::{Figure, FrameShapes, View};
+use crate::gui::screens::{Exit, StudyUi, Texts};
+use crate::gui::timing::FrameClock;
+use crate::gui::window::{self, Next, WindowOptions, WindowReport};
+use crate::session::{Opened, Recorder, now_ms};
+use crate::stimuli::StimulusLibrary;
+
+/// Window size `WxH`.
+fn parse_size(s: &str) -> Result<[f32; 2], String> {
+    let (w, h) = s
+        .split_once('x')
+        .ok_or_else(|| format!("{s:?}: expected WIDTHxHEIGHT, e.g. 1280x720"))?;
+    let p = |v: &str| {
+        v.trim()
+            .parse::<u16>()
+            .ok()
+            .filter(|v| *v >= 320)
+            .map(f32::from)
+            .ok_or_else(|| format!("{v:?}: expected a whole number of pixels ≥ 320"))
+    };
+    Ok([p(w)?, p(h)?])
+}
+
+/// Arguments of `study run`.
+#[derive(Debug, Args)]
+pub struct RunArgs {
+    /// Study file (TOML).
+    pub study: PathBuf,
+    /// Subject id (letters, digits, `-` and `_`).
+    #[arg(long)]
+    pub subject: String,
+    /// Session number of this subject.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=999))]
+    pub session: u32,
+    /// Continue an interrupted session of this subject.
+    #[arg(long)]
+    pub resume: bool,
+    /// Borderless fullscreen (on `--monitor`).
+    #[arg(long)]
+    pub fullscreen: bool,
+    /// Monitor index for fullscreen.
+    #[arg(long)]
+    pub monitor: Option<usize>,
+    /// Window size when not fullscreen.
+    #[arg(long, default_value = "1280x720", value_parser = parse_size)]
+    pub window_size: [f32; 2],
+    /// Results directory (one per study; each subject's session is a folder inside).
+    /// Default: `results-<study name>` beside the study file.
+    #[arg(short = 'o', long = "output")]
+    pub output: Option<PathBuf>,
+}
+
+/// Arguments of `study display-test`.
+#[derive(Debug, Args)]
+pub struct DisplayTestArgs {
+    /// Seconds to measure (after the refresh period is estimated).
+    #[arg(long, default_value_t = 10.0)]
+    pub seconds: f64,
+    /// Borderless fullscreen.
+    #[arg(long)]
+    pub fullscreen: bool,
+    /// Monitor index for fullscreen.
+    #[arg(long)]
+    pub monitor: Option<usize>,
+    /// Window size when not fullscreen.
+    #[arg(long, default_value = "1280x720", value_parser = parse_size)]
+    pub window_size: [f32; 2],
+    /// Clip to animate (`.bvh`, or `.amc` with `--asf`); default: the generated walk.
+    #[arg(long)]
+    pub clip: Option<PathBuf>,
+    /// ASF skeleton of an `.amc` clip.
+    #[arg(long)]
+    pub asf: Option<PathBuf>,
+    /// Also write the measurements as JSON here.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+}
+
+/// A subject's plan index: stable for an id and session, different between subjects.
+fn subject_index(subject: &str, session: u32) -> u32 {
+    let mut h: u32 = 0x811c_9dc5;
+    for b in subject.bytes().chain(format!("/{session}").bytes()) {
+        h ^= u32::from(b);
+        h = h.wrapping_mul(0x0100_0193);
+    }
+    h
+}
+
+fn check_subject(id: &str) -> anyhow::Result<()> {
+    if id.is_empty()
+        || id.len() > 64
+        || !id
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
+    {
+        bail!("--subject {id:?}: use 1-64 letters, digits, '-' or '_' (it names a folder)");
+    }
+    Ok(())
+}
+
+/// The results directory of a real study: created with its run manifest and the archived
+/// study on first use.
+fn open_results_dir(
+    out: &Path,
+    args: &RunArgs,
+    study: &StudyDefinition,
+    study_bytes: &[u8],
+) -> anyhow::Result<()> {
+    let hash = content_hash(study_bytes);
+    if out.join(RUN_FILE).exists() {
+        let run: RunManifest = results::store::read_json(&out.join(RUN_FILE))?;
+        if run.study != study.name {
+            bail!(
+                "{} holds results of study {:?}, not {:?}",
+                out.display(),
+                run.study,
+                study.name
+            );
+        }
+        if run.study_hash != hash {
+            eprintln!(
+                "note: {} changed since the first session in {} (hash {} -> {hash})",
+                args.study.display(),
+                out.display(),
+                run.study_hash
+            );
+        }
+    } else {
+        fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+        let run = RunManifest {
+            format_version: MANIFEST_FORMAT_VERSION,
+            study: study.name.clone(),
+            study_hash: hash,
+            study_file: "study.toml".into(),
+            plan_seed: study.seed,
+            observer_seed: None,
+            subjects: 0,
+            software_version: env!("CARGO_PKG_VERSION").into(),
+            created_ms: now_ms(),
+        };
+        write_new(&out.join(RUN_FILE), &serde_json::to_vec_pretty(&run)?)?;
+    }
+    crate::study_cmd::archive_study(out, &args.study, study_bytes, study)
+}
+
+/// `study run`: one subject's session in the window.
+///
+/// # Errors
+/// A bad study file or subject id, an existing session without `--resume`, no display, or a
+/// results folder that cannot be written.
+#[expect(
+    clippy::too_many_lines,
+    reason = "the session's setup, its window loop and how it ended, in the order they happen"
+)]
+pub fn run(args: &RunArgs) -> anyhow::Result<()> {
+    check_subject(&args.subject)?;
+    let study_bytes =
+        fs::read(&args.study).with_context(|| format!("reading {}", args.study.display()))?;
+    let study = StudyDefinition::load(&args.study)?;
+    if !window::display_available() {
+        bail!(
+            "no display (DISPLAY and WAYLAND_DISPLAY are unset): `study run` shows stimuli to a \
+             subject in a window. Run it on the lab machine's display, or dry-run the study with \
+             `study simulate {}`",
+            args.study.display()
+        );
+    }
+    let out = args.output.clone().unwrap_or_else(|| {
+        args.study
+            .parent()
+            .unwrap_or(Path::new("."))
+            .join(format!("results-{}", study.name))
+    });
+    open_results_dir(&out, args, &study, &study_bytes)?;
+    let dir = out.join(format!("{}_s{}", args.subject, args.session));
+    let index = subject_index(&args.subject, args.session);
+    let fresh = SessionManifest {
+        format_version: MANIFEST_FORMAT_VERSION,
+        study: study.name.clone(),
+        study_hash: content_hash(&study_bytes),
+        protocol: study.protocol,
+        subject: args.subject.clone(),
+        subject_index: index,
+        session: args.session,
+        plan_seed: study.seed,
+        observer_seed: None,
+        software_version: env!("CARGO_PKG_VERSION").into(),
+        subject_fields: std::collections::BTreeMap::new(),
+        started_ms: now_ms(),
+        ended_ms: None,
+        status: SessionState::Running,
+        trials_logged: 0,
+        not_shown: Vec::new(),
+        thresholds: Vec::new(),
+        resumes: 0,
+        torn_rows: Vec::new(),
+        display: None,
+    };
+    let recorder = match Recorder::open(&study, index, &dir, args.resume, fresh)? {
+        Opened::Finished(m) => {
+            let m = *m;
+            println!(
+                "{}: session already {:?} with {} trials; nothing to do",
+                dir.display(),
+                m.status,
+                m.trials_logged
+            );
+            return Ok(());
+        }
+        Opened::Ready { recorder, resumed } => {
+            if resumed > 0 {
+                println!("{}: resuming after {resumed} logged trials", dir.display());
+            }
+            recorder
+        }
+    };
+    let library = StimulusLibrary::new(&study, &args.study);
+    let study = Arc::new(study);
+    let mut screens = StudyUi::new(
+        Arc::clone(&study),
+        library,
+        recorder,
+        Texts::default(),
+        true,
+    );
+    let options = WindowOptions {
+        title: format!("study: {}", study.name),
+        fullscreen: args.fullscreen,
+        monitor: args.monitor,
+        size: args.window_size,
+    };
+    let exit = std::rc::Rc::new(std::cell::RefCell::new(None::<Exit>));
+    let exit_seen = std::rc::Rc::clone(&exit);
+    let mut display_logged = false;
+    let mut end_shown_at: Option<f64> = None;
+    let report = window::run_window(&options, move |ui, ctx| {
+        if ctx.close_requested {
+            // Mid-session this opens the quit confirmation instead of closing.
+            screens.close_requested();
+        }
+        if !display_logged && ctx.clock.calibrated() {
+            display_logged = true;
+            let info = display_info(ctx.facts, ctx.clock);
+            if let Err(e) = screens
+                .recorder_mut()
+                .update_manifest(|m| m.display = Some(info))
+            {
+                eprintln!("warning: writing the display information: {e:#}");
+            }
+        }
+        screens.ui(ui, ctx.clock);
+        if let Some(e) = screens.exit() {
+            *exit_seen.borrow_mut() = Some(e.clone());
+            // Leave the last screen up briefly so the subject sees it.
+            let now = ui.input(|i| i.time);
+            let since = *end_shown_at.get_or_insert(now);
+            return if now - since > 1.5 || ctx.close_requested {
+                Next::Close
+            } else {
+                Next::Animate
+            };
+        }
+        if screens.animating() {
+            Next::Animate
+        } else {
+            // Idle screens still need frames to measure the display before the first trial.
+            if ctx.clock.calibrated() {
+                Next::Idle
+            } else {
+                Next::Animate
+            }
+        }
+    })?;
+    print_timing(&report);
+    let exit = exit.borrow().clone();
+    match exit {
+        Some(Exit::Finished(summary)) => {
+            println!("{summary}");
+            println!("results: {}", out.display());
+            Ok(())
+        }
+        Some(Exit::Quit { logged }) => {
+            println!(
+                "session stopped by the experimenter after {logged} trials; continue with: \
+                 study run {} --subject {} --session {} --resume{}",
+                args.study.display(),
+                args.subject,
+                args.session,
+                args.output
+                    .as_ref()
+                    .map_or_else(String::new, |o| format!(" -o {}", o.display()))
+            );
+            Ok(())
+        }
+        Some(Exit::Failed(e)) => bail!("{e} (the session is resumable with --resume)"),
+        None => bail!("the window closed before the session ended (resumable with --resume)"),
+    }
+}
+
+fn display_info(facts: &window::DisplayFacts, clock: &FrameClock) -> DisplayInfo {
+    let period = clock.period();
+    DisplayInfo {
+        description: facts.describe(period),
+        width_px: facts.width_px,
+        height_px: facts.height_px,
+        refresh_hz: period.map_or(0.0, |(p, _)| 1000.0 / p),
+    }
+}
+
+fn percentile(sorted: &[f64], q: f64) -> f64 {
+    if sorted.is_empty() {
+        return 0.0;
+    }
+    let i = ((sorted.len() - 1) as f64 * q).round() as usize;
+    sorted[i.min(sorted.len() - 1)]
+}
+
+fn timing_text(report: &WindowReport) -> String {
+    let mut cpu = report.cpu_ms.clone();
+    cpu.sort_by(f64::total_cmp);
+    let s = report.session;
+    let mut t = String::new();
+    let _ = writeln!(t, "display: {}", report.facts.describe(report.period));
+    let _ = writeln!(
+        t,
+        "frames: {} presented, interval mean {:.2} ms, SD {:.3} ms, max {:.2} ms, {} dropped (> 1.5 periods)",
+        s.frames, s.mean_ms, s.sd_ms, s.max_ms, s.dropped
+    );
+    let _ = writeln!(
+        t,
+        "CPU per frame (update + record + submit): p50 {:.2} ms, p99 {:.2} ms, max {:.2} ms over {} frames",
+        percentile(&cpu, 0.5),
+        percentile(&cpu, 0.99),
+        cpu.last().copied().unwrap_or(0.0),
+        cpu.len()
+    );
+    if report.facts.device_type == "Cpu" {
+        let _ = writeln!(
+            t,
+            "note: a software (Cpu) adapter: these are software-rendering figures, not a lab monitor's"
+        );
+    }
+    t
+}
+
+fn print_timing(report: &WindowReport) {
+    print!("{}", timing_text(report));
+}
+
+/// `study display-test`: two animated skeletons side by side for `--seconds`, then the
+/// frame-interval statistics.
+///
+/// # Errors
+/// No display or adapter, an unreadable clip, or the JSON cannot be written.
+pub fn display_test(args: &DisplayTestArgs) -> anyhow::Result<()> {
+    if !window::display_available() {
+        bail!("no display (DISPLAY and WAYLAND_DISPLAY are unset): nothing to measure");
+    }
+    if !(args.seconds.is_finite() && args.seconds > 0.0 && args.seconds <= 3600.0) {
+        bail!("--seconds {}: expected 0 < seconds ≤ 3600", args.seconds);
+    }
+    let clip = match &args.clip {
+        Some(p) => codecs::io::read_clip(args.asf.as_deref(), p)?,
+        None => codecs::synth::walking_clip(&codecs::synth::WalkParams::default()),
+    };
+    let view = View::framing(&clip);
+    let mut figures = [Figure::new(&clip, &view), Figure::new(&clip, &view)];
+    let duration = figures[0].duration_s().max(0.1);
+    let options = WindowOptions {
+        title: "study: display test".into(),
+        fullscreen: args.fullscreen,
+        monitor: args.monitor,
+        size: args.window_size,
+    };
+    let seconds = args.seconds;
+    let mut measuring_since: Option<f64> = None;
+    let bg = egui::Color32::from_rgb(
+        (BACKGROUND[0] * 255.0) as u8,
+        (BACKGROUND[1] * 255.0) as u8,
+        (BACKGROUND[2] * 255.0) as u8,
+    );
+    let report = window::run_window(&options, move |ui, ctx| {
+        let now = ui.input(|i| i.time);
+        if ctx.clock.calibrated() && measuring_since.is_none() {
+            measuring_since = Some(now);
+            ctx.clock.start_segment();
+        }
+        let elapsed = measuring_since.map_or(0.0, |s| now - s);
+        egui::CentralPanel::default().show(ui, |ui| {
+            ui.label(match measuring_since {
+                None => "Estimating the refresh period…".to_string(),
+                Some(_) => format!("Measuring: {elapsed:.1} / {seconds:.0} s"),
+            });
+            let full = ui.available_rect_before_wrap();
+            let w = (full.width() - 12.0) * 0.5;
+            for (k, fig) in figures.iter_mut().enumerate() {
+                let rect = egui::Rect::from_min_size(
+                    egui::pos2(full.left() + k as f32 * (w + 12.0), full.top()),
+                    egui::vec2(w, full.height()),
+                );
+                ui.painter().rect_filled(rect, 0.0, bg);
+                let mut shapes = FrameShapes::default();
+                fig.shapes_at(now % duration, &mut shapes);
+                ui.painter()
+                    .add(eframe::egui_wgpu::Callback::new_paint_callback(
+                        rect,
+                        crate::gui::render::SkeletonCallback {
+                            slot: k,
+                            view,
+                            aspect: rect.width() / rect.height().max(1.0),
+                            shapes: Arc::new(shapes),
+                        },
+                    ));
+            }
+        });
+        if elapsed >= seconds || ctx.close_requested {
+            Next::Close
+        } else {
+            Next::Animate
+        }
+    })?;
+    let text = timing_text(&report);
+    print!("{text}");
+    if let Some(path) = &args.json {
+        let mut cpu = report.cpu_ms.clone();
+        cpu.sort_by(f64::total_cmp);
+        let s = report.session;
+        let json = serde_json::json!({
+            "display": report.facts.describe(report.period),
+            "adapter": report.facts.adapter,
+            "device_type": report.facts.device_type,
+            "driver": report.facts.driver,
+            "present_mode": report.facts.present_mode,
+            "width_px": report.facts.width_px,
+            "height_px": report.facts.height_px,
+            "refresh_hz": report.period.map(|(p, _)| 1000.0 / p),
+            "frames": s.frames,
+            "dropped": s.dropped,
+            "interval_mean_ms": s.mean_ms,
+            "interval_sd_ms": s.sd_ms,
+            "interval_max_ms": s.max_ms,
+            "cpu_p50_ms": percentile(&cpu, 0.5),
+            "cpu_p99_ms": percentile(&cpu, 0.99),
+        });
+        fs::write(path, serde_json::to_vec_pretty(&json)?)
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sizes_and_subject_ids_are_checked() {
+        assert_eq!(parse_size("1280x720"), Ok([1280.0, 720.0]));
+        assert!(parse_size("1280").is_err() && parse_size("100x100").is_err());
+        assert!(check_subject("S01_a-b").is_ok());
+        for bad in ["", "../x", "a b", "s/1"] {
+            assert!(check_subject(bad).is_err(), "{bad:?}");
+        }
+        assert_eq!(subject_index("S01", 1), subject_index("S01", 1));
+        assert_ne!(subject_index("S01", 1), subject_index("S02", 1));
+        assert_ne!(subject_index("S01", 1), subject_index("S01", 2));
+    }
+}

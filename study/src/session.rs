@@ -1,0 +1,240 @@
+//! One subject's session on disk: open or resume the results folder, replay the logged
+//! responses into the protocol engine, then log each new response (fsynced) before the next
+//! trial is asked for. The study window uses it; it knows nothing of drawing.
+
+use std::path::Path;
+use std::time::{Instant, SystemTime, UNIX_EPOCH};
+
+use anyhow::Context as _;
+use protocols::{Outcome, Response, Session, SessionStatus, StudyDefinition, Trial, TrialRecord};
+use results::store::{SessionLock, SessionState, read_json};
+use results::{SessionLog, SessionManifest};
+
+/// Milliseconds since the Unix epoch.
+pub fn now_ms() -> u64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(0, |d| d.as_millis() as u64)
+}
+
+/// An open session: the engine, its log and its manifest.
+pub struct Recorder {
+    engine: Session,
+    log: SessionLog,
+    manifest: SessionManifest,
+    study: String,
+    /// Session clock (ms) at which this process took over: the last logged trial's.
+    clock_base_ms: u64,
+    monotonic_base_ms: u64,
+    started: Instant,
+}
+
+/// What opening a session found.
+pub enum Opened {
+    /// Ready for trials; `resumed` trials were replayed from the log.
+    Ready {
+        /// The session.
+        recorder: Box<Recorder>,
+        /// Trials replayed from an earlier run.
+        resumed: u32,
+    },
+    /// The session was already finished.
+    Finished(Box<SessionManifest>),
+}
+
+impl Recorder {
+    /// Opens `dir` for subject `subject_index` of `study`: creates it, or with `resume`
+    /// continues an interrupted session there (a torn last row is set aside and reported on
+    /// stderr; the logged responses are replayed and must regenerate the logged trials).
+    /// `fresh` is the manifest of a new session.
+    ///
+    /// # Errors
+    /// The folder exists without `resume`, a live runner holds it, the log cannot be read,
+    /// or the study no longer regenerates the logged trials.
+    pub fn open(
+        study: &StudyDefinition,
+        subject_index: u32,
+        dir: &Path,
+        resume: bool,
+        fresh: SessionManifest,
+    ) -> anyhow::Result<Opened> {
+        let mut engine = Session::new(study, subject_index)?;
+        let (log, logged, mut manifest) = if resume && dir.exists() {
+            let manifest_path = dir.join(results::store::SESSION_FILE);
+            let old: Option<SessionManifest> = if manifest_path.exists() {
+                Some(read_json(&manifest_path)?)
+            } else {
+                None
+            };
+            if let Some(m) = old.as_ref().filter(|m| m.status != SessionState::Running) {
+                // A crash after the final manifest write can leave the lock behind: take the
+                // stale lock over and release it (refused if a live runner holds it).
+                drop(SessionLock::acquire(dir)?);
+                return Ok(Opened::Finished(Box::new(m.clone())));
+            }
+            let resumed = SessionLog::resume(dir)?;
+            let mut m = old.unwrap_or(fresh);
+            m.resumes += 1;
+            if let Some((row, aside)) = &resumed.torn {
+                let name = aside
+                    .file_name()
+                    .map(|n| n.to_string_lossy().into_owned())
+                    .unwrap_or_default();
+                eprintln!(
+                    "warning: {}: line {} was torn ({} bytes, power cut mid-write?); set aside in {name}",
+                    dir.join(results::store::TRIALS_FILE).display(),
+                    row.line,
+                    row.bytes.len()
+                );
+                m.torn_rows.push(name);
+            }
+            (resumed.log, resumed.records, m)
+        } else {
+            if dir.exists() {
+                anyhow::bail!(
+                    "{} already exists; results are never overwritten (use --resume to continue)",
+                    dir.display()
+                );
+            }
+            (SessionLog::create(dir)?, Vec::new(), fresh)
+        };
+        for rec in &logged {
+            engine
+                .replay(&rec.trial, &rec.response, &rec.outcome)
+                .with_context(|| "cannot resume: replaying the logged responses")?;
+        }
+        manifest.trials_logged = log.rows();
+        log.write_manifest(&manifest)?;
+        let last = logged.last();
+        Ok(Opened::Ready {
+            resumed: logged.len() as u32,
+            recorder: Box::new(Recorder {
+                engine,
+                log,
+                study: study.name.clone(),
+                manifest,
+                clock_base_ms: last.map_or(0, |r| r.elapsed_ms),
+                monotonic_base_ms: last.map_or(0, |r| r.monotonic_ms),
+                started: Instant::now(),
+            }),
+        })
+    }
+
+    /// The session clock: time already logged plus this process's running time, ms.
+    pub fn elapsed_ms(&self) -> u64 {
+        self.clock_base_ms + self.started.elapsed().as_millis() as u64
+    }
+
+    /// Trials answered so far (including replayed ones).
+    pub fn answered(&self) -> u32 {
+        self.engine.answered()
+    }
+
+    /// The manifest as it stands.
+    pub fn manifest(&self) -> &SessionManifest {
+        &self.manifest
+    }
+
+    /// Updates the manifest (display information, ...) and writes it.
+    ///
+    /// # Errors
+    /// The manifest cannot be written.
+    pub fn update_manifest(
+        &mut self,
+        change: impl FnOnce(&mut SessionManifest),
+    ) -> anyhow::Result<()> {
+        change(&mut self.manifest);
+        self.log.write_manifest(&self.manifest)?;
+        Ok(())
+    }
+
+    /// The next trial at session clock `elapsed_ms`, or `None` when the session is over.
+    ///
+    /// # Errors
+    /// Engine errors (a staircase level without a stimulus).
+    pub fn next_trial(&mut self, elapsed_ms: u64) -> anyhow::Result<Option<Trial>> {
+        Ok(self.engine.next_trial(elapsed_ms)?)
+    }
+
+    /// Scores `response` to the pending `trial` and appends the row (flushed and fsynced)
+    /// before returning: nothing can show the next stimulus before the answer is on disk.
+    ///
+    /// # Errors
+    /// The engine refuses the response, or the row cannot be written.
+    pub fn record(
+        &mut self,
+        trial: Trial,
+        response: Response,
+        elapsed_ms: u64,
+    ) -> anyhow::Result<Outcome> {
+        let outcome = self.engine.respond(&response)?;
+        let record = TrialRecord {
+            study: self.study.clone(),
+            subject: self.manifest.subject.clone(),
+            session: self.manifest.session,
+            protocol: self.engine.protocol(),
+            trial,
+            response,
+            outcome,
+            elapsed_ms,
+            wall_clock_ms: now_ms(),
+            monotonic_ms: self.monotonic_base_ms + self.started.elapsed().as_millis() as u64,
+        };
+        self.log.append(&record)?;
+        self.manifest.trials_logged = self.log.rows();
+        Ok(outcome)
+    }
+
+    /// Writes the final manifest once the engine says the session is over.
+    ///
+    /// # Errors
+    /// The manifest cannot be written.
+    pub fn finish(&mut self) -> anyhow::Result<SessionState> {
+        self.manifest.status = match self.engine.status() {
+            SessionStatus::TimeLimit => SessionState::TimeLimit,
+            SessionStatus::Complete | SessionStatus::Running => SessionState::Complete,
+        };
+        self.manifest.trials_logged = self.log.rows();
+        self.manifest.ended_ms = Some(now_ms());
+        self.manifest.not_shown = self
+            .engine
+            .not_shown()
+            .into_iter()
+            .map(|t| t.stimulus)
+            .collect();
+        self.manifest.thresholds = self.engine.thresholds();
+        self.log.write_manifest(&self.manifest)?;
+        Ok(self.manifest.status)
+    }
+
+    /// One line on how the session ended.
+    pub fn summary(&self) -> String {
+        let m = &self.manifest;
+        let thresholds: Vec<String> = m
+            .thresholds
+            .iter()
+            .map(|(n, t)| {
+                format!(
+                    "{n}={}",
+                    t.map_or_else(|| "n/a".to_string(), |v| format!("{v:.4}"))
+                )
+            })
+            .collect();
+        format!(
+            "{}: {:?}, {} trials{}{}",
+            m.subject,
+            m.status,
+            m.trials_logged,
+            if m.not_shown.is_empty() {
+                String::new()
+            } else {
+                format!(", {} not shown", m.not_shown.len())
+            },
+            if thresholds.is_empty() {
+                String::new()
+            } else {
+                format!(", thresholds {}", thresholds.join(" "))
+            }
+        )
+    }
+}

@@ -1,0 +1,351 @@
+//! End to end in a real X server: `study run` on a 6-trial MOS study under Xvfb with Mesa's
+//! software Vulkan driver (lavapipe), driven by `xdotool` keystrokes. A screenshot of a trial
+//! shows both skeletons; the session is SIGKILLed mid-way and `--resume` completes it with
+//! every response kept exactly once.
+//!
+//! Needs `Xvfb`, `xdotool`, `import` (ImageMagick) and a Vulkan driver; `scripts/test`
+//! installs them. Without them the test fails under `CI` and is skipped elsewhere.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+fn have(tool: &str) -> bool {
+    Command::new("sh")
+        .args(["-c", &format!("command -v {tool}")])
+        .stdout(Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success())
+}
+
+struct Xvfb {
+    child: Child,
+    display: String,
+}
+
+impl Drop for Xvfb {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+#[allow(
+    clippy::zombie_processes,
+    reason = "the server is returned inside `Xvfb`, whose Drop kills and waits for it"
+)]
+fn start_xvfb() -> Xvfb {
+    // A display number no other test or session uses: from the process id.
+    for k in 0..20 {
+        let n = 90 + (std::process::id() % 400) + k * 7;
+        if Path::new(&format!("/tmp/.X11-unix/X{n}")).exists() {
+            continue;
+        }
+        let child = Command::new("Xvfb")
+            // -noreset: no server reset (refusing connections) when the last client leaves.
+            .args([
+                &format!(":{n}"),
+                "-screen",
+                "0",
+                "1280x720x24",
+                "-nolisten",
+                "tcp",
+                "-noreset",
+            ])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("starting Xvfb");
+        let deadline = Instant::now() + Duration::from_secs(10);
+        while Instant::now() < deadline {
+            if Path::new(&format!("/tmp/.X11-unix/X{n}")).exists() {
+                return Xvfb {
+                    child,
+                    display: format!(":{n}"),
+                };
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+    panic!("Xvfb did not start");
+}
+
+struct Env {
+    dir: PathBuf,
+    xvfb: Xvfb,
+    runtime: PathBuf,
+}
+
+impl Drop for Env {
+    fn drop(&mut self) {
+        if std::env::var_os("KEEP_E2E").is_some() {
+            eprintln!("kept {}", self.dir.display());
+            return;
+        }
+        let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}
+
+impl Env {
+    fn cmd(&self, program: &str) -> Command {
+        let mut c = Command::new(program);
+        c.env("DISPLAY", &self.xvfb.display)
+            .env("XDG_RUNTIME_DIR", &self.runtime)
+            .env_remove("WAYLAND_DISPLAY")
+            // Software rendering: lavapipe (it is also what wgpu picks without a GPU).
+            .env("WGPU_BACKEND", "vulkan");
+        c
+    }
+
+    fn xdotool(&self, args: &[&str]) -> String {
+        let out = self.cmd("xdotool").args(args).output().unwrap();
+        String::from_utf8_lossy(&out.stdout).trim().to_string()
+    }
+}
+
+fn setup() -> Option<Env> {
+    let missing: Vec<&str> = ["Xvfb", "xdotool", "import"]
+        .into_iter()
+        .filter(|t| !have(t))
+        .collect();
+    if !missing.is_empty() {
+        assert!(
+            std::env::var_os("CI").is_none(),
+            "under CI the window test needs {missing:?} (scripts/test installs them)"
+        );
+        eprintln!("skipping the window test: {missing:?} not installed");
+        return None;
+    }
+    let dir = std::env::temp_dir().join(format!("study-e2e-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let runtime = dir.join("xdg");
+    std::fs::create_dir_all(&runtime).unwrap();
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt as _;
+        std::fs::set_permissions(&runtime, std::fs::Permissions::from_mode(0o700)).unwrap();
+    }
+    write_study(&dir);
+    Some(Env {
+        dir,
+        xvfb: start_xvfb(),
+        runtime,
+    })
+}
+
+/// A one-second walk, a reference and two "compressed" versions (a lateral lean of the root
+/// so they differ), and a MOS study of 2 familiarization + 2 test + 2 hidden-repeat trials.
+fn write_study(dir: &Path) {
+    let clip = codecs::synth::walking_clip(&codecs::synth::WalkParams {
+        duration_s: 1.0,
+        // AMC files carry no rate: CMU's 120 Hz is assumed when they are read back.
+        frame_rate_hz: 120.0,
+        ..codecs::synth::WalkParams::default()
+    });
+    codecs::io::write_clip(&clip, &dir.join("walk.amc"), Some(&dir.join("walk.asf"))).unwrap();
+    let stim = |id: &str, codec: &str, cr: f64, rms: f64| {
+        serde_json::json!({
+            "id": id, "clip": "walk", "codec": codec,
+            "target_cr": if codec == "reference" { serde_json::Value::Null } else { cr.into() },
+            "achieved_cr": cr, "file": "walk.amc", "skeleton": "walk.asf",
+            "params": if codec == "reference" { serde_json::json!({}) } else { serde_json::json!({"cr": cr}) },
+            "metrics": { "rms_cm": rms, "max_cm": rms * 3.0, "mean_angle_deg": rms }
+        })
+    };
+    let manifest = serde_json::json!({"version": 1, "stimuli": [
+        stim("walk/reference", "reference", 1.0, 0.0),
+        stim("walk/x/cr10", "x", 10.0, 0.5),
+        stim("walk/x/cr20", "x", 20.0, 1.5),
+    ]});
+    std::fs::write(
+        dir.join("stimuli.json"),
+        serde_json::to_vec_pretty(&manifest).unwrap(),
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("study.toml"),
+        "format_version = 1\nname = \"e2e\"\nprotocol = \"mos\"\nstimuli = \"stimuli.json\"\n\
+         seed = 5\n[conditions]\nclips = [\"walk\"]\ncodecs = [\"x\"]\ntarget_cr = [10, 20]\n\
+         [presentation]\nplayback_count = 1\n\
+         [session]\nfamiliarization = 2\nhidden_repeats = 2\n",
+    )
+    .unwrap();
+}
+
+fn session_dir(env: &Env) -> PathBuf {
+    env.dir.join("results/S07_s1")
+}
+
+fn logged_rows(env: &Env) -> usize {
+    std::fs::read_to_string(session_dir(env).join("trials.csv"))
+        .map_or(0, |s| s.lines().count().saturating_sub(1))
+}
+
+fn spawn_run(env: &Env, resume: bool) -> Child {
+    let mut c = env.cmd(env!("CARGO_BIN_EXE_study"));
+    c.arg("run")
+        .arg(env.dir.join("study.toml"))
+        .args(["--subject", "S07", "-o"])
+        .arg(env.dir.join("results"))
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped());
+    if resume {
+        c.arg("--resume");
+    }
+    c.spawn().unwrap()
+}
+
+fn find_window(env: &Env, child: &mut Child) -> String {
+    let deadline = Instant::now() + Duration::from_secs(120);
+    while Instant::now() < deadline {
+        if let Some(status) = child.try_wait().unwrap() {
+            let mut err = String::new();
+            if let Some(mut e) = child.stderr.take() {
+                std::io::Read::read_to_string(&mut e, &mut err).unwrap();
+            }
+            panic!("study run exited early ({status}): {err}");
+        }
+        let id = env.xdotool(&["search", "--name", "study: e2e"]);
+        if let Some(first) = id.lines().next().filter(|l| !l.is_empty()) {
+            return first.to_string();
+        }
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    panic!("the study window never appeared");
+}
+
+/// Presses `keys` every half second until `rows` trials are logged (keys pressed while the
+/// stimulus plays are ignored by design, so repeating is safe).
+/// Bare Xvfb has no window manager: the window gets the keyboard focus before every press
+/// (until it is mapped a focus request is lost), then plain `xdotool key` reaches it
+/// (`key --window` events were seen to be dropped).
+fn press(env: &Env, wid: &str, keys: &[&str]) {
+    env.xdotool(&["windowfocus", "--sync", wid]);
+    let mut args = vec!["key"];
+    args.extend_from_slice(keys);
+    env.xdotool(&args);
+}
+
+fn answer_until(env: &Env, wid: &str, keys: &[&str], rows: usize) {
+    let deadline = Instant::now() + Duration::from_secs(240);
+    while logged_rows(env) < rows {
+        assert!(
+            Instant::now() < deadline,
+            "stuck at {} rows",
+            logged_rows(env)
+        );
+        press(env, wid, keys);
+        std::thread::sleep(Duration::from_millis(500));
+    }
+}
+
+/// Pixels that are joint orange, in the left and in the right half of the screen.
+fn orange_per_half(png_path: &Path) -> [usize; 2] {
+    let mut dec = png::Decoder::new(std::io::BufReader::new(
+        std::fs::File::open(png_path).unwrap(),
+    ));
+    // ImageMagick may write 16-bit or paletted PNGs: read as 8-bit RGB(A).
+    dec.set_transformations(png::Transformations::normalize_to_color8());
+    let mut reader = dec.read_info().unwrap();
+    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+    let info = reader.next_frame(&mut buf).unwrap();
+    let channels = info.line_size / info.width as usize;
+    if channels < 3 {
+        return [0, 0]; // a grey-only screen (ImageMagick writes it as grayscale)
+    }
+    let mut halves = [0; 2];
+    for y in 0..info.height as usize {
+        for x in 0..info.width as usize {
+            let i = y * info.line_size + x * channels;
+            let (r, b) = (i32::from(buf[i]), i32::from(buf[i + 2]));
+            if r - b > 60 {
+                halves[usize::from(x >= info.width as usize / 2)] += 1;
+            }
+        }
+    }
+    halves
+}
+
+#[test]
+fn study_run_under_xvfb_logs_every_trial_and_resumes_after_a_kill() {
+    let Some(env) = setup() else { return };
+    let mut child = spawn_run(&env, false);
+    let wid = find_window(&env, &mut child);
+    // Welcome: Enter begins once the display is measured (~30 frames).
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while !session_dir(&env).join("session.json").exists() || logged_rows(&env) == 0 {
+        press(&env, &wid, &["Return"]);
+        std::thread::sleep(Duration::from_millis(700));
+        // Screenshot mid-presentation of the first trial.
+        let shot = env.dir.join("trial.png");
+        if !shot.exists() {
+            let ok = env
+                .cmd("import")
+                .args(["-window", "root"])
+                .arg(&shot)
+                .status()
+                .unwrap()
+                .success();
+            assert!(ok);
+            let halves = orange_per_half(&shot);
+            eprintln!("screenshot: joint pixels per half {halves:?}");
+            if halves[0] == 0 || halves[1] == 0 {
+                // Still on the welcome screen: try again.
+                std::fs::remove_file(&shot).unwrap();
+            } else {
+                assert!(halves[0] > 30 && halves[1] > 30, "{halves:?}");
+            }
+        }
+        if env.dir.join("trial.png").exists() {
+            break;
+        }
+        assert!(Instant::now() < deadline, "no trial screen appeared");
+    }
+    // Three answers, then a kill between trials.
+    answer_until(&env, &wid, &["4", "Return"], 3);
+    child.kill().unwrap();
+    child.wait().unwrap();
+    assert_eq!(logged_rows(&env), 3);
+
+    let mut child = spawn_run(&env, true);
+    let wid = find_window(&env, &mut child);
+    std::thread::sleep(Duration::from_millis(500));
+    answer_until(&env, &wid, &["Return", "3", "Return"], 6);
+    let out = child.wait_with_output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        stdout.contains("resuming after 3 logged trials"),
+        "{stdout}"
+    );
+    assert!(stdout.contains("dropped"), "timing summary: {stdout}");
+
+    let trials = results::trials::read_trials(&session_dir(&env).join("trials.csv")).unwrap();
+    let idx: Vec<u32> = trials.records.iter().map(|r| r.trial.index).collect();
+    assert_eq!(idx, [0, 1, 2, 3, 4, 5], "every trial exactly once");
+    let ratings: Vec<f64> = trials
+        .records
+        .iter()
+        .map(|r| match r.response.answer {
+            protocols::Answer::Rating(v) => v,
+            other => panic!("{other:?}"),
+        })
+        .collect();
+    assert_eq!(ratings, [4.0, 4.0, 4.0, 3.0, 3.0, 3.0]);
+    let manifest: results::SessionManifest =
+        results::store::read_json(&session_dir(&env).join("session.json")).unwrap();
+    assert_eq!(manifest.status, results::store::SessionState::Complete);
+    assert_eq!(manifest.resumes, 1);
+    let display = manifest.display.expect("display facts recorded");
+    assert!(
+        display.description.contains("present mode Fifo"),
+        "{display:?}"
+    );
+    assert!(display.refresh_hz > 0.0);
+}
