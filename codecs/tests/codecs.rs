@@ -318,3 +318,66 @@ fn registry_names_and_ids_are_unique() {
         assert_eq!(codec::by_id(a.id()).unwrap().name(), a.name());
     }
 }
+
+/// Decision (c): wavelet-perceptual's default allocation (position sensitivity, one threshold and
+/// step per slice in position units) against the paper's K_i = α·l_i·v_i·N·W/ΣA as printed
+/// (`allocation = 1`), at the same compression ratio.
+#[test]
+fn position_allocation_beats_the_printed_rule() {
+    let mut clips = shared();
+    clips.push((
+        "synthetic-walk".into(),
+        walking_clip(&WalkParams {
+            duration_s: 4.0,
+            speed_cm_s: 150.0,
+            ..WalkParams::default()
+        }),
+    ));
+    let c = codec::by_name("wavelet-perceptual").unwrap();
+    for (clip_name, clip) in clips {
+        for target in [20.0, 40.0] {
+            let err = |allocation: f64| {
+                let s = rate::encode_to_cr(
+                    c.as_ref(),
+                    &clip,
+                    &params(&[("allocation", allocation)]),
+                    target,
+                )
+                .unwrap();
+                assert!((s.params["allocation"] - allocation).abs() < 1e-12);
+                metrics::compare(&clip, &c.decode(&s, &clip.skeleton).unwrap())
+                    .unwrap()
+                    .rms_cm
+            };
+            let (position, paper) = (err(0.0), err(1.0));
+            assert!(
+                position < paper,
+                "{clip_name} CR {target}: position {position} cm vs paper {paper} cm"
+            );
+        }
+    }
+}
+
+/// Payload format 2 starts with a version byte; a version-1 stream (no version byte, its first
+/// payload byte is the range coder's initial 0) or any other version is refused, not decoded.
+#[test]
+fn old_wavelet_payload_versions_are_refused() {
+    let clip = walking_clip(&WalkParams {
+        duration_s: 1.0,
+        ..WalkParams::default()
+    });
+    for name in ["wavelet-perceptual", "wavelet-standard", "wavelet-bone"] {
+        let c = codec::by_name(name).unwrap();
+        let s = c.encode(&clip, &Params::new()).unwrap();
+        assert_eq!(s.payload[0], codec::wavelet_codec::PAYLOAD_VERSION);
+        for v in [0u8, 1, 3, 255] {
+            let mut old = s.clone();
+            old.payload[0] = v;
+            let e = c.decode(&old, &clip.skeleton).unwrap_err().to_string();
+            assert!(e.contains("payload format version"), "{name} v{v}: {e}");
+        }
+        let mut empty = s.clone();
+        empty.payload.clear();
+        assert!(c.decode(&empty, &clip.skeleton).is_err());
+    }
+}
