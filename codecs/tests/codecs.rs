@@ -381,3 +381,56 @@ fn old_wavelet_payload_versions_are_refused() {
         assert!(c.decode(&empty, &clip.skeleton).is_err());
     }
 }
+
+/// SPIHT's position-aware energy (default) against eq. 6.3 as printed (`allocation = 1`), on
+/// the real clips (on the synthetic walker, whose channels all move alike, the two are within
+/// 10 % of each other).
+#[test]
+fn spiht_position_allocation_beats_the_printed_energy() {
+    let clips = shared();
+    let c = codec::by_name("spiht").unwrap();
+    for (clip_name, clip) in clips {
+        for target in [20.0, 40.0] {
+            let err = |allocation: f64| {
+                let s = c
+                    .encode(
+                        &clip,
+                        &params(&[("cr", target), ("allocation", allocation)]),
+                    )
+                    .unwrap();
+                metrics::compare(&clip, &c.decode(&s, &clip.skeleton).unwrap())
+                    .unwrap()
+                    .rms_cm
+            };
+            let (position, printed) = (err(0.0), err(1.0));
+            assert!(
+                position < printed,
+                "{clip_name} CR {target}: position {position} cm vs printed {printed} cm"
+            );
+        }
+    }
+}
+
+/// SPIHT payloads carry a version tag; a version-1 payload (starting with its side-information
+/// length) or another version is refused, and truncation keeps the tag.
+#[test]
+fn old_spiht_payload_versions_are_refused() {
+    let clip = walking_clip(&WalkParams {
+        duration_s: 1.0,
+        ..WalkParams::default()
+    });
+    let c = codec::by_name("spiht").unwrap();
+    let s = c.encode(&clip, &Params::new()).unwrap();
+    assert_eq!(&s.payload[..4], &[b'S', spiht::PAYLOAD_VERSION, 0, 0xFF]);
+    let cut = spiht::truncate(&s, 0.5).unwrap();
+    assert!(c.decode(&cut, &clip.skeleton).is_ok());
+    let mut v1 = s.clone();
+    v1.payload.drain(..4);
+    let e = c.decode(&v1, &clip.skeleton).unwrap_err().to_string();
+    assert!(e.contains("payload format version 1"), "{e}");
+    assert!(spiht::truncate(&v1, 0.5).is_err());
+    let mut v3 = s.clone();
+    v3.payload[1] = 3;
+    let e = c.decode(&v3, &clip.skeleton).unwrap_err().to_string();
+    assert!(e.contains("payload format version 3"), "{e}");
+}
