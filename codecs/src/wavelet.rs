@@ -276,17 +276,22 @@ fn periodic_extend(x: &[f64], big_n: usize, pad: usize, ext: &mut Vec<f64>) {
 ///
 /// The transpose of [`analysis_step`] in gather form: position `k` of the (even) output
 /// collects `rec_lo[m]·a[i] + rec_hi[m]·d[i]` over `2i + m = k + L/2 − 1` (indices of `a`, `d`
-/// taken modulo `h`). `ae`, `de` are scratch for the periodically padded coefficients.
+/// taken modulo `h`). Both outputs `e = 2q` and `2q + 1` (with `e = k + L/2 − 1`) read the same
+/// `L/2` padded coefficients `i = q − L/2 + 1 ..= q`, so they are computed together from one
+/// window. `ae`, `de` are scratch for the periodically padded coefficients, `full` for the
+/// outputs before the phase shift.
 fn synthesis_step<const L: usize>(
     f: &Filters<L>,
     a: &[f64],
     d: &[f64],
-    ae: &mut Vec<f64>,
-    de: &mut Vec<f64>,
+    scratch: &mut [Vec<f64>; 3],
     out: &mut [f64],
 ) {
+    let [ae, de, full] = scratch;
     let h = a.len();
-    let pad = L / 2 - 1;
+    let n = out.len();
+    let half = L / 2;
+    let pad = half - 1;
     // i ranges over (k + pad − m)/2 for k in 0..2h, m in 0..L: from −⌈(L − 1 − pad)/2⌉ to
     // h − 1 + ⌈pad/2⌉.
     let left = (L - pad).div_ceil(2);
@@ -295,19 +300,37 @@ fn synthesis_step<const L: usize>(
     ae.extend((0..right.saturating_sub(left)).map(|u| a[(u + left) % h]));
     periodic_extend(d, h, left, de);
     de.extend((0..right.saturating_sub(left)).map(|u| d[(u + left) % h]));
-    for (k, o) in out.iter_mut().enumerate() {
-        let e = k + pad;
-        let m0 = e & 1;
-        // i = (e − m)/2 = q − t with m = m0 + 2t; padded index left + q − t.
-        let q = e >> 1;
-        let base = left + q;
-        let mut s = 0.0;
-        for t in 0..L / 2 {
-            let m = m0 + 2 * t;
-            s += f.rec_lo[m] * ae[base - t] + f.rec_hi[m] * de[base - t];
-        }
-        *o = s;
+    // Taps per window position u (coefficient i = q − half + 1 + u, t = half − 1 − u).
+    let mut taps = [[0.0f64; 4]; 8];
+    for (u, tap) in taps.iter_mut().enumerate().take(half) {
+        let t = half - 1 - u;
+        *tap = [
+            f.rec_lo[2 * t],
+            f.rec_hi[2 * t],
+            f.rec_lo[2 * t + 1],
+            f.rec_hi[2 * t + 1],
+        ];
     }
+    let taps = &taps[..half];
+    let q_first = pad / 2;
+    let q_last = (pad + n - 1) / 2;
+    let start = left + q_first + 1 - half;
+    full.resize(2 * (q_last + 1 - q_first), 0.0);
+    for ((pair, wa), wd) in full
+        .chunks_exact_mut(2)
+        .zip(ae[start..].windows(half))
+        .zip(de[start..].windows(half))
+    {
+        let (mut even, mut odd) = (0.0, 0.0);
+        for ((&x, &y), tap) in wa.iter().zip(wd).zip(taps) {
+            even += tap[0] * x + tap[1] * y;
+            odd += tap[2] * x + tap[3] * y;
+        }
+        pair[0] = even;
+        pair[1] = odd;
+    }
+    let off = pad % 2;
+    out.copy_from_slice(&full[off..off + n]);
 }
 
 /// A reusable multi-level transform: keeps its scratch buffers between calls so a codec can
@@ -318,7 +341,8 @@ pub struct Transform {
     buf_a: Vec<f64>,
     buf_b: Vec<f64>,
     ext: Vec<f64>,
-    ext_d: Vec<f64>,
+    /// Synthesis scratch: padded approximation, padded detail, outputs.
+    syn: [Vec<f64>; 3],
 }
 
 impl Transform {
@@ -329,7 +353,7 @@ impl Transform {
             buf_a: Vec::new(),
             buf_b: Vec::new(),
             ext: Vec::new(),
-            ext_d: Vec::new(),
+            syn: [Vec::new(), Vec::new(), Vec::new()],
         }
     }
 
@@ -434,14 +458,7 @@ impl Transform {
             let d = &coeffs[start..start + h];
             start += h;
             self.buf_b.resize(m, 0.0);
-            synthesis_step(
-                f,
-                &self.buf_a[..h],
-                d,
-                &mut self.ext,
-                &mut self.ext_d,
-                &mut self.buf_b[..m],
-            );
+            synthesis_step(f, &self.buf_a[..h], d, &mut self.syn, &mut self.buf_b[..m]);
             std::mem::swap(&mut self.buf_a, &mut self.buf_b);
         }
         out.resize(n, 0.0);
@@ -450,8 +467,7 @@ impl Transform {
             f,
             &self.buf_a[..h],
             &coeffs[start..start + h],
-            &mut self.ext,
-            &mut self.ext_d,
+            &mut self.syn,
             out,
         );
         Ok(())
