@@ -119,6 +119,9 @@ const STEP_MIN: i64 = -512;
 const STEP_MAX: i64 = 512;
 /// [`Allocation::Position`]: quantizer step over the slice's selection threshold.
 const STEP_OVER_THRESHOLD: f64 = 1.0;
+/// [`Allocation::Position`]: the step is never finer than the slice's largest weighted value
+/// over `2^MAX_VALUE_BITS`, so every quantized value fits the entropy coder.
+const MAX_VALUE_BITS: u32 = 28;
 /// [`Allocation::Position`]: sensitivities are floored at this fraction of the largest, so a
 /// channel that moves no joint (at the rest pose) is still coded, coarsely.
 const SENSITIVITY_FLOOR: f64 = 1e-3;
@@ -516,6 +519,9 @@ impl WaveletCodec {
         if thr.is_finite() && thr > 0.0 {
             delta = delta.min(STEP_OVER_THRESHOLD * thr);
         }
+        // A threshold near zero (α ≈ 1 with near-constant channels) must not ask for more than
+        // MAX_VALUE_BITS bits of any value.
+        delta = delta.max(ymax.max(amax) * (-f64::from(MAX_VALUE_BITS)).exp2());
         let step_exp = if delta > 0.0 {
             ((delta.log2() * 8.0).floor() as i64).clamp(STEP_MIN, STEP_MAX)
         } else {
