@@ -13,6 +13,8 @@ const PROB_BITS: u32 = 11;
 const PROB_ONE: u16 = 1 << PROB_BITS;
 const MOVE_BITS: u32 = 5;
 const TOP: u32 = 1 << 24;
+/// Most direct bits coded in one range division (the range stays ≥ 2^8 after it).
+pub const DIRECT_CHUNK: u32 = 16;
 
 /// An adaptive probability that the next bit is 0, in 1/2048.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -93,12 +95,17 @@ impl RangeEncoder {
     }
 
     /// Codes `count` (≤ 32) low bits of `value`, most significant first, at probability 1/2.
+    ///
+    /// Up to [`DIRECT_CHUNK`] bits go in one step (the range is divided by `2^n` once rather
+    /// than halved `n` times).
     pub fn direct(&mut self, value: u32, count: u32) {
-        for k in (0..count).rev() {
-            self.range >>= 1;
-            if (value >> k) & 1 == 1 {
-                self.low += u64::from(self.range);
-            }
+        let mut left = count.min(32);
+        while left > 0 {
+            let n = left.min(DIRECT_CHUNK);
+            left -= n;
+            let chunk = (value >> left) & ((1u32 << n) - 1);
+            self.range >>= n;
+            self.low += u64::from(self.range) * u64::from(chunk);
             self.normalize();
         }
     }
@@ -186,13 +193,15 @@ impl<'a> RangeDecoder<'a> {
     /// Decodes `count` (≤ 32) direct bits.
     pub fn direct(&mut self, count: u32) -> u32 {
         let mut v: u32 = 0;
-        for _ in 0..count {
-            self.range >>= 1;
-            let b = u32::from(self.code >= self.range);
-            if b == 1 {
-                self.code -= self.range;
-            }
-            v = (v << 1) | b;
+        let mut left = count.min(32);
+        while left > 0 {
+            let n = left.min(DIRECT_CHUNK);
+            left -= n;
+            self.range >>= n;
+            // A valid stream gives a chunk below 2^n; corrupt input is clamped, not trusted.
+            let chunk = (self.code / self.range).min((1u32 << n) - 1);
+            self.code -= chunk * self.range;
+            v = (v << n) | chunk;
             self.normalize();
         }
         v
@@ -238,6 +247,9 @@ pub enum EntropyError {
     /// The value does not fit the Exp-Golomb range.
     #[error("value {0} exceeds the entropy coder's range")]
     TooLarge(u64),
+    /// Zero given to a model of nonzero values.
+    #[error("zero given to a model of nonzero values")]
+    Zero,
 }
 
 impl UintModel {
@@ -339,6 +351,37 @@ impl IntModel {
     }
 }
 
+/// Nonzero signed integers (a run-length coder's values): sign as a direct bit (wavelet signs
+/// are close to a coin toss), `|v| − 1` with a [`UintModel`]. One decision fewer per value than
+/// [`IntModel`], which also codes a zero flag.
+#[derive(Debug, Clone, Default)]
+pub struct NonzeroModel {
+    mag: UintModel,
+}
+
+impl NonzeroModel {
+    /// Codes `v`.
+    ///
+    /// # Errors
+    /// [`EntropyError::Zero`] for 0, [`EntropyError::TooLarge`] when `|v| − 1` exceeds [`UintModel::MAX`].
+    pub fn encode(&mut self, enc: &mut RangeEncoder, v: i64) -> Result<(), EntropyError> {
+        if v == 0 {
+            return Err(EntropyError::Zero);
+        }
+        let m = v.unsigned_abs() - 1;
+        let m32 = u32::try_from(m).map_err(|_| EntropyError::TooLarge(m))?;
+        self.mag.encode(enc, m32)?;
+        enc.direct(u32::from(v < 0), 1);
+        Ok(())
+    }
+
+    /// Decodes one value (`None` on an out-of-range exponent); never 0.
+    pub fn decode(&mut self, dec: &mut RangeDecoder<'_>) -> Option<i64> {
+        let m = i64::from(self.mag.decode(dec)?) + 1;
+        Some(if dec.direct(1) == 1 { -m } else { m })
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -365,6 +408,14 @@ mod tests {
             um.encode(&mut enc, v).unwrap();
             enc.bit(&mut b, v % 3 == 0);
         }
+        let mut nz = NonzeroModel::default();
+        for &v in values.iter().filter(|&&v| v != 0) {
+            nz.encode(&mut enc, v).unwrap();
+        }
+        assert_eq!(nz.encode(&mut enc, 0), Err(EntropyError::Zero));
+        for k in 0..=32 {
+            enc.direct(0x9E37_79B9u32.rotate_left(k), k);
+        }
         enc.direct(0xDEAD_BEEF, 32);
         let bytes = enc.finish();
         let mut dec = RangeDecoder::new(&bytes);
@@ -379,6 +430,15 @@ mod tests {
         for &v in &uvals {
             assert_eq!(um.decode(&mut dec), Some(v));
             assert_eq!(dec.bit(&mut b), v % 3 == 0);
+        }
+        let mut nz = NonzeroModel::default();
+        for &v in values.iter().filter(|&&v| v != 0) {
+            assert_eq!(nz.decode(&mut dec), Some(v));
+        }
+        for k in 0..=32u32 {
+            let want = 0x9E37_79B9u32.rotate_left(k);
+            let mask = if k == 32 { u32::MAX } else { (1u32 << k) - 1 };
+            assert_eq!(dec.direct(k), want & mask, "{k} direct bits");
         }
         assert_eq!(dec.direct(32), 0xDEAD_BEEF);
         assert_eq!(dec.overrun(), 0);

@@ -33,34 +33,46 @@ pub enum Wavelet {
     Cdf97,
 }
 
-struct Filters {
-    dec_lo: &'static [f64],
-    dec_hi: &'static [f64],
-    rec_lo: &'static [f64],
-    rec_hi: &'static [f64],
+/// A filter bank of `L` taps; the decomposition filters are stored reversed (`rdec_lo[m] =
+/// dec_lo[L − 1 − m]`) so that analysis is a forward dot product over a window.
+struct Filters<const L: usize> {
+    rdec_lo: [f64; L],
+    rdec_hi: [f64; L],
+    rec_lo: [f64; L],
+    rec_hi: [f64; L],
+}
+
+const fn reversed<const L: usize>(f: [f64; L]) -> [f64; L] {
+    let mut out = [0.0; L];
+    let mut i = 0;
+    while i < L {
+        out[i] = f[L - 1 - i];
+        i += 1;
+    }
+    out
 }
 
 // Filter values exactly as PyWavelets 1.8 prints them (`pywt.Wavelet(name).dec_lo` ...).
-static D4_FILTERS: Filters = Filters {
-    dec_lo: &[
+static D4_FILTERS: Filters<4> = Filters {
+    rdec_lo: reversed([
         -0.129_409_522_551_260_37,
         0.224_143_868_042_013_4,
         0.836_516_303_737_807_9,
         0.482_962_913_144_534_16,
-    ],
-    dec_hi: &[
+    ]),
+    rdec_hi: reversed([
         -0.482_962_913_144_534_16,
         0.836_516_303_737_807_9,
         -0.224_143_868_042_013_4,
         -0.129_409_522_551_260_37,
-    ],
-    rec_lo: &[
+    ]),
+    rec_lo: [
         0.482_962_913_144_534_16,
         0.836_516_303_737_807_9,
         0.224_143_868_042_013_4,
         -0.129_409_522_551_260_37,
     ],
-    rec_hi: &[
+    rec_hi: [
         -0.129_409_522_551_260_37,
         -0.224_143_868_042_013_4,
         0.836_516_303_737_807_9,
@@ -68,8 +80,8 @@ static D4_FILTERS: Filters = Filters {
     ],
 };
 
-static CDF97_FILTERS: Filters = Filters {
-    dec_lo: &[
+static CDF97_FILTERS: Filters<10> = Filters {
+    rdec_lo: reversed([
         0.0,
         0.037_828_455_507_264_04,
         -0.023_849_465_019_556_843,
@@ -80,8 +92,8 @@ static CDF97_FILTERS: Filters = Filters {
         -0.110_624_404_418_437_18,
         -0.023_849_465_019_556_843,
         0.037_828_455_507_264_04,
-    ],
-    dec_hi: &[
+    ]),
+    rdec_hi: reversed([
         0.0,
         -0.064_538_882_628_697_06,
         0.040_689_417_609_164_06,
@@ -92,8 +104,8 @@ static CDF97_FILTERS: Filters = Filters {
         -0.064_538_882_628_697_06,
         0.0,
         0.0,
-    ],
-    rec_lo: &[
+    ]),
+    rec_lo: [
         0.0,
         -0.064_538_882_628_697_06,
         -0.040_689_417_609_164_06,
@@ -105,7 +117,7 @@ static CDF97_FILTERS: Filters = Filters {
         0.0,
         0.0,
     ],
-    rec_hi: &[
+    rec_hi: [
         0.0,
         -0.037_828_455_507_264_04,
         -0.023_849_465_019_556_843,
@@ -159,16 +171,12 @@ impl Wavelet {
         Wavelet::ALL.into_iter().find(|w| w.id() == id)
     }
 
-    fn filters(self) -> &'static Filters {
-        match self {
-            Wavelet::D4 => &D4_FILTERS,
-            Wavelet::Cdf97 => &CDF97_FILTERS,
-        }
-    }
-
     /// Length of the decomposition filters (PyWavelets `dec_len`): 4 or 10.
     pub fn filter_len(self) -> usize {
-        self.filters().dec_lo.len()
+        match self {
+            Wavelet::D4 => 4,
+            Wavelet::Cdf97 => 10,
+        }
     }
 
     /// Deepest useful level for a signal of `n` samples, as `pywt.dwt_max_level(n, dec_len)`:
@@ -204,67 +212,125 @@ pub fn band_lengths(n: usize, levels: usize) -> Vec<usize> {
 
 /// Total number of coefficients of a `levels`-level decomposition of `n` samples.
 pub fn coefficient_count(n: usize, levels: usize) -> usize {
-    band_lengths(n, levels).iter().sum()
+    // Detail bands ceil(n/2), ..., ceil(n/2^L), then the approximation ceil(n/2^L) again.
+    (1..=levels).map(|k| approx_len(n, k)).sum::<usize>() + approx_len(n, levels)
+}
+
+/// Length of the level-`k` approximation of `n` samples: `ceil(n / 2^k)` (repeated halving
+/// with rounding up).
+fn approx_len(n: usize, k: usize) -> usize {
+    if k >= usize::BITS as usize {
+        usize::from(n > 0)
+    } else {
+        n.div_ceil(1usize << k)
+    }
 }
 
 /// One analysis level: `x` (any length ≥ 1) into `a` and `d` of length `ceil(n / 2)` each.
-fn analysis_step(f: &Filters, x: &[f64], a: &mut [f64], d: &mut [f64]) {
+///
+/// `x` is first copied into `ext`, periodically extended by `L/2 − 1` samples on each side
+/// (after the odd-length extension), so that every output is a branch-free dot product over a
+/// contiguous window: `a[i] = Σ_m dec_lo[L−1−m] · ext[2i + m]`.
+fn analysis_step<const L: usize>(
+    f: &Filters<L>,
+    x: &[f64],
+    ext: &mut Vec<f64>,
+    a: &mut [f64],
+    d: &mut [f64],
+) {
     let n = x.len();
     let big_n = n + (n & 1);
-    let l = f.dec_lo.len();
-    let half = l / 2;
-    let get = |idx: isize| -> f64 {
-        let m = idx.rem_euclid(big_n as isize) as usize;
-        // The odd-length extension repeats the last sample (PyWavelets periodization).
-        if m >= n { x[n - 1] } else { x[m] }
-    };
-    for i in 0..big_n / 2 {
-        let base = 2 * i + half;
+    let pad = L / 2 - 1;
+    periodic_extend(x, big_n, pad, ext);
+    for ((w, ai), di) in ext
+        .windows(L)
+        .step_by(2)
+        .zip(a.iter_mut())
+        .zip(d.iter_mut())
+    {
         let (mut sa, mut sd) = (0.0, 0.0);
-        if base + 1 >= l && base < n {
-            // Interior: indices base - j for j in 0..l are all in 0..n.
-            let window = &x[base + 1 - l..=base];
-            for j in 0..l {
-                let v = window[l - 1 - j];
-                sa += f.dec_lo[j] * v;
-                sd += f.dec_hi[j] * v;
-            }
-        } else {
-            for j in 0..l {
-                let v = get(base as isize - j as isize);
-                sa += f.dec_lo[j] * v;
-                sd += f.dec_hi[j] * v;
-            }
+        for ((&v, &lo), &hi) in w.iter().zip(&f.rdec_lo).zip(&f.rdec_hi) {
+            sa += lo * v;
+            sd += hi * v;
         }
-        a[i] = sa;
-        d[i] = sd;
+        *ai = sa;
+        *di = sd;
     }
 }
 
-/// One synthesis level: `a`, `d` (length `h`) into `out` of length `n` with `ceil(n/2) == h`;
-/// `full` is scratch of length `2h`.
-fn synthesis_step(f: &Filters, a: &[f64], d: &[f64], full: &mut [f64], out: &mut [f64]) {
-    let big_n = full.len();
-    let l = f.rec_lo.len();
-    let half = l / 2;
-    full.fill(0.0);
-    for i in 0..a.len() {
-        let base = 2 * i + half;
-        let (ai, di) = (a[i], d[i]);
-        if base + 1 >= l && base < big_n {
-            let window = &mut full[base + 1 - l..=base];
-            for j in 0..l {
-                window[l - 1 - j] += ai * f.rec_lo[l - 1 - j] + di * f.rec_hi[l - 1 - j];
-            }
-        } else {
-            for j in 0..l {
-                let m = (base as isize - j as isize).rem_euclid(big_n as isize) as usize;
-                full[m] += ai * f.rec_lo[l - 1 - j] + di * f.rec_hi[l - 1 - j];
-            }
-        }
+/// `ext[u] = x̃[(u − pad) mod big_n]` for `u` in `0..big_n + 2·pad`, where `x̃` is `x` with its
+/// last sample repeated up to `big_n` samples.
+fn periodic_extend(x: &[f64], big_n: usize, pad: usize, ext: &mut Vec<f64>) {
+    let n = x.len();
+    let at = |k: usize| x[k.min(n - 1)];
+    ext.clear();
+    ext.extend((0..pad).map(|u| at((u + big_n * pad - pad) % big_n)));
+    ext.extend_from_slice(x);
+    if big_n > n {
+        ext.push(x[n - 1]);
     }
+    ext.extend((0..pad).map(|u| at(u % big_n)));
+}
+
+/// One synthesis level: `a`, `d` (length `h`) into `out` of length `n` with `ceil(n/2) == h`.
+///
+/// The transpose of [`analysis_step`] in gather form: position `k` of the (even) output
+/// collects `rec_lo[m]·a[i] + rec_hi[m]·d[i]` over `2i + m = k + L/2 − 1` (indices of `a`, `d`
+/// taken modulo `h`). Both outputs `e = 2q` and `2q + 1` (with `e = k + L/2 − 1`) read the same
+/// `L/2` padded coefficients `i = q − L/2 + 1 ..= q`, so they are computed together from one
+/// window. `ae`, `de` are scratch for the periodically padded coefficients, `full` for the
+/// outputs before the phase shift.
+fn synthesis_step<const L: usize>(
+    f: &Filters<L>,
+    a: &[f64],
+    d: &[f64],
+    scratch: &mut [Vec<f64>; 3],
+    out: &mut [f64],
+) {
+    let [ae, de, full] = scratch;
+    let h = a.len();
     let n = out.len();
-    out.copy_from_slice(&full[..n]);
+    let half = L / 2;
+    let pad = half - 1;
+    // i ranges over (k + pad − m)/2 for k in 0..2h, m in 0..L: from −⌈(L − 1 − pad)/2⌉ to
+    // h − 1 + ⌈pad/2⌉.
+    let left = (L - pad).div_ceil(2);
+    let right = pad.div_ceil(2) + 1;
+    periodic_extend(a, h, left, ae);
+    ae.extend((0..right.saturating_sub(left)).map(|u| a[(u + left) % h]));
+    periodic_extend(d, h, left, de);
+    de.extend((0..right.saturating_sub(left)).map(|u| d[(u + left) % h]));
+    // Taps per window position u (coefficient i = q − half + 1 + u, t = half − 1 − u).
+    let mut taps = [[0.0f64; 4]; 8];
+    for (u, tap) in taps.iter_mut().enumerate().take(half) {
+        let t = half - 1 - u;
+        *tap = [
+            f.rec_lo[2 * t],
+            f.rec_hi[2 * t],
+            f.rec_lo[2 * t + 1],
+            f.rec_hi[2 * t + 1],
+        ];
+    }
+    let taps = &taps[..half];
+    let q_first = pad / 2;
+    let q_last = (pad + n - 1) / 2;
+    let start = left + q_first + 1 - half;
+    full.resize(2 * (q_last + 1 - q_first), 0.0);
+    for ((pair, wa), wd) in full
+        .chunks_exact_mut(2)
+        .zip(ae[start..].windows(half))
+        .zip(de[start..].windows(half))
+    {
+        let (mut even, mut odd) = (0.0, 0.0);
+        for ((&x, &y), tap) in wa.iter().zip(wd).zip(taps) {
+            even += tap[0] * x + tap[1] * y;
+            odd += tap[2] * x + tap[3] * y;
+        }
+        pair[0] = even;
+        pair[1] = odd;
+    }
+    let off = pad % 2;
+    out.copy_from_slice(&full[off..off + n]);
 }
 
 /// A reusable multi-level transform: keeps its scratch buffers between calls so a codec can
@@ -274,7 +340,9 @@ pub struct Transform {
     wavelet: Wavelet,
     buf_a: Vec<f64>,
     buf_b: Vec<f64>,
-    full: Vec<f64>,
+    ext: Vec<f64>,
+    /// Synthesis scratch: padded approximation, padded detail, outputs.
+    syn: [Vec<f64>; 3],
 }
 
 impl Transform {
@@ -284,7 +352,8 @@ impl Transform {
             wavelet,
             buf_a: Vec::new(),
             buf_b: Vec::new(),
-            full: Vec::new(),
+            ext: Vec::new(),
+            syn: [Vec::new(), Vec::new(), Vec::new()],
         }
     }
 
@@ -297,30 +366,47 @@ impl Transform {
     /// PyWavelets order `[cA_L, cD_L, …, cD_1]`; equals `pywt.wavedec(x, w,
     /// mode='periodization', level=levels)` concatenated. `levels == 0` copies `x`.
     pub fn forward(&mut self, x: &[f64], levels: usize, out: &mut Vec<f64>) {
-        let f = self.wavelet.filters();
-        let lens = band_lengths(x.len(), levels);
-        let total: usize = lens.iter().sum();
+        match self.wavelet {
+            Wavelet::D4 => self.forward_with(&D4_FILTERS, x, levels, out),
+            Wavelet::Cdf97 => self.forward_with(&CDF97_FILTERS, x, levels, out),
+        }
+    }
+
+    fn forward_with<const L: usize>(
+        &mut self,
+        f: &Filters<L>,
+        x: &[f64],
+        levels: usize,
+        out: &mut Vec<f64>,
+    ) {
+        let total = coefficient_count(x.len(), levels);
         out.clear();
         out.resize(total, 0.0);
         if levels == 0 || x.is_empty() {
             out.copy_from_slice(x);
             return;
         }
-        self.buf_a.clear();
-        self.buf_a.extend_from_slice(x);
-        // cD_1 sits at the end; walk the detail bands backwards.
+        // cD_1 sits at the end; walk the detail bands backwards. The approximation of each
+        // level is written just before its detail band and read from there by the next level.
         let mut end = total;
         let mut m = x.len();
-        for _ in 0..levels {
+        let h = m.div_ceil(2);
+        {
+            let (head, d) = out.split_at_mut(end - h);
+            analysis_step(f, x, &mut self.ext, &mut head[end - 2 * h..], d);
+        }
+        end -= h;
+        m = h;
+        for _ in 1..levels {
             let h = m.div_ceil(2);
-            self.buf_b.resize(h, 0.0);
-            let d = &mut out[end - h..end];
-            analysis_step(f, &self.buf_a[..m], &mut self.buf_b[..h], d);
+            self.buf_a.clear();
+            self.buf_a.extend_from_slice(&out[end - m..end]);
+            let (head, d) = out[..end].split_at_mut(end - h);
+            analysis_step(f, &self.buf_a, &mut self.ext, &mut head[end - 2 * h..], d);
             end -= h;
-            std::mem::swap(&mut self.buf_a, &mut self.buf_b);
             m = h;
         }
-        out[..m].copy_from_slice(&self.buf_a[..m]);
+        debug_assert_eq!(end, m);
     }
 
     /// Inverse of [`Transform::forward`]: `coeffs` of a `levels`-level decomposition of an
@@ -335,8 +421,21 @@ impl Transform {
         levels: usize,
         out: &mut Vec<f64>,
     ) -> Result<(), WaveletError> {
-        let lens = band_lengths(n, levels);
-        let total: usize = lens.iter().sum();
+        match self.wavelet {
+            Wavelet::D4 => self.inverse_with(&D4_FILTERS, coeffs, n, levels, out),
+            Wavelet::Cdf97 => self.inverse_with(&CDF97_FILTERS, coeffs, n, levels, out),
+        }
+    }
+
+    fn inverse_with<const L: usize>(
+        &mut self,
+        f: &Filters<L>,
+        coeffs: &[f64],
+        n: usize,
+        levels: usize,
+        out: &mut Vec<f64>,
+    ) -> Result<(), WaveletError> {
+        let total = coefficient_count(n, levels);
         if coeffs.len() != total {
             return Err(WaveletError::Length {
                 expected: total,
@@ -348,27 +447,29 @@ impl Transform {
             out.extend_from_slice(coeffs);
             return Ok(());
         }
-        let f = self.wavelet.filters();
         // Lengths of the approximation at each level: n_0 = n, n_k = ceil(n_{k-1}/2).
-        let mut sizes = Vec::with_capacity(levels + 1);
-        sizes.push(n);
-        for k in 0..levels {
-            sizes.push(sizes[k].div_ceil(2));
-        }
-        let mut start = lens[0];
+        let sizes = |k: usize| approx_len(n, k);
+        let mut start = sizes(levels);
         self.buf_a.clear();
-        self.buf_a.extend_from_slice(&coeffs[..lens[0]]);
-        for k in (1..=levels).rev() {
-            let h = sizes[k];
-            let m = sizes[k - 1];
+        self.buf_a.extend_from_slice(&coeffs[..start]);
+        for k in (2..=levels).rev() {
+            let h = sizes(k);
+            let m = sizes(k - 1);
             let d = &coeffs[start..start + h];
             start += h;
-            self.full.resize(2 * h, 0.0);
             self.buf_b.resize(m, 0.0);
-            synthesis_step(f, &self.buf_a[..h], d, &mut self.full, &mut self.buf_b[..m]);
+            synthesis_step(f, &self.buf_a[..h], d, &mut self.syn, &mut self.buf_b[..m]);
             std::mem::swap(&mut self.buf_a, &mut self.buf_b);
         }
-        out.extend_from_slice(&self.buf_a[..n]);
+        out.resize(n, 0.0);
+        let h = sizes(1);
+        synthesis_step(
+            f,
+            &self.buf_a[..h],
+            &coeffs[start..start + h],
+            &mut self.syn,
+            out,
+        );
         Ok(())
     }
 }
