@@ -87,7 +87,9 @@ pub fn list() {
             .collect();
         let rate = match c.rate_control() {
             codec::RateControl::Native => "target CR native",
-            codec::RateControl::Search { .. } => "target CR by search",
+            codec::RateControl::Search { .. } | codec::RateControl::SearchIncreasing { .. } => {
+                "target CR by search"
+            }
             codec::RateControl::None => "no target CR",
         };
         let _ = writeln!(out, "{:<20} id {}  {}", c.name(), c.id(), c.description());
