@@ -144,10 +144,10 @@ fn bisect(
         }
         // Search: CR falls as the parameter grows, so too high a CR asks for a larger value;
         // SearchIncreasing: the other way round.
-        if (cr > target) != increasing {
-            lo = mid;
-        } else {
+        if (cr > target) == increasing {
             hi = mid;
+        } else {
+            lo = mid;
         }
         if hi - lo < 1e-9 {
             break;

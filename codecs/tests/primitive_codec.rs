@@ -5,6 +5,10 @@
 //! The database is trained in the test on the shared clips (first 600 frames of each, K ≤ 12,
 //! to stay fast in a debug build); the bound and the monotonicity do not depend on its quality.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
+#![expect(
+    clippy::float_cmp,
+    reason = "stored parameters and untouched frames are compared bit for bit"
+)]
 
 use std::sync::{Arc, OnceLock};
 

@@ -522,7 +522,7 @@ impl PrimitiveCodec {
                 let win = &x[start..end];
                 let mean = win.iter().sum::<f64>() / win.len() as f64;
                 let mq = (mean * MEAN_SCALE).round();
-                if !(mq.abs() < MEAN_LIMIT as f64) {
+                if !mq.is_finite() || mq.abs() >= MEAN_LIMIT as f64 {
                     return Err(CodecError::Param {
                         codec: NAME,
                         key: clip.channel_name(c),
