@@ -9,7 +9,7 @@
 //! joint's own channel order and unwraps each angle to the one nearest the previous frame, so
 //! Euler wraps do not come back as 360° jumps.
 
-use crate::clip::{Axis, ChannelKind, Clip, SkeletonFormat};
+use crate::clip::{Axis, ChannelKind, Clip, Skeleton, SkeletonFormat};
 use crate::math::{Mat3, Vec3};
 
 /// A quaternion `w + xi + yj + zk`; rotations use unit quaternions.
@@ -329,6 +329,48 @@ pub fn unwrap_near(a: f64, reference: f64) -> f64 {
     a + 360.0 * ((reference - a) / 360.0).round()
 }
 
+/// The axes of a joint's rotation channels, in listed (channel) order.
+pub fn rotation_axes(skeleton: &Skeleton, joint: usize) -> Vec<Axis> {
+    skeleton.joints[joint]
+        .dofs
+        .iter()
+        .filter_map(|d| match d {
+            ChannelKind::Rotation(a) => Some(*a),
+            ChannelKind::Translation(_) => None,
+        })
+        .collect()
+}
+
+/// The joints of a skeleton that have rotation channels, in skeleton order (the joints of a
+/// [`QuatClip`]).
+pub fn rotation_joints(skeleton: &Skeleton) -> Vec<usize> {
+    (0..skeleton.joints.len())
+        .filter(|&j| skeleton.joints[j].dofs.iter().any(|d| d.is_rotation()))
+        .collect()
+}
+
+/// The rotation that [`from_quaternions`] writes for `q` on a joint whose rotation channels
+/// are `axes`: `q` itself for three distinct axes, otherwise the rotation the joint's fewer
+/// channels make from the decomposed angles (a 1- or 2-dof joint cannot hold an arbitrary
+/// rotation, so a decoded quaternion off that manifold is projected onto it). A codec that
+/// bounds the error of its output checks this projection, not `q`.
+pub fn project_to_channels(format: SkeletonFormat, axes: &[Axis], q: Quat) -> Quat {
+    if matches!(axes, [x, y, z] if x != y && y != z && x != z) {
+        return q;
+    }
+    let m = q.to_mat3();
+    let angles = match format {
+        SkeletonFormat::Asf => {
+            let order: Vec<Axis> = axes.iter().rev().copied().collect();
+            let mut a = decompose_listed(&m, &order);
+            a.reverse();
+            a
+        }
+        SkeletonFormat::Bvh => decompose_listed(&m, axes),
+    };
+    channel_rotation(format, axes, &angles)
+}
+
 /// A clip with every joint's rotation channels replaced by one unit quaternion per frame.
 #[derive(Debug, Clone, PartialEq)]
 pub struct QuatClip {
@@ -506,6 +548,33 @@ mod tests {
         assert!(m.distance(Quat::from_axis(Axis::Z, 35.0)) < 1e-9);
         // Takes the short way round even when b is given on the other hemisphere.
         assert!(a.slerp(-b, 0.5).distance(Quat::from_axis(Axis::Z, 60.0)) < 1e-9);
+    }
+
+    #[test]
+    fn projection_matches_what_euler_channels_hold() {
+        use crate::clip::SkeletonFormat::{Asf, Bvh};
+        let q = Quat::from_axis(Axis::X, 20.0) * Quat::from_axis(Axis::Z, -35.0);
+        let off = q * Quat::from_axis(Axis::Y, 3.0);
+        for format in [Asf, Bvh] {
+            // Three distinct axes hold any rotation.
+            assert_eq!(
+                project_to_channels(format, &[Axis::Z, Axis::X, Axis::Y], off),
+                off
+            );
+            // One axis: the projection stays on that axis.
+            let p = project_to_channels(format, &[Axis::X], off);
+            assert!(p.y.abs() < 1e-12 && p.z.abs() < 1e-12, "{p:?}");
+        }
+        // A rotation the channels can make comes back unchanged; one off the manifold moves.
+        let rx_rz = [Axis::X, Axis::Z];
+        let on = channel_rotation(Bvh, &rx_rz, &[20.0, -35.0]);
+        assert!(project_to_channels(Bvh, &rx_rz, on).distance(on) < 1e-7);
+        let on = channel_rotation(Asf, &rx_rz, &[20.0, -35.0]);
+        assert!(project_to_channels(Asf, &rx_rz, on).distance(on) < 1e-7);
+        assert!(
+            project_to_channels(Asf, &rx_rz, on * Quat::from_axis(Axis::Y, 5.0)).distance(on)
+                > 1e-3
+        );
     }
 
     #[test]

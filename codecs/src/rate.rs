@@ -3,7 +3,8 @@
 //! CR is the seeds' definition, `4 × channels × frames / bitstream bytes`, counted on the whole
 //! container ([`Bitstream::compression_ratio`]). SPIHT reaches a budget natively (its embedded
 //! stream is cut at the budget); the wavelet codecs bisect α on a log scale (the kept fraction;
-//! bytes grow monotonically with it up to quantization noise).
+//! bytes grow monotonically with it up to quantization noise); the `primitive` codec bisects its
+//! error threshold `t_l`, along which the CR grows instead ([`RateControl::SearchIncreasing`]).
 
 use crate::bitstream::Bitstream;
 use crate::clip::Clip;
@@ -39,7 +40,8 @@ pub fn encode_to_cr(
     codec.encode(clip, &p)
 }
 
-/// The bisection used by codecs with [`RateControl::Search`]; `params` holds `cr = target`.
+/// The bisection used by codecs with [`RateControl::Search`] or
+/// [`RateControl::SearchIncreasing`]; `params` holds `cr = target`.
 ///
 /// # Errors
 /// As [`encode_to_cr`].
@@ -49,13 +51,23 @@ pub(crate) fn search(
     params: &Params,
     target: f64,
 ) -> Result<Bitstream, CodecError> {
-    let RateControl::Search { key, min, max } = codec.rate_control() else {
-        return Err(CodecError::Param {
-            codec: codec.name(),
-            key: "cr".into(),
-            value: target,
-            detail: "no searchable rate parameter".into(),
-        });
+    let (key, min, max, increasing) = match codec.rate_control() {
+        RateControl::Search { key, min, max } => (key, min, max, false),
+        RateControl::SearchIncreasing { key, min, max } => (key, min, max, true),
+        RateControl::Native | RateControl::None => {
+            return Err(CodecError::Param {
+                codec: codec.name(),
+                key: "cr".into(),
+                value: target,
+                detail: "no searchable rate parameter".into(),
+            });
+        }
+    };
+    let knob = Knob {
+        key,
+        min,
+        max,
+        increasing,
     };
     let mut p = params.clone();
     p.insert("cr".into(), 0.0);
@@ -63,7 +75,7 @@ pub(crate) fn search(
     // needed way and search again.
     let mut last = None;
     for _ in 0..13 {
-        match bisect(codec, clip, &p, key, min, max, target)? {
+        match bisect(codec, clip, &p, knob, target)? {
             Ok(s) => return Ok(s),
             Err(closest) => {
                 last = Some(closest);
@@ -83,16 +95,30 @@ pub(crate) fn search(
     })
 }
 
-/// Bisection of `key` alone: `Ok(Ok(stream))` within tolerance, `Ok(Err(closest CR))` if not.
+/// The searched parameter and the direction the CR moves in as it grows.
+#[derive(Debug, Clone, Copy)]
+struct Knob {
+    key: &'static str,
+    min: f64,
+    max: f64,
+    increasing: bool,
+}
+
+/// Bisection of the knob alone: `Ok(Ok(stream))` within tolerance, `Ok(Err(closest CR))` if
+/// not.
 fn bisect(
     codec: &dyn Codec,
     clip: &Clip,
     params: &Params,
-    key: &'static str,
-    min: f64,
-    max: f64,
+    knob: Knob,
     target: f64,
 ) -> Result<Result<Bitstream, f64>, CodecError> {
+    let Knob {
+        key,
+        min,
+        max,
+        increasing,
+    } = knob;
     let mut p = params.clone();
     let mut run = |x: f64| -> Result<(Bitstream, f64), CodecError> {
         p.insert(key.into(), x);
@@ -116,11 +142,12 @@ fn bisect(
         if done {
             break;
         }
-        // CR falls as the parameter grows.
-        if cr > target {
-            lo = mid;
-        } else {
+        // Search: CR falls as the parameter grows, so too high a CR asks for a larger value;
+        // SearchIncreasing: the other way round.
+        if (cr > target) == increasing {
             hi = mid;
+        } else {
+            lo = mid;
         }
         if hi - lo < 1e-9 {
             break;

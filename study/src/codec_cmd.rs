@@ -4,13 +4,14 @@
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use codecs::bitstream::Bitstream;
-use codecs::codec::{self, Codec, Params};
+use codecs::codec::{self, Codec, CodecContext, Params};
+use codecs::primitives::Database;
 use codecs::{Clip, Skeleton, SkeletonFormat, asf, io, metrics, rate};
 use protocols::manifest::{
     MANIFEST_VERSION, REFERENCE_CODEC, Stimulus, StimulusManifest, StimulusMetrics,
@@ -33,6 +34,9 @@ pub struct EncodeArgs {
     /// Codec parameter `key=value` (repeatable), e.g. `--param qp=9 --param window=256`.
     #[arg(long = "param", value_name = "KEY=VALUE")]
     pub params: Vec<String>,
+    /// Primitive database (`study primitives train`) for the `primitive` codec.
+    #[arg(long, value_name = "FILE")]
+    pub db: Option<PathBuf>,
     /// Output folder.
     #[arg(short, long)]
     pub output: PathBuf,
@@ -46,6 +50,9 @@ pub struct DecodeArgs {
     /// The skeleton the stream was made for: an `.asf`, or a `.bvh` whose skeleton is used.
     #[arg(long, value_name = "ASF_OR_BVH")]
     pub skeleton: PathBuf,
+    /// Primitive database the stream was coded with (`primitive` streams).
+    #[arg(long, value_name = "FILE")]
+    pub db: Option<PathBuf>,
     /// Output folder.
     #[arg(short, long)]
     pub output: PathBuf,
@@ -74,12 +81,25 @@ pub struct SweepArgs {
     /// Hide the progress bar.
     #[arg(long)]
     pub quiet: bool,
+    /// Primitive database for the `primitive` codec.
+    #[arg(long, value_name = "FILE")]
+    pub db: Option<PathBuf>,
 }
 
-/// `study codecs`: prints the registry.
+/// The codec context of a command: the primitive database of `--db`, if given.
+fn context(db: Option<&Path>) -> Result<CodecContext> {
+    let Some(path) = db else {
+        return Ok(CodecContext::default());
+    };
+    let d = Database::read(path).context("reading the primitive database (--db)")?;
+    Ok(CodecContext::with_primitives(Arc::new(d)))
+}
+
+/// `study codecs`: prints every codec (the `primitive` codec with a note that it needs
+/// `--db`).
 pub fn list() {
     let mut out = String::new();
-    for c in codec::registry() {
+    for c in codec::registry_in(&CodecContext::default()) {
         let params: Vec<String> = c
             .default_params()
             .iter()
@@ -87,10 +107,20 @@ pub fn list() {
             .collect();
         let rate = match c.rate_control() {
             codec::RateControl::Native => "target CR native",
-            codec::RateControl::Search { .. } => "target CR by search",
+            codec::RateControl::Search { .. } | codec::RateControl::SearchIncreasing { .. } => {
+                "target CR by search"
+            }
             codec::RateControl::None => "no target CR",
         };
         let _ = writeln!(out, "{:<20} id {}  {}", c.name(), c.id(), c.description());
+        if c.name() == codec::primitive::NAME {
+            let _ = writeln!(
+                out,
+                "{:<20}       needs a primitive database: `study encode|decode|sweep --db FILE` \
+                 (`study primitives train`); its fingerprint is recorded as `db`",
+                ""
+            );
+        }
         let _ = writeln!(
             out,
             "{:<20}       {rate}; defaults: {}",
@@ -120,9 +150,9 @@ fn parse_params(items: &[String]) -> Result<Params> {
     Ok(p)
 }
 
-fn find_codec(name: &str) -> Result<Box<dyn Codec>> {
-    codec::by_name(name).with_context(|| {
-        let names: Vec<&str> = codec::registry()
+fn find_codec(name: &str, ctx: &CodecContext) -> Result<Box<dyn Codec>> {
+    codec::by_name_in(name, ctx).with_context(|| {
+        let names: Vec<&str> = codec::registry_in(ctx)
             .iter()
             .map(|c| c.name())
             .collect::<Vec<_>>();
@@ -173,7 +203,8 @@ fn stem_of(p: &Path) -> String {
 /// On unreadable input, a bad codec or parameter, or an unwritable output folder.
 pub fn encode(args: &EncodeArgs) -> Result<()> {
     let clip = io::read_clip(args.asf.as_deref(), &args.input)?;
-    let c = find_codec(&args.codec)?;
+    let ctx = context(args.db.as_deref())?;
+    let c = find_codec(&args.codec, &ctx)?;
     let params = parse_params(&args.params)?;
     let t0 = Instant::now();
     let stream = encode_with(c.as_ref(), &clip, &params, args.cr)?;
@@ -223,7 +254,8 @@ pub fn decode(args: &DecodeArgs) -> Result<()> {
     let stream =
         Bitstream::from_bytes(&bytes).with_context(|| format!("{}", args.bitstream.display()))?;
     let skeleton = read_skeleton(&args.skeleton)?;
-    let clip = codec::decode_any(&stream, &skeleton)
+    let ctx = context(args.db.as_deref())?;
+    let clip = codec::decode_any_in(&stream, &skeleton, &ctx)
         .with_context(|| format!("decoding {}", args.bitstream.display()))?;
     std::fs::create_dir_all(&args.output)
         .with_context(|| format!("creating {}", args.output.display()))?;
@@ -305,8 +337,9 @@ pub fn sweep(args: &SweepArgs) -> Result<()> {
             bail!("--cr {t}: compression ratios must be positive");
         }
     }
+    let ctx = context(args.db.as_deref())?;
     for name in &args.codecs {
-        let c = find_codec(name)?;
+        let c = find_codec(name, &ctx)?;
         if c.rate_control() == codec::RateControl::None {
             bail!("codec `{name}` takes no target rate; sweep lossy codecs");
         }
@@ -373,7 +406,7 @@ pub fn sweep(args: &SweepArgs) -> Result<()> {
                 loop {
                     let i = next.fetch_add(1, Ordering::Relaxed);
                     let Some(job) = jobs.get(i) else { break };
-                    let r = run_job(job, &clips, out);
+                    let r = run_job(job, &clips, out, &ctx);
                     bar.inc(1);
                     if let Ok(mut v) = results.lock() {
                         v.push((i, r));
@@ -412,9 +445,9 @@ type SweepClip = (String, Clip, Option<PathBuf>, PathBuf);
 /// One stimulus and its CSV row.
 type JobResult = Result<(Stimulus, String)>;
 
-fn run_job(job: &Job, clips: &[SweepClip], out: &Path) -> JobResult {
+fn run_job(job: &Job, clips: &[SweepClip], out: &Path, ctx: &CodecContext) -> JobResult {
     let (name, clip, skel, dir) = &clips[job.clip];
-    let c = find_codec(&job.codec)?;
+    let c = find_codec(&job.codec, ctx)?;
     let t0 = Instant::now();
     let stream = rate::encode_to_cr(c.as_ref(), clip, &Params::new(), job.target)
         .with_context(|| format!("{name}: {} at CR {}", job.codec, job.target))?;
@@ -490,6 +523,7 @@ mod tests {
             output: out.clone(),
             jobs: Some(2),
             quiet: true,
+            db: None,
         };
         sweep(&args).unwrap();
         let text = std::fs::read_to_string(out.join("stimuli.json")).unwrap();

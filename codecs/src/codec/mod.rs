@@ -9,21 +9,32 @@
 //! | `wavelet-bone` | 5 | bone length only, `A_i = l_i` |
 //! | `spiht` | 6 | thesis ch. 6: 1-D SPIHT, perceptual bit allocation eq. 6.1-6.3 |
 //! | `spiht-uniform` | 7 | 1-D SPIHT with equal bit shares (allocation ablation) |
+//! | `primitive` | 8 | thesis ch. 5: primitive database + incremental CDF 9/7 differences, knob `t_l` |
 //!
 //! Every lossy codec takes either its native parameters or `cr` (a target compression ratio);
-//! [`crate::rate::encode_to_cr`] reaches a target within ±2 %.
+//! [`crate::rate::encode_to_cr`] reaches a target within ±2 % where the codec's knob allows.
+//!
+//! The `primitive` codec needs a context the others do not: the primitive database its
+//! decoder shares with the encoder. [`CodecContext`] carries it; [`by_name_in`],
+//! [`by_id_in`], [`decode_any_in`] and [`registry_in`] take one, and [`by_name`], [`by_id`],
+//! [`decode_any`] use an empty context (the `primitive` codec is found, but refuses to encode
+//! or decode with [`CodecError::NoDatabase`]).
 
 use std::collections::BTreeMap;
+use std::sync::Arc;
 
 use crate::bitstream::{Bitstream, BitstreamError, StreamLimits};
 use crate::clip::{Clip, ClipError, Skeleton};
+use crate::primitives::Database;
 
 mod prep;
+pub mod primitive;
 pub mod raw;
 pub mod spiht;
 pub mod wavelet_codec;
 
 pub use prep::{unwrap_degrees, wrap_degrees};
+pub use primitive::PrimitiveCodec;
 pub use spiht::{SpihtCodec, crowd_budgets};
 pub use wavelet_codec::{Selection, TranslationRule, WaveletCodec};
 
@@ -80,6 +91,26 @@ pub enum CodecError {
         /// Frames.
         frames: usize,
     },
+    /// The codec needs a primitive database and none was given.
+    #[error(
+        "codec `{codec}` needs a primitive database (CodecContext::primitives; in `study`: --db FILE)"
+    )]
+    NoDatabase {
+        /// Codec name.
+        codec: &'static str,
+    },
+    /// The stream (or the `db` parameter) names another primitive database than the one given.
+    #[error(
+        "codec `{codec}`: the stream was coded with primitive database {stream:08x}, but the database given has fingerprint {given:08x}"
+    )]
+    DatabaseMismatch {
+        /// Codec name.
+        codec: &'static str,
+        /// Fingerprint recorded in the stream or parameters.
+        stream: u32,
+        /// Fingerprint of the database in the context.
+        given: u32,
+    },
     /// A target compression ratio cannot be reached.
     #[error("codec `{codec}`: target CR {target} not reachable (closest {closest:.3})")]
     Rate {
@@ -99,6 +130,16 @@ pub enum RateControl {
     Native,
     /// Bisect this parameter (CR decreases as it grows) in `[min, max]`, on a log scale.
     Search {
+        /// Parameter name.
+        key: &'static str,
+        /// Smallest value.
+        min: f64,
+        /// Largest value.
+        max: f64,
+    },
+    /// Bisect this parameter (CR increases as it grows, e.g. an error threshold) in
+    /// `[min, max]`, on a log scale.
+    SearchIncreasing {
         /// Parameter name.
         key: &'static str,
         /// Smallest value.
@@ -135,7 +176,25 @@ pub trait Codec: Send + Sync {
     fn decode(&self, stream: &Bitstream, skeleton: &Skeleton) -> Result<Clip, CodecError>;
 }
 
-/// Every codec, in id order.
+/// What a codec may need besides the stream: today the primitive database of the `primitive`
+/// codec (thesis ch. 5), shared by encoder and decoder. `Default` is an empty context.
+#[derive(Debug, Clone, Default)]
+pub struct CodecContext {
+    /// The primitive database, if one is loaded.
+    pub primitives: Option<Arc<Database>>,
+}
+
+impl CodecContext {
+    /// A context holding a primitive database.
+    pub fn with_primitives(db: Arc<Database>) -> CodecContext {
+        CodecContext {
+            primitives: Some(db),
+        }
+    }
+}
+
+/// Every codec that needs no context (ids 1-7), in id order. The `primitive` codec is left
+/// out because it cannot encode without a database; [`registry_in`] lists every codec.
 pub fn registry() -> Vec<Box<dyn Codec>> {
     vec![
         Box::new(raw::RawF32),
@@ -148,22 +207,68 @@ pub fn registry() -> Vec<Box<dyn Codec>> {
     ]
 }
 
-/// The codec called `name`.
+/// Every codec, in id order, with `ctx` (the `primitive` codec is listed with or without a
+/// database; without one it refuses to encode and decode).
+pub fn registry_in(ctx: &CodecContext) -> Vec<Box<dyn Codec>> {
+    let mut r = registry();
+    r.push(primitive_in(ctx));
+    r
+}
+
+/// The `primitive` codec of a context (built only when asked for: it fingerprints and
+/// renormalizes the database).
+fn primitive_in(ctx: &CodecContext) -> Box<dyn Codec> {
+    Box::new(match &ctx.primitives {
+        Some(db) => PrimitiveCodec::new(Arc::clone(db)),
+        None => PrimitiveCodec::without_database(),
+    })
+}
+
+/// The codec called `name` (empty context).
 pub fn by_name(name: &str) -> Option<Box<dyn Codec>> {
+    by_name_in(name, &CodecContext::default())
+}
+
+/// The codec called `name`, with `ctx`.
+pub fn by_name_in(name: &str, ctx: &CodecContext) -> Option<Box<dyn Codec>> {
+    if name == primitive::NAME {
+        return Some(primitive_in(ctx));
+    }
     registry().into_iter().find(|c| c.name() == name)
 }
 
-/// The codec with bitstream id `id`.
+/// The codec with bitstream id `id` (empty context).
 pub fn by_id(id: u8) -> Option<Box<dyn Codec>> {
+    by_id_in(id, &CodecContext::default())
+}
+
+/// The codec with bitstream id `id`, with `ctx`.
+pub fn by_id_in(id: u8, ctx: &CodecContext) -> Option<Box<dyn Codec>> {
+    if id == primitive::ID {
+        return Some(primitive_in(ctx));
+    }
     registry().into_iter().find(|c| c.id() == id)
 }
 
-/// Decodes any stream with the codec its header names.
+/// Decodes any stream with the codec its header names (empty context).
 ///
 /// # Errors
 /// [`CodecError::WrongCodec`] for an unknown id, otherwise as [`Codec::decode`].
 pub fn decode_any(stream: &Bitstream, skeleton: &Skeleton) -> Result<Clip, CodecError> {
-    let codec = by_id(stream.codec_id).ok_or(CodecError::WrongCodec {
+    decode_any_in(stream, skeleton, &CodecContext::default())
+}
+
+/// Decodes any stream with the codec its header names, with `ctx`.
+///
+/// # Errors
+/// [`CodecError::WrongCodec`] for an unknown id, otherwise as [`Codec::decode`]
+/// ([`CodecError::NoDatabase`] and [`CodecError::DatabaseMismatch`] for `primitive` streams).
+pub fn decode_any_in(
+    stream: &Bitstream,
+    skeleton: &Skeleton,
+    ctx: &CodecContext,
+) -> Result<Clip, CodecError> {
+    let codec = by_id_in(stream.codec_id, ctx).ok_or(CodecError::WrongCodec {
         codec: "any",
         expected: 0,
         found: stream.codec_id,

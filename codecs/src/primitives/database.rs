@@ -148,10 +148,18 @@ pub enum DatabaseError {
 
 /// Largest per-frame distance between two normalized segments (eq. 5.4).
 pub fn segment_distance(a: &Primitive, b: &Primitive) -> f64 {
+    // acos is decreasing, so the largest per-frame distance acos(2(q1·q2)² − 1) is the acos
+    // of the smallest argument: one acos per segment pair instead of sixteen (the codec's
+    // nearest-primitive search runs this K times per segment).
     a.iter()
         .zip(b)
-        .map(|(x, y)| x.distance(*y))
-        .fold(0.0, f64::max)
+        .map(|(x, y)| {
+            let d = x.dot(*y);
+            2.0 * d * d - 1.0
+        })
+        .fold(1.0, f64::min)
+        .clamp(-1.0, 1.0)
+        .acos()
 }
 
 /// SplitMix64: a tiny, well-known, seedable generator for reproducible seeding.

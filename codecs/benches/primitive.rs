@@ -1,0 +1,62 @@
+//! Encode and decode time per frame of the `primitive` codec (thesis ch. 5) on the shared CMU
+//! clips at `t_L = 0.01`, and the compression ratio it reaches there.
+//!
+//! Each clip is coded with a database trained on the *other* shared clips (thesis defaults:
+//! K from 5 to 25, error bound 0.01, S_M = 32), as Table 5.1 codes motions with a database
+//! trained elsewhere. The CR of each clip is printed before timing. Throughput is in frames:
+//! µs/frame = 10⁶ / thrpt. Targets: encode ≤ 200 µs/frame, decode ≤ 20 µs/frame.
+#![allow(clippy::unwrap_used, clippy::expect_used, missing_docs)]
+
+use std::hint::black_box;
+use std::sync::Arc;
+use std::time::Duration;
+
+use codecs::codec::{self, CodecContext, Params};
+use codecs::primitives::{Database, TrainParams};
+use codecs::{Clip, data, io};
+use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+
+fn bench(c: &mut Criterion) {
+    let clips: Vec<(String, Clip)> = data::shared_clips()
+        .into_iter()
+        .map(|f| (f.name, io::read_clip(f.asf.as_deref(), &f.motion).unwrap()))
+        .collect();
+    let mut params = Params::new();
+    params.insert("t_l".into(), 0.01);
+    for (i, (name, clip)) in clips.iter().enumerate() {
+        let others: Vec<&Clip> = clips
+            .iter()
+            .enumerate()
+            .filter(|(k, _)| *k != i)
+            .map(|(_, (_, c))| c)
+            .collect();
+        let db = Database::train(&others, &TrainParams::default(), |_, _| {});
+        let ctx = CodecContext::with_primitives(Arc::new(db));
+        let codec = codec::by_name_in("primitive", &ctx).unwrap();
+        let stream = codec.encode(clip, &params).unwrap();
+        let mut literal = params.clone();
+        literal.insert("step_floor".into(), 0.0);
+        let cr_literal = codec.encode(clip, &literal).unwrap().compression_ratio();
+        println!(
+            "primitive/{name}: {} frames, CR {:.2} at t_L = 0.01 (step_floor 0: {cr_literal:.2}), {} bytes",
+            clip.frames(),
+            stream.compression_ratio(),
+            stream.byte_len(),
+        );
+        let mut g = c.benchmark_group(format!("primitive/{name}"));
+        g.throughput(Throughput::Elements(clip.frames() as u64));
+        g.sample_size(10)
+            .warm_up_time(Duration::from_millis(500))
+            .measurement_time(Duration::from_secs(2));
+        g.bench_function("encode", |b| {
+            b.iter(|| codec.encode(black_box(clip), &params).unwrap());
+        });
+        g.bench_function("decode", |b| {
+            b.iter(|| codec.decode(black_box(&stream), &clip.skeleton).unwrap());
+        });
+        g.finish();
+    }
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);
