@@ -367,6 +367,7 @@ fn run_subject(
             elapsed_ms: clock_ms,
             wall_clock_ms: now_ms(),
             monotonic_ms: monotonic_base + started.elapsed().as_millis() as u64,
+            encoding: None,
         };
         log.append(&record)?;
     }
