@@ -10,6 +10,7 @@ use clap::{Parser, Subcommand};
 mod clip_cmd;
 mod codec_cmd;
 mod demo_cmd;
+mod live;
 mod markers_cmd;
 mod primitives_cmd;
 mod report_cmd;

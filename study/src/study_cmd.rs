@@ -8,13 +8,16 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 use anyhow::{Context as _, bail};
 use clap::Args;
 use protocols::observer::Observer;
+use protocols::study::Metric;
 use protocols::study::content_hash;
-use protocols::{Protocol, Session, SessionStatus, StudyDefinition, TrialRecord};
+use protocols::{Detection, Protocol, Session, SessionStatus, StudyDefinition, TrialRecord};
 use results::store::{
     DisplayInfo, MANIFEST_FORMAT_VERSION, RUN_FILE, SESSION_FILE, SessionLock, SessionState,
     read_json, write_json, write_new,
 };
 use results::{RunManifest, SessionLog, SessionManifest};
+
+use crate::live::{LiveStimuli, LiveStimulus};
 
 /// Arguments of `study check`.
 #[derive(Debug, Args)]
@@ -76,7 +79,66 @@ pub fn check(args: &CheckArgs) -> anyhow::Result<()> {
             )?;
         }
         Protocol::Staircase => {
-            if let Some(sc) = &study.staircase {
+            if let Some(sc) = &study.staircase
+                && let Some(live) = &sc.live
+            {
+                let stimuli = LiveStimuli::from_study(&study, &args.study)?;
+                let names: Vec<&str> = live.clips.iter().map(|c| c.clip.as_str()).collect();
+                writeln!(
+                    text,
+                    "  live staircase: codec {} encodes {} = level on the fly; clips {}: {}",
+                    stimuli.as_ref().map_or("?", LiveStimuli::codec_name),
+                    sc.param,
+                    match live.order {
+                        protocols::ClipOrder::InTurn => "in turn",
+                        protocols::ClipOrder::Shuffled => "in turn, order shuffled per subject",
+                    },
+                    names.join(", ")
+                )?;
+                for t in &sc.tracks {
+                    writeln!(
+                        text,
+                        "  staircase {:?}: start {} in [{}, {}]",
+                        t.name,
+                        t.settings.start,
+                        t.settings.min.unwrap_or(f64::NEG_INFINITY),
+                        t.settings.max.unwrap_or(f64::INFINITY)
+                    )?;
+                }
+                // Encode every clip once at the first start level: proves the codec takes the
+                // settings and shows what a trial will look like.
+                if let (Some(mut stimuli), Some(t)) = (stimuli, sc.tracks.first()) {
+                    let clips: Vec<(String, String)> = stimuli
+                        .clips()
+                        .map(|(c, r)| (c.to_string(), r.to_string()))
+                        .collect();
+                    for (clip, reference) in clips {
+                        let level = t.settings.start;
+                        let trial = protocols::Trial {
+                            index: 0,
+                            block: protocols::Block::Test,
+                            condition: t.name.clone(),
+                            stimulus: sc.live_stimulus_id(&clip, level),
+                            reference,
+                            arrangement: study.presentation.arrangement,
+                            reference_position: protocols::Position::Left,
+                            staircase: Some(0),
+                            level: Some(level),
+                            break_before: false,
+                        };
+                        let s = stimuli.resolve(&trial)?;
+                        writeln!(
+                            text,
+                            "  clip {clip:?}: {} frames; at {} = {level}: CR {:.2}:1, RMS {:.3} cm ({} decoded frames)",
+                            s.reference.frames(),
+                            sc.param,
+                            s.achieved_cr,
+                            s.rms_cm,
+                            s.test.frames()
+                        )?;
+                    }
+                }
+            } else if let Some(sc) = &study.staircase {
                 for t in &sc.tracks {
                     writeln!(
                         text,
@@ -149,6 +211,16 @@ pub fn archive_study(
         st.bitstream = st.bitstream.as_deref().map(absolute);
     }
     table.insert("stimuli".into(), toml::Value::String("stimuli.json".into()));
+    // A live staircase's decoder context is named relative to the study file: point the copy
+    // at the original so the copy still loads it.
+    if let Some(toml::Value::String(db)) = table
+        .get_mut("staircase")
+        .and_then(|s| s.get_mut("live"))
+        .and_then(|l| l.get_mut("database"))
+    {
+        let p = base.join(db.as_str());
+        *db = fs::canonicalize(&p).unwrap_or(p).display().to_string();
+    }
     let body = toml::to_string(&table).context("writing the study copy")?;
     let header = format!(
         "# Copy of {} kept with its results; `stimuli` points at the manifest copy beside it.\n",
@@ -229,11 +301,29 @@ pub fn simulate(args: &SimulateArgs) -> anyhow::Result<()> {
         write_new(&out.join(RUN_FILE), &serde_json::to_vec_pretty(&run)?)?;
     }
     archive_study(out, &args.study, &study_bytes, &study)?;
+    // One cache of encoded levels for every simulated subject of the run.
+    let mut live = LiveStimuli::from_study(&study, &args.study)?;
+    if live.is_some()
+        && study.simulation.detection == Detection::Error
+        && study.simulation.metric != Metric::RmsCm
+    {
+        bail!(
+            "{}: simulation.metric: a live staircase measures rms_cm on the decoded clip; set metric = \"rms_cm\"",
+            args.study.display()
+        );
+    }
     for subject in 0..args.subjects {
         let dir = out.join(format!("{}_s1", subject_id(subject)));
-        let summary = run_subject(&study, &hash, args, subject, &dir)
+        let summary = run_subject(&study, &hash, args, subject, &dir, live.as_mut())
             .with_context(|| format!("session {}", dir.display()))?;
         eprintln!("{summary}");
+    }
+    if let Some(l) = &live {
+        eprintln!(
+            "live staircase: {} clip × level stimuli encoded with {}",
+            l.cached(),
+            l.codec_name()
+        );
     }
     Ok(())
 }
@@ -288,6 +378,7 @@ fn run_subject(
     args: &SimulateArgs,
     subject: u32,
     dir: &Path,
+    mut live: Option<&mut LiveStimuli>,
 ) -> anyhow::Result<String> {
     let mut engine = Session::new(study, subject)?;
     let (mut log, logged, mut manifest) = if args.resume && dir.exists() {
@@ -346,7 +437,12 @@ fn run_subject(
     let started = Instant::now();
     let per_trial_ms = study.trial_presentation_ms();
     while let Some(trial) = engine.next_trial(clock_ms)? {
-        let response = observer.respond(&trial)?;
+        // A live trial's stimulus is encoded now; the observer sees its measured error.
+        let made = match live.as_deref_mut() {
+            Some(l) => Some(l.resolve(&trial)?),
+            None => None,
+        };
+        let response = observer.respond_measured(&trial, made.as_ref().map(|m| m.rms_cm))?;
         if args.trial_delay_ms > 0 {
             std::thread::sleep(Duration::from_millis(args.trial_delay_ms));
         }
@@ -367,7 +463,7 @@ fn run_subject(
             elapsed_ms: clock_ms,
             wall_clock_ms: now_ms(),
             monotonic_ms: monotonic_base + started.elapsed().as_millis() as u64,
-            encoding: None,
+            encoding: made.as_ref().map(LiveStimulus::encoding),
         };
         log.append(&record)?;
     }
