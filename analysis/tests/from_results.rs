@@ -189,6 +189,7 @@ fn mos_sessions_become_ratings_with_conditions_and_hidden_reference() {
         &c.data,
         &ReportOptions {
             figures: false,
+            level_label: "Level".to_owned(),
             ..ReportOptions::default()
         },
     )

@@ -80,6 +80,24 @@ pub struct ReportArgs {
     pub no_png: bool,
 }
 
+/// The staircase level's name in tables and figures: the thesis's `t_L`, a target ratio, or
+/// the parameter as the study names it (live staircases add the codec).
+fn level_label(study: &StudyDefinition) -> String {
+    let Some(sc) = &study.staircase else {
+        return "Level".to_owned();
+    };
+    let name = match sc.param.as_str() {
+        "t_l" => "t_L".to_owned(),
+        "cr" => "target CR".to_owned(),
+        p => p.to_owned(),
+    };
+    if sc.live.is_some() {
+        format!("{name} ({})", sc.codec)
+    } else {
+        name
+    }
+}
+
 /// Runs `study report`.
 ///
 /// # Errors
@@ -130,6 +148,7 @@ pub fn run(args: &ReportArgs) -> Result<()> {
         },
         zscore: args.zscore,
         figures: true,
+        level_label: level_label(&study),
     };
     let analysis = analyze(&converted.data, &options)?;
     let title = format!(
@@ -224,8 +243,8 @@ mod tests {
             ),
             (
                 "staircase",
-                &["thresholds"],
-                &["staircases", "psychometric"],
+                &["thresholds", "jnd_thresholds", "jnd_notice"],
+                &["staircases", "psychometric", "jnd"],
             ),
         ];
         for (name, tables, figures) in expected {
