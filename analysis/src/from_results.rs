@@ -303,12 +303,11 @@ fn encoded_level(record: &TrialRecord, manifest: &StimulusManifest) -> Option<En
         .or_else(|| manifest.get(&record.trial.stimulus))?
         .clip
         .clone();
-    let (achieved_cr, rms_cm) = match &record.encoding {
-        Some(e) => (e.achieved_cr, Some(e.rms_cm)),
-        None => {
-            let s = manifest.get(&record.trial.stimulus)?;
-            (s.achieved_cr, s.metrics.map(|m| m.rms_cm))
-        }
+    let (achieved_cr, rms_cm) = if let Some(e) = &record.encoding {
+        (e.achieved_cr, Some(e.rms_cm))
+    } else {
+        let s = manifest.get(&record.trial.stimulus)?;
+        (s.achieved_cr, s.metrics.map(|m| m.rms_cm))
     };
     Some(EncodedLevel {
         clip,

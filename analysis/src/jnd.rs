@@ -102,7 +102,8 @@ pub fn unnoticed_share(
     }
     let mean = thresholds.iter().sum::<f64>() / n;
     let sd = (thresholds.iter().map(|t| (t - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
-    if !(sd > 0.0) {
+    // sd is finite (finite inputs); zero spread leaves the model undefined.
+    if sd <= 0.0 {
         return Ok(UnnoticedShare {
             level,
             empirical,

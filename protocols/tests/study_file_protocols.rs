@@ -25,6 +25,8 @@ fn examples_are_valid() {
     let sc = s.staircase.unwrap();
     assert_eq!(sc.tracks.len(), 2);
     assert!((sc.tracks[0].settings.start - 0.024).abs() < 1e-15);
+    let live = example("live-staircase.toml").staircase.unwrap();
+    assert_eq!(live.live.unwrap().clips.len(), 5, "five motions in turn");
 }
 
 #[test]

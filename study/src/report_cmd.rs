@@ -98,29 +98,9 @@ fn level_label(study: &StudyDefinition) -> String {
     }
 }
 
-/// Runs `study report`.
-///
-/// # Errors
-/// Unreadable or malformed results (named by file, line and column), a study file that does
-/// not load, or an output that cannot be written.
-pub fn run(args: &ReportArgs) -> Result<()> {
-    let (run, sessions) = results::read_results_dir(&args.results)?;
-    let study_path = args
-        .study
-        .clone()
-        .unwrap_or_else(|| args.results.join(&run.study_file));
-    let study = StudyDefinition::load(&study_path).with_context(|| {
-        format!(
-            "loading the study file {} (pass --study to name another)",
-            study_path.display()
-        )
-    })?;
-    let converted = from_results::convert(
-        &sessions,
-        &study.manifest,
-        Some((study.scale.min, study.scale.max)),
-    )?;
-    let options = ReportOptions {
+/// The analysis options `args` ask for.
+fn report_options(args: &ReportArgs, study: &StudyDefinition) -> ReportOptions {
+    ReportOptions {
         confidence: args.confidence,
         ci_method: match args.ci {
             CiArg::T => CiMethod::StudentT,
@@ -148,8 +128,33 @@ pub fn run(args: &ReportArgs) -> Result<()> {
         },
         zscore: args.zscore,
         figures: true,
-        level_label: level_label(&study),
-    };
+        level_label: level_label(study),
+    }
+}
+
+/// Runs `study report`.
+///
+/// # Errors
+/// Unreadable or malformed results (named by file, line and column), a study file that does
+/// not load, or an output that cannot be written.
+pub fn run(args: &ReportArgs) -> Result<()> {
+    let (run, sessions) = results::read_results_dir(&args.results)?;
+    let study_path = args
+        .study
+        .clone()
+        .unwrap_or_else(|| args.results.join(&run.study_file));
+    let study = StudyDefinition::load(&study_path).with_context(|| {
+        format!(
+            "loading the study file {} (pass --study to name another)",
+            study_path.display()
+        )
+    })?;
+    let converted = from_results::convert(
+        &sessions,
+        &study.manifest,
+        Some((study.scale.min, study.scale.max)),
+    )?;
+    let options = report_options(args, &study);
     let analysis = analyze(&converted.data, &options)?;
     let title = format!(
         "Study {} ({} protocol, {} sessions)",

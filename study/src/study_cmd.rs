@@ -79,65 +79,8 @@ pub fn check(args: &CheckArgs) -> anyhow::Result<()> {
             )?;
         }
         Protocol::Staircase => {
-            if let Some(sc) = &study.staircase
-                && let Some(live) = &sc.live
-            {
-                let stimuli = LiveStimuli::from_study(&study, &args.study)?;
-                let names: Vec<&str> = live.clips.iter().map(|c| c.clip.as_str()).collect();
-                writeln!(
-                    text,
-                    "  live staircase: codec {} encodes {} = level on the fly; clips {}: {}",
-                    stimuli.as_ref().map_or("?", LiveStimuli::codec_name),
-                    sc.param,
-                    match live.order {
-                        protocols::ClipOrder::InTurn => "in turn",
-                        protocols::ClipOrder::Shuffled => "in turn, order shuffled per subject",
-                    },
-                    names.join(", ")
-                )?;
-                for t in &sc.tracks {
-                    writeln!(
-                        text,
-                        "  staircase {:?}: start {} in [{}, {}]",
-                        t.name,
-                        t.settings.start,
-                        t.settings.min.unwrap_or(f64::NEG_INFINITY),
-                        t.settings.max.unwrap_or(f64::INFINITY)
-                    )?;
-                }
-                // Encode every clip once at the first start level: proves the codec takes the
-                // settings and shows what a trial will look like.
-                if let (Some(mut stimuli), Some(t)) = (stimuli, sc.tracks.first()) {
-                    let clips: Vec<(String, String)> = stimuli
-                        .clips()
-                        .map(|(c, r)| (c.to_string(), r.to_string()))
-                        .collect();
-                    for (clip, reference) in clips {
-                        let level = t.settings.start;
-                        let trial = protocols::Trial {
-                            index: 0,
-                            block: protocols::Block::Test,
-                            condition: t.name.clone(),
-                            stimulus: sc.live_stimulus_id(&clip, level),
-                            reference,
-                            arrangement: study.presentation.arrangement,
-                            reference_position: protocols::Position::Left,
-                            staircase: Some(0),
-                            level: Some(level),
-                            break_before: false,
-                        };
-                        let s = stimuli.resolve(&trial)?;
-                        writeln!(
-                            text,
-                            "  clip {clip:?}: {} frames; at {} = {level}: CR {:.2}:1, RMS {:.3} cm ({} decoded frames)",
-                            s.reference.frames(),
-                            sc.param,
-                            s.achieved_cr,
-                            s.rms_cm,
-                            s.test.frames()
-                        )?;
-                    }
-                }
+            if study.staircase.as_ref().is_some_and(|sc| sc.live.is_some()) {
+                describe_live(&mut text, &study, &args.study)?;
             } else if let Some(sc) = &study.staircase {
                 for t in &sc.tracks {
                     writeln!(
@@ -158,6 +101,76 @@ pub fn check(args: &CheckArgs) -> anyhow::Result<()> {
         writeln!(text, "  time limit: {:.1} min", ms as f64 / 60_000.0)?;
     }
     std::io::Write::write_all(&mut std::io::stdout(), text.as_bytes())?;
+    Ok(())
+}
+
+/// `study check` on a live staircase: its codec, clips and tracks, and every clip encoded
+/// once at the first start level (proves the codec takes the settings and shows what a trial
+/// will look like).
+fn describe_live(text: &mut String, study: &StudyDefinition, path: &Path) -> anyhow::Result<()> {
+    use std::fmt::Write as _;
+    let (Some(sc), Some(live)) = (
+        &study.staircase,
+        study.staircase.as_ref().and_then(|s| s.live.as_ref()),
+    ) else {
+        return Ok(());
+    };
+    let stimuli = LiveStimuli::from_study(study, path)?;
+    let names: Vec<&str> = live.clips.iter().map(|c| c.clip.as_str()).collect();
+    writeln!(
+        text,
+        "  live staircase: codec {} encodes {} = level on the fly; clips {}: {}",
+        stimuli.as_ref().map_or("?", LiveStimuli::codec_name),
+        sc.param,
+        match live.order {
+            protocols::ClipOrder::InTurn => "in turn",
+            protocols::ClipOrder::Shuffled => "in turn, order shuffled per subject",
+        },
+        names.join(", ")
+    )?;
+    for t in &sc.tracks {
+        writeln!(
+            text,
+            "  staircase {:?}: start {} in [{}, {}]",
+            t.name,
+            t.settings.start,
+            t.settings.min.unwrap_or(f64::NEG_INFINITY),
+            t.settings.max.unwrap_or(f64::INFINITY)
+        )?;
+    }
+    // Encode every clip once at the first start level: proves the codec takes the
+    // settings and shows what a trial will look like.
+    if let (Some(mut stimuli), Some(t)) = (stimuli, sc.tracks.first()) {
+        let clips: Vec<(String, String)> = stimuli
+            .clips()
+            .map(|(c, r)| (c.to_string(), r.to_string()))
+            .collect();
+        for (clip, reference) in clips {
+            let level = t.settings.start;
+            let trial = protocols::Trial {
+                index: 0,
+                block: protocols::Block::Test,
+                condition: t.name.clone(),
+                stimulus: sc.live_stimulus_id(&clip, level),
+                reference,
+                arrangement: study.presentation.arrangement,
+                reference_position: protocols::Position::Left,
+                staircase: Some(0),
+                level: Some(level),
+                break_before: false,
+            };
+            let s = stimuli.resolve(&trial)?;
+            writeln!(
+                text,
+                "  clip {clip:?}: {} frames; at {} = {level}: CR {:.2}:1, RMS {:.3} cm ({} decoded frames)",
+                s.reference.frames(),
+                sc.param,
+                s.achieved_cr,
+                s.rms_cm,
+                s.test.frames()
+            )?;
+        }
+    }
     Ok(())
 }
 

@@ -1,7 +1,8 @@
 //! Kill test: `study simulate` is killed with SIGKILL at random moments (at least 20 kills),
 //! resumed each time with `--resume`; after every kill the logs hold a prefix of the
 //! uninterrupted run (no response lost or duplicated), and the completed results equal those
-//! of an uninterrupted run with the same seed, timestamps aside.
+//! of an uninterrupted run with the same seed, timestamps aside. The live staircase (stimuli
+//! encoded by the runner) is killed and resumed the same way.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
 
 use std::path::{Path, PathBuf};
@@ -153,6 +154,15 @@ fn kill_and_resume(study_name: &str, min_kills: u32) {
 #[test]
 fn staircase_survives_sigkill_and_resumes_identically() {
     kill_and_resume("staircase.toml", 20);
+}
+
+/// A live staircase encodes each trial's stimulus in the runner: a resumed process starts with
+/// an empty cache, re-encodes what it needs, and must log the same trials, parameters, CRs and
+/// errors as an uninterrupted run (the logs are compared row by row, encoding columns
+/// included).
+#[test]
+fn live_staircase_survives_sigkill_and_resumes_identically() {
+    kill_and_resume("live-staircase.toml", 20);
 }
 
 #[test]
