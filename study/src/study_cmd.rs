@@ -239,10 +239,19 @@ pub fn archive_study(
         "# Copy of {} kept with its results; `stimuli` points at the manifest copy beside it.\n",
         original.display()
     );
-    write_new(
-        &out.join("stimuli.json"),
-        &serde_json::to_vec_pretty(&manifest)?,
-    )?;
+    // A run killed between the two copies left a complete manifest copy (write_new is
+    // atomic) but no study copy: keep an identical one instead of refusing the resume.
+    let manifest_copy = out.join("stimuli.json");
+    let manifest_bytes = serde_json::to_vec_pretty(&manifest)?;
+    match fs::read(&manifest_copy) {
+        Ok(existing) if existing == manifest_bytes => {}
+        Ok(_) => bail!(
+            "{} exists and differs from the manifest of {}; results are never overwritten",
+            manifest_copy.display(),
+            original.display()
+        ),
+        Err(_) => write_new(&manifest_copy, &manifest_bytes)?,
+    }
     write_new(&copy, format!("{header}{body}").as_bytes())?;
     Ok(())
 }

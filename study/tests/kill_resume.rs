@@ -34,7 +34,10 @@ fn simulate(study: &Path, out: &Path, delay_ms: u64, resume: bool) -> Command {
     if resume {
         c.arg("--resume");
     }
-    c.stdout(Stdio::null()).stderr(Stdio::null());
+    // Each run's messages go beside its results, so a failed resume can say why.
+    let log = std::fs::File::create(out.with_extension(if resume { "resume.log" } else { "log" }))
+        .unwrap();
+    c.stdout(Stdio::null()).stderr(Stdio::from(log));
     c
 }
 
@@ -118,13 +121,21 @@ fn kill_and_resume(study_name: &str, min_kills: u32) {
             previous = total;
             let mut resumed = simulate(&study, &out, 4, true).spawn().unwrap();
             if kills >= min_kills {
-                assert!(resumed.wait().unwrap().success(), "final resume completes");
+                assert!(
+                    resumed.wait().unwrap().success(),
+                    "final resume completes: {}",
+                    std::fs::read_to_string(out.with_extension("resume.log")).unwrap_or_default()
+                );
                 break;
             }
             // A resume that finished before the next kill ends this attempt.
             std::thread::sleep(Duration::from_millis(5 + rng.below(120)));
             if let Some(status) = resumed.try_wait().unwrap() {
-                assert!(status.success(), "a resume after SIGKILL failed: {status}");
+                assert!(
+                    status.success(),
+                    "a resume after SIGKILL failed: {status}: {}",
+                    std::fs::read_to_string(out.with_extension("resume.log")).unwrap_or_default()
+                );
                 break;
             }
             child = resumed;
