@@ -37,6 +37,7 @@ fn bench(c: &mut Criterion) {
     let options = ReportOptions {
         baseline_codec: Some("d".into()),
         figures: false,
+        level_label: "Level".to_owned(),
         ..ReportOptions::default()
     };
     let mut group = c.benchmark_group("report_1m_ratings");

@@ -14,6 +14,7 @@ use crate::descriptive::Rating;
 use crate::dmos::DscqsPair;
 use crate::error::AnalysisError;
 use crate::findings::ConditionInfo;
+use crate::jnd::EncodedLevel;
 use crate::psychometric::TwoAfcTrial;
 use crate::staircase::{StaircaseStep, StaircaseTrack};
 use crate::study::StudyData;
@@ -97,7 +98,9 @@ fn check_scale(
 /// repeats are kept as repeated ratings. `scale` (min, max) rejects scores outside the study's
 /// rating scale. Stimuli rated as tests whose clip's reference was also rated (a hidden
 /// reference) get an ACR-HR mapping in `reference_of`. A condition's compression ratio is the
-/// stimulus' target ratio when it has one, else the achieved ratio.
+/// stimulus' target ratio when it has one, else the achieved ratio. Staircase trials also
+/// give the compression ratio reached at their level (`encoded_levels`), from the row's
+/// encoding columns (live staircase) or the manifest.
 ///
 /// # Errors
 /// [`AnalysisError::MixedProtocols`] when sessions ran different protocols;
@@ -153,6 +156,9 @@ pub fn convert(
                 &mut tracks,
                 scale,
             )?;
+            if let Some(e) = encoded_level(record, manifest) {
+                data.encoded_levels.push(e);
+            }
         }
     }
     for (id, name) in stimuli.names.iter().enumerate() {
@@ -286,4 +292,27 @@ fn convert_record(
         }
     }
     Ok(())
+}
+
+/// The CR (and error) a staircase trial's stimulus reached at its level: logged in the row by
+/// a live staircase, else the manifest's for a prepared stimulus. The clip is the reference's.
+fn encoded_level(record: &TrialRecord, manifest: &StimulusManifest) -> Option<EncodedLevel> {
+    let level = record.trial.level.filter(|l| l.is_finite())?;
+    let clip = manifest
+        .get(&record.trial.reference)
+        .or_else(|| manifest.get(&record.trial.stimulus))?
+        .clip
+        .clone();
+    let (achieved_cr, rms_cm) = if let Some(e) = &record.encoding {
+        (e.achieved_cr, Some(e.rms_cm))
+    } else {
+        let s = manifest.get(&record.trial.stimulus)?;
+        (s.achieved_cr, s.metrics.map(|m| m.rms_cm))
+    };
+    Some(EncodedLevel {
+        clip,
+        level,
+        achieved_cr,
+        rms_cm,
+    })
 }

@@ -3,7 +3,8 @@
 //! Computes, the way the seeds and the standards do: MOS with Student-t and BT.500 normal
 //! confidence intervals ([`descriptive`]), DSCQS and ACR-HR DMOS ([`dmos`]), paired / Welch /
 //! Student t-tests with Holm correction ([`ttest`]), power analysis ([`power`]), BT.500 Annex 2
-//! observer screening ([`screening`]), staircase thresholds ([`staircase`]), maximum-likelihood
+//! observer screening ([`screening`]), staircase thresholds ([`staircase`]) and the share of
+//! viewers who would notice a level ([`jnd`]), maximum-likelihood
 //! psychometric fits with bootstrap CIs ([`psychometric`]), rate findings ([`findings`]), and
 //! the tables, plots and report that `study report` writes.
 //!
@@ -28,6 +29,7 @@ mod error;
 pub mod export;
 pub mod findings;
 pub mod from_results;
+pub mod jnd;
 mod panel;
 pub mod plots;
 pub mod power;

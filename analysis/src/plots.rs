@@ -86,6 +86,19 @@ pub enum Figure {
         /// (percent correct, threshold, CI lower, CI upper), if computed.
         threshold: Option<(f64, f64, f64, f64)>,
     },
+    /// Distribution of staircase thresholds over viewers: the empirical share who notice a
+    /// level (step function of the sorted thresholds, each threshold marked) and the normal
+    /// model's share with its confidence band.
+    Jnd {
+        /// Title.
+        title: String,
+        /// X axis label (the level's name).
+        level_label: String,
+        /// Per-viewer thresholds.
+        thresholds: Vec<f64>,
+        /// (level, modelled share noticing, CI lower, CI upper).
+        model: Vec<(f64, f64, f64, f64)>,
+    },
     /// Per-subject score distributions: one column per subject, dot area ∝ count.
     ScoreDistributions {
         /// Title.
@@ -116,6 +129,7 @@ impl Figure {
             Self::RateCurves { title, .. }
             | Self::Staircases { title, .. }
             | Self::Psychometric { title, .. }
+            | Self::Jnd { title, .. }
             | Self::ScoreDistributions { title, .. } => title,
         }
     }
@@ -175,6 +189,12 @@ impl Figure {
                 fit,
                 threshold,
             } => draw_psychometric(root, title, level_label, data, fit, *threshold),
+            Self::Jnd {
+                title,
+                level_label,
+                thresholds,
+                model,
+            } => draw_jnd(root, title, level_label, thresholds, model),
             Self::ScoreDistributions { title, per_subject } => {
                 draw_distributions(root, title, per_subject)
             }
@@ -367,6 +387,78 @@ fn draw_psychometric<DB: DrawingBackend>(
             BLACK.stroke_width(3),
         ))?;
     }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::LowerRight)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font((FONT, 13))
+        .draw()?;
+    Ok(())
+}
+
+fn draw_jnd<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    title: &str,
+    level_label: &str,
+    thresholds: &[f64],
+    model: &[(f64, f64, f64, f64)],
+) -> DrawResult<DB> {
+    let mut sorted: Vec<f64> = thresholds
+        .iter()
+        .copied()
+        .filter(|t| t.is_finite())
+        .collect();
+    sorted.sort_by(f64::total_cmp);
+    let (mut x0, mut x1) = (f64::INFINITY, f64::NEG_INFINITY);
+    for x in sorted.iter().copied().chain(model.iter().map(|m| m.0)) {
+        x0 = x0.min(x);
+        x1 = x1.max(x);
+    }
+    let (x0, x1) = padded(x0, x1);
+    let mut chart = ChartBuilder::on(root)
+        .caption(title, (FONT, 20))
+        .margin(12)
+        .x_label_area_size(45)
+        .y_label_area_size(55)
+        .build_cartesian_2d(x0..x1, 0.0..1.0)?;
+    chart
+        .configure_mesh()
+        .x_desc(level_label)
+        .y_desc("Share of viewers who notice")
+        .draw()?;
+    if !model.is_empty() {
+        let band: Vec<(f64, f64)> = model
+            .iter()
+            .map(|m| (m.0, m.2))
+            .chain(model.iter().rev().map(|m| (m.0, m.3)))
+            .collect();
+        chart.draw_series(std::iter::once(Polygon::new(band, RED.mix(0.15).filled())))?;
+        chart
+            .draw_series(LineSeries::new(
+                model.iter().map(|m| (m.0, m.1)),
+                RED.stroke_width(2),
+            ))?
+            .label("normal model with confidence band")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED.stroke_width(2)));
+    }
+    // Empirical CDF: the share noticing steps up by 1/n at each threshold.
+    let n = sorted.len().max(1) as f64;
+    let mut steps = vec![(x0, 0.0)];
+    for (i, &t) in sorted.iter().enumerate() {
+        steps.push((t, i as f64 / n));
+        steps.push((t, (i + 1) as f64 / n));
+    }
+    steps.push((x1, if sorted.is_empty() { 0.0 } else { 1.0 }));
+    chart
+        .draw_series(LineSeries::new(steps, BLUE.stroke_width(2)))?
+        .label(format!("empirical ({} viewers)", sorted.len()))
+        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLUE.stroke_width(2)));
+    chart.draw_series(
+        sorted
+            .iter()
+            .map(|&t| Circle::new((t, 0.0), 4, BLUE.mix(0.6).filled())),
+    )?;
     chart
         .configure_series_labels()
         .position(SeriesLabelPosition::LowerRight)

@@ -9,6 +9,7 @@ use crate::descriptive::{CiMethod, ConditionStats, Rating, condition_stats};
 use crate::dmos::{DscqsPair, acr_hr_dmos, dscqs_dmos, zscore_by_subject};
 use crate::error::AnalysisError;
 use crate::findings::{ConditionInfo, Limit, RateFinding, rate_findings};
+use crate::jnd::{EncodedLevel, JndAnalysis, jnd_analysis};
 use crate::panel::Panel;
 use crate::plots::{Figure, RateSeries};
 use crate::psychometric::{
@@ -38,6 +39,9 @@ pub struct StudyData {
     pub staircases: Vec<StaircaseTrack>,
     /// All 2AFC trials, for the psychometric fit.
     pub two_afc: Vec<TwoAfcTrial>,
+    /// Compression ratio (and error) reached at each staircase level on each clip, one entry
+    /// per trial: logged by a live staircase, or the manifest's for prepared stimuli.
+    pub encoded_levels: Vec<EncodedLevel>,
 }
 
 /// Options of the analysis.
@@ -66,6 +70,8 @@ pub struct ReportOptions {
     pub zscore: bool,
     /// Draw figures.
     pub figures: bool,
+    /// Name of the staircase level in tables and figures (e.g. `t_L`, `target CR`).
+    pub level_label: String,
 }
 
 impl Default for ReportOptions {
@@ -82,6 +88,7 @@ impl Default for ReportOptions {
             bootstrap: BootstrapOptions::default(),
             zscore: false,
             figures: true,
+            level_label: "Level".to_owned(),
         }
     }
 }
@@ -111,6 +118,8 @@ pub struct StudyAnalysis {
     pub thresholds: Option<ThresholdSummary>,
     /// Psychometric fit and bootstrap CI of its threshold.
     pub psychometric: Option<(PsychometricFit, BootstrapCi)>,
+    /// Share of viewers who would notice each level, and the CR reached there (staircases).
+    pub jnd: Option<JndAnalysis>,
 }
 
 /// Computes every statistic the data allow.
@@ -174,6 +183,14 @@ pub fn analyze(data: &StudyData, options: &ReportOptions) -> Result<StudyAnalysi
             options.confidence,
         )?)
     };
+    let jnd = match &thresholds {
+        Some(t) if !t.per_subject.is_empty() => Some(jnd_analysis(
+            &t.per_subject,
+            &data.encoded_levels,
+            options.confidence,
+        )?),
+        _ => None,
+    };
     let psychometric = if data.two_afc.is_empty() {
         None
     } else {
@@ -197,6 +214,7 @@ pub fn analyze(data: &StudyData, options: &ReportOptions) -> Result<StudyAnalysi
         dmos_findings,
         thresholds,
         psychometric,
+        jnd,
     })
 }
 
@@ -505,11 +523,14 @@ impl StudyAnalysis {
                     "staircases",
                     Figure::Staircases {
                         title: "Staircase tracks".to_owned(),
-                        level_label: "Level".to_owned(),
+                        level_label: options.level_label.clone(),
                         tracks: data.staircases.clone(),
                     },
                 );
             }
+        }
+        if let Some(j) = &self.jnd {
+            jnd_section(&mut report, j, options);
         }
         if let Some((fit, ci)) = &self.psychometric {
             let s = report.section("Psychometric function");
@@ -532,7 +553,7 @@ impl StudyAnalysis {
                     "psychometric",
                     Figure::Psychometric {
                         title: "Psychometric function".to_owned(),
-                        level_label: "Level".to_owned(),
+                        level_label: options.level_label.clone(),
                         data: GroupedTrials::from_trials(&data.two_afc),
                         fit: *fit,
                         threshold: Some((
@@ -546,5 +567,80 @@ impl StudyAnalysis {
             }
         }
         report
+    }
+}
+
+/// The JND section: thresholds over viewers, and at each level the share who would notice
+/// with the CR the codec reached there on each clip.
+fn jnd_section(report: &mut Report, j: &JndAnalysis, options: &ReportOptions) {
+    let conf = format!("{:.0} %", j.confidence * 100.0);
+    let label = &options.level_label;
+    let s = report.section("Just-noticeable difference across viewers");
+    let sd = j
+        .summary
+        .sd
+        .map_or_else(|| "n/a".to_owned(), |v| format!("{v:.4}"));
+    let ci = j.summary.ci_t.map_or_else(
+        || "n/a".to_owned(),
+        |c| format!("[{:.4}, {:.4}]", c.lower, c.upper),
+    );
+    s.text(format!(
+        "{} viewers: mean JND {label} = {:.4} (SD {sd}, {conf} CI of the mean {ci}), smallest {:.4}, largest {:.4} (thesis §5.4 layout). A viewer notices a level at or above their threshold; the share who would not notice is read from the thresholds (empirical) and from a normal model of them, with the exact normal-theory {conf} interval (noncentral t).",
+        j.thresholds.len(),
+        j.summary.mean,
+        j.min,
+        j.max
+    ));
+    s.table(tables::Table {
+        name: "jnd_thresholds".to_owned(),
+        caption: format!("JND threshold ({label}) per viewer"),
+        columns: vec!["Subject".to_owned(), format!("Threshold ({label})")],
+        rows: j
+            .thresholds
+            .iter()
+            .map(|(subject, t)| vec![subject.to_string(), format!("{t:.4}")])
+            .collect(),
+    });
+    let mut columns = vec![
+        label.clone(),
+        "Notice, empirical (%)".to_owned(),
+        "Notice, normal model (%)".to_owned(),
+        format!("{conf} CI (%)"),
+    ];
+    columns.extend(j.clips.iter().map(|c| format!("CR on {c}")));
+    let pct = |v: f64| format!("{:.1}", 100.0 * v);
+    s.table(tables::Table {
+        name: "jnd_notice".to_owned(),
+        caption: format!(
+            "Share of viewers who would notice each {label}, and the compression ratio reached there"
+        ),
+        columns,
+        rows: j
+            .rows
+            .iter()
+            .map(|r| {
+                let mut row = vec![
+                    format!("{:.4}", r.share.level),
+                    pct(1.0 - r.share.empirical),
+                    r.share.model.map_or_else(String::new, |m| pct(1.0 - m)),
+                    r.share.model_ci.map_or_else(String::new, |(lo, hi)| {
+                        format!("{} – {}", pct(1.0 - hi), pct(1.0 - lo))
+                    }),
+                ];
+                row.extend(r.cr_per_clip.iter().map(|c| fmt_opt(*c, 1)));
+                row
+            })
+            .collect(),
+    });
+    if options.figures {
+        s.figure(
+            "jnd",
+            Figure::Jnd {
+                title: "Share of viewers who notice".to_owned(),
+                level_label: label.clone(),
+                thresholds: j.thresholds.iter().map(|t| t.1).collect(),
+                model: j.notice_curve(120),
+            },
+        );
     }
 }

@@ -79,6 +79,7 @@ fn record(
         elapsed_ms: 0,
         wall_clock_ms: 0,
         monotonic_ms: 0,
+        encoding: None,
     }
 }
 
@@ -118,6 +119,7 @@ fn session(subject: &str, protocol: Protocol, records: Vec<TrialRecord>) -> Sess
             display: None,
         },
         trials: TrialsFile {
+            format_version: 2,
             records,
             complete_bytes: 0,
             torn: None,
@@ -187,6 +189,7 @@ fn mos_sessions_become_ratings_with_conditions_and_hidden_reference() {
         &c.data,
         &ReportOptions {
             figures: false,
+            level_label: "Level".to_owned(),
             ..ReportOptions::default()
         },
     )

@@ -146,6 +146,8 @@ fn report_writes_every_table_and_figure() {
         "dmos",
         "dmos_ci",
         "thresholds",
+        "jnd_thresholds",
+        "jnd_notice",
         "mos_findings",
         "dmos_findings",
     ] {
@@ -164,6 +166,7 @@ fn report_writes_every_table_and_figure() {
         "score_distributions",
         "dmos_vs_cr",
         "staircases",
+        "jnd",
         "psychometric",
     ] {
         let svg = std::fs::read_to_string(dir.join("figures").join(format!("{fig}.svg"))).unwrap();
@@ -175,7 +178,7 @@ fn report_writes_every_table_and_figure() {
         assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");
     }
     let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
-    assert_eq!(html.matches("<svg").count(), 5, "every figure inlined");
+    assert_eq!(html.matches("<svg").count(), 6, "every figure inlined");
     assert!(!html.contains("<?xml"));
     let md = std::fs::read_to_string(dir.join("report.md")).unwrap();
     assert!(md.contains("![MOS vs compression ratio](figures/mos_vs_cr.svg)"));

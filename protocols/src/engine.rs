@@ -13,7 +13,10 @@ use serde::{Deserialize, Serialize};
 use crate::record::{Answer, Arrangement, Block, Outcome, Position, Protocol, Response, Trial};
 use crate::rng::{StudyRng, purpose};
 use crate::staircase::{Staircase, StaircaseError};
-use crate::study::{Condition, RatingScale, ReferencePlacement, StudyDefinition, Track};
+use crate::study::{
+    ClipOrder, Condition, LiveClip, RatingScale, ReferencePlacement, StaircaseStudy,
+    StudyDefinition, Track,
+};
 
 /// Where a session stands.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -103,6 +106,14 @@ struct Stairs {
     tracks: Vec<Track>,
     staircases: Vec<Staircase>,
     tolerance: f64,
+    live: Option<LiveRun>,
+}
+
+/// A live staircase's clips in this subject's order, and how to name a derived stimulus.
+#[derive(Debug, Clone)]
+struct LiveRun {
+    study: StaircaseStudy,
+    clips: Vec<LiveClip>,
 }
 
 /// A subject's session: the state machine of one protocol.
@@ -160,10 +171,25 @@ impl Session {
                         .iter()
                         .map(|t| Staircase::new(t.settings.clone()))
                         .collect::<Result<Vec<_>, _>>()?;
+                    let live = sc.live.as_ref().map(|l| {
+                        let mut clips = l.clips.clone();
+                        if l.order == ClipOrder::Shuffled {
+                            let mut rng = StudyRng::new(
+                                study.seed,
+                                &[u64::from(subject), purpose::LIVE_CLIPS],
+                            );
+                            rng.shuffle(&mut clips);
+                        }
+                        LiveRun {
+                            study: sc.clone(),
+                            clips,
+                        }
+                    });
                     stairs = Some(Stairs {
                         tracks: sc.tracks.clone(),
                         staircases,
                         tolerance: sc.level_tolerance,
+                        live,
                     });
                 }
             }
@@ -248,18 +274,34 @@ impl Session {
                 let level = st.staircases[k]
                     .next_level()
                     .unwrap_or(track.settings.start);
-                let Some(stimulus) = track.stimulus_at(level, st.tolerance) else {
-                    return Err(EngineError::NoStimulus {
-                        track: track.name.clone(),
-                        level,
-                    });
+                // Live: the clips take turns across the session's trials, and the stimulus
+                // is named, not looked up; the runner encodes it.
+                let (stimulus, reference) = if let Some(live) = &st.live {
+                    let Some(c) = live.clips.get(index as usize % live.clips.len().max(1)) else {
+                        return Err(EngineError::NoStimulus {
+                            track: track.name.clone(),
+                            level,
+                        });
+                    };
+                    (
+                        live.study.live_stimulus_id(&c.clip, level),
+                        c.reference.clone(),
+                    )
+                } else {
+                    let Some(stimulus) = track.stimulus_at(level, st.tolerance) else {
+                        return Err(EngineError::NoStimulus {
+                            track: track.name.clone(),
+                            level,
+                        });
+                    };
+                    (stimulus.to_string(), track.reference.clone())
                 };
                 Trial {
                     index,
                     block: Block::Test,
                     condition: track.name.clone(),
-                    stimulus: stimulus.to_string(),
-                    reference: track.reference.clone(),
+                    stimulus,
+                    reference,
                     arrangement: self.arrangement,
                     reference_position,
                     staircase: Some(k as u32),

@@ -28,7 +28,11 @@ pub mod study;
 
 pub use engine::{EngineError, Session, SessionStatus};
 pub use record::{
-    Answer, Arrangement, Block, Outcome, Position, Protocol, Response, Trial, TrialRecord,
+    Answer, Arrangement, Block, Outcome, Position, Protocol, Response, StimulusEncoding, Trial,
+    TrialRecord,
 };
 pub use staircase::{Staircase, StaircaseSettings, StepType};
-pub use study::{StudyDefinition, StudyError, StudyIssue};
+pub use study::{
+    ClipOrder, Detection, LiveClip, LiveStaircase, StaircaseStudy, StudyDefinition, StudyError,
+    StudyIssue,
+};

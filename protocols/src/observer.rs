@@ -3,14 +3,18 @@
 //! A rating observer turns a stimulus's objective error into a latent quality (an exponential
 //! fall from the top of the scale), adds a per-subject bias and per-trial noise, and snaps the
 //! result to the scale. A 2AFC observer answers correctly with the probability of a Weibull or
-//! logistic psychometric function of the level, with guess rate 1/2 and a lapse rate. Every
+//! logistic psychometric function of the level, or (`detection = "error"`) of the distorted
+//! stimulus's objective error, which a live staircase's runner measures on the clip it just
+//! decoded and passes in ([`Observer::respond_measured`]); guess rate 1/2 and a lapse rate. Every
 //! answer draws from a stream seeded by (seed, subject, trial index), so an answer does not
 //! depend on how many answers came before it in this process (resume gives the same answers).
 
 use crate::manifest::REFERENCE_CODEC;
 use crate::record::{Answer, Position, Protocol, Response, Trial};
 use crate::rng::{StudyRng, purpose};
-use crate::study::{Metric, Psychometric, RatingScale, SimulationSettings, StudyDefinition};
+use crate::study::{
+    Detection, Metric, Psychometric, RatingScale, SimulationSettings, StudyDefinition,
+};
 
 /// Why an observer could not answer.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -126,42 +130,75 @@ impl Observer {
         }
     }
 
-    /// Latent quality of a stimulus before bias and noise, in scale units.
+    /// The objective error (`[simulation] metric`) of a manifest stimulus; 0 for a reference.
     ///
     /// # Errors
     /// [`ObserverError`] when the stimulus or its metrics are missing.
-    pub fn latent_quality(&self, id: &str) -> Result<f64, ObserverError> {
+    pub fn manifest_error(&self, id: &str) -> Result<f64, ObserverError> {
         let s = self
             .study
             .manifest
             .get(id)
             .ok_or_else(|| ObserverError::UnknownStimulus { id: id.to_string() })?;
-        let m = if s.codec == REFERENCE_CODEC {
-            0.0
-        } else {
-            let m = s
-                .metrics
-                .ok_or_else(|| ObserverError::NoMetrics { id: id.to_string() })?;
-            match self.settings.metric {
-                Metric::RmsCm => m.rms_cm,
-                Metric::MaxCm => m.max_cm,
-                Metric::MeanAngleDeg => m.mean_angle_deg,
-            }
-        };
+        if s.codec == REFERENCE_CODEC {
+            return Ok(0.0);
+        }
+        let m = s
+            .metrics
+            .ok_or_else(|| ObserverError::NoMetrics { id: id.to_string() })?;
+        Ok(match self.settings.metric {
+            Metric::RmsCm => m.rms_cm,
+            Metric::MaxCm => m.max_cm,
+            Metric::MeanAngleDeg => m.mean_angle_deg,
+        })
+    }
+
+    /// Latent quality of a stimulus before bias and noise, in scale units.
+    ///
+    /// # Errors
+    /// [`ObserverError`] when the stimulus or its metrics are missing.
+    pub fn latent_quality(&self, id: &str) -> Result<f64, ObserverError> {
+        Ok(self.quality_of_error(self.manifest_error(id)?))
+    }
+
+    /// Latent quality of a stimulus whose objective error is `error` (metric units).
+    pub fn quality_of_error(&self, error: f64) -> f64 {
         let range = self.scale.max - self.scale.min;
-        Ok(self.scale.min + range * (-m.max(0.0) / self.settings.quality_scale).exp())
+        self.scale.min + range * (-error.max(0.0) / self.settings.quality_scale).exp()
     }
 
-    fn rate(&self, id: &str, rng: &mut StudyRng) -> Result<f64, ObserverError> {
-        let q = self.latent_quality(id)? + self.bias + self.settings.noise_sd * rng.normal();
-        Ok(self.scale.snap(q))
+    fn rate(&self, error: f64, rng: &mut StudyRng) -> f64 {
+        let q = self.quality_of_error(error) + self.bias + self.settings.noise_sd * rng.normal();
+        self.scale.snap(q)
     }
 
-    /// This observer's response to `trial`.
+    /// This observer's response to `trial`, with the stimuli's errors from the manifest.
     ///
     /// # Errors
     /// [`ObserverError`] when the stimulus cannot be rated.
     pub fn respond(&self, trial: &Trial) -> Result<Response, ObserverError> {
+        self.respond_measured(trial, None)
+    }
+
+    /// This observer's response to `trial` when the caller measured the objective error
+    /// (`[simulation] metric`, e.g. RMS cm) of the trial's distorted stimulus itself, as a live
+    /// staircase does on the clip it just decoded. `measured_error` replaces the manifest's
+    /// metrics of `trial.stimulus`; with `[simulation] detection = "error"` the 2AFC
+    /// observer's detection probability is the psychometric function of that error. The
+    /// random draws are the same with and without it, so a resumed simulation answers as an
+    /// uninterrupted one.
+    ///
+    /// # Errors
+    /// [`ObserverError`] when an error is needed and neither given nor in the manifest.
+    pub fn respond_measured(
+        &self,
+        trial: &Trial,
+        measured_error: Option<f64>,
+    ) -> Result<Response, ObserverError> {
+        let test_error = || match measured_error {
+            Some(e) => Ok(e),
+            None => self.manifest_error(&trial.stimulus),
+        };
         let mut rng = StudyRng::new(
             self.seed,
             &[
@@ -171,10 +208,10 @@ impl Observer {
             ],
         );
         let answer = match self.protocol {
-            Protocol::Mos => Answer::Rating(self.rate(&trial.stimulus, &mut rng)?),
+            Protocol::Mos => Answer::Rating(self.rate(test_error()?, &mut rng)),
             Protocol::Dscqs => {
-                let r = self.rate(&trial.reference, &mut rng)?;
-                let t = self.rate(&trial.stimulus, &mut rng)?;
+                let r = self.rate(self.manifest_error(&trial.reference)?, &mut rng);
+                let t = self.rate(test_error()?, &mut rng);
                 if trial.reference_position == Position::A {
                     Answer::Pair { a: r, b: t }
                 } else {
@@ -185,7 +222,11 @@ impl Observer {
                 let level = trial
                     .level
                     .ok_or(ObserverError::NoLevel { trial: trial.index })?;
-                let correct = rng.unit_f64() < self.psychometric().p_correct(level);
+                let x = match self.settings.detection {
+                    Detection::Level => level,
+                    Detection::Error => test_error()?,
+                };
+                let correct = rng.unit_f64() < self.psychometric().p_correct(x);
                 Answer::Choice(if correct {
                     trial.reference_position
                 } else {

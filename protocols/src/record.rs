@@ -4,6 +4,7 @@
 //! the results store: the engine emits a [`Trial`], the runner returns a [`Response`], the engine
 //! scores it into an [`Outcome`], and the store logs all three as one [`TrialRecord`].
 
+use std::collections::BTreeMap;
 use std::fmt;
 use std::str::FromStr;
 
@@ -213,4 +214,21 @@ pub struct TrialRecord {
     pub wall_clock_ms: u64,
     /// Monotonic clock of the answer, ms since this runner process started the session.
     pub monotonic_ms: u64,
+    /// How the distorted stimulus was made, when the runner encoded it for this trial (live
+    /// staircase); `None` for stimuli from the manifest.
+    #[serde(default)]
+    pub encoding: Option<StimulusEncoding>,
+}
+
+/// What the runner logged about a stimulus it encoded and decoded for one trial (live
+/// staircase): the exact codec parameters, the compression ratio reached and the error of the
+/// decoded clip.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StimulusEncoding {
+    /// Codec parameters of the bitstream (the level's parameter included), exact values.
+    pub codec_params: BTreeMap<String, f64>,
+    /// Compression ratio reached (4 bytes × channels × frames / bitstream bytes).
+    pub achieved_cr: f64,
+    /// Joint position RMS error of the decoded clip against the reference, cm.
+    pub rms_cm: f64,
 }

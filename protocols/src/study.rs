@@ -199,13 +199,14 @@ pub struct Condition {
 pub struct Track {
     /// Name, logged as the trial's condition.
     pub name: String,
-    /// Source clip.
+    /// Source clip (empty in a live staircase, whose clips take turns across trials).
     pub clip: String,
-    /// Reference stimulus id of that clip.
+    /// Reference stimulus id of that clip (empty in a live staircase).
     pub reference: String,
     /// Settings (shared settings with this track's start).
     pub settings: StaircaseSettings,
-    /// Available levels: (parameter value, stimulus id), sorted by value.
+    /// Available levels: (parameter value, stimulus id), sorted by value (empty in a live
+    /// staircase, where every level is encoded on demand).
     pub levels: Vec<(f64, String)>,
 }
 
@@ -230,14 +231,69 @@ impl Track {
 /// Staircase study settings (`[staircase]`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct StaircaseStudy {
-    /// Manifest parameter that is the level (thesis ch. 5: `t_l`).
+    /// Parameter that is the level (thesis ch. 5: `t_l`): a manifest parameter, or in a live
+    /// staircase the codec parameter the runner encodes with.
     pub param: String,
-    /// Codec whose stimuli give the levels.
+    /// Codec whose stimuli give the levels (live: the codec the runner encodes with).
     pub codec: String,
-    /// Largest distance between a level and the parameter of the stimulus shown for it.
+    /// Largest distance between a level and the parameter of the stimulus shown for it
+    /// (unused by a live staircase).
     pub level_tolerance: f64,
     /// The interleaved staircases.
     pub tracks: Vec<Track>,
+    /// Set when the level is a codec parameter and the runner encodes each trial's stimulus
+    /// on the fly (`[staircase.live]`); `None` for stimuli from the manifest.
+    pub live: Option<LiveStaircase>,
+}
+
+/// Prefix of every stimulus id a live staircase derives.
+pub const LIVE_ID_PREFIX: &str = "live:";
+
+impl StaircaseStudy {
+    /// The derived stimulus id of a live trial: `live:<clip>/<codec>/<param>=<level>`, the
+    /// level written in Rust's shortest round-trip form so the id names the exact value.
+    pub fn live_stimulus_id(&self, clip: &str, level: f64) -> String {
+        format!(
+            "{LIVE_ID_PREFIX}{clip}/{}/{}={level}",
+            self.codec, self.param
+        )
+    }
+}
+
+/// The order in which a live staircase's clips take turns.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ClipOrder {
+    /// The clips in the order listed, one per trial, over and over (thesis ch. 5: the five
+    /// motions were used in turn).
+    InTurn,
+    /// In turn, in an order drawn per subject from the study seed (counterbalanced).
+    Shuffled,
+}
+
+/// One source clip of a live staircase.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct LiveClip {
+    /// Clip name in the manifest.
+    pub clip: String,
+    /// Its reference stimulus id (the source the runner encodes).
+    pub reference: String,
+}
+
+/// A codec-in-the-loop staircase (`[staircase.live]`): each trial's distorted stimulus is the
+/// reference clip encoded and decoded at the trial's level by the runner; the protocol only
+/// names it ([`StaircaseStudy::live_stimulus_id`]) and never encodes anything.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LiveStaircase {
+    /// Clips that alternate between trials.
+    pub clips: Vec<LiveClip>,
+    /// How they take turns.
+    pub order: ClipOrder,
+    /// Fixed values of the codec's other parameters.
+    pub params: BTreeMap<String, f64>,
+    /// Decoder context file (e.g. a primitive database) as written, relative to the study
+    /// file.
+    pub database: Option<String>,
 }
 
 /// Psychometric function family of the simulated 2AFC observer.
@@ -262,6 +318,17 @@ pub enum Metric {
     MeanAngleDeg,
 }
 
+/// What a simulated 2AFC observer's psychometric function is a function of.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Detection {
+    /// The staircase level itself (α in level units).
+    Level,
+    /// The objective error (`metric`) of the trial's distorted stimulus: measured on the
+    /// decoded clip in a live staircase, from the manifest otherwise (α in metric units).
+    Error,
+}
+
 /// Simulated observer settings (`[simulation]`), used by `study simulate` only.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SimulationSettings {
@@ -275,6 +342,8 @@ pub struct SimulationSettings {
     pub noise_sd: f64,
     /// Psychometric family of the 2AFC observer.
     pub psychometric: Psychometric,
+    /// Input of the 2AFC observer's psychometric function.
+    pub detection: Detection,
     /// Level at which detection is 63 % (Weibull α) or 50 % (logistic α) of the way from guess
     /// rate to 1.
     pub threshold: f64,
@@ -294,6 +363,7 @@ impl Default for SimulationSettings {
             bias_sd: 0.25,
             noise_sd: 0.35,
             psychometric: Psychometric::Weibull,
+            detection: Detection::Level,
             threshold: 0.012,
             slope: 3.5,
             lapse: 0.02,
@@ -1216,6 +1286,7 @@ fn parse_simulation(t: &Table, cx: &mut Ctx) -> SimulationSettings {
             "bias_sd",
             "noise_sd",
             "psychometric",
+            "detection",
             "threshold",
             "slope",
             "lapse",
@@ -1223,6 +1294,12 @@ fn parse_simulation(t: &Table, cx: &mut Ctx) -> SimulationSettings {
         ],
     );
     let d = SimulationSettings::default();
+    let detection = cx.pick(
+        t,
+        P,
+        "detection",
+        &[("level", Detection::Level), ("error", Detection::Error)],
+    );
     let metric = cx.pick(
         t,
         P,
@@ -1276,6 +1353,7 @@ fn parse_simulation(t: &Table, cx: &mut Ctx) -> SimulationSettings {
         bias_sd,
         noise_sd,
         psychometric: psychometric.unwrap_or(d.psychometric),
+        detection: detection.unwrap_or(d.detection),
         threshold,
         slope,
         lapse,
@@ -1301,7 +1379,121 @@ const STAIR_KEYS: &[&str] = &[
     "max_trials",
     "threshold_reversals",
     "tracks",
+    "live",
 ];
+
+/// Most clips a live staircase may alternate, and most fixed codec parameters.
+const MAX_LIVE_CLIPS: usize = 256;
+const MAX_LIVE_PARAMS: usize = 32;
+
+/// `[staircase.live]`: clips, their order, fixed codec parameters, decoder context.
+fn parse_live(
+    t: &Table,
+    param: Option<&str>,
+    m: Option<&StimulusManifest>,
+    cx: &mut Ctx,
+) -> Option<LiveStaircase> {
+    const P: &str = "staircase.live";
+    cx.known(t, P, &["clips", "order", "params", "database"]);
+    let names = cx.strings(t, P, "clips");
+    let names = cx.required(names, t, P, "clips");
+    let mut clips = Vec::new();
+    if let Some(names) = &names {
+        if names.is_empty() {
+            cx.err(join(P, "clips"), "needs at least one clip");
+        } else if names.len() > MAX_LIVE_CLIPS {
+            cx.err(
+                join(P, "clips"),
+                format!("{} clips, limit {MAX_LIVE_CLIPS}", names.len()),
+            );
+        }
+        let mut seen = BTreeSet::new();
+        for (i, clip) in names.iter().take(MAX_LIVE_CLIPS).enumerate() {
+            let key = format!("{P}.clips[{i}]");
+            if !seen.insert(clip.as_str()) {
+                cx.err(&key, format!("clip {clip:?} is listed twice"));
+                continue;
+            }
+            let Some(m) = m else { continue };
+            match m.reference_of(clip) {
+                Some(r) => clips.push(LiveClip {
+                    clip: clip.clone(),
+                    reference: r.id.clone(),
+                }),
+                None => cx.err(
+                    &key,
+                    format!(
+                        "clip {clip:?} has no reference stimulus in the manifest (a live staircase encodes the reference)"
+                    ),
+                ),
+            }
+        }
+    }
+    let order = cx
+        .pick(
+            t,
+            P,
+            "order",
+            &[
+                ("in_turn", ClipOrder::InTurn),
+                ("shuffled", ClipOrder::Shuffled),
+            ],
+        )
+        .unwrap_or(ClipOrder::InTurn);
+    let mut params = BTreeMap::new();
+    match t.get("params") {
+        None => {}
+        Some(Value::Table(pt)) => {
+            if pt.len() > MAX_LIVE_PARAMS {
+                cx.err(
+                    join(P, "params"),
+                    format!("{} parameters, limit {MAX_LIVE_PARAMS}", pt.len()),
+                );
+            }
+            for (k, v) in pt.iter().take(MAX_LIVE_PARAMS) {
+                let key = format!("{P}.params.{k}");
+                if k.is_empty()
+                    || k.len() > 32
+                    || !k.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
+                {
+                    cx.err(&key, "a parameter name is 1-32 letters, digits or _");
+                    continue;
+                }
+                if Some(k.as_str()) == param {
+                    cx.err(
+                        &key,
+                        format!("{k:?} is the staircase's level; it cannot also be fixed"),
+                    );
+                    continue;
+                }
+                match v {
+                    Value::Float(f) if f.is_finite() => {
+                        params.insert(k.clone(), *f);
+                    }
+                    Value::Integer(i) => {
+                        params.insert(k.clone(), *i as f64);
+                    }
+                    v => cx.err(
+                        &key,
+                        format!("expected a finite number, got {}", type_name(v)),
+                    ),
+                }
+            }
+        }
+        Some(v) => cx.wrong(P, "params", "a table of numbers", v),
+    }
+    let database = cx.string(t, P, "database");
+    if database.as_deref().is_some_and(|d| d.trim().is_empty()) {
+        cx.err(join(P, "database"), "must name a file");
+    }
+    names?;
+    Some(LiveStaircase {
+        clips,
+        order,
+        params,
+        database,
+    })
+}
 
 #[expect(
     clippy::too_many_lines,
@@ -1352,6 +1544,15 @@ fn parse_staircase(
         max_trials: opt_u(cx, "max_trials"),
         threshold_reversals: opt_u(cx, "threshold_reversals").unwrap_or(3),
     };
+    let live_t = cx.table(t, P, "live");
+    let live_asked = t.contains_key("live");
+    let live = live_t.and_then(|lt| parse_live(lt, param.as_deref(), m, cx));
+    if live_asked && t.contains_key("level_tolerance") {
+        cx.err(
+            join(P, "level_tolerance"),
+            "a live staircase encodes every level exactly; remove level_tolerance",
+        );
+    }
     let tolerance = match cx.float(t, P, "level_tolerance") {
         Some(v) if v >= 0.0 => v,
         Some(v) => {
@@ -1360,12 +1561,18 @@ fn parse_staircase(
         }
         None => 1e-9 * settings.step.abs().max(f64::MIN_POSITIVE),
     };
+    // A live staircase without [[staircase.tracks]] runs one staircase named "live".
+    let default_track = [Value::Table(Table::from_iter([(
+        "name".to_string(),
+        Value::String("live".into()),
+    )]))];
     let tracks_v = match t.get("tracks") {
         Some(Value::Array(a)) => a.as_slice(),
         Some(v) => {
             cx.wrong(P, "tracks", "an array of tables ([[staircase.tracks]])", v);
             &[]
         }
+        None if live_asked => &default_track[..],
         None => {
             cx.err(
                 join(P, "tracks"),
@@ -1392,13 +1599,31 @@ fn parse_staircase(
             cx.err(&tp, format!("expected a table, got {}", type_name(tv)));
             continue;
         };
-        cx.known(tt, &tp, &["name", "clip", "start"]);
-        let clip = cx.string(tt, &tp, "clip");
-        let clip = cx.required(clip, tt, &tp, "clip");
+        let clip = if live_asked {
+            let mut others = tt.clone();
+            if others.remove("clip").is_some() {
+                cx.err(
+                    join(&tp, "clip"),
+                    "a live staircase takes its clips from staircase.live.clips",
+                );
+            }
+            cx.known(&others, &tp, &["name", "start"]);
+            None
+        } else {
+            cx.known(tt, &tp, &["name", "clip", "start"]);
+            let clip = cx.string(tt, &tp, "clip");
+            cx.required(clip, tt, &tp, "clip")
+        };
         let name = cx
             .string(tt, &tp, "name")
             .or_else(|| clip.clone())
-            .unwrap_or_default();
+            .unwrap_or_else(|| {
+                if live_asked {
+                    "live".into()
+                } else {
+                    String::new()
+                }
+            });
         if !names.insert(name.clone()) {
             cx.err(
                 join(&tp, "name"),
@@ -1425,6 +1650,16 @@ fn parse_staircase(
                     cx.err(at, reason);
                 }
             }
+        }
+        if live_asked {
+            tracks.push(Track {
+                name,
+                clip: String::new(),
+                reference: String::new(),
+                settings: s,
+                levels: Vec::new(),
+            });
+            continue;
         }
         let (Some(clip), Some(m), Some(param), Some(codec)) = (clip, m, &param, &codec) else {
             continue;
@@ -1469,11 +1704,15 @@ fn parse_staircase(
         }
         tracks.push(track);
     }
+    if live_asked && live.is_none() {
+        return None;
+    }
     Some(StaircaseStudy {
         param: param?,
         codec: codec?,
         level_tolerance: tolerance,
         tracks,
+        live,
     })
 }
 

@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::{example, example_text, parse};
+use common::{LIVE, example, example_text, parse};
 use protocols::rng::StudyRng;
 use protocols::{Protocol, StudyError};
 
@@ -25,6 +25,8 @@ fn examples_are_valid() {
     let sc = s.staircase.unwrap();
     assert_eq!(sc.tracks.len(), 2);
     assert!((sc.tracks[0].settings.start - 0.024).abs() < 1e-15);
+    let live = example("live-staircase.toml").staircase.unwrap();
+    assert_eq!(live.live.unwrap().clips.len(), 5, "five motions in turn");
 }
 
 #[test]
@@ -226,6 +228,38 @@ fn mutated_study_files_give_errors_never_panics() {
     assert_eq!(errors + oks, 2400);
     assert!(
         errors > 1200,
+        "most mutations are caught: {errors} errors, {oks} still valid"
+    );
+}
+
+/// The live staircase option (`[staircase.live]`) under the same mutations: clear errors,
+/// never a panic, and every accepted mutation still names a reference for each live clip.
+#[test]
+fn mutated_live_study_files_give_errors_never_panics() {
+    let mut rng = StudyRng::new(2027, &[]);
+    let (mut errors, mut oks) = (0, 0);
+    for _ in 0..800 {
+        let m = mutate(LIVE, &mut rng);
+        match parse(&m) {
+            Ok(s) => {
+                if let Some(live) = s.staircase.and_then(|sc| sc.live) {
+                    assert!(!live.clips.is_empty(), "{m}");
+                    assert!(live.clips.iter().all(|c| !c.reference.is_empty()), "{m}");
+                }
+                oks += 1;
+            }
+            Err(e) => {
+                assert!(!e.to_string().is_empty());
+                if let StudyError::Invalid { issues, .. } = &e {
+                    assert!(!issues.is_empty());
+                    assert!(issues.iter().all(|i| !i.reason.is_empty()));
+                }
+                errors += 1;
+            }
+        }
+    }
+    assert!(
+        errors > 400,
         "most mutations are caught: {errors} errors, {oks} still valid"
     );
 }

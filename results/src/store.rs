@@ -16,7 +16,9 @@ use protocols::{Protocol, TrialRecord};
 use serde::{Deserialize, Serialize};
 
 use crate::ResultsError;
-use crate::trials::{HEADER, TornRow, TrialsFile, encode_row, read_trials, torn_path};
+use crate::trials::{
+    HEADER, TRIALS_FORMAT_VERSION, TornRow, TrialsFile, encode_row_as, read_trials, torn_path,
+};
 
 /// Version of `session.json` and `run.json` written by this build.
 pub const MANIFEST_FORMAT_VERSION: u32 = 1;
@@ -321,6 +323,7 @@ pub struct SessionLog {
     dir: PathBuf,
     file: File,
     rows: u32,
+    version: u32,
     _lock: SessionLock,
 }
 
@@ -362,10 +365,15 @@ impl SessionLog {
         let lock = SessionLock::acquire(dir)?;
         let trials = dir.join(TRIALS_FILE);
         write_new(&trials, format!("{HEADER}\n").as_bytes())?;
-        Self::open_append(dir, 0, lock)
+        Self::open_append(dir, 0, TRIALS_FORMAT_VERSION, lock)
     }
 
-    fn open_append(dir: &Path, rows: u32, lock: SessionLock) -> Result<Self, ResultsError> {
+    fn open_append(
+        dir: &Path,
+        rows: u32,
+        version: u32,
+        lock: SessionLock,
+    ) -> Result<Self, ResultsError> {
         let trials = dir.join(TRIALS_FILE);
         let file = OpenOptions::new()
             .append(true)
@@ -375,6 +383,7 @@ impl SessionLog {
             dir: dir.to_path_buf(),
             file,
             rows,
+            version,
             _lock: lock,
         })
     }
@@ -394,6 +403,7 @@ impl SessionLog {
             write_new(&trials, format!("{HEADER}\n").as_bytes())?;
         }
         let TrialsFile {
+            format_version,
             records,
             complete_bytes,
             torn,
@@ -412,7 +422,8 @@ impl SessionLog {
             }
             None => None,
         };
-        let log = Self::open_append(dir, records.len() as u32, lock)?;
+        // Rows appended to an older file keep its layout, so the file stays one version.
+        let log = Self::open_append(dir, records.len() as u32, format_version, lock)?;
         Ok(Resumed { log, records, torn })
     }
 
@@ -426,12 +437,17 @@ impl SessionLog {
         self.rows
     }
 
+    /// Format version of this log's `trials.csv` (an older file resumed keeps its version).
+    pub fn format_version(&self) -> u32 {
+        self.version
+    }
+
     /// Appends one row; it is on disk (written and `sync_data`) when this returns.
     ///
     /// # Errors
     /// [`ResultsError::Unwritable`] or [`ResultsError::Io`].
     pub fn append(&mut self, record: &TrialRecord) -> Result<(), ResultsError> {
-        let line = encode_row(record)?;
+        let line = encode_row_as(record, self.version)?;
         let path = self.dir.join(TRIALS_FILE);
         self.file
             .write_all(line.as_bytes())

@@ -1,24 +1,32 @@
-//! `trials.csv` format version 1: one row per trial, written and read here.
+//! `trials.csv` format versions 1 and 2: one row per trial, written and read here.
 //!
 //! Plain RFC 4180 CSV with a fixed header ([`HEADER`]); the first column repeats the format
 //! version on every row so a row taken out of its file still says how to read it. Fields that
 //! contain a comma or a quote are quoted; line breaks inside fields are refused, so every row is
 //! exactly one line and a row cut short by a power failure is the last line without its `\n`.
-//! Documented in `docs/results-format.md`.
+//! Version 2 appends three optional columns for stimuli the runner encodes on the fly (live
+//! staircase): `codec_params`, `achieved_cr`, `rms_cm`. Version 1 files still read, and a
+//! session resumed into a version 1 file keeps appending version 1 rows. Documented in
+//! `docs/results-format.md`.
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use protocols::{
-    Answer, Arrangement, Block, Outcome, Position, Protocol, Response, Trial, TrialRecord,
+    Answer, Arrangement, Block, Outcome, Position, Protocol, Response, StimulusEncoding, Trial,
+    TrialRecord,
 };
 
 use crate::ResultsError;
 
 /// Version of the `trials.csv` format written by this build.
-pub const TRIALS_FORMAT_VERSION: u32 = 1;
+pub const TRIALS_FORMAT_VERSION: u32 = 2;
 
-/// Column names, in order.
-pub const COLUMNS: [&str; 29] = [
+/// The oldest `trials.csv` version this build reads (and appends to on resume).
+pub const OLDEST_TRIALS_FORMAT_VERSION: u32 = 1;
+
+/// Column names of the current version, in order.
+pub const COLUMNS: [&str; 32] = [
     "format_version",
     "study",
     "subject",
@@ -48,12 +56,41 @@ pub const COLUMNS: [&str; 29] = [
     "elapsed_ms",
     "wall_clock_ms",
     "monotonic_ms",
+    "codec_params",
+    "achieved_cr",
+    "rms_cm",
 ];
+
+/// Columns of version 1: the first 29 of [`COLUMNS`].
+pub const COLUMNS_V1: usize = 29;
 
 /// The header line, without its line break.
 pub const HEADER: &str = "format_version,study,subject,session,trial_index,block,protocol,condition,stimulus,reference,\
 arrangement,reference_position,break_before,staircase,level,response,response_a,response_b,score,score_reference,\
+score_test,correct,reversal,response_time_ms,replays,dropped_frames,elapsed_ms,wall_clock_ms,monotonic_ms,\
+codec_params,achieved_cr,rms_cm";
+
+/// The header line of version 1 (no encoding columns), without its line break.
+pub const HEADER_V1: &str = "format_version,study,subject,session,trial_index,block,protocol,condition,stimulus,reference,\
+arrangement,reference_position,break_before,staircase,level,response,response_a,response_b,score,score_reference,\
 score_test,correct,reversal,response_time_ms,replays,dropped_frames,elapsed_ms,wall_clock_ms,monotonic_ms";
+
+/// The header line of `version`, or `None` for a version this build does not know.
+pub fn header_of(version: u32) -> Option<&'static str> {
+    match version {
+        1 => Some(HEADER_V1),
+        2 => Some(HEADER),
+        _ => None,
+    }
+}
+
+fn column_count(version: u32) -> usize {
+    if version == 1 {
+        COLUMNS_V1
+    } else {
+        COLUMNS.len()
+    }
+}
 
 /// Longest row accepted by the reader, bytes.
 pub const MAX_ROW_BYTES: usize = 64 * 1024;
@@ -82,11 +119,88 @@ fn flag(v: bool) -> String {
     if v { "1".into() } else { "0".into() }
 }
 
-/// Encodes one record as a CSV line ending in `\n`.
+/// Writes codec parameters as `key=value;key=value` (keys sorted, values in shortest
+/// round-trip form), the `codec_params` column.
 ///
 /// # Errors
-/// [`ResultsError::Unwritable`] when a text field contains a line break.
+/// A reason when a key is not 1-32 letters, digits or `_`, or a value is not finite.
+pub fn format_codec_params(params: &BTreeMap<String, f64>) -> Result<String, String> {
+    let mut out = String::new();
+    for (k, v) in params {
+        if !valid_param_key(k) {
+            return Err(format!(
+                "parameter name {k:?} must be 1-32 letters, digits or _"
+            ));
+        }
+        if !v.is_finite() {
+            return Err(format!("parameter {k} = {v} is not finite"));
+        }
+        if !out.is_empty() {
+            out.push(';');
+        }
+        out.push_str(k);
+        out.push('=');
+        out.push_str(&v.to_string());
+    }
+    Ok(out)
+}
+
+fn valid_param_key(k: &str) -> bool {
+    !k.is_empty() && k.len() <= 32 && k.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
+}
+
+/// Reads the `codec_params` column back ([`format_codec_params`]).
+///
+/// # Errors
+/// A reason naming the entry that is not `key=finite number`, or a key given twice.
+pub fn parse_codec_params(text: &str) -> Result<BTreeMap<String, f64>, String> {
+    let mut out = BTreeMap::new();
+    if text.is_empty() {
+        return Ok(out);
+    }
+    for entry in text.split(';') {
+        let Some((k, v)) = entry.split_once('=') else {
+            return Err(format!("entry {entry:?} is not key=value"));
+        };
+        if !valid_param_key(k) {
+            return Err(format!(
+                "parameter name {k:?} must be 1-32 letters, digits or _"
+            ));
+        }
+        let value: f64 = v
+            .parse()
+            .ok()
+            .filter(|x: &f64| x.is_finite())
+            .ok_or_else(|| format!("parameter {k}: {v:?} is not a finite number"))?;
+        if out.insert(k.to_string(), value).is_some() {
+            return Err(format!("parameter {k} is given twice"));
+        }
+    }
+    Ok(out)
+}
+
+/// Encodes one record as a CSV line of the current version, ending in `\n`.
+///
+/// # Errors
+/// [`ResultsError::Unwritable`] when a text field contains a line break or the codec
+/// parameters cannot be written.
 pub fn encode_row(r: &TrialRecord) -> Result<String, ResultsError> {
+    encode_row_as(r, TRIALS_FORMAT_VERSION)
+}
+
+/// Encodes one record as a CSV line of format `version` (1 or 2), ending in `\n`: a session
+/// resumed into a version 1 file keeps its layout.
+///
+/// # Errors
+/// [`ResultsError::Unwritable`] as [`encode_row`], for an unknown version, or for a record
+/// with an encoding (version 1 has no columns for it).
+pub fn encode_row_as(r: &TrialRecord, version: u32) -> Result<String, ResultsError> {
+    if header_of(version).is_none() {
+        return Err(ResultsError::Unwritable {
+            column: "format_version",
+            reason: format!("version {version} is not one this build writes"),
+        });
+    }
     let t = &r.trial;
     let o = &r.outcome;
     let (response, a, b) = match r.response.answer {
@@ -94,8 +208,37 @@ pub fn encode_row(r: &TrialRecord) -> Result<String, ResultsError> {
         Answer::Pair { a, b } => (String::new(), a.to_string(), b.to_string()),
         Answer::Choice(p) => (p.to_string(), String::new(), String::new()),
     };
-    let fields: [String; 29] = [
-        TRIALS_FORMAT_VERSION.to_string(),
+    let (params, cr, rms) = match &r.encoding {
+        None => (String::new(), String::new(), String::new()),
+        Some(_) if version == 1 => {
+            return Err(ResultsError::Unwritable {
+                column: "codec_params",
+                reason: "a trials.csv of version 1 has no columns for an encoded stimulus".into(),
+            });
+        }
+        Some(e) => {
+            for (column, v) in [("achieved_cr", e.achieved_cr), ("rms_cm", e.rms_cm)] {
+                if !v.is_finite() {
+                    return Err(ResultsError::Unwritable {
+                        column,
+                        reason: format!("{v} is not finite"),
+                    });
+                }
+            }
+            (
+                format_codec_params(&e.codec_params).map_err(|reason| {
+                    ResultsError::Unwritable {
+                        column: "codec_params",
+                        reason,
+                    }
+                })?,
+                e.achieved_cr.to_string(),
+                e.rms_cm.to_string(),
+            )
+        }
+    };
+    let fields: [String; 32] = [
+        version.to_string(),
         r.study.clone(),
         r.subject.clone(),
         r.session.to_string(),
@@ -124,9 +267,12 @@ pub fn encode_row(r: &TrialRecord) -> Result<String, ResultsError> {
         r.elapsed_ms.to_string(),
         r.wall_clock_ms.to_string(),
         r.monotonic_ms.to_string(),
+        params,
+        cr,
+        rms,
     ];
     let mut line = String::with_capacity(256);
-    for (i, f) in fields.iter().enumerate() {
+    for (i, f) in fields.iter().take(column_count(version)).enumerate() {
         if i > 0 {
             line.push(',');
         }
@@ -139,9 +285,10 @@ pub fn encode_row(r: &TrialRecord) -> Result<String, ResultsError> {
     Ok(line)
 }
 
-/// Splits one CSV line into fields; `Err((column, message))` with a 1-based column.
-fn split_line(line: &str) -> Result<Vec<String>, (usize, String)> {
-    let mut fields = Vec::with_capacity(COLUMNS.len());
+/// Splits one CSV line into at most `max` fields; `Err((column, message))` with a 1-based
+/// column.
+fn split_line(line: &str, max: usize) -> Result<Vec<String>, (usize, String)> {
+    let mut fields = Vec::with_capacity(max);
     let mut cur = String::new();
     let mut chars = line.chars().peekable();
     let mut quoted = false;
@@ -175,8 +322,8 @@ fn split_line(line: &str) -> Result<Vec<String>, (usize, String)> {
             Some(',') if !quoted => {
                 fields.push(std::mem::take(&mut cur));
                 at_start = true;
-                if fields.len() > COLUMNS.len() {
-                    return Err((fields.len(), format!("more than {} fields", COLUMNS.len())));
+                if fields.len() > max {
+                    return Err((fields.len(), format!("more than {max} fields")));
                 }
             }
             Some(c) => {
@@ -252,6 +399,34 @@ impl Row<'_> {
             self.flag(i).map(Some)
         }
     }
+    /// Columns 30-32: all empty (no encoding) or all set.
+    fn encoding(&self) -> FieldResult<Option<StimulusEncoding>> {
+        let (p, cr, rms) = (29, 30, 31);
+        if [p, cr, rms].iter().all(|&i| self.text(i).is_empty()) {
+            return Ok(None);
+        }
+        let codec_params = parse_codec_params(self.text(p))
+            .map_err(|m| (p + 1, format!("{}: {m}", COLUMNS[p])))?;
+        let achieved_cr = self.float(cr)?;
+        if achieved_cr <= 0.0 {
+            return Err((
+                cr + 1,
+                format!("{} {achieved_cr} must be positive", COLUMNS[cr]),
+            ));
+        }
+        let rms_cm = self.float(rms)?;
+        if rms_cm < 0.0 {
+            return Err((
+                rms + 1,
+                format!("{} {rms_cm} must not be negative", COLUMNS[rms]),
+            ));
+        }
+        Ok(Some(StimulusEncoding {
+            codec_params,
+            achieved_cr,
+            rms_cm,
+        }))
+    }
     fn opt_u32(&self, i: usize) -> FieldResult<Option<u32>> {
         if self.text(i).is_empty() {
             Ok(None)
@@ -261,25 +436,26 @@ impl Row<'_> {
     }
 }
 
-/// Decodes one CSV line (without its line break); `Err((column, message))`.
-fn decode_fields(line: &str) -> FieldResult<TrialRecord> {
-    let fields = split_line(line)?;
-    if fields.len() != COLUMNS.len() {
+/// Decodes one CSV line (without its line break) of a file of format `file_version`;
+/// `Err((column, message))`.
+fn decode_fields(line: &str, file_version: u32) -> FieldResult<TrialRecord> {
+    let n = column_count(file_version);
+    let fields = split_line(line, n)?;
+    if fields.len() != n {
         return Err((
-            fields.len().min(COLUMNS.len()),
-            format!("{} fields, expected {}", fields.len(), COLUMNS.len()),
+            fields.len().min(n),
+            format!("{} fields, expected {n}", fields.len()),
         ));
     }
     let r = Row { fields: &fields };
     let version: u32 = r.parse(0)?;
-    if version != TRIALS_FORMAT_VERSION {
+    if version != file_version {
         return Err((
             1,
-            format!(
-                "format_version {version} is not supported (this build reads {TRIALS_FORMAT_VERSION})"
-            ),
+            format!("format_version {version} in a file whose header is version {file_version}"),
         ));
     }
+    let encoding = if n > COLUMNS_V1 { r.encoding()? } else { None };
     let protocol: Protocol = r.named(6)?;
     let arrangement: Arrangement = r.named(10)?;
     let reference_position: Position = r.named(11)?;
@@ -333,6 +509,7 @@ fn decode_fields(line: &str) -> FieldResult<TrialRecord> {
         elapsed_ms: r.parse(26)?,
         wall_clock_ms: r.parse(27)?,
         monotonic_ms: r.parse(28)?,
+        encoding,
     })
 }
 
@@ -350,6 +527,8 @@ pub struct TornRow {
 /// A parsed `trials.csv`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TrialsFile {
+    /// Format version named by the header (rows appended on resume keep it).
+    pub format_version: u32,
     /// Complete rows, in file order.
     pub records: Vec<TrialRecord>,
     /// Byte length of the complete part (header and complete rows).
@@ -376,6 +555,7 @@ pub fn parse_trials(bytes: &[u8], path: &Path) -> Result<TrialsFile, ResultsErro
     let mut offset = 0_usize;
     let mut line_no = 0_usize;
     let mut torn = None;
+    let mut version = TRIALS_FORMAT_VERSION;
     while offset < bytes.len() {
         line_no += 1;
         let rest = &bytes[offset..];
@@ -416,20 +596,26 @@ pub fn parse_trials(bytes: &[u8], path: &Path) -> Result<TrialsFile, ResultsErro
         })?;
         let text = text.strip_suffix('\r').unwrap_or(text);
         if line_no == 1 {
-            if text != HEADER {
+            if text == HEADER {
+                version = TRIALS_FORMAT_VERSION;
+            } else if text == HEADER_V1 {
+                version = 1;
+            } else {
                 let col = text
                     .split(',')
                     .zip(COLUMNS)
                     .position(|(a, b)| a != b)
-                    .map_or(1, |i| i + 1);
+                    .map_or(COLUMNS_V1 + 1, |i| i + 1);
                 return Err(bad(
                     1,
                     col,
-                    format!("header is not the trials.csv v{TRIALS_FORMAT_VERSION} header"),
+                    format!(
+                        "header is not a trials.csv header (versions {OLDEST_TRIALS_FORMAT_VERSION} to {TRIALS_FORMAT_VERSION})"
+                    ),
                 ));
             }
         } else {
-            let rec = decode_fields(text).map_err(|(col, msg)| bad(line_no, col, msg))?;
+            let rec = decode_fields(text, version).map_err(|(col, msg)| bad(line_no, col, msg))?;
             records.push(rec);
         }
         offset += raw.len() + 1;
@@ -439,6 +625,7 @@ pub fn parse_trials(bytes: &[u8], path: &Path) -> Result<TrialsFile, ResultsErro
     }
     let complete_bytes = torn.as_ref().map_or(bytes.len() as u64, |t| t.offset);
     Ok(TrialsFile {
+        format_version: version,
         records,
         complete_bytes,
         torn,

@@ -9,12 +9,13 @@ use std::path::{Path, PathBuf};
 use proptest::prelude::*;
 use protocols::rng::StudyRng;
 use protocols::{
-    Answer, Arrangement, Block, Outcome, Position, Protocol, Response, Trial, TrialRecord,
+    Answer, Arrangement, Block, Outcome, Position, Protocol, Response, StimulusEncoding, Trial,
+    TrialRecord,
 };
 use results::store::{
     DisplayInfo, MANIFEST_FORMAT_VERSION, SessionLock, SessionState, read_json, write_json,
 };
-use results::trials::{HEADER, encode_row, parse_trials};
+use results::trials::{HEADER, HEADER_V1, encode_row, encode_row_as, parse_trials};
 use results::{
     ResultsError, RunManifest, SessionLog, SessionManifest, read_results_dir, read_trials,
 };
@@ -108,6 +109,16 @@ fn record(i: u32, protocol: Protocol, rng: &mut StudyRng) -> TrialRecord {
         elapsed_ms: u64::from(i) * 1000,
         wall_clock_ms: 1_795_000_000_000 + u64::from(i),
         monotonic_ms: u64::from(i) * 999,
+        // Live staircase rows log how their stimulus was encoded: awkward floats on purpose.
+        encoding: (protocol == Protocol::Staircase && i % 2 == 1).then(|| StimulusEncoding {
+            codec_params: BTreeMap::from([
+                ("cr".to_string(), 0.1 + 0.2 + f64::from(i)),
+                ("qp".to_string(), 10.0),
+                ("alpha".to_string(), 1e-7 / 3.0),
+            ]),
+            achieved_cr: 48.000_000_000_000_01 + rng.unit_f64(),
+            rms_cm: rng.unit_f64() * 3.0,
+        }),
     }
 }
 
@@ -394,4 +405,123 @@ fn mutated_results_files_give_errors_never_panics() {
         errs > 1000,
         "{errs} errors, {oks} accepted (a truncation at a row end is a valid shorter file)"
     );
+}
+
+/// A `trials.csv` written before the encoding columns existed (version 1, 29 columns) still
+/// reads, and a session resumed into it keeps appending version 1 rows (torn-row handling
+/// included), so one file never mixes layouts.
+#[test]
+fn version_1_files_read_and_resume_in_their_own_layout() {
+    let root = scratch("v1");
+    let dir = root.join("S001_s1");
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut rng = StudyRng::new(8, &[]);
+    let recs: Vec<TrialRecord> = (0..6)
+        .map(|i| {
+            let mut r = record(i, Protocol::Staircase, &mut rng);
+            r.encoding = None;
+            r
+        })
+        .collect();
+    let mut text = format!("{HEADER_V1}\n");
+    for r in &recs[..4] {
+        let row = encode_row_as(r, 1).unwrap();
+        assert!(row.starts_with("1,"), "{row}");
+        assert_eq!(
+            row.trim_end().split(',').count(),
+            29 + 2,
+            "two quoted commas: {row}"
+        );
+        text.push_str(&row);
+    }
+    // Torn fifth row, as a power cut leaves it.
+    let fifth = encode_row_as(&recs[4], 1).unwrap();
+    text.push_str(&fifth[..fifth.len() / 3]);
+    let path = dir.join("trials.csv");
+    std::fs::write(&path, &text).unwrap();
+    let read = read_trials(&path).unwrap();
+    assert_eq!(read.format_version, 1);
+    assert_eq!(read.records, recs[..4]);
+    assert!(read.torn.is_some());
+
+    let resumed = SessionLog::resume(&dir).unwrap();
+    assert_eq!(resumed.records, recs[..4]);
+    let mut log = resumed.log;
+    assert_eq!(log.format_version(), 1);
+    log.append(&recs[4]).unwrap();
+    log.append(&recs[5]).unwrap();
+    // An encoded stimulus has no columns in version 1: refused, not silently dropped.
+    let mut encoded = record(7, Protocol::Staircase, &mut rng);
+    assert!(encoded.encoding.is_some());
+    assert!(matches!(
+        log.append(&encoded),
+        Err(ResultsError::Unwritable {
+            column: "codec_params",
+            ..
+        })
+    ));
+    drop(log);
+    let again = read_trials(&path).unwrap();
+    assert_eq!(again.format_version, 1);
+    assert_eq!(again.records, recs);
+    assert!(
+        std::fs::read_to_string(&path)
+            .unwrap()
+            .starts_with(&format!("{HEADER_V1}\n"))
+    );
+    // A version 2 row in a version 1 file is an error naming the first column.
+    encoded.encoding = None;
+    let mixed = format!("{HEADER_V1}\n{}", encode_row(&encoded).unwrap());
+    match parse_trials(mixed.as_bytes(), Path::new("trials.csv")) {
+        Err(ResultsError::Malformed { line: 2, .. }) => {}
+        other => panic!("{other:?}"),
+    }
+}
+
+/// The encoding columns: all three or none; bad parameter lists and values name column and
+/// reason.
+#[test]
+fn encoding_columns_are_checked() {
+    let mut rng = StudyRng::new(9, &[]);
+    let good = encode_row(&record(1, Protocol::Staircase, &mut rng)).unwrap();
+    let fields: Vec<&str> = good.trim_end().rsplitn(4, ',').collect();
+    let (rms, cr, params) = (fields[0], fields[1], fields[2]);
+    assert!(params.contains("cr=") && params.contains(';'), "{params}");
+    let prefix = fields[3];
+    let cases = [
+        (format!("{prefix},{params},,{rms}"), 31, "achieved_cr"),
+        (format!("{prefix},cr=x,{cr},{rms}"), 30, "codec_params"),
+        (format!("{prefix},cr=1;cr=2,{cr},{rms}"), 30, "twice"),
+        (format!("{prefix},c r=1,{cr},{rms}"), 30, "codec_params"),
+        (format!("{prefix},{params},-4,{rms}"), 31, "positive"),
+        (format!("{prefix},{params},{cr},nan"), 32, "rms_cm"),
+    ];
+    for (row, want_col, want) in cases {
+        let text = format!("{HEADER}\n{row}\n");
+        match parse_trials(text.as_bytes(), Path::new("trials.csv")) {
+            Err(ResultsError::Malformed {
+                line: 2,
+                column,
+                message,
+                ..
+            }) => {
+                assert_eq!(column, want_col, "{row}: {message}");
+                assert!(message.contains(want), "{row}: {message}");
+            }
+            other => panic!("{row}: {other:?}"),
+        }
+    }
+    let mut r = record(3, Protocol::Staircase, &mut rng);
+    r.encoding
+        .as_mut()
+        .unwrap()
+        .codec_params
+        .insert("a;b".into(), 1.0);
+    assert!(matches!(
+        encode_row(&r),
+        Err(ResultsError::Unwritable {
+            column: "codec_params",
+            ..
+        })
+    ));
 }

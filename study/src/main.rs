@@ -11,6 +11,7 @@ mod clip_cmd;
 mod codec_cmd;
 mod demo_cmd;
 mod gui;
+mod live;
 mod markers_cmd;
 mod primitives_cmd;
 mod report_cmd;

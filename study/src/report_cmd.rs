@@ -80,29 +80,27 @@ pub struct ReportArgs {
     pub no_png: bool,
 }
 
-/// Runs `study report`.
-///
-/// # Errors
-/// Unreadable or malformed results (named by file, line and column), a study file that does
-/// not load, or an output that cannot be written.
-pub fn run(args: &ReportArgs) -> Result<()> {
-    let (run, sessions) = results::read_results_dir(&args.results)?;
-    let study_path = args
-        .study
-        .clone()
-        .unwrap_or_else(|| args.results.join(&run.study_file));
-    let study = StudyDefinition::load(&study_path).with_context(|| {
-        format!(
-            "loading the study file {} (pass --study to name another)",
-            study_path.display()
-        )
-    })?;
-    let converted = from_results::convert(
-        &sessions,
-        &study.manifest,
-        Some((study.scale.min, study.scale.max)),
-    )?;
-    let options = ReportOptions {
+/// The staircase level's name in tables and figures: the thesis's `t_L`, a target ratio, or
+/// the parameter as the study names it (live staircases add the codec).
+fn level_label(study: &StudyDefinition) -> String {
+    let Some(sc) = &study.staircase else {
+        return "Level".to_owned();
+    };
+    let name = match sc.param.as_str() {
+        "t_l" => "t_L".to_owned(),
+        "cr" => "target CR".to_owned(),
+        p => p.to_owned(),
+    };
+    if sc.live.is_some() {
+        format!("{name} ({})", sc.codec)
+    } else {
+        name
+    }
+}
+
+/// The analysis options `args` ask for.
+fn report_options(args: &ReportArgs, study: &StudyDefinition) -> ReportOptions {
+    ReportOptions {
         confidence: args.confidence,
         ci_method: match args.ci {
             CiArg::T => CiMethod::StudentT,
@@ -130,7 +128,33 @@ pub fn run(args: &ReportArgs) -> Result<()> {
         },
         zscore: args.zscore,
         figures: true,
-    };
+        level_label: level_label(study),
+    }
+}
+
+/// Runs `study report`.
+///
+/// # Errors
+/// Unreadable or malformed results (named by file, line and column), a study file that does
+/// not load, or an output that cannot be written.
+pub fn run(args: &ReportArgs) -> Result<()> {
+    let (run, sessions) = results::read_results_dir(&args.results)?;
+    let study_path = args
+        .study
+        .clone()
+        .unwrap_or_else(|| args.results.join(&run.study_file));
+    let study = StudyDefinition::load(&study_path).with_context(|| {
+        format!(
+            "loading the study file {} (pass --study to name another)",
+            study_path.display()
+        )
+    })?;
+    let converted = from_results::convert(
+        &sessions,
+        &study.manifest,
+        Some((study.scale.min, study.scale.max)),
+    )?;
+    let options = report_options(args, &study);
     let analysis = analyze(&converted.data, &options)?;
     let title = format!(
         "Study {} ({} protocol, {} sessions)",
@@ -224,8 +248,8 @@ mod tests {
             ),
             (
                 "staircase",
-                &["thresholds"],
-                &["staircases", "psychometric"],
+                &["thresholds", "jnd_thresholds", "jnd_notice"],
+                &["staircases", "psychometric", "jnd"],
             ),
         ];
         for (name, tables, figures) in expected {

@@ -231,10 +231,12 @@ pub fn run(args: &RunArgs) -> anyhow::Result<()> {
         }
     };
     let library = StimulusLibrary::new(&study, &args.study);
+    let live = crate::live::LiveStimuli::from_study(&study, &args.study)?;
     let study = Arc::new(study);
     let mut screens = StudyUi::new(
         Arc::clone(&study),
         library,
+        live,
         recorder,
         Texts::default(),
         true,

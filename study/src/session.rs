@@ -1,12 +1,16 @@
 //! One subject's session on disk: open or resume the results folder, replay the logged
 //! responses into the protocol engine, then log each new response (fsynced) before the next
-//! trial is asked for. The study window uses it; it knows nothing of drawing.
+//! trial is asked for. The study window and `study simulate` both use it; it knows nothing of
+//! drawing or of observers.
 
 use std::path::Path;
 use std::time::{Instant, SystemTime, UNIX_EPOCH};
 
 use anyhow::Context as _;
-use protocols::{Outcome, Response, Session, SessionStatus, StudyDefinition, Trial, TrialRecord};
+use protocols::{
+    Outcome, Response, Session, SessionStatus, StimulusEncoding, StudyDefinition, Trial,
+    TrialRecord,
+};
 use results::store::{SessionLock, SessionState, read_json};
 use results::{SessionLog, SessionManifest};
 
@@ -120,6 +124,11 @@ impl Recorder {
         })
     }
 
+    /// The session clock of the last logged trial (0 for a new session), ms.
+    pub fn logged_clock_ms(&self) -> u64 {
+        self.clock_base_ms
+    }
+
     /// The session clock: time already logged plus this process's running time, ms.
     pub fn elapsed_ms(&self) -> u64 {
         self.clock_base_ms + self.started.elapsed().as_millis() as u64
@@ -158,6 +167,7 @@ impl Recorder {
 
     /// Scores `response` to the pending `trial` and appends the row (flushed and fsynced)
     /// before returning: nothing can show the next stimulus before the answer is on disk.
+    /// `encoding` describes a stimulus encoded for this trial (live staircase).
     ///
     /// # Errors
     /// The engine refuses the response, or the row cannot be written.
@@ -166,6 +176,7 @@ impl Recorder {
         trial: Trial,
         response: Response,
         elapsed_ms: u64,
+        encoding: Option<StimulusEncoding>,
     ) -> anyhow::Result<Outcome> {
         let outcome = self.engine.respond(&response)?;
         let record = TrialRecord {
@@ -179,6 +190,7 @@ impl Recorder {
             elapsed_ms,
             wall_clock_ms: now_ms(),
             monotonic_ms: self.monotonic_base_ms + self.started.elapsed().as_millis() as u64,
+            encoding,
         };
         self.log.append(&record)?;
         self.manifest.trials_logged = self.log.rows();

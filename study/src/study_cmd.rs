@@ -3,18 +3,21 @@
 
 use std::fs;
 use std::path::{Path, PathBuf};
-use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+use std::time::Duration;
 
 use anyhow::{Context as _, bail};
 use clap::Args;
 use protocols::observer::Observer;
+use protocols::study::Metric;
 use protocols::study::content_hash;
-use protocols::{Protocol, Session, SessionStatus, StudyDefinition, TrialRecord};
+use protocols::{Detection, Protocol, StudyDefinition};
 use results::store::{
-    DisplayInfo, MANIFEST_FORMAT_VERSION, RUN_FILE, SESSION_FILE, SessionLock, SessionState,
-    read_json, write_json, write_new,
+    DisplayInfo, MANIFEST_FORMAT_VERSION, RUN_FILE, SessionState, read_json, write_json, write_new,
 };
-use results::{RunManifest, SessionLog, SessionManifest};
+use results::{RunManifest, SessionManifest};
+
+use crate::live::{LiveStimuli, LiveStimulus};
+use crate::session::{Opened, Recorder, now_ms};
 
 /// Arguments of `study check`.
 #[derive(Debug, Args)]
@@ -76,7 +79,9 @@ pub fn check(args: &CheckArgs) -> anyhow::Result<()> {
             )?;
         }
         Protocol::Staircase => {
-            if let Some(sc) = &study.staircase {
+            if study.staircase.as_ref().is_some_and(|sc| sc.live.is_some()) {
+                describe_live(&mut text, &study, &args.study)?;
+            } else if let Some(sc) = &study.staircase {
                 for t in &sc.tracks {
                     writeln!(
                         text,
@@ -99,10 +104,74 @@ pub fn check(args: &CheckArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn now_ms() -> u64 {
-    SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map_or(0, |d| d.as_millis() as u64)
+/// `study check` on a live staircase: its codec, clips and tracks, and every clip encoded
+/// once at the first start level (proves the codec takes the settings and shows what a trial
+/// will look like).
+fn describe_live(text: &mut String, study: &StudyDefinition, path: &Path) -> anyhow::Result<()> {
+    use std::fmt::Write as _;
+    let (Some(sc), Some(live)) = (
+        &study.staircase,
+        study.staircase.as_ref().and_then(|s| s.live.as_ref()),
+    ) else {
+        return Ok(());
+    };
+    let stimuli = LiveStimuli::from_study(study, path)?;
+    let names: Vec<&str> = live.clips.iter().map(|c| c.clip.as_str()).collect();
+    writeln!(
+        text,
+        "  live staircase: codec {} encodes {} = level on the fly; clips {}: {}",
+        stimuli.as_ref().map_or("?", LiveStimuli::codec_name),
+        sc.param,
+        match live.order {
+            protocols::ClipOrder::InTurn => "in turn",
+            protocols::ClipOrder::Shuffled => "in turn, order shuffled per subject",
+        },
+        names.join(", ")
+    )?;
+    for t in &sc.tracks {
+        writeln!(
+            text,
+            "  staircase {:?}: start {} in [{}, {}]",
+            t.name,
+            t.settings.start,
+            t.settings.min.unwrap_or(f64::NEG_INFINITY),
+            t.settings.max.unwrap_or(f64::INFINITY)
+        )?;
+    }
+    // Encode every clip once at the first start level: proves the codec takes the
+    // settings and shows what a trial will look like.
+    if let (Some(mut stimuli), Some(t)) = (stimuli, sc.tracks.first()) {
+        let clips: Vec<(String, String)> = stimuli
+            .clips()
+            .map(|(c, r)| (c.to_string(), r.to_string()))
+            .collect();
+        for (clip, reference) in clips {
+            let level = t.settings.start;
+            let trial = protocols::Trial {
+                index: 0,
+                block: protocols::Block::Test,
+                condition: t.name.clone(),
+                stimulus: sc.live_stimulus_id(&clip, level),
+                reference,
+                arrangement: study.presentation.arrangement,
+                reference_position: protocols::Position::Left,
+                staircase: Some(0),
+                level: Some(level),
+                break_before: false,
+            };
+            let s = stimuli.resolve(&trial)?;
+            writeln!(
+                text,
+                "  clip {clip:?}: {} frames; at {} = {level}: CR {:.2}:1, RMS {:.3} cm ({} decoded frames)",
+                s.reference.frames(),
+                sc.param,
+                s.achieved_cr,
+                s.rms_cm,
+                s.test.frames()
+            )?;
+        }
+    }
+    Ok(())
 }
 
 fn subject_id(index: u32) -> String {
@@ -149,15 +218,34 @@ pub fn archive_study(
         st.bitstream = st.bitstream.as_deref().map(absolute);
     }
     table.insert("stimuli".into(), toml::Value::String("stimuli.json".into()));
+    // A live staircase's decoder context is named relative to the study file: point the copy
+    // at the original so the copy still loads it.
+    if let Some(toml::Value::String(db)) = table
+        .get_mut("staircase")
+        .and_then(|s| s.get_mut("live"))
+        .and_then(|l| l.get_mut("database"))
+    {
+        let p = base.join(db.as_str());
+        *db = fs::canonicalize(&p).unwrap_or(p).display().to_string();
+    }
     let body = toml::to_string(&table).context("writing the study copy")?;
     let header = format!(
         "# Copy of {} kept with its results; `stimuli` points at the manifest copy beside it.\n",
         original.display()
     );
-    write_new(
-        &out.join("stimuli.json"),
-        &serde_json::to_vec_pretty(&manifest)?,
-    )?;
+    // A run killed between the two copies left a complete manifest copy (write_new is
+    // atomic) but no study copy: keep an identical one instead of refusing the resume.
+    let manifest_copy = out.join("stimuli.json");
+    let manifest_bytes = serde_json::to_vec_pretty(&manifest)?;
+    match fs::read(&manifest_copy) {
+        Ok(existing) if existing == manifest_bytes => {}
+        Ok(_) => bail!(
+            "{} exists and differs from the manifest of {}; results are never overwritten",
+            manifest_copy.display(),
+            original.display()
+        ),
+        Err(_) => write_new(&manifest_copy, &manifest_bytes)?,
+    }
     write_new(&copy, format!("{header}{body}").as_bytes())?;
     Ok(())
 }
@@ -229,11 +317,29 @@ pub fn simulate(args: &SimulateArgs) -> anyhow::Result<()> {
         write_new(&out.join(RUN_FILE), &serde_json::to_vec_pretty(&run)?)?;
     }
     archive_study(out, &args.study, &study_bytes, &study)?;
+    // One cache of encoded levels for every simulated subject of the run.
+    let mut live = LiveStimuli::from_study(&study, &args.study)?;
+    if live.is_some()
+        && study.simulation.detection == Detection::Error
+        && study.simulation.metric != Metric::RmsCm
+    {
+        bail!(
+            "{}: simulation.metric: a live staircase measures rms_cm on the decoded clip; set metric = \"rms_cm\"",
+            args.study.display()
+        );
+    }
     for subject in 0..args.subjects {
         let dir = out.join(format!("{}_s1", subject_id(subject)));
-        let summary = run_subject(&study, &hash, args, subject, &dir)
+        let summary = run_subject(&study, &hash, args, subject, &dir, live.as_mut())
             .with_context(|| format!("session {}", dir.display()))?;
         eprintln!("{summary}");
+    }
+    if let Some(l) = &live {
+        eprintln!(
+            "live staircase: {} clip × level stimuli encoded with {}",
+            l.cached(),
+            l.codec_name()
+        );
     }
     Ok(())
 }
@@ -278,131 +384,49 @@ fn new_manifest(
     }
 }
 
-#[expect(
-    clippy::too_many_lines,
-    reason = "resume, run loop and final manifest of one session read best in one place"
-)]
 fn run_subject(
     study: &StudyDefinition,
     hash: &str,
     args: &SimulateArgs,
     subject: u32,
     dir: &Path,
+    mut live: Option<&mut LiveStimuli>,
 ) -> anyhow::Result<String> {
-    let mut engine = Session::new(study, subject)?;
-    let (mut log, logged, mut manifest) = if args.resume && dir.exists() {
-        let manifest_path = dir.join(SESSION_FILE);
-        let old: Option<SessionManifest> = if manifest_path.exists() {
-            Some(read_json(&manifest_path)?)
-        } else {
-            None
-        };
-        if let Some(m) = &old
-            && m.status != SessionState::Running
-        {
-            // A crash after the final manifest write can leave the lock behind: take the
-            // stale lock over and release it (refused if a live runner holds it).
-            drop(SessionLock::acquire(dir)?);
+    let fresh = new_manifest(study, hash, args, subject);
+    let mut rec = match Recorder::open(study, subject, dir, args.resume, fresh)? {
+        Opened::Finished(m) => {
             return Ok(format!(
                 "{}: already {:?}, {} trials",
                 m.subject, m.status, m.trials_logged
             ));
         }
-        let resumed = SessionLog::resume(dir)?;
-        let mut m = old.unwrap_or_else(|| new_manifest(study, hash, args, subject));
-        m.resumes += 1;
-        if let Some((row, aside)) = &resumed.torn {
-            let name = aside
-                .file_name()
-                .map(|n| n.to_string_lossy().into_owned())
-                .unwrap_or_default();
-            eprintln!(
-                "warning: {}: line {} was torn ({} bytes, power cut mid-write?); set aside in {name}",
-                dir.join("trials.csv").display(),
-                row.line,
-                row.bytes.len()
-            );
-            m.torn_rows.push(name);
-        }
-        (resumed.log, resumed.records, m)
-    } else {
-        (
-            SessionLog::create(dir)?,
-            Vec::new(),
-            new_manifest(study, hash, args, subject),
-        )
+        Opened::Ready { recorder, .. } => recorder,
     };
-    for rec in &logged {
-        engine
-            .replay(&rec.trial, &rec.response, &rec.outcome)
-            .with_context(|| "cannot resume: replaying the logged responses")?;
-    }
-    manifest.trials_logged = log.rows();
-    log.write_manifest(&manifest)?;
-
     let observer = Observer::new(study, args.seed, subject);
-    let mut clock_ms = logged.last().map_or(0, |r| r.elapsed_ms);
-    let monotonic_base = logged.last().map_or(0, |r| r.monotonic_ms);
-    let started = Instant::now();
+    let mut clock_ms = rec.logged_clock_ms();
     let per_trial_ms = study.trial_presentation_ms();
-    while let Some(trial) = engine.next_trial(clock_ms)? {
-        let response = observer.respond(&trial)?;
+    while let Some(trial) = rec.next_trial(clock_ms)? {
+        // A live trial's stimulus is encoded now; the observer sees its measured error.
+        let made = match live.as_deref_mut() {
+            Some(l) => Some(l.resolve(&trial)?),
+            None => None,
+        };
+        let response = observer.respond_measured(&trial, made.as_ref().map(|m| m.rms_cm))?;
         if args.trial_delay_ms > 0 {
             std::thread::sleep(Duration::from_millis(args.trial_delay_ms));
         }
-        let outcome = engine.respond(&response)?;
         // Simulated session clock: the presentation (again for each replay), the answer and
         // the gap before the next trial; deterministic, so the time limit replays exactly.
         clock_ms += per_trial_ms * (1 + u64::from(response.replays))
             + response.response_time_ms
             + study.presentation.gap_ms;
-        let record = TrialRecord {
-            study: study.name.clone(),
-            subject: subject_id(subject),
-            session: 1,
-            protocol: study.protocol,
+        rec.record(
             trial,
             response,
-            outcome,
-            elapsed_ms: clock_ms,
-            wall_clock_ms: now_ms(),
-            monotonic_ms: monotonic_base + started.elapsed().as_millis() as u64,
-        };
-        log.append(&record)?;
+            clock_ms,
+            made.as_ref().map(LiveStimulus::encoding),
+        )?;
     }
-    manifest.status = match engine.status() {
-        SessionStatus::TimeLimit => SessionState::TimeLimit,
-        SessionStatus::Complete | SessionStatus::Running => SessionState::Complete,
-    };
-    manifest.trials_logged = log.rows();
-    manifest.ended_ms = Some(now_ms());
-    manifest.not_shown = engine.not_shown().into_iter().map(|t| t.stimulus).collect();
-    manifest.thresholds = engine.thresholds();
-    log.write_manifest(&manifest)?;
-    let thresholds: Vec<String> = manifest
-        .thresholds
-        .iter()
-        .map(|(n, t)| {
-            format!(
-                "{n}={}",
-                t.map_or_else(|| "n/a".to_string(), |v| format!("{v:.4}"))
-            )
-        })
-        .collect();
-    Ok(format!(
-        "{}: {:?}, {} trials{}{}",
-        manifest.subject,
-        manifest.status,
-        manifest.trials_logged,
-        if manifest.not_shown.is_empty() {
-            String::new()
-        } else {
-            format!(", {} not shown", manifest.not_shown.len())
-        },
-        if thresholds.is_empty() {
-            String::new()
-        } else {
-            format!(", thresholds {}", thresholds.join(" "))
-        }
-    ))
+    rec.finish()?;
+    Ok(rec.summary())
 }

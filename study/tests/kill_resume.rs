@@ -1,7 +1,8 @@
 //! Kill test: `study simulate` is killed with SIGKILL at random moments (at least 20 kills),
 //! resumed each time with `--resume`; after every kill the logs hold a prefix of the
 //! uninterrupted run (no response lost or duplicated), and the completed results equal those
-//! of an uninterrupted run with the same seed, timestamps aside.
+//! of an uninterrupted run with the same seed, timestamps aside. The live staircase (stimuli
+//! encoded by the runner) is killed and resumed the same way.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
 
 use std::path::{Path, PathBuf};
@@ -33,7 +34,10 @@ fn simulate(study: &Path, out: &Path, delay_ms: u64, resume: bool) -> Command {
     if resume {
         c.arg("--resume");
     }
-    c.stdout(Stdio::null()).stderr(Stdio::null());
+    // Each run's messages go beside its results, so a failed resume can say why.
+    let log = std::fs::File::create(out.with_extension(if resume { "resume.log" } else { "log" }))
+        .unwrap();
+    c.stdout(Stdio::null()).stderr(Stdio::from(log));
     c
 }
 
@@ -117,13 +121,21 @@ fn kill_and_resume(study_name: &str, min_kills: u32) {
             previous = total;
             let mut resumed = simulate(&study, &out, 4, true).spawn().unwrap();
             if kills >= min_kills {
-                assert!(resumed.wait().unwrap().success(), "final resume completes");
+                assert!(
+                    resumed.wait().unwrap().success(),
+                    "final resume completes: {}",
+                    std::fs::read_to_string(out.with_extension("resume.log")).unwrap_or_default()
+                );
                 break;
             }
             // A resume that finished before the next kill ends this attempt.
             std::thread::sleep(Duration::from_millis(5 + rng.below(120)));
             if let Some(status) = resumed.try_wait().unwrap() {
-                assert!(status.success(), "a resume after SIGKILL failed: {status}");
+                assert!(
+                    status.success(),
+                    "a resume after SIGKILL failed: {status}: {}",
+                    std::fs::read_to_string(out.with_extension("resume.log")).unwrap_or_default()
+                );
                 break;
             }
             child = resumed;
@@ -153,6 +165,15 @@ fn kill_and_resume(study_name: &str, min_kills: u32) {
 #[test]
 fn staircase_survives_sigkill_and_resumes_identically() {
     kill_and_resume("staircase.toml", 20);
+}
+
+/// A live staircase encodes each trial's stimulus in the runner: a resumed process starts with
+/// an empty cache, re-encodes what it needs, and must log the same trials, parameters, CRs and
+/// errors as an uninterrupted run (the logs are compared row by row, encoding columns
+/// included).
+#[test]
+fn live_staircase_survives_sigkill_and_resumes_identically() {
+    kill_and_resume("live-staircase.toml", 20);
 }
 
 #[test]

@@ -33,3 +33,32 @@ pub fn parse(text: &str) -> Result<StudyDefinition, protocols::StudyError> {
 pub fn example(name: &str) -> StudyDefinition {
     StudyDefinition::load(&examples().join(name)).unwrap()
 }
+
+/// A live staircase over the hand-made example manifest (clips `walk` and `dance`).
+pub const LIVE: &str = r#"
+format_version = 1
+name = "live"
+protocol = "staircase"
+stimuli = "stimuli.json"
+seed = 5
+
+[staircase]
+param = "cr"
+codec = "wavelet-perceptual"
+start = 40
+step = 4
+min = 8
+max = 80
+stop_reversals = 8
+max_trials = 50
+
+[staircase.live]
+clips = ["walk", "dance"]
+order = "in_turn"
+params = { qp = 10, window = 128 }
+
+[simulation]
+detection = "error"
+threshold = 1.5
+slope = 3
+"#;

@@ -11,14 +11,15 @@ use std::collections::HashMap;
 use std::sync::Arc;
 
 use egui::{Align, Color32, Key, Layout, RichText, Ui, Vec2};
-use protocols::StudyDefinition;
 use protocols::record::{Answer, Arrangement, Block, Position, Protocol, Response, Trial};
 use protocols::study::{RatingScale, ScaleKind};
+use protocols::{StimulusEncoding, StudyDefinition};
 
 use super::flow::{Presentation, Show, stimulus_at};
 use super::render::{BACKGROUND, SkeletonCallback};
 use super::scene::{Figure, FrameShapes, View};
 use super::timing::FrameClock;
+use crate::live::LiveStimuli;
 use crate::session::Recorder;
 use crate::stimuli::StimulusLibrary;
 
@@ -98,6 +99,8 @@ struct TrialScreen {
     rating_b: Option<f64>,
     gate_open_s: Option<f64>,
     shapes: [Arc<FrameShapes>; 2],
+    /// How the test stimulus was encoded for this trial (live staircase).
+    encoding: Option<StimulusEncoding>,
 }
 
 /// Total trials of a session, when the protocol plans them up front.
@@ -141,6 +144,7 @@ fn quality_label(scale: &RatingScale, v: f64) -> Option<&'static str> {
 pub struct StudyUi {
     study: Arc<StudyDefinition>,
     library: StimulusLibrary,
+    live: Option<LiveStimuli>,
     recorder: Box<Recorder>,
     texts: Texts,
     screen: Screen,
@@ -154,12 +158,14 @@ pub struct StudyUi {
 }
 
 impl StudyUi {
-    /// Screens for `recorder`'s session. `gpu`: draw the skeletons through the wgpu paint
-    /// callback (off in UI tests, which have no renderer). A resumed session that already
-    /// has its subject fields skips the welcome form.
+    /// Screens for `recorder`'s session. Stimuli come from `library`, or are encoded per
+    /// trial by `live` (codec-in-the-loop staircase). `gpu`: draw the skeletons through the
+    /// wgpu paint callback (off in UI tests, which have no renderer). A resumed session shows
+    /// its subject fields as entered.
     pub fn new(
         study: Arc<StudyDefinition>,
         library: StimulusLibrary,
+        live: Option<LiveStimuli>,
         recorder: Box<Recorder>,
         texts: Texts,
         gpu: bool,
@@ -182,6 +188,7 @@ impl StudyUi {
         StudyUi {
             study,
             library,
+            live,
             recorder,
             texts,
             screen: Screen::Welcome,
@@ -397,13 +404,31 @@ impl StudyUi {
             Arrangement::Sequential => Position::First,
             Arrangement::Abab => Position::A,
         };
-        let reference = self.library.clip(&trial.reference)?;
+        // A live trial's test stimulus is encoded now (cached by level); others are files.
+        let (reference, test, encoding) = match self.live.as_mut() {
+            Some(live) => {
+                let made = live.resolve(&trial)?;
+                let encoding = Some(made.encoding());
+                (made.reference, made.test, encoding)
+            }
+            None => (
+                self.library.clip(&trial.reference)?,
+                self.library.clip(&trial.stimulus)?,
+                None,
+            ),
+        };
         let view = *self
             .views
             .entry(trial.reference.clone())
             .or_insert_with(|| View::framing(&reference));
-        let a = self.library.clip(stimulus_at(&trial, first))?;
-        let b = self.library.clip(stimulus_at(&trial, first.other()))?;
+        let at = |p: Position| {
+            if stimulus_at(&trial, p) == trial.reference {
+                Arc::clone(&reference)
+            } else {
+                Arc::clone(&test)
+            }
+        };
+        let (a, b) = (at(first), at(first.other()));
         let presentation = Presentation::new(
             &trial,
             &self.study.presentation,
@@ -420,6 +445,7 @@ impl StudyUi {
             rating_b: None,
             gate_open_s: None,
             shapes: [Arc::default(), Arc::default()],
+            encoding,
         })
     }
 
@@ -625,8 +651,9 @@ impl StudyUi {
                 dropped_frames: stats.dropped,
             };
             let trial = t.trial.clone();
+            let encoding = t.encoding.take();
             let elapsed = self.recorder.elapsed_ms();
-            match self.recorder.record(trial, response, elapsed) {
+            match self.recorder.record(trial, response, elapsed, encoding) {
                 Ok(_) => self.advance(now, clock),
                 Err(e) => self.fail(&e),
             }

@@ -114,7 +114,14 @@ fn harness(fx: Fixture) -> (Harness<'static, (StudyUi, FrameClock)>, Run) {
         panic!("new session reported finished");
     };
     let library = StimulusLibrary::new(&study, &fx.study_path);
-    let ui = StudyUi::new(Arc::new(study), library, recorder, Texts::default(), false);
+    let ui = StudyUi::new(
+        Arc::new(study),
+        library,
+        None,
+        recorder,
+        Texts::default(),
+        false,
+    );
     let h = Harness::builder()
         .with_size(egui::vec2(1280.0, 720.0))
         .with_step_dt(DT)
