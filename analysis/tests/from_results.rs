@@ -80,6 +80,7 @@ fn record(
         wall_clock_ms: 0,
         monotonic_ms: 0,
         encoding: None,
+        timing: None,
     }
 }
 

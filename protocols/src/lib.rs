@@ -28,8 +28,8 @@ pub mod study;
 
 pub use engine::{EngineError, Session, SessionStatus};
 pub use record::{
-    Answer, Arrangement, Block, Outcome, Position, Protocol, Response, StimulusEncoding, Trial,
-    TrialRecord,
+    Answer, Arrangement, Block, FrameTiming, Outcome, Position, Protocol, Response,
+    StimulusEncoding, Trial, TrialRecord,
 };
 pub use staircase::{Staircase, StaircaseSettings, StepType};
 pub use study::{

@@ -218,6 +218,20 @@ pub struct TrialRecord {
     /// staircase); `None` for stimuli from the manifest.
     #[serde(default)]
     pub encoding: Option<StimulusEncoding>,
+    /// How the display kept time while the trial was shown (the study window); `None` for a
+    /// simulated session.
+    #[serde(default)]
+    pub timing: Option<FrameTiming>,
+}
+
+/// Frame timing of one trial in the study window. The dropped frames are in
+/// [`Response::dropped_frames`].
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct FrameTiming {
+    /// Frames presented while the trial was on screen.
+    pub frames_shown: u32,
+    /// Sample standard deviation of the intervals between them, ms.
+    pub interval_sd_ms: f64,
 }
 
 /// What the runner logged about a stimulus it encoded and decoded for one trial (live

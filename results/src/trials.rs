@@ -13,8 +13,8 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use protocols::{
-    Answer, Arrangement, Block, Outcome, Position, Protocol, Response, StimulusEncoding, Trial,
-    TrialRecord,
+    Answer, Arrangement, Block, FrameTiming, Outcome, Position, Protocol, Response,
+    StimulusEncoding, Trial, TrialRecord,
 };
 
 use crate::ResultsError;
@@ -26,7 +26,7 @@ pub const TRIALS_FORMAT_VERSION: u32 = 2;
 pub const OLDEST_TRIALS_FORMAT_VERSION: u32 = 1;
 
 /// Column names of the current version, in order.
-pub const COLUMNS: [&str; 32] = [
+pub const COLUMNS: [&str; 34] = [
     "format_version",
     "study",
     "subject",
@@ -59,6 +59,8 @@ pub const COLUMNS: [&str; 32] = [
     "codec_params",
     "achieved_cr",
     "rms_cm",
+    "frames_shown",
+    "interval_sd_ms",
 ];
 
 /// Columns of version 1: the first 29 of [`COLUMNS`].
@@ -68,7 +70,7 @@ pub const COLUMNS_V1: usize = 29;
 pub const HEADER: &str = "format_version,study,subject,session,trial_index,block,protocol,condition,stimulus,reference,\
 arrangement,reference_position,break_before,staircase,level,response,response_a,response_b,score,score_reference,\
 score_test,correct,reversal,response_time_ms,replays,dropped_frames,elapsed_ms,wall_clock_ms,monotonic_ms,\
-codec_params,achieved_cr,rms_cm";
+codec_params,achieved_cr,rms_cm,frames_shown,interval_sd_ms";
 
 /// The header line of version 1 (no encoding columns), without its line break.
 pub const HEADER_V1: &str = "format_version,study,subject,session,trial_index,block,protocol,condition,stimulus,reference,\
@@ -188,27 +190,12 @@ pub fn encode_row(r: &TrialRecord) -> Result<String, ResultsError> {
     encode_row_as(r, TRIALS_FORMAT_VERSION)
 }
 
-/// Encodes one record as a CSV line of format `version` (1 or 2), ending in `\n`: a session
-/// resumed into a version 1 file keeps its layout.
-///
-/// # Errors
-/// [`ResultsError::Unwritable`] as [`encode_row`], for an unknown version, or for a record
-/// with an encoding (version 1 has no columns for it).
-pub fn encode_row_as(r: &TrialRecord, version: u32) -> Result<String, ResultsError> {
-    if header_of(version).is_none() {
-        return Err(ResultsError::Unwritable {
-            column: "format_version",
-            reason: format!("version {version} is not one this build writes"),
-        });
-    }
-    let t = &r.trial;
-    let o = &r.outcome;
-    let (response, a, b) = match r.response.answer {
-        Answer::Rating(v) => (v.to_string(), String::new(), String::new()),
-        Answer::Pair { a, b } => (String::new(), a.to_string(), b.to_string()),
-        Answer::Choice(p) => (p.to_string(), String::new(), String::new()),
-    };
-    let (params, cr, rms) = match &r.encoding {
+/// Columns 30-32 of `r` (empty without an encoding).
+fn encoding_fields(
+    r: &TrialRecord,
+    version: u32,
+) -> Result<(String, String, String), ResultsError> {
+    Ok(match &r.encoding {
         None => (String::new(), String::new(), String::new()),
         Some(_) if version == 1 => {
             return Err(ResultsError::Unwritable {
@@ -236,8 +223,52 @@ pub fn encode_row_as(r: &TrialRecord, version: u32) -> Result<String, ResultsErr
                 e.rms_cm.to_string(),
             )
         }
+    })
+}
+
+/// Columns 33-34 of `r` (empty without frame timing).
+fn timing_fields(r: &TrialRecord, version: u32) -> Result<(String, String), ResultsError> {
+    Ok(match &r.timing {
+        None => (String::new(), String::new()),
+        Some(_) if version == 1 => {
+            return Err(ResultsError::Unwritable {
+                column: "frames_shown",
+                reason: "a trials.csv of version 1 has no columns for frame timing".into(),
+            });
+        }
+        Some(t) if !(t.interval_sd_ms.is_finite() && t.interval_sd_ms >= 0.0) => {
+            return Err(ResultsError::Unwritable {
+                column: "interval_sd_ms",
+                reason: format!("{} is not a standard deviation", t.interval_sd_ms),
+            });
+        }
+        Some(t) => (t.frames_shown.to_string(), t.interval_sd_ms.to_string()),
+    })
+}
+
+/// Encodes one record as a CSV line of format `version` (1 or 2), ending in `\n`: a session
+/// resumed into a version 1 file keeps its layout.
+///
+/// # Errors
+/// [`ResultsError::Unwritable`] as [`encode_row`], for an unknown version, or for a record
+/// with an encoding (version 1 has no columns for it).
+pub fn encode_row_as(r: &TrialRecord, version: u32) -> Result<String, ResultsError> {
+    if header_of(version).is_none() {
+        return Err(ResultsError::Unwritable {
+            column: "format_version",
+            reason: format!("version {version} is not one this build writes"),
+        });
+    }
+    let t = &r.trial;
+    let o = &r.outcome;
+    let (response, a, b) = match r.response.answer {
+        Answer::Rating(v) => (v.to_string(), String::new(), String::new()),
+        Answer::Pair { a, b } => (String::new(), a.to_string(), b.to_string()),
+        Answer::Choice(p) => (p.to_string(), String::new(), String::new()),
     };
-    let fields: [String; 32] = [
+    let (params, cr, rms) = encoding_fields(r, version)?;
+    let (frames_shown, interval_sd) = timing_fields(r, version)?;
+    let fields: [String; 34] = [
         version.to_string(),
         r.study.clone(),
         r.subject.clone(),
@@ -270,6 +301,8 @@ pub fn encode_row_as(r: &TrialRecord, version: u32) -> Result<String, ResultsErr
         params,
         cr,
         rms,
+        frames_shown,
+        interval_sd,
     ];
     let mut line = String::with_capacity(256);
     for (i, f) in fields.iter().take(column_count(version)).enumerate() {
@@ -427,6 +460,25 @@ impl Row<'_> {
             rms_cm,
         }))
     }
+    /// Columns 33-34: both empty (simulated) or both set.
+    fn timing(&self) -> FieldResult<Option<FrameTiming>> {
+        let (f, sd) = (32, 33);
+        if self.text(f).is_empty() && self.text(sd).is_empty() {
+            return Ok(None);
+        }
+        let frames_shown = self.parse(f)?;
+        let interval_sd_ms = self.float(sd)?;
+        if interval_sd_ms < 0.0 {
+            return Err((
+                sd + 1,
+                format!("{} {interval_sd_ms} must not be negative", COLUMNS[sd]),
+            ));
+        }
+        Ok(Some(FrameTiming {
+            frames_shown,
+            interval_sd_ms,
+        }))
+    }
     fn opt_u32(&self, i: usize) -> FieldResult<Option<u32>> {
         if self.text(i).is_empty() {
             Ok(None)
@@ -456,6 +508,7 @@ fn decode_fields(line: &str, file_version: u32) -> FieldResult<TrialRecord> {
         ));
     }
     let encoding = if n > COLUMNS_V1 { r.encoding()? } else { None };
+    let timing = if n > COLUMNS_V1 { r.timing()? } else { None };
     let protocol: Protocol = r.named(6)?;
     let arrangement: Arrangement = r.named(10)?;
     let reference_position: Position = r.named(11)?;
@@ -510,6 +563,7 @@ fn decode_fields(line: &str, file_version: u32) -> FieldResult<TrialRecord> {
         wall_clock_ms: r.parse(27)?,
         monotonic_ms: r.parse(28)?,
         encoding,
+        timing,
     })
 }
 

@@ -9,8 +9,8 @@ use std::path::{Path, PathBuf};
 use proptest::prelude::*;
 use protocols::rng::StudyRng;
 use protocols::{
-    Answer, Arrangement, Block, Outcome, Position, Protocol, Response, StimulusEncoding, Trial,
-    TrialRecord,
+    Answer, Arrangement, Block, FrameTiming, Outcome, Position, Protocol, Response,
+    StimulusEncoding, Trial, TrialRecord,
 };
 use results::store::{
     DisplayInfo, MANIFEST_FORMAT_VERSION, SessionLock, SessionState, read_json, write_json,
@@ -118,6 +118,11 @@ fn record(i: u32, protocol: Protocol, rng: &mut StudyRng) -> TrialRecord {
             ]),
             achieved_cr: 48.000_000_000_000_01 + rng.unit_f64(),
             rms_cm: rng.unit_f64() * 3.0,
+        }),
+        // Rows from the study window carry frame timing; simulated rows do not.
+        timing: (protocol != Protocol::Staircase && i.is_multiple_of(3)).then(|| FrameTiming {
+            frames_shown: 120 + i,
+            interval_sd_ms: 0.1 + rng.unit_f64() / 7.0,
         }),
     }
 }
@@ -420,6 +425,7 @@ fn version_1_files_read_and_resume_in_their_own_layout() {
         .map(|i| {
             let mut r = record(i, Protocol::Staircase, &mut rng);
             r.encoding = None;
+            r.timing = None;
             r
         })
         .collect();
@@ -478,13 +484,61 @@ fn version_1_files_read_and_resume_in_their_own_layout() {
     }
 }
 
+/// The frame-timing columns: both or none, a standard deviation that is one.
+#[test]
+fn frame_timing_columns_are_checked() {
+    let mut rng = StudyRng::new(10, &[]);
+    let good = encode_row(&record(3, Protocol::Mos, &mut rng)).unwrap();
+    let parsed = parse_trials(format!("{HEADER}\n{good}").as_bytes(), Path::new("t.csv")).unwrap();
+    let t = parsed.records[0].timing.unwrap();
+    assert_eq!(t.frames_shown, 123);
+    let (prefix, tail) = good.trim_end().rsplit_once(',').unwrap();
+    let (prefix, _) = prefix.rsplit_once(',').unwrap();
+    assert!(tail.parse::<f64>().is_ok());
+    for (row, want_col, want) in [
+        (format!("{prefix},,{tail}"), 33, "frames_shown"),
+        (format!("{prefix},12,"), 34, "interval_sd_ms"),
+        (format!("{prefix},12,-1"), 34, "negative"),
+        (format!("{prefix},x,1"), 33, "frames_shown"),
+    ] {
+        let text = format!("{HEADER}\n{row}\n");
+        match parse_trials(text.as_bytes(), Path::new("trials.csv")) {
+            Err(ResultsError::Malformed {
+                line: 2,
+                column,
+                message,
+                ..
+            }) => {
+                assert_eq!(column, want_col, "{row}: {message}");
+                assert!(message.contains(want), "{row}: {message}");
+            }
+            other => panic!("{row}: {other:?}"),
+        }
+    }
+    let mut r = record(3, Protocol::Mos, &mut rng);
+    r.timing = Some(FrameTiming {
+        frames_shown: 1,
+        interval_sd_ms: f64::NAN,
+    });
+    assert!(matches!(
+        encode_row(&r),
+        Err(ResultsError::Unwritable {
+            column: "interval_sd_ms",
+            ..
+        })
+    ));
+    assert!(encode_row_as(&record(3, Protocol::Mos, &mut StudyRng::new(10, &[])), 1).is_err());
+}
+
 /// The encoding columns: all three or none; bad parameter lists and values name column and
 /// reason.
 #[test]
 fn encoding_columns_are_checked() {
     let mut rng = StudyRng::new(9, &[]);
     let good = encode_row(&record(1, Protocol::Staircase, &mut rng)).unwrap();
-    let fields: Vec<&str> = good.trim_end().rsplitn(4, ',').collect();
+    // The last two columns (frame timing) are empty on a simulated row.
+    let good = good.trim_end().strip_suffix(",,").unwrap();
+    let fields: Vec<&str> = good.rsplitn(4, ',').collect();
     let (rms, cr, params) = (fields[0], fields[1], fields[2]);
     assert!(params.contains("cr=") && params.contains(';'), "{params}");
     let prefix = fields[3];
@@ -497,7 +551,7 @@ fn encoding_columns_are_checked() {
         (format!("{prefix},{params},{cr},nan"), 32, "rms_cm"),
     ];
     for (row, want_col, want) in cases {
-        let text = format!("{HEADER}\n{row}\n");
+        let text = format!("{HEADER}\n{row},,\n");
         match parse_trials(text.as_bytes(), Path::new("trials.csv")) {
             Err(ResultsError::Malformed {
                 line: 2,

@@ -8,8 +8,8 @@ use std::time::{Instant, SystemTime, UNIX_EPOCH};
 
 use anyhow::Context as _;
 use protocols::{
-    Outcome, Response, Session, SessionStatus, StimulusEncoding, StudyDefinition, Trial,
-    TrialRecord,
+    FrameTiming, Outcome, Response, Session, SessionStatus, StimulusEncoding, StudyDefinition,
+    Trial, TrialRecord,
 };
 use results::store::{SessionLock, SessionState, read_json};
 use results::{SessionLog, SessionManifest};
@@ -167,7 +167,8 @@ impl Recorder {
 
     /// Scores `response` to the pending `trial` and appends the row (flushed and fsynced)
     /// before returning: nothing can show the next stimulus before the answer is on disk.
-    /// `encoding` describes a stimulus encoded for this trial (live staircase).
+    /// `encoding` describes a stimulus encoded for this trial (live staircase), `timing` how
+    /// the window's display kept time during it.
     ///
     /// # Errors
     /// The engine refuses the response, or the row cannot be written.
@@ -177,6 +178,7 @@ impl Recorder {
         response: Response,
         elapsed_ms: u64,
         encoding: Option<StimulusEncoding>,
+        timing: Option<FrameTiming>,
     ) -> anyhow::Result<Outcome> {
         let outcome = self.engine.respond(&response)?;
         let record = TrialRecord {
@@ -191,6 +193,7 @@ impl Recorder {
             wall_clock_ms: now_ms(),
             monotonic_ms: self.monotonic_base_ms + self.started.elapsed().as_millis() as u64,
             encoding,
+            timing,
         };
         self.log.append(&record)?;
         self.manifest.trials_logged = self.log.rows();

@@ -425,6 +425,7 @@ fn run_subject(
             response,
             clock_ms,
             made.as_ref().map(LiveStimulus::encoding),
+            None,
         )?;
     }
     rec.finish()?;

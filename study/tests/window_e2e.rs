@@ -338,6 +338,11 @@ fn study_run_under_xvfb_logs_every_trial_and_resumes_after_a_kill() {
         })
         .collect();
     assert_eq!(ratings, [4.0, 4.0, 4.0, 3.0, 3.0, 3.0]);
+    // Every row of a real session records how the display kept time during its trial.
+    for r in &trials.records {
+        let t = r.timing.expect("frame timing in a window session");
+        assert!(t.frames_shown > 0 && t.interval_sd_ms >= 0.0, "{t:?}");
+    }
     let manifest: results::SessionManifest =
         results::store::read_json(&session_dir(&env).join("session.json")).unwrap();
     assert_eq!(manifest.status, results::store::SessionState::Complete);

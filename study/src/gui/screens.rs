@@ -13,7 +13,7 @@ use std::sync::Arc;
 use egui::{Align, Color32, Key, Layout, RichText, Ui, Vec2};
 use protocols::record::{Answer, Arrangement, Block, Position, Protocol, Response, Trial};
 use protocols::study::{RatingScale, ScaleKind};
-use protocols::{StimulusEncoding, StudyDefinition};
+use protocols::{FrameTiming, StimulusEncoding, StudyDefinition};
 
 use super::flow::{Presentation, Show, stimulus_at};
 use super::render::{BACKGROUND, SkeletonCallback};
@@ -644,6 +644,12 @@ impl StudyUi {
                 .gate_open_s
                 .map_or(0, |g| ((now - g).max(0.0) * 1e3) as u64);
             let stats = clock.end_segment();
+            // Timing is only known once the refresh period was measured (always, in the
+            // window: trials start after it).
+            let timing = clock.calibrated().then_some(FrameTiming {
+                frames_shown: stats.frames,
+                interval_sd_ms: stats.sd_ms,
+            });
             let response = Response {
                 answer,
                 response_time_ms,
@@ -653,7 +659,10 @@ impl StudyUi {
             let trial = t.trial.clone();
             let encoding = t.encoding.take();
             let elapsed = self.recorder.elapsed_ms();
-            match self.recorder.record(trial, response, elapsed, encoding) {
+            match self
+                .recorder
+                .record(trial, response, elapsed, encoding, timing)
+            {
                 Ok(_) => self.advance(now, clock),
                 Err(e) => self.fail(&e),
             }
