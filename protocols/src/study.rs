@@ -183,6 +183,12 @@ pub struct SessionSettings {
     pub hidden_repeats: u32,
     /// Subject fields a runner collects before the session.
     pub subject_fields: Vec<String>,
+    /// Consent text the subject must accept before the session (none: no consent step).
+    #[serde(default)]
+    pub consent: Option<String>,
+    /// Instructions shown before the first trial (none: the protocol's default text).
+    #[serde(default)]
+    pub instructions: Option<String>,
 }
 
 /// A test stimulus with its reference.
@@ -1043,6 +1049,8 @@ fn parse_session(t: &Table, cx: &mut Ctx) -> (SessionSettings, FamSpec) {
             "familiarization_stimuli",
             "hidden_repeats",
             "subject_fields",
+            "consent",
+            "instructions",
         ],
     );
     let time_limit_ms = cx.float(t, P, "time_limit_min").and_then(|m| {
@@ -1080,6 +1088,23 @@ fn parse_session(t: &Table, cx: &mut Ctx) -> (SessionSettings, FamSpec) {
             );
         }
     }
+    let mut text = |key: &str| {
+        let v = cx.string(t, P, key)?;
+        if v.trim().is_empty() {
+            cx.err(join(P, key), "is empty (omit it instead)");
+            None
+        } else if v.len() > 16 * 1024 {
+            cx.err(
+                join(P, key),
+                format!("{} bytes is over the 16 KiB limit", v.len()),
+            );
+            None
+        } else {
+            Some(v)
+        }
+    };
+    let consent = text("consent");
+    let instructions = text("instructions");
     let count = cx.uint(t, P, "familiarization", 10_000);
     let list = cx.strings(t, P, "familiarization_stimuli");
     let fam = match (count, list) {
@@ -1100,6 +1125,8 @@ fn parse_session(t: &Table, cx: &mut Ctx) -> (SessionSettings, FamSpec) {
             break_every_trials,
             hidden_repeats,
             subject_fields,
+            consent,
+            instructions,
         },
         fam,
     )

@@ -64,6 +64,29 @@ fn every_mistake_is_reported_at_once_with_its_key_path() {
 }
 
 #[test]
+fn consent_and_instructions_are_read_and_checked() {
+    let text = example_text("mos.toml").replace(
+        "hidden_repeats = 8",
+        "hidden_repeats = 8\nconsent = \"I agree.\"\ninstructions = \"Rate the right one.\"",
+    );
+    let study = parse(&text).unwrap();
+    assert_eq!(study.session.consent.as_deref(), Some("I agree."));
+    assert_eq!(
+        study.session.instructions.as_deref(),
+        Some("Rate the right one.")
+    );
+    let text = example_text("mos.toml").replace(
+        "hidden_repeats = 8",
+        "hidden_repeats = 8\nconsent = \"  \"\ninstructions = 3",
+    );
+    let got = issues(&text);
+    let has = |k: &str, r: &str| got.iter().any(|(gk, gr)| gk == k && gr.contains(r));
+    assert!(has("session.consent", "is empty"), "{got:#?}");
+    assert!(has("session.instructions", "expected a string"), "{got:#?}");
+    assert!(example("mos.toml").session.consent.is_none());
+}
+
+#[test]
 fn unknown_stimulus_and_wrong_types_in_mos() {
     let text = example_text("mos.toml")
         .replace("[conditions]\nclips = [\"walk\", \"dance\"]\ncodecs = [\"wavelet-perceptual\", \"wavelet-bone\", \"wavelet-standard\"]\ntarget_cr = [10, 20, 30, 40, 50, 60, 70]",

@@ -15,7 +15,7 @@ use results::{RunManifest, SessionManifest};
 
 use crate::gui::render::BACKGROUND;
 use crate::gui::scene::{Figure, FrameShapes, View};
-use crate::gui::screens::{Exit, StudyUi, Texts};
+use crate::gui::screens::{Exit, StudyUi};
 use crate::gui::timing::FrameClock;
 use crate::gui::window::{self, Next, WindowOptions, WindowReport};
 use crate::session::{Opened, Recorder, now_ms};
@@ -233,14 +233,7 @@ pub fn run(args: &RunArgs) -> anyhow::Result<()> {
     let library = StimulusLibrary::new(&study, &args.study);
     let live = crate::live::LiveStimuli::from_study(&study, &args.study)?;
     let study = Arc::new(study);
-    let mut screens = StudyUi::new(
-        Arc::clone(&study),
-        library,
-        live,
-        recorder,
-        Texts::default(),
-        true,
-    );
+    let mut screens = StudyUi::new(Arc::clone(&study), library, live, recorder, true);
     let options = WindowOptions {
         title: format!("study: {}", study.name),
         fullscreen: args.fullscreen,

@@ -29,15 +29,6 @@ pub const QUALITY_LABELS: [&str; 5] = ["Excellent", "Good", "Fair", "Poor", "Bad
 /// The 2AFC question of thesis ch. 5.
 pub const AFC_QUESTION: &str = "Which motion looks more natural?";
 
-/// Texts shown before the first trial.
-#[derive(Debug, Clone, Default, PartialEq, Eq)]
-pub struct Texts {
-    /// Consent text the subject must accept (none: no consent step).
-    pub consent: Option<String>,
-    /// Instructions (empty: the protocol's default).
-    pub instructions: String,
-}
-
 /// The protocol's default instructions.
 pub fn default_instructions(protocol: Protocol) -> &'static str {
     match protocol {
@@ -146,7 +137,6 @@ pub struct StudyUi {
     library: StimulusLibrary,
     live: Option<LiveStimuli>,
     recorder: Box<Recorder>,
-    texts: Texts,
     screen: Screen,
     pause: Pause,
     exit: Option<Exit>,
@@ -167,7 +157,6 @@ impl StudyUi {
         library: StimulusLibrary,
         live: Option<LiveStimuli>,
         recorder: Box<Recorder>,
-        texts: Texts,
         gpu: bool,
     ) -> StudyUi {
         let fields = study
@@ -190,7 +179,6 @@ impl StudyUi {
             library,
             live,
             recorder,
-            texts,
             screen: Screen::Welcome,
             pause: Pause::None,
             exit: None,
@@ -270,11 +258,12 @@ impl StudyUi {
                 }
             });
             ui.add_space(12.0);
-            let instructions = if self.texts.instructions.is_empty() {
-                default_instructions(self.study.protocol).to_string()
-            } else {
-                self.texts.instructions.clone()
-            };
+            let instructions = self
+                .study
+                .session
+                .instructions
+                .clone()
+                .unwrap_or_else(|| default_instructions(self.study.protocol).to_string());
             ui.label(RichText::new(instructions).size(18.0));
             ui.add_space(16.0);
             if !self.fields.is_empty() {
@@ -290,7 +279,7 @@ impl StudyUi {
                     });
                 ui.add_space(12.0);
             }
-            if let Some(consent) = &self.texts.consent {
+            if let Some(consent) = &self.study.session.consent {
                 ui.label(consent);
                 ui.add_enabled(
                     active,
@@ -299,7 +288,7 @@ impl StudyUi {
                 ui.add_space(12.0);
             }
             let ready = self.fields.iter().all(|(_, v)| !v.trim().is_empty())
-                && (self.texts.consent.is_none() || self.consent);
+                && (self.study.session.consent.is_none() || self.consent);
             // Trials start once the refresh period is known, so every trial's drop count is
             // against the measured period.
             let measured = clock.calibrated() || !self.gpu;

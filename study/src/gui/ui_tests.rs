@@ -12,7 +12,7 @@ use protocols::record::{Answer, Position};
 use results::store::{SESSION_FILE, SessionState, TRIALS_FILE, read_json};
 use results::trials::read_trials;
 
-use super::screens::{Exit, StudyUi, Texts};
+use super::screens::{Exit, StudyUi};
 use super::timing::FrameClock;
 use crate::session::{Opened, Recorder};
 use crate::stimuli::StimulusLibrary;
@@ -86,6 +86,12 @@ const MOS: &str = "protocol = \"mos\"\n\
     [presentation]\nplayback_count = 1\nmax_replays = 1\n\
     [session]\nfamiliarization = 0\nhidden_repeats = 0\nsubject_fields = [\"age\"]\n";
 
+const CONSENT: &str = "protocol = \"mos\"\n\
+    [conditions]\nclips = [\"walk\"]\ncodecs = [\"x\"]\ntarget_cr = [10]\n\
+    [session]\nfamiliarization = 0\nhidden_repeats = 0\n\
+    consent = \"Your answers are stored without your name.\"\n\
+    instructions = \"Rate the motion on the right.\"\n";
+
 const DSCQS: &str = "protocol = \"dscqs\"\n\
     [conditions]\nclips = [\"walk\"]\ncodecs = [\"x\"]\ntarget_cr = [10]\n\
     [presentation]\ngap_ms = 200\n\
@@ -114,14 +120,7 @@ fn harness(fx: Fixture) -> (Harness<'static, (StudyUi, FrameClock)>, Run) {
         panic!("new session reported finished");
     };
     let library = StimulusLibrary::new(&study, &fx.study_path);
-    let ui = StudyUi::new(
-        Arc::new(study),
-        library,
-        None,
-        recorder,
-        Texts::default(),
-        false,
-    );
+    let ui = StudyUi::new(Arc::new(study), library, None, recorder, false);
     let h = Harness::builder()
         .with_size(egui::vec2(1280.0, 720.0))
         .with_step_dt(DT)
@@ -213,6 +212,35 @@ fn a_mos_trial_is_rated_by_clicking_four_and_a_half() {
     let m: results::SessionManifest = read_json(&run.session_dir.join(SESSION_FILE)).unwrap();
     assert_eq!(m.status, SessionState::Complete);
     assert_eq!(m.subject_fields.get("age").map(String::as_str), Some("31"));
+    drop(run.fx);
+}
+
+#[test]
+fn the_study_files_instructions_and_consent_gate_the_session() {
+    let (mut h, run) = harness(fixture("consent", CONSENT));
+    h.run_steps(2);
+    assert!(h.query_by_label("Rate the motion on the right.").is_some());
+    assert!(
+        h.query_by_label("Your answers are stored without your name.")
+            .is_some()
+    );
+    assert!(h.get_by_label("Begin").accesskit_node().is_disabled());
+    h.key_press(Key::Enter);
+    h.run_steps(2);
+    assert!(
+        h.query_by_label("Trial 1 of 1").is_none(),
+        "Enter must not skip consent"
+    );
+    h.get_by_label("I agree to take part").click();
+    h.run_steps(2);
+    h.get_by_label("Begin").click();
+    h.run_steps(2);
+    assert!(h.query_by_label("Trial 1 of 1").is_some());
+    let m: results::SessionManifest = read_json(&run.session_dir.join(SESSION_FILE)).unwrap();
+    assert_eq!(
+        m.subject_fields.get("consent").map(String::as_str),
+        Some("given")
+    );
     drop(run.fx);
 }
 
