@@ -2,9 +2,10 @@
 //!
 //! It generates a walking figure, encodes it with two of the seeds' codecs at four rates
 //! (`study sweep`), writes a MOS, a DSCQS and a 2AFC-staircase study over that stimulus set,
-//! runs each with simulated observers (`study simulate`; the subject window is not part of
-//! this build yet, so observers are always simulated, and the demo says so) and writes the
-//! reports (`study report`), printing their main tables.
+//! runs each with simulated observers (`study simulate`) and, where a display is available
+//! (and `--simulate` is not given), one session of yours in the study window (`study run`,
+//! subject `you`) into the same results, then writes the reports (`study report`), printing
+//! their main tables. Without a display it says so and runs simulated observers only.
 
 use std::fs;
 use std::path::{Path, PathBuf};
@@ -12,7 +13,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context as _, Result};
 use clap::Parser;
 
-use crate::{codec_cmd, report_cmd, study_cmd};
+use crate::{codec_cmd, report_cmd, run_cmd, study_cmd};
 
 /// Arguments of `study demo`.
 #[derive(Debug, clap::Args)]
@@ -27,30 +28,46 @@ pub struct DemoArgs {
     /// Seed of the simulated observers.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Run with simulated observers (the only mode of this build; kept so scripts that pass it
-    /// keep working once the study window exists).
+    /// Simulated observers only, even where a display is available (no study window).
     #[arg(long)]
     pub simulate: bool,
+}
+
+/// The demo's studies in the window: short enough to sit through (about three minutes for all
+/// three), long enough to show every screen.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Mode {
+    Simulated,
+    Window,
 }
 
 const CODECS: &str = "wavelet-perceptual,spiht";
 const RATES: &str = "10,20,30,40";
 
-fn study_text(protocol: &str) -> String {
+fn study_text(protocol: &str, mode: Mode) -> String {
     let common = format!(
         "format_version = 1\nname = \"demo-{protocol}\"\nprotocol = \"{protocol}\"\n\
          stimuli = \"stimuli/stimuli.json\"\nseed = 7\n"
     );
     if protocol == "staircase" {
         // Thesis ch. 5 shape: start high, two-down-one-up, mean of the last reversals.
+        let max_trials = if mode == Mode::Window { 12 } else { 40 };
         return common
-            + "\n[staircase]\nparam = \"cr\"\ncodec = \"spiht\"\nstart = 40\nstep = 10\nmin = 10\n\
-               max = 40\nstop_reversals = 6\nmax_trials = 40\n\n[[staircase.tracks]]\n\
-               clip = \"walk\"\n\n[simulation]\nthreshold = 25\nslope = 3\n";
+            + &format!(
+                "\n[staircase]\nparam = \"cr\"\ncodec = \"spiht\"\nstart = 40\nstep = 10\nmin = 10\n\
+                 max = 40\nstop_reversals = 6\nmax_trials = {max_trials}\n\n[[staircase.tracks]]\n\
+                 clip = \"walk\"\n\n[simulation]\nthreshold = 25\nslope = 3\n"
+            );
     }
+    let (rates, fam, repeats) = match mode {
+        Mode::Simulated => ("10, 20, 30, 40", 2, 2),
+        Mode::Window => ("10, 40", 1, 1),
+    };
     common
-        + "\n[conditions]\nclips = [\"walk\"]\ncodecs = [\"wavelet-perceptual\", \"spiht\"]\n\
-           target_cr = [10, 20, 30, 40]\n\n[session]\nfamiliarization = 2\nhidden_repeats = 2\n"
+        + &format!(
+            "\n[conditions]\nclips = [\"walk\"]\ncodecs = [\"wavelet-perceptual\", \"spiht\"]\n\
+             target_cr = [{rates}]\n\n[session]\nfamiliarization = {fam}\nhidden_repeats = {repeats}\n"
+        )
         // DSCQS on the 5-grade scale of thesis ch. 6.4, so DMOS reads against its 0.2 limit.
         + if protocol == "dscqs" { "\n[scale]\nkind = \"categorical\"\n" } else { "" }
 }
@@ -95,11 +112,32 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         "study demo: a short study on a generated walking figure, written to {}",
         out.display()
     );
-    println!(
-        "No study window in this build: every session runs with {} simulated observers.",
-        args.subjects
-    );
-    let clip = codecs::synth::walking_clip(&codecs::synth::WalkParams::default());
+    let mut mode = if args.simulate {
+        println!(
+            "--simulate: every session runs with {} simulated observers.",
+            args.subjects
+        );
+        Mode::Simulated
+    } else if crate::gui::window::display_available() {
+        println!(
+            "A display is available: each study runs {} simulated observers, then one session of \
+             yours in the study window (subject `you`; Ctrl+Shift+P pauses or quits).",
+            args.subjects
+        );
+        Mode::Window
+    } else {
+        println!(
+            "No display (DISPLAY and WAYLAND_DISPLAY are unset): every session runs with {} \
+             simulated observers, none in the study window.",
+            args.subjects
+        );
+        Mode::Simulated
+    };
+    // In the window, a two-second walk keeps each trial short.
+    let clip = codecs::synth::walking_clip(&codecs::synth::WalkParams {
+        duration_s: if mode == Mode::Window { 2.0 } else { 4.0 },
+        ..codecs::synth::WalkParams::default()
+    });
     let (asf, amc) = (out.join("clips/walk.asf"), out.join("clips/walk.amc"));
     codecs::io::write_clip(&clip, &amc, Some(&asf))?;
 
@@ -125,7 +163,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     let seed = args.seed.to_string();
     for protocol in ["mos", "dscqs", "staircase"] {
         let study = out.join(format!("{protocol}.toml"));
-        fs::write(&study, study_text(protocol))
+        fs::write(&study, study_text(protocol, mode))
             .with_context(|| format!("writing {}", study.display()))?;
         let results = out.join(format!("results-{protocol}"));
         println!(
@@ -143,6 +181,19 @@ pub fn run(args: &DemoArgs) -> Result<()> {
             &s(&results),
         ])?;
         study_cmd::simulate(&sim).with_context(|| format!("simulating the {protocol} study"))?;
+        if mode == Mode::Window {
+            println!("       your {protocol} session in the study window…");
+            let run: run_cmd::RunArgs =
+                parse(&["run", &s(&study), "--subject", "you", "-o", &s(&results)])?;
+            if let Err(e) = run_cmd::run(&run) {
+                // The demo still reports the simulated sessions (e.g. DISPLAY set but no
+                // server reachable, or no graphics adapter), and does not try again.
+                println!(
+                    "note: the study window did not run ({e:#}); simulated observers only from here"
+                );
+                mode = Mode::Simulated;
+            }
+        }
         let report_dir = out.join(format!("report-{protocol}"));
         let rep: report_cmd::ReportArgs = parse(&["report", &s(&results), "-o", &s(&report_dir)])?;
         report_cmd::run(&rep).with_context(|| format!("reporting the {protocol} study"))?;

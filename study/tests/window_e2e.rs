@@ -7,133 +7,13 @@
 //! installs them. Without them the test fails under `CI` and is skipped elsewhere.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
 
+mod common;
+
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Stdio};
 use std::time::{Duration, Instant};
 
-fn have(tool: &str) -> bool {
-    Command::new("sh")
-        .args(["-c", &format!("command -v {tool}")])
-        .stdout(Stdio::null())
-        .status()
-        .is_ok_and(|s| s.success())
-}
-
-struct Xvfb {
-    child: Child,
-    display: String,
-}
-
-impl Drop for Xvfb {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
-#[allow(
-    clippy::zombie_processes,
-    reason = "the server is returned inside `Xvfb`, whose Drop kills and waits for it"
-)]
-fn start_xvfb() -> Xvfb {
-    // A display number no other test or session uses: from the process id.
-    for k in 0..20 {
-        let n = 90 + (std::process::id() % 400) + k * 7;
-        if Path::new(&format!("/tmp/.X11-unix/X{n}")).exists() {
-            continue;
-        }
-        let child = Command::new("Xvfb")
-            // -noreset: no server reset (refusing connections) when the last client leaves.
-            .args([
-                &format!(":{n}"),
-                "-screen",
-                "0",
-                "1280x720x24",
-                "-nolisten",
-                "tcp",
-                "-noreset",
-            ])
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .expect("starting Xvfb");
-        let deadline = Instant::now() + Duration::from_secs(10);
-        while Instant::now() < deadline {
-            if Path::new(&format!("/tmp/.X11-unix/X{n}")).exists() {
-                return Xvfb {
-                    child,
-                    display: format!(":{n}"),
-                };
-            }
-            std::thread::sleep(Duration::from_millis(50));
-        }
-    }
-    panic!("Xvfb did not start");
-}
-
-struct Env {
-    dir: PathBuf,
-    xvfb: Xvfb,
-    runtime: PathBuf,
-}
-
-impl Drop for Env {
-    fn drop(&mut self) {
-        if std::env::var_os("KEEP_E2E").is_some() {
-            eprintln!("kept {}", self.dir.display());
-            return;
-        }
-        let _ = std::fs::remove_dir_all(&self.dir);
-    }
-}
-
-impl Env {
-    fn cmd(&self, program: &str) -> Command {
-        let mut c = Command::new(program);
-        c.env("DISPLAY", &self.xvfb.display)
-            .env("XDG_RUNTIME_DIR", &self.runtime)
-            .env_remove("WAYLAND_DISPLAY")
-            // Software rendering: lavapipe (it is also what wgpu picks without a GPU).
-            .env("WGPU_BACKEND", "vulkan");
-        c
-    }
-
-    fn xdotool(&self, args: &[&str]) -> String {
-        let out = self.cmd("xdotool").args(args).output().unwrap();
-        String::from_utf8_lossy(&out.stdout).trim().to_string()
-    }
-}
-
-fn setup() -> Option<Env> {
-    let missing: Vec<&str> = ["Xvfb", "xdotool", "import"]
-        .into_iter()
-        .filter(|t| !have(t))
-        .collect();
-    if !missing.is_empty() {
-        assert!(
-            std::env::var_os("CI").is_none(),
-            "under CI the window test needs {missing:?} (scripts/test installs them)"
-        );
-        eprintln!("skipping the window test: {missing:?} not installed");
-        return None;
-    }
-    let dir = std::env::temp_dir().join(format!("study-e2e-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    let runtime = dir.join("xdg");
-    std::fs::create_dir_all(&runtime).unwrap();
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::PermissionsExt as _;
-        std::fs::set_permissions(&runtime, std::fs::Permissions::from_mode(0o700)).unwrap();
-    }
-    write_study(&dir);
-    Some(Env {
-        dir,
-        xvfb: start_xvfb(),
-        runtime,
-    })
-}
+use common::{Env, find_window, press, setup};
 
 /// A one-second walk, a reference and two "compressed" versions (a lateral lean of the root
 /// so they differ), and a MOS study of 2 familiarization + 2 test + 2 hidden-repeat trials.
@@ -197,37 +77,8 @@ fn spawn_run(env: &Env, resume: bool) -> Child {
     c.spawn().unwrap()
 }
 
-fn find_window(env: &Env, child: &mut Child) -> String {
-    let deadline = Instant::now() + Duration::from_secs(120);
-    while Instant::now() < deadline {
-        if let Some(status) = child.try_wait().unwrap() {
-            let mut err = String::new();
-            if let Some(mut e) = child.stderr.take() {
-                std::io::Read::read_to_string(&mut e, &mut err).unwrap();
-            }
-            panic!("study run exited early ({status}): {err}");
-        }
-        let id = env.xdotool(&["search", "--name", "study: e2e"]);
-        if let Some(first) = id.lines().next().filter(|l| !l.is_empty()) {
-            return first.to_string();
-        }
-        std::thread::sleep(Duration::from_millis(200));
-    }
-    panic!("the study window never appeared");
-}
-
 /// Presses `keys` every half second until `rows` trials are logged (keys pressed while the
 /// stimulus plays are ignored by design, so repeating is safe).
-/// Bare Xvfb has no window manager: the window gets the keyboard focus before every press
-/// (until it is mapped a focus request is lost), then plain `xdotool key` reaches it
-/// (`key --window` events were seen to be dropped).
-fn press(env: &Env, wid: &str, keys: &[&str]) {
-    env.xdotool(&["windowfocus", "--sync", wid]);
-    let mut args = vec!["key"];
-    args.extend_from_slice(keys);
-    env.xdotool(&args);
-}
-
 fn answer_until(env: &Env, wid: &str, keys: &[&str], rows: usize) {
     let deadline = Instant::now() + Duration::from_secs(240);
     while logged_rows(env) < rows {
@@ -270,9 +121,10 @@ fn orange_per_half(png_path: &Path) -> [usize; 2] {
 
 #[test]
 fn study_run_under_xvfb_logs_every_trial_and_resumes_after_a_kill() {
-    let Some(env) = setup() else { return };
+    let Some(env) = setup("e2e") else { return };
+    write_study(&env.dir);
     let mut child = spawn_run(&env, false);
-    let wid = find_window(&env, &mut child);
+    let wid = find_window(&env, &mut child, "study: e2e");
     // Welcome: Enter begins once the display is measured (~30 frames).
     let deadline = Instant::now() + Duration::from_secs(60);
     while !session_dir(&env).join("session.json").exists() || logged_rows(&env) == 0 {
@@ -310,7 +162,7 @@ fn study_run_under_xvfb_logs_every_trial_and_resumes_after_a_kill() {
     assert_eq!(logged_rows(&env), 3);
 
     let mut child = spawn_run(&env, true);
-    let wid = find_window(&env, &mut child);
+    let wid = find_window(&env, &mut child, "study: e2e");
     std::thread::sleep(Duration::from_millis(500));
     answer_until(&env, &wid, &["Return", "3", "Return"], 6);
     let out = child.wait_with_output().unwrap();

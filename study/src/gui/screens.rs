@@ -41,7 +41,8 @@ pub fn default_instructions(protocol: Protocol) -> &'static str {
         Protocol::Dscqs => {
             "Each trial shows two motions, A and B, twice: A, B, A, B. One of them is the \
              original, in random order. After the second showing, rate the quality of both A \
-             and B, then press Continue (Enter)."
+             and B (with the mouse, or number keys: first A, then B), then press Continue \
+             (Enter)."
         }
         Protocol::Staircase => {
             "Each trial shows two motions side by side. Choose the one that looks more natural \
@@ -88,6 +89,8 @@ struct TrialScreen {
     first: Position,
     rating: Option<f64>,
     rating_b: Option<f64>,
+    /// DSCQS keyboard: number keys now rate B.
+    editing_b: bool,
     gate_open_s: Option<f64>,
     shapes: [Arc<FrameShapes>; 2],
     /// How the test stimulus was encoded for this trial (live staircase).
@@ -432,6 +435,7 @@ impl StudyUi {
             first,
             rating: None,
             rating_b: None,
+            editing_b: false,
             gate_open_s: None,
             shapes: [Arc::default(), Arc::default()],
             encoding,
@@ -512,6 +516,23 @@ impl StudyUi {
                             ui.label(RichText::new("B").strong().size(18.0));
                             rating_row(ui, &scale, &mut t.rating_b, open, "rating B");
                         });
+                        if open {
+                            // Keys: number keys rate A, then B; arrows adjust the row being
+                            // rated; Backspace goes back to A.
+                            let row = if t.editing_b {
+                                &mut t.rating_b
+                            } else {
+                                &mut t.rating
+                            };
+                            keyboard_rating(ui, &scale, row);
+                            let digit = ui.input(|i| DIGITS.iter().any(|k| i.key_pressed(*k)));
+                            if digit && !t.editing_b && t.rating.is_some() {
+                                t.editing_b = true;
+                            }
+                            if ui.input(|i| i.key_pressed(Key::Backspace)) {
+                                t.editing_b = false;
+                            }
+                        }
                         let both = t.rating.zip(t.rating_b);
                         let confirm = ui
                             .add_enabled(open && both.is_some(), egui::Button::new("Continue"))
@@ -765,6 +786,19 @@ fn rating_row(ui: &mut Ui, scale: &RatingScale, value: &mut Option<f64>, open: b
     }
 }
 
+/// The number keys 1-9.
+const DIGITS: [Key; 9] = [
+    Key::Num1,
+    Key::Num2,
+    Key::Num3,
+    Key::Num4,
+    Key::Num5,
+    Key::Num6,
+    Key::Num7,
+    Key::Num8,
+    Key::Num9,
+];
+
 /// Number keys pick whole ratings; up/down move by the scale's step.
 fn keyboard_rating(ui: &Ui, scale: &RatingScale, value: &mut Option<f64>) {
     if scale.kind != ScaleKind::Categorical {
@@ -772,20 +806,7 @@ fn keyboard_rating(ui: &Ui, scale: &RatingScale, value: &mut Option<f64>) {
     }
     let cats = categories(scale);
     ui.input(|i| {
-        for (k, key) in [
-            Key::Num1,
-            Key::Num2,
-            Key::Num3,
-            Key::Num4,
-            Key::Num5,
-            Key::Num6,
-            Key::Num7,
-            Key::Num8,
-            Key::Num9,
-        ]
-        .into_iter()
-        .enumerate()
-        {
+        for (k, &key) in DIGITS.iter().enumerate() {
             let v = (k + 1) as f64;
             if i.key_pressed(key) && cats.iter().any(|c| (c - v).abs() < 1e-9) {
                 *value = Some(v);

@@ -302,6 +302,23 @@ fn a_dscqs_pair_is_rated_twice() {
 }
 
 #[test]
+fn a_dscqs_pair_can_be_rated_from_the_keyboard() {
+    let (mut h, run) = harness(fixture("dscqs-keys", DSCQS));
+    begin(&mut h);
+    watch(&mut h, 4.6);
+    // 5 rates A, 3 then ↓ rate B (2), Enter records.
+    for key in [Key::Num5, Key::Num3, Key::ArrowDown, Key::Enter] {
+        h.key_press(key);
+        h.run_steps(1);
+    }
+    h.run_steps(2);
+    let r = rows(&run.session_dir);
+    assert_eq!(r.len(), 1);
+    assert_eq!(r[0].response.answer, Answer::Pair { a: 5.0, b: 2.0 });
+    drop(run.fx);
+}
+
+#[test]
 fn pause_and_quit_need_confirmation_and_record_nothing() {
     let (mut h, run) = harness(fixture("pause", AFC));
     begin(&mut h);

@@ -1,0 +1,166 @@
+//! A real X server for the window tests: Xvfb with Mesa's software Vulkan driver, keys by
+//! `xdotool`. Without the tools the tests fail under `CI` and are skipped elsewhere.
+#![allow(dead_code, reason = "each test file uses its own part of the harness")]
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+pub fn have(tool: &str) -> bool {
+    Command::new("sh")
+        .args(["-c", &format!("command -v {tool}")])
+        .stdout(Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success())
+}
+
+pub struct Xvfb {
+    child: Child,
+    /// `:N`.
+    pub display: String,
+}
+
+impl Drop for Xvfb {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+#[allow(
+    clippy::zombie_processes,
+    reason = "the server is returned inside `Xvfb`, whose Drop kills and waits for it"
+)]
+pub fn start_xvfb() -> Xvfb {
+    // A display number no other test or session uses: from the process id.
+    for k in 0..20 {
+        let n = 90 + (std::process::id() % 400) + k * 7;
+        if Path::new(&format!("/tmp/.X11-unix/X{n}")).exists() {
+            continue;
+        }
+        let child = Command::new("Xvfb")
+            // -noreset: no server reset (refusing connections) when the last client leaves.
+            .args([
+                &format!(":{n}"),
+                "-screen",
+                "0",
+                "1280x720x24",
+                "-nolisten",
+                "tcp",
+                "-noreset",
+            ])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("starting Xvfb");
+        let deadline = Instant::now() + Duration::from_secs(10);
+        while Instant::now() < deadline {
+            if Path::new(&format!("/tmp/.X11-unix/X{n}")).exists() {
+                return Xvfb {
+                    child,
+                    display: format!(":{n}"),
+                };
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+    panic!("Xvfb did not start");
+}
+
+pub struct Env {
+    /// Scratch folder (removed on drop unless `KEEP_E2E` is set).
+    pub dir: PathBuf,
+    /// The X server.
+    pub xvfb: Xvfb,
+    runtime: PathBuf,
+}
+
+impl Drop for Env {
+    fn drop(&mut self) {
+        if std::env::var_os("KEEP_E2E").is_some() {
+            eprintln!("kept {}", self.dir.display());
+            return;
+        }
+        let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}
+
+impl Env {
+    /// A command that runs on this X server.
+    pub fn cmd(&self, program: &str) -> Command {
+        let mut c = Command::new(program);
+        c.env("DISPLAY", &self.xvfb.display)
+            .env("XDG_RUNTIME_DIR", &self.runtime)
+            .env_remove("WAYLAND_DISPLAY")
+            // Software rendering: lavapipe (it is also what wgpu picks without a GPU).
+            .env("WGPU_BACKEND", "vulkan");
+        c
+    }
+
+    /// Runs `xdotool` and returns its output.
+    pub fn xdotool(&self, args: &[&str]) -> String {
+        let out = self.cmd("xdotool").args(args).output().unwrap();
+        String::from_utf8_lossy(&out.stdout).trim().to_string()
+    }
+}
+
+/// A fresh folder and X server, or `None` (skip) when the tools are missing outside CI.
+pub fn setup(name: &str) -> Option<Env> {
+    let missing: Vec<&str> = ["Xvfb", "xdotool", "import"]
+        .into_iter()
+        .filter(|t| !have(t))
+        .collect();
+    if !missing.is_empty() {
+        assert!(
+            std::env::var_os("CI").is_none(),
+            "under CI the window test needs {missing:?} (scripts/test installs them)"
+        );
+        eprintln!("skipping the window test: {missing:?} not installed");
+        return None;
+    }
+    let dir = std::env::temp_dir().join(format!("study-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let runtime = dir.join("xdg");
+    std::fs::create_dir_all(&runtime).unwrap();
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt as _;
+        std::fs::set_permissions(&runtime, std::fs::Permissions::from_mode(0o700)).unwrap();
+    }
+    Some(Env {
+        dir,
+        xvfb: start_xvfb(),
+        runtime,
+    })
+}
+
+/// Finds the window whose name contains `title`, failing if `child` exits first.
+pub fn find_window(env: &Env, child: &mut Child, title: &str) -> String {
+    let deadline = Instant::now() + Duration::from_secs(120);
+    while Instant::now() < deadline {
+        if let Some(status) = child.try_wait().unwrap() {
+            let mut err = String::new();
+            if let Some(mut e) = child.stderr.take() {
+                std::io::Read::read_to_string(&mut e, &mut err).unwrap();
+            }
+            panic!("the study process exited early ({status}): {err}");
+        }
+        let id = env.xdotool(&["search", "--name", title]);
+        if let Some(first) = id.lines().next().filter(|l| !l.is_empty()) {
+            return first.to_string();
+        }
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    panic!("the window {title:?} never appeared");
+}
+
+/// Bare Xvfb has no window manager: the window gets the keyboard focus before every press
+/// (until it is mapped a focus request is lost), then plain `xdotool key` reaches it
+/// (`key --window` events were seen to be dropped).
+pub fn press(env: &Env, wid: &str, keys: &[&str]) {
+    env.xdotool(&["windowfocus", "--sync", wid]);
+    let mut args = vec!["key"];
+    args.extend_from_slice(keys);
+    env.xdotool(&args);
+}
