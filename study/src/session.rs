@@ -14,6 +14,9 @@ use protocols::{
 use results::store::{SessionLock, SessionState, read_json};
 use results::{SessionLog, SessionManifest};
 
+/// Per-frame presentation intervals of a window session, beside `trials.csv`.
+pub const FRAMES_FILE: &str = "frames.csv";
+
 /// Milliseconds since the Unix epoch.
 pub fn now_ms() -> u64 {
     SystemTime::now()
@@ -198,6 +201,36 @@ impl Recorder {
         self.log.append(&record)?;
         self.manifest.trials_logged = self.log.rows();
         Ok(outcome)
+    }
+
+    /// Appends the presentation intervals of trial `index` to `frames.csv` beside the trial
+    /// log (`trial_index,interval_ms`, one row per presented frame), so every frame's timing
+    /// is kept, not only the per-trial summary. Flushed, not fsynced: the answer itself is
+    /// already on disk.
+    ///
+    /// # Errors
+    /// The file cannot be written.
+    pub fn append_frame_intervals(&mut self, index: u32, intervals: &[f64]) -> anyhow::Result<()> {
+        use std::fmt::Write as _;
+        use std::io::Write as _;
+        let path = self.log.dir().join(FRAMES_FILE);
+        let new = !path.exists();
+        let mut text = String::with_capacity(intervals.len() * 12 + 32);
+        if new {
+            text.push_str("trial_index,interval_ms\n");
+        }
+        for ms in intervals {
+            let _ = writeln!(text, "{index},{ms:.3}");
+        }
+        let mut f = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(&path)
+            .with_context(|| format!("opening {}", path.display()))?;
+        f.write_all(text.as_bytes())
+            .and_then(|()| f.flush())
+            .with_context(|| format!("writing {}", path.display()))?;
+        Ok(())
     }
 
     /// Writes the final manifest once the engine says the session is over.

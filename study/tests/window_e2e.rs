@@ -190,10 +190,32 @@ fn study_run_under_xvfb_logs_every_trial_and_resumes_after_a_kill() {
         })
         .collect();
     assert_eq!(ratings, [4.0, 4.0, 4.0, 3.0, 3.0, 3.0]);
-    // Every row of a real session records how the display kept time during its trial.
+    // Every row of a real session records how the display kept time during its trial, and
+    // frames.csv keeps each of those frames' intervals.
+    let frames = std::fs::read_to_string(session_dir(&env).join("frames.csv")).unwrap();
+    let mut lines = frames.lines();
+    assert_eq!(lines.next(), Some("trial_index,interval_ms"));
+    let per_trial: Vec<(u32, f64)> = lines
+        .map(|l| {
+            let (t, ms) = l.split_once(',').unwrap();
+            (t.parse().unwrap(), ms.parse().unwrap())
+        })
+        .collect();
     for r in &trials.records {
         let t = r.timing.expect("frame timing in a window session");
         assert!(t.frames_shown > 0 && t.interval_sd_ms >= 0.0, "{t:?}");
+        let n = per_trial
+            .iter()
+            .filter(|(i, ms)| *i == r.trial.index && *ms > 0.0)
+            .count();
+        // The intervals are written just after the answer: a kill in between (trial 2 here,
+        // the last before the kill) may leave that one trial without them, never with wrong ones.
+        assert!(
+            n == t.frames_shown as usize || (n == 0 && r.trial.index == 2),
+            "trial {}: {n} intervals, {} frames",
+            r.trial.index,
+            t.frames_shown
+        );
     }
     let manifest: results::SessionManifest =
         results::store::read_json(&session_dir(&env).join("session.json")).unwrap();

@@ -669,11 +669,20 @@ impl StudyUi {
             let trial = t.trial.clone();
             let encoding = t.encoding.take();
             let elapsed = self.recorder.elapsed_ms();
-            match self
+            let index = trial.index;
+            let logged = self
                 .recorder
                 .record(trial, response, elapsed, encoding, timing)
-            {
-                Ok(_) => self.advance(now, clock),
+                .and_then(|_| {
+                    if timing.is_some() {
+                        self.recorder
+                            .append_frame_intervals(index, clock.segment_intervals())
+                    } else {
+                        Ok(())
+                    }
+                });
+            match logged {
+                Ok(()) => self.advance(now, clock),
                 Err(e) => self.fail(&e),
             }
         }

@@ -87,6 +87,7 @@ pub struct FrameClock {
     session: Accumulator,
     segment: Accumulator,
     recording: bool,
+    intervals: Vec<f64>,
 }
 
 impl FrameClock {
@@ -100,6 +101,7 @@ impl FrameClock {
             session: Accumulator::default(),
             segment: Accumulator::default(),
             recording: false,
+            intervals: Vec::new(),
         }
     }
 
@@ -130,6 +132,7 @@ impl FrameClock {
                 if self.recording {
                     self.segment.frame();
                     self.segment.interval(ms, period);
+                    self.intervals.push(ms);
                 }
             }
         }
@@ -148,6 +151,7 @@ impl FrameClock {
     /// Starts counting a trial's frames.
     pub fn start_segment(&mut self) {
         self.segment = Accumulator::default();
+        self.intervals.clear();
         self.recording = true;
     }
 
@@ -155,6 +159,11 @@ impl FrameClock {
     pub fn end_segment(&mut self) -> IntervalStats {
         self.recording = false;
         self.segment.stats()
+    }
+
+    /// The intervals of the current (or last) segment, ms, in order.
+    pub fn segment_intervals(&self) -> &[f64] {
+        &self.intervals
     }
 
     /// Statistics of the current segment so far.
@@ -232,6 +241,7 @@ mod tests {
         }
         let s = c.end_segment();
         assert_eq!(s.frames, 6);
+        assert_eq!(c.segment_intervals(), [16.6, 16.8, 25.1, 24.9, 33.4, 16.7]);
         // 1.5 × 16.667 = 25.0: 25.1 is over, 24.9 is not.
         assert_eq!(s.dropped, 2);
         assert!((s.max_ms - 33.4).abs() < 1e-12);
