@@ -10,15 +10,15 @@ use anyhow::{Context as _, bail};
 use clap::Args;
 use protocols::StudyDefinition;
 use protocols::study::content_hash;
-use results::store::{DisplayInfo, MANIFEST_FORMAT_VERSION, RUN_FILE, SessionState, write_new};
-use results::{RunManifest, SessionManifest};
+use results::RunManifest;
+use results::store::{DisplayInfo, MANIFEST_FORMAT_VERSION, RUN_FILE, write_new};
 
 use crate::gui::render::BACKGROUND;
 use crate::gui::scene::{Figure, FrameShapes, View};
 use crate::gui::screens::{Exit, StudyUi};
 use crate::gui::timing::FrameClock;
 use crate::gui::window::{self, Next, WindowOptions, WindowReport};
-use crate::session::{Opened, Recorder, now_ms};
+use crate::session::{self, Opened, Recorder, SessionOf, now_ms};
 use crate::stimuli::StimulusLibrary;
 
 /// Window size `WxH`.
@@ -190,28 +190,17 @@ pub fn run(args: &RunArgs) -> anyhow::Result<()> {
     open_results_dir(&out, args, &study, &study_bytes)?;
     let dir = out.join(format!("{}_s{}", args.subject, args.session));
     let index = subject_index(&args.subject, args.session);
-    let fresh = SessionManifest {
-        format_version: MANIFEST_FORMAT_VERSION,
-        study: study.name.clone(),
-        study_hash: content_hash(&study_bytes),
-        protocol: study.protocol,
-        subject: args.subject.clone(),
-        subject_index: index,
-        session: args.session,
-        plan_seed: study.seed,
-        observer_seed: None,
-        software_version: env!("CARGO_PKG_VERSION").into(),
-        subject_fields: std::collections::BTreeMap::new(),
-        started_ms: now_ms(),
-        ended_ms: None,
-        status: SessionState::Running,
-        trials_logged: 0,
-        not_shown: Vec::new(),
-        thresholds: Vec::new(),
-        resumes: 0,
-        torn_rows: Vec::new(),
-        display: None,
-    };
+    let study_hash = content_hash(&study_bytes);
+    let fresh = session::new_manifest(
+        &study,
+        SessionOf {
+            study_hash: &study_hash,
+            subject: args.subject.clone(),
+            subject_index: index,
+            session: args.session,
+            observer_seed: None,
+        },
+    );
     let recorder = match Recorder::open(&study, index, &dir, args.resume, fresh)? {
         Opened::Finished(m) => {
             let m = *m;

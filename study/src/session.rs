@@ -24,6 +24,46 @@ pub fn now_ms() -> u64 {
         .map_or(0, |d| d.as_millis() as u64)
 }
 
+/// Who a new session is for: the manifest fields that differ between sessions.
+pub struct SessionOf<'a> {
+    /// Hash of the study file's bytes.
+    pub study_hash: &'a str,
+    /// Subject id.
+    pub subject: String,
+    /// Subject index (the plan's randomisation).
+    pub subject_index: u32,
+    /// Session number of this subject.
+    pub session: u32,
+    /// Seed of the simulated observer; `None` for a real subject.
+    pub observer_seed: Option<u64>,
+}
+
+/// The manifest of a new, running session of `study`; everything else starts empty.
+pub fn new_manifest(study: &StudyDefinition, of: SessionOf<'_>) -> SessionManifest {
+    SessionManifest {
+        format_version: results::store::MANIFEST_FORMAT_VERSION,
+        study: study.name.clone(),
+        study_hash: of.study_hash.to_string(),
+        protocol: study.protocol,
+        subject: of.subject,
+        subject_index: of.subject_index,
+        session: of.session,
+        plan_seed: study.seed,
+        observer_seed: of.observer_seed,
+        software_version: env!("CARGO_PKG_VERSION").into(),
+        subject_fields: std::collections::BTreeMap::new(),
+        started_ms: now_ms(),
+        ended_ms: None,
+        status: SessionState::Running,
+        trials_logged: 0,
+        not_shown: Vec::new(),
+        thresholds: Vec::new(),
+        resumes: 0,
+        torn_rows: Vec::new(),
+        display: None,
+    }
+}
+
 /// An open session: the engine, its log and its manifest.
 pub struct Recorder {
     engine: Session,

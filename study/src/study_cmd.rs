@@ -12,12 +12,12 @@ use protocols::study::Metric;
 use protocols::study::content_hash;
 use protocols::{Detection, Protocol, StudyDefinition};
 use results::store::{
-    DisplayInfo, MANIFEST_FORMAT_VERSION, RUN_FILE, SessionState, read_json, write_json, write_new,
+    DisplayInfo, MANIFEST_FORMAT_VERSION, RUN_FILE, read_json, write_json, write_new,
 };
 use results::{RunManifest, SessionManifest};
 
 use crate::live::{LiveStimuli, LiveStimulus};
-use crate::session::{Opened, Recorder, now_ms};
+use crate::session::{self, Opened, Recorder, SessionOf, now_ms};
 
 /// Arguments of `study check`.
 #[derive(Debug, Args)]
@@ -350,38 +350,29 @@ fn new_manifest(
     args: &SimulateArgs,
     subject: u32,
 ) -> SessionManifest {
-    SessionManifest {
-        format_version: MANIFEST_FORMAT_VERSION,
-        study: study.name.clone(),
-        study_hash: hash.to_string(),
-        protocol: study.protocol,
-        subject: subject_id(subject),
-        subject_index: subject,
-        session: 1,
-        plan_seed: study.seed,
-        observer_seed: Some(args.seed),
-        software_version: env!("CARGO_PKG_VERSION").into(),
-        subject_fields: study
-            .session
-            .subject_fields
-            .iter()
-            .map(|f| (f.clone(), "simulated".to_string()))
-            .collect(),
-        started_ms: now_ms(),
-        ended_ms: None,
-        status: SessionState::Running,
-        trials_logged: 0,
-        not_shown: Vec::new(),
-        thresholds: Vec::new(),
-        resumes: 0,
-        torn_rows: Vec::new(),
-        display: Some(DisplayInfo {
-            description: "simulated".into(),
-            width_px: 0,
-            height_px: 0,
-            refresh_hz: 0.0,
-        }),
-    }
+    let mut m = session::new_manifest(
+        study,
+        SessionOf {
+            study_hash: hash,
+            subject: subject_id(subject),
+            subject_index: subject,
+            session: 1,
+            observer_seed: Some(args.seed),
+        },
+    );
+    m.subject_fields = study
+        .session
+        .subject_fields
+        .iter()
+        .map(|f| (f.clone(), "simulated".to_string()))
+        .collect();
+    m.display = Some(DisplayInfo {
+        description: "simulated".into(),
+        width_px: 0,
+        height_px: 0,
+        refresh_hz: 0.0,
+    });
+    m
 }
 
 fn run_subject(

@@ -132,28 +132,16 @@ fn harness(fx: Fixture) -> (Harness<'static, (StudyUi, FrameClock)>, Run) {
 }
 
 fn fresh_manifest(study: &StudyDefinition) -> results::SessionManifest {
-    results::SessionManifest {
-        format_version: results::store::MANIFEST_FORMAT_VERSION,
-        study: study.name.clone(),
-        study_hash: "test".into(),
-        protocol: study.protocol,
-        subject: "S01".into(),
-        subject_index: 0,
-        session: 1,
-        plan_seed: study.seed,
-        observer_seed: None,
-        software_version: "test".into(),
-        subject_fields: std::collections::BTreeMap::new(),
-        started_ms: 0,
-        ended_ms: None,
-        status: SessionState::Running,
-        trials_logged: 0,
-        not_shown: Vec::new(),
-        thresholds: Vec::new(),
-        resumes: 0,
-        torn_rows: Vec::new(),
-        display: None,
-    }
+    crate::session::new_manifest(
+        study,
+        crate::session::SessionOf {
+            study_hash: "test",
+            subject: "S01".into(),
+            subject_index: 0,
+            session: 1,
+            observer_seed: None,
+        },
+    )
 }
 
 fn rows(dir: &Path) -> Vec<protocols::TrialRecord> {
