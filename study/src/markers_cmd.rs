@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
-use codecs::markers::{data, gdke::JointKind, segments, synth};
+use codecs::markers::{acclaim, data, gdke::JointKind, segments, synth};
 
 use crate::clip_cmd::ClipInput;
 
@@ -33,16 +33,19 @@ pub enum MarkersCommand {
         #[arg(long, value_name = "TOML")]
         segments_out: Option<PathBuf>,
     },
-    /// Solve a skeleton and joint rotations from markers and write them as BVH.
+    /// Solve a skeleton and joint rotations from markers and write them as BVH, or as ASF/AMC.
     Solve {
         /// Marker file (`.c3d` or `.csv`).
         markers: PathBuf,
         /// Segment/marker assignment file (TOML).
         #[arg(long, value_name = "FILE")]
         segments: PathBuf,
-        /// Output motion file (`.bvh`).
+        /// Output motion file: `.bvh`, or `.amc` with `--out-asf`.
         #[arg(short, long, value_name = "OUT")]
         output: PathBuf,
+        /// Output skeleton (`.asf`) for `.amc` output.
+        #[arg(long, value_name = "SKEL")]
+        out_asf: Option<PathBuf>,
     },
 }
 
@@ -88,17 +91,36 @@ pub fn run(cmd: MarkersCommand) -> Result<()> {
             markers,
             segments: seg_path,
             output,
+            out_asf,
         } => {
-            if !output
-                .extension()
-                .is_some_and(|e| e.eq_ignore_ascii_case("bvh"))
-            {
-                bail!("{}: the solved clip is written as .bvh", output.display());
+            let is =
+                |p: &PathBuf, e: &str| p.extension().is_some_and(|x| x.eq_ignore_ascii_case(e));
+            match (is(&output, "bvh"), is(&output, "amc"), &out_asf) {
+                (true, _, None) => {}
+                (true, _, Some(a)) => bail!(
+                    "{}: a BVH file carries its own skeleton; --out-asf is for .amc output",
+                    a.display()
+                ),
+                (_, true, Some(a)) if is(a, "asf") => {}
+                (_, true, Some(a)) => bail!("{}: the skeleton is written as .asf", a.display()),
+                (_, true, None) => bail!(
+                    "{}: AMC output needs --out-asf for its skeleton",
+                    output.display()
+                ),
+                _ => bail!(
+                    "{}: the solved clip is written as .bvh or .amc",
+                    output.display()
+                ),
             }
             let set = data::read_markers(&markers)?;
             let map = segments::read_segments(&seg_path)?;
             let solved = segments::solve(&set, &map)?;
-            codecs::io::write_clip(&solved.clip, &output, None)?;
+            if out_asf.is_some() {
+                let asf = acclaim::bvh_to_asf(&solved.clip)?;
+                codecs::io::write_clip(&asf.clip, &output, out_asf.as_deref())?;
+            } else {
+                codecs::io::write_clip(&solved.clip, &output, None)?;
+            }
             for (i, j) in solved.joints.iter().enumerate() {
                 let kind = match j.kind {
                     _ if i == 0 => "root".to_string(),
@@ -117,8 +139,11 @@ pub fn run(cmd: MarkersCommand) -> Result<()> {
                     j.segment, c[0], c[1], c[2], j.markers_used, j.held_frames
                 );
             }
+            if let Some(a) = &out_asf {
+                eprintln!("wrote {}", a.display());
+            }
             eprintln!(
-                "wrote {}: {} joints, {} frames",
+                "wrote {}: {} segments, {} frames",
                 output.display(),
                 solved.clip.skeleton.joints.len(),
                 solved.clip.frames()

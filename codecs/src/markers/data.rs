@@ -5,9 +5,9 @@
 //! and a sample at exactly (0, 0, 0) is the "zeroed" missing point of seed 003 (section 2.4).
 
 use std::fmt::Write as _;
-use std::panic::AssertUnwindSafe;
 use std::path::Path;
 
+use super::quiet::catch_quiet;
 use super::{MarkerError, MarkerLimits};
 
 /// Marker positions in millimetres over frames; `None` is a gap.
@@ -449,17 +449,16 @@ pub fn parse_c3d(
 ) -> Result<MarkerSet, MarkerError> {
     check_c3d_header(bytes, path, limits)?;
     // c3dio indexes its input without bounds checks in places; a malformed file that passes
-    // the header checks above must still end as an error, not a crash.
-    let parsed = std::panic::catch_unwind(AssertUnwindSafe(|| {
-        c3dio::C3d::from_bytes(bytes).map_err(Box::new)
-    }))
-    .map_err(|_| {
-        c3d_err(
-            path,
-            "malformed file (the parser stopped on inconsistent data)",
-        )
-    })?
-    .map_err(|e| c3d_err(path, format!("{e:?}")))?;
+    // the header checks above must still end as this error, not a crash, and without the
+    // panic hook printing c3dio's message next to it.
+    let parsed = catch_quiet(|| c3dio::C3d::from_bytes(bytes).map_err(Box::new))
+        .map_err(|why| {
+            c3d_err(
+                path,
+                format!("malformed file (the parser stopped on inconsistent data: {why})"),
+            )
+        })?
+        .map_err(|e| c3d_err(path, format!("{e:?}")))?;
     let points = &parsed.points;
     let markers = points.points.cols();
     let frames = points.points.rows();
@@ -577,8 +576,8 @@ pub fn write_c3d(set: &MarkerSet, path: &Path) -> Result<(), MarkerError> {
         pts.points.push_row(row);
     }
     let tmp = path.with_extension("c3d.tmp.c3d");
-    std::panic::catch_unwind(AssertUnwindSafe(|| c3d.write_path(tmp.clone()).map(|_| ())))
-        .map_err(|_| c3d_err(path, "the C3D writer stopped"))?
+    catch_quiet(|| c3d.write_path(tmp.clone()).map(|_| ()))
+        .map_err(|why| c3d_err(path, format!("the C3D writer stopped: {why}")))?
         .map_err(|e| c3d_err(path, format!("{e:?}")))?;
     // c3dio does not pad the data section to whole 512-byte blocks, which its own reader
     // (and the C3D specification) expects.

@@ -7,10 +7,13 @@
 //! near-singular. [`gdke`] holds the estimator and an iterative least-squares sphere fit for
 //! comparison; [`data`] the marker set with C3D and CSV I/O; [`segments`] the segment/marker
 //! assignment file, segment frames (section 2.5) and the solver that produces a
-//! [`Clip`](crate::Clip); [`synth`] synthetic captures with ground truth.
+//! [`Clip`](crate::Clip); [`acclaim`] the solved clip as ASF/AMC; [`synth`] synthetic
+//! captures with ground truth; [`quiet`] catches the C3D parser's panics without printing them.
 
+pub mod acclaim;
 pub mod data;
 pub mod gdke;
+pub mod quiet;
 pub mod segments;
 pub mod synth;
 
