@@ -40,7 +40,8 @@ enum Command {
     /// Inspect, convert and evaluate motion clips (ASF/AMC, BVH).
     #[command(subcommand)]
     Clip(clip_cmd::ClipCommand),
-    /// Skeletons from raw markers: synthetic captures and GDKE solving (C3D/CSV in, BVH out).
+    /// Skeletons from raw markers: synthetic captures and GDKE solving (C3D/CSV in, BVH or
+    /// ASF/AMC out).
     #[command(subcommand)]
     Markers(markers_cmd::MarkersCommand),
     /// Build and inspect the primitive database of the incremental codec (thesis ch. 5).
