@@ -46,20 +46,23 @@ fn round_trip(bvh: &Clip, tag: &str) -> (f64, f64) {
     assert_eq!(sk.format, SkeletonFormat::Asf);
     assert_eq!(sk.joints[0].name, "root");
     assert_eq!(sk.joints[0].dofs.len(), 6);
-    let names = |c: &Clip| -> Vec<String> {
-        c.skeleton
-            .joints
-            .iter()
-            .map(|j| j.name.clone())
-            .collect()
-    };
-    assert_eq!(names(&asf_back), names(&clip), "the ASF reader kept the bone order");
+    let names =
+        |c: &Clip| -> Vec<String> { c.skeleton.joints.iter().map(|j| j.name.clone()).collect() };
+    assert_eq!(
+        names(&asf_back),
+        names(&clip),
+        "the ASF reader kept the bone order"
+    );
     for j in &sk.joints[1..] {
         let Rest::Bone { direction, length } = j.rest else {
             panic!("{} is not a bone", j.name);
         };
         assert!(length >= 0.0);
-        assert!((dist(direction, [0.0; 3]) - 1.0).abs() < 1e-12, "{}", j.name);
+        assert!(
+            (dist(direction, [0.0; 3]) - 1.0).abs() < 1e-12,
+            "{}",
+            j.name
+        );
         assert!(j.dofs.len() == 3 || j.dofs.is_empty(), "{}", j.name);
     }
     assert_eq!(asf_back.frames(), bvh.frames());
@@ -138,7 +141,11 @@ fn asf_conversion_keeps_branches_and_end_sites() {
             assert_eq!(&sk.joints[p].name, parent);
         }
     }
-    let links = sk.joints.iter().filter(|j| j.name.ends_with("_link")).count();
+    let links = sk
+        .joints
+        .iter()
+        .filter(|j| j.name.ends_with("_link"))
+        .count();
     let branches: usize = bvh
         .joints
         .iter()
