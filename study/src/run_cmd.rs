@@ -37,6 +37,31 @@ fn parse_size(s: &str) -> Result<[f32; 2], String> {
     Ok([p(w)?, p(h)?])
 }
 
+/// Where the study window opens (`study run`, `study display-test`).
+#[derive(Debug, Args)]
+pub struct WindowArgs {
+    /// Borderless fullscreen (on `--monitor`).
+    #[arg(long)]
+    pub fullscreen: bool,
+    /// Monitor index for fullscreen.
+    #[arg(long)]
+    pub monitor: Option<usize>,
+    /// Window size when not fullscreen.
+    #[arg(long, default_value = "1280x720", value_parser = parse_size)]
+    pub window_size: [f32; 2],
+}
+
+impl WindowArgs {
+    fn options(&self, title: String) -> WindowOptions {
+        WindowOptions {
+            title,
+            fullscreen: self.fullscreen,
+            monitor: self.monitor,
+            size: self.window_size,
+        }
+    }
+}
+
 /// Arguments of `study run`.
 #[derive(Debug, Args)]
 pub struct RunArgs {
@@ -51,15 +76,9 @@ pub struct RunArgs {
     /// Continue an interrupted session of this subject.
     #[arg(long)]
     pub resume: bool,
-    /// Borderless fullscreen (on `--monitor`).
-    #[arg(long)]
-    pub fullscreen: bool,
-    /// Monitor index for fullscreen.
-    #[arg(long)]
-    pub monitor: Option<usize>,
-    /// Window size when not fullscreen.
-    #[arg(long, default_value = "1280x720", value_parser = parse_size)]
-    pub window_size: [f32; 2],
+    /// Where the window goes.
+    #[command(flatten)]
+    pub window: WindowArgs,
     /// Results directory (one per study; each subject's session is a folder inside).
     /// Default: `results-<study name>` beside the study file.
     #[arg(short = 'o', long = "output")]
@@ -72,15 +91,9 @@ pub struct DisplayTestArgs {
     /// Seconds to measure (after the refresh period is estimated).
     #[arg(long, default_value_t = 10.0)]
     pub seconds: f64,
-    /// Borderless fullscreen.
-    #[arg(long)]
-    pub fullscreen: bool,
-    /// Monitor index for fullscreen.
-    #[arg(long)]
-    pub monitor: Option<usize>,
-    /// Window size when not fullscreen.
-    #[arg(long, default_value = "1280x720", value_parser = parse_size)]
-    pub window_size: [f32; 2],
+    /// Where the window goes.
+    #[command(flatten)]
+    pub window: WindowArgs,
     /// Clip to animate (`.bvh`, or `.amc` with `--asf`); default: the generated walk.
     #[arg(long)]
     pub clip: Option<PathBuf>,
@@ -223,12 +236,7 @@ pub fn run(args: &RunArgs) -> anyhow::Result<()> {
     let live = crate::live::LiveStimuli::from_study(&study, &args.study)?;
     let study = Arc::new(study);
     let mut screens = StudyUi::new(Arc::clone(&study), library, live, recorder, true);
-    let options = WindowOptions {
-        title: format!("study: {}", study.name),
-        fullscreen: args.fullscreen,
-        monitor: args.monitor,
-        size: args.window_size,
-    };
+    let options = args.window.options(format!("study: {}", study.name));
     let exit = std::rc::Rc::new(std::cell::RefCell::new(None::<Exit>));
     let exit_seen = std::rc::Rc::clone(&exit);
     let mut display_logged = false;
@@ -366,12 +374,7 @@ pub fn display_test(args: &DisplayTestArgs) -> anyhow::Result<()> {
     let view = View::framing(&clip);
     let mut figures = [Figure::new(&clip, &view), Figure::new(&clip, &view)];
     let duration = figures[0].duration_s().max(0.1);
-    let options = WindowOptions {
-        title: "study: display test".into(),
-        fullscreen: args.fullscreen,
-        monitor: args.monitor,
-        size: args.window_size,
-    };
+    let options = args.window.options("study: display test".into());
     let seconds = args.seconds;
     let mut measuring_since: Option<f64> = None;
     let bg = egui::Color32::from_rgb(
