@@ -15,35 +15,10 @@ use std::time::{Duration, Instant};
 
 use common::{Env, find_window, press, setup};
 
-/// A one-second walk, a reference and two "compressed" versions (a lateral lean of the root
-/// so they differ), and a MOS study of 2 familiarization + 2 test + 2 hidden-repeat trials.
+/// The shared walk stimuli and a MOS study of 2 familiarization + 2 test + 2 hidden-repeat
+/// trials.
 fn write_study(dir: &Path) {
-    let clip = codecs::synth::walking_clip(&codecs::synth::WalkParams {
-        duration_s: 1.0,
-        // AMC files carry no rate: CMU's 120 Hz is assumed when they are read back.
-        frame_rate_hz: 120.0,
-        ..codecs::synth::WalkParams::default()
-    });
-    codecs::io::write_clip(&clip, &dir.join("walk.amc"), Some(&dir.join("walk.asf"))).unwrap();
-    let stim = |id: &str, codec: &str, cr: f64, rms: f64| {
-        serde_json::json!({
-            "id": id, "clip": "walk", "codec": codec,
-            "target_cr": if codec == "reference" { serde_json::Value::Null } else { cr.into() },
-            "achieved_cr": cr, "file": "walk.amc", "skeleton": "walk.asf",
-            "params": if codec == "reference" { serde_json::json!({}) } else { serde_json::json!({"cr": cr}) },
-            "metrics": { "rms_cm": rms, "max_cm": rms * 3.0, "mean_angle_deg": rms }
-        })
-    };
-    let manifest = serde_json::json!({"version": 1, "stimuli": [
-        stim("walk/reference", "reference", 1.0, 0.0),
-        stim("walk/x/cr10", "x", 10.0, 0.5),
-        stim("walk/x/cr20", "x", 20.0, 1.5),
-    ]});
-    std::fs::write(
-        dir.join("stimuli.json"),
-        serde_json::to_vec_pretty(&manifest).unwrap(),
-    )
-    .unwrap();
+    common::walk_stimuli::write_walk_stimuli(dir);
     std::fs::write(
         dir.join("study.toml"),
         "format_version = 1\nname = \"e2e\"\nprotocol = \"mos\"\nstimuli = \"stimuli.json\"\n\

@@ -2,6 +2,8 @@
 //! `xdotool`. Without the tools the tests fail under `CI` and are skipped elsewhere.
 #![allow(dead_code, reason = "each test file uses its own part of the harness")]
 
+pub mod walk_stimuli;
+
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
