@@ -203,3 +203,36 @@ fn study_run_under_xvfb_logs_every_trial_and_resumes_after_a_kill() {
     );
     assert!(display.refresh_hz > 0.0);
 }
+
+/// Without a display, `study run` and `study display-test` stop with one clear error that
+/// points at `study simulate`, and `study run` writes no results.
+#[test]
+fn without_a_display_run_says_so_and_writes_nothing() {
+    let dir = std::env::temp_dir().join(format!("study-nodisplay-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    write_study(&dir);
+    let run = |args: &[&str]| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_study"))
+            .args(args)
+            .env_remove("DISPLAY")
+            .env_remove("WAYLAND_DISPLAY")
+            .current_dir(&dir)
+            .output()
+            .unwrap()
+    };
+    let out = run(&["run", "study.toml", "--subject", "S01", "-o", "results"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        err.contains("no display") && err.contains("study simulate study.toml"),
+        "{err}"
+    );
+    assert!(!dir.join("results").exists());
+    let out = run(&["display-test", "--seconds", "1"]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("no display"));
+    let out = run(&["run", "study.toml", "--subject", "../x"]);
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--subject"));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
