@@ -481,6 +481,48 @@ impl Session {
         Ok(())
     }
 
+    /// The trials that can follow the pending one at session clock `elapsed_ms`, one per
+    /// answer that leads somewhere different, without changing this session. For a staircase
+    /// trial these are the next trial after a correct and after a wrong choice; for MOS and
+    /// DSCQS the next trial does not depend on the answer, so there is at most one. A runner
+    /// uses this to prepare the next stimulus (a live staircase encodes it) while the subject
+    /// watches the current one. Empty when no trial is pending or the session ends after it.
+    pub fn lookahead(&self, elapsed_ms: u64) -> Vec<Trial> {
+        let Some(trial) = &self.pending else {
+            return Vec::new();
+        };
+        let answers = match self.protocol {
+            Protocol::Mos => vec![Answer::Rating(self.scale.min)],
+            Protocol::Dscqs => vec![Answer::Pair {
+                a: self.scale.min,
+                b: self.scale.min,
+            }],
+            Protocol::Staircase => vec![
+                Answer::Choice(trial.reference_position),
+                Answer::Choice(trial.reference_position.other()),
+            ],
+        };
+        let mut next: Vec<Trial> = Vec::with_capacity(answers.len());
+        for answer in answers {
+            let mut branch = self.clone();
+            let response = Response {
+                answer,
+                response_time_ms: 0,
+                replays: 0,
+                dropped_frames: 0,
+            };
+            if branch.respond(&response).is_err() {
+                continue;
+            }
+            if let Ok(Some(t)) = branch.next_trial(elapsed_ms)
+                && !next.contains(&t)
+            {
+                next.push(t);
+            }
+        }
+        next
+    }
+
     /// Trials planned but not shown (after a time limit, or still to come).
     pub fn not_shown(&self) -> Vec<Trial> {
         let from = self.next_index as usize + usize::from(self.pending.is_some());

@@ -45,15 +45,37 @@ fn drive(study: &StudyDefinition, subject: u32, answers_seed: u64) -> (Log, Sess
     let mut rng = StudyRng::new(answers_seed, &[]);
     let mut log = Vec::new();
     let mut clock = 0;
+    let mut ahead: Option<Vec<Trial>> = None;
     while let Some(t) = session.next_trial(clock).unwrap() {
         assert_eq!(
             session.next_trial(clock).unwrap().as_ref(),
             Some(&t),
             "next_trial is idempotent"
         );
+        if let Some(ahead) = ahead.take() {
+            assert!(
+                ahead.contains(&t),
+                "trial {} was not among the lookahead {ahead:?}",
+                t.index
+            );
+        }
         let r = random_response(study, &t, &mut rng);
+        let next_clock = clock + 10_000 + r.response_time_ms;
+        let predicted = session.lookahead(next_clock);
+        let branches = if study.protocol == Protocol::Staircase {
+            2
+        } else {
+            1
+        };
+        assert!(predicted.len() <= branches, "{predicted:?}");
+        assert_eq!(
+            session.next_trial(clock).unwrap().as_ref(),
+            Some(&t),
+            "lookahead leaves the session as it was"
+        );
+        ahead = Some(predicted);
         let o = session.respond(&r).unwrap();
-        clock += 10_000 + r.response_time_ms;
+        clock = next_clock;
         log.push((t, r, o));
     }
     (log, session.status())

@@ -275,3 +275,40 @@ fn observer_detects_the_measured_error() {
     let b = obs_level.respond_measured(&trial, Some(1e9)).unwrap();
     assert_eq!(a, b, "detection by level ignores the measured error");
 }
+
+/// A runner prepares the next live stimulus while the subject watches: the lookahead names the
+/// next clip at the level a correct and a wrong answer lead to, and one of them is the trial
+/// that really follows.
+#[test]
+fn lookahead_names_the_next_clip_at_both_possible_levels() {
+    let study = live();
+    let mut session = Session::new(&study, 2).unwrap();
+    let mut rng = StudyRng::new(11, &[]);
+    let mut two_levels = 0;
+    while let Some(t) = session.next_trial(0).unwrap() {
+        let ahead = session.lookahead(0);
+        let next_clip = if t.index % 2 == 0 { "dance" } else { "walk" };
+        for a in &ahead {
+            assert_eq!(a.index, t.index + 1);
+            assert_eq!(a.reference, format!("{next_clip}/reference"));
+        }
+        if let [a, b] = ahead.as_slice() {
+            assert_ne!(a.level, b.level, "branches differ in level: {ahead:?}");
+            two_levels += 1;
+        }
+        let p = t.reference_position;
+        let answer = Answer::Choice(if rng.unit_f64() < 0.75 { p } else { p.other() });
+        session
+            .respond(&Response {
+                answer,
+                response_time_ms: 1,
+                replays: 0,
+                dropped_frames: 0,
+            })
+            .unwrap();
+        if let Some(next) = session.next_trial(0).unwrap() {
+            assert!(ahead.contains(&next), "{next:?} not in {ahead:?}");
+        }
+    }
+    assert!(two_levels > 5, "a staircase trial has two futures");
+}
