@@ -8,10 +8,20 @@
 //! `[staircase.live] params`), decodes it, and measures the compression ratio reached and the
 //! joint-position RMS error. Both `study simulate` and the subject window call it, and both log
 //! the exact parameters, CR and error in the trial's row.
+//!
+//! A new level takes as long as the codec needs for the whole clip (the primitive codec: about
+//! 150 ms for a 10 s clip), too long to do between the answer and the next trial. The window
+//! therefore calls [`LiveStimuli::prefetch`] with the trials a correct and a wrong answer lead
+//! to (`protocols::Session::lookahead`) as soon as a trial starts: a background thread encodes
+//! them while the subject watches, so after the answer the next stimulus is a cache lookup.
+//! A trial whose level is still being encoded waits for that encoding instead of starting
+//! another; one that failed in the background is encoded again in the foreground, which
+//! reports the error.
 
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
+use std::sync::{Arc, Condvar, Mutex, PoisonError};
+use std::thread::JoinHandle;
 
 use anyhow::{Context as _, anyhow, bail};
 use codecs::clip::Clip;
@@ -21,14 +31,37 @@ use codecs::primitives::Database;
 use protocols::{StaircaseStudy, StimulusEncoding, StudyDefinition, Trial};
 
 /// The stimuli of one live staircase study: its codec, source clips and a cache of encoded
-/// levels.
+/// levels, filled on demand or ahead of time by background threads.
 pub struct LiveStimuli {
+    encoder: Arc<Encoder>,
+    cache: Arc<Cache>,
+    /// Background encodings started by [`LiveStimuli::prefetch`] (finished ones are pruned).
+    workers: Vec<JoinHandle<()>>,
+}
+
+/// What encodes a level: the codec, its fixed parameters and the source clips.
+struct Encoder {
     staircase: StaircaseStudy,
     codec: Box<dyn Codec>,
     fixed: Params,
     /// (clip name, reference stimulus id, the source clip).
     clips: Vec<(String, String, Arc<Clip>)>,
-    cache: HashMap<(usize, u64), LiveStimulus>,
+}
+
+/// A cache key: the clip's index and the level's bits.
+type Key = (usize, u64);
+
+/// Encoded levels, and the ones a thread is encoding now.
+#[derive(Default)]
+struct Cache {
+    slots: Mutex<HashMap<Key, Slot>>,
+    /// Signalled whenever an encoding ends (stored or failed).
+    done: Condvar,
+}
+
+enum Slot {
+    Encoding,
+    Ready(LiveStimulus),
 }
 
 /// One trial's stimulus pair with how the distorted clip was made.
@@ -169,35 +202,151 @@ impl LiveStimuli {
             clips.push((c.clip.clone(), c.reference.clone(), Arc::new(clip)));
         }
         Ok(Some(LiveStimuli {
-            staircase: sc.clone(),
-            codec,
-            fixed: live.params.clone(),
-            clips,
-            cache: HashMap::new(),
+            encoder: Arc::new(Encoder {
+                staircase: sc.clone(),
+                codec,
+                fixed: live.params.clone(),
+                clips,
+            }),
+            cache: Arc::default(),
+            workers: Vec::new(),
         }))
     }
 
     /// The codec's name.
     pub fn codec_name(&self) -> &'static str {
-        self.codec.name()
+        self.encoder.codec.name()
     }
 
-    /// Levels encoded so far (distinct clip × level pairs).
+    /// Levels encoded so far (distinct clip × level pairs), prefetched ones included.
     pub fn cached(&self) -> usize {
-        self.cache.len()
+        self.cache
+            .lock()
+            .values()
+            .filter(|s| matches!(s, Slot::Ready(_)))
+            .count()
     }
 
     /// The clips in the study's order: (clip name, reference stimulus id).
     pub fn clips(&self) -> impl Iterator<Item = (&str, &str)> {
-        self.clips.iter().map(|(c, r, _)| (c.as_str(), r.as_str()))
+        self.encoder
+            .clips
+            .iter()
+            .map(|(c, r, _)| (c.as_str(), r.as_str()))
     }
 
-    /// Encodes+decodes (cached) the trial's distorted stimulus.
+    /// Encodes+decodes (cached) the trial's distorted stimulus. A level that a background
+    /// thread is encoding is waited for.
     ///
     /// # Errors
     /// A trial that is not one of this study's live trials (unknown reference, no level, a
     /// stimulus id that does not name this codec and level), or a codec error at that level.
     pub fn resolve(&mut self, trial: &Trial) -> anyhow::Result<LiveStimulus> {
+        let key = self.encoder.key(trial)?;
+        self.cache.fetch(&self.encoder, key)
+    }
+
+    /// Starts encoding, in the background, the stimuli of `trials` that are not cached or
+    /// being encoded yet (the trials that can follow the current one). Trials that are not
+    /// this study's live trials are skipped; a failed encoding is left for [`Self::resolve`]
+    /// to repeat and report.
+    pub fn prefetch(&mut self, trials: &[Trial]) {
+        self.workers.retain(|w| !w.is_finished());
+        let keys: Vec<Key> = trials
+            .iter()
+            .filter_map(|t| self.encoder.key(t).ok())
+            .filter(|k| !self.cache.lock().contains_key(k))
+            .collect();
+        if keys.is_empty() {
+            return;
+        }
+        let encoder = Arc::clone(&self.encoder);
+        let cache = Arc::clone(&self.cache);
+        let spawned = std::thread::Builder::new()
+            .name("live-prefetch".into())
+            .spawn(move || {
+                for key in keys {
+                    // Errors are the foreground's to report (resolve encodes again).
+                    let _ = cache.fetch(&encoder, key);
+                }
+            });
+        // Without a thread the trials are simply encoded when they come.
+        if let Ok(handle) = spawned {
+            self.workers.push(handle);
+        }
+    }
+
+    /// Waits until every background encoding has ended.
+    pub fn wait_prefetch(&mut self) {
+        for w in self.workers.drain(..) {
+            // A worker that panicked has already cleared its slot (see `Claim`); the level is
+            // encoded again, and the error reported, when a trial asks for it.
+            let _ = w.join();
+        }
+    }
+}
+
+impl Drop for LiveStimuli {
+    /// A prefetch never outlives the session that asked for it.
+    fn drop(&mut self) {
+        self.wait_prefetch();
+    }
+}
+
+impl Cache {
+    fn lock(&self) -> std::sync::MutexGuard<'_, HashMap<Key, Slot>> {
+        self.slots.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    /// The stimulus of `key`: cached, awaited from the thread encoding it, or encoded now.
+    fn fetch(&self, encoder: &Encoder, key: Key) -> anyhow::Result<LiveStimulus> {
+        let mut slots = self.lock();
+        loop {
+            match slots.get(&key) {
+                Some(Slot::Ready(hit)) => return Ok(hit.clone()),
+                Some(Slot::Encoding) => {
+                    slots = self
+                        .done
+                        .wait(slots)
+                        .unwrap_or_else(PoisonError::into_inner);
+                }
+                None => break,
+            }
+        }
+        slots.insert(key, Slot::Encoding);
+        drop(slots);
+        let claim = Claim { cache: self, key };
+        let made = encoder.encode(key);
+        if let Ok(stimulus) = &made {
+            self.lock().insert(key, Slot::Ready(stimulus.clone()));
+        }
+        drop(claim);
+        made
+    }
+}
+
+/// A slot marked as being encoded by this thread. Dropping it (after storing the result, on
+/// an error, or while unwinding from a panic) clears a mark still standing and wakes every
+/// thread waiting for the level, so no one waits for an encoding that will never end.
+struct Claim<'a> {
+    cache: &'a Cache,
+    key: Key,
+}
+
+impl Drop for Claim<'_> {
+    fn drop(&mut self) {
+        let mut slots = self.cache.lock();
+        if matches!(slots.get(&self.key), Some(Slot::Encoding)) {
+            slots.remove(&self.key);
+        }
+        drop(slots);
+        self.cache.done.notify_all();
+    }
+}
+
+impl Encoder {
+    /// The cache key of a live trial of this study.
+    fn key(&self, trial: &Trial) -> anyhow::Result<Key> {
         let idx = self
             .clips
             .iter()
@@ -213,8 +362,7 @@ impl LiveStimuli {
             .level
             .filter(|l| l.is_finite())
             .ok_or_else(|| anyhow!("trial {}: no finite staircase level", trial.index))?;
-        let (name, _, source) = &self.clips[idx];
-        let expected = self.staircase.live_stimulus_id(name, level);
+        let expected = self.staircase.live_stimulus_id(&self.clips[idx].0, level);
         if trial.stimulus != expected {
             bail!(
                 "trial {}: stimulus {:?} is not the live stimulus {expected:?} of this study",
@@ -222,10 +370,13 @@ impl LiveStimuli {
                 trial.stimulus
             );
         }
-        let key = (idx, level.to_bits());
-        if let Some(hit) = self.cache.get(&key) {
-            return Ok(hit.clone());
-        }
+        Ok((idx, level.to_bits()))
+    }
+
+    /// Encodes, decodes and measures clip `key.0` at level `key.1`.
+    fn encode(&self, (idx, bits): Key) -> anyhow::Result<LiveStimulus> {
+        let level = f64::from_bits(bits);
+        let (name, _, source) = &self.clips[idx];
         let mut requested = self.fixed.clone();
         requested.insert(self.staircase.param.clone(), level);
         let stream = self.codec.encode(source, &requested).with_context(|| {
@@ -256,14 +407,116 @@ impl LiveStimuli {
         for (k, v) in requested {
             params.entry(k).or_insert(v);
         }
-        let out = LiveStimulus {
+        Ok(LiveStimulus {
             reference: Arc::clone(source),
             test: Arc::new(decoded),
             params,
             achieved_cr: stream.compression_ratio(),
             rms_cm: metrics.rms_cm,
-        };
-        self.cache.insert(key, out.clone());
-        Ok(out)
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn example() -> (StudyDefinition, PathBuf) {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/live-staircase.toml");
+        (StudyDefinition::load(&path).unwrap(), path)
+    }
+
+    fn same(a: &LiveStimulus, b: &LiveStimulus) {
+        assert_eq!(a.params, b.params);
+        assert_eq!(a.achieved_cr.to_bits(), b.achieved_cr.to_bits());
+        assert_eq!(a.rms_cm.to_bits(), b.rms_cm.to_bits());
+        assert_eq!(a.test.data(), b.test.data());
+    }
+
+    /// Over a whole session answered at random, every trial after the first was prefetched
+    /// while the previous one ran, and equals what a fresh cache encodes in the foreground.
+    #[test]
+    fn every_next_trial_is_prefetched_and_equals_a_foreground_encoding() {
+        use protocols::{Answer, Response, Session};
+        let (study, path) = example();
+        let mut live = LiveStimuli::from_study(&study, &path).unwrap().unwrap();
+        let mut fresh = LiveStimuli::from_study(&study, &path).unwrap().unwrap();
+        let mut session = Session::new(&study, 1).unwrap();
+        let mut trials = 0;
+        while let Some(t) = session.next_trial(0).unwrap()
+            && trials < 12
+        {
+            if trials > 0 {
+                let before = live.cached();
+                let got = live.resolve(&t).unwrap();
+                assert_eq!(live.cached(), before, "trial {} was prefetched", t.index);
+                same(&got, &fresh.resolve(&t).unwrap());
+            } else {
+                live.resolve(&t).unwrap();
+            }
+            let ahead = session.lookahead(0);
+            assert!(!ahead.is_empty());
+            live.prefetch(&ahead);
+            live.wait_prefetch();
+            let answer = if t.index % 3 == 0 {
+                t.reference_position.other()
+            } else {
+                t.reference_position
+            };
+            session
+                .respond(&Response {
+                    answer: Answer::Choice(answer),
+                    response_time_ms: 500,
+                    replays: 0,
+                    dropped_frames: 0,
+                })
+                .unwrap();
+            trials += 1;
+        }
+        assert_eq!(trials, 12);
+    }
+
+    /// A trial that asks for a level while it is being prefetched waits for that encoding;
+    /// trials that are not live trials of the study are not prefetched.
+    #[test]
+    fn a_level_in_flight_is_awaited_and_foreign_trials_are_skipped() {
+        use protocols::Session;
+        let (study, path) = example();
+        let mut live = LiveStimuli::from_study(&study, &path).unwrap().unwrap();
+        let mut session = Session::new(&study, 0).unwrap();
+        let t = session.next_trial(0).unwrap().unwrap();
+        let mut foreign = t.clone();
+        foreign.reference = "nobody/reference".into();
+        live.prefetch(&[t.clone(), foreign.clone()]);
+        let got = live.resolve(&t).unwrap();
+        live.wait_prefetch();
+        assert_eq!(live.cached(), 1);
+        let mut fresh = LiveStimuli::from_study(&study, &path).unwrap().unwrap();
+        same(&got, &fresh.resolve(&t).unwrap());
+        let err = live.resolve(&foreign).unwrap_err().to_string();
+        assert!(err.contains("not a clip of this live staircase"), "{err}");
+    }
+
+    /// A level the codec refuses fails in the background without leaving the level marked as
+    /// in flight: the trial's own resolve encodes it again and reports the codec's error.
+    #[test]
+    fn a_failed_prefetch_is_reported_by_the_trial_that_needs_it() {
+        use protocols::Session;
+        let (study, path) = example();
+        let mut live = LiveStimuli::from_study(&study, &path).unwrap().unwrap();
+        let mut session = Session::new(&study, 0).unwrap();
+        let mut t = session.next_trial(0).unwrap().unwrap();
+        let sc = study.staircase.as_ref().unwrap();
+        let clip = live.clips().next().unwrap().0.to_string();
+        t.level = Some(1e5);
+        t.stimulus = sc.live_stimulus_id(&clip, 1e5);
+        live.prefetch(std::slice::from_ref(&t));
+        live.wait_prefetch();
+        assert_eq!(live.cached(), 0);
+        let err = format!("{:#}", live.resolve(&t).unwrap_err());
+        assert!(
+            err.contains("at cr = 100000") && err.contains("0.1..=10000"),
+            "{err}"
+        );
     }
 }

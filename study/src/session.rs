@@ -208,6 +208,12 @@ impl Recorder {
         Ok(self.engine.next_trial(elapsed_ms)?)
     }
 
+    /// The trials that can follow the pending one (one per answer that leads somewhere
+    /// different; see `protocols::Session::lookahead`), for preparing their stimuli early.
+    pub fn lookahead(&self, elapsed_ms: u64) -> Vec<Trial> {
+        self.engine.lookahead(elapsed_ms)
+    }
+
     /// Scores `response` to the pending `trial` and appends the row (flushed and fsynced)
     /// before returning: nothing can show the next stimulus before the answer is on disk.
     /// `encoding` describes a stimulus encoded for this trial (live staircase), `timing` how

@@ -193,6 +193,21 @@ impl StudyUi {
         }
     }
 
+    /// The live staircase's stimuli (UI tests wait for their prefetch).
+    #[cfg(test)]
+    pub fn live_mut(&mut self) -> Option<&mut LiveStimuli> {
+        self.live.as_mut()
+    }
+
+    /// Where the reference is in the trial on screen (UI tests answer right or wrong).
+    #[cfg(test)]
+    pub fn pending_reference(&self) -> Option<protocols::record::Position> {
+        match &self.screen {
+            Screen::Trial(t) => Some(t.trial.reference_position),
+            _ => None,
+        }
+    }
+
     /// Set once the window should close, with why.
     pub fn exit(&self) -> Option<&Exit> {
         self.exit.as_ref()
@@ -396,10 +411,14 @@ impl StudyUi {
             Arrangement::Sequential => Position::First,
             Arrangement::Abab => Position::A,
         };
-        // A live trial's test stimulus is encoded now (cached by level); others are files.
+        // A live trial's test stimulus is encoded now unless it was prefetched (cached by
+        // level); others are files.
         let (reference, test, encoding) = match self.live.as_mut() {
             Some(live) => {
                 let made = live.resolve(&trial)?;
+                // While the subject watches this trial, encode the stimuli a correct and a
+                // wrong answer lead to, so the next trial starts without waiting for the codec.
+                live.prefetch(&self.recorder.lookahead(self.recorder.elapsed_ms()));
                 let encoding = Some(made.encoding());
                 (made.reference, made.test, encoding)
             }

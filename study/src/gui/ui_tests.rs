@@ -17,6 +17,7 @@ use super::screens::{Exit, StudyUi};
 #[path = "../../tests/common/walk_stimuli.rs"]
 mod walk_stimuli;
 use super::timing::FrameClock;
+use crate::live::LiveStimuli;
 use crate::session::{Opened, Recorder};
 use crate::stimuli::StimulusLibrary;
 
@@ -79,6 +80,13 @@ const AFC: &str = "protocol = \"staircase\"\n\
     stop_reversals = 2\nmax_trials = 3\n\
     [[staircase.tracks]]\nclip = \"walk\"\n";
 
+/// A codec-in-the-loop staircase over the walk: each trial's stimulus is encoded at its level.
+const LIVE: &str = "protocol = \"staircase\"\n\
+    [presentation]\narrangement = \"side_by_side\"\n\
+    [staircase]\nparam = \"cr\"\ncodec = \"wavelet-perceptual\"\nstart = 20\nstep = 10\n\
+    min = 10\nmax = 40\nstop_reversals = 2\nmax_trials = 3\n\
+    [staircase.live]\nclips = [\"walk\"]\nparams = { window = 64 }\n";
+
 struct Run {
     fx: Fixture,
     session_dir: PathBuf,
@@ -86,6 +94,7 @@ struct Run {
 
 fn harness(fx: Fixture) -> (Harness<'static, (StudyUi, FrameClock)>, Run) {
     let study = StudyDefinition::load(&fx.study_path).unwrap();
+    let live = LiveStimuli::from_study(&study, &fx.study_path).unwrap();
     let session_dir = fx.dir.join("results").join("S01_s1");
     std::fs::create_dir_all(session_dir.parent().unwrap()).unwrap();
     let manifest = fresh_manifest(&study);
@@ -95,7 +104,7 @@ fn harness(fx: Fixture) -> (Harness<'static, (StudyUi, FrameClock)>, Run) {
         panic!("new session reported finished");
     };
     let library = StimulusLibrary::new(&study, &fx.study_path);
-    let ui = StudyUi::new(Arc::new(study), library, None, recorder, false);
+    let ui = StudyUi::new(Arc::new(study), library, live, recorder, false);
     let h = Harness::builder()
         .with_size(egui::vec2(1280.0, 720.0))
         .with_step_dt(DT)
@@ -329,5 +338,43 @@ fn closing_the_window_mid_session_asks_first() {
     assert!(!h.state_mut().0.close_requested());
     h.run_steps(2);
     assert!(h.query_by_label("Quit the session?").is_some());
+    drop(run.fx);
+}
+
+/// In the window, a live trial's stimulus is encoded at its level, and while the subject
+/// watches, the levels a correct and a wrong answer lead to are encoded in the background:
+/// after a wrong answer the next trial (a level up) is already cached.
+#[test]
+fn a_live_staircase_prefetches_the_next_levels_while_a_trial_runs() {
+    let (mut h, run) = harness(fixture("live", LIVE));
+    begin(&mut h);
+    assert!(h.query_by_label("Trial 1").is_some());
+    let live = h.state_mut().0.live_mut().unwrap();
+    live.wait_prefetch();
+    // Level 20 shown; a correct answer keeps 20 (two-down), a wrong one goes up to 30.
+    assert_eq!(live.cached(), 2);
+    watch(&mut h, 1.0);
+    let wrong = match rows(&run.session_dir).len() {
+        0 => h.state().0.pending_reference().unwrap().other(),
+        n => panic!("{n} rows before the first answer"),
+    };
+    h.key_press(if wrong == Position::Left {
+        Key::ArrowLeft
+    } else {
+        Key::ArrowRight
+    });
+    h.run_steps(2);
+    let r = rows(&run.session_dir);
+    assert_eq!(r.len(), 1);
+    assert_eq!(r[0].outcome.correct, Some(false));
+    let e = r[0].encoding.as_ref().unwrap();
+    assert_eq!(e.codec_params.get("cr"), Some(&20.0));
+    assert!((e.achieved_cr - 20.0).abs() < 0.5, "{}", e.achieved_cr);
+    // Trial 2 at 30 came from the cache; its own lookahead adds 40 (wrong) only, since a
+    // correct answer keeps 30.
+    assert!(h.query_by_label("Trial 2").is_some());
+    let live = h.state_mut().0.live_mut().unwrap();
+    live.wait_prefetch();
+    assert_eq!(live.cached(), 3);
     drop(run.fx);
 }
