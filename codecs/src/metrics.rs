@@ -2,7 +2,11 @@
 //!
 //! - joint position error in cm (FK points × `cm_per_unit`): RMS and max per joint and overall,
 //!   and the RMS over joints of every frame (the per-frame error curve);
-//! - mean absolute angle error over rotation channels, in degrees, taken modulo 360°;
+//! - mean angle error in degrees: for every joint with rotation channels and every frame, the
+//!   angle of the rotation between the reference's and the decoded local rotation (geodesic,
+//!   0-180°), averaged. Comparing the Euler channels one by one would count a pose written
+//!   with another, equivalent triplet (a codec that works on quaternions may decode
+//!   `(x+180, 180−y, z+180)` for `(x, y, z)`) as a large error although nothing moved;
 //! - foot sliding: on the reference, a foot (the deepest point of each leg chain) is in contact
 //!   in frames where it is within [`CONTACT_HEIGHT_CM`] of its lowest height (y up); the
 //!   metric is the difference (decoded − reference) of the mean horizontal foot speed over
@@ -21,7 +25,8 @@ pub struct Metrics {
     pub rms_cm: f64,
     /// Largest joint position error, cm.
     pub max_cm: f64,
-    /// Mean absolute angle error over rotation channels and frames, degrees.
+    /// Mean geodesic angle between reference and decoded local joint rotations over joints
+    /// with rotation channels and frames, degrees.
     pub mean_angle_deg: f64,
     /// Foot-sliding difference (decoded − reference mean contact speed), cm/s; `None` when the
     /// skeleton has no leg chains.
@@ -49,10 +54,6 @@ pub enum MetricsError {
 ///
 /// # Errors
 /// [`MetricsError::Mismatch`] when the skeletons or shapes differ.
-#[expect(
-    clippy::too_many_lines,
-    reason = "the four metrics share the FK positions"
-)]
 pub fn compare(reference: &Clip, decoded: &Clip) -> Result<Metrics, MetricsError> {
     if reference.frames() != decoded.frames()
         || reference.channel_count() != decoded.channel_count()
@@ -100,22 +101,7 @@ pub fn compare(reference: &Clip, decoded: &Clip) -> Result<Metrics, MetricsError
     let rms_cm = (total_sq / (nf * joints.max(1) as f64)).sqrt();
     let max_cm = joint_max.iter().copied().fold(0.0, f64::max);
 
-    let mut angle_sum = 0.0;
-    let mut angle_n = 0usize;
-    for (c, ch) in reference.channels().iter().enumerate() {
-        if ch.kind.is_rotation() {
-            for (x, y) in reference.channel(c).iter().zip(decoded.channel(c)) {
-                let d = (x - y).rem_euclid(360.0);
-                angle_sum += d.min(360.0 - d);
-                angle_n += 1;
-            }
-        }
-    }
-    let mean_angle_deg = if angle_n > 0 {
-        angle_sum / angle_n as f64
-    } else {
-        0.0
-    };
+    let mean_angle_deg = mean_rotation_angle_deg(reference, decoded);
 
     let feet: Vec<usize> = [BodyPart::LeftLeg, BodyPart::RightLeg]
         .iter()
@@ -159,6 +145,44 @@ pub fn compare(reference: &Clip, decoded: &Clip) -> Result<Metrics, MetricsError
         joint_max_cm: joint_max,
         frame_rms_cm: frame_rms,
     })
+}
+
+/// Mean over joints with rotation channels and frames of the angle between the two clips'
+/// local rotations, degrees.
+fn mean_rotation_angle_deg(reference: &Clip, decoded: &Clip) -> f64 {
+    let sk = &reference.skeleton;
+    let rotating: Vec<usize> = (0..sk.joints.len())
+        .filter(|&j| sk.joints[j].dofs.iter().any(|d| d.is_rotation()))
+        .collect();
+    if rotating.is_empty() || reference.frames() == 0 {
+        return 0.0;
+    }
+    let kin = fk::Kinematics::new(sk);
+    let (mut va, mut vb) = (Vec::new(), Vec::new());
+    let (mut la, mut lb) = (Vec::new(), Vec::new());
+    let mut sum = 0.0;
+    for f in 0..reference.frames() {
+        reference.frame_into(f, &mut va);
+        decoded.frame_into(f, &mut vb);
+        kin.local_transforms(&va, &mut la);
+        kin.local_transforms(&vb, &mut lb);
+        for &j in &rotating {
+            sum += angle_between(&la[j].rotation, &lb[j].rotation);
+        }
+    }
+    (sum / (reference.frames() * rotating.len()) as f64).to_degrees()
+}
+
+/// The angle (radians, 0..=π) of the rotation `aᵀ·b`, from its cosine (trace) and sine (skew
+/// part) together, which stays accurate near 0 and π where `acos` alone does not.
+fn angle_between(a: &crate::math::Mat3, b: &crate::math::Mat3) -> f64 {
+    let r = crate::math::mul(&crate::math::transpose(a), b);
+    let cos = (r[0][0] + r[1][1] + r[2][2] - 1.0) / 2.0;
+    let sin =
+        ((r[2][1] - r[1][2]).powi(2) + (r[0][2] - r[2][0]).powi(2) + (r[1][0] - r[0][1]).powi(2))
+            .sqrt()
+            / 2.0;
+    sin.atan2(cos)
 }
 
 #[cfg(test)]
@@ -211,5 +235,56 @@ mod tests {
             *v += 360.0;
         }
         assert!(compare(&clip, &turned).unwrap().mean_angle_deg < 1e-9);
+    }
+
+    /// The same pose written with the other Euler triplet is no angle error; a real turn of
+    /// one joint is measured by its size, spread over the rotating joints.
+    #[test]
+    fn equivalent_euler_triplets_are_no_angle_error() {
+        let clip = walking_clip(&WalkParams {
+            duration_s: 1.0,
+            ..WalkParams::default()
+        });
+        let sk = &clip.skeleton;
+        let j = (0..sk.joints.len())
+            .find(|&j| {
+                sk.joints[j].parent.is_some()
+                    && sk.joints[j].dofs.iter().filter(|d| d.is_rotation()).count() == 3
+            })
+            .unwrap();
+        let first = sk.joints[..j].iter().map(|jt| jt.dofs.len()).sum::<usize>();
+        let mut flipped = clip.clone();
+        // Fixed-axis X, Y, Z (any order of three distinct axes): (a, b, c) and
+        // (a + 180, 180 − b, c + 180) are the same rotation.
+        for f in 0..clip.frames() {
+            let (a, b, c) = (
+                clip.value(first, f),
+                clip.value(first + 1, f),
+                clip.value(first + 2, f),
+            );
+            flipped.channel_mut(first)[f] = a + 180.0;
+            flipped.channel_mut(first + 1)[f] = 180.0 - b;
+            flipped.channel_mut(first + 2)[f] = c + 180.0;
+        }
+        let m = compare(&clip, &flipped).unwrap();
+        assert!(m.rms_cm < 1e-9, "{}", m.rms_cm);
+        assert!(m.mean_angle_deg < 1e-9, "{}", m.mean_angle_deg);
+        // 10° more about the joint's first channel axis: a 10° rotation at one joint.
+        let mut bent = clip.clone();
+        for v in bent.channel_mut(first) {
+            *v += 10.0;
+        }
+        let rotating = sk
+            .joints
+            .iter()
+            .filter(|jt| jt.dofs.iter().any(|d| d.is_rotation()))
+            .count();
+        let m = compare(&clip, &bent).unwrap();
+        assert!(
+            (m.mean_angle_deg - 10.0 / rotating as f64).abs() < 1e-9,
+            "{} vs {}",
+            m.mean_angle_deg,
+            10.0 / rotating as f64
+        );
     }
 }
