@@ -10,7 +10,7 @@
 //! the exact parameters, CR and error in the trial's row.
 //!
 //! A new level takes as long as the codec needs for the whole clip (the primitive codec: about
-//! 150 ms for a 10 s clip), too long to do between the answer and the next trial. The window
+//! 90 ms for a 10 s clip), too long to do between the answer and the next trial. The window
 //! therefore calls [`LiveStimuli::prefetch`] with the trials a correct and a wrong answer lead
 //! to (`protocols::Session::lookahead`) as soon as a trial starts: a background thread encodes
 //! them while the subject watches, so after the answer the next stimulus is a cache lookup.

@@ -54,9 +54,10 @@ pub struct ReportArgs {
     /// DMOS a rate must stay under (upper CI bound) (thesis §6.4.3: 0.2).
     #[arg(long, default_value_t = 0.2)]
     pub dmos_limit: f64,
-    /// Reversals averaged per staircase (thesis §5.4: 3).
-    #[arg(long, default_value_t = 3)]
-    pub reversals: usize,
+    /// Reversals averaged per staircase (default: the study's `threshold_reversals`, the
+    /// number the sessions used for their own thresholds; thesis §5.4: 3).
+    #[arg(long)]
+    pub reversals: Option<usize>,
     /// Percent correct (fraction) at which the psychometric threshold is read.
     #[arg(long, default_value_t = 0.75)]
     pub percent_correct: f64,
@@ -98,6 +99,18 @@ fn level_label(study: &StudyDefinition) -> String {
     }
 }
 
+/// Reversals averaged per staircase: `--reversals`, else the study's `threshold_reversals`
+/// (one setting shared by every track), else 3.
+fn last_reversals(args: &ReportArgs, study: &StudyDefinition) -> usize {
+    args.reversals.unwrap_or_else(|| {
+        study
+            .staircase
+            .as_ref()
+            .and_then(|sc| sc.tracks.first())
+            .map_or(3, |t| t.settings.threshold_reversals as usize)
+    })
+}
+
 /// The analysis options `args` ask for.
 fn report_options(args: &ReportArgs, study: &StudyDefinition) -> ReportOptions {
     ReportOptions {
@@ -109,7 +122,7 @@ fn report_options(args: &ReportArgs, study: &StudyDefinition) -> ReportOptions {
         mos_limit: args.mos_limit,
         dmos_limit: args.dmos_limit,
         baseline_codec: args.baseline.clone(),
-        last_reversals: args.reversals,
+        last_reversals: last_reversals(args, study),
         percent_correct: args.percent_correct,
         fit: FitOptions {
             shape: match args.shape {

@@ -260,12 +260,13 @@ fn simulated_live_staircase_recovers_the_observers_true_threshold() {
         "share not noticing at the truth: [{lo}, {hi}]"
     );
 
-    // And `study report` writes the JND tables for it.
+    // And `study report` writes the JND tables for it, averaging the study's
+    // `threshold_reversals` (6) reversals unless told otherwise.
     let report = scratch("coverage-report");
     let rep = study()
         .arg("report")
         .arg(&out)
-        .args(["--reversals", "6", "--bootstrap", "50", "--no-png", "-o"])
+        .args(["--bootstrap", "50", "--no-png", "-o"])
         .arg(&report)
         .output()
         .unwrap();
@@ -276,6 +277,7 @@ fn simulated_live_staircase_recovers_the_observers_true_threshold() {
     );
     let md = std::fs::read_to_string(report.join("report.md")).unwrap();
     assert!(md.contains("Just-noticeable difference"), "{md}");
+    assert!(md.contains("Mean of the last 6 reversals"), "{md}");
     let notice = std::fs::read_to_string(report.join("tables/jnd_notice.csv")).unwrap();
     assert!(
         notice.lines().next().unwrap().contains("CR on walk"),
