@@ -440,12 +440,83 @@ fn spiht_encode(
     }
 }
 
+/// One channel's embedded bits, packed most significant first into 64-bit words. A segment's
+/// payload interleaves the channels' layers; the decoder gathers each channel's bits with
+/// word-sized copies instead of one push per bit (at 3:1 a 10 s clip holds 800 000 bits).
+#[derive(Debug, Default, Clone)]
+struct PackedBits {
+    words: Vec<u64>,
+    len: usize,
+}
+
+impl PackedBits {
+    fn clear(&mut self) {
+        self.words.clear();
+        self.len = 0;
+    }
+
+    /// The bits of a slice of 0/1 values.
+    #[cfg(test)]
+    fn from_bits(bits: &[u8]) -> PackedBits {
+        let mut p = PackedBits::default();
+        for &b in bits {
+            p.append(u64::from(b & 1), 1);
+        }
+        p
+    }
+
+    /// Appends the low `k` (1..=56) bits of `v`, most significant first.
+    fn append(&mut self, v: u64, k: usize) {
+        let used = self.len & 63;
+        if used == 0 {
+            self.words.push(0);
+        }
+        let free = 64 - used;
+        let last = self.words.len() - 1;
+        if k <= free {
+            self.words[last] |= v << (free - k);
+        } else {
+            self.words[last] |= v >> (k - free);
+            self.words.push(v << (64 - (k - free)));
+        }
+        self.len += k;
+    }
+
+    /// Appends bits `from..from + count` of `src` (most significant bit of each byte first;
+    /// bits past the end of `src` read as 0).
+    fn append_run(&mut self, src: &[u8], mut from: usize, mut count: usize) {
+        while count > 0 {
+            let k = count.min(56);
+            let byte = from / 8;
+            let mut window = [0u8; 8];
+            if let Some(b) = src.get(byte..byte + 8) {
+                window.copy_from_slice(b);
+            } else if let Some(rest) = src.get(byte..) {
+                window[..rest.len()].copy_from_slice(rest);
+            }
+            let w = u64::from_be_bytes(window) << (from % 8);
+            self.append(w >> (64 - k), k);
+            from += k;
+            count -= k;
+        }
+    }
+
+    /// Bit `i`, or `None` past the end.
+    #[inline]
+    fn get(&self, i: usize) -> Option<bool> {
+        if i >= self.len {
+            return None;
+        }
+        Some((self.words[i >> 6] >> (63 - (i & 63))) & 1 == 1)
+    }
+}
+
 #[expect(
     clippy::needless_range_loop,
     reason = "SPIHT's passes with node indices, mirroring the encoder"
 )]
 /// SPIHT decoder: reads from `bits` until it runs out, reconstructs into `rec` (zeroed first).
-fn spiht_decode(bits: &[u8], n0: usize, nmax: i64, rec: &mut [f64], scratch: &mut Scratch) {
+fn spiht_decode(bits: &PackedBits, n0: usize, nmax: i64, rec: &mut [f64], scratch: &mut Scratch) {
     let n = rec.len();
     rec.fill(0.0);
     let mut pos = 0usize;
@@ -463,9 +534,9 @@ fn spiht_decode(bits: &[u8], n0: usize, nmax: i64, rec: &mut [f64], scratch: &mu
     );
     macro_rules! get {
         () => {{
-            let Some(&b) = bits.get(pos) else { return };
+            let Some(b) = bits.get(pos) else { return };
             pos += 1;
-            b == 1
+            b
         }};
     }
     for plane in (nmax - MAX_PLANES..=nmax).rev() {
@@ -518,11 +589,19 @@ fn spiht_decode(bits: &[u8], n0: usize, nmax: i64, rec: &mut [f64], scratch: &mu
             e += 1;
         }
         lis.retain(|&(j, _)| j != usize::MAX);
-        for &i in &lsp[..lsp_before] {
-            let up = get!();
-            let half = 0.5 * t;
-            let m = rec[i].abs() + if up { half } else { -half };
-            rec[i] = if rec[i] < 0.0 { -m } else { m };
+        // Refinement pass: one bit per coefficient found significant in an earlier plane
+        // moves its magnitude half a step up or down (most of a near-lossless stream's bits,
+        // so the bits are read straight from the words and the update has no branch).
+        let half = 0.5 * t;
+        let count = lsp_before.min(bits.len.saturating_sub(pos));
+        for (k, &i) in lsp[..count].iter().enumerate() {
+            let p = pos + k;
+            let up = (bits.words[p >> 6] >> (63 - (p & 63))) & 1;
+            rec[i] += (2.0 * up as f64 - 1.0) * half.copysign(rec[i]);
+        }
+        pos += count;
+        if count < lsp_before {
+            return;
         }
     }
 }
@@ -807,7 +886,7 @@ impl Codec for SpihtCodec {
         let mut scratch = Scratch::default();
         let mut rec = Vec::new();
         let mut out = Vec::new();
-        let mut streams: Vec<Vec<u8>> = vec![Vec::new(); n_ch];
+        let mut streams: Vec<PackedBits> = vec![PackedBits::default(); n_ch];
         let mut sides = vec![
             Side {
                 mean_q: 0,
@@ -882,12 +961,11 @@ impl Codec for SpihtCodec {
             'layers: for r in 0..LAYERS {
                 for c in 0..n_ch {
                     let n_bits = layer_bound(budgets[c], r + 1) - layer_bound(budgets[c], r);
-                    for _ in 0..n_bits {
-                        if r_bit >= present {
-                            break 'layers;
-                        }
-                        streams[c].push((bytes[r_bit / 8] >> (7 - r_bit % 8)) & 1);
-                        r_bit += 1;
+                    let take = n_bits.min(present - r_bit);
+                    streams[c].append_run(bytes, r_bit, take);
+                    r_bit += take;
+                    if r_bit >= present {
+                        break 'layers;
                     }
                 }
             }
@@ -988,6 +1066,31 @@ pub fn truncate(stream: &Bitstream, fraction: f64) -> Result<Bitstream, CodecErr
 mod tests {
     use super::*;
 
+    /// Word-sized gathering of bit runs equals reading the bits one by one, at every offset
+    /// and length, past the end of the source included (zeros).
+    #[test]
+    fn packed_runs_equal_bit_by_bit_copies() {
+        let src: Vec<u8> = (0..40u32)
+            .map(|i| (i.wrapping_mul(97) ^ 0x5A) as u8)
+            .collect();
+        let bit = |i: usize| src.get(i / 8).map_or(0, |b| (b >> (7 - i % 8)) & 1);
+        for from in [0, 1, 7, 8, 13, 63, 64, 65, 200, 310] {
+            for count in [0, 1, 5, 55, 56, 57, 64, 120, 130] {
+                let mut p = PackedBits::default();
+                p.append_run(&src, 3, 9); // a ragged start
+                p.append_run(&src, from, count);
+                assert_eq!(p.len, 9 + count);
+                for i in 0..9 {
+                    assert_eq!(p.get(i), Some(bit(3 + i) == 1));
+                }
+                for i in 0..count {
+                    assert_eq!(p.get(9 + i), Some(bit(from + i) == 1), "{from} {count} {i}");
+                }
+                assert_eq!(p.get(9 + count), None);
+            }
+        }
+    }
+
     #[test]
     fn spiht_round_trips_at_full_budget() {
         let x: Vec<f64> = (0..128)
@@ -1000,7 +1103,7 @@ mod tests {
         let mut sc = Scratch::default();
         spiht_encode(&co, n0, nm, usize::MAX / 2, &mut bits, &mut sc);
         let mut rec = vec![0.0; co.len()];
-        spiht_decode(&bits, n0, nm, &mut rec, &mut sc);
+        spiht_decode(&PackedBits::from_bits(&bits), n0, nm, &mut rec, &mut sc);
         let err = co
             .iter()
             .zip(&rec)
@@ -1011,7 +1114,13 @@ mod tests {
         let mut last = f64::INFINITY;
         for frac in [0.1, 0.25, 0.5, 1.0] {
             let k = (bits.len() as f64 * frac) as usize;
-            spiht_decode(&bits[..k], n0, nm, &mut rec, &mut sc);
+            spiht_decode(
+                &PackedBits::from_bits(&bits[..k]),
+                n0,
+                nm,
+                &mut rec,
+                &mut sc,
+            );
             let e: f64 = co.iter().zip(&rec).map(|(a, b)| (a - b).powi(2)).sum();
             assert!(e <= last, "{frac}: {e} > {last}");
             last = e;
