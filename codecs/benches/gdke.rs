@@ -1,12 +1,19 @@
 //! GDKE (closed form, seed 003 eq. 5) against the iterative Levenberg-Marquardt least-squares
 //! sphere fit on the same noisy samples of a spherical joint (σ = 2 mm, R = 300 mm), for
-//! N = 100 (the paper's typical preprocessing count) and N = 1000.
+//! N = 100 (the paper's typical preprocessing count) and N = 1000; and the whole solver on
+//! synthetic markers of CMU 02_01 (σ = 2 mm, gaps), per frame: the plain solve of the walk,
+//! the calibration on its range-of-motion trial, and the calibrated solve of the walk.
 #![allow(clippy::unwrap_used, clippy::expect_used, missing_docs)]
 
 use std::hint::black_box;
 use std::time::Duration;
 
+use codecs::markers::calibration::Calibration;
 use codecs::markers::gdke::{GdkeOptions, LsqOptions, gdke, least_squares_sphere};
+use codecs::markers::segments::{self, parse_segments};
+use codecs::markers::synth::{
+    RomOptions, SynthOptions, rom_capture, segment_map_toml, synth_capture,
+};
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -48,6 +55,46 @@ fn bench(c: &mut Criterion) {
         });
         g.finish();
     }
+    solver(c);
+}
+
+/// The solver on CMU 02_01 (480 frames) and its range-of-motion trial; skipped without the
+/// shared clips (outside CI).
+fn solver(c: &mut Criterion) {
+    let Some(dir) = codecs::data::mocap_dir() else {
+        eprintln!("shared clips not found: solver benchmarks skipped");
+        return;
+    };
+    let clip = codecs::io::read_clip(Some(&dir.join("12.asf")), &dir.join("02_01.amc")).unwrap();
+    let frames = clip.frames().min(480);
+    let mut data = Vec::with_capacity(clip.channel_count() * frames);
+    for ch in 0..clip.channel_count() {
+        data.extend((0..frames).map(|f| clip.value(ch, f)));
+    }
+    let clip = clip.with_data(frames, data).unwrap();
+    let options = SynthOptions::default();
+    let motion = synth_capture(&clip, &options).unwrap().markers;
+    let rom = rom_capture(&clip, &RomOptions::default(), &options)
+        .unwrap()
+        .markers;
+    let map = parse_segments(&segment_map_toml(&clip), std::path::Path::new("s.toml")).unwrap();
+    let cal = Calibration::estimate(&rom, &map).unwrap();
+    let mut g = c.benchmark_group("solve/cmu-02_01");
+    g.sample_size(10)
+        .warm_up_time(Duration::from_millis(300))
+        .measurement_time(Duration::from_secs(3));
+    g.throughput(Throughput::Elements(motion.frames() as u64));
+    g.bench_function("plain-walk", |b| {
+        b.iter(|| segments::solve(black_box(&motion), &map).unwrap());
+    });
+    g.bench_function("calibrated-walk", |b| {
+        b.iter(|| cal.solve(black_box(&motion)).unwrap());
+    });
+    g.throughput(Throughput::Elements(rom.frames() as u64));
+    g.bench_function("calibrate-rom", |b| {
+        b.iter(|| Calibration::estimate(black_box(&rom), &map).unwrap());
+    });
+    g.finish();
 }
 
 criterion_group!(benches, bench);

@@ -224,3 +224,148 @@ fn malformed_c3d_prints_one_error_line_and_no_panic_message() {
     // Without at least a few parser panics this test would not test the hook at all.
     assert!(panicked >= 10, "only {panicked} parser panics");
 }
+
+/// `synth --calibration-out` writes a range-of-motion trial with the motion trial's markers;
+/// `solve --calibration` solves the motion trial with the centres estimated on it, exactly as
+/// the library does, and differently from a solve of the motion trial alone.
+#[test]
+fn solve_with_a_calibration_trial() {
+    let dir = tmp("cal");
+    let (c3d, rom, seg) = (dir.join("m.c3d"), dir.join("rom.c3d"), dir.join("s.toml"));
+    let (cal_bvh, plain_bvh) = (dir.join("cal.bvh"), dir.join("plain.bvh"));
+    let synth = study(&[
+        "markers",
+        "synth",
+        "--demo",
+        "-o",
+        s(&c3d),
+        "--segments-out",
+        s(&seg),
+        "--calibration-out",
+        s(&rom),
+        "--rom-seconds-per-axis",
+        "0.5",
+    ]);
+    let stderr = String::from_utf8_lossy(&synth.stderr);
+    assert!(synth.status.success(), "{stderr}");
+    assert!(stderr.contains("range-of-motion trial"), "{stderr}");
+    let solve = |out: &Path, extra: &[&str]| {
+        let mut a = vec![
+            "markers",
+            "solve",
+            s(&c3d),
+            "--segments",
+            s(&seg),
+            "-o",
+            s(out),
+        ];
+        a.extend_from_slice(extra);
+        let o = study(&a);
+        let stderr = String::from_utf8_lossy(&o.stderr).into_owned();
+        assert!(o.status.success(), "{stderr}");
+        stderr
+    };
+    let stderr = solve(&cal_bvh, &["--calibration", s(&rom)]);
+    assert!(stderr.contains("calibrated on"), "{stderr}");
+    solve(&plain_bvh, &[]);
+    // The library on the files the CLI wrote.
+    let motion = data::read_markers(&c3d).unwrap();
+    let rom_set = data::read_markers(&rom).unwrap();
+    assert_eq!(motion.names(), rom_set.names());
+    assert!(rom_set.frames() > motion.frames());
+    let map = codecs::markers::segments::read_segments(&seg).unwrap();
+    let cal = codecs::markers::calibration::Calibration::estimate(&rom_set, &map).unwrap();
+    let expected = codecs::fk::positions(&cal.solve(&motion).unwrap().clip);
+    let cal_back = codecs::fk::positions(&codecs::io::read_clip(None, &cal_bvh).unwrap());
+    let plain_back = codecs::fk::positions(&codecs::io::read_clip(None, &plain_bvh).unwrap());
+    std::fs::remove_dir_all(&dir).ok();
+    let (mut same, mut differ) = (0.0f64, 0.0f64);
+    for f in 0..expected.frames() {
+        for j in 0..expected.joint_count() {
+            same = same.max(dist(expected.point(f, j), cal_back.point(f, j)));
+            differ = differ.max(dist(expected.point(f, j), plain_back.point(f, j)));
+        }
+    }
+    assert!(same < 1e-6, "CLI and library differ by {same} mm");
+    assert!(
+        differ > 1.0,
+        "the calibration changed nothing ({differ} mm)"
+    );
+}
+
+/// A calibration trial and a motion trial with different marker sets: one `error:` line
+/// naming the file and the marker, and no output written.
+#[test]
+fn mismatched_calibration_trial_names_the_file_and_marker() {
+    let dir = tmp("calbad");
+    let (c3d, rom, seg) = (dir.join("m.c3d"), dir.join("rom.c3d"), dir.join("s.toml"));
+    ok(&[
+        "markers",
+        "synth",
+        "--demo",
+        "-o",
+        s(&c3d),
+        "--segments-out",
+        s(&seg),
+        "--calibration-out",
+        s(&rom),
+        "--rom-seconds-per-axis",
+        "0.5",
+    ]);
+    // Copies of both trials without one marker, as CSV.
+    let without = |from: &Path, to: &Path, gone: &str| {
+        let set = data::read_markers(from).unwrap();
+        let keep: Vec<usize> = (0..set.marker_count())
+            .filter(|&m| set.names()[m] != gone)
+            .collect();
+        assert_eq!(keep.len() + 1, set.marker_count());
+        let names = keep.iter().map(|&m| set.names()[m].clone()).collect();
+        let mut out = MarkerSet::new(names, set.frames(), set.frame_rate_hz);
+        for f in 0..set.frames() {
+            for (i, &m) in keep.iter().enumerate() {
+                out.set(f, i, set.get(f, m));
+            }
+        }
+        data::write_csv(&out, to).unwrap();
+    };
+    let gone = data::read_markers(&c3d).unwrap().names()[7].clone();
+    let (rom_less, motion_less) = (dir.join("rom-less.csv"), dir.join("motion-less.csv"));
+    without(&rom, &rom_less, &gone);
+    without(&c3d, &motion_less, &gone);
+    let out = dir.join("o.bvh");
+    let fail = |motion: &Path, rom: &Path| {
+        let o = study(&[
+            "markers",
+            "solve",
+            s(motion),
+            "--segments",
+            s(&seg),
+            "--calibration",
+            s(rom),
+            "-o",
+            s(&out),
+        ]);
+        assert!(!o.status.success());
+        let stderr = String::from_utf8(o.stderr).unwrap();
+        let lines: Vec<&str> = stderr.lines().filter(|l| !l.trim().is_empty()).collect();
+        assert!(
+            lines.len() == 1 && lines[0].starts_with("error: "),
+            "not one error line:\n{stderr}"
+        );
+        lines[0].to_string()
+    };
+    // The calibration trial lacks the marker.
+    let e = fail(&c3d, &rom_less);
+    assert!(
+        e.contains(s(&rom_less)) && e.contains(&format!("{gone:?}")),
+        "{e}"
+    );
+    // The motion trial lacks it.
+    let e = fail(&motion_less, &rom);
+    assert!(
+        e.contains(s(&motion_less)) && e.contains(&format!("{gone:?}")) && e.contains(s(&rom)),
+        "{e}"
+    );
+    assert!(!out.exists());
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -7,10 +7,13 @@
 //! near-singular. [`gdke`] holds the estimator and an iterative least-squares sphere fit for
 //! comparison; [`data`] the marker set with C3D and CSV I/O; [`segments`] the segment/marker
 //! assignment file, segment frames (section 2.5) and the solver that produces a
-//! [`Clip`](crate::Clip); [`acclaim`] the solved clip as ASF/AMC; [`synth`] synthetic
-//! captures with ground truth; [`quiet`] catches the C3D parser's panics without printing them.
+//! [`Clip`](crate::Clip); [`calibration`] joint centres estimated on a range-of-motion trial
+//! and applied to a motion trial; [`acclaim`] the solved clip as ASF/AMC; [`synth`] synthetic
+//! captures (motion and range-of-motion trials) with ground truth; [`quiet`] catches the C3D
+//! parser's panics without printing them.
 
 pub mod acclaim;
+pub mod calibration;
 pub mod data;
 pub mod gdke;
 pub mod quiet;
@@ -85,6 +88,21 @@ pub enum MarkerError {
         /// Key path of the offending value, e.g. `segment[3].parent`.
         key: String,
         /// What is wrong.
+        reason: String,
+    },
+    /// A marker that a calibration or segment map uses is not in the marker set it is
+    /// applied to.
+    #[error("marker {marker:?} of segment {segment} is not in the marker data")]
+    MissingMarker {
+        /// The marker.
+        marker: String,
+        /// The segment it is on.
+        segment: String,
+    },
+    /// A calibration does not fit the segment map or marker set it is applied to.
+    #[error("calibration: {reason}")]
+    Calibration {
+        /// What does not fit.
         reason: String,
     },
     /// The markers do not determine a segment or joint.
