@@ -358,7 +358,7 @@ fn position_allocation_beats_the_printed_rule() {
     }
 }
 
-/// Payload format 2 starts with a version byte; a version-1 stream (no version byte, its first
+/// Payload formats from 2 on start with a version byte; a version-1 stream (no version byte, its first
 /// payload byte is the range coder's initial 0) or any other version is refused, not decoded.
 #[test]
 fn old_wavelet_payload_versions_are_refused() {
@@ -370,7 +370,7 @@ fn old_wavelet_payload_versions_are_refused() {
         let c = codec::by_name(name).unwrap();
         let s = c.encode(&clip, &Params::new()).unwrap();
         assert_eq!(s.payload[0], codec::wavelet_codec::PAYLOAD_VERSION);
-        for v in [0u8, 1, 3, 255] {
+        for v in [0u8, 1, 2, 4, 255] {
             let mut old = s.clone();
             old.payload[0] = v;
             let e = c.decode(&old, &clip.skeleton).unwrap_err().to_string();
@@ -380,6 +380,37 @@ fn old_wavelet_payload_versions_are_refused() {
         empty.payload.clear();
         assert!(c.decode(&empty, &clip.skeleton).is_err());
     }
+}
+
+/// A large wavelet stream has two lanes (decoded on two threads) and round-trips; a lane
+/// header that does not fit the stream is refused, naming what is wrong.
+#[test]
+fn wavelet_lanes_round_trip_and_bad_lane_headers_are_refused() {
+    let (_, clip) = shared()
+        .into_iter()
+        .find(|(n, _)| n == "lambada")
+        .expect("the shared clips include lambada");
+    let c = codec::by_name("wavelet-perceptual").unwrap();
+    // 4:1: well above the 16 KiB at which lanes run in parallel.
+    let s = c.encode(&clip, &params(&[("cr", 4.0)])).unwrap();
+    assert!(s.payload.len() > 16 * 1024, "{}", s.payload.len());
+    assert_eq!(s.payload[1], 2, "two lanes");
+    let m = codecs::metrics::compare(&clip, &c.decode(&s, &clip.skeleton).unwrap()).unwrap();
+    assert!(m.rms_cm < 0.05, "{}", m.rms_cm);
+    for (byte, value, why) in [
+        (1usize, 0u8, "lanes for"),
+        (1, 200, "lanes for"),
+        (5, 0xFF, "lane longer than the payload"),
+    ] {
+        let mut bad = s.clone();
+        bad.payload[byte] = value;
+        let e = c.decode(&bad, &clip.skeleton).unwrap_err().to_string();
+        assert!(e.contains(why), "byte {byte} = {value}: {e}");
+    }
+    let mut cut = s.clone();
+    cut.payload.truncate(4);
+    let e = c.decode(&cut, &clip.skeleton).unwrap_err().to_string();
+    assert!(e.contains("lane lengths truncated"), "{e}");
 }
 
 /// SPIHT's position-aware energy (default) against eq. 6.3 as printed (`allocation = 1`), on
