@@ -450,11 +450,6 @@ struct PackedBits {
 }
 
 impl PackedBits {
-    fn clear(&mut self) {
-        self.words.clear();
-        self.len = 0;
-    }
-
     /// The bits of a slice of 0/1 values.
     #[cfg(test)]
     fn from_bits(bits: &[u8]) -> PackedBits {
@@ -606,6 +601,21 @@ fn spiht_decode(bits: &PackedBits, n0: usize, nmax: i64, rec: &mut [f64], scratc
     }
 }
 
+/// One segment as read from the payload: where it lies, every channel's side information
+/// and embedded bits.
+struct Segment {
+    start: usize,
+    len: usize,
+    /// Payload offset of its bits (for errors).
+    offset: usize,
+    sides: Vec<Side>,
+    streams: Vec<PackedBits>,
+}
+
+/// Below this many payload bytes the channels are decoded on one thread: a thread costs more
+/// than it saves.
+const PARALLEL_MIN_BYTES: usize = 16 * 1024;
+
 #[derive(Debug, Default)]
 struct Scratch {
     dmax: Vec<f64>,
@@ -652,6 +662,44 @@ fn layer_bound(budget: usize, r: usize) -> usize {
 }
 
 impl SpihtCodec {
+    /// The clip rows of `channels` (`rows`: their `frames` values each) from every segment's
+    /// embedded streams and side information.
+    fn reconstruct(
+        self,
+        wavelet: Wavelet,
+        frames: usize,
+        segs: &[Segment],
+        channels: std::ops::Range<usize>,
+        rows: &mut [f64],
+    ) -> Result<(), CodecError> {
+        let mut t = Transform::new(wavelet);
+        let mut scratch = Scratch::default();
+        let (mut rec, mut out) = (Vec::new(), Vec::new());
+        for seg in segs {
+            let (start, len) = (seg.start, seg.len);
+            let levels = wavelet.max_level(len);
+            let lens = band_lengths(len, levels);
+            let n_coef: usize = lens.iter().sum();
+            for (r, c) in channels.clone().enumerate() {
+                rec.clear();
+                rec.resize(n_coef, 0.0);
+                if let Some(nm) = seg.sides[c].nmax {
+                    spiht_decode(&seg.streams[c], lens[0], nm, &mut rec, &mut scratch);
+                }
+                t.inverse(&rec, len, levels, &mut out)
+                    .map_err(|e| self.err(seg.offset, &e.to_string()))?;
+                let mean = seg.sides[c].mean_q as f64 * MEAN_STEP;
+                for (d, v) in rows[r * frames + start..r * frames + start + len]
+                    .iter_mut()
+                    .zip(&out)
+                {
+                    *d = v + mean;
+                }
+            }
+        }
+        Ok(())
+    }
+
     fn err(self, offset: usize, detail: &str) -> CodecError {
         CodecError::Payload {
             codec: self.name(),
@@ -882,11 +930,8 @@ impl Codec for SpihtCodec {
         let mut prev_mean = vec![0i64; n_ch];
         let mut prev_nmax = vec![0i64; n_ch];
         let mut data = vec![0.0; n_ch * frames];
-        let mut t = Transform::new(s.wavelet);
-        let mut scratch = Scratch::default();
-        let mut rec = Vec::new();
-        let mut out = Vec::new();
         let mut streams: Vec<PackedBits> = vec![PackedBits::default(); n_ch];
+        let mut segs: Vec<Segment> = Vec::new();
         let mut sides = vec![
             Side {
                 mean_q: 0,
@@ -954,9 +999,6 @@ impl Codec for SpihtCodec {
                 .get(pos..pos + present.div_ceil(8))
                 .ok_or_else(|| self.err(pos, "segment truncated"))?;
             pos += present.div_ceil(8);
-            for st in &mut streams {
-                st.clear();
-            }
             let mut r_bit = 0usize;
             'layers: for r in 0..LAYERS {
                 for c in 0..n_ch {
@@ -969,28 +1011,49 @@ impl Codec for SpihtCodec {
                     }
                 }
             }
-            let levels = s.wavelet.max_level(len);
-            let lens = band_lengths(len, levels);
-            let n_coef: usize = lens.iter().sum();
-            for c in 0..n_ch {
-                rec.clear();
-                rec.resize(n_coef, 0.0);
-                if let Some(nm) = sides[c].nmax {
-                    spiht_decode(&streams[c], lens[0], nm, &mut rec, &mut scratch);
-                }
-                t.inverse(&rec, len, levels, &mut out)
-                    .map_err(|e| self.err(pos, &e.to_string()))?;
-                let mean = sides[c].mean_q as f64 * MEAN_STEP;
-                for (d, v) in data[c * frames + start..c * frames + start + len]
-                    .iter_mut()
-                    .zip(&out)
-                {
-                    *d = v + mean;
-                }
-            }
+            segs.push(Segment {
+                start,
+                len,
+                offset: pos,
+                sides: sides.clone(),
+                streams: std::mem::take(&mut streams),
+            });
+            streams = vec![PackedBits::default(); n_ch];
         }
         if pos != pl.len() {
             return Err(self.err(pos, "trailing bytes in payload"));
+        }
+        // Each channel's segments decode on their own: the channels in two runs of about equal
+        // bits on two threads, once the payload is large enough to pay for a thread.
+        let bits: Vec<usize> = (0..n_ch)
+            .map(|c| segs.iter().map(|g| g.streams[c].len).sum())
+            .collect();
+        let total: usize = bits.iter().sum();
+        let mut acc = 0;
+        let half = bits
+            .iter()
+            .position(|b| {
+                acc += b;
+                2 * acc >= total
+            })
+            .map_or(n_ch, |c| c + 1)
+            .min(n_ch);
+        let (first, second) = data.split_at_mut(half * frames);
+        let rebuild = |channels: std::ops::Range<usize>, rows: &mut [f64]| {
+            self.reconstruct(s.wavelet, frames, &segs, channels, rows)
+        };
+        if n_ch > 1 && pl.len() >= PARALLEL_MIN_BYTES {
+            std::thread::scope(|scope| {
+                let other = scope.spawn(|| rebuild(half..n_ch, second));
+                let mine = rebuild(0..half, first);
+                let theirs = other
+                    .join()
+                    .unwrap_or_else(|_| Err(self.err(0, "a decoder thread stopped unexpectedly")));
+                mine.and(theirs)
+            })?;
+        } else {
+            rebuild(0..half, first)?;
+            rebuild(half..n_ch, second)?;
         }
         wrap_flagged(&mut data, frames, &flags);
         Ok(Clip::new(
