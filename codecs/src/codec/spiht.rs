@@ -373,7 +373,7 @@ fn spiht_encode(
         };
     }
     for plane in (nmax - MAX_PLANES..=nmax).rev() {
-        let t = (plane as f64).exp2();
+        let t = pow2(plane);
         let lsp_before = lsp.len();
         // Sorting pass: LIP.
         let mut keep = 0;
@@ -437,6 +437,16 @@ fn spiht_encode(
             let bit = ((c[i].abs() / t).floor() as u64) & 1 == 1;
             put!(bit);
         }
+    }
+}
+
+/// `2^plane`, exactly, built from the exponent bits in the normal range (`exp2` is a libm
+/// call per bit plane otherwise).
+fn pow2(plane: i64) -> f64 {
+    if (-1022..=1023).contains(&plane) {
+        f64::from_bits(((plane + 1023) as u64) << 52)
+    } else {
+        (plane as f64).exp2()
     }
 }
 
@@ -535,7 +545,7 @@ fn spiht_decode(bits: &PackedBits, n0: usize, nmax: i64, rec: &mut [f64], scratc
         }};
     }
     for plane in (nmax - MAX_PLANES..=nmax).rev() {
-        let t = (plane as f64).exp2();
+        let t = pow2(plane);
         let lsp_before = lsp.len();
         let mut keep = 0;
         for idx in 0..lip.len() {
@@ -1128,6 +1138,13 @@ pub fn truncate(stream: &Bitstream, fraction: f64) -> Result<Bitstream, CodecErr
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn pow2_is_exact() {
+        for p in -1100..1100 {
+            assert_eq!(pow2(p).to_bits(), (p as f64).exp2().to_bits(), "{p}");
+        }
+    }
 
     /// Word-sized gathering of bit runs equals reading the bits one by one, at every offset
     /// and length, past the end of the source included (zeros).
