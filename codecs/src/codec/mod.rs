@@ -375,6 +375,10 @@ pub(crate) fn header(
     })
 }
 
+/// Payload size from which a decoder splits its work over two threads (the wavelet codec's
+/// lanes, SPIHT's channels); below it a thread costs more than it saves.
+pub(crate) const PARALLEL_MIN_BYTES: usize = 16 * 1024;
+
 /// Checks the stream belongs to `codec` and `skeleton`.
 pub(crate) fn check_stream(
     codec: &dyn Codec,

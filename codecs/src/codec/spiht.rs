@@ -43,7 +43,8 @@
 
 use super::prep::{position_sensitivity, unwrapped_matrix, wrap_flagged};
 use super::{
-    Codec, CodecError, Params, RateControl, check_stream, header, int_param, merged, real_param,
+    Codec, CodecError, PARALLEL_MIN_BYTES, Params, RateControl, check_stream, header, int_param,
+    merged, real_param,
 };
 use crate::bitstream::Bitstream;
 use crate::clip::{BodyPart, Clip, Skeleton};
@@ -621,10 +622,6 @@ struct Segment {
     sides: Vec<Side>,
     streams: Vec<PackedBits>,
 }
-
-/// Below this many payload bytes the channels are decoded on one thread: a thread costs more
-/// than it saves.
-const PARALLEL_MIN_BYTES: usize = 16 * 1024;
 
 #[derive(Debug, Default)]
 struct Scratch {

@@ -69,7 +69,8 @@ use super::prep::{
     channel_lengths, is_translation, position_sensitivity, unwrapped_matrix, wrap_flagged,
 };
 use super::{
-    Codec, CodecError, Params, RateControl, check_stream, header, int_param, merged, real_param,
+    Codec, CodecError, PARALLEL_MIN_BYTES, Params, RateControl, check_stream, header, int_param,
+    merged, real_param,
 };
 use crate::bitstream::Bitstream;
 use crate::clip::{Clip, Skeleton};
@@ -122,9 +123,7 @@ pub const PAYLOAD_VERSION: u8 = 3;
 const LANES: usize = 2;
 /// Most lanes a stream may declare.
 const MAX_LANES: usize = 64;
-/// Below this many payload bytes the lanes are decoded one after the other: a thread costs
-/// more than it saves.
-const PARALLEL_MIN_BYTES: usize = 16 * 1024;
+
 /// Extra quantization bits of translation channels under [`TranslationRule::Comparable`].
 const TRANSLATION_EXTRA_QP: u32 = 4;
 /// Contexts: one per band, deeper bands share the last.
