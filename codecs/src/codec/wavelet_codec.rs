@@ -317,15 +317,11 @@ fn lane_of(c: usize, n_ch: usize, lanes: usize) -> usize {
     (c * lanes) / n_ch.max(1)
 }
 
-/// The channels of lane `g`.
+/// The channels of lane `g`: those `c` with `⌊c·lanes/n_ch⌋ = g` ([`lane_of`]), that is
+/// `⌈g·n_ch/lanes⌉..⌈(g+1)·n_ch/lanes⌉`.
 fn lane_channels(g: usize, n_ch: usize, lanes: usize) -> std::ops::Range<usize> {
-    let first = (0..n_ch)
-        .find(|&c| lane_of(c, n_ch, lanes) >= g)
-        .unwrap_or(n_ch);
-    let end = (first..n_ch)
-        .find(|&c| lane_of(c, n_ch, lanes) > g)
-        .unwrap_or(n_ch);
-    first..end
+    let bound = |g: usize| (g * n_ch).div_ceil(lanes.max(1)).min(n_ch);
+    bound(g)..bound(g + 1)
 }
 
 /// One lane's range coder and models.
@@ -945,6 +941,21 @@ impl LaneContext<'_> {
 mod tests {
     use super::*;
     use crate::synth::{WalkParams, walking_clip};
+
+    #[test]
+    fn lane_channels_are_the_channels_lane_of_assigns() {
+        for n_ch in 1..40 {
+            for lanes in 1..=n_ch.min(MAX_LANES) {
+                for g in 0..lanes {
+                    let want: Vec<usize> = (0..n_ch)
+                        .filter(|&c| lane_of(c, n_ch, lanes) == g)
+                        .collect();
+                    let got: Vec<usize> = lane_channels(g, n_ch, lanes).collect();
+                    assert_eq!(got, want, "{n_ch} channels, {lanes} lanes, lane {g}");
+                }
+            }
+        }
+    }
 
     /// The lanes are independent: decoding them on threads (forced here; `decode` does it from
     /// 16 KiB) gives exactly what decoding them one after the other gives.
