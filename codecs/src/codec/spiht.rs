@@ -268,24 +268,26 @@ fn energy_of(code: u32) -> f64 {
     }
 }
 
-/// Eq. 6.1: channel budgets from the segment budget.
+/// Eq. 6.1: channel budgets from the segment budget and its channels' side information (an
+/// empty channel gets none).
 fn allocate(
     factors: &[f64],
-    energy: &[u32],
-    empty: &[bool],
+    sides: &[Side],
     perceptual: bool,
     position: bool,
     total_bits: usize,
 ) -> Vec<usize> {
-    let f: Vec<f64> = (0..factors.len())
-        .map(|c| {
-            if empty[c] {
+    let f: Vec<f64> = factors
+        .iter()
+        .zip(sides)
+        .map(|(&factor, side)| {
+            if side.nmax.is_none() {
                 0.0
             } else if perceptual && position {
                 // E^(1/4): see `position_energy_codes`.
-                factors[c] * energy_of(energy[c]).sqrt().sqrt()
+                factor * energy_of(side.energy).sqrt().sqrt()
             } else if perceptual {
-                factors[c] * energy_of(energy[c])
+                factor * energy_of(side.energy)
             } else {
                 1.0
             }
@@ -817,16 +819,7 @@ impl SpihtCodec {
             let seg_budget = end_bits.saturating_sub(used_bits);
             let levels = s.wavelet.max_level(len);
             let n0 = band_lengths(len, levels)[0];
-            let empty: Vec<bool> = sides[k].iter().map(|sd| sd.nmax.is_none()).collect();
-            let energy: Vec<u32> = sides[k].iter().map(|sd| sd.energy).collect();
-            let budgets = allocate(
-                &factors,
-                &energy,
-                &empty,
-                self.perceptual,
-                s.position,
-                seg_budget,
-            );
+            let budgets = allocate(&factors, &sides[k], self.perceptual, s.position, seg_budget);
             for c in 0..n_ch {
                 streams[c].clear();
                 if let Some(nm) = sides[k][c].nmax {
@@ -988,16 +981,7 @@ impl Codec for SpihtCodec {
             if seg_budget > len * n_ch * 512 {
                 return Err(self.err(pos - 8, "segment budget beyond any rate"));
             }
-            let empty: Vec<bool> = sides.iter().map(|sd| sd.nmax.is_none()).collect();
-            let energy: Vec<u32> = sides.iter().map(|sd| sd.energy).collect();
-            let budgets = allocate(
-                &factors,
-                &energy,
-                &empty,
-                self.perceptual,
-                s.position,
-                seg_budget,
-            );
+            let budgets = allocate(&factors, &sides, self.perceptual, s.position, seg_budget);
             let total: usize = budgets.iter().sum();
             if present > total {
                 return Err(self.err(pos - 4, "more bits than the budget"));
