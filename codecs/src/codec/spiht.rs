@@ -43,7 +43,7 @@
 
 use super::prep::{position_sensitivity, unwrapped_matrix, wrap_flagged};
 use super::{
-    Codec, CodecError, PARALLEL_MIN_BYTES, Params, RateControl, check_stream, header, int_param,
+    Codec, CodecError, Params, RateControl, check_stream, decode_on_two_threads, header, int_param,
     merged, real_param,
 };
 use crate::bitstream::Bitstream;
@@ -923,11 +923,7 @@ impl Codec for SpihtCodec {
     }
 
     fn decode(&self, stream: &Bitstream, skeleton: &Skeleton) -> Result<Clip, CodecError> {
-        self.decode_channels(
-            stream,
-            skeleton,
-            stream.channels > 1 && stream.payload.len() >= PARALLEL_MIN_BYTES,
-        )
+        self.decode_channels(stream, skeleton, decode_on_two_threads(stream))
     }
 }
 
@@ -1213,8 +1209,8 @@ mod tests {
     }
 
     /// Channels decode on their own: two threads sharing the channel queue (forced here;
-    /// `decode` does it from 16 KiB of payload) give exactly what one
-    /// thread gives, near-lossless (1:1) and at 12:1.
+    /// `decode` does it for clips of 16 Ki values or payloads of 16 KiB) give exactly what
+    /// one thread gives, near-lossless (1:1) and at 12:1.
     #[test]
     fn channels_on_threads_decode_exactly_as_on_one() {
         let clip = crate::synth::walking_clip(&crate::synth::WalkParams {

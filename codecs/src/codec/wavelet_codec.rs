@@ -69,7 +69,7 @@ use super::prep::{
     channel_lengths, is_translation, position_sensitivity, unwrapped_matrix, wrap_flagged,
 };
 use super::{
-    Codec, CodecError, PARALLEL_MIN_BYTES, Params, RateControl, check_stream, header, int_param,
+    Codec, CodecError, Params, RateControl, check_stream, decode_on_two_threads, header, int_param,
     merged, real_param,
 };
 use crate::bitstream::Bitstream;
@@ -673,7 +673,7 @@ impl Codec for WaveletCodec {
     }
 
     fn decode(&self, stream: &Bitstream, skeleton: &Skeleton) -> Result<Clip, CodecError> {
-        self.decode_lanes(stream, skeleton, stream.payload.len() >= PARALLEL_MIN_BYTES)
+        self.decode_lanes(stream, skeleton, decode_on_two_threads(stream))
     }
 }
 
@@ -957,8 +957,9 @@ mod tests {
         }
     }
 
-    /// The lanes are independent: decoding them on threads (forced here; `decode` does it from
-    /// 16 KiB) gives exactly what decoding them one after the other gives.
+    /// The lanes are independent: decoding them on threads (forced here; `decode` does it for
+    /// clips of 16 Ki values or payloads of 16 KiB) gives exactly what decoding them one after
+    /// the other gives.
     #[test]
     fn lanes_on_threads_decode_exactly_as_in_sequence() {
         let clip = walking_clip(&WalkParams {
