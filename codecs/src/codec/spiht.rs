@@ -1042,10 +1042,10 @@ impl SpihtCodec {
         if pos != pl.len() {
             return Err(self.err(pos, "trailing bytes in payload"));
         }
-        // Each channel's segments decode on their own. Two threads (once the payload is large
-        // enough to pay for one) take channels from a queue, those with the most bits first:
-        // a channel's cost is not proportional to its bits (a stream past its last bit plane
-        // ends in padding), so a fixed split leaves one thread idle.
+        // Each channel's segments decode on their own. One thread, or two with `threads`, take
+        // channels from a queue, those with the most bits first: a channel's cost is not
+        // proportional to its bits (a stream past its last bit plane ends in padding), so a
+        // fixed split leaves one thread idle.
         let mut queue: Vec<(usize, &mut [f64])> =
             data.chunks_mut(frames.max(1)).enumerate().collect();
         let bits: Vec<usize> = (0..n_ch)
