@@ -503,6 +503,25 @@ impl Clip {
         out.extend((0..self.channels.len()).map(|c| self.data[c * self.frames + f]));
     }
 
+    /// Frames `range` of the clip, cut to its length (an empty clip when the range lies past
+    /// the end): the same skeleton and rate.
+    #[must_use]
+    pub fn excerpt(&self, range: std::ops::Range<usize>) -> Clip {
+        let end = range.end.min(self.frames);
+        let start = range.start.min(end);
+        let mut data = Vec::with_capacity(self.channels.len() * (end - start));
+        for c in 0..self.channels.len() {
+            data.extend_from_slice(&self.channel(c)[start..end]);
+        }
+        Clip {
+            skeleton: self.skeleton.clone(),
+            frame_rate_hz: self.frame_rate_hz,
+            channels: self.channels.clone(),
+            frames: end - start,
+            data,
+        }
+    }
+
     /// The same skeleton and rate with another matrix of the same shape.
     ///
     /// # Errors

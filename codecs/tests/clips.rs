@@ -251,6 +251,24 @@ fn synthetic_walk_is_a_valid_clip_that_walks_forward() {
     assert_same_values(&clip, &back, "walk");
 }
 
+#[test]
+fn excerpt_keeps_the_frames_asked_for_and_cuts_at_the_end() {
+    let clip = codecs::synth::walking_clip(&codecs::synth::WalkParams::default());
+    let n = clip.frames();
+    let part = clip.excerpt(100..130);
+    assert_eq!(part.frames(), 30);
+    assert_eq!(part.skeleton, clip.skeleton);
+    assert_eq!(part.frame_rate_hz.to_bits(), clip.frame_rate_hz.to_bits());
+    for c in 0..clip.channel_count() {
+        assert_eq!(part.channel(c), &clip.channel(c)[100..130], "channel {c}");
+    }
+    let tail = clip.excerpt(n - 5..n + 50);
+    assert_eq!(tail.frames(), 5);
+    assert_eq!(tail.value(3, 4).to_bits(), clip.value(3, n - 1).to_bits());
+    assert_eq!(clip.excerpt(n + 1..n + 9).frames(), 0);
+    assert_eq!(clip.excerpt(0..n), clip);
+}
+
 /// Thesis ch. 5 works on quaternions: Euler → quaternion → Euler must keep every joint where
 /// it was (≤ 1e-6 of the skeleton's scale), including across Euler wraps.
 #[test]

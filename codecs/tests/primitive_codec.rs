@@ -27,16 +27,6 @@ static ALLOC: Cap<std::alloc::System> = Cap::new(std::alloc::System, 1 << 30);
 
 const TRAIN_FRAMES: usize = 600;
 
-/// The first `n` frames of a clip (a real clip, shortened to keep debug-build tests fast).
-fn head(clip: &Clip, n: usize) -> Clip {
-    let n = n.min(clip.frames());
-    let mut data = Vec::with_capacity(clip.channel_count() * n);
-    for c in 0..clip.channel_count() {
-        data.extend_from_slice(&clip.channel(c)[..n]);
-    }
-    clip.with_data(n, data).unwrap()
-}
-
 struct Fixture {
     clips: Vec<(String, Clip)>,
     db: Arc<Database>,
@@ -51,7 +41,7 @@ fn fixture() -> &'static Fixture {
             .into_iter()
             .map(|f| {
                 let clip = io::read_clip(f.asf.as_deref(), &f.motion).unwrap();
-                (f.name, head(&clip, TRAIN_FRAMES))
+                (f.name, clip.excerpt(0..TRAIN_FRAMES))
             })
             .collect();
         let refs: Vec<&Clip> = clips.iter().map(|(_, c)| c).collect();
@@ -158,12 +148,7 @@ proptest! {
     ) {
         let f = fixture();
         let (name, clip) = &f.clips[which % f.clips.len()];
-        let n = clip.frames().saturating_sub(start).min(240);
-        let mut data = Vec::new();
-        for ch in 0..clip.channel_count() {
-            data.extend_from_slice(&clip.channel(ch)[start..start + n]);
-        }
-        let piece = clip.with_data(n, data).unwrap();
+        let piece = clip.excerpt(start..start + 240);
         let c = codec_with(&f.db);
         let s = c.encode(&piece, &params(&[("t_l", t_l), ("upper_ratio", upper)])).unwrap();
         let d = c.decode(&s, &piece.skeleton).unwrap();
@@ -338,7 +323,7 @@ fn corpus() -> &'static Vec<(Clip, Vec<u8>)> {
         f.clips
             .iter()
             .map(|(_, clip)| {
-                let piece = head(clip, 150);
+                let piece = clip.excerpt(0..150);
                 let s = c.encode(&piece, &params(&[("t_l", 0.01)])).unwrap();
                 (piece, s.to_bytes().unwrap())
             })

@@ -54,13 +54,8 @@ fn study_dir() -> PathBuf {
     // last 1 200 frames, so every branch of the lookahead is a level not encoded yet.
     let n = clip.frames();
     for (name, from) in [("start", 0), ("end", n - FRAMES)] {
-        let data: Vec<f64> = clip
-            .data()
-            .chunks(n)
-            .flat_map(|ch| ch[from..from + FRAMES].iter().copied())
-            .collect();
         io::write_clip(
-            &clip.with_data(FRAMES, data).unwrap(),
+            &clip.excerpt(from..from + FRAMES),
             &dir.join(format!("clips/{name}.amc")),
             Some(&dir.join("clips/lambada.asf")),
         )
