@@ -1,6 +1,8 @@
 //! Issue 9: GDKE joint centres, marker files and skeleton solving from synthetic captures.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
 
+mod common;
+
 use std::path::Path;
 
 use codecs::markers::data::{self, MarkerSet};
@@ -8,6 +10,7 @@ use codecs::markers::gdke::{GdkeOptions, JointKind, LsqOptions, gdke, least_squa
 use codecs::markers::segments::{self, parse_segments};
 use codecs::markers::synth::{SynthOptions, segment_map_toml, synth_capture};
 use codecs::markers::{MarkerError, MarkerLimits};
+use common::{assert_survives_a_bvh_round_trip, dist};
 use proptest::prelude::*;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -26,10 +29,6 @@ fn rot(axis: [f64; 3], angle: f64) -> [[f64; 3]; 3] {
 
 fn apply(m: &[[f64; 3]; 3], v: [f64; 3]) -> [f64; 3] {
     [0, 1, 2].map(|i| m[i][0] * v[0] + m[i][1] * v[1] + m[i][2] * v[2])
-}
-
-fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
-    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
 }
 
 fn gaussian(rng: &mut ChaCha8Rng) -> f64 {
@@ -522,25 +521,7 @@ fn solved_clip_survives_a_bvh_round_trip() {
     let cap = synth_capture(&clip, &SynthOptions::default()).unwrap();
     let map = parse_segments(&segment_map_toml(&clip), Path::new("s.toml")).unwrap();
     let solved = segments::solve(&cap.markers, &map).unwrap();
-    let dir = std::env::temp_dir().join(format!("markers-bvh-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let path = dir.join("solved.bvh");
-    codecs::io::write_clip(&solved.clip, &path, None).unwrap();
-    let back = codecs::io::read_clip(None, &path).unwrap();
-    std::fs::remove_dir_all(&dir).ok();
-    let (a, b) = (
-        codecs::fk::positions(&solved.clip),
-        codecs::fk::positions(&back),
-    );
-    assert_eq!(a.names, b.names);
-    for f in 0..a.frames() {
-        for j in 0..a.joint_count() {
-            assert!(
-                dist(a.point(f, j), b.point(f, j)) < 1e-3,
-                "frame {f} joint {j}"
-            );
-        }
-    }
+    assert_survives_a_bvh_round_trip(&solved.clip, "markers-bvh");
 }
 
 #[test]

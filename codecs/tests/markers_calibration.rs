@@ -2,6 +2,8 @@
 //! range-of-motion trial of CMU 02_01 and applied to its motion trial (same markers).
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
 
+mod common;
+
 use std::path::Path;
 
 use codecs::clip::SkeletonFormat;
@@ -13,11 +15,8 @@ use codecs::markers::synth::{
     MarkerPlacement, RomOptions, SynthCapture, SynthOptions, rom_capture, rom_clip, rom_groups,
     segment_map_toml, synth_capture,
 };
+use common::{assert_survives_a_bvh_round_trip, dist};
 use proptest::prelude::*;
-
-fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
-    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
-}
 
 /// The first `frames` frames of CMU 02_01 (a walk), or `None` outside CI without the data.
 fn cmu_clip(frames: usize) -> Option<codecs::Clip> {
@@ -342,24 +341,7 @@ fn noise_free_calibrated_solve_of_cmu_is_exact() {
     assert_eq!(twists, ["lwrist", "rwrist"]);
     // The solved clip's FK reproduces the clip's points of every joint: the points above are
     // the solved clip's own FK points; the same holds after a BVH round trip.
-    let dir = std::env::temp_dir().join(format!("markers-cal-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let path = dir.join("cal.bvh");
-    codecs::io::write_clip(&solved.clip, &path, None).unwrap();
-    let back = codecs::io::read_clip(None, &path).unwrap();
-    std::fs::remove_dir_all(&dir).ok();
-    let (a, b) = (
-        codecs::fk::positions(&solved.clip),
-        codecs::fk::positions(&back),
-    );
-    for f in 0..a.frames() {
-        for j in 0..a.joint_count() {
-            assert!(
-                dist(a.point(f, j), b.point(f, j)) < 1e-3,
-                "frame {f} joint {j}"
-            );
-        }
-    }
+    assert_survives_a_bvh_round_trip(&solved.clip, "markers-cal");
 }
 
 #[test]

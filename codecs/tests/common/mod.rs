@@ -1,0 +1,27 @@
+//! Helpers shared by the marker test files.
+
+/// Euclidean distance between two points.
+pub fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+}
+
+/// Writes `clip` as BVH (under the temp folder, in a directory named after `tag`), reads it
+/// back and asserts that every joint of every frame lands within 1e-3 units of where it was.
+pub fn assert_survives_a_bvh_round_trip(clip: &codecs::Clip, tag: &str) {
+    let dir = std::env::temp_dir().join(format!("{tag}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("solved.bvh");
+    codecs::io::write_clip(clip, &path, None).unwrap();
+    let back = codecs::io::read_clip(None, &path).unwrap();
+    std::fs::remove_dir_all(&dir).ok();
+    let (a, b) = (codecs::fk::positions(clip), codecs::fk::positions(&back));
+    assert_eq!(a.names, b.names);
+    for f in 0..a.frames() {
+        for j in 0..a.joint_count() {
+            assert!(
+                dist(a.point(f, j), b.point(f, j)) < 1e-3,
+                "frame {f} joint {j}"
+            );
+        }
+    }
+}
