@@ -225,15 +225,11 @@ fn malformed_c3d_prints_one_error_line_and_no_panic_message() {
     assert!(panicked >= 10, "only {panicked} parser panics");
 }
 
-/// `synth --calibration-out` writes a range-of-motion trial with the motion trial's markers;
-/// `solve --calibration` solves the motion trial with the centres estimated on it, exactly as
-/// the library does, and differently from a solve of the motion trial alone.
-#[test]
-fn solve_with_a_calibration_trial() {
-    let dir = tmp("cal");
+/// `markers synth --demo` into `dir` with a range-of-motion trial (0.5 s per axis): the
+/// motion trial, the calibration trial, the segment map and what the command printed.
+fn synth_with_calibration(dir: &Path) -> (PathBuf, PathBuf, PathBuf, String) {
     let (c3d, rom, seg) = (dir.join("m.c3d"), dir.join("rom.c3d"), dir.join("s.toml"));
-    let (cal_bvh, plain_bvh) = (dir.join("cal.bvh"), dir.join("plain.bvh"));
-    let synth = study(&[
+    let out = study(&[
         "markers",
         "synth",
         "--demo",
@@ -246,9 +242,20 @@ fn solve_with_a_calibration_trial() {
         "--rom-seconds-per-axis",
         "0.5",
     ]);
-    let stderr = String::from_utf8_lossy(&synth.stderr);
-    assert!(synth.status.success(), "{stderr}");
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(out.status.success(), "{stderr}");
+    (c3d, rom, seg, stderr)
+}
+
+/// `synth --calibration-out` writes a range-of-motion trial with the motion trial's markers;
+/// `solve --calibration` solves the motion trial with the centres estimated on it, exactly as
+/// the library does, and differently from a solve of the motion trial alone.
+#[test]
+fn solve_with_a_calibration_trial() {
+    let dir = tmp("cal");
+    let (c3d, rom, seg, stderr) = synth_with_calibration(&dir);
     assert!(stderr.contains("range-of-motion trial"), "{stderr}");
+    let (cal_bvh, plain_bvh) = (dir.join("cal.bvh"), dir.join("plain.bvh"));
     let solve = |out: &Path, extra: &[&str]| {
         let mut a = vec![
             "markers",
@@ -298,20 +305,7 @@ fn solve_with_a_calibration_trial() {
 #[test]
 fn mismatched_calibration_trial_names_the_file_and_marker() {
     let dir = tmp("calbad");
-    let (c3d, rom, seg) = (dir.join("m.c3d"), dir.join("rom.c3d"), dir.join("s.toml"));
-    ok(&[
-        "markers",
-        "synth",
-        "--demo",
-        "-o",
-        s(&c3d),
-        "--segments-out",
-        s(&seg),
-        "--calibration-out",
-        s(&rom),
-        "--rom-seconds-per-axis",
-        "0.5",
-    ]);
+    let (c3d, rom, seg, _) = synth_with_calibration(&dir);
     // Copies of both trials without one marker, as CSV.
     let without = |from: &Path, to: &Path, gone: &str| {
         let set = data::read_markers(from).unwrap();
