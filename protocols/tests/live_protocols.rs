@@ -126,21 +126,30 @@ fn live_mistakes_are_reported_at_once_with_their_key_paths() {
     );
 }
 
+/// Answers trial `t` of `session`: the reference's side with probability `p_correct`.
+fn choose(session: &mut Session, t: &protocols::Trial, rng: &mut StudyRng, p_correct: f64) {
+    let p = t.reference_position;
+    let answer = Answer::Choice(if rng.unit_f64() < p_correct {
+        p
+    } else {
+        p.other()
+    });
+    session
+        .respond(&Response {
+            answer,
+            response_time_ms: 1,
+            replays: 0,
+            dropped_frames: 0,
+        })
+        .unwrap();
+}
+
 fn answer_all(study: &StudyDefinition, subject: u32) -> Vec<protocols::Trial> {
     let mut session = Session::new(study, subject).unwrap();
     let mut rng = StudyRng::new(3, &[u64::from(subject)]);
     let mut trials = Vec::new();
     while let Some(t) = session.next_trial(0).unwrap() {
-        let p = t.reference_position;
-        let answer = Answer::Choice(if rng.unit_f64() < 0.8 { p } else { p.other() });
-        session
-            .respond(&Response {
-                answer,
-                response_time_ms: 1,
-                replays: 0,
-                dropped_frames: 0,
-            })
-            .unwrap();
+        choose(&mut session, &t, &mut rng, 0.8);
         trials.push(t);
     }
     assert_eq!(session.status(), SessionStatus::Complete);
@@ -296,16 +305,7 @@ fn lookahead_names_the_next_clip_at_both_possible_levels() {
             assert_ne!(a.level, b.level, "branches differ in level: {ahead:?}");
             two_levels += 1;
         }
-        let p = t.reference_position;
-        let answer = Answer::Choice(if rng.unit_f64() < 0.75 { p } else { p.other() });
-        session
-            .respond(&Response {
-                answer,
-                response_time_ms: 1,
-                replays: 0,
-                dropped_frames: 0,
-            })
-            .unwrap();
+        choose(&mut session, &t, &mut rng, 0.75);
         if let Some(next) = session.next_trial(0).unwrap() {
             assert!(ahead.contains(&next), "{next:?} not in {ahead:?}");
         }
