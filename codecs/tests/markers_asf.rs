@@ -2,16 +2,15 @@
 //! as, through the files and the project's own forward kinematics.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
 
+mod common;
+
 use std::path::{Path, PathBuf};
 
 use codecs::markers::acclaim::{AsfSolved, bvh_to_asf};
 use codecs::markers::segments::{self, parse_segments};
 use codecs::markers::synth::{SynthOptions, segment_map_toml, synth_capture};
 use codecs::{Clip, Rest, SkeletonFormat};
-
-fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
-    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
-}
+use common::{dist, walk_clip};
 
 fn tmp(tag: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("markers-asf-{tag}-{}", std::process::id()));
@@ -104,21 +103,13 @@ fn solved_demo_walk_as_asf_amc_matches_its_bvh() {
 
 #[test]
 fn solved_cmu_clip_as_asf_amc_matches_its_bvh() {
-    let clips = codecs::data::shared_clips();
-    let Some(files) = clips.iter().find(|c| c.name == "02_01").or(clips.first()) else {
-        eprintln!("shared clips not found: skipped outside CI");
+    // 2 s of the walk: every joint moves, and the test stays quick.
+    let Some((name, clip)) = walk_clip(240) else {
         return;
     };
-    // 2 s of the walk: every joint moves, and the test stays quick.
-    let clip = codecs::io::read_clip(files.asf.as_deref(), &files.motion)
-        .unwrap()
-        .excerpt(0..240);
     let solved = solve(&clip, &SynthOptions::default());
-    let (rel, mm) = round_trip(&solved, &files.name);
-    eprintln!(
-        "{}: worst FK disagreement {rel:.2e} of bone length, {mm:.2e} mm",
-        files.name
-    );
+    let (rel, mm) = round_trip(&solved, &name);
+    eprintln!("{name}: worst FK disagreement {rel:.2e} of bone length, {mm:.2e} mm");
 }
 
 #[test]

@@ -15,18 +15,8 @@ use codecs::markers::synth::{
     MarkerPlacement, RomOptions, SynthCapture, SynthOptions, rom_capture, rom_clip, rom_groups,
     segment_map_toml, synth_capture,
 };
-use common::{assert_survives_a_bvh_round_trip, dist};
+use common::{assert_survives_a_bvh_round_trip, dist, walk_clip};
 use proptest::prelude::*;
-
-/// The first `frames` frames of CMU 02_01 (a walk), or `None` outside CI without the data.
-fn cmu_clip(frames: usize) -> Option<codecs::Clip> {
-    let Some(dir) = codecs::data::mocap_dir() else {
-        eprintln!("shared clips not found: skipped outside CI");
-        return None;
-    };
-    let clip = codecs::io::read_clip(Some(&dir.join("12.asf")), &dir.join("02_01.amc")).unwrap();
-    Some(clip.excerpt(0..frames))
-}
 
 fn map_of(clip: &codecs::Clip) -> SegmentMap {
     parse_segments(&segment_map_toml(clip), Path::new("synth.toml")).unwrap()
@@ -211,7 +201,9 @@ fn rom_trial_carries_the_motion_trial_markers() {
 
 #[test]
 fn rom_clip_swings_each_rotation_axis_alone_within_limits() {
-    let Some(clip) = cmu_clip(10) else { return };
+    let Some((_, clip)) = walk_clip(10) else {
+        return;
+    };
     let options = RomOptions::default();
     let trial = rom_clip(&clip, &options).unwrap();
     let sk = &trial.skeleton;
@@ -309,7 +301,9 @@ fn rom_clip_swings_each_rotation_axis_alone_within_limits() {
 
 #[test]
 fn noise_free_calibrated_solve_of_cmu_is_exact() {
-    let Some(clip) = cmu_clip(300) else { return };
+    let Some((_, clip)) = walk_clip(300) else {
+        return;
+    };
     let mut map = map_of(&clip);
     map.gdke = EXACT;
     let rom = rom_capture(&clip, &RomOptions::default(), &NOISE_FREE).unwrap();
@@ -346,7 +340,9 @@ fn noise_free_calibrated_solve_of_cmu_is_exact() {
 
 #[test]
 fn calibrated_solve_of_cmu_reaches_1_cm_at_2_mm() {
-    let Some(clip) = cmu_clip(480) else { return };
+    let Some((_, clip)) = walk_clip(480) else {
+        return;
+    };
     let options = SynthOptions::default(); // σ = 2 mm, 0.5 % gaps
     let map = map_of(&clip);
     let rom = rom_capture(&clip, &RomOptions::default(), &options).unwrap();

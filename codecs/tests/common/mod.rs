@@ -1,4 +1,5 @@
 //! Helpers shared by the marker test files.
+#![allow(dead_code, reason = "each test file uses its own part")]
 
 /// Euclidean distance between two points.
 pub fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
@@ -24,4 +25,17 @@ pub fn assert_survives_a_bvh_round_trip(clip: &codecs::Clip, tag: &str) {
             );
         }
     }
+}
+
+/// The first `frames` frames of CMU 02_01 (a walk), or of the first shared clip where a
+/// `MOCAP_DATA` folder lacks it, with the clip's name; `None` outside CI without the data
+/// (under `CI` a missing folder fails the test).
+pub fn walk_clip(frames: usize) -> Option<(String, codecs::Clip)> {
+    let clips = codecs::data::shared_clips();
+    let Some(files) = clips.iter().find(|c| c.name == "02_01").or(clips.first()) else {
+        eprintln!("shared clips not found: skipped outside CI");
+        return None;
+    };
+    let clip = codecs::io::read_clip(files.asf.as_deref(), &files.motion).unwrap();
+    Some((files.name.clone(), clip.excerpt(0..frames)))
 }
