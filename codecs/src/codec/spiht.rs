@@ -515,13 +515,16 @@ impl PackedBits {
         }
     }
 
+    /// Bit `i` as 0 or 1, for `i` below `len`.
+    #[inline]
+    fn bit(&self, i: usize) -> u64 {
+        (self.words[i >> 6] >> (63 - (i & 63))) & 1
+    }
+
     /// Bit `i`, or `None` past the end.
     #[inline]
     fn get(&self, i: usize) -> Option<bool> {
-        if i >= self.len {
-            return None;
-        }
-        Some((self.words[i >> 6] >> (63 - (i & 63))) & 1 == 1)
+        (i < self.len).then(|| self.bit(i) == 1)
     }
 }
 
@@ -609,8 +612,7 @@ fn spiht_decode(bits: &PackedBits, n0: usize, nmax: i64, rec: &mut [f64], scratc
         let half = 0.5 * t;
         let count = lsp_before.min(bits.len.saturating_sub(pos));
         for (k, &i) in lsp[..count].iter().enumerate() {
-            let p = pos + k;
-            let up = (bits.words[p >> 6] >> (63 - (p & 63))) & 1;
+            let up = bits.bit(pos + k);
             rec[i] += (2.0 * up as f64 - 1.0) * half.copysign(rec[i]);
         }
         pos += count;
@@ -625,6 +627,10 @@ fn spiht_decode(bits: &PackedBits, n0: usize, nmax: i64, rec: &mut [f64], scratc
 struct Segment<'a> {
     start: usize,
     len: usize,
+    /// Its wavelet levels, approximation band length and coefficient count.
+    levels: usize,
+    n0: usize,
+    n_coef: usize,
     /// Payload offset of its bits (for errors).
     offset: usize,
     sides: Vec<Side>,
@@ -705,19 +711,16 @@ impl SpihtCodec {
         while let Some((c, row)) = queue.lock().ok().and_then(|mut q| q.pop()) {
             for seg in segs {
                 let (start, len) = (seg.start, seg.len);
-                let levels = wavelet.max_level(len);
-                let lens = band_lengths(len, levels);
-                let n_coef: usize = lens.iter().sum();
                 rec.clear();
-                rec.resize(n_coef, 0.0);
+                rec.resize(seg.n_coef, 0.0);
                 if let Some(nm) = seg.sides[c].nmax {
                     bits.clear();
                     for &(from, count) in &seg.runs[c * LAYERS..(c + 1) * LAYERS] {
                         bits.append_run(seg.bytes, from, count);
                     }
-                    spiht_decode(&bits, lens[0], nm, &mut rec, &mut scratch);
+                    spiht_decode(&bits, seg.n0, nm, &mut rec, &mut scratch);
                 }
-                t.inverse(&rec, len, levels, &mut out)
+                t.inverse(&rec, len, seg.levels, &mut out)
                     .map_err(|e| self.err(seg.offset, &e.to_string()))?;
                 let mean = seg.sides[c].mean_q as f64 * MEAN_STEP;
                 for (d, v) in row[start..start + len].iter_mut().zip(&out) {
@@ -1030,9 +1033,14 @@ impl SpihtCodec {
                     from += n_bits;
                 }
             }
+            let levels = s.wavelet.max_level(len);
+            let lens = band_lengths(len, levels);
             segs.push(Segment {
                 start,
                 len,
+                levels,
+                n0: lens[0],
+                n_coef: lens.iter().sum(),
                 offset: pos - present.div_ceil(8),
                 sides: sides.clone(),
                 bytes,

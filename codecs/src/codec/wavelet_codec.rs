@@ -62,8 +62,8 @@
 //! allocation: the slice's step exponent, delta-coded, repeated in every lane) and per channel
 //! the nonzero count, (printed rule: the channel's step exponent,) then (run, value) pairs with
 //! per-band contexts; values are sign (direct bit) and `|v| − 1` (adaptive Exp-Golomb). Lanes
-//! decode independently, on one thread each once the payload is large enough to pay for it
-//! (16 KiB). Streams of another version are refused.
+//! decode independently, on one thread each once the clip or its payload is large enough to
+//! pay for it (see `decode_on_two_threads`). Streams of another version are refused.
 
 use super::prep::{
     channel_lengths, is_translation, position_sensitivity, unwrapped_matrix, wrap_flagged,
