@@ -111,7 +111,7 @@ fn open(path: &Path, study: &StudyDefinition) -> LiveStimuli {
 
 /// A fresh cache that has shown the first trial; the session waits for its answer.
 fn first_trial(path: &Path, study: &StudyDefinition) -> (LiveStimuli, Session, Trial) {
-    let mut live = open(path, study);
+    let live = open(path, study);
     let mut session = Session::new(study, 0).unwrap();
     let t = session.next_trial(0).unwrap().unwrap();
     live.resolve(&t).unwrap();
@@ -146,7 +146,7 @@ fn bench(c: &mut Criterion) {
                 let next = answer(&mut session, &t);
                 (live, next)
             },
-            |(mut live, next)| {
+            |(live, next)| {
                 let s = live.resolve(&next).unwrap();
                 (live, black_box(s))
             },
@@ -174,7 +174,7 @@ fn bench(c: &mut Criterion) {
                 let next = answer(&mut session, &t);
                 (live, next, cached)
             },
-            |(mut live, next, cached)| {
+            |(live, next, cached)| {
                 let s = live.resolve(&next).unwrap();
                 assert_eq!(live.cached(), cached, "the next trial was prefetched");
                 black_box(s);

@@ -241,7 +241,7 @@ impl LiveStimuli {
     /// # Errors
     /// A trial that is not one of this study's live trials (unknown reference, no level, a
     /// stimulus id that does not name this codec and level), or a codec error at that level.
-    pub fn resolve(&mut self, trial: &Trial) -> anyhow::Result<LiveStimulus> {
+    pub fn resolve(&self, trial: &Trial) -> anyhow::Result<LiveStimulus> {
         let key = self.encoder.key(trial)?;
         self.cache.fetch(&self.encoder, key)
     }
@@ -440,7 +440,7 @@ mod tests {
         use protocols::{Answer, Response, Session};
         let (study, path) = example();
         let mut live = LiveStimuli::from_study(&study, &path).unwrap().unwrap();
-        let mut fresh = LiveStimuli::from_study(&study, &path).unwrap().unwrap();
+        let fresh = LiveStimuli::from_study(&study, &path).unwrap().unwrap();
         let mut session = Session::new(&study, 1).unwrap();
         let mut trials = 0;
         while let Some(t) = session.next_trial(0).unwrap()
@@ -491,7 +491,7 @@ mod tests {
         let got = live.resolve(&t).unwrap();
         live.wait_prefetch();
         assert_eq!(live.cached(), 1);
-        let mut fresh = LiveStimuli::from_study(&study, &path).unwrap().unwrap();
+        let fresh = LiveStimuli::from_study(&study, &path).unwrap().unwrap();
         same(&got, &fresh.resolve(&t).unwrap());
         let err = live.resolve(&foreign).unwrap_err().to_string();
         assert!(err.contains("not a clip of this live staircase"), "{err}");

@@ -140,7 +140,7 @@ fn describe_live(text: &mut String, study: &StudyDefinition, path: &Path) -> any
     }
     // Encode every clip once at the first start level: proves the codec takes the
     // settings and shows what a trial will look like.
-    if let (Some(mut stimuli), Some(t)) = (stimuli, sc.tracks.first()) {
+    if let (Some(stimuli), Some(t)) = (stimuli, sc.tracks.first()) {
         let clips: Vec<(String, String)> = stimuli
             .clips()
             .map(|(c, r)| (c.to_string(), r.to_string()))
