@@ -358,8 +358,9 @@ fn position_allocation_beats_the_printed_rule() {
     }
 }
 
-/// Payload formats from 2 on start with a version byte; a version-1 stream (no version byte, its first
-/// payload byte is the range coder's initial 0) or any other version is refused, not decoded.
+/// Payload formats from 2 on start with a version byte; a version-1 stream (no version byte,
+/// its first payload byte is the range coder's initial 0) or any other version is refused, not
+/// decoded.
 #[test]
 fn old_wavelet_payload_versions_are_refused() {
     let clip = walking_clip(&WalkParams {

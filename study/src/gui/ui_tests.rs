@@ -13,13 +13,14 @@ use results::store::{SESSION_FILE, SessionState, TRIALS_FILE, read_json};
 use results::trials::read_trials;
 
 use super::screens::{Exit, StudyUi};
-
-#[path = "../../tests/common/walk_stimuli.rs"]
-mod walk_stimuli;
 use super::timing::FrameClock;
 use crate::live::LiveStimuli;
 use crate::session::{Opened, Recorder};
 use crate::stimuli::StimulusLibrary;
+
+/// The window tests' generated walk stimuli, shared with `tests/`.
+#[path = "../../tests/common/walk_stimuli.rs"]
+mod walk_stimuli;
 
 /// Seconds per kittest step.
 const DT: f32 = 0.05;
