@@ -14,8 +14,9 @@ use std::hint::black_box;
 use std::time::Duration;
 
 use codecs::codec::{self, Params};
-use codecs::{data, io, rate};
+use codecs::rate;
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use motion::{data, io};
 
 fn bench(c: &mut Criterion) {
     let clips = data::shared_clips();

@@ -13,8 +13,8 @@ use std::time::Duration;
 
 use codecs::codec::{self, CodecContext, Params};
 use codecs::primitives::{Database, TrainParams};
-use codecs::{Clip, data, io};
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use motion::{Clip, data, io};
 
 fn bench(c: &mut Criterion) {
     let clips: Vec<(String, Clip)> = data::shared_clips()

@@ -398,7 +398,7 @@ impl Bitstream {
     ///
     /// # Errors
     /// [`BitstreamError::Skeleton`] when fingerprints or channel counts differ.
-    pub fn check_skeleton(&self, skeleton: &crate::Skeleton) -> Result<(), BitstreamError> {
+    pub fn check_skeleton(&self, skeleton: &motion::Skeleton) -> Result<(), BitstreamError> {
         let fp = skeleton.fingerprint();
         if fp != self.fingerprint || skeleton.channel_count() != self.channels as usize {
             return Err(BitstreamError::Skeleton {

@@ -1,44 +1,29 @@
-//! Motion-capture clips and the codecs that compress them.
+//! The seeds' motion codecs and what they are measured with.
 //!
-//! This crate holds everything that works on motion data and knows nothing of studies:
-//! - the clip model ([`Skeleton`], [`Clip`]) with readers and writers for Acclaim ASF/AMC and BVH,
-//! - forward kinematics ([`fk`]) in `f64`,
-//! - the body-part and hierarchy map the perceptual codecs weight channels by ([`bodymap`]),
-//! - a procedurally generated walking figure for demos and tests ([`synth`]),
-//! - (codec issue) wavelets, the seeds' codecs, the bitstream container and error metrics.
+//! This crate compresses [`motion::Clip`]s and knows nothing of studies:
+//! - wavelets ([`wavelet`]) and entropy coding ([`entropy`]),
+//! - every codec behind one [`codec::Codec`] trait and a registry by name ([`codec`]): the
+//!   perceptual wavelet codec and its baselines, 1-D SPIHT with perceptual bit allocation, the
+//!   primitive codec, raw and zstd references,
+//! - the CRC-checked bitstream container ([`bitstream`]) and rate control to a target
+//!   compression ratio ([`rate`]),
+//! - objective error metrics through forward kinematics ([`metrics`]),
+//! - the motion-primitive database of the incremental codec ([`primitives`]).
 //!
 //! ```
-//! let clip = codecs::synth::walking_clip(&codecs::synth::WalkParams::default());
-//! let positions = codecs::fk::positions(&clip);
-//! assert_eq!(positions.frames(), clip.frames());
+//! use codecs::codec;
+//! let clip = motion::synth::walking_clip(&motion::synth::WalkParams::default());
+//! let spiht = codec::by_name("spiht").ok_or("no spiht")?;
+//! let stream = codecs::rate::encode_to_cr(spiht.as_ref(), &clip, &codec::Params::new(), 20.0)?;
+//! let decoded = spiht.decode(&stream, &clip.skeleton)?;
+//! assert!(codecs::metrics::compare(&clip, &decoded)?.rms_cm < 2.0);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
-pub mod amc;
-pub mod asf;
 pub mod bitstream;
-pub mod bodymap;
-pub mod bvh;
-pub mod clip;
 pub mod codec;
-pub mod convert;
-pub mod data;
 pub mod entropy;
-pub mod error;
-pub mod fk;
-pub mod io;
-pub mod markers;
-pub mod math;
 pub mod metrics;
-pub mod playback;
 pub mod primitives;
-pub mod quat;
 pub mod rate;
-pub mod synth;
-mod text;
 pub mod wavelet;
-
-pub use clip::{
-    Axis, BodyPart, Channel, ChannelKind, Clip, ClipError, Joint, Rest, Skeleton, SkeletonFormat,
-    Units,
-};
-pub use error::{Limits, ParseError, WriteError};

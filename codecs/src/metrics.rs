@@ -12,8 +12,8 @@
 //!   metric is the difference (decoded − reference) of the mean horizontal foot speed over
 //!   those frames, in cm/s. Positive means the decoded clip slides more.
 
-use crate::clip::{BodyPart, Clip};
-use crate::fk;
+use motion::clip::{BodyPart, Clip};
+use motion::fk;
 
 /// A foot within this height of its lowest point counts as in contact.
 pub const CONTACT_HEIGHT_CM: f64 = 4.0;
@@ -175,8 +175,8 @@ fn mean_rotation_angle_deg(reference: &Clip, decoded: &Clip) -> f64 {
 
 /// The angle (radians, 0..=π) of the rotation `aᵀ·b`, from its cosine (trace) and sine (skew
 /// part) together, which stays accurate near 0 and π where `acos` alone does not.
-fn angle_between(a: &crate::math::Mat3, b: &crate::math::Mat3) -> f64 {
-    let r = crate::math::mul(&crate::math::transpose(a), b);
+fn angle_between(a: &motion::math::Mat3, b: &motion::math::Mat3) -> f64 {
+    let r = motion::math::mul(&motion::math::transpose(a), b);
     let cos = (r[0][0] + r[1][1] + r[2][2] - 1.0) / 2.0;
     let sin =
         ((r[2][1] - r[1][2]).powi(2) + (r[0][2] - r[2][0]).powi(2) + (r[1][0] - r[0][1]).powi(2))
@@ -188,7 +188,7 @@ fn angle_between(a: &crate::math::Mat3, b: &crate::math::Mat3) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::synth::{WalkParams, walking_clip};
+    use motion::synth::{WalkParams, walking_clip};
 
     #[test]
     fn identical_clips_have_zero_error() {

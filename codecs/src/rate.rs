@@ -7,8 +7,8 @@
 //! error threshold `t_l`, along which the CR grows instead ([`RateControl::SearchIncreasing`]).
 
 use crate::bitstream::Bitstream;
-use crate::clip::Clip;
 use crate::codec::{Codec, CodecError, Params, RateControl};
+use motion::clip::Clip;
 
 /// Relative tolerance on the achieved CR.
 pub const CR_TOLERANCE: f64 = 0.02;

@@ -5,8 +5,8 @@ use std::sync::OnceLock;
 
 use codecs::bitstream::Bitstream;
 use codecs::codec::{self, Params};
-use codecs::synth::{WalkParams, walking_clip};
-use codecs::{Clip, Skeleton};
+use motion::synth::{WalkParams, walking_clip};
+use motion::{Clip, Skeleton};
 use proptest::prelude::*;
 
 /// A short clip coded by every codec: (clip, serialized streams).

@@ -4,8 +4,9 @@
 
 use codecs::bitstream::Bitstream;
 use codecs::codec::{self, Params, spiht};
-use codecs::synth::{WalkParams, walking_clip};
-use codecs::{Clip, data, io, metrics, rate};
+use codecs::{metrics, rate};
+use motion::synth::{WalkParams, walking_clip};
+use motion::{Clip, data, io};
 
 fn shared() -> Vec<(String, Clip)> {
     data::shared_clips()

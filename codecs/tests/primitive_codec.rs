@@ -16,8 +16,9 @@ use cap::Cap;
 use codecs::bitstream::Bitstream;
 use codecs::codec::{self, Codec, CodecContext, CodecError, Params, PrimitiveCodec};
 use codecs::primitives::{Database, TrainParams};
-use codecs::quat::to_quaternions;
-use codecs::{Clip, data, io, rate};
+use codecs::rate;
+use motion::quat::to_quaternions;
+use motion::{Clip, data, io};
 use proptest::prelude::*;
 
 /// 1 GiB for the whole binary: far above what decoding the clips needs, far below what a

@@ -11,7 +11,7 @@ use proptest::prelude::*;
 fn db_bytes() -> &'static Vec<u8> {
     static B: OnceLock<Vec<u8>> = OnceLock::new();
     B.get_or_init(|| {
-        let clip = codecs::synth::walking_clip(&codecs::synth::WalkParams::default());
+        let clip = motion::synth::walking_clip(&motion::synth::WalkParams::default());
         let params = TrainParams {
             k_max: 6,
             ..TrainParams::default()

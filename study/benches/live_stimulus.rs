@@ -23,9 +23,9 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use codecs::primitives::{Database, TrainParams};
-use codecs::{Clip, data, io};
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use live::LiveStimuli;
+use motion::{Clip, data, io};
 use protocols::{Answer, Response, Session, StudyDefinition, Trial};
 
 const FRAMES: usize = 1200;

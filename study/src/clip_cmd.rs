@@ -5,7 +5,7 @@ use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
-use codecs::{Clip, SkeletonFormat, fk, io, synth};
+use motion::{Clip, SkeletonFormat, fk, io, synth};
 
 /// Where a clip comes from: `--asf A --amc M`, one `.bvh`, or the built-in demo walk.
 #[derive(Debug, Clone, clap::Args)]

@@ -12,7 +12,8 @@ use anyhow::{Context, Result, bail};
 use codecs::bitstream::Bitstream;
 use codecs::codec::{self, Codec, CodecContext, Params};
 use codecs::primitives::Database;
-use codecs::{Clip, Skeleton, SkeletonFormat, asf, io, metrics, rate};
+use codecs::{metrics, rate};
+use motion::{Clip, Skeleton, SkeletonFormat, asf, io};
 use protocols::manifest::{
     MANIFEST_VERSION, REFERENCE_CODEC, Stimulus, StimulusManifest, StimulusMetrics,
 };
@@ -503,7 +504,7 @@ mod tests {
 
     #[test]
     fn sweep_two_shared_clips_three_codecs_four_rates() {
-        let Some(dir) = codecs::data::mocap_dir() else {
+        let Some(dir) = motion::data::mocap_dir() else {
             return;
         };
         let out = std::env::temp_dir().join(format!("study-sweep-test-{}", std::process::id()));

@@ -134,12 +134,12 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         Mode::Simulated
     };
     // In the window, a two-second walk keeps each trial short.
-    let clip = codecs::synth::walking_clip(&codecs::synth::WalkParams {
+    let clip = motion::synth::walking_clip(&motion::synth::WalkParams {
         duration_s: if mode == Mode::Window { 2.0 } else { 4.0 },
-        ..codecs::synth::WalkParams::default()
+        ..motion::synth::WalkParams::default()
     });
     let (asf, amc) = (out.join("clips/walk.asf"), out.join("clips/walk.amc"));
-    codecs::io::write_clip(&clip, &amc, Some(&asf))?;
+    motion::io::write_clip(&clip, &amc, Some(&asf))?;
 
     let s = |p: &Path| p.display().to_string();
     let stimuli = out.join("stimuli");

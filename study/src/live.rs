@@ -24,10 +24,10 @@ use std::sync::{Arc, Condvar, Mutex, PoisonError};
 use std::thread::JoinHandle;
 
 use anyhow::{Context as _, anyhow, bail};
-use codecs::clip::Clip;
 use codecs::codec::CodecContext;
 use codecs::codec::{Codec, Params, RateControl};
 use codecs::primitives::Database;
+use motion::clip::Clip;
 use protocols::{StaircaseStudy, StimulusEncoding, StudyDefinition, Trial};
 
 /// The stimuli of one live staircase study: its codec, source clips and a cache of encoded
@@ -191,7 +191,7 @@ impl LiveStimuli {
             })?;
             let file: PathBuf = manifest_dir.join(&s.file);
             let skeleton = s.skeleton.as_deref().map(|k| manifest_dir.join(k));
-            let clip = codecs::io::read_clip(skeleton.as_deref(), &file).with_context(|| {
+            let clip = motion::io::read_clip(skeleton.as_deref(), &file).with_context(|| {
                 format!(
                     "loading the source of live clip {:?} (stimulus {:?} in {})",
                     c.clip,

@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
-use codecs::markers::{acclaim, calibration::Calibration, data, gdke::JointKind, segments, synth};
+use markers::{acclaim, calibration::Calibration, data, gdke::JointKind, segments, synth};
 
 use crate::clip_cmd::ClipInput;
 
@@ -211,9 +211,9 @@ fn solve(args: SolveArgs) -> Result<()> {
     };
     if out_asf.is_some() {
         let asf = acclaim::bvh_to_asf(&solved.clip)?;
-        codecs::io::write_clip(&asf.clip, &output, out_asf.as_deref())?;
+        motion::io::write_clip(&asf.clip, &output, out_asf.as_deref())?;
     } else {
-        codecs::io::write_clip(&solved.clip, &output, None)?;
+        motion::io::write_clip(&solved.clip, &output, None)?;
     }
     for (i, j) in solved.joints.iter().enumerate() {
         let kind = match j.kind {

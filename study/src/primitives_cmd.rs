@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use codecs::primitives::{Database, SegmentParams, TrainParams};
-use codecs::{Clip, io};
+use motion::{Clip, io};
 
 /// Primitive-database subcommands.
 #[derive(Debug, clap::Subcommand)]

@@ -368,8 +368,8 @@ pub fn display_test(args: &DisplayTestArgs) -> anyhow::Result<()> {
         bail!("--seconds {}: expected 0 < seconds ≤ 3600", args.seconds);
     }
     let clip = match &args.clip {
-        Some(p) => codecs::io::read_clip(args.asf.as_deref(), p)?,
-        None => codecs::synth::walking_clip(&codecs::synth::WalkParams::default()),
+        Some(p) => motion::io::read_clip(args.asf.as_deref(), p)?,
+        None => motion::synth::walking_clip(&motion::synth::WalkParams::default()),
     };
     let view = View::framing(&clip);
     let mut figures = [Figure::new(&clip, &view), Figure::new(&clip, &view)];

@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use anyhow::Context as _;
-use codecs::clip::Clip;
+use motion::clip::Clip;
 use protocols::StudyDefinition;
 use protocols::manifest::StimulusManifest;
 
@@ -46,7 +46,7 @@ impl StimulusLibrary {
             .with_context(|| format!("stimulus {id:?} is not in the stimulus manifest"))?;
         let file = self.base.join(&st.file);
         let skeleton = st.skeleton.as_ref().map(|s| self.base.join(s));
-        let clip = codecs::io::read_clip(skeleton.as_deref(), &file)
+        let clip = motion::io::read_clip(skeleton.as_deref(), &file)
             .with_context(|| format!("loading stimulus {id:?}"))?;
         let clip = Arc::new(clip);
         self.clips.insert(id.to_string(), Arc::clone(&clip));

@@ -22,7 +22,7 @@ fn ok(args: &[&str]) -> String {
 }
 
 fn data(name: &str) -> String {
-    codecs::data::mocap_dir()
+    motion::data::mocap_dir()
         .map_or_else(
             || PathBuf::from("/nonexistent").join(name),
             |d| d.join(name),
@@ -32,7 +32,7 @@ fn data(name: &str) -> String {
 }
 
 fn have_data() -> bool {
-    codecs::data::mocap_dir().is_some()
+    motion::data::mocap_dir().is_some()
 }
 
 fn tmp() -> PathBuf {

@@ -8,7 +8,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use codecs::synth::{WalkParams, walking_clip};
+use motion::synth::{WalkParams, walking_clip};
 
 fn examples() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples")
@@ -71,7 +71,7 @@ fn example_motions() -> Vec<(&'static str, &'static str, WalkParams)> {
     ]
 }
 
-/// The checked-in clips of `examples/live/clips` are exactly what `codecs::synth` generates
+/// The checked-in clips of `examples/live/clips` are exactly what `motion::synth` generates
 /// (run with `REGENERATE_LIVE_EXAMPLE=1` to rewrite them after a change to the generator).
 #[test]
 fn example_clips_are_the_generated_motions() {
@@ -87,7 +87,7 @@ fn example_clips_are_the_generated_motions() {
             .extension()
             .is_some_and(|e| e.eq_ignore_ascii_case("amc"));
         let asf = is_amc.then(|| out.join("walker.asf"));
-        codecs::io::write_clip(&clip, &out.join(file), asf.as_deref()).unwrap();
+        motion::io::write_clip(&clip, &out.join(file), asf.as_deref()).unwrap();
         if !regenerate {
             for f in std::iter::once(file).chain(asf.as_ref().map(|_| "walker.asf")) {
                 assert_eq!(
@@ -112,7 +112,7 @@ fn study() -> Command {
 }
 
 /// The example's source clips, read the way the manifest names them.
-fn source_clips() -> Vec<(String, codecs::Clip)> {
+fn source_clips() -> Vec<(String, motion::Clip)> {
     let dir = examples().join("live");
     let m: protocols::manifest::StimulusManifest =
         serde_json::from_str(&std::fs::read_to_string(dir.join("stimuli.json")).unwrap()).unwrap();
@@ -120,7 +120,7 @@ fn source_clips() -> Vec<(String, codecs::Clip)> {
         .iter()
         .map(|s| {
             let skeleton = s.skeleton.as_ref().map(|k| dir.join(k));
-            let clip = codecs::io::read_clip(skeleton.as_deref(), &dir.join(&s.file)).unwrap();
+            let clip = motion::io::read_clip(skeleton.as_deref(), &dir.join(&s.file)).unwrap();
             (s.clip.clone(), clip)
         })
         .collect()
@@ -128,7 +128,7 @@ fn source_clips() -> Vec<(String, codecs::Clip)> {
 
 /// RMS error (cm) of SPIHT at target CR `level` on `clip`, computed here independently of the
 /// runner, with the example's fixed parameters.
-fn spiht_rms_cm(clip: &codecs::Clip, level: f64) -> f64 {
+fn spiht_rms_cm(clip: &motion::Clip, level: f64) -> f64 {
     let codec = codecs::codec::by_name("spiht").unwrap();
     let params = BTreeMap::from([("cr".to_string(), level), ("window".to_string(), 128.0)]);
     let stream = codec.encode(clip, &params).unwrap();

@@ -6,7 +6,7 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use codecs::markers::data::{self, MarkerSet};
+use markers::data::{self, MarkerSet};
 
 fn study(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_study"))
@@ -55,19 +55,19 @@ fn solve_both_ways(tag: &str, clip_args: &[&str]) {
     };
     solve(&["-o", s(&bvh)]);
     solve(&["-o", s(&amc), "--out-asf", s(&asf)]);
-    let bvh_back = codecs::io::read_clip(None, &bvh).unwrap();
-    let asf_back = codecs::io::read_clip(Some(&asf), &amc).unwrap();
+    let bvh_back = motion::io::read_clip(None, &bvh).unwrap();
+    let asf_back = motion::io::read_clip(Some(&asf), &amc).unwrap();
     std::fs::remove_dir_all(&dir).ok();
     // The point map depends only on the skeleton's structure; the ASF read back must have
     // the bones the conversion of the BVH read back names, in the same order.
-    let map = codecs::markers::acclaim::bvh_to_asf(&bvh_back).unwrap();
-    let names = |c: &codecs::Clip| -> Vec<String> {
+    let map = markers::acclaim::bvh_to_asf(&bvh_back).unwrap();
+    let names = |c: &motion::Clip| -> Vec<String> {
         c.skeleton.joints.iter().map(|j| j.name.clone()).collect()
     };
     assert_eq!(names(&asf_back), names(&map.clip));
     let (a, b) = (
-        codecs::fk::positions(&bvh_back),
-        codecs::fk::positions(&asf_back),
+        motion::fk::positions(&bvh_back),
+        motion::fk::positions(&asf_back),
     );
     assert_eq!(a.frames(), b.frames());
     let mut worst = 0.0f64;
@@ -89,7 +89,7 @@ fn solve_both_ways(tag: &str, clip_args: &[&str]) {
 #[test]
 fn solve_as_asf_amc_matches_solve_as_bvh() {
     solve_both_ways("demo", &["--demo"]);
-    if let Some(dir) = codecs::data::mocap_dir() {
+    if let Some(dir) = motion::data::mocap_dir() {
         let (asf, amc) = (dir.join("12.asf"), dir.join("02_01.amc"));
         solve_both_ways("cmu", &["--asf", s(&asf), "--amc", s(&amc)]);
     } else {
@@ -280,11 +280,11 @@ fn solve_with_a_calibration_trial() {
     let rom_set = data::read_markers(&rom).unwrap();
     assert_eq!(motion.names(), rom_set.names());
     assert!(rom_set.frames() > motion.frames());
-    let map = codecs::markers::segments::read_segments(&seg).unwrap();
-    let cal = codecs::markers::calibration::Calibration::estimate(&rom_set, &map).unwrap();
-    let expected = codecs::fk::positions(&cal.solve(&motion).unwrap().clip);
-    let cal_back = codecs::fk::positions(&codecs::io::read_clip(None, &cal_bvh).unwrap());
-    let plain_back = codecs::fk::positions(&codecs::io::read_clip(None, &plain_bvh).unwrap());
+    let map = markers::segments::read_segments(&seg).unwrap();
+    let cal = markers::calibration::Calibration::estimate(&rom_set, &map).unwrap();
+    let expected = motion::fk::positions(&cal.solve(&motion).unwrap().clip);
+    let cal_back = motion::fk::positions(&motion::io::read_clip(None, &cal_bvh).unwrap());
+    let plain_back = motion::fk::positions(&motion::io::read_clip(None, &plain_bvh).unwrap());
     std::fs::remove_dir_all(&dir).ok();
     let (mut same, mut differ) = (0.0f64, 0.0f64);
     for f in 0..expected.frames() {

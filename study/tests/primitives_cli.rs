@@ -70,7 +70,7 @@ fn train_then_info_then_refuse_a_corrupt_database() {
     reason = "one scenario: train, list, encode, decode, mismatch, truncation, sweep"
 )]
 fn primitive_codec_end_to_end_with_db() {
-    let Some(data) = codecs::data::mocap_dir() else {
+    let Some(data) = motion::data::mocap_dir() else {
         return;
     };
     let dir = std::env::temp_dir().join(format!("study-prim-codec-{}", std::process::id()));

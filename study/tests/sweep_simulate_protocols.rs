@@ -58,7 +58,7 @@ slope = 3
 
 #[test]
 fn simulate_over_a_sweep_manifest() {
-    let Some(mocap) = codecs::data::mocap_dir() else {
+    let Some(mocap) = motion::data::mocap_dir() else {
         return;
     };
     let dir = scratch("sweep");

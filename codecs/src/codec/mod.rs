@@ -24,8 +24,8 @@ use std::collections::BTreeMap;
 use std::sync::Arc;
 
 use crate::bitstream::{Bitstream, BitstreamError, StreamLimits};
-use crate::clip::{Clip, ClipError, Skeleton};
 use crate::primitives::Database;
+use motion::clip::{Clip, ClipError, Skeleton};
 
 mod prep;
 pub mod primitive;

@@ -1,9 +1,9 @@
 //! Preparation shared by the wavelet codecs: Euler unwrapping, channel lengths and the
 //! channels' first-order effect on joint positions.
 
-use crate::clip::{ChannelKind, Clip, Skeleton, SkeletonFormat};
-use crate::fk::Kinematics;
-use crate::math::{Vec3, euler_fixed};
+use motion::clip::{ChannelKind, Clip, Skeleton, SkeletonFormat};
+use motion::fk::Kinematics;
+use motion::math::{Vec3, euler_fixed};
 
 /// Unwraps an angle channel in degrees in place: every frame-to-frame jump larger than 180° is
 /// taken as a wrap and removed by adding a multiple of 360°. Returns true if anything changed.
@@ -62,7 +62,7 @@ pub(crate) fn unwrapped_matrix(clip: &Clip) -> (Vec<f64>, Vec<bool>) {
     (data, flags)
 }
 
-/// Length each channel swings, in file units ([`crate::Skeleton::swung_length`]), and the longest
+/// Length each channel swings, in file units ([`motion::Skeleton::swung_length`]), and the longest
 /// over the skeleton (paper 000 step 3 normalizes by it).
 pub(crate) fn channel_lengths(clip: &Clip) -> (Vec<f64>, f64) {
     let sk = &clip.skeleton;
@@ -110,7 +110,7 @@ pub(crate) fn position_sensitivity(skeleton: &Skeleton) -> Vec<f64> {
     for (j, joint) in joints.iter().enumerate() {
         let frame = match skeleton.format {
             SkeletonFormat::Asf => euler_fixed(&joint.axis_order, &joint.axis_deg),
-            SkeletonFormat::Bvh => crate::math::IDENTITY,
+            SkeletonFormat::Bvh => motion::math::IDENTITY,
         };
         let pivot = match (skeleton.format, joint.parent) {
             (SkeletonFormat::Asf, Some(p)) => points.get(p).copied(),

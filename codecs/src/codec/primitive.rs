@@ -15,7 +15,7 @@
 //!    (eq. 5.8) stays within `t_j` at every frame; the kept values are run-length coded and
 //!    everything is range coded ([`crate::entropy`]).
 //!
-//! `t_j = t_L` for leg joints ([`crate::BodyPart::is_leg`]) and `t_U = upper_ratio·t_L`
+//! `t_j = t_L` for leg joints ([`motion::BodyPart::is_leg`]) and `t_U = upper_ratio·t_L`
 //! (thesis: 2) for every other joint. Translation channels (the root's) are cut into 32-frame
 //! windows; each window's mean is sent in 1/1024 units, the rest gets a 4-level CDF 9/7
 //! transform whose smallest 50 % of coefficients are zeroed and the others quantized to 10 bits.
@@ -54,15 +54,15 @@ use super::{
     Codec, CodecError, Params, RateControl, check_stream, header, int_param, merged, real_param,
 };
 use crate::bitstream::Bitstream;
-use crate::clip::{Axis, Clip, Skeleton, SkeletonFormat};
 use crate::entropy::{BitModel, EntropyError, IntModel, RangeDecoder, RangeEncoder, UintModel};
 use crate::primitives::database::{Database, Primitive, segment_distance};
 use crate::primitives::segment::{denormalize, segment_track};
-use crate::quat::{
+use crate::wavelet::{Transform, Wavelet, band_lengths};
+use motion::clip::{Axis, Clip, Skeleton, SkeletonFormat};
+use motion::quat::{
     Quat, QuatClip, from_quaternions, project_to_channels, rotation_axes, rotation_joints,
     to_quaternions,
 };
-use crate::wavelet::{Transform, Wavelet, band_lengths};
 
 /// Registry name.
 pub const NAME: &str = "primitive";

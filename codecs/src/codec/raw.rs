@@ -2,7 +2,7 @@
 
 use super::{Codec, CodecError, Params, RateControl, check_stream, header, merged};
 use crate::bitstream::Bitstream;
-use crate::clip::{Clip, Skeleton};
+use motion::clip::{Clip, Skeleton};
 
 /// zstd level for the lossless baseline.
 const ZSTD_LEVEL: i32 = 19;

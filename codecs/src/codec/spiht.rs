@@ -47,9 +47,9 @@ use super::{
     merged, real_param,
 };
 use crate::bitstream::Bitstream;
-use crate::clip::{BodyPart, Clip, Skeleton};
 use crate::entropy::{BitModel, IntModel, RangeDecoder, RangeEncoder, UintModel};
 use crate::wavelet::{Transform, Wavelet, band_lengths};
+use motion::clip::{BodyPart, Clip, Skeleton};
 
 /// Payload format version 2: the position-aware allocation (`allocation`), whose energy codes
 /// mean something else than version 1's.
@@ -1221,9 +1221,9 @@ mod tests {
     /// one thread gives, near-lossless (1:1) and at 12:1.
     #[test]
     fn channels_on_threads_decode_exactly_as_on_one() {
-        let clip = crate::synth::walking_clip(&crate::synth::WalkParams {
+        let clip = motion::synth::walking_clip(&motion::synth::WalkParams {
             duration_s: 3.0,
-            ..crate::synth::WalkParams::default()
+            ..motion::synth::WalkParams::default()
         });
         let c = SpihtCodec::new(true);
         for cr in [1.0, 12.0] {

@@ -73,11 +73,11 @@ use super::{
     merged, real_param,
 };
 use crate::bitstream::Bitstream;
-use crate::clip::{Clip, Skeleton};
 use crate::entropy::{
     BitModel, EntropyError, IntModel, NonzeroModel, RangeDecoder, RangeEncoder, UintModel,
 };
 use crate::wavelet::{Transform, Wavelet, band_lengths};
+use motion::clip::{Clip, Skeleton};
 
 /// How channels share the coefficient budget.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -940,7 +940,7 @@ impl LaneContext<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::synth::{WalkParams, walking_clip};
+    use motion::synth::{WalkParams, walking_clip};
 
     #[test]
     fn lane_channels_are_the_channels_lane_of_assigns() {

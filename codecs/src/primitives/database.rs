@@ -18,9 +18,9 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::clip::Clip;
 use crate::primitives::segment::{NORMALIZED_FRAMES, SegmentParams, segment_track};
-use crate::quat::{Quat, to_quaternions};
+use motion::clip::Clip;
+use motion::quat::{Quat, to_quaternions};
 
 /// Current database file version.
 pub const DATABASE_VERSION: u32 = 1;
@@ -600,7 +600,7 @@ mod tests {
     use super::*;
 
     fn walk() -> Clip {
-        crate::synth::walking_clip(&crate::synth::WalkParams::default())
+        motion::synth::walking_clip(&motion::synth::WalkParams::default())
     }
 
     #[test]

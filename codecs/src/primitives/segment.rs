@@ -8,7 +8,7 @@
 //! at least `min_frames` (15) after its start, or after `max_frames` (`S_M`) frames if none
 //! comes; the rest of the clip forms the last, possibly shorter, segment.
 
-use crate::quat::Quat;
+use motion::quat::Quat;
 
 /// Frames of a normalized segment (a power of two, for the 4-level wavelet of ch. 5.3.4).
 pub const NORMALIZED_FRAMES: usize = 16;
@@ -148,7 +148,7 @@ pub fn segment_track(track: &[Quat], frame_rate_hz: f64, params: SegmentParams) 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::clip::Axis;
+    use motion::clip::Axis;
 
     fn swing(n: usize) -> Vec<Quat> {
         (0..n)

@@ -33,7 +33,7 @@ fn offscreen() -> Option<Offscreen> {
 
 /// The generated walk at 0.5 s, twice side by side (the right one a quarter second later).
 fn render(o: &mut Offscreen) -> Image {
-    let clip = codecs::synth::walking_clip(&codecs::synth::WalkParams::default());
+    let clip = motion::synth::walking_clip(&motion::synth::WalkParams::default());
     let view = View::framing(&clip);
     let mut fig = Figure::new(&clip, &view);
     let (mut a, mut b) = (FrameShapes::default(), FrameShapes::default());
@@ -110,7 +110,7 @@ fn a_known_pose_matches_the_reference_image() {
 fn a_frame_differs_from_a_different_pose() {
     let Some(mut o) = offscreen() else { return };
     let a = render(&mut o);
-    let clip = codecs::synth::walking_clip(&codecs::synth::WalkParams::default());
+    let clip = motion::synth::walking_clip(&motion::synth::WalkParams::default());
     let view = View::framing(&clip);
     let mut fig = Figure::new(&clip, &view);
     let mut s = FrameShapes::default();

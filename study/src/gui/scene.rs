@@ -7,9 +7,9 @@
 //! and the test stimulus of a trial, drawn with the reference's view, appear at the same size
 //! and place. The renderer knows nothing of trials; this module knows nothing of wgpu.
 
-use codecs::clip::Clip;
-use codecs::math::Vec3;
-use codecs::playback::{EndMode, Sampler};
+use motion::clip::Clip;
+use motion::math::Vec3;
+use motion::playback::{EndMode, Sampler};
 
 /// A column-major 4×4 matrix (`m[column][row]`), as WGSL reads it.
 pub type Mat4 = [[f32; 4]; 4];
@@ -147,7 +147,7 @@ pub struct View {
 impl View {
     /// Frames every pose of `clip` (y up), seen from the front-right and a little above.
     pub fn framing(clip: &Clip) -> View {
-        let positions = codecs::fk::positions(clip);
+        let positions = motion::fk::positions(clip);
         let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
         let mut tallest = 0.0f32;
         for f in 0..positions.frames() {
@@ -344,10 +344,10 @@ mod tests {
 
     #[test]
     fn every_pose_of_the_walk_projects_inside_the_view() {
-        let clip = codecs::synth::walking_clip(&codecs::synth::WalkParams::default());
+        let clip = motion::synth::walking_clip(&motion::synth::WalkParams::default());
         let view = View::framing(&clip);
         let vp = view.view_proj(16.0 / 9.0);
-        let positions = codecs::fk::positions(&clip);
+        let positions = motion::fk::positions(&clip);
         for f in (0..positions.frames()).step_by(7) {
             for p in positions.frame(f) {
                 let ndc = transform(&vp, to_f32(*p));
@@ -359,7 +359,7 @@ mod tests {
 
     #[test]
     fn bones_join_parent_and_child_joints() {
-        let clip = codecs::synth::walking_clip(&codecs::synth::WalkParams::default());
+        let clip = motion::synth::walking_clip(&motion::synth::WalkParams::default());
         let view = View::framing(&clip);
         let mut fig = Figure::new(&clip, &view);
         let mut shapes = FrameShapes::default();

@@ -7,13 +7,13 @@ use std::path::Path;
 
 /// Writes `walk.asf`, `walk.amc` and `stimuli.json` into `dir`.
 pub fn write_walk_stimuli(dir: &Path) {
-    let clip = codecs::synth::walking_clip(&codecs::synth::WalkParams {
+    let clip = motion::synth::walking_clip(&motion::synth::WalkParams {
         duration_s: 1.0,
         // AMC files carry no rate: CMU's 120 Hz is assumed when they are read back.
         frame_rate_hz: 120.0,
-        ..codecs::synth::WalkParams::default()
+        ..motion::synth::WalkParams::default()
     });
-    codecs::io::write_clip(&clip, &dir.join("walk.amc"), Some(&dir.join("walk.asf"))).unwrap();
+    motion::io::write_clip(&clip, &dir.join("walk.amc"), Some(&dir.join("walk.asf"))).unwrap();
     let stim = |id: &str, codec: &str, cr: f64, rms: f64| {
         serde_json::json!({
             "id": id, "clip": "walk", "codec": codec,

@@ -22,8 +22,8 @@
 //!
 //! ```
 //! use std::path::Path;
-//! use codecs::markers::{calibration::Calibration, segments::parse_segments, synth};
-//! let walk = codecs::synth::walking_clip(&codecs::synth::WalkParams {
+//! use markers::{calibration::Calibration, segments::parse_segments, synth};
+//! let walk = motion::synth::walking_clip(&motion::synth::WalkParams {
 //!     duration_s: 2.0,
 //!     ..Default::default()
 //! });

@@ -7,7 +7,7 @@
 use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use codecs::markers::quiet::catch_quiet;
+use markers::quiet::catch_quiet;
 
 #[test]
 fn quiet_panics_leave_other_threads_and_the_previous_hook_alone() {

@@ -8,13 +8,11 @@
 use std::hint::black_box;
 use std::time::Duration;
 
-use codecs::markers::calibration::Calibration;
-use codecs::markers::gdke::{GdkeOptions, LsqOptions, gdke, least_squares_sphere};
-use codecs::markers::segments::{self, parse_segments};
-use codecs::markers::synth::{
-    RomOptions, SynthOptions, rom_capture, segment_map_toml, synth_capture,
-};
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use markers::calibration::Calibration;
+use markers::gdke::{GdkeOptions, LsqOptions, gdke, least_squares_sphere};
+use markers::segments::{self, parse_segments};
+use markers::synth::{RomOptions, SynthOptions, rom_capture, segment_map_toml, synth_capture};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -61,11 +59,11 @@ fn bench(c: &mut Criterion) {
 /// The solver on CMU 02_01 (480 frames) and its range-of-motion trial; skipped without the
 /// shared clips (outside CI).
 fn solver(c: &mut Criterion) {
-    let Some(dir) = codecs::data::mocap_dir() else {
+    let Some(dir) = motion::data::mocap_dir() else {
         eprintln!("shared clips not found: solver benchmarks skipped");
         return;
     };
-    let clip = codecs::io::read_clip(Some(&dir.join("12.asf")), &dir.join("02_01.amc")).unwrap();
+    let clip = motion::io::read_clip(Some(&dir.join("12.asf")), &dir.join("02_01.amc")).unwrap();
     let clip = clip.excerpt(0..480);
     let options = SynthOptions::default();
     let motion = synth_capture(&clip, &options).unwrap().markers;

@@ -6,11 +6,11 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use codecs::markers::acclaim::{AsfSolved, bvh_to_asf};
-use codecs::markers::segments::{self, parse_segments};
-use codecs::markers::synth::{SynthOptions, segment_map_toml, synth_capture};
-use codecs::{Clip, Rest, SkeletonFormat};
 use common::{dist, walk_clip};
+use markers::acclaim::{AsfSolved, bvh_to_asf};
+use markers::segments::{self, parse_segments};
+use markers::synth::{SynthOptions, segment_map_toml, synth_capture};
+use motion::{Clip, Rest, SkeletonFormat};
 
 fn tmp(tag: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("markers-asf-{tag}-{}", std::process::id()));
@@ -34,10 +34,10 @@ fn round_trip(bvh: &Clip, tag: &str) -> (f64, f64) {
         dir.join("solved.amc"),
     );
     let AsfSolved { clip, asf_point_of } = bvh_to_asf(bvh).unwrap();
-    codecs::io::write_clip(bvh, &bvh_path, None).unwrap();
-    codecs::io::write_clip(&clip, &amc_path, Some(&asf_path)).unwrap();
-    let bvh_back = codecs::io::read_clip(None, &bvh_path).unwrap();
-    let asf_back = codecs::io::read_clip(Some(&asf_path), &amc_path).unwrap();
+    motion::io::write_clip(bvh, &bvh_path, None).unwrap();
+    motion::io::write_clip(&clip, &amc_path, Some(&asf_path)).unwrap();
+    let bvh_back = motion::io::read_clip(None, &bvh_path).unwrap();
+    let asf_back = motion::io::read_clip(Some(&asf_path), &amc_path).unwrap();
     std::fs::remove_dir_all(&dir).ok();
 
     // A valid ASF skeleton: root first, bones with unit direction, length, axis and dofs.
@@ -68,8 +68,8 @@ fn round_trip(bvh: &Clip, tag: &str) -> (f64, f64) {
     assert_eq!(asf_back.channel_count(), clip.channel_count());
 
     let (a, b) = (
-        codecs::fk::positions(&bvh_back),
-        codecs::fk::positions(&asf_back),
+        motion::fk::positions(&bvh_back),
+        motion::fk::positions(&asf_back),
     );
     assert_eq!(a.joint_count(), bvh.skeleton.joints.len());
     let (mut worst_rel, mut worst_mm) = (0.0f64, 0.0f64);
@@ -96,7 +96,7 @@ fn round_trip(bvh: &Clip, tag: &str) -> (f64, f64) {
 
 #[test]
 fn solved_demo_walk_as_asf_amc_matches_its_bvh() {
-    let clip = codecs::synth::walking_clip(&codecs::synth::WalkParams::default());
+    let clip = motion::synth::walking_clip(&motion::synth::WalkParams::default());
     let (rel, mm) = round_trip(&solve(&clip, &SynthOptions::default()), "demo");
     eprintln!("demo walk: worst FK disagreement {rel:.2e} of bone length, {mm:.2e} mm");
 }
@@ -116,7 +116,7 @@ fn solved_cmu_clip_as_asf_amc_matches_its_bvh() {
 fn asf_conversion_keeps_branches_and_end_sites() {
     // A BVH joint with two children and the root's children each need a bone without dofs
     // (a link) so that every BVH point stays an ASF point.
-    let clip = codecs::synth::walking_clip(&codecs::synth::WalkParams::default());
+    let clip = motion::synth::walking_clip(&motion::synth::WalkParams::default());
     let solved = solve(&clip, &SynthOptions::default());
     let asf = bvh_to_asf(&solved).unwrap();
     let sk = &asf.clip.skeleton;

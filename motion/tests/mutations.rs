@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 use cap::Cap;
-use codecs::{Limits, ParseError, Skeleton, amc, asf, bvh};
+use motion::{Limits, ParseError, Skeleton, amc, asf, bvh};
 use proptest::prelude::*;
 
 /// 1 GiB for the whole test binary: far above what parsing the real clips needs (a few MB
@@ -27,7 +27,7 @@ struct Inputs {
 fn inputs() -> &'static Inputs {
     static I: OnceLock<Inputs> = OnceLock::new();
     I.get_or_init(|| {
-        let dir = codecs::data::mocap_dir().unwrap_or_else(|| PathBuf::from("/nonexistent"));
+        let dir = motion::data::mocap_dir().unwrap_or_else(|| PathBuf::from("/nonexistent"));
         let read = |n: &str| {
             let p = dir.join(n);
             let t = std::fs::read_to_string(&p).unwrap_or_else(|e| {

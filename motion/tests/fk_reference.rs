@@ -6,7 +6,7 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use codecs::{Clip, fk, io};
+use motion::{Clip, fk, io};
 
 fn reference(args: &[&Path]) -> Vec<(usize, String, [f64; 3])> {
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scripts/reference/fk_reference.py");
@@ -66,7 +66,7 @@ fn compare(clip: &Clip, args: &[&Path], what: &str) {
 
 #[test]
 fn fk_matches_the_independent_reference_on_every_shared_clip() {
-    let clips = codecs::data::shared_clips();
+    let clips = motion::data::shared_clips();
     for c in &clips {
         let clip = io::read_clip(c.asf.as_deref(), &c.motion).unwrap();
         let args: Vec<&Path> = c
@@ -83,7 +83,7 @@ fn fk_matches_the_independent_reference_on_every_shared_clip() {
 fn fk_matches_the_independent_reference_on_generated_and_converted_motion() {
     let dir = std::env::temp_dir().join(format!("fkref-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let walk = codecs::synth::walking_clip(&codecs::synth::WalkParams {
+    let walk = motion::synth::walking_clip(&motion::synth::WalkParams {
         duration_s: 1.0,
         amplitude: 2.5,
         ..Default::default()

@@ -7,7 +7,7 @@
 //! near-singular. [`gdke`] holds the estimator and an iterative least-squares sphere fit for
 //! comparison; [`data`] the marker set with C3D and CSV I/O; [`segments`] the segment/marker
 //! assignment file, segment frames (section 2.5) and the solver that produces a
-//! [`Clip`](crate::Clip); [`calibration`] joint centres estimated on a range-of-motion trial
+//! [`Clip`](motion::Clip); [`calibration`] joint centres estimated on a range-of-motion trial
 //! and applied to a motion trial; [`acclaim`] the solved clip as ASF/AMC; [`synth`] synthetic
 //! captures (motion and range-of-motion trials) with ground truth; [`quiet`] catches the C3D
 //! parser's panics without printing them.

@@ -8,14 +8,14 @@ pub fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
 
 /// Writes `clip` as BVH (under the temp folder, in a directory named after `tag`), reads it
 /// back and asserts that every joint of every frame lands within 1e-3 units of where it was.
-pub fn assert_survives_a_bvh_round_trip(clip: &codecs::Clip, tag: &str) {
+pub fn assert_survives_a_bvh_round_trip(clip: &motion::Clip, tag: &str) {
     let dir = std::env::temp_dir().join(format!("{tag}-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("solved.bvh");
-    codecs::io::write_clip(clip, &path, None).unwrap();
-    let back = codecs::io::read_clip(None, &path).unwrap();
+    motion::io::write_clip(clip, &path, None).unwrap();
+    let back = motion::io::read_clip(None, &path).unwrap();
     std::fs::remove_dir_all(&dir).ok();
-    let (a, b) = (codecs::fk::positions(clip), codecs::fk::positions(&back));
+    let (a, b) = (motion::fk::positions(clip), motion::fk::positions(&back));
     assert_eq!(a.names, b.names);
     for f in 0..a.frames() {
         for j in 0..a.joint_count() {
@@ -30,12 +30,12 @@ pub fn assert_survives_a_bvh_round_trip(clip: &codecs::Clip, tag: &str) {
 /// The first `frames` frames of CMU 02_01 (a walk), or of the first shared clip where a
 /// `MOCAP_DATA` folder lacks it, with the clip's name; `None` outside CI without the data
 /// (under `CI` a missing folder fails the test).
-pub fn walk_clip(frames: usize) -> Option<(String, codecs::Clip)> {
-    let clips = codecs::data::shared_clips();
+pub fn walk_clip(frames: usize) -> Option<(String, motion::Clip)> {
+    let clips = motion::data::shared_clips();
     let Some(files) = clips.iter().find(|c| c.name == "02_01").or(clips.first()) else {
         eprintln!("shared clips not found: skipped outside CI");
         return None;
     };
-    let clip = codecs::io::read_clip(files.asf.as_deref(), &files.motion).unwrap();
+    let clip = motion::io::read_clip(files.asf.as_deref(), &files.motion).unwrap();
     Some((files.name.clone(), clip.excerpt(0..frames)))
 }

@@ -6,19 +6,19 @@ mod common;
 
 use std::path::Path;
 
-use codecs::clip::SkeletonFormat;
-use codecs::markers::MarkerError;
-use codecs::markers::calibration::Calibration;
-use codecs::markers::gdke::{GdkeOptions, JointKind};
-use codecs::markers::segments::{self, SegmentMap, Solved, parse_segments};
-use codecs::markers::synth::{
+use common::{assert_survives_a_bvh_round_trip, dist, walk_clip};
+use markers::MarkerError;
+use markers::calibration::Calibration;
+use markers::gdke::{GdkeOptions, JointKind};
+use markers::segments::{self, SegmentMap, Solved, parse_segments};
+use markers::synth::{
     MarkerPlacement, RomOptions, SynthCapture, SynthOptions, rom_capture, rom_clip, rom_groups,
     segment_map_toml, synth_capture,
 };
-use common::{assert_survives_a_bvh_round_trip, dist, walk_clip};
+use motion::clip::SkeletonFormat;
 use proptest::prelude::*;
 
-fn map_of(clip: &codecs::Clip) -> SegmentMap {
+fn map_of(clip: &motion::Clip) -> SegmentMap {
     parse_segments(&segment_map_toml(clip), Path::new("synth.toml")).unwrap()
 }
 
@@ -36,7 +36,7 @@ const NOISE_FREE: SynthOptions = SynthOptions {
 
 /// True for a one-axis joint whose axis runs along its own bone (the CMU wrists, `dof ry`
 /// about the forearm line): a twist, whose centre no motion places along the axis.
-fn is_twist(clip: &codecs::Clip, segment_name: &str) -> bool {
+fn is_twist(clip: &motion::Clip, segment_name: &str) -> bool {
     let sk = &clip.skeleton;
     let Some(j) = sk.joint_index(segment_name) else {
         return false;
@@ -46,13 +46,13 @@ fn is_twist(clip: &codecs::Clip, segment_name: &str) -> bool {
     if rot.len() != 1 || sk.format != SkeletonFormat::Asf {
         return false;
     }
-    let codecs::clip::ChannelKind::Rotation(axis) = rot[0] else {
+    let motion::clip::ChannelKind::Rotation(axis) = rot[0] else {
         return false;
     };
-    let c = codecs::math::euler_fixed(&joint.axis_order, &joint.axis_deg);
+    let c = motion::math::euler_fixed(&joint.axis_order, &joint.axis_deg);
     let mut e = [0.0; 3];
     e[axis.index()] = 1.0;
-    let a = codecs::math::mul_vec(&c, &e);
+    let a = motion::math::mul_vec(&c, &e);
     let b = joint.rest.vector();
     let bn = dist(b, [0.0; 3]);
     (a[0] * b[0] + a[1] * b[1] + a[2] * b[2]).abs() > 0.99 * bn
@@ -86,8 +86,8 @@ impl JointError {
 
 /// Per-joint errors of every segment's joint point (all 28 of the CMU skeleton: every joint
 /// with rotation channels but the root) against the FK points of the clip.
-fn errors(clip: &codecs::Clip, cap: &SynthCapture, solved: &Solved) -> Vec<JointError> {
-    let kin = codecs::fk::Kinematics::new(&solved.clip.skeleton);
+fn errors(clip: &motion::Clip, cap: &SynthCapture, solved: &Solved) -> Vec<JointError> {
+    let kin = motion::fk::Kinematics::new(&solved.clip.skeleton);
     let (mut values, mut local, mut points, mut rotations) =
         (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let frames = solved.clip.frames();
@@ -109,7 +109,7 @@ fn errors(clip: &codecs::Clip, cap: &SynthCapture, solved: &Solved) -> Vec<Joint
             let d = [0, 1, 2].map(|k| t[k] - points[j][k]);
             let dd = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
             let off = if let JointKind::Hinge { axis } = kind {
-                let n = codecs::math::mul_vec(&rotations[pj], &axis);
+                let n = motion::math::mul_vec(&rotations[pj], &axis);
                 let along = d[0] * n[0] + d[1] * n[1] + d[2] * n[2];
                 (dd - along * along).max(0.0)
             } else {
@@ -160,7 +160,7 @@ fn kind_name(k: JointKind) -> &'static str {
 
 #[test]
 fn rom_trial_carries_the_motion_trial_markers() {
-    let clip = codecs::synth::walking_clip(&codecs::synth::WalkParams::default());
+    let clip = motion::synth::walking_clip(&motion::synth::WalkParams::default());
     let options = SynthOptions::default();
     let motion = synth_capture(&clip, &options).unwrap();
     let rom = rom_capture(&clip, &RomOptions::default(), &options).unwrap();
@@ -172,7 +172,7 @@ fn rom_trial_carries_the_motion_trial_markers() {
     let trial = rom_clip(&clip, &RomOptions::default()).unwrap();
     let mm = clip.skeleton.units.cm_per_unit * 10.0;
     for (c, cap) in [(&clip, &motion), (&trial, &rom)] {
-        let kin = codecs::fk::Kinematics::new(&c.skeleton);
+        let kin = motion::fk::Kinematics::new(&c.skeleton);
         let (mut values, mut local, mut points, mut rotations) =
             (Vec::new(), Vec::new(), Vec::new(), Vec::new());
         for f in (0..c.frames()).step_by(37) {
@@ -401,7 +401,7 @@ fn calibrated_solve_of_cmu_reaches_1_cm_at_2_mm() {
 
 #[test]
 fn calibration_applied_to_other_markers_names_the_missing_one() {
-    let clip = codecs::synth::walking_clip(&codecs::synth::WalkParams {
+    let clip = motion::synth::walking_clip(&motion::synth::WalkParams {
         duration_s: 1.0,
         ..Default::default()
     });
@@ -428,11 +428,8 @@ fn calibration_applied_to_other_markers_names_the_missing_one() {
         .filter(|&(i, _)| i != gone)
         .map(|(_, n)| n.clone())
         .collect();
-    let mut fewer = codecs::markers::data::MarkerSet::new(
-        kept,
-        motion.markers.frames(),
-        motion.markers.frame_rate_hz,
-    );
+    let mut fewer =
+        markers::data::MarkerSet::new(kept, motion.markers.frames(), motion.markers.frame_rate_hz);
     for f in 0..motion.markers.frames() {
         for (i, m) in (0..names.len()).filter(|&i| i != gone).enumerate() {
             fewer.set(f, i, motion.markers.get(f, m));
@@ -471,7 +468,7 @@ proptest! {
         field in 0usize..7,
         value in prop::sample::select(vec![f64::NAN, f64::INFINITY, -1e300, 0.0, 1e-300, 5.0, 1e12]),
     ) {
-        let clip = codecs::synth::walking_clip(&codecs::synth::WalkParams {
+        let clip = motion::synth::walking_clip(&motion::synth::WalkParams {
             duration_s: 0.5,
             ..Default::default()
         });

@@ -38,10 +38,10 @@ use nalgebra::{Matrix3, Vector3};
 use super::MarkerError;
 use super::data::MarkerSet;
 use super::gdke::{GdkeOptions, JointKind, KindHint, gdke_pooled};
-use crate::clip::{
+use motion::clip::{
     Axis, BodyPart, ChannelKind, Clip, Joint, Rest, Skeleton, SkeletonFormat, Units,
 };
-use crate::math::{Mat3, to_euler_zyx_deg};
+use motion::math::{Mat3, to_euler_zyx_deg};
 
 /// One segment of the assignment file.
 #[derive(Debug, Clone, PartialEq)]
@@ -891,7 +891,7 @@ pub(super) fn build_clip(
         joints: skel_joints,
         documentation: vec!["solved from markers by GDKE (seed 003)".into()],
     };
-    crate::bodymap::assign(&mut skeleton);
+    motion::bodymap::assign(&mut skeleton);
     let channels = skeleton.channel_count();
     let mut data = vec![0.0; channels * frames];
     let mut c = 0;
@@ -937,7 +937,7 @@ mod tests {
     use rand_chacha::ChaCha8Rng;
 
     use super::*;
-    use crate::markers::gdke::GdkeOptions;
+    use crate::gdke::GdkeOptions;
 
     /// One marker 250 mm from a centre at the origin: still for 4 s, one ±40° swing over 2 s,
     /// still for 12 s (120 Hz, as a joint of a range-of-motion trial in 9 groups), with

@@ -3,7 +3,7 @@
 //! ref. 19) for comparison.
 //!
 //! ```
-//! use codecs::markers::gdke::{gdke, GdkeOptions, JointKind};
+//! use markers::gdke::{gdke, GdkeOptions, JointKind};
 //! // Points on a sphere of radius 2 about (1, 2, 3).
 //! let mut pts = Vec::new();
 //! for i in 0..40 {

@@ -17,12 +17,12 @@
 //!
 //! With axis `C = I` every ASF bone's world rotation is the BVH joint's world rotation, and the
 //! AMC values are the BVH joint's local rotation `L_j = Rz·Ry·Rx` split as fixed-axis `rx ry
-//! rz` (same matrix: seed conventions in [`crate::fk`]). Every BVH point is an ASF point
+//! rz` (same matrix: seed conventions in [`motion::fk`]). Every BVH point is an ASF point
 //! ([`AsfSolved::asf_point_of`]), and forward kinematics of the two agree to rounding.
 
-use crate::clip::{Axis, ChannelKind, Clip, Joint, Rest, Skeleton, SkeletonFormat, Units};
-use crate::fk::Kinematics;
-use crate::math::to_euler_zyx_deg;
+use motion::clip::{Axis, ChannelKind, Clip, Joint, Rest, Skeleton, SkeletonFormat, Units};
+use motion::fk::Kinematics;
+use motion::math::to_euler_zyx_deg;
 
 use super::MarkerError;
 
@@ -156,7 +156,7 @@ pub fn bvh_to_asf(clip: &Clip) -> Result<AsfSolved, MarkerError> {
                 continue;
             }
             // L = Rz·Ry·Rx: BVH `Zrotation Yrotation Xrotation` read in listed order, ASF
-            // `rx ry rz` read as fixed axes (crate::math::euler_fixed).
+            // `rx ry rz` read as fixed axes (motion::math::euler_fixed).
             let [z, y, x] = to_euler_zyx_deg(&lt.rotation);
             let mut row = first_channel[a];
             if a == 0 {
@@ -271,6 +271,6 @@ fn asf_skeleton(sk: &Skeleton) -> (Skeleton, Vec<usize>, Vec<usize>) {
         joints,
         documentation: sk.documentation.clone(),
     };
-    crate::bodymap::assign(&mut skeleton);
+    motion::bodymap::assign(&mut skeleton);
     (skeleton, bone_of, asf_point_of)
 }

@@ -23,9 +23,9 @@ use rand_chacha::ChaCha8Rng;
 
 use super::MarkerError;
 use super::data::MarkerSet;
-use crate::clip::{Clip, Skeleton, SkeletonFormat};
-use crate::fk::Kinematics;
-use crate::math::{Vec3, add, mul_vec};
+use motion::clip::{Clip, Skeleton, SkeletonFormat};
+use motion::fk::Kinematics;
+use motion::math::{Vec3, add, mul_vec};
 
 /// Options of a synthetic capture.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -60,7 +60,7 @@ pub struct SynthSegment {
     pub parent: Option<usize>,
     /// Marker names on the segment.
     pub markers: Vec<String>,
-    /// Index of the FK point ([`crate::fk::positions`]) at the segment's centre of rotation
+    /// Index of the FK point ([`motion::fk::positions`]) at the segment's centre of rotation
     /// (`None` for the root, which has none).
     pub truth_point: Option<usize>,
     /// True when the joint has exactly one rotation channel (a hinge).

@@ -3,9 +3,9 @@
 
 use std::path::PathBuf;
 
-use codecs::BodyPart::{Head, LeftArm, LeftLeg, RightArm, RightLeg, Torso};
-use codecs::data::{ClipFiles, shared_clips};
-use codecs::{Clip, SkeletonFormat, asf, bvh, convert, fk, io};
+use motion::BodyPart::{Head, LeftArm, LeftLeg, RightArm, RightLeg, Torso};
+use motion::data::{ClipFiles, shared_clips};
+use motion::{Clip, SkeletonFormat, asf, bvh, convert, fk, io};
 
 fn clips() -> Vec<ClipFiles> {
     let c = shared_clips();
@@ -214,7 +214,7 @@ fn bvh_body_parts_by_name_agree_with_topology() {
         for (i, j) in anon.joints.iter_mut().enumerate() {
             j.name = format!("j{i}");
         }
-        codecs::bodymap::assign(&mut anon);
+        motion::bodymap::assign(&mut anon);
         let by_topo: Vec<_> = anon.joints.iter().map(|j| j.body_part).collect();
         let agree = by_name.iter().zip(&by_topo).filter(|(a, b)| a == b).count();
         assert_eq!(
@@ -224,15 +224,15 @@ fn bvh_body_parts_by_name_agree_with_topology() {
             c.name
         );
         let hips = sk.joint_index("Hips").unwrap();
-        assert_eq!(sk.joints[hips].body_part, codecs::BodyPart::Torso);
+        assert_eq!(sk.joints[hips].body_part, motion::BodyPart::Torso);
         let toe = sk.joint_index("LeftToe").unwrap();
-        assert_eq!(sk.joints[toe].body_part, codecs::BodyPart::LeftLeg);
+        assert_eq!(sk.joints[toe].body_part, motion::BodyPart::LeftLeg);
     }
 }
 
 #[test]
 fn synthetic_walk_is_a_valid_clip_that_walks_forward() {
-    let clip = codecs::synth::walking_clip(&codecs::synth::WalkParams::default());
+    let clip = motion::synth::walking_clip(&motion::synth::WalkParams::default());
     assert_eq!(clip.frames(), 480);
     let p = fk::positions(&clip);
     let z0 = p.point(0, 0)[2];
@@ -253,7 +253,7 @@ fn synthetic_walk_is_a_valid_clip_that_walks_forward() {
 
 #[test]
 fn excerpt_keeps_the_frames_asked_for_and_cuts_at_the_end() {
-    let clip = codecs::synth::walking_clip(&codecs::synth::WalkParams::default());
+    let clip = motion::synth::walking_clip(&motion::synth::WalkParams::default());
     let n = clip.frames();
     let part = clip.excerpt(100..130);
     assert_eq!(part.frames(), 30);
@@ -274,11 +274,11 @@ fn excerpt_keeps_the_frames_asked_for_and_cuts_at_the_end() {
 #[test]
 fn quaternion_round_trip_keeps_every_joint_position() {
     let mut all = clips().into_iter().map(|c| load(&c)).collect::<Vec<_>>();
-    all.push(codecs::synth::walking_clip(
-        &codecs::synth::WalkParams::default(),
+    all.push(motion::synth::walking_clip(
+        &motion::synth::WalkParams::default(),
     ));
     for clip in all {
-        let back = codecs::quat::from_quaternions(&codecs::quat::to_quaternions(&clip));
+        let back = motion::quat::from_quaternions(&motion::quat::to_quaternions(&clip));
         let (a, b) = (fk::positions(&clip), fk::positions(&back));
         let scale = clip
             .skeleton

@@ -5,12 +5,12 @@ mod common;
 
 use std::path::Path;
 
-use codecs::markers::data::{self, MarkerSet};
-use codecs::markers::gdke::{GdkeOptions, JointKind, LsqOptions, gdke, least_squares_sphere};
-use codecs::markers::segments::{self, parse_segments};
-use codecs::markers::synth::{SynthOptions, segment_map_toml, synth_capture};
-use codecs::markers::{MarkerError, MarkerLimits};
 use common::{assert_survives_a_bvh_round_trip, dist, walk_clip};
+use markers::data::{self, MarkerSet};
+use markers::gdke::{GdkeOptions, JointKind, LsqOptions, gdke, least_squares_sphere};
+use markers::segments::{self, parse_segments};
+use markers::synth::{SynthOptions, segment_map_toml, synth_capture};
+use markers::{MarkerError, MarkerLimits};
 use proptest::prelude::*;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -176,8 +176,8 @@ fn too_few_samples_is_a_typed_error() {
     assert!(matches!(e, Err(MarkerError::TooFewSamples { got: 2, .. })));
 }
 
-fn demo_clip() -> codecs::Clip {
-    codecs::synth::walking_clip(&codecs::synth::WalkParams::default())
+fn demo_clip() -> motion::Clip {
+    motion::synth::walking_clip(&motion::synth::WalkParams::default())
 }
 
 struct JointError {
@@ -197,7 +197,7 @@ struct JointError {
 /// Per-segment RMS errors of solved joint points against the truth, and the RMS over the
 /// joints that move.
 fn centre_errors(
-    clip: &codecs::Clip,
+    clip: &motion::Clip,
     options: &SynthOptions,
     gdke_options: Option<GdkeOptions>,
 ) -> (Vec<JointError>, f64) {
@@ -207,7 +207,7 @@ fn centre_errors(
         map.gdke = g;
     }
     let solved = segments::solve(&cap.markers, &map).unwrap();
-    let kin = codecs::fk::Kinematics::new(&solved.clip.skeleton);
+    let kin = motion::fk::Kinematics::new(&solved.clip.skeleton);
     let (mut values, mut local, mut points, mut rotations) =
         (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let mut out = Vec::new();
@@ -547,7 +547,7 @@ fn one_and_two_marker_segments_use_section_2_5_frames() {
     map.segments[tibia].markers.truncate(1);
     let solved = segments::solve(&cap.markers, &map).unwrap();
     assert!(matches!(solved.joints[tibia].kind, JointKind::Hinge { .. }));
-    let pos = codecs::fk::positions(&solved.clip);
+    let pos = motion::fk::positions(&solved.clip);
     let foot = map.segments.iter().position(|s| s.name == "lfoot").unwrap();
     for s in [femur, tibia, foot] {
         let tp = cap.segments[s].truth_point.unwrap();
@@ -569,7 +569,7 @@ fn one_and_two_marker_segments_use_section_2_5_frames() {
         let mut m = map.clone();
         m.segments[tibia].markers = vec!["ltibia_1".into(), "ltibia_2".into()];
         m.segments[femur].markers.truncate(1);
-        m.segments[femur].kind = codecs::markers::gdke::KindHint::Spherical;
+        m.segments[femur].kind = markers::gdke::KindHint::Spherical;
         m
     };
     let e = segments::solve(&cap.markers, &hip_one).unwrap_err();
