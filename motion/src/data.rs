@@ -6,16 +6,7 @@
 
 use std::path::{Path, PathBuf};
 
-/// One real clip: a name, its ASF skeleton (for AMC motion) and its motion file.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct ClipFiles {
-    /// Short name (the motion file's stem, e.g. `02_01`).
-    pub name: String,
-    /// The ASF skeleton for an AMC motion, `None` for BVH.
-    pub asf: Option<PathBuf>,
-    /// The motion file (AMC or BVH).
-    pub motion: PathBuf,
-}
+use crate::pairing::ClipSource;
 
 /// The folder holding the shared clips, or `None` when it is absent outside CI.
 ///
@@ -38,60 +29,34 @@ pub fn mocap_dir() -> Option<PathBuf> {
     None
 }
 
-/// Every clip in the shared folder: each `.bvh`, and each `.amc` paired with the `.asf` of the
-/// same stem or, failing that, the folder's only other ASF (CMU's `02_01.amc` uses `12.asf`).
-pub fn shared_clips() -> Vec<ClipFiles> {
+/// Every clip in the shared folder, paired by the one rule of [`crate::pairing`] (each
+/// `.bvh`; each `.amc` with the `.asf` named after it, or the folder's one ASF no other motion
+/// is named after: CMU's `02_01.amc` uses `12.asf`).
+///
+/// # Panics
+/// As [`mocap_dir`], and when the folder's files do not pair (a test must not run on clips
+/// read with the wrong skeleton).
+#[expect(
+    clippy::panic,
+    reason = "a helper of tests and benchmarks, which must stop on clips read with the wrong skeleton"
+)]
+pub fn shared_clips() -> Vec<ClipSource> {
     let Some(dir) = mocap_dir() else {
         return Vec::new();
     };
     let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
         .map(|rd| rd.filter_map(|e| e.ok().map(|e| e.path())).collect())
         .unwrap_or_default();
-    files.sort();
-    let ext = |p: &Path, e: &str| p.extension().is_some_and(|x| x.eq_ignore_ascii_case(e));
-    let asfs: Vec<&PathBuf> = files.iter().filter(|p| ext(p, "asf")).collect();
-    let mut out = Vec::new();
-    for p in &files {
-        let stem = p
-            .file_stem()
-            .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_default();
-        if ext(p, "bvh") {
-            out.push(ClipFiles {
-                name: stem,
-                asf: None,
-                motion: p.clone(),
-            });
-        } else if ext(p, "amc") {
-            let asf = asfs
+    files.retain(|p| {
+        p.extension().is_some_and(|x| {
+            ["asf", "amc", "bvh"]
                 .iter()
-                .find(|a| {
-                    a.file_stem().is_some_and(|s| {
-                        let s = s.to_string_lossy();
-                        stem.starts_with(s.as_ref())
-                    })
-                })
-                .or_else(|| {
-                    // An AMC whose stem names no ASF: pair it with an ASF no other AMC claims.
-                    asfs.iter().find(|a| {
-                        let s = a.file_stem().map(|s| s.to_string_lossy().into_owned());
-                        !files.iter().any(|m| {
-                            ext(m, "amc")
-                                && m.file_stem().is_some_and(|ms| {
-                                    s.as_deref()
-                                        .is_some_and(|s| ms.to_string_lossy().starts_with(s))
-                                })
-                        })
-                    })
-                });
-            if let Some(a) = asf {
-                out.push(ClipFiles {
-                    name: stem,
-                    asf: Some((*a).clone()),
-                    motion: p.clone(),
-                });
-            }
-        }
+                .any(|e| x.eq_ignore_ascii_case(e))
+        })
+    });
+    files.sort();
+    match crate::pairing::pair(&files, None) {
+        Ok(clips) => clips,
+        Err(e) => panic!("the clips in {} do not pair: {e}", dir.display()),
     }
-    out
 }

@@ -4,6 +4,7 @@
 //! This crate knows nothing of codecs or studies:
 //! - the clip model ([`Skeleton`], [`Clip`]) with readers and writers for Acclaim ASF/AMC and
 //!   BVH ([`asf`], [`amc`], [`bvh`], [`io`]) and ASF → BVH conversion ([`convert`]),
+//! - which skeleton an AMC motion is read with, one rule for every command ([`pairing`]),
 //! - forward kinematics ([`fk`]) in `f64`, rotation helpers ([`math`]) and quaternions
 //!   ([`quat`]),
 //! - the body-part and hierarchy map the perceptual codecs weight channels by ([`bodymap`]),
@@ -28,6 +29,7 @@ pub mod error;
 pub mod fk;
 pub mod io;
 pub mod math;
+pub mod pairing;
 pub mod playback;
 pub mod quat;
 pub mod synth;

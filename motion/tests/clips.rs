@@ -4,10 +4,11 @@
 use std::path::PathBuf;
 
 use motion::BodyPart::{Head, LeftArm, LeftLeg, RightArm, RightLeg, Torso};
-use motion::data::{ClipFiles, shared_clips};
+use motion::data::shared_clips;
+use motion::pairing::ClipSource;
 use motion::{Clip, SkeletonFormat, asf, bvh, convert, fk, io};
 
-fn clips() -> Vec<ClipFiles> {
+fn clips() -> Vec<ClipSource> {
     let c = shared_clips();
     if std::env::var_os("CI").is_some() {
         assert!(
@@ -19,7 +20,7 @@ fn clips() -> Vec<ClipFiles> {
     c
 }
 
-fn load(c: &ClipFiles) -> Clip {
+fn load(c: &ClipSource) -> Clip {
     io::read_clip(c.asf.as_deref(), &c.motion).unwrap_or_else(|e| panic!("{e}"))
 }
 
