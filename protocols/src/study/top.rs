@@ -1,0 +1,195 @@
+//! The top-level table of a study file: its header keys, the stimulus manifest, and which
+//! sections each protocol takes.
+
+use std::collections::BTreeSet;
+
+use toml::Table;
+
+use super::check::Ctx;
+use super::conditions::{parse_conditions, resolve_familiarization};
+use super::presentation::parse_presentation;
+use super::scale::parse_scale;
+use super::session::{FamSpec, parse_session};
+use super::simulation::parse_simulation;
+use super::staircase::parse_staircase;
+use super::{STUDY_FORMAT_VERSION, StudyDefinition};
+use crate::manifest::StimulusManifest;
+use crate::record::Protocol;
+
+const TOP_KEYS: &[&str] = &[
+    "format_version",
+    "name",
+    "protocol",
+    "stimuli",
+    "seed",
+    "conditions",
+    "presentation",
+    "scale",
+    "session",
+    "staircase",
+    "simulation",
+];
+
+#[expect(
+    clippy::too_many_lines,
+    reason = "one pass over the top-level keys, kept together so the order of checks reads like the file"
+)]
+pub(super) fn parse_table(
+    t: &Table,
+    cx: &mut Ctx,
+    load_manifest: impl FnOnce(&str) -> Result<StimulusManifest, String>,
+) -> Option<StudyDefinition> {
+    cx.known(t, "", TOP_KEYS);
+    let version = cx.int(t, "", "format_version", 0, i64::from(u32::MAX));
+    let version = cx.required(version, t, "", "format_version");
+    if let Some(v) = version
+        && v != i64::from(STUDY_FORMAT_VERSION)
+    {
+        cx.err(
+            "format_version",
+            format!("version {v} is not supported (this build reads {STUDY_FORMAT_VERSION})"),
+        );
+    }
+    let name = cx.string(t, "", "name");
+    let name = cx.required(name, t, "", "name");
+    if name
+        .as_deref()
+        .is_some_and(|n| n.trim().is_empty() || n.len() > 200 || n.chars().any(char::is_control))
+    {
+        cx.err("name", "must be 1-200 printable characters");
+    }
+    let protocol: Option<Protocol> = cx.parse_enum(t, "", "protocol");
+    let protocol = cx.required(protocol, t, "", "protocol");
+    let stimuli_path = cx.string(t, "", "stimuli");
+    let stimuli_path = cx.required(stimuli_path, t, "", "stimuli");
+    let seed = cx.int(t, "", "seed", 0, i64::MAX);
+    let seed = cx.required(seed, t, "", "seed");
+
+    let manifest = match &stimuli_path {
+        Some(p) => match load_manifest(p) {
+            Ok(m) => {
+                check_manifest(&m, cx);
+                Some(m)
+            }
+            Err(e) => {
+                cx.err("stimuli", format!("cannot load the stimulus manifest: {e}"));
+                None
+            }
+        },
+        None => None,
+    };
+
+    let empty = Table::new();
+    let pres_t = cx.table(t, "", "presentation").unwrap_or(&empty);
+    let presentation = parse_presentation(pres_t, protocol, cx);
+    let scale_t = cx.table(t, "", "scale");
+    let scale = parse_scale(scale_t.unwrap_or(&empty), protocol, cx);
+    let session_t = cx.table(t, "", "session").unwrap_or(&empty);
+    let (session, familiarization_spec) = parse_session(session_t, cx);
+    let sim_t = cx.table(t, "", "simulation").unwrap_or(&empty);
+    let simulation = parse_simulation(sim_t, cx);
+
+    let mut conditions = Vec::new();
+    let mut familiarization = Vec::new();
+    let mut staircase = None;
+    match protocol {
+        Some(Protocol::Mos | Protocol::Dscqs) => {
+            if t.contains_key("staircase") {
+                cx.err(
+                    "staircase",
+                    "only a staircase study may have a [staircase] table",
+                );
+            }
+            match cx.table(t, "", "conditions") {
+                Some(ct) => {
+                    if let Some(m) = &manifest {
+                        conditions = parse_conditions(ct, m, cx);
+                        familiarization =
+                            resolve_familiarization(familiarization_spec, &conditions, m, cx);
+                    } else {
+                        cx.known(
+                            ct,
+                            "conditions",
+                            &["stimuli", "clips", "codecs", "target_cr"],
+                        );
+                    }
+                }
+                None if !t.contains_key("conditions") => cx.err("conditions", "missing"),
+                None => {}
+            }
+            if session.hidden_repeats as usize > conditions.len() && manifest.is_some() {
+                cx.err(
+                    "session.hidden_repeats",
+                    format!(
+                        "{} repeats but only {} conditions",
+                        session.hidden_repeats,
+                        conditions.len()
+                    ),
+                );
+            }
+        }
+        Some(Protocol::Staircase) => {
+            if t.contains_key("conditions") {
+                cx.err(
+                    "conditions",
+                    "a staircase study takes its stimuli from [staircase]; remove [conditions]",
+                );
+            }
+            if !matches!(familiarization_spec, FamSpec::None) {
+                cx.err(
+                    "session.familiarization",
+                    "familiarization trials are not supported in a staircase study",
+                );
+            }
+            if session.hidden_repeats > 0 {
+                cx.err(
+                    "session.hidden_repeats",
+                    "hidden repeats are not supported in a staircase study",
+                );
+            }
+            if scale_t.is_some() {
+                cx.err("scale", "a staircase study has no rating scale");
+            }
+            match cx.table(t, "", "staircase") {
+                Some(st) => staircase = parse_staircase(st, manifest.as_ref(), cx),
+                None if !t.contains_key("staircase") => cx.err("staircase", "missing"),
+                None => {}
+            }
+        }
+        None => {}
+    }
+
+    Some(StudyDefinition {
+        format_version: version? as u32,
+        name: name?,
+        protocol: protocol?,
+        stimuli_path: stimuli_path?,
+        seed: seed? as u64,
+        conditions,
+        familiarization,
+        presentation: presentation?,
+        scale: scale?,
+        session,
+        staircase,
+        simulation,
+        manifest: manifest?,
+    })
+}
+
+fn check_manifest(m: &StimulusManifest, cx: &mut Ctx) {
+    if m.version != crate::manifest::MANIFEST_VERSION {
+        cx.err(
+            "stimuli",
+            format!("manifest version {} is not supported", m.version),
+        );
+    }
+    let mut seen = BTreeSet::new();
+    for s in &m.stimuli {
+        if !seen.insert(s.id.as_str()) {
+            cx.err(
+                "stimuli",
+                format!("manifest lists stimulus id {:?} twice", s.id),
+            );
+        }
+    }
+}
