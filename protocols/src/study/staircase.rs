@@ -36,17 +36,22 @@ const STAIR_KEYS: &[&str] = &[
     "live",
 ];
 
-#[expect(
-    clippy::too_many_lines,
-    reason = "one pass over the [staircase] keys and tracks"
-)]
-pub(super) fn parse_staircase(
-    t: &Table,
-    m: Option<&StimulusManifest>,
-    cx: &mut Ctx,
-) -> Option<StaircaseStudy> {
-    const P: &str = "staircase";
-    cx.known(t, P, STAIR_KEYS);
+const P: &str = "staircase";
+
+/// What `[staircase]` says for every track: the level parameter, the codec and the settings.
+struct Shared {
+    /// The level's parameter (`param`).
+    param: Option<String>,
+    /// The codec whose stimuli (or, live, whose encoder) give the levels.
+    codec: Option<String>,
+    /// `staircase.start` as written: a track without its own start needs it.
+    start: Option<f64>,
+    /// The settings every track starts from (the default start where none is written).
+    settings: StaircaseSettings,
+}
+
+/// The settings shared by every track: `param`, `codec` and the staircase rules.
+fn parse_shared(t: &Table, cx: &mut Ctx) -> Shared {
     let d = StaircaseSettings::default();
     let param = cx.string(t, P, "param");
     let param = cx.required(param, t, P, "param");
@@ -85,23 +90,46 @@ pub(super) fn parse_staircase(
         max_trials: opt_u(cx, "max_trials"),
         threshold_reversals: opt_u(cx, "threshold_reversals").unwrap_or(3),
     };
-    let live_t = cx.table(t, P, "live");
-    let live_asked = t.contains_key("live");
-    let live = live_t.and_then(|lt| parse_live(lt, param.as_deref(), m, cx));
-    if live_asked && t.contains_key("level_tolerance") {
+    Shared {
+        param,
+        codec,
+        start,
+        settings,
+    }
+}
+
+/// `level_tolerance`: how far a manifest stimulus's parameter may be from a level (a live
+/// staircase has none: it encodes every level exactly).
+fn parse_tolerance(t: &Table, live: bool, settings: &StaircaseSettings, cx: &mut Ctx) -> f64 {
+    if live && t.contains_key("level_tolerance") {
         cx.err(
             join(P, "level_tolerance"),
             "a live staircase encodes every level exactly; remove level_tolerance",
         );
     }
-    let tolerance = match cx.float(t, P, "level_tolerance") {
+    match cx.float(t, P, "level_tolerance") {
         Some(v) if v >= 0.0 => v,
         Some(v) => {
             cx.err(join(P, "level_tolerance"), format!("must be >= 0, got {v}"));
             0.0
         }
         None => 1e-9 * settings.step.abs().max(f64::MIN_POSITIVE),
-    };
+    }
+}
+
+/// `[staircase]`: the shared settings, the live option, the level tolerance and every track
+/// with its levels.
+pub(super) fn parse_staircase(
+    t: &Table,
+    m: Option<&StimulusManifest>,
+    cx: &mut Ctx,
+) -> Option<StaircaseStudy> {
+    cx.known(t, P, STAIR_KEYS);
+    let shared = parse_shared(t, cx);
+    let live_t = cx.table(t, P, "live");
+    let live_asked = t.contains_key("live");
+    let live = live_t.and_then(|lt| parse_live(lt, shared.param.as_deref(), m, cx));
+    let tolerance = parse_tolerance(t, live_asked, &shared.settings, cx);
     // A live staircase without [[staircase.tracks]] runs one staircase named "live".
     let default_track = [Value::Table(Table::from_iter([(
         "name".to_string(),
@@ -140,105 +168,20 @@ pub(super) fn parse_staircase(
             cx.err(&tp, format!("expected a table, got {}", type_name(tv)));
             continue;
         };
-        let clip = if live_asked {
-            let mut others = tt.clone();
-            if others.remove("clip").is_some() {
-                cx.err(
-                    join(&tp, "clip"),
-                    "a live staircase takes its clips from staircase.live.clips",
-                );
-            }
-            cx.known(&others, &tp, &["name", "start"]);
-            None
-        } else {
-            cx.known(tt, &tp, &["name", "clip", "start"]);
-            let clip = cx.string(tt, &tp, "clip");
-            cx.required(clip, tt, &tp, "clip")
-        };
-        let name = cx
-            .string(tt, &tp, "name")
-            .or_else(|| clip.clone())
-            .unwrap_or_else(|| {
-                if live_asked {
-                    "live".into()
-                } else {
-                    String::new()
-                }
-            });
-        if !names.insert(name.clone()) {
-            cx.err(
-                join(&tp, "name"),
-                format!("track name {name:?} is used twice"),
-            );
-        }
-        let mut s = settings.clone();
-        if let Some(st) = cx.float(tt, &tp, "start") {
-            s.start = st;
-        } else if start.is_none() {
-            cx.err(
-                join(&tp, "start"),
-                "missing (set staircase.start or a start per track)",
-            );
-        }
-        for e in check_settings(&s) {
-            if let crate::staircase::StaircaseError::BadSetting { key, reason } = e {
-                let at = if key == "start" && tt.contains_key("start") {
-                    join(&tp, "start")
-                } else {
-                    join(P, key)
-                };
-                if !cx.issues.iter().any(|x| x.key == at && x.reason == reason) {
-                    cx.err(at, reason);
-                }
-            }
-        }
+        let head = parse_track(tt, &tp, &shared, live_asked, &mut names, cx);
         if live_asked {
             tracks.push(Track {
-                name,
+                name: head.name,
                 clip: String::new(),
                 reference: String::new(),
-                settings: s,
+                settings: head.settings,
                 levels: Vec::new(),
             });
             continue;
         }
-        let (Some(clip), Some(m), Some(param), Some(codec)) = (clip, m, &param, &codec) else {
+        let Some(m) = m else { continue };
+        let Some(track) = manifest_track(head, &shared, m, &tp, cx) else {
             continue;
-        };
-        let Some(reference) = m.reference_of(&clip) else {
-            cx.err(
-                join(&tp, "clip"),
-                format!("clip {clip:?} has no reference stimulus in the manifest"),
-            );
-            continue;
-        };
-        let mut levels: Vec<(f64, String)> = m
-            .stimuli
-            .iter()
-            .filter(|x| x.clip == clip && &x.codec == codec)
-            .filter_map(|x| {
-                x.params
-                    .get(param)
-                    .filter(|v| v.is_finite())
-                    .map(|v| (*v, x.id.clone()))
-            })
-            .collect();
-        levels.sort_by(|a, b| a.0.total_cmp(&b.0).then_with(|| a.1.cmp(&b.1)));
-        if levels.is_empty() {
-            cx.err(
-                join(&tp, "clip"),
-                format!(
-                    "no stimulus of clip {clip:?} with codec {codec:?} has parameter {param:?}"
-                ),
-            );
-            continue;
-        }
-        let track = Track {
-            name,
-            clip,
-            reference: reference.id.clone(),
-            settings: s,
-            levels,
         };
         if check_settings(&track.settings).is_empty() {
             check_levels(&track, tolerance, &tp, cx);
@@ -249,12 +192,144 @@ pub(super) fn parse_staircase(
         return None;
     }
     Some(StaircaseStudy {
-        param: param?,
-        codec: codec?,
+        param: shared.param?,
+        codec: shared.codec?,
         level_tolerance: tolerance,
         tracks,
         live,
     })
+}
+
+/// A track as its `[[staircase.tracks]]` table gives it, before its levels are looked up.
+struct TrackHead {
+    name: String,
+    /// The clip (`None` in a live staircase, or when the key is missing or mistyped).
+    clip: Option<String>,
+    /// The shared settings with this track's start.
+    settings: StaircaseSettings,
+}
+
+/// One `[[staircase.tracks]]` table at `tp`: its keys, a name not used by an earlier track
+/// (`names`), and its start checked together with the shared settings.
+fn parse_track(
+    tt: &Table,
+    tp: &str,
+    shared: &Shared,
+    live: bool,
+    names: &mut BTreeSet<String>,
+    cx: &mut Ctx,
+) -> TrackHead {
+    let clip = if live {
+        let mut others = tt.clone();
+        if others.remove("clip").is_some() {
+            cx.err(
+                join(tp, "clip"),
+                "a live staircase takes its clips from staircase.live.clips",
+            );
+        }
+        cx.known(&others, tp, &["name", "start"]);
+        None
+    } else {
+        cx.known(tt, tp, &["name", "clip", "start"]);
+        let clip = cx.string(tt, tp, "clip");
+        cx.required(clip, tt, tp, "clip")
+    };
+    let name = cx
+        .string(tt, tp, "name")
+        .or_else(|| clip.clone())
+        .unwrap_or_else(|| if live { "live".into() } else { String::new() });
+    if !names.insert(name.clone()) {
+        cx.err(
+            join(tp, "name"),
+            format!("track name {name:?} is used twice"),
+        );
+    }
+    let mut s = shared.settings.clone();
+    if let Some(st) = cx.float(tt, tp, "start") {
+        s.start = st;
+    } else if shared.start.is_none() {
+        cx.err(
+            join(tp, "start"),
+            "missing (set staircase.start or a start per track)",
+        );
+    }
+    for e in check_settings(&s) {
+        if let crate::staircase::StaircaseError::BadSetting { key, reason } = e {
+            let at = if key == "start" && tt.contains_key("start") {
+                join(tp, "start")
+            } else {
+                join(P, key)
+            };
+            if !cx.issues.iter().any(|x| x.key == at && x.reason == reason) {
+                cx.err(at, reason);
+            }
+        }
+    }
+    TrackHead {
+        name,
+        clip,
+        settings: s,
+    }
+}
+
+/// The track of a staircase over manifest stimuli: its clip's reference and the levels its
+/// clip's stimuli of the shared codec offer; `None` (with the problem reported) when the clip
+/// has no reference or no such stimulus.
+fn manifest_track(
+    head: TrackHead,
+    shared: &Shared,
+    m: &StimulusManifest,
+    tp: &str,
+    cx: &mut Ctx,
+) -> Option<Track> {
+    let (Some(clip), Some(param), Some(codec)) = (head.clip, &shared.param, &shared.codec) else {
+        return None;
+    };
+    let Some(reference) = m.reference_of(&clip) else {
+        cx.err(
+            join(tp, "clip"),
+            format!("clip {clip:?} has no reference stimulus in the manifest"),
+        );
+        return None;
+    };
+    let levels = manifest_levels(m, &clip, codec, param);
+    if levels.is_empty() {
+        cx.err(
+            join(tp, "clip"),
+            format!("no stimulus of clip {clip:?} with codec {codec:?} has parameter {param:?}"),
+        );
+        return None;
+    }
+    Some(Track {
+        name: head.name,
+        clip,
+        reference: reference.id.clone(),
+        settings: head.settings,
+        levels,
+    })
+}
+
+/// The levels the manifest offers a track: (value of `param`, stimulus id) of every stimulus
+/// of `clip` made with `codec` that has a finite `param`, sorted by value, then id.
+fn manifest_levels(
+    m: &StimulusManifest,
+    clip: &str,
+    codec: &str,
+    param: &str,
+) -> Vec<(f64, String)> {
+    let mut levels: Vec<(f64, String)> = m
+        .stimuli
+        .iter()
+        .filter(|x| x.clip == clip && x.codec == codec)
+        .filter_map(|x| {
+            x.params
+                .get(param)
+                .filter(|v| v.is_finite())
+                .map(|v| (*v, x.id.clone()))
+        })
+        .collect();
+    levels.sort_by(|a, b| a.0.total_cmp(&b.0).then_with(|| a.1.cmp(&b.1)));
+    levels
 }
 
 /// Every level the staircase can reach must have a stimulus within the tolerance. Reachable
