@@ -6,7 +6,7 @@ mod common;
 
 use common::{LIVE, example, example_text, parse};
 use protocols::rng::StudyRng;
-use protocols::{Protocol, StudyError};
+use protocols::{Protocol, Staircase, StaircaseSettings, StepType, StudyError};
 
 fn issues(text: &str) -> Vec<(String, String)> {
     match parse(text) {
@@ -126,6 +126,46 @@ fn a_level_without_stimulus_is_an_error() {
     assert!(
         got.iter().any(|(_, r)| r.contains("reachable level")),
         "{got:#?}"
+    );
+}
+
+/// The check that every reachable level has a stimulus steps with the staircase's own
+/// arithmetic: a log step down divides by 10^step, and the level it names as missing is the
+/// exact value a session would show (multiplying by 10^-step differs in the last digit here).
+#[test]
+fn a_missing_log_level_is_named_as_the_staircase_computes_it() {
+    let text = example_text("staircase.toml")
+        .replace("start = 0.024", "start = 0.012")
+        .replace("step = 0.002", "step = 0.02")
+        .replace("step_type = \"linear\"", "step_type = \"log\"")
+        .replace("min = 0.002", "min = 0.010")
+        .replace("max = 0.040", "max = 0.012");
+    let got = issues(&text);
+    let mut s = Staircase::new(StaircaseSettings {
+        start: 0.012,
+        step: 0.02,
+        step_type: StepType::Log,
+        min: Some(0.010),
+        max: Some(0.012),
+        ..StaircaseSettings::default()
+    })
+    .unwrap();
+    s.add_response(true).unwrap();
+    s.add_response(true).unwrap();
+    let first_down = s.next_level().unwrap();
+    assert_ne!(
+        first_down.to_bits(),
+        (0.012 * 10_f64.powf(-0.02)).to_bits(),
+        "the example needs a level where the two roundings differ"
+    );
+    let (_, reason) = got
+        .iter()
+        .find(|(k, _)| k == "staircase.tracks[0].clip")
+        .unwrap_or_else(|| panic!("{got:#?}"));
+    let listed = reason.rsplit(": ").next().unwrap();
+    assert!(
+        listed.split(", ").any(|v| v == first_down.to_string()),
+        "{first_down} not in {reason}"
     );
 }
 

@@ -10,7 +10,7 @@ use super::check::{Ctx, join, type_name};
 use super::live::parse_live;
 use super::{MAX_TRACKS, StaircaseStudy, Track};
 use crate::manifest::StimulusManifest;
-use crate::staircase::{StaircaseSettings, StepType, check_settings};
+use crate::staircase::{StaircaseSettings, StepType, check_settings, stepped};
 
 /// Most levels enumerated when checking that every staircase level has a stimulus.
 const MAX_ENUMERATED_LEVELS: usize = 4096;
@@ -333,8 +333,9 @@ fn manifest_levels(
 }
 
 /// Every level the staircase can reach must have a stimulus within the tolerance. Reachable
-/// levels are enumerated when they form a small set (equal linear steps); otherwise the
-/// stimuli's tolerance intervals must cover [min, max].
+/// levels are enumerated when they form a small set (equal linear steps), each step taken by
+/// [`stepped`] as a session takes it; otherwise the stimuli's tolerance intervals must cover
+/// [min, max].
 fn check_levels(track: &Track, tol: f64, path: &str, cx: &mut Ctx) {
     let s = &track.settings;
     let (Some(lo), Some(hi)) = (s.min, s.max) else {
@@ -353,15 +354,7 @@ fn check_levels(track: &Track, tol: f64, path: &str, cx: &mut Ctx) {
             break;
         }
         for up in [true, false] {
-            let mut x = v;
-            let st = if up { s.step } else { s.step * s.down_up_ratio };
-            let sign = if up { 1.0 } else { -1.0 };
-            match s.step_type {
-                StepType::Linear => x += sign * st,
-                StepType::Log => x *= 10_f64.powf(sign * st),
-                StepType::Db => x *= 10_f64.powf(sign * st / 20.0),
-            }
-            x = x.max(lo).min(hi);
+            let x = stepped(s, v, up);
             if !seen.contains_key(&key(x)) {
                 queue.push(x);
             }
