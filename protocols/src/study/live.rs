@@ -7,20 +7,26 @@ use toml::{Table, Value};
 
 use super::check::{Ctx, join, type_name};
 use super::{ClipOrder, LiveClip, LiveStaircase};
+use crate::catalog::{CodecCatalog, TARGET_CR_PARAM};
 use crate::manifest::StimulusManifest;
+
+const P: &str = "staircase.live";
 
 /// Most clips a live staircase may alternate, and most fixed codec parameters.
 const MAX_LIVE_CLIPS: usize = 256;
 const MAX_LIVE_PARAMS: usize = 32;
 
-/// `[staircase.live]`: clips, their order, fixed codec parameters, decoder context.
+/// `[staircase.live]`: clips, their order, fixed codec parameters, decoder context, and the
+/// codec of `[staircase]` (`codec`, whose parameter `param` is the level) checked against the
+/// catalog `codecs`.
 pub(super) fn parse_live(
     t: &Table,
+    codec: Option<&str>,
     param: Option<&str>,
     m: Option<&StimulusManifest>,
+    codecs: &dyn CodecCatalog,
     cx: &mut Ctx,
 ) -> Option<LiveStaircase> {
-    const P: &str = "staircase.live";
     cx.known(t, P, &["clips", "order", "params", "database"]);
     let names = cx.strings(t, P, "clips");
     let names = cx.required(names, t, P, "clips");
@@ -67,6 +73,25 @@ pub(super) fn parse_live(
             ],
         )
         .unwrap_or(ClipOrder::InTurn);
+    let params = parse_fixed_params(t, param, cx);
+    let database = cx.string(t, P, "database");
+    if database.as_deref().is_some_and(|d| d.trim().is_empty()) {
+        cx.err(join(P, "database"), "must name a file");
+    }
+    if let Some(codec) = codec {
+        check_codec(codecs, codec, param, &params, database.as_deref(), cx);
+    }
+    names?;
+    Some(LiveStaircase {
+        clips,
+        order,
+        params,
+        database,
+    })
+}
+
+/// `params`: fixed values of the codec's other parameters (never the level's `param`).
+fn parse_fixed_params(t: &Table, param: Option<&str>, cx: &mut Ctx) -> BTreeMap<String, f64> {
     let mut params = BTreeMap::new();
     match t.get("params") {
         None => {}
@@ -109,15 +134,63 @@ pub(super) fn parse_live(
         }
         Some(v) => cx.wrong(P, "params", "a table of numbers", v),
     }
-    let database = cx.string(t, P, "database");
-    if database.as_deref().is_some_and(|d| d.trim().is_empty()) {
-        cx.err(join(P, "database"), "must name a file");
+    params
+}
+
+/// The live staircase's codec against the catalog, as the runner will use it: the codec
+/// exists, takes the level's parameter and every fixed one, can aim at a compression ratio
+/// when the level is one, and has the decoder context file it needs. Each problem is reported
+/// on its own, so a file with several shows them all.
+fn check_codec(
+    codecs: &dyn CodecCatalog,
+    codec: &str,
+    param: Option<&str>,
+    fixed: &BTreeMap<String, f64>,
+    database: Option<&str>,
+    cx: &mut Ctx,
+) {
+    let Some(info) = codecs.codec(codec) else {
+        cx.err(
+            "staircase.codec",
+            format!(
+                "unknown codec {codec:?} (known: {}; `study codecs` lists them)",
+                codecs.names().join(", ")
+            ),
+        );
+        return;
+    };
+    let accepts = |k: &str| info.params.iter().any(|p| p == k);
+    let accepted = || info.params.join(", ");
+    if let Some(param) = param {
+        if !accepts(param) {
+            cx.err(
+                "staircase.param",
+                format!(
+                    "codec {codec:?} has no parameter {param:?} (accepted: {})",
+                    accepted()
+                ),
+            );
+        }
+        if param == TARGET_CR_PARAM && !info.target_cr {
+            cx.err(
+                "staircase.param",
+                format!("codec {codec:?} takes no target compression ratio"),
+            );
+        }
     }
-    names?;
-    Some(LiveStaircase {
-        clips,
-        order,
-        params,
-        database,
-    })
+    for k in fixed.keys().filter(|k| !accepts(k)) {
+        cx.err(
+            format!("staircase.live.params.{k}"),
+            format!(
+                "codec {codec:?} has no such parameter (accepted: {})",
+                accepted()
+            ),
+        );
+    }
+    if info.needs_database && database.is_none() {
+        cx.err(
+            "staircase.live.database",
+            format!("codec {codec:?} needs a primitive database file here"),
+        );
+    }
 }

@@ -2,9 +2,10 @@
 //!
 //! Parsing walks the TOML tree by hand rather than through `serde` so that every problem
 //! (unknown key, wrong type, a stimulus id missing from the manifest, a zero step, a start
-//! outside min/max, a staircase level with no stimulus) is collected with its key path and
-//! reported all at once before any session starts. The format is documented in
-//! `docs/study-file.md`.
+//! outside min/max, a staircase level with no stimulus, a live staircase's codec parameter
+//! that the codec does not take) is collected with its key path and reported all at once
+//! before any session starts. Codecs are known through a [`CodecCatalog`]. The format is
+//! documented in `docs/study-file.md`.
 
 mod check;
 mod conditions;
@@ -23,6 +24,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 use toml::Table;
 
+use crate::catalog::CodecCatalog;
 use crate::manifest::StimulusManifest;
 use crate::record::{Arrangement, Position, Protocol};
 use crate::staircase::StaircaseSettings;
@@ -430,23 +432,25 @@ pub fn content_hash(bytes: &[u8]) -> String {
 }
 
 impl StudyDefinition {
-    /// Reads and validates a study file and its stimulus manifest.
+    /// Reads and validates a study file and its stimulus manifest; a live staircase's codec
+    /// settings are checked against `codecs` (see [`crate::catalog`]).
     ///
     /// # Errors
     /// [`StudyError`] with every problem found.
-    pub fn load(path: &Path) -> Result<Self, StudyError> {
+    pub fn load(path: &Path, codecs: &dyn CodecCatalog) -> Result<Self, StudyError> {
         let text = read_limited(path, MAX_STUDY_BYTES)?;
         let base = path.parent().unwrap_or(Path::new("."));
-        Self::parse(&text, path, |rel| {
+        let manifest = |rel: &str| {
             let p = base.join(rel);
             let t = read_limited(&p, MAX_MANIFEST_BYTES).map_err(|e| e.to_string())?;
             serde_json::from_str::<StimulusManifest>(&t)
                 .map_err(|e| format!("{}: {e}", p.display()))
-        })
+        };
+        Self::parse(&text, path, manifest, codecs)
     }
 
     /// Validates study `text` (named `path` in errors); `manifest` loads the manifest named by
-    /// the `stimuli` key.
+    /// the `stimuli` key, and `codecs` tells what a live staircase's codec accepts.
     ///
     /// # Errors
     /// [`StudyError::Syntax`] or [`StudyError::Invalid`] with every problem found.
@@ -454,6 +458,7 @@ impl StudyDefinition {
         text: &str,
         path: &Path,
         manifest: impl FnOnce(&str) -> Result<StimulusManifest, String>,
+        codecs: &dyn CodecCatalog,
     ) -> Result<Self, StudyError> {
         let table: Table = text.parse().map_err(|e: toml::de::Error| {
             let (line, column) = e.span().map_or((0, 0), |s| line_col(text, s.start));
@@ -465,7 +470,7 @@ impl StudyDefinition {
             }
         })?;
         let mut cx = Ctx::default();
-        let def = top::parse_table(&table, &mut cx, manifest);
+        let def = top::parse_table(&table, &mut cx, manifest, codecs);
         match def {
             Some(d) if cx.issues.is_empty() => Ok(d),
             _ => {

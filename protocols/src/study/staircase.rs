@@ -9,6 +9,7 @@ use toml::{Table, Value};
 use super::check::{Ctx, join, type_name};
 use super::live::parse_live;
 use super::{MAX_TRACKS, StaircaseStudy, Track};
+use crate::catalog::{CodecCatalog, TARGET_CR_PARAM};
 use crate::manifest::StimulusManifest;
 use crate::staircase::{StaircaseSettings, StepType, check_settings, stepped};
 
@@ -117,18 +118,28 @@ fn parse_tolerance(t: &Table, live: bool, settings: &StaircaseSettings, cx: &mut
     }
 }
 
-/// `[staircase]`: the shared settings, the live option, the level tolerance and every track
-/// with its levels.
+/// `[staircase]`: the shared settings, the live option (its codec checked against `codecs`),
+/// the level tolerance and every track with its levels.
 pub(super) fn parse_staircase(
     t: &Table,
     m: Option<&StimulusManifest>,
+    codecs: &dyn CodecCatalog,
     cx: &mut Ctx,
 ) -> Option<StaircaseStudy> {
     cx.known(t, P, STAIR_KEYS);
     let shared = parse_shared(t, cx);
     let live_t = cx.table(t, P, "live");
     let live_asked = t.contains_key("live");
-    let live = live_t.and_then(|lt| parse_live(lt, shared.param.as_deref(), m, cx));
+    let (codec, param) = (shared.codec.as_deref(), shared.param.as_deref());
+    let live = live_t.and_then(|lt| parse_live(lt, codec, param, m, codecs, cx));
+    // A live level that is a compression ratio must stay positive, whatever the codec. Every
+    // track shares `min` (a track sets only its start), so one check covers them all.
+    if live_asked
+        && param == Some(TARGET_CR_PARAM)
+        && shared.settings.min.is_some_and(|lo| lo <= 0.0)
+    {
+        cx.err(join(P, "min"), "a compression ratio level needs min > 0");
+    }
     let tolerance = parse_tolerance(t, live_asked, &shared.settings, cx);
     // A live staircase without [[staircase.tracks]] runs one staircase named "live".
     let default_track = [Value::Table(Table::from_iter([(

@@ -13,6 +13,7 @@ use super::session::{FamSpec, parse_session};
 use super::simulation::parse_simulation;
 use super::staircase::parse_staircase;
 use super::{Condition, STUDY_FORMAT_VERSION, SessionSettings, StaircaseStudy, StudyDefinition};
+use crate::catalog::CodecCatalog;
 use crate::manifest::StimulusManifest;
 use crate::record::Protocol;
 
@@ -37,6 +38,7 @@ pub(super) fn parse_table(
     t: &Table,
     cx: &mut Ctx,
     load_manifest: impl FnOnce(&str) -> Result<StimulusManifest, String>,
+    codecs: &dyn CodecCatalog,
 ) -> Option<StudyDefinition> {
     cx.known(t, "", TOP_KEYS);
     let header = parse_header(t, cx);
@@ -71,6 +73,7 @@ pub(super) fn parse_table(
                 &familiarization_spec,
                 scale_t.is_some(),
                 manifest.as_ref(),
+                codecs,
                 cx,
             );
         }
@@ -212,6 +215,7 @@ fn staircase_sections(
     familiarization_spec: &FamSpec,
     has_scale: bool,
     manifest: Option<&StimulusManifest>,
+    codecs: &dyn CodecCatalog,
     cx: &mut Ctx,
 ) -> Option<StaircaseStudy> {
     if t.contains_key("conditions") {
@@ -236,7 +240,7 @@ fn staircase_sections(
         cx.err("scale", "a staircase study has no rating scale");
     }
     match cx.table(t, "", "staircase") {
-        Some(st) => parse_staircase(st, manifest, cx),
+        Some(st) => parse_staircase(st, manifest, codecs, cx),
         None if !t.contains_key("staircase") => {
             cx.err("staircase", "missing");
             None
