@@ -450,6 +450,29 @@ fn a_codec_that_needs_a_database_is_given_one() {
     );
 }
 
+#[test]
+fn a_live_observer_detecting_error_measures_rms_cm() {
+    let text = LIVE.replace(
+        "detection = \"error\"",
+        "detection = \"error\"\nmetric = \"max_cm\"",
+    );
+    assert_eq!(
+        issues(&text),
+        pairs(&[(
+            "simulation.metric",
+            "a live staircase measures rms_cm on the decoded clip; set metric = \"rms_cm\""
+        )])
+    );
+    // Detection by level does not use the metric; a manifest staircase has every metric.
+    let by_level = text.replace("detection = \"error\"", "detection = \"level\"");
+    assert!(parse(&by_level).is_ok());
+    let manifest_study = example_text("staircase.toml").replace(
+        "psychometric = \"weibull\"",
+        "psychometric = \"weibull\"\ndetection = \"error\"\nmetric = \"max_cm\"",
+    );
+    assert!(parse(&manifest_study).is_ok());
+}
+
 /// A catalog that knows no codec.
 struct NoCodecs;
 

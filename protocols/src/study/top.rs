@@ -3,7 +3,7 @@
 
 use std::collections::BTreeSet;
 
-use toml::Table;
+use toml::{Table, Value};
 
 use super::check::Ctx;
 use super::conditions::{parse_conditions, resolve_familiarization};
@@ -12,7 +12,10 @@ use super::scale::parse_scale;
 use super::session::{FamSpec, parse_session};
 use super::simulation::parse_simulation;
 use super::staircase::parse_staircase;
-use super::{Condition, STUDY_FORMAT_VERSION, SessionSettings, StaircaseStudy, StudyDefinition};
+use super::{
+    Condition, Detection, Metric, STUDY_FORMAT_VERSION, SessionSettings, SimulationSettings,
+    StaircaseStudy, StudyDefinition,
+};
 use crate::catalog::CodecCatalog;
 use crate::manifest::StimulusManifest;
 use crate::record::Protocol;
@@ -76,6 +79,7 @@ pub(super) fn parse_table(
                 codecs,
                 cx,
             );
+            check_live_metric(t, &simulation, cx);
         }
         None => {}
     }
@@ -246,6 +250,21 @@ fn staircase_sections(
             None
         }
         None => None,
+    }
+}
+
+/// A live staircase's simulated observer is told the error measured on the decoded clip,
+/// which is its joint RMS error: detecting by error there needs `metric = "rms_cm"`.
+fn check_live_metric(t: &Table, simulation: &SimulationSettings, cx: &mut Ctx) {
+    let live = t
+        .get("staircase")
+        .and_then(Value::as_table)
+        .is_some_and(|st| st.contains_key("live"));
+    if live && simulation.detection == Detection::Error && simulation.metric != Metric::RmsCm {
+        cx.err(
+            "simulation.metric",
+            "a live staircase measures rms_cm on the decoded clip; set metric = \"rms_cm\"",
+        );
     }
 }
 
