@@ -6,12 +6,14 @@ use toml::{Table, Value};
 
 use super::{MAX_CONDITIONS, StudyIssue};
 
+/// The problems found so far in one study file.
 #[derive(Default)]
 pub(super) struct Ctx {
     /// Every problem found so far, in the order found.
     pub(super) issues: Vec<StudyIssue>,
 }
 
+/// The dotted key path of `key` inside the table at `path` (`""`: the top level).
 pub(super) fn join(path: &str, key: &str) -> String {
     if path.is_empty() {
         key.to_string()
@@ -20,6 +22,7 @@ pub(super) fn join(path: &str, key: &str) -> String {
     }
 }
 
+/// What a value is, for "expected X, got Y" messages.
 pub(super) fn type_name(v: &Value) -> &'static str {
     match v {
         Value::String(_) => "a string",
