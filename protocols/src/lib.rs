@@ -5,7 +5,8 @@
 //! study, its seed and the responses so far fix the next trial), the PsychoPy-compatible
 //! [`staircase`], and
 //! simulated observers for dry runs ([`observer`]). It knows stimuli only as ids and parameters
-//! from the [`manifest`]; it never draws anything and never touches result files.
+//! from the [`manifest`], and codecs only through the [`catalog`] the binary implements over
+//! the codec registry; it never draws anything and never touches result files.
 //!
 //! ```
 //! use protocols::{Staircase, StaircaseSettings};
@@ -18,6 +19,7 @@
 //! # Ok::<(), protocols::staircase::StaircaseError>(())
 //! ```
 
+pub mod catalog;
 pub mod engine;
 pub mod manifest;
 pub mod observer;
@@ -26,6 +28,7 @@ pub mod rng;
 pub mod staircase;
 pub mod study;
 
+pub use catalog::{CodecCatalog, CodecInfo};
 pub use engine::{EngineError, Session, SessionStatus};
 pub use record::{
     Answer, Arrangement, Block, FrameTiming, Outcome, Position, Protocol, Response,

@@ -153,14 +153,6 @@ impl Observer {
         })
     }
 
-    /// Latent quality of a stimulus before bias and noise, in scale units.
-    ///
-    /// # Errors
-    /// [`ObserverError`] when the stimulus or its metrics are missing.
-    pub fn latent_quality(&self, id: &str) -> Result<f64, ObserverError> {
-        Ok(self.quality_of_error(self.manifest_error(id)?))
-    }
-
     /// Latent quality of a stimulus whose objective error is `error` (metric units).
     pub fn quality_of_error(&self, error: f64) -> f64 {
         let range = self.scale.max - self.scale.min;

@@ -331,15 +331,11 @@ impl Staircase {
             && self.settings.apply_initial_rule
         {
             self.initial_rule = false;
-            if correct {
-                self.step_down();
-            } else {
-                self.step_up();
-            }
+            self.step(!correct);
         } else if self.correct_counter >= n_down {
-            self.step_down();
+            self.step(false);
         } else if self.correct_counter <= -n_up {
-            self.step_up();
+            self.step(true);
         }
         Ok(StepOutcome {
             level,
@@ -348,39 +344,49 @@ impl Staircase {
         })
     }
 
-    fn step_up(&mut self) {
-        let s = self.settings.step;
-        match self.settings.step_type {
-            StepType::Linear => self.next_level += s,
-            StepType::Log => self.next_level *= 10_f64.powf(s),
-            StepType::Db => self.next_level *= 10_f64.powf(s / 20.0),
-        }
-        self.clamp();
-    }
-
-    fn step_down(&mut self) {
-        let s = self.settings.step * self.settings.down_up_ratio;
-        match self.settings.step_type {
-            StepType::Linear => self.next_level -= s,
-            StepType::Log => self.next_level /= 10_f64.powf(s),
-            StepType::Db => self.next_level /= 10_f64.powf(s / 20.0),
-        }
-        self.clamp();
-    }
-
-    fn clamp(&mut self) {
-        if let Some(lo) = self.settings.min
-            && self.next_level < lo
-        {
-            self.next_level = lo;
-        }
-        if let Some(hi) = self.settings.max
-            && self.next_level > hi
-        {
-            self.next_level = hi;
-        }
+    /// Moves the next level one step up or down and starts counting answers afresh.
+    fn step(&mut self, up: bool) {
+        self.next_level = stepped(&self.settings, self.next_level, up);
         self.correct_counter = 0;
     }
+}
+
+/// The level one step up (`up`) or down from `level`, clamped to `[min, max]`: where a
+/// staircase with `settings` goes after `n_up` wrong or `n_down` correct answers in a row. A
+/// down step is `step × down_up_ratio`; log and dB steps multiply and divide by `10^step` and
+/// `10^(step/20)` as PsychoPy's `StairHandler` does. The study file's check that every
+/// reachable level has a stimulus walks the levels with this same function, so it sees exactly
+/// the values a session will show.
+pub fn stepped(settings: &StaircaseSettings, level: f64, up: bool) -> f64 {
+    // The operations and their order are PsychoPy's (tests/staircase_psychopy.rs compares
+    // levels bit for bit): a down step divides rather than multiplying by 10^-step.
+    let mut x = level;
+    if up {
+        let s = settings.step;
+        match settings.step_type {
+            StepType::Linear => x += s,
+            StepType::Log => x *= 10_f64.powf(s),
+            StepType::Db => x *= 10_f64.powf(s / 20.0),
+        }
+    } else {
+        let s = settings.step * settings.down_up_ratio;
+        match settings.step_type {
+            StepType::Linear => x -= s,
+            StepType::Log => x /= 10_f64.powf(s),
+            StepType::Db => x /= 10_f64.powf(s / 20.0),
+        }
+    }
+    if let Some(lo) = settings.min
+        && x < lo
+    {
+        x = lo;
+    }
+    if let Some(hi) = settings.max
+        && x > hi
+    {
+        x = hi;
+    }
+    x
 }
 
 #[cfg(test)]
@@ -401,6 +407,51 @@ mod tests {
         let o = s.add_response(false).unwrap();
         assert!(o.reversal);
         assert!((s.next_level().unwrap() - 0.024).abs() < 1e-12);
+    }
+
+    #[test]
+    fn stepped_moves_by_the_step_type_and_clamps() {
+        let lin = StaircaseSettings {
+            step: 0.002,
+            down_up_ratio: 0.5,
+            min: Some(0.001),
+            max: Some(0.03),
+            ..StaircaseSettings::default()
+        };
+        assert!((stepped(&lin, 0.024, true) - 0.026).abs() < 1e-15);
+        assert!(
+            (stepped(&lin, 0.024, false) - 0.023).abs() < 1e-15,
+            "half a step down"
+        );
+        assert_eq!(
+            stepped(&lin, 0.0015, false).to_bits(),
+            0.001_f64.to_bits(),
+            "clamped to min"
+        );
+        assert_eq!(
+            stepped(&lin, 0.0295, true).to_bits(),
+            0.03_f64.to_bits(),
+            "clamped to max"
+        );
+        let log = StaircaseSettings {
+            step_type: StepType::Log,
+            step: 1.0,
+            min: None,
+            max: None,
+            ..StaircaseSettings::default()
+        };
+        assert!((stepped(&log, 2.0, true) - 20.0).abs() < 1e-12);
+        // Down divides by 10^step, as PsychoPy does (not a multiply by 10^-step).
+        assert_eq!(
+            stepped(&log, 0.012, false).to_bits(),
+            (0.012 / 10_f64.powf(1.0)).to_bits()
+        );
+        let db = StaircaseSettings {
+            step_type: StepType::Db,
+            step: 20.0,
+            ..log
+        };
+        assert!((stepped(&db, 2.0, false) - 0.2).abs() < 1e-12);
     }
 
     #[test]

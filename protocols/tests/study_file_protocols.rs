@@ -4,9 +4,14 @@
 
 mod common;
 
-use common::{LIVE, example, example_text, parse};
+use std::path::Path;
+
+use common::{LIVE, example, example_text, manifest, parse};
 use protocols::rng::StudyRng;
-use protocols::{Protocol, StudyError};
+use protocols::{
+    CodecCatalog, CodecInfo, Protocol, Staircase, StaircaseSettings, StepType, StudyDefinition,
+    StudyError,
+};
 
 fn issues(text: &str) -> Vec<(String, String)> {
     match parse(text) {
@@ -126,6 +131,46 @@ fn a_level_without_stimulus_is_an_error() {
     assert!(
         got.iter().any(|(_, r)| r.contains("reachable level")),
         "{got:#?}"
+    );
+}
+
+/// The check that every reachable level has a stimulus steps with the staircase's own
+/// arithmetic: a log step down divides by 10^step, and the level it names as missing is the
+/// exact value a session would show (multiplying by 10^-step differs in the last digit here).
+#[test]
+fn a_missing_log_level_is_named_as_the_staircase_computes_it() {
+    let text = example_text("staircase.toml")
+        .replace("start = 0.024", "start = 0.012")
+        .replace("step = 0.002", "step = 0.02")
+        .replace("step_type = \"linear\"", "step_type = \"log\"")
+        .replace("min = 0.002", "min = 0.010")
+        .replace("max = 0.040", "max = 0.012");
+    let got = issues(&text);
+    let mut s = Staircase::new(StaircaseSettings {
+        start: 0.012,
+        step: 0.02,
+        step_type: StepType::Log,
+        min: Some(0.010),
+        max: Some(0.012),
+        ..StaircaseSettings::default()
+    })
+    .unwrap();
+    s.add_response(true).unwrap();
+    s.add_response(true).unwrap();
+    let first_down = s.next_level().unwrap();
+    assert_ne!(
+        first_down.to_bits(),
+        (0.012 * 10_f64.powf(-0.02)).to_bits(),
+        "the example needs a level where the two roundings differ"
+    );
+    let (_, reason) = got
+        .iter()
+        .find(|(k, _)| k == "staircase.tracks[0].clip")
+        .unwrap_or_else(|| panic!("{got:#?}"));
+    let listed = reason.rsplit(": ").next().unwrap();
+    assert!(
+        listed.split(", ").any(|v| v == first_down.to_string()),
+        "{first_down} not in {reason}"
     );
 }
 
@@ -284,5 +329,203 @@ fn mutated_live_study_files_give_errors_never_panics() {
     assert!(
         errors > 400,
         "most mutations are caught: {errors} errors, {oks} still valid"
+    );
+}
+
+/// `LIVE` with another codec, level parameter and fixed parameters.
+fn live_with(codec: &str, param: &str, params: &str) -> String {
+    LIVE.replace(
+        "codec = \"wavelet-perceptual\"",
+        &format!("codec = \"{codec}\""),
+    )
+    .replace("param = \"cr\"", &format!("param = \"{param}\""))
+    .replace(
+        "params = { qp = 10, window = 128 }",
+        &format!("params = {{ {params} }}"),
+    )
+}
+
+fn pairs(want: &[(&str, &str)]) -> Vec<(String, String)> {
+    want.iter()
+        .map(|(k, r)| ((*k).to_string(), (*r).to_string()))
+        .collect()
+}
+
+const KNOWN: &str =
+    "known: raw-f32, wavelet-perceptual, spiht, primitive; `study codecs` lists them";
+
+#[test]
+fn a_live_staircase_names_a_known_codec() {
+    assert!(parse(&live_with("spiht", "cr", "window = 64")).is_ok());
+    assert_eq!(
+        issues(&live_with("spiht2", "cr", "window = 64")),
+        pairs(&[(
+            "staircase.codec",
+            &format!("unknown codec \"spiht2\" ({KNOWN})")
+        )]),
+        "nothing else is checked against a codec that does not exist"
+    );
+}
+
+#[test]
+fn a_live_level_is_a_parameter_of_the_codec() {
+    assert_eq!(
+        issues(&live_with("spiht", "qp", "window = 64")),
+        pairs(&[(
+            "staircase.param",
+            "codec \"spiht\" has no parameter \"qp\" (accepted: cr, window)"
+        )])
+    );
+}
+
+#[test]
+fn every_fixed_live_parameter_is_one_the_codec_takes() {
+    assert_eq!(
+        issues(&live_with(
+            "spiht",
+            "cr",
+            "window = 64, qp = 10, alpha = 0.1"
+        )),
+        pairs(&[
+            (
+                "staircase.live.params.alpha",
+                "codec \"spiht\" has no such parameter (accepted: cr, window)"
+            ),
+            (
+                "staircase.live.params.qp",
+                "codec \"spiht\" has no such parameter (accepted: cr, window)"
+            ),
+        ])
+    );
+}
+
+#[test]
+fn a_compression_ratio_level_needs_rate_control_and_a_positive_min() {
+    // raw-f32 has neither the parameter nor rate control: both are said.
+    assert_eq!(
+        issues(&live_with("raw-f32", "cr", "")),
+        pairs(&[
+            (
+                "staircase.param",
+                "codec \"raw-f32\" has no parameter \"cr\" (accepted: )"
+            ),
+            (
+                "staircase.param",
+                "codec \"raw-f32\" takes no target compression ratio"
+            ),
+        ])
+    );
+    let text = live_with("spiht", "cr", "window = 64").replace("min = 8", "min = 0");
+    assert_eq!(
+        issues(&text),
+        pairs(&[("staircase.min", "a compression ratio level needs min > 0")])
+    );
+    // Another level parameter may start at 0.
+    let text = live_with("primitive", "t_l", "")
+        .replace("min = 8", "min = 0")
+        .replace(
+            "order = \"in_turn\"",
+            "order = \"in_turn\"\ndatabase = \"db.bin\"",
+        );
+    assert!(parse(&text).is_ok(), "{:?}", parse(&text).err());
+}
+
+#[test]
+fn a_codec_that_needs_a_database_is_given_one() {
+    assert_eq!(
+        issues(&live_with("primitive", "t_l", "")),
+        pairs(&[(
+            "staircase.live.database",
+            "codec \"primitive\" needs a primitive database file here"
+        )])
+    );
+    let text = live_with("primitive", "t_l", "").replace(
+        "order = \"in_turn\"",
+        "order = \"in_turn\"\ndatabase = \"db.bin\"",
+    );
+    let study = parse(&text).unwrap();
+    assert_eq!(
+        study.staircase.unwrap().live.unwrap().database.as_deref(),
+        Some("db.bin")
+    );
+}
+
+#[test]
+fn a_live_observer_detecting_error_measures_rms_cm() {
+    let text = LIVE.replace(
+        "detection = \"error\"",
+        "detection = \"error\"\nmetric = \"max_cm\"",
+    );
+    assert_eq!(
+        issues(&text),
+        pairs(&[(
+            "simulation.metric",
+            "a live staircase measures rms_cm on the decoded clip; set metric = \"rms_cm\""
+        )])
+    );
+    // Detection by level does not use the metric; a manifest staircase has every metric.
+    let by_level = text.replace("detection = \"error\"", "detection = \"level\"");
+    assert!(parse(&by_level).is_ok());
+    let manifest_study = example_text("staircase.toml").replace(
+        "psychometric = \"weibull\"",
+        "psychometric = \"weibull\"\ndetection = \"error\"\nmetric = \"max_cm\"",
+    );
+    assert!(parse(&manifest_study).is_ok());
+}
+
+/// A catalog that knows no codec.
+struct NoCodecs;
+
+impl CodecCatalog for NoCodecs {
+    fn codec(&self, _: &str) -> Option<CodecInfo> {
+        None
+    }
+    fn names(&self) -> Vec<String> {
+        Vec::new()
+    }
+}
+
+/// Studies over manifest stimuli name codecs only as the manifest does; the catalog is not
+/// asked about them.
+#[test]
+fn manifest_studies_are_not_checked_against_the_catalog() {
+    for name in ["mos.toml", "dscqs.toml", "staircase.toml"] {
+        let m = manifest();
+        let parsed = StudyDefinition::parse(
+            &example_text(name),
+            Path::new(name),
+            move |_| Ok(m),
+            &NoCodecs,
+        );
+        assert!(parsed.is_ok(), "{name}: {:?}", parsed.err());
+    }
+    let m = manifest();
+    let live = StudyDefinition::parse(LIVE, Path::new("live.toml"), move |_| Ok(m), &NoCodecs);
+    assert!(matches!(live, Err(StudyError::Invalid { .. })), "{live:?}");
+}
+
+/// Codec problems land in the same list as every other problem of the file.
+#[test]
+fn codec_problems_are_listed_with_every_other_problem() {
+    let text = LIVE
+        .replace(
+            "params = { qp = 10, window = 128 }",
+            "params = { qp = 10, colour = 3 }",
+        )
+        .replace("seed = 5\n", "")
+        + "\n[scale]\nkind = \"categorical\"\n";
+    let got = issues(&text);
+    let keys: Vec<&str> = got.iter().map(|(k, _)| k.as_str()).collect();
+    assert_eq!(
+        keys,
+        ["seed", "scale", "staircase.live.params.colour"],
+        "{got:#?}"
+    );
+    assert_eq!(got[0].1, "missing");
+    assert_eq!(got[1].1, "a staircase study has no rating scale");
+    assert!(
+        got[2]
+            .1
+            .starts_with("codec \"wavelet-perceptual\" has no such parameter")
     );
 }

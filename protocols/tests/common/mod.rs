@@ -1,4 +1,5 @@
-// Shared by the integration tests: the example study files and their manifest.
+// Shared by the integration tests: the example study files, their manifest, and a codec
+// catalog standing in for the binary's codec registry.
 #![allow(
     dead_code,
     clippy::unwrap_used,
@@ -9,8 +10,40 @@
 
 use std::path::{Path, PathBuf};
 
-use protocols::StudyDefinition;
 use protocols::manifest::StimulusManifest;
+use protocols::{CodecCatalog, CodecInfo, StudyDefinition};
+
+/// The codecs the test study files may name, shaped like the real registry's: `spiht` and
+/// `wavelet-perceptual` reach a target compression ratio, `primitive` also needs its database,
+/// `raw-f32` takes no parameters and has no rate control.
+pub struct TestCodecs;
+
+impl CodecCatalog for TestCodecs {
+    fn codec(&self, name: &str) -> Option<CodecInfo> {
+        let info = |params: &[&str], target_cr: bool, needs_database: bool| CodecInfo {
+            params: params.iter().map(|p| (*p).to_string()).collect(),
+            target_cr,
+            needs_database,
+        };
+        match name {
+            "spiht" => Some(info(&["cr", "window"], true, false)),
+            "wavelet-perceptual" => Some(info(
+                &["alpha", "c", "cr", "qp", "translation", "wavelet", "window"],
+                true,
+                false,
+            )),
+            "primitive" => Some(info(&["cr", "t_l"], true, true)),
+            "raw-f32" => Some(info(&[], false, false)),
+            _ => None,
+        }
+    }
+
+    fn names(&self) -> Vec<String> {
+        ["raw-f32", "wavelet-perceptual", "spiht", "primitive"]
+            .map(String::from)
+            .to_vec()
+    }
+}
 
 pub fn examples() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples")
@@ -27,11 +60,11 @@ pub fn example_text(name: &str) -> String {
 
 pub fn parse(text: &str) -> Result<StudyDefinition, protocols::StudyError> {
     let m = manifest();
-    StudyDefinition::parse(text, Path::new("test.toml"), move |_| Ok(m))
+    StudyDefinition::parse(text, Path::new("test.toml"), move |_| Ok(m), &TestCodecs)
 }
 
 pub fn example(name: &str) -> StudyDefinition {
-    StudyDefinition::load(&examples().join(name)).unwrap()
+    StudyDefinition::load(&examples().join(name), &TestCodecs).unwrap()
 }
 
 /// A live staircase over the hand-made example manifest (clips `walk` and `dance`).

@@ -1,0 +1,287 @@
+//! The top-level table of a study file: its header keys, the stimulus manifest, and which
+//! sections each protocol takes.
+
+use std::collections::BTreeSet;
+
+use toml::{Table, Value};
+
+use super::check::Ctx;
+use super::conditions::{parse_conditions, resolve_familiarization};
+use super::presentation::parse_presentation;
+use super::scale::parse_scale;
+use super::session::{FamSpec, parse_session};
+use super::simulation::parse_simulation;
+use super::staircase::parse_staircase;
+use super::{
+    Condition, Detection, Metric, STUDY_FORMAT_VERSION, SessionSettings, SimulationSettings,
+    StaircaseStudy, StudyDefinition,
+};
+use crate::catalog::CodecCatalog;
+use crate::manifest::StimulusManifest;
+use crate::record::Protocol;
+
+const TOP_KEYS: &[&str] = &[
+    "format_version",
+    "name",
+    "protocol",
+    "stimuli",
+    "seed",
+    "conditions",
+    "presentation",
+    "scale",
+    "session",
+    "staircase",
+    "simulation",
+];
+
+/// The whole study file: its header, the manifest, the sections every protocol has, then
+/// the protocol's own; `None` when something the definition needs is missing (the problem is
+/// in `cx`).
+pub(super) fn parse_table(
+    t: &Table,
+    cx: &mut Ctx,
+    load_manifest: impl FnOnce(&str) -> Result<StimulusManifest, String>,
+    codecs: &dyn CodecCatalog,
+) -> Option<StudyDefinition> {
+    cx.known(t, "", TOP_KEYS);
+    let header = parse_header(t, cx);
+    let manifest = header
+        .stimuli_path
+        .as_deref()
+        .and_then(|p| load_checked_manifest(p, load_manifest, cx));
+
+    let empty = Table::new();
+    let protocol = header.protocol;
+    let pres_t = cx.table(t, "", "presentation").unwrap_or(&empty);
+    let presentation = parse_presentation(pres_t, protocol, cx);
+    let scale_t = cx.table(t, "", "scale");
+    let scale = parse_scale(scale_t.unwrap_or(&empty), protocol, cx);
+    let session_t = cx.table(t, "", "session").unwrap_or(&empty);
+    let (session, familiarization_spec) = parse_session(session_t, cx);
+    let sim_t = cx.table(t, "", "simulation").unwrap_or(&empty);
+    let simulation = parse_simulation(sim_t, cx);
+
+    let mut conditions = Vec::new();
+    let mut familiarization = Vec::new();
+    let mut staircase = None;
+    match protocol {
+        Some(Protocol::Mos | Protocol::Dscqs) => {
+            (conditions, familiarization) =
+                rating_sections(t, &session, familiarization_spec, manifest.as_ref(), cx);
+        }
+        Some(Protocol::Staircase) => {
+            staircase = staircase_sections(
+                t,
+                &session,
+                &familiarization_spec,
+                scale_t.is_some(),
+                manifest.as_ref(),
+                codecs,
+                cx,
+            );
+            check_live_metric(t, &simulation, cx);
+        }
+        None => {}
+    }
+
+    Some(StudyDefinition {
+        format_version: header.version? as u32,
+        name: header.name?,
+        protocol: protocol?,
+        stimuli_path: header.stimuli_path?,
+        seed: header.seed? as u64,
+        conditions,
+        familiarization,
+        presentation: presentation?,
+        scale: scale?,
+        session,
+        staircase,
+        simulation,
+        manifest: manifest?,
+    })
+}
+
+/// The top-level keys before the sections (`None` where missing or invalid, with the problem
+/// reported).
+struct Header {
+    version: Option<i64>,
+    name: Option<String>,
+    protocol: Option<Protocol>,
+    stimuli_path: Option<String>,
+    seed: Option<i64>,
+}
+
+/// `format_version`, `name`, `protocol`, `stimuli` and `seed`.
+fn parse_header(t: &Table, cx: &mut Ctx) -> Header {
+    let version = cx.int(t, "", "format_version", 0, i64::from(u32::MAX));
+    let version = cx.required(version, t, "", "format_version");
+    if let Some(v) = version
+        && v != i64::from(STUDY_FORMAT_VERSION)
+    {
+        cx.err(
+            "format_version",
+            format!("version {v} is not supported (this build reads {STUDY_FORMAT_VERSION})"),
+        );
+    }
+    let name = cx.string(t, "", "name");
+    let name = cx.required(name, t, "", "name");
+    if name
+        .as_deref()
+        .is_some_and(|n| n.trim().is_empty() || n.len() > 200 || n.chars().any(char::is_control))
+    {
+        cx.err("name", "must be 1-200 printable characters");
+    }
+    let protocol: Option<Protocol> = cx.parse_enum(t, "", "protocol");
+    let protocol = cx.required(protocol, t, "", "protocol");
+    let stimuli_path = cx.string(t, "", "stimuli");
+    let stimuli_path = cx.required(stimuli_path, t, "", "stimuli");
+    let seed = cx.int(t, "", "seed", 0, i64::MAX);
+    let seed = cx.required(seed, t, "", "seed");
+    Header {
+        version,
+        name,
+        protocol,
+        stimuli_path,
+        seed,
+    }
+}
+
+/// The manifest named by `stimuli`, loaded and checked; `None` when it cannot be loaded.
+fn load_checked_manifest(
+    path: &str,
+    load_manifest: impl FnOnce(&str) -> Result<StimulusManifest, String>,
+    cx: &mut Ctx,
+) -> Option<StimulusManifest> {
+    match load_manifest(path) {
+        Ok(m) => {
+            check_manifest(&m, cx);
+            Some(m)
+        }
+        Err(e) => {
+            cx.err("stimuli", format!("cannot load the stimulus manifest: {e}"));
+            None
+        }
+    }
+}
+
+/// The sections of a MOS or DSCQS study: no `[staircase]`, the `[conditions]` and the
+/// familiarization stimuli chosen among them, and enough conditions to hide the repeats in.
+fn rating_sections(
+    t: &Table,
+    session: &SessionSettings,
+    familiarization_spec: FamSpec,
+    manifest: Option<&StimulusManifest>,
+    cx: &mut Ctx,
+) -> (Vec<Condition>, Vec<Condition>) {
+    let mut conditions = Vec::new();
+    let mut familiarization = Vec::new();
+    if t.contains_key("staircase") {
+        cx.err(
+            "staircase",
+            "only a staircase study may have a [staircase] table",
+        );
+    }
+    match cx.table(t, "", "conditions") {
+        Some(ct) => {
+            if let Some(m) = manifest {
+                conditions = parse_conditions(ct, m, cx);
+                familiarization = resolve_familiarization(familiarization_spec, &conditions, m, cx);
+            } else {
+                cx.known(
+                    ct,
+                    "conditions",
+                    &["stimuli", "clips", "codecs", "target_cr"],
+                );
+            }
+        }
+        None if !t.contains_key("conditions") => cx.err("conditions", "missing"),
+        None => {}
+    }
+    if session.hidden_repeats as usize > conditions.len() && manifest.is_some() {
+        cx.err(
+            "session.hidden_repeats",
+            format!(
+                "{} repeats but only {} conditions",
+                session.hidden_repeats,
+                conditions.len()
+            ),
+        );
+    }
+    (conditions, familiarization)
+}
+
+/// The sections of a staircase study: none of the settings only rating studies have
+/// (conditions, familiarization, hidden repeats, a `[scale]`, which `has_scale` tells), and the
+/// `[staircase]` table.
+fn staircase_sections(
+    t: &Table,
+    session: &SessionSettings,
+    familiarization_spec: &FamSpec,
+    has_scale: bool,
+    manifest: Option<&StimulusManifest>,
+    codecs: &dyn CodecCatalog,
+    cx: &mut Ctx,
+) -> Option<StaircaseStudy> {
+    if t.contains_key("conditions") {
+        cx.err(
+            "conditions",
+            "a staircase study takes its stimuli from [staircase]; remove [conditions]",
+        );
+    }
+    if !matches!(familiarization_spec, FamSpec::None) {
+        cx.err(
+            "session.familiarization",
+            "familiarization trials are not supported in a staircase study",
+        );
+    }
+    if session.hidden_repeats > 0 {
+        cx.err(
+            "session.hidden_repeats",
+            "hidden repeats are not supported in a staircase study",
+        );
+    }
+    if has_scale {
+        cx.err("scale", "a staircase study has no rating scale");
+    }
+    match cx.table(t, "", "staircase") {
+        Some(st) => parse_staircase(st, manifest, codecs, cx),
+        None if !t.contains_key("staircase") => {
+            cx.err("staircase", "missing");
+            None
+        }
+        None => None,
+    }
+}
+
+/// A live staircase's simulated observer is told the error measured on the decoded clip,
+/// which is its joint RMS error: detecting by error there needs `metric = "rms_cm"`.
+fn check_live_metric(t: &Table, simulation: &SimulationSettings, cx: &mut Ctx) {
+    let live = t
+        .get("staircase")
+        .and_then(Value::as_table)
+        .is_some_and(|st| st.contains_key("live"));
+    if live && simulation.detection == Detection::Error && simulation.metric != Metric::RmsCm {
+        cx.err(
+            "simulation.metric",
+            "a live staircase measures rms_cm on the decoded clip; set metric = \"rms_cm\"",
+        );
+    }
+}
+
+fn check_manifest(m: &StimulusManifest, cx: &mut Ctx) {
+    if m.version != crate::manifest::MANIFEST_VERSION {
+        cx.err(
+            "stimuli",
+            format!("manifest version {} is not supported", m.version),
+        );
+    }
+    let mut seen = BTreeSet::new();
+    for s in &m.stimuli {
+        if !seen.insert(s.id.as_str()) {
+            cx.err(
+                "stimuli",
+                format!("manifest lists stimulus id {:?} twice", s.id),
+            );
+        }
+    }
+}
