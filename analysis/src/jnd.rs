@@ -19,6 +19,7 @@ use std::collections::BTreeMap;
 
 use serde::Serialize;
 
+use crate::confidence::Confidence;
 use crate::descriptive::{Summary, summarize};
 use crate::dist::{nct_cdf, z_sf};
 use crate::error::AnalysisError;
@@ -60,14 +61,12 @@ fn phi(x: f64) -> f64 {
 ///
 /// # Errors
 /// [`AnalysisError::TooFew`] without thresholds; [`AnalysisError::NonFinite`] for a
-/// non-finite threshold or level; [`AnalysisError::InvalidParameter`] for a confidence outside
-/// (0, 1).
+/// non-finite threshold or level.
 pub fn unnoticed_share(
     thresholds: &[f64],
     level: f64,
-    confidence: f64,
+    confidence: Confidence,
 ) -> Result<UnnoticedShare, AnalysisError> {
-    crate::error::check_confidence(confidence)?;
     if thresholds.is_empty() {
         return Err(AnalysisError::TooFew {
             what: "thresholds",
@@ -115,7 +114,7 @@ pub fn unnoticed_share(
     let root_n = n.sqrt();
     let t_obs = root_n * (mean - level) / sd;
     let df = n - 1.0;
-    let alpha = 1.0 - confidence;
+    let alpha = confidence.alpha();
     // P(T ≤ t_obs | δ) falls from 1 to 0 as δ grows: the lower bound of δ puts t_obs at the
     // upper α/2 point, the upper bound at the lower α/2 point.
     let lower = solve_delta(t_obs, df, 1.0 - alpha / 2.0);
@@ -192,7 +191,7 @@ pub struct JndAnalysis {
     /// One row per tabulated level, ascending.
     pub rows: Vec<JndRow>,
     /// Confidence level of the intervals.
-    pub confidence: f64,
+    pub confidence: Confidence,
 }
 
 /// Most levels tabulated; more distinct levels are thinned evenly.
@@ -207,7 +206,7 @@ const MAX_ROWS: usize = 24;
 pub fn jnd_analysis(
     thresholds: &[(u32, f64)],
     encoded: &[EncodedLevel],
-    confidence: f64,
+    confidence: Confidence,
 ) -> Result<JndAnalysis, AnalysisError> {
     let values: Vec<f64> = thresholds.iter().map(|t| t.1).collect();
     let summary = summarize(&values, confidence)?;

@@ -5,6 +5,7 @@ use std::collections::{BTreeMap, BTreeSet, HashMap};
 
 use serde::Serialize;
 
+use crate::confidence::Confidence;
 use crate::descriptive::{CiMethod, ConditionStats, Rating, condition_stats};
 use crate::dmos::{DscqsPair, acr_hr_dmos, dscqs_dmos, zscore_by_subject};
 use crate::error::AnalysisError;
@@ -47,8 +48,8 @@ pub struct StudyData {
 /// Options of the analysis.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct ReportOptions {
-    /// Confidence level of all intervals.
-    pub confidence: f64,
+    /// Confidence level of all intervals (the bootstrap's is set in [`Self::bootstrap`]).
+    pub confidence: Confidence,
     /// Which interval decides findings and is printed in tables.
     pub ci_method: CiMethod,
     /// MOS limit for rate findings (4.5 in thesis §3.3).
@@ -77,7 +78,7 @@ pub struct ReportOptions {
 impl Default for ReportOptions {
     fn default() -> Self {
         Self {
-            confidence: 0.95,
+            confidence: Confidence::default(),
             ci_method: CiMethod::StudentT,
             mos_limit: 4.5,
             dmos_limit: 0.2,
@@ -357,7 +358,7 @@ impl StudyAnalysis {
     )]
     pub fn to_report(&self, data: &StudyData, options: &ReportOptions, title: &str) -> Report {
         let mut report = Report::new(title);
-        let conf = format!("{:.0} %", options.confidence * 100.0);
+        let conf = format!("{:.0} %", options.confidence.percent());
         if !self.mos.is_empty() {
             let s = report.section("Mean opinion scores");
             s.text(format!(
@@ -542,7 +543,7 @@ impl StudyAnalysis {
                 fit.lapse,
                 options.percent_correct * 100.0,
                 ci.threshold,
-                ci.confidence * 100.0,
+                ci.confidence.percent(),
                 ci.lower,
                 ci.upper,
                 ci.replicates,
@@ -573,7 +574,7 @@ impl StudyAnalysis {
 /// The JND section: thresholds over viewers, and at each level the share who would notice
 /// with the CR the codec reached there on each clip.
 fn jnd_section(report: &mut Report, j: &JndAnalysis, options: &ReportOptions) {
-    let conf = format!("{:.0} %", j.confidence * 100.0);
+    let conf = format!("{:.0} %", j.confidence.percent());
     let label = &options.level_label;
     let s = report.section("Just-noticeable difference across viewers");
     let sd = j
