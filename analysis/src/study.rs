@@ -352,229 +352,284 @@ fn rate_series(findings: &[RateFinding], method: CiMethod) -> Vec<RateSeries> {
 
 impl StudyAnalysis {
     /// Lays the statistics out as a report: tables shaped like the seeds' and the figures.
-    #[expect(
-        clippy::too_many_lines,
-        reason = "one linear layout of every section; splitting it would scatter the report's order"
-    )]
+    ///
+    /// Sections come in this order, each only when the data gave it something to show.
     pub fn to_report(&self, data: &StudyData, options: &ReportOptions, title: &str) -> Report {
         let mut report = Report::new(title);
-        let conf = format!("{:.0} %", options.confidence.percent());
         if !self.mos.is_empty() {
-            let s = report.section("Mean opinion scores");
-            s.text(format!(
-                "{} ratings from {} subjects. Mean ± {conf} confidence interval ({:?}); thesis Table 3.1 layout.",
-                data.ratings.len(),
-                data.ratings.iter().map(|r| r.subject).collect::<BTreeSet<_>>().len(),
-                options.ci_method
-            ));
-            s.table(tables::mos_table(
-                "mos",
-                "MOS per condition (all observers)",
-                &data.conditions,
-                &self.mos,
-                options.ci_method,
-            ));
-            if let Some(screened) = &self.mos_screened {
-                s.table(tables::mos_table(
-                    "mos_screened",
-                    "MOS per condition without rejected observers",
-                    &data.conditions,
-                    screened,
-                    options.ci_method,
-                ));
-            }
-            if let Some(z) = &self.mos_zscored {
-                s.table(tables::mos_table(
-                    "mos_zscored",
-                    "Mean of per-subject z-scores per condition",
-                    &data.conditions,
-                    z,
-                    options.ci_method,
-                ));
-            }
-            s.table(tables::findings_table(
-                "mos_findings",
-                &format!(
-                    "Highest CR whose lower CI bound stays ≥ MOS {}",
-                    options.mos_limit
-                ),
-                &self.mos_findings,
-            ));
-            if options.figures {
-                s.figure(
-                    "mos_vs_cr",
-                    Figure::RateCurves {
-                        title: "MOS vs compression ratio".to_owned(),
-                        y_label: "MOS".to_owned(),
-                        series: rate_series(&self.mos_findings, options.ci_method),
-                        limit: Some(options.mos_limit),
-                    },
-                );
-                let mut per: BTreeMap<u32, Vec<f64>> = BTreeMap::new();
-                for r in &data.ratings {
-                    per.entry(r.subject).or_default().push(r.score);
-                }
-                s.figure(
-                    "score_distributions",
-                    Figure::ScoreDistributions {
-                        title: "Scores per subject".to_owned(),
-                        per_subject: per.into_iter().collect(),
-                    },
-                );
-            }
+            self.mos_section(&mut report, data, options);
         }
         if !self.comparisons.is_empty() {
-            let s = report.section("Comparisons");
-            s.text("Paired t-tests on per-subject mean scores at equal clip and ratio; p values Holm-corrected across the table (thesis Tables 3.2, 3.3).");
-            s.table(tables::ttest_table(
-                "ttests",
-                "Paired t-tests between codecs",
-                &self.comparisons,
-            ));
+            comparisons_section(&mut report, &self.comparisons);
         }
         if let Some(screening) = &self.screening {
-            let s = report.section("Observer screening");
-            let rejected = screening.rejected();
-            s.text(if rejected.is_empty() {
-                "BT.500 Annex 2 §2.3.1: no observer rejected.".to_owned()
-            } else {
-                format!(
-                    "BT.500 Annex 2 §2.3.1: rejected {} ((P+Q)/JKR > 0.05 and |P−Q|/(P+Q) < 0.3); MOS is reported with and without them.",
-                    rejected.iter().map(ToString::to_string).collect::<Vec<_>>().join(", ")
-                )
-            });
-            s.table(tables::screening_table(
-                "screening",
-                "BT.500 observer screening",
-                screening,
-            ));
-            let rows: Vec<Vec<String>> = self
-                .repeats
-                .iter()
-                .filter(|r| r.pairs > 0)
-                .map(|r| {
-                    vec![
-                        r.subject.to_string(),
-                        r.pairs.to_string(),
-                        fmt_opt(r.mean_abs_difference, 3),
-                    ]
-                })
-                .collect();
-            if !rows.is_empty() {
-                s.table(tables::Table {
-                    name: "repeats".to_owned(),
-                    caption: "Hidden-repeat consistency (mean |repeat − first|)".to_owned(),
-                    columns: vec![
-                        "Subject".to_owned(),
-                        "Repeats".to_owned(),
-                        "Mean abs. difference".to_owned(),
-                    ],
-                    rows,
-                });
-            }
+            screening_section(&mut report, screening, &self.repeats);
         }
         if !self.dmos.is_empty() {
-            let s = report.section("Differential MOS");
-            s.table(tables::dmos_table(
-                "dmos",
-                "DMOS per condition and clip (thesis Table 6.3 layout)",
-                &data.conditions,
-                &self.dmos,
-            ));
-            s.table(tables::mos_table(
-                "dmos_ci",
-                "DMOS with confidence intervals",
-                &data.conditions,
-                &self.dmos,
-                options.ci_method,
-            ));
-            s.table(tables::findings_table(
-                "dmos_findings",
-                &format!(
-                    "Highest CR whose upper CI bound stays < DMOS {}",
-                    options.dmos_limit
-                ),
-                &self.dmos_findings,
-            ));
-            if options.figures {
-                s.figure(
-                    "dmos_vs_cr",
-                    Figure::RateCurves {
-                        title: "DMOS vs compression ratio".to_owned(),
-                        y_label: "DMOS".to_owned(),
-                        series: rate_series(&self.dmos_findings, options.ci_method),
-                        limit: Some(options.dmos_limit),
-                    },
-                );
-            }
+            self.dmos_section(&mut report, data, options);
         }
         if let Some(t) = &self.thresholds {
-            let s = report.section("Staircase thresholds");
-            s.text(format!(
-                "Mean of the last {} reversals per staircase, averaged per subject (thesis §5.4).",
-                t.last_reversals
-            ));
-            s.table(tables::threshold_table(
-                "thresholds",
-                "Staircase thresholds across subjects",
-                t,
-            ));
-            if options.figures {
-                s.figure(
-                    "staircases",
-                    Figure::Staircases {
-                        title: "Staircase tracks".to_owned(),
-                        level_label: options.level_label.clone(),
-                        tracks: data.staircases.clone(),
-                    },
-                );
-            }
+            thresholds_section(&mut report, t, data, options);
         }
         if let Some(j) = &self.jnd {
             jnd_section(&mut report, j, options);
         }
         if let Some((fit, ci)) = &self.psychometric {
-            let s = report.section("Psychometric function");
-            s.text(format!(
-                "Maximum-likelihood {:?} fit to {} 2AFC trials (guess rate {}, lapse {:.4}); threshold at {:.0} % correct = {:.5}, {:.0} % parametric bootstrap CI [{:.5}, {:.5}] from {} replicates (seed {}).",
-                fit.shape,
-                fit.trials,
-                fit.guess_rate,
-                fit.lapse,
-                options.percent_correct * 100.0,
-                ci.threshold,
-                ci.confidence.percent(),
-                ci.lower,
-                ci.upper,
-                ci.replicates,
-                ci.seed
-            ));
-            if options.figures {
-                s.figure(
-                    "psychometric",
-                    Figure::Psychometric {
-                        title: "Psychometric function".to_owned(),
-                        level_label: options.level_label.clone(),
-                        data: GroupedTrials::from_trials(&data.two_afc),
-                        fit: *fit,
-                        threshold: Some((
-                            options.percent_correct,
-                            ci.threshold,
-                            ci.lower,
-                            ci.upper,
-                        )),
-                    },
-                );
-            }
+            psychometric_section(&mut report, fit, ci, data, options);
         }
         report
+    }
+
+    /// The MOS section: all observers, without the rejected ones, of z-scores (thesis Table
+    /// 3.1 layout), the MOS rate findings, and the MOS-vs-CR and per-subject score figures.
+    fn mos_section(&self, report: &mut Report, data: &StudyData, options: &ReportOptions) {
+        let conf = percent_label(options.confidence);
+        let s = report.section("Mean opinion scores");
+        s.text(format!(
+            "{} ratings from {} subjects. Mean ± {conf} confidence interval ({:?}); thesis Table 3.1 layout.",
+            data.ratings.len(),
+            data.ratings.iter().map(|r| r.subject).collect::<BTreeSet<_>>().len(),
+            options.ci_method
+        ));
+        s.table(tables::mos_table(
+            "mos",
+            "MOS per condition (all observers)",
+            &data.conditions,
+            &self.mos,
+            options.ci_method,
+        ));
+        if let Some(screened) = &self.mos_screened {
+            s.table(tables::mos_table(
+                "mos_screened",
+                "MOS per condition without rejected observers",
+                &data.conditions,
+                screened,
+                options.ci_method,
+            ));
+        }
+        if let Some(z) = &self.mos_zscored {
+            s.table(tables::mos_table(
+                "mos_zscored",
+                "Mean of per-subject z-scores per condition",
+                &data.conditions,
+                z,
+                options.ci_method,
+            ));
+        }
+        s.table(tables::findings_table(
+            "mos_findings",
+            &format!(
+                "Highest CR whose lower CI bound stays ≥ MOS {}",
+                options.mos_limit
+            ),
+            &self.mos_findings,
+        ));
+        if options.figures {
+            s.figure(
+                "mos_vs_cr",
+                Figure::RateCurves {
+                    title: "MOS vs compression ratio".to_owned(),
+                    y_label: "MOS".to_owned(),
+                    series: rate_series(&self.mos_findings, options.ci_method),
+                    limit: Some(options.mos_limit),
+                },
+            );
+            s.figure(
+                "score_distributions",
+                Figure::ScoreDistributions {
+                    title: "Scores per subject".to_owned(),
+                    per_subject: scores_per_subject(&data.ratings),
+                },
+            );
+        }
+    }
+
+    /// The DMOS section: the thesis Table 6.3 grid, DMOS with intervals, the DMOS rate
+    /// findings and the DMOS-vs-CR figure.
+    fn dmos_section(&self, report: &mut Report, data: &StudyData, options: &ReportOptions) {
+        let s = report.section("Differential MOS");
+        s.table(tables::dmos_table(
+            "dmos",
+            "DMOS per condition and clip (thesis Table 6.3 layout)",
+            &data.conditions,
+            &self.dmos,
+        ));
+        s.table(tables::mos_table(
+            "dmos_ci",
+            "DMOS with confidence intervals",
+            &data.conditions,
+            &self.dmos,
+            options.ci_method,
+        ));
+        s.table(tables::findings_table(
+            "dmos_findings",
+            &format!(
+                "Highest CR whose upper CI bound stays < DMOS {}",
+                options.dmos_limit
+            ),
+            &self.dmos_findings,
+        ));
+        if options.figures {
+            s.figure(
+                "dmos_vs_cr",
+                Figure::RateCurves {
+                    title: "DMOS vs compression ratio".to_owned(),
+                    y_label: "DMOS".to_owned(),
+                    series: rate_series(&self.dmos_findings, options.ci_method),
+                    limit: Some(options.dmos_limit),
+                },
+            );
+        }
+    }
+}
+
+/// A confidence level as the report's text prints it: `95 %`.
+fn percent_label(confidence: Confidence) -> String {
+    format!("{:.0} %", confidence.percent())
+}
+
+/// Every subject's scores in rating order, by subject id: the score-distribution figure.
+fn scores_per_subject(ratings: &[Rating]) -> Vec<(u32, Vec<f64>)> {
+    let mut per: BTreeMap<u32, Vec<f64>> = BTreeMap::new();
+    for r in ratings {
+        per.entry(r.subject).or_default().push(r.score);
+    }
+    per.into_iter().collect()
+}
+
+/// The comparisons section: the paired t-tests between codecs (thesis Tables 3.2, 3.3).
+fn comparisons_section(report: &mut Report, comparisons: &[ComparisonRow]) {
+    let s = report.section("Comparisons");
+    s.text("Paired t-tests on per-subject mean scores at equal clip and ratio; p values Holm-corrected across the table (thesis Tables 3.2, 3.3).");
+    s.table(tables::ttest_table(
+        "ttests",
+        "Paired t-tests between codecs",
+        comparisons,
+    ));
+}
+
+/// The observer-screening section: who BT.500 rejects and why, and hidden-repeat consistency.
+fn screening_section(
+    report: &mut Report,
+    screening: &ScreeningReport,
+    repeats: &[RepeatConsistency],
+) {
+    let s = report.section("Observer screening");
+    let rejected = screening.rejected();
+    s.text(if rejected.is_empty() {
+        "BT.500 Annex 2 §2.3.1: no observer rejected.".to_owned()
+    } else {
+        format!(
+            "BT.500 Annex 2 §2.3.1: rejected {} ((P+Q)/JKR > 0.05 and |P−Q|/(P+Q) < 0.3); MOS is reported with and without them.",
+            rejected.iter().map(ToString::to_string).collect::<Vec<_>>().join(", ")
+        )
+    });
+    s.table(tables::screening_table(
+        "screening",
+        "BT.500 observer screening",
+        screening,
+    ));
+    if let Some(table) = repeats_table(repeats) {
+        s.table(table);
+    }
+}
+
+/// Hidden-repeat consistency of the subjects who met a repeat; `None` when nobody did.
+fn repeats_table(repeats: &[RepeatConsistency]) -> Option<tables::Table> {
+    let rows: Vec<Vec<String>> = repeats
+        .iter()
+        .filter(|r| r.pairs > 0)
+        .map(|r| {
+            vec![
+                r.subject.to_string(),
+                r.pairs.to_string(),
+                fmt_opt(r.mean_abs_difference, 3),
+            ]
+        })
+        .collect();
+    (!rows.is_empty()).then(|| tables::Table {
+        name: "repeats".to_owned(),
+        caption: "Hidden-repeat consistency (mean |repeat − first|)".to_owned(),
+        columns: vec![
+            "Subject".to_owned(),
+            "Repeats".to_owned(),
+            "Mean abs. difference".to_owned(),
+        ],
+        rows,
+    })
+}
+
+/// The staircase section: thresholds from the last reversals (thesis §5.4) and the tracks.
+fn thresholds_section(
+    report: &mut Report,
+    t: &ThresholdSummary,
+    data: &StudyData,
+    options: &ReportOptions,
+) {
+    let s = report.section("Staircase thresholds");
+    s.text(format!(
+        "Mean of the last {} reversals per staircase, averaged per subject (thesis §5.4).",
+        t.last_reversals
+    ));
+    s.table(tables::threshold_table(
+        "thresholds",
+        "Staircase thresholds across subjects",
+        t,
+    ));
+    if options.figures {
+        s.figure(
+            "staircases",
+            Figure::Staircases {
+                title: "Staircase tracks".to_owned(),
+                level_label: options.level_label.clone(),
+                tracks: data.staircases.clone(),
+            },
+        );
+    }
+}
+
+/// The psychometric section: the maximum-likelihood fit, its threshold with the bootstrap
+/// interval, and the fitted curve over the grouped 2AFC data.
+fn psychometric_section(
+    report: &mut Report,
+    fit: &PsychometricFit,
+    ci: &BootstrapCi,
+    data: &StudyData,
+    options: &ReportOptions,
+) {
+    let s = report.section("Psychometric function");
+    s.text(format!(
+        "Maximum-likelihood {:?} fit to {} 2AFC trials (guess rate {}, lapse {:.4}); threshold at {:.0} % correct = {:.5}, {:.0} % parametric bootstrap CI [{:.5}, {:.5}] from {} replicates (seed {}).",
+        fit.shape,
+        fit.trials,
+        fit.guess_rate,
+        fit.lapse,
+        options.percent_correct * 100.0,
+        ci.threshold,
+        ci.confidence.percent(),
+        ci.lower,
+        ci.upper,
+        ci.replicates,
+        ci.seed
+    ));
+    if options.figures {
+        s.figure(
+            "psychometric",
+            Figure::Psychometric {
+                title: "Psychometric function".to_owned(),
+                level_label: options.level_label.clone(),
+                data: GroupedTrials::from_trials(&data.two_afc),
+                fit: *fit,
+                threshold: Some((options.percent_correct, ci.threshold, ci.lower, ci.upper)),
+            },
+        );
     }
 }
 
 /// The JND section: thresholds over viewers, and at each level the share who would notice
 /// with the CR the codec reached there on each clip.
 fn jnd_section(report: &mut Report, j: &JndAnalysis, options: &ReportOptions) {
-    let conf = format!("{:.0} %", j.confidence.percent());
+    let conf = percent_label(j.confidence);
     let label = &options.level_label;
     let s = report.section("Just-noticeable difference across viewers");
     let sd = j
