@@ -226,23 +226,7 @@ fn compare_codecs(
     panel: &Panel,
     options: &ReportOptions,
 ) -> Result<Vec<ComparisonRow>, AnalysisError> {
-    // Per condition index: (subject index, that subject's mean score), sorted by subject
-    // because the panel's cells run in (subject, condition) order.
-    let mut per_condition: Vec<Vec<(u32, f64)>> = vec![Vec::new(); panel.conditions.len()];
-    for (start, end) in panel.cells() {
-        let first = panel.order[start] as usize;
-        let sum: f64 = panel.order[start..end]
-            .iter()
-            .map(|&r| data.ratings[r as usize].score)
-            .sum();
-        per_condition[panel.c[first] as usize].push((panel.s[first], sum / (end - start) as f64));
-    }
-    let by_condition: BTreeMap<u32, &Vec<(u32, f64)>> = panel
-        .conditions
-        .iter()
-        .copied()
-        .zip(per_condition.iter())
-        .collect();
+    let by_condition = subject_means_by_condition(data, panel);
     // Group conditions by (clip, ratio bits).
     let mut groups: BTreeMap<(String, u64), Vec<&ConditionInfo>> = BTreeMap::new();
     for c in &data.conditions {
@@ -258,64 +242,108 @@ fn compare_codecs(
     let mut rows = Vec::new();
     for ((clip, cr_bits), mut conds) in groups {
         conds.sort_by(|a, b| a.codec.cmp(&b.codec));
-        let mut pairs = Vec::new();
-        match &options.baseline_codec {
-            Some(base) => {
-                if let Some(b) = conds.iter().find(|c| &c.codec == base) {
-                    pairs.extend(
-                        conds
-                            .iter()
-                            .filter(|c| &c.codec != base)
-                            .map(|a| (*a, *b, Alternative::Greater)),
-                    );
-                }
-            }
-            None => {
-                for (i, a) in conds.iter().enumerate() {
-                    for b in &conds[i + 1..] {
-                        pairs.push((*a, *b, Alternative::TwoSided));
-                    }
-                }
-            }
-        }
-        for (a, b, alt) in pairs {
+        for (a, b, alt) in codec_pairs(&conds, options.baseline_codec.as_deref()) {
             let (Some(sa), Some(sb)) = (by_condition.get(&a.id), by_condition.get(&b.id)) else {
                 continue;
             };
-            // Merge join on subject: only subjects who rated both conditions.
-            let (mut xa, mut xb) = (Vec::new(), Vec::new());
-            let (mut i, mut j) = (0, 0);
-            while i < sa.len() && j < sb.len() {
-                match sa[i].0.cmp(&sb[j].0) {
-                    std::cmp::Ordering::Less => i += 1,
-                    std::cmp::Ordering::Greater => j += 1,
-                    std::cmp::Ordering::Equal => {
-                        xa.push(sa[i].1);
-                        xb.push(sb[j].1);
-                        i += 1;
-                        j += 1;
-                    }
-                }
-            }
+            let (xa, xb) = common_subjects(sa, sb);
             let test = paired(&xa, &xb, alt)?;
-            let mean = |v: &[f64]| {
-                if v.is_empty() {
-                    f64::NAN
-                } else {
-                    v.iter().sum::<f64>() / v.len() as f64
-                }
-            };
             rows.push(ComparisonRow {
                 clip: clip.clone(),
                 compression_ratio: Some(f64::from_bits(cr_bits)),
-                first: (a.codec.clone(), mean(&xa)),
-                second: (b.codec.clone(), mean(&xb)),
+                first: (a.codec.clone(), mean_or_nan(&xa)),
+                second: (b.codec.clone(), mean_or_nan(&xb)),
                 test,
                 p_holm: None,
             });
         }
     }
-    // Holm across the family of defined tests.
+    holm_adjust(&mut rows)?;
+    Ok(rows)
+}
+
+/// Per condition id: (subject index, that subject's mean score over its repeats), sorted by
+/// subject because the panel's cells run in (subject, condition) order.
+fn subject_means_by_condition(data: &StudyData, panel: &Panel) -> BTreeMap<u32, Vec<(u32, f64)>> {
+    let mut per_condition: Vec<Vec<(u32, f64)>> = vec![Vec::new(); panel.conditions.len()];
+    for (start, end) in panel.cells() {
+        let first = panel.order[start] as usize;
+        let sum: f64 = panel.order[start..end]
+            .iter()
+            .map(|&r| data.ratings[r as usize].score)
+            .sum();
+        per_condition[panel.c[first] as usize].push((panel.s[first], sum / (end - start) as f64));
+    }
+    panel
+        .conditions
+        .iter()
+        .copied()
+        .zip(per_condition)
+        .collect()
+}
+
+/// The tests to run among codecs at one clip and ratio (`conds` sorted by codec): each codec
+/// against `baseline`, one-tailed ("scores higher than the baseline"), when the baseline is
+/// among them (else none); without a baseline every pair, two-tailed.
+fn codec_pairs<'a>(
+    conds: &[&'a ConditionInfo],
+    baseline: Option<&str>,
+) -> Vec<(&'a ConditionInfo, &'a ConditionInfo, Alternative)> {
+    let mut pairs = Vec::new();
+    match baseline {
+        Some(base) => {
+            if let Some(b) = conds.iter().find(|c| c.codec == base) {
+                pairs.extend(
+                    conds
+                        .iter()
+                        .filter(|c| c.codec != base)
+                        .map(|a| (*a, *b, Alternative::Greater)),
+                );
+            }
+        }
+        None => {
+            for (i, a) in conds.iter().enumerate() {
+                for b in &conds[i + 1..] {
+                    pairs.push((*a, *b, Alternative::TwoSided));
+                }
+            }
+        }
+    }
+    pairs
+}
+
+/// The paired samples of two conditions: the means of the subjects who rated both, by a merge
+/// join on the subject-sorted lists.
+fn common_subjects(a: &[(u32, f64)], b: &[(u32, f64)]) -> (Vec<f64>, Vec<f64>) {
+    let (mut xa, mut xb) = (Vec::new(), Vec::new());
+    let (mut i, mut j) = (0, 0);
+    while i < a.len() && j < b.len() {
+        match a[i].0.cmp(&b[j].0) {
+            std::cmp::Ordering::Less => i += 1,
+            std::cmp::Ordering::Greater => j += 1,
+            std::cmp::Ordering::Equal => {
+                xa.push(a[i].1);
+                xb.push(b[j].1);
+                i += 1;
+                j += 1;
+            }
+        }
+    }
+    (xa, xb)
+}
+
+/// Plain mean of a comparison's sample, NaN when no subject rated both conditions (the table
+/// prints that test as undefined).
+fn mean_or_nan(v: &[f64]) -> f64 {
+    if v.is_empty() {
+        f64::NAN
+    } else {
+        v.iter().sum::<f64>() / v.len() as f64
+    }
+}
+
+/// Fills `p_holm` with the Holm correction across the family of defined tests in `rows`.
+fn holm_adjust(rows: &mut [ComparisonRow]) -> Result<(), AnalysisError> {
     let defined: Vec<(usize, f64)> = rows
         .iter()
         .enumerate()
@@ -325,7 +353,7 @@ fn compare_codecs(
     for ((i, _), p) in defined.iter().zip(adjusted) {
         rows[*i].p_holm = Some(p);
     }
-    Ok(rows)
+    Ok(())
 }
 
 fn rate_series(findings: &[RateFinding], method: CiMethod) -> Vec<RateSeries> {
