@@ -3,8 +3,9 @@
 
 use serde::Serialize;
 
+use crate::confidence::Confidence;
 use crate::dist::{t_quantile, z_quantile};
-use crate::error::{AnalysisError, check_confidence, check_finite};
+use crate::error::{AnalysisError, check_finite};
 
 /// One opinion score: a subject's rating of one test condition.
 ///
@@ -63,7 +64,7 @@ pub struct Summary {
     /// statistics only.
     pub median: Option<f64>,
     /// The confidence level of both intervals, e.g. 0.95.
-    pub confidence: f64,
+    pub confidence: Confidence,
 }
 
 impl Summary {
@@ -80,8 +81,8 @@ impl Summary {
 ///
 /// # Errors
 /// [`AnalysisError::TooFew`] for an empty sample, [`AnalysisError::NonFinite`] for NaN or
-/// infinite values, [`AnalysisError::InvalidParameter`] for a confidence outside (0, 1).
-pub fn summarize(values: &[f64], confidence: f64) -> Result<Summary, AnalysisError> {
+/// infinite values.
+pub fn summarize(values: &[f64], confidence: Confidence) -> Result<Summary, AnalysisError> {
     check_finite("summarize", values)?;
     if values.is_empty() {
         return Err(AnalysisError::TooFew {
@@ -106,14 +107,13 @@ pub fn summarize(values: &[f64], confidence: f64) -> Result<Summary, AnalysisErr
 ///
 /// # Errors
 /// [`AnalysisError::TooFew`] for n = 0, [`AnalysisError::InvalidParameter`] for a negative or
-/// non-finite SD or a confidence outside (0, 1).
+/// non-finite SD.
 pub fn from_summary_statistics(
     mean: f64,
     sd: Option<f64>,
     n: usize,
-    confidence: f64,
+    confidence: Confidence,
 ) -> Result<Summary, AnalysisError> {
-    check_confidence(confidence)?;
     if n == 0 {
         return Err(AnalysisError::TooFew {
             what: "summary statistics",
@@ -133,7 +133,7 @@ pub fn from_summary_statistics(
     }
     let sd = if n >= 2 { sd } else { None };
     let se = sd.map(|s| s / (n as f64).sqrt());
-    let upper_p = 1.0 - (1.0 - confidence) / 2.0;
+    let upper_p = 1.0 - confidence.alpha() / 2.0;
     let make = |q: Option<f64>| -> Option<Ci> {
         let half_width = q? * se?;
         Some(Ci {
@@ -176,9 +176,8 @@ pub struct ConditionStats {
 /// As [`summarize`].
 pub fn condition_stats(
     ratings: &[Rating],
-    confidence: f64,
+    confidence: Confidence,
 ) -> Result<Vec<ConditionStats>, AnalysisError> {
-    check_confidence(confidence)?;
     let (ids, offsets, scores) = crate::panel::group_by_condition(ratings)?;
     ids.iter()
         .enumerate()

@@ -5,8 +5,9 @@ use std::collections::{BTreeMap, HashMap};
 
 use serde::Serialize;
 
+use crate::confidence::Confidence;
 use crate::descriptive::{ConditionStats, Rating, mean_of, sample_variance, summarize};
-use crate::error::{AnalysisError, check_confidence};
+use crate::error::AnalysisError;
 use crate::panel::check_scores;
 
 /// One DSCQS presentation: a subject scored the hidden reference and the test version of a
@@ -28,12 +29,11 @@ pub struct DscqsPair {
 /// ("the average value of this difference would be the DSCQS value", thesis §6.4.1).
 ///
 /// # Errors
-/// [`AnalysisError::NonFinite`] for NaN or infinite scores; confidence outside (0, 1).
+/// [`AnalysisError::NonFinite`] for NaN or infinite scores.
 pub fn dscqs_dmos(
     pairs: &[DscqsPair],
-    confidence: f64,
+    confidence: Confidence,
 ) -> Result<Vec<ConditionStats>, AnalysisError> {
-    check_confidence(confidence)?;
     let mut per: BTreeMap<(u32, u32), (f64, usize)> = BTreeMap::new();
     for (index, p) in pairs.iter().enumerate() {
         let d = p.reference_score - p.test_score;
@@ -56,7 +56,7 @@ pub fn dscqs_dmos(
 
 fn summarize_subject_means(
     values: impl Iterator<Item = (u32, f64)>,
-    confidence: f64,
+    confidence: Confidence,
 ) -> Result<Vec<ConditionStats>, AnalysisError> {
     let mut groups: BTreeMap<u32, Vec<f64>> = BTreeMap::new();
     for (c, v) in values {
@@ -89,9 +89,8 @@ fn summarize_subject_means(
 pub fn acr_hr_dmos<S: std::hash::BuildHasher>(
     ratings: &[Rating],
     reference_of: &HashMap<u32, u32, S>,
-    confidence: f64,
+    confidence: Confidence,
 ) -> Result<Vec<ConditionStats>, AnalysisError> {
-    check_confidence(confidence)?;
     let references: std::collections::HashSet<u32> = reference_of.values().copied().collect();
     let mut ref_scores: HashMap<(u32, u32), (f64, usize)> = HashMap::new();
     check_scores(ratings)?;

@@ -40,6 +40,14 @@ pub enum AnalysisError {
         /// What the valid range is.
         reason: &'static str,
     },
+    /// A parameter given as text (a command-line flag) is not a number.
+    #[error("parameter {name} = {text:?} is not a number")]
+    NotANumber {
+        /// Parameter name.
+        name: &'static str,
+        /// The text given.
+        text: String,
+    },
     /// Two inputs that must pair up have different lengths.
     #[error("{what}: paired inputs differ in length ({left} vs {right})")]
     LengthMismatch {
@@ -137,18 +145,5 @@ pub(crate) fn check_finite(what: &'static str, values: &[f64]) -> Result<(), Ana
             value: values[index],
         }),
         None => Ok(()),
-    }
-}
-
-/// Checks a confidence level is in (0, 1).
-pub(crate) fn check_confidence(confidence: f64) -> Result<(), AnalysisError> {
-    if confidence > 0.0 && confidence < 1.0 {
-        Ok(())
-    } else {
-        Err(AnalysisError::InvalidParameter {
-            name: "confidence",
-            value: confidence,
-            reason: "must lie strictly between 0 and 1",
-        })
     }
 }

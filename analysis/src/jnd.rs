@@ -19,9 +19,10 @@ use std::collections::BTreeMap;
 
 use serde::Serialize;
 
+use crate::confidence::Confidence;
 use crate::descriptive::{Summary, summarize};
 use crate::dist::{nct_cdf, z_sf};
-use crate::error::AnalysisError;
+use crate::error::{AnalysisError, check_finite};
 
 /// The compression ratio and error a codec reached at one level on one clip.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -60,14 +61,12 @@ fn phi(x: f64) -> f64 {
 ///
 /// # Errors
 /// [`AnalysisError::TooFew`] without thresholds; [`AnalysisError::NonFinite`] for a
-/// non-finite threshold or level; [`AnalysisError::InvalidParameter`] for a confidence outside
-/// (0, 1).
+/// non-finite threshold or level.
 pub fn unnoticed_share(
     thresholds: &[f64],
     level: f64,
-    confidence: f64,
+    confidence: Confidence,
 ) -> Result<UnnoticedShare, AnalysisError> {
-    crate::error::check_confidence(confidence)?;
     if thresholds.is_empty() {
         return Err(AnalysisError::TooFew {
             what: "thresholds",
@@ -75,47 +74,24 @@ pub fn unnoticed_share(
             got: 0,
         });
     }
-    if let Some((index, &value)) = thresholds.iter().enumerate().find(|(_, v)| !v.is_finite()) {
-        return Err(AnalysisError::NonFinite {
-            what: "threshold",
-            index,
-            value,
-        });
-    }
-    if !level.is_finite() {
-        return Err(AnalysisError::NonFinite {
-            what: "level",
-            index: 0,
-            value: level,
-        });
-    }
+    check_finite("threshold", thresholds)?;
+    check_finite("level", &[level])?;
     let n = thresholds.len() as f64;
     let above = thresholds.iter().filter(|&&t| t > level).count() as f64;
     let empirical = above / n;
-    if thresholds.len() < 2 {
+    let Some((mean, sd)) = normal_model(thresholds) else {
         return Ok(UnnoticedShare {
             level,
             empirical,
             model: None,
             model_ci: None,
         });
-    }
-    let mean = thresholds.iter().sum::<f64>() / n;
-    let sd = (thresholds.iter().map(|t| (t - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
-    // sd is finite (finite inputs); zero spread leaves the model undefined.
-    if sd <= 0.0 {
-        return Ok(UnnoticedShare {
-            level,
-            empirical,
-            model: None,
-            model_ci: None,
-        });
-    }
+    };
     let model = phi((mean - level) / sd);
     let root_n = n.sqrt();
     let t_obs = root_n * (mean - level) / sd;
     let df = n - 1.0;
-    let alpha = 1.0 - confidence;
+    let alpha = confidence.alpha();
     // P(T ≤ t_obs | δ) falls from 1 to 0 as δ grows: the lower bound of δ puts t_obs at the
     // upper α/2 point, the upper bound at the lower α/2 point.
     let lower = solve_delta(t_obs, df, 1.0 - alpha / 2.0);
@@ -126,6 +102,21 @@ pub fn unnoticed_share(
         model: Some(model),
         model_ci: Some((phi(lower / root_n), phi(upper / root_n))),
     })
+}
+
+/// The normal model of the thresholds, (x̄, s) with the sample SD (divisor n − 1); `None`
+/// with fewer than two thresholds or no spread, where the model is undefined.
+fn normal_model(thresholds: &[f64]) -> Option<(f64, f64)> {
+    if thresholds.len() < 2 {
+        return None;
+    }
+    let n = thresholds.len() as f64;
+    // Plain two-pass sums rather than descriptive::mean_of's compensated mean: switching would
+    // move the last digits of the published JND tables for no gain at a study's sample sizes.
+    let mean = thresholds.iter().sum::<f64>() / n;
+    let sd = (thresholds.iter().map(|t| (t - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+    // sd is finite (finite inputs); zero spread leaves the model undefined.
+    if sd <= 0.0 { None } else { Some((mean, sd)) }
 }
 
 /// The noncentrality δ with `P(T ≤ t | df, δ) = target`, by bisection (the CDF falls
@@ -192,7 +183,7 @@ pub struct JndAnalysis {
     /// One row per tabulated level, ascending.
     pub rows: Vec<JndRow>,
     /// Confidence level of the intervals.
-    pub confidence: f64,
+    pub confidence: Confidence,
 }
 
 /// Most levels tabulated; more distinct levels are thinned evenly.
@@ -207,7 +198,7 @@ const MAX_ROWS: usize = 24;
 pub fn jnd_analysis(
     thresholds: &[(u32, f64)],
     encoded: &[EncodedLevel],
-    confidence: f64,
+    confidence: Confidence,
 ) -> Result<JndAnalysis, AnalysisError> {
     let values: Vec<f64> = thresholds.iter().map(|t| t.1).collect();
     let summary = summarize(&values, confidence)?;

@@ -9,19 +9,21 @@
 //! the tables, plots and report that `study report` writes.
 //!
 //! Inputs are plain types ([`Rating`], [`DscqsPair`], [`StaircaseTrack`], [`TwoAfcTrial`]) so
-//! the statistics do not depend on the results store's file format.
+//! the statistics do not depend on the results store's file format. Every interval's level is
+//! a [`Confidence`], checked to lie in (0, 1) once, when it is made.
 //!
 //! ```
-//! use analysis::{summarize, ttest::{paired, Alternative}};
+//! use analysis::{Confidence, summarize, ttest::{paired, Alternative}};
 //! let proposed = [4.5, 4.0, 5.0, 4.5, 4.0];
 //! let wavelet = [3.5, 4.0, 4.0, 3.0, 3.5];
-//! let s = summarize(&proposed, 0.95)?;
+//! let s = summarize(&proposed, Confidence::default())?;
 //! assert!((s.mean - 4.4).abs() < 1e-12);
 //! let test = paired(&proposed, &wavelet, Alternative::Greater)?.expect("defined");
 //! assert!(test.p < 0.05);
 //! # Ok::<(), analysis::AnalysisError>(())
 //! ```
 
+mod confidence;
 pub mod descriptive;
 mod dist;
 pub mod dmos;
@@ -42,6 +44,7 @@ pub mod synthetic;
 pub mod tables;
 pub mod ttest;
 
+pub use confidence::Confidence;
 pub use descriptive::{
     Ci, CiMethod, ConditionStats, Rating, Summary, condition_stats, from_summary_statistics,
     summarize,

@@ -11,6 +11,7 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
 
+use crate::confidence::Confidence;
 use crate::error::AnalysisError;
 
 /// One two-alternative forced-choice trial.
@@ -473,7 +474,7 @@ pub struct BootstrapCi {
     /// Replicates whose fit failed or whose threshold was undefined.
     pub failed: usize,
     /// Confidence level.
-    pub confidence: f64,
+    pub confidence: Confidence,
     /// The RNG seed (ChaCha8), logged so the interval can be reproduced.
     pub seed: u64,
 }
@@ -484,7 +485,7 @@ pub struct BootstrapOptions {
     /// Number of simulated data sets.
     pub replicates: usize,
     /// Confidence level of the percentile interval.
-    pub confidence: f64,
+    pub confidence: Confidence,
     /// Seed of the ChaCha8 generator.
     pub seed: u64,
 }
@@ -493,7 +494,7 @@ impl Default for BootstrapOptions {
     fn default() -> Self {
         Self {
             replicates: 1000,
-            confidence: 0.95,
+            confidence: Confidence::default(),
             seed: 0x5EED,
         }
     }
@@ -513,7 +514,6 @@ pub fn bootstrap_threshold(
     boot: &BootstrapOptions,
 ) -> Result<(PsychometricFit, BootstrapCi), AnalysisError> {
     const MAX_REPLICATES: usize = 1_000_000;
-    crate::error::check_confidence(boot.confidence)?;
     if boot.replicates < 2 || boot.replicates > MAX_REPLICATES {
         return Err(AnalysisError::InvalidParameter {
             name: "replicates",
@@ -575,7 +575,7 @@ pub fn bootstrap_threshold(
         });
     }
     thresholds.sort_by(f64::total_cmp);
-    let tail = (1.0 - boot.confidence) / 2.0;
+    let tail = boot.confidence.alpha() / 2.0;
     let ci = BootstrapCi {
         threshold,
         lower: percentile(&thresholds, tail),

@@ -5,6 +5,7 @@ use std::collections::BTreeMap;
 
 use serde::Serialize;
 
+use crate::confidence::Confidence;
 use crate::descriptive::{Summary, summarize};
 use crate::error::AnalysisError;
 
@@ -101,12 +102,12 @@ pub struct ThresholdSummary {
 /// across subjects at `confidence`.
 ///
 /// # Errors
-/// [`AnalysisError::InvalidParameter`] for k = 0 or a confidence outside (0, 1);
+/// [`AnalysisError::InvalidParameter`] for k = 0;
 /// [`AnalysisError::NonFinite`] if a level is not finite.
 pub fn staircase_thresholds(
     tracks: &[StaircaseTrack],
     k: usize,
-    confidence: f64,
+    confidence: Confidence,
 ) -> Result<ThresholdSummary, AnalysisError> {
     if k == 0 {
         return Err(AnalysisError::InvalidParameter {
@@ -115,7 +116,6 @@ pub fn staircase_thresholds(
             reason: "need at least one reversal",
         });
     }
-    crate::error::check_confidence(confidence)?;
     let mut per: BTreeMap<u32, Vec<f64>> = BTreeMap::new();
     let mut unconverged = Vec::new();
     for track in tracks {

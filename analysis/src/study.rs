@@ -5,6 +5,7 @@ use std::collections::{BTreeMap, BTreeSet, HashMap};
 
 use serde::Serialize;
 
+use crate::confidence::Confidence;
 use crate::descriptive::{CiMethod, ConditionStats, Rating, condition_stats};
 use crate::dmos::{DscqsPair, acr_hr_dmos, dscqs_dmos, zscore_by_subject};
 use crate::error::AnalysisError;
@@ -47,8 +48,8 @@ pub struct StudyData {
 /// Options of the analysis.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct ReportOptions {
-    /// Confidence level of all intervals.
-    pub confidence: f64,
+    /// Confidence level of all intervals (the bootstrap's is set in [`Self::bootstrap`]).
+    pub confidence: Confidence,
     /// Which interval decides findings and is printed in tables.
     pub ci_method: CiMethod,
     /// MOS limit for rate findings (4.5 in thesis §3.3).
@@ -77,7 +78,7 @@ pub struct ReportOptions {
 impl Default for ReportOptions {
     fn default() -> Self {
         Self {
-            confidence: 0.95,
+            confidence: Confidence::default(),
             ci_method: CiMethod::StudentT,
             mos_limit: 4.5,
             dmos_limit: 0.2,
@@ -225,23 +226,7 @@ fn compare_codecs(
     panel: &Panel,
     options: &ReportOptions,
 ) -> Result<Vec<ComparisonRow>, AnalysisError> {
-    // Per condition index: (subject index, that subject's mean score), sorted by subject
-    // because the panel's cells run in (subject, condition) order.
-    let mut per_condition: Vec<Vec<(u32, f64)>> = vec![Vec::new(); panel.conditions.len()];
-    for (start, end) in panel.cells() {
-        let first = panel.order[start] as usize;
-        let sum: f64 = panel.order[start..end]
-            .iter()
-            .map(|&r| data.ratings[r as usize].score)
-            .sum();
-        per_condition[panel.c[first] as usize].push((panel.s[first], sum / (end - start) as f64));
-    }
-    let by_condition: BTreeMap<u32, &Vec<(u32, f64)>> = panel
-        .conditions
-        .iter()
-        .copied()
-        .zip(per_condition.iter())
-        .collect();
+    let by_condition = subject_means_by_condition(data, panel);
     // Group conditions by (clip, ratio bits).
     let mut groups: BTreeMap<(String, u64), Vec<&ConditionInfo>> = BTreeMap::new();
     for c in &data.conditions {
@@ -257,64 +242,108 @@ fn compare_codecs(
     let mut rows = Vec::new();
     for ((clip, cr_bits), mut conds) in groups {
         conds.sort_by(|a, b| a.codec.cmp(&b.codec));
-        let mut pairs = Vec::new();
-        match &options.baseline_codec {
-            Some(base) => {
-                if let Some(b) = conds.iter().find(|c| &c.codec == base) {
-                    pairs.extend(
-                        conds
-                            .iter()
-                            .filter(|c| &c.codec != base)
-                            .map(|a| (*a, *b, Alternative::Greater)),
-                    );
-                }
-            }
-            None => {
-                for (i, a) in conds.iter().enumerate() {
-                    for b in &conds[i + 1..] {
-                        pairs.push((*a, *b, Alternative::TwoSided));
-                    }
-                }
-            }
-        }
-        for (a, b, alt) in pairs {
+        for (a, b, alt) in codec_pairs(&conds, options.baseline_codec.as_deref()) {
             let (Some(sa), Some(sb)) = (by_condition.get(&a.id), by_condition.get(&b.id)) else {
                 continue;
             };
-            // Merge join on subject: only subjects who rated both conditions.
-            let (mut xa, mut xb) = (Vec::new(), Vec::new());
-            let (mut i, mut j) = (0, 0);
-            while i < sa.len() && j < sb.len() {
-                match sa[i].0.cmp(&sb[j].0) {
-                    std::cmp::Ordering::Less => i += 1,
-                    std::cmp::Ordering::Greater => j += 1,
-                    std::cmp::Ordering::Equal => {
-                        xa.push(sa[i].1);
-                        xb.push(sb[j].1);
-                        i += 1;
-                        j += 1;
-                    }
-                }
-            }
+            let (xa, xb) = common_subjects(sa, sb);
             let test = paired(&xa, &xb, alt)?;
-            let mean = |v: &[f64]| {
-                if v.is_empty() {
-                    f64::NAN
-                } else {
-                    v.iter().sum::<f64>() / v.len() as f64
-                }
-            };
             rows.push(ComparisonRow {
                 clip: clip.clone(),
                 compression_ratio: Some(f64::from_bits(cr_bits)),
-                first: (a.codec.clone(), mean(&xa)),
-                second: (b.codec.clone(), mean(&xb)),
+                first: (a.codec.clone(), mean_or_nan(&xa)),
+                second: (b.codec.clone(), mean_or_nan(&xb)),
                 test,
                 p_holm: None,
             });
         }
     }
-    // Holm across the family of defined tests.
+    holm_adjust(&mut rows)?;
+    Ok(rows)
+}
+
+/// Per condition id: (subject index, that subject's mean score over its repeats), sorted by
+/// subject because the panel's cells run in (subject, condition) order.
+fn subject_means_by_condition(data: &StudyData, panel: &Panel) -> BTreeMap<u32, Vec<(u32, f64)>> {
+    let mut per_condition: Vec<Vec<(u32, f64)>> = vec![Vec::new(); panel.conditions.len()];
+    for (start, end) in panel.cells() {
+        let first = panel.order[start] as usize;
+        let sum: f64 = panel.order[start..end]
+            .iter()
+            .map(|&r| data.ratings[r as usize].score)
+            .sum();
+        per_condition[panel.c[first] as usize].push((panel.s[first], sum / (end - start) as f64));
+    }
+    panel
+        .conditions
+        .iter()
+        .copied()
+        .zip(per_condition)
+        .collect()
+}
+
+/// The tests to run among codecs at one clip and ratio (`conds` sorted by codec): each codec
+/// against `baseline`, one-tailed ("scores higher than the baseline"), when the baseline is
+/// among them (else none); without a baseline every pair, two-tailed.
+fn codec_pairs<'a>(
+    conds: &[&'a ConditionInfo],
+    baseline: Option<&str>,
+) -> Vec<(&'a ConditionInfo, &'a ConditionInfo, Alternative)> {
+    let mut pairs = Vec::new();
+    match baseline {
+        Some(base) => {
+            if let Some(b) = conds.iter().find(|c| c.codec == base) {
+                pairs.extend(
+                    conds
+                        .iter()
+                        .filter(|c| c.codec != base)
+                        .map(|a| (*a, *b, Alternative::Greater)),
+                );
+            }
+        }
+        None => {
+            for (i, a) in conds.iter().enumerate() {
+                for b in &conds[i + 1..] {
+                    pairs.push((*a, *b, Alternative::TwoSided));
+                }
+            }
+        }
+    }
+    pairs
+}
+
+/// The paired samples of two conditions: the means of the subjects who rated both, by a merge
+/// join on the subject-sorted lists.
+fn common_subjects(a: &[(u32, f64)], b: &[(u32, f64)]) -> (Vec<f64>, Vec<f64>) {
+    let (mut xa, mut xb) = (Vec::new(), Vec::new());
+    let (mut i, mut j) = (0, 0);
+    while i < a.len() && j < b.len() {
+        match a[i].0.cmp(&b[j].0) {
+            std::cmp::Ordering::Less => i += 1,
+            std::cmp::Ordering::Greater => j += 1,
+            std::cmp::Ordering::Equal => {
+                xa.push(a[i].1);
+                xb.push(b[j].1);
+                i += 1;
+                j += 1;
+            }
+        }
+    }
+    (xa, xb)
+}
+
+/// Plain mean of a comparison's sample, NaN when no subject rated both conditions (the table
+/// prints that test as undefined).
+fn mean_or_nan(v: &[f64]) -> f64 {
+    if v.is_empty() {
+        f64::NAN
+    } else {
+        v.iter().sum::<f64>() / v.len() as f64
+    }
+}
+
+/// Fills `p_holm` with the Holm correction across the family of defined tests in `rows`.
+fn holm_adjust(rows: &mut [ComparisonRow]) -> Result<(), AnalysisError> {
     let defined: Vec<(usize, f64)> = rows
         .iter()
         .enumerate()
@@ -324,7 +353,7 @@ fn compare_codecs(
     for ((i, _), p) in defined.iter().zip(adjusted) {
         rows[*i].p_holm = Some(p);
     }
-    Ok(rows)
+    Ok(())
 }
 
 fn rate_series(findings: &[RateFinding], method: CiMethod) -> Vec<RateSeries> {
@@ -351,229 +380,284 @@ fn rate_series(findings: &[RateFinding], method: CiMethod) -> Vec<RateSeries> {
 
 impl StudyAnalysis {
     /// Lays the statistics out as a report: tables shaped like the seeds' and the figures.
-    #[expect(
-        clippy::too_many_lines,
-        reason = "one linear layout of every section; splitting it would scatter the report's order"
-    )]
+    ///
+    /// Sections come in this order, each only when the data gave it something to show.
     pub fn to_report(&self, data: &StudyData, options: &ReportOptions, title: &str) -> Report {
         let mut report = Report::new(title);
-        let conf = format!("{:.0} %", options.confidence * 100.0);
         if !self.mos.is_empty() {
-            let s = report.section("Mean opinion scores");
-            s.text(format!(
-                "{} ratings from {} subjects. Mean ± {conf} confidence interval ({:?}); thesis Table 3.1 layout.",
-                data.ratings.len(),
-                data.ratings.iter().map(|r| r.subject).collect::<BTreeSet<_>>().len(),
-                options.ci_method
-            ));
-            s.table(tables::mos_table(
-                "mos",
-                "MOS per condition (all observers)",
-                &data.conditions,
-                &self.mos,
-                options.ci_method,
-            ));
-            if let Some(screened) = &self.mos_screened {
-                s.table(tables::mos_table(
-                    "mos_screened",
-                    "MOS per condition without rejected observers",
-                    &data.conditions,
-                    screened,
-                    options.ci_method,
-                ));
-            }
-            if let Some(z) = &self.mos_zscored {
-                s.table(tables::mos_table(
-                    "mos_zscored",
-                    "Mean of per-subject z-scores per condition",
-                    &data.conditions,
-                    z,
-                    options.ci_method,
-                ));
-            }
-            s.table(tables::findings_table(
-                "mos_findings",
-                &format!(
-                    "Highest CR whose lower CI bound stays ≥ MOS {}",
-                    options.mos_limit
-                ),
-                &self.mos_findings,
-            ));
-            if options.figures {
-                s.figure(
-                    "mos_vs_cr",
-                    Figure::RateCurves {
-                        title: "MOS vs compression ratio".to_owned(),
-                        y_label: "MOS".to_owned(),
-                        series: rate_series(&self.mos_findings, options.ci_method),
-                        limit: Some(options.mos_limit),
-                    },
-                );
-                let mut per: BTreeMap<u32, Vec<f64>> = BTreeMap::new();
-                for r in &data.ratings {
-                    per.entry(r.subject).or_default().push(r.score);
-                }
-                s.figure(
-                    "score_distributions",
-                    Figure::ScoreDistributions {
-                        title: "Scores per subject".to_owned(),
-                        per_subject: per.into_iter().collect(),
-                    },
-                );
-            }
+            self.mos_section(&mut report, data, options);
         }
         if !self.comparisons.is_empty() {
-            let s = report.section("Comparisons");
-            s.text("Paired t-tests on per-subject mean scores at equal clip and ratio; p values Holm-corrected across the table (thesis Tables 3.2, 3.3).");
-            s.table(tables::ttest_table(
-                "ttests",
-                "Paired t-tests between codecs",
-                &self.comparisons,
-            ));
+            comparisons_section(&mut report, &self.comparisons);
         }
         if let Some(screening) = &self.screening {
-            let s = report.section("Observer screening");
-            let rejected = screening.rejected();
-            s.text(if rejected.is_empty() {
-                "BT.500 Annex 2 §2.3.1: no observer rejected.".to_owned()
-            } else {
-                format!(
-                    "BT.500 Annex 2 §2.3.1: rejected {} ((P+Q)/JKR > 0.05 and |P−Q|/(P+Q) < 0.3); MOS is reported with and without them.",
-                    rejected.iter().map(ToString::to_string).collect::<Vec<_>>().join(", ")
-                )
-            });
-            s.table(tables::screening_table(
-                "screening",
-                "BT.500 observer screening",
-                screening,
-            ));
-            let rows: Vec<Vec<String>> = self
-                .repeats
-                .iter()
-                .filter(|r| r.pairs > 0)
-                .map(|r| {
-                    vec![
-                        r.subject.to_string(),
-                        r.pairs.to_string(),
-                        fmt_opt(r.mean_abs_difference, 3),
-                    ]
-                })
-                .collect();
-            if !rows.is_empty() {
-                s.table(tables::Table {
-                    name: "repeats".to_owned(),
-                    caption: "Hidden-repeat consistency (mean |repeat − first|)".to_owned(),
-                    columns: vec![
-                        "Subject".to_owned(),
-                        "Repeats".to_owned(),
-                        "Mean abs. difference".to_owned(),
-                    ],
-                    rows,
-                });
-            }
+            screening_section(&mut report, screening, &self.repeats);
         }
         if !self.dmos.is_empty() {
-            let s = report.section("Differential MOS");
-            s.table(tables::dmos_table(
-                "dmos",
-                "DMOS per condition and clip (thesis Table 6.3 layout)",
-                &data.conditions,
-                &self.dmos,
-            ));
-            s.table(tables::mos_table(
-                "dmos_ci",
-                "DMOS with confidence intervals",
-                &data.conditions,
-                &self.dmos,
-                options.ci_method,
-            ));
-            s.table(tables::findings_table(
-                "dmos_findings",
-                &format!(
-                    "Highest CR whose upper CI bound stays < DMOS {}",
-                    options.dmos_limit
-                ),
-                &self.dmos_findings,
-            ));
-            if options.figures {
-                s.figure(
-                    "dmos_vs_cr",
-                    Figure::RateCurves {
-                        title: "DMOS vs compression ratio".to_owned(),
-                        y_label: "DMOS".to_owned(),
-                        series: rate_series(&self.dmos_findings, options.ci_method),
-                        limit: Some(options.dmos_limit),
-                    },
-                );
-            }
+            self.dmos_section(&mut report, data, options);
         }
         if let Some(t) = &self.thresholds {
-            let s = report.section("Staircase thresholds");
-            s.text(format!(
-                "Mean of the last {} reversals per staircase, averaged per subject (thesis §5.4).",
-                t.last_reversals
-            ));
-            s.table(tables::threshold_table(
-                "thresholds",
-                "Staircase thresholds across subjects",
-                t,
-            ));
-            if options.figures {
-                s.figure(
-                    "staircases",
-                    Figure::Staircases {
-                        title: "Staircase tracks".to_owned(),
-                        level_label: options.level_label.clone(),
-                        tracks: data.staircases.clone(),
-                    },
-                );
-            }
+            thresholds_section(&mut report, t, data, options);
         }
         if let Some(j) = &self.jnd {
             jnd_section(&mut report, j, options);
         }
         if let Some((fit, ci)) = &self.psychometric {
-            let s = report.section("Psychometric function");
-            s.text(format!(
-                "Maximum-likelihood {:?} fit to {} 2AFC trials (guess rate {}, lapse {:.4}); threshold at {:.0} % correct = {:.5}, {:.0} % parametric bootstrap CI [{:.5}, {:.5}] from {} replicates (seed {}).",
-                fit.shape,
-                fit.trials,
-                fit.guess_rate,
-                fit.lapse,
-                options.percent_correct * 100.0,
-                ci.threshold,
-                ci.confidence * 100.0,
-                ci.lower,
-                ci.upper,
-                ci.replicates,
-                ci.seed
-            ));
-            if options.figures {
-                s.figure(
-                    "psychometric",
-                    Figure::Psychometric {
-                        title: "Psychometric function".to_owned(),
-                        level_label: options.level_label.clone(),
-                        data: GroupedTrials::from_trials(&data.two_afc),
-                        fit: *fit,
-                        threshold: Some((
-                            options.percent_correct,
-                            ci.threshold,
-                            ci.lower,
-                            ci.upper,
-                        )),
-                    },
-                );
-            }
+            psychometric_section(&mut report, fit, ci, data, options);
         }
         report
+    }
+
+    /// The MOS section: all observers, without the rejected ones, of z-scores (thesis Table
+    /// 3.1 layout), the MOS rate findings, and the MOS-vs-CR and per-subject score figures.
+    fn mos_section(&self, report: &mut Report, data: &StudyData, options: &ReportOptions) {
+        let conf = percent_label(options.confidence);
+        let s = report.section("Mean opinion scores");
+        s.text(format!(
+            "{} ratings from {} subjects. Mean ± {conf} confidence interval ({:?}); thesis Table 3.1 layout.",
+            data.ratings.len(),
+            data.ratings.iter().map(|r| r.subject).collect::<BTreeSet<_>>().len(),
+            options.ci_method
+        ));
+        s.table(tables::mos_table(
+            "mos",
+            "MOS per condition (all observers)",
+            &data.conditions,
+            &self.mos,
+            options.ci_method,
+        ));
+        if let Some(screened) = &self.mos_screened {
+            s.table(tables::mos_table(
+                "mos_screened",
+                "MOS per condition without rejected observers",
+                &data.conditions,
+                screened,
+                options.ci_method,
+            ));
+        }
+        if let Some(z) = &self.mos_zscored {
+            s.table(tables::mos_table(
+                "mos_zscored",
+                "Mean of per-subject z-scores per condition",
+                &data.conditions,
+                z,
+                options.ci_method,
+            ));
+        }
+        s.table(tables::findings_table(
+            "mos_findings",
+            &format!(
+                "Highest CR whose lower CI bound stays ≥ MOS {}",
+                options.mos_limit
+            ),
+            &self.mos_findings,
+        ));
+        if options.figures {
+            s.figure(
+                "mos_vs_cr",
+                Figure::RateCurves {
+                    title: "MOS vs compression ratio".to_owned(),
+                    y_label: "MOS".to_owned(),
+                    series: rate_series(&self.mos_findings, options.ci_method),
+                    limit: Some(options.mos_limit),
+                },
+            );
+            s.figure(
+                "score_distributions",
+                Figure::ScoreDistributions {
+                    title: "Scores per subject".to_owned(),
+                    per_subject: scores_per_subject(&data.ratings),
+                },
+            );
+        }
+    }
+
+    /// The DMOS section: the thesis Table 6.3 grid, DMOS with intervals, the DMOS rate
+    /// findings and the DMOS-vs-CR figure.
+    fn dmos_section(&self, report: &mut Report, data: &StudyData, options: &ReportOptions) {
+        let s = report.section("Differential MOS");
+        s.table(tables::dmos_table(
+            "dmos",
+            "DMOS per condition and clip (thesis Table 6.3 layout)",
+            &data.conditions,
+            &self.dmos,
+        ));
+        s.table(tables::mos_table(
+            "dmos_ci",
+            "DMOS with confidence intervals",
+            &data.conditions,
+            &self.dmos,
+            options.ci_method,
+        ));
+        s.table(tables::findings_table(
+            "dmos_findings",
+            &format!(
+                "Highest CR whose upper CI bound stays < DMOS {}",
+                options.dmos_limit
+            ),
+            &self.dmos_findings,
+        ));
+        if options.figures {
+            s.figure(
+                "dmos_vs_cr",
+                Figure::RateCurves {
+                    title: "DMOS vs compression ratio".to_owned(),
+                    y_label: "DMOS".to_owned(),
+                    series: rate_series(&self.dmos_findings, options.ci_method),
+                    limit: Some(options.dmos_limit),
+                },
+            );
+        }
+    }
+}
+
+/// A confidence level as the report's text prints it: `95 %`.
+fn percent_label(confidence: Confidence) -> String {
+    format!("{:.0} %", confidence.percent())
+}
+
+/// Every subject's scores in rating order, by subject id: the score-distribution figure.
+fn scores_per_subject(ratings: &[Rating]) -> Vec<(u32, Vec<f64>)> {
+    let mut per: BTreeMap<u32, Vec<f64>> = BTreeMap::new();
+    for r in ratings {
+        per.entry(r.subject).or_default().push(r.score);
+    }
+    per.into_iter().collect()
+}
+
+/// The comparisons section: the paired t-tests between codecs (thesis Tables 3.2, 3.3).
+fn comparisons_section(report: &mut Report, comparisons: &[ComparisonRow]) {
+    let s = report.section("Comparisons");
+    s.text("Paired t-tests on per-subject mean scores at equal clip and ratio; p values Holm-corrected across the table (thesis Tables 3.2, 3.3).");
+    s.table(tables::ttest_table(
+        "ttests",
+        "Paired t-tests between codecs",
+        comparisons,
+    ));
+}
+
+/// The observer-screening section: who BT.500 rejects and why, and hidden-repeat consistency.
+fn screening_section(
+    report: &mut Report,
+    screening: &ScreeningReport,
+    repeats: &[RepeatConsistency],
+) {
+    let s = report.section("Observer screening");
+    let rejected = screening.rejected();
+    s.text(if rejected.is_empty() {
+        "BT.500 Annex 2 §2.3.1: no observer rejected.".to_owned()
+    } else {
+        format!(
+            "BT.500 Annex 2 §2.3.1: rejected {} ((P+Q)/JKR > 0.05 and |P−Q|/(P+Q) < 0.3); MOS is reported with and without them.",
+            rejected.iter().map(ToString::to_string).collect::<Vec<_>>().join(", ")
+        )
+    });
+    s.table(tables::screening_table(
+        "screening",
+        "BT.500 observer screening",
+        screening,
+    ));
+    if let Some(table) = repeats_table(repeats) {
+        s.table(table);
+    }
+}
+
+/// Hidden-repeat consistency of the subjects who met a repeat; `None` when nobody did.
+fn repeats_table(repeats: &[RepeatConsistency]) -> Option<tables::Table> {
+    let rows: Vec<Vec<String>> = repeats
+        .iter()
+        .filter(|r| r.pairs > 0)
+        .map(|r| {
+            vec![
+                r.subject.to_string(),
+                r.pairs.to_string(),
+                fmt_opt(r.mean_abs_difference, 3),
+            ]
+        })
+        .collect();
+    (!rows.is_empty()).then(|| tables::Table {
+        name: "repeats".to_owned(),
+        caption: "Hidden-repeat consistency (mean |repeat − first|)".to_owned(),
+        columns: vec![
+            "Subject".to_owned(),
+            "Repeats".to_owned(),
+            "Mean abs. difference".to_owned(),
+        ],
+        rows,
+    })
+}
+
+/// The staircase section: thresholds from the last reversals (thesis §5.4) and the tracks.
+fn thresholds_section(
+    report: &mut Report,
+    t: &ThresholdSummary,
+    data: &StudyData,
+    options: &ReportOptions,
+) {
+    let s = report.section("Staircase thresholds");
+    s.text(format!(
+        "Mean of the last {} reversals per staircase, averaged per subject (thesis §5.4).",
+        t.last_reversals
+    ));
+    s.table(tables::threshold_table(
+        "thresholds",
+        "Staircase thresholds across subjects",
+        t,
+    ));
+    if options.figures {
+        s.figure(
+            "staircases",
+            Figure::Staircases {
+                title: "Staircase tracks".to_owned(),
+                level_label: options.level_label.clone(),
+                tracks: data.staircases.clone(),
+            },
+        );
+    }
+}
+
+/// The psychometric section: the maximum-likelihood fit, its threshold with the bootstrap
+/// interval, and the fitted curve over the grouped 2AFC data.
+fn psychometric_section(
+    report: &mut Report,
+    fit: &PsychometricFit,
+    ci: &BootstrapCi,
+    data: &StudyData,
+    options: &ReportOptions,
+) {
+    let s = report.section("Psychometric function");
+    s.text(format!(
+        "Maximum-likelihood {:?} fit to {} 2AFC trials (guess rate {}, lapse {:.4}); threshold at {:.0} % correct = {:.5}, {:.0} % parametric bootstrap CI [{:.5}, {:.5}] from {} replicates (seed {}).",
+        fit.shape,
+        fit.trials,
+        fit.guess_rate,
+        fit.lapse,
+        options.percent_correct * 100.0,
+        ci.threshold,
+        ci.confidence.percent(),
+        ci.lower,
+        ci.upper,
+        ci.replicates,
+        ci.seed
+    ));
+    if options.figures {
+        s.figure(
+            "psychometric",
+            Figure::Psychometric {
+                title: "Psychometric function".to_owned(),
+                level_label: options.level_label.clone(),
+                data: GroupedTrials::from_trials(&data.two_afc),
+                fit: *fit,
+                threshold: Some((options.percent_correct, ci.threshold, ci.lower, ci.upper)),
+            },
+        );
     }
 }
 
 /// The JND section: thresholds over viewers, and at each level the share who would notice
 /// with the CR the codec reached there on each clip.
 fn jnd_section(report: &mut Report, j: &JndAnalysis, options: &ReportOptions) {
-    let conf = format!("{:.0} %", j.confidence * 100.0);
+    let conf = percent_label(j.confidence);
     let label = &options.level_label;
     let s = report.section("Just-noticeable difference across viewers");
     let sd = j

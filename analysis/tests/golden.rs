@@ -9,11 +9,18 @@ use analysis::power::{paired_one_tailed_power, paired_one_tailed_sample_size};
 use analysis::psychometric::{FitOptions, GroupedTrials, Lapse, Shape, fit_grouped};
 use analysis::screening::bt500_screening;
 use analysis::ttest::{self, Alternative, GroupStats};
-use analysis::{Rating, Summary, acr_hr_dmos, dscqs_dmos, summarize, zscore_by_subject};
+use analysis::{
+    Confidence, Rating, Summary, acr_hr_dmos, dscqs_dmos, summarize, zscore_by_subject,
+};
 use serde_json::Value;
 
 const REL: f64 = 1e-9;
 const FIT_REL: f64 = 1e-4;
+
+/// A confidence level the test knows to be valid.
+fn conf(level: f64) -> Confidence {
+    Confidence::new(level).unwrap()
+}
 
 fn golden() -> Value {
     let text = std::fs::read_to_string(concat!(
@@ -105,7 +112,7 @@ fn descriptive_statistics_match_scipy() {
     for case in cases {
         let name = case["sample"].as_str().unwrap();
         let values = floats(&g["samples"][name]);
-        let s = summarize(&values, f(&case["confidence"])).unwrap();
+        let s = summarize(&values, conf(f(&case["confidence"]))).unwrap();
         check_summary(&s, &case["expected"], name);
     }
 }
@@ -185,7 +192,7 @@ fn dscqs_dmos_matches_numpy() {
             test_score: f(&p["test_score"]),
         })
         .collect();
-    let stats = dscqs_dmos(&pairs, 0.95).unwrap();
+    let stats = dscqs_dmos(&pairs, conf(0.95)).unwrap();
     let expected = g["dscqs"].as_array().unwrap();
     assert_eq!(stats.len(), expected.len());
     for (s, e) in stats.iter().zip(expected) {
@@ -216,7 +223,7 @@ fn acr_hr_dmos_and_zscores_match_numpy() {
         .iter()
         .map(|p| (p[0].as_u64().unwrap() as u32, p[1].as_u64().unwrap() as u32))
         .collect();
-    let stats = acr_hr_dmos(&rs, &reference_of, 0.95).unwrap();
+    let stats = acr_hr_dmos(&rs, &reference_of, conf(0.95)).unwrap();
     let expected = g["acr_hr"].as_array().unwrap();
     assert_eq!(stats.len(), expected.len());
     for (s, e) in stats.iter().zip(expected) {

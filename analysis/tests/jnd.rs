@@ -3,8 +3,14 @@
 //! `tests/data/jnd_golden.json`: empirical share of viewers who would not notice a level, the
 //! normal model's share and its exact normal-theory (noncentral t) confidence interval.
 
+use analysis::Confidence;
 use analysis::jnd::{EncodedLevel, jnd_analysis, unnoticed_share};
 use serde_json::Value;
+
+/// A confidence level the test knows to be valid.
+fn conf(level: f64) -> Confidence {
+    Confidence::new(level).unwrap()
+}
 
 fn golden() -> Value {
     let text = std::fs::read_to_string(concat!(
@@ -36,11 +42,11 @@ fn unnoticed_share_equals_scipy() {
             .iter()
             .map(|v| v.as_f64().unwrap())
             .collect();
-        let conf = case["confidence"].as_f64().unwrap();
+        let confidence = case["confidence"].as_f64().unwrap();
         let e = &case["expected"];
         let level = e["level"].as_f64().unwrap();
-        let s = unnoticed_share(&t, level, conf).unwrap();
-        let what = format!("{name} at {level} ({conf})");
+        let s = unnoticed_share(&t, level, conf(confidence)).unwrap();
+        let what = format!("{name} at {level} ({confidence})");
         // Exact counts: the empirical share is a ratio of small integers.
         assert!(
             (s.empirical - e["empirical"].as_f64().unwrap()).abs() < 1e-15,
@@ -66,14 +72,13 @@ fn unnoticed_share_equals_scipy() {
 
 #[test]
 fn undefined_cases_are_none_or_errors() {
-    assert!(unnoticed_share(&[], 1.0, 0.95).is_err());
-    assert!(unnoticed_share(&[1.0, f64::NAN], 1.0, 0.95).is_err());
-    assert!(unnoticed_share(&[1.0, 2.0], f64::INFINITY, 0.95).is_err());
-    assert!(unnoticed_share(&[1.0, 2.0], 1.0, 1.5).is_err());
-    let one = unnoticed_share(&[3.0], 2.0, 0.95).unwrap();
+    assert!(unnoticed_share(&[], 1.0, conf(0.95)).is_err());
+    assert!(unnoticed_share(&[1.0, f64::NAN], 1.0, conf(0.95)).is_err());
+    assert!(unnoticed_share(&[1.0, 2.0], f64::INFINITY, conf(0.95)).is_err());
+    let one = unnoticed_share(&[3.0], 2.0, conf(0.95)).unwrap();
     assert!((one.empirical - 1.0).abs() < 1e-15);
     assert_eq!(one.model, None, "no spread from one viewer");
-    let same = unnoticed_share(&[3.0, 3.0, 3.0], 3.0, 0.95).unwrap();
+    let same = unnoticed_share(&[3.0, 3.0, 3.0], 3.0, conf(0.95)).unwrap();
     assert!(
         same.empirical.abs() < f64::EPSILON,
         "a level equal to a threshold is noticed"
@@ -96,7 +101,7 @@ fn jnd_table_reads_cr_per_clip_at_each_level() {
         enc("run", 32.0, 31.8),
         enc("walk", 48.0, 47.5),
     ];
-    let j = jnd_analysis(&thresholds, &encoded, 0.95).unwrap();
+    let j = jnd_analysis(&thresholds, &encoded, conf(0.95)).unwrap();
     assert_eq!(j.clips, ["run", "walk"]);
     assert_eq!(j.rows.len(), 2);
     let r = &j.rows[0];

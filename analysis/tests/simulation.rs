@@ -1,6 +1,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
 //! The analysis recovers what simulated observers put in.
 
+use analysis::Confidence;
 use analysis::power::{paired_one_tailed_power, paired_one_tailed_sample_size};
 use analysis::psychometric::{
     BootstrapOptions, FitOptions, GroupedTrials, Lapse, PsychometricFit, Shape, bootstrap_threshold,
@@ -43,7 +44,7 @@ fn bootstrap_ci_covers_the_true_threshold_in_200_simulated_studies() {
         let data = GroupedTrials::from_trials(&trials);
         let boot = BootstrapOptions {
             replicates: 200,
-            confidence: 0.95,
+            confidence: Confidence::new(0.95).unwrap(),
             seed: 1000 + study,
         };
         let (_, ci) = bootstrap_threshold(&data, &options, 0.75, &boot).unwrap();
@@ -80,7 +81,7 @@ fn bootstrap_is_reproducible_from_its_seed() {
     };
     let boot = BootstrapOptions {
         replicates: 50,
-        confidence: 0.9,
+        confidence: Confidence::new(0.9).unwrap(),
         seed: 77,
     };
     let a = bootstrap_threshold(&data, &options, 0.75, &boot).unwrap();

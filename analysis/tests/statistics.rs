@@ -15,14 +15,19 @@ use analysis::findings::{ConditionInfo, Limit, rate_findings};
 use analysis::staircase::staircase_thresholds;
 use analysis::ttest::{self, Alternative, GroupStats, Undefined};
 use analysis::{
-    AnalysisError, CiMethod, Rating, StaircaseStep, StaircaseTrack, acr_hr_dmos, condition_stats,
-    summarize, zscore_by_subject,
+    AnalysisError, CiMethod, Confidence, Rating, StaircaseStep, StaircaseTrack, acr_hr_dmos,
+    condition_stats, summarize, zscore_by_subject,
 };
 use proptest::prelude::*;
 
+/// A confidence level the test knows to be valid.
+fn conf(level: f64) -> Confidence {
+    Confidence::new(level).unwrap()
+}
+
 #[test]
 fn one_rating_has_no_sd_or_ci_and_no_nan() {
-    let s = summarize(&[4.5], 0.95).unwrap();
+    let s = summarize(&[4.5], conf(0.95)).unwrap();
     assert_eq!(s.n, 1);
     assert_eq!(s.mean, 4.5);
     assert_eq!(s.median, Some(4.5));
@@ -32,19 +37,12 @@ fn one_rating_has_no_sd_or_ci_and_no_nan() {
 #[test]
 fn empty_and_non_finite_inputs_are_errors() {
     assert!(matches!(
-        summarize(&[], 0.95),
+        summarize(&[], conf(0.95)),
         Err(AnalysisError::TooFew { got: 0, .. })
     ));
     assert!(matches!(
-        summarize(&[1.0, f64::NAN], 0.95),
+        summarize(&[1.0, f64::NAN], conf(0.95)),
         Err(AnalysisError::NonFinite { index: 1, .. })
-    ));
-    assert!(matches!(
-        summarize(&[1.0, 2.0], 1.0),
-        Err(AnalysisError::InvalidParameter {
-            name: "confidence",
-            ..
-        })
     ));
     let bad = [Rating {
         subject: 0,
@@ -52,13 +50,58 @@ fn empty_and_non_finite_inputs_are_errors() {
         score: f64::INFINITY,
     }];
     assert!(matches!(
-        condition_stats(&bad, 0.95),
+        condition_stats(&bad, conf(0.95)),
         Err(AnalysisError::NonFinite { index: 0, .. })
     ));
     assert!(matches!(
         ttest::paired(&[1.0, 2.0], &[1.0], Alternative::TwoSided),
         Err(AnalysisError::LengthMismatch { .. })
     ));
+}
+
+/// A level outside (0, 1) is refused where it is made, with the error every statistic used to
+/// give for it; text that is no number is its own error.
+#[test]
+fn confidence_outside_zero_one_is_an_error() {
+    for level in [
+        0.0,
+        1.0,
+        -0.5,
+        1.5,
+        f64::NAN,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+    ] {
+        let err = Confidence::new(level).unwrap_err();
+        assert!(
+            matches!(
+                err,
+                AnalysisError::InvalidParameter {
+                    name: "confidence",
+                    ..
+                }
+            ),
+            "{level}: {err}"
+        );
+    }
+    assert_eq!(
+        Confidence::new(1.5).unwrap_err().to_string(),
+        "parameter confidence = 1.5 is invalid: must lie strictly between 0 and 1"
+    );
+    assert_eq!(Confidence::default().level(), 0.95);
+    assert!(matches!(
+        "95 %".parse::<Confidence>(),
+        Err(AnalysisError::NotANumber {
+            name: "confidence",
+            ..
+        })
+    ));
+    assert!(matches!(
+        "1".parse::<Confidence>(),
+        Err(AnalysisError::InvalidParameter { .. })
+    ));
+    // Serialised as the bare number, as the f64 field it replaced.
+    assert_eq!(serde_json::to_string(&conf(0.9)).unwrap(), "0.9");
 }
 
 #[test]
@@ -163,7 +206,7 @@ fn acr_hr_needs_the_reference_of_the_same_subject() {
     ];
     let map = HashMap::from([(0, 9)]);
     assert!(matches!(
-        acr_hr_dmos(&rs, &map, 0.95),
+        acr_hr_dmos(&rs, &map, conf(0.95)),
         Err(AnalysisError::MissingReference {
             subject: 1,
             condition: 0,
@@ -188,7 +231,7 @@ fn acr_hr_needs_the_reference_of_the_same_subject() {
             score: 5.0,
         },
     ];
-    let s = acr_hr_dmos(&rs, &map, 0.95).unwrap();
+    let s = acr_hr_dmos(&rs, &map, conf(0.95)).unwrap();
     assert_eq!(s.len(), 1);
     assert!((s[0].summary.mean - 4.5).abs() < 1e-15);
 }
@@ -226,12 +269,12 @@ fn staircase_reversals_and_threshold_of_last_three() {
     assert!((t.threshold(3).unwrap() - (0.014 + 0.010 + 0.016) / 3.0).abs() < 1e-15);
     assert!(t.threshold(5).is_none());
     let short = track(4, &[0.024, 0.022]);
-    let s = staircase_thresholds(&[t.clone(), short], 3, 0.95).unwrap();
+    let s = staircase_thresholds(&[t.clone(), short], 3, conf(0.95)).unwrap();
     assert_eq!(s.per_subject.len(), 1);
     assert_eq!(s.unconverged, vec![(4, "t_L".to_owned())]);
     assert!(s.summary.unwrap().sd.is_none(), "one subject: no SD");
     assert!(matches!(
-        staircase_thresholds(&[t], 0, 0.95),
+        staircase_thresholds(&[t], 0, conf(0.95)),
         Err(AnalysisError::InvalidParameter { name: "k", .. })
     ));
 }
@@ -254,7 +297,7 @@ fn rate_finding_needs_an_unbroken_run_from_the_lowest_ratio() {
         .enumerate()
         .map(|(i, &m)| analysis::ConditionStats {
             condition: i as u32,
-            summary: from_summary_statistics(m, Some(0.1), 20, 0.95).unwrap(),
+            summary: from_summary_statistics(m, Some(0.1), 20, conf(0.95)).unwrap(),
         })
         .collect();
     let f = rate_findings(
@@ -293,15 +336,15 @@ fn thesis_table_3_1_ci_column_from_summary_statistics() {
     ];
     let mut exact = 0;
     for (n, mean, sd, printed) in rows {
-        let s = from_summary_statistics(mean, Some(sd), n, 0.95).unwrap();
+        let s = from_summary_statistics(mean, Some(sd), n, conf(0.95)).unwrap();
         let z = s.ci_z.unwrap().half_width;
         // Printed to 3 decimals from an SD itself rounded to 3 decimals.
-        let z_lo = from_summary_statistics(mean, Some(sd - 0.0005), n, 0.95)
+        let z_lo = from_summary_statistics(mean, Some(sd - 0.0005), n, conf(0.95))
             .unwrap()
             .ci_z
             .unwrap()
             .half_width;
-        let z_hi = from_summary_statistics(mean, Some(sd + 0.0005), n, 0.95)
+        let z_hi = from_summary_statistics(mean, Some(sd + 0.0005), n, conf(0.95))
             .unwrap()
             .ci_z
             .unwrap()
@@ -316,7 +359,7 @@ fn thesis_table_3_1_ci_column_from_summary_statistics() {
         assert!((t * 1000.0).round() / 1000.0 > printed);
         // With the implied 22 / 26 ratings neither formula comes close.
         let ratings = if n == 13 { 22 } else { 26 };
-        let wide = from_summary_statistics(mean, Some(sd), ratings, 0.95).unwrap();
+        let wide = from_summary_statistics(mean, Some(sd), ratings, conf(0.95)).unwrap();
         assert!((wide.ci_t.unwrap().half_width - printed).abs() > 0.03);
     }
     assert_eq!(
@@ -327,9 +370,17 @@ fn thesis_table_3_1_ci_column_from_summary_statistics() {
 
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(64))]
+    /// Every level in (0, 1) is kept exactly, and its text (a CLI default) parses back to it.
+    #[test]
+    fn confidence_keeps_its_level_and_round_trips_through_text(level in f64::MIN_POSITIVE..1.0) {
+        let c = Confidence::new(level).unwrap();
+        prop_assert_eq!(c.level(), level);
+        prop_assert_eq!(c.to_string().parse::<Confidence>().unwrap(), c);
+    }
+
     #[test]
     fn intervals_contain_the_mean_and_t_is_wider_than_z(values in prop::collection::vec(1.0f64..5.0, 2..40)) {
-        let s = summarize(&values, 0.95).unwrap();
+        let s = summarize(&values, conf(0.95)).unwrap();
         let t = s.ci_t.unwrap();
         let z = s.ci_z.unwrap();
         prop_assert!(t.lower <= s.mean && s.mean <= t.upper);
@@ -366,8 +417,8 @@ fn large_sparse_ids_give_the_same_statistics() {
             ..*r
         })
         .collect();
-    let a = condition_stats(&data.ratings, 0.95).unwrap();
-    let b = condition_stats(&sparse, 0.95).unwrap();
+    let a = condition_stats(&data.ratings, conf(0.95)).unwrap();
+    let b = condition_stats(&sparse, conf(0.95)).unwrap();
     assert_eq!(a.len(), b.len());
     for (x, y) in a.iter().zip(&b) {
         assert_eq!(x.condition * 50_000_017 + 5, y.condition);

@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use analysis::psychometric::{BootstrapOptions, FitOptions, Lapse, Shape};
 use analysis::study::{ReportOptions, analyze};
-use analysis::{CiMethod, export, from_results};
+use analysis::{CiMethod, Confidence, export, from_results};
 use anyhow::{Context, Result};
 use protocols::StudyDefinition;
 
@@ -43,8 +43,8 @@ pub struct ReportArgs {
     #[arg(long, value_name = "CODEC")]
     pub baseline: Option<String>,
     /// Confidence level of every interval.
-    #[arg(long, default_value_t = 0.95)]
-    pub confidence: f64,
+    #[arg(long, default_value_t = Confidence::default())]
+    pub confidence: Confidence,
     /// Interval used in tables and findings.
     #[arg(long, value_enum, default_value_t = CiArg::T)]
     pub ci: CiArg,
