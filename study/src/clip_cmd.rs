@@ -5,14 +5,17 @@ use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
+use lab::clips::ClipOptions;
 use motion::{Clip, SkeletonFormat, fk, io, synth};
 
 /// Where a clip comes from: `--asf A --amc M`, one `.bvh`, or the built-in demo walk.
 #[derive(Debug, Clone, clap::Args)]
 pub struct ClipInput {
-    /// Motion files: `.bvh` files, or `.amc` files with one `.asf` among them or in `--asf`.
+    /// Motion files: `.bvh` files, or `.amc` files with their `.asf` files, paired as every
+    /// command pairs them (an AMC with the ASF named after it, else `--asf`, else the ASF
+    /// beside it, else the one ASF no other motion is named after).
     pub files: Vec<PathBuf>,
-    /// ASF skeleton for AMC motion.
+    /// ASF skeleton for the AMC motions not named after one of the files.
     #[arg(long, value_name = "SKEL")]
     pub asf: Option<PathBuf>,
     /// AMC motion (needs `--asf`).
@@ -47,37 +50,20 @@ impl ClipInput {
                 clip: synth::walking_clip(&synth::WalkParams::default()),
             });
         }
-        let ext = |p: &Path, e: &str| p.extension().is_some_and(|x| x.eq_ignore_ascii_case(e));
-        let mut asf = self.asf.clone();
-        let mut motions: Vec<PathBuf> = self.amc.clone();
-        for f in &self.files {
-            if ext(f, "asf") {
-                if asf.is_some() {
-                    bail!("more than one ASF skeleton given ({})", f.display());
-                }
-                asf = Some(f.clone());
-            } else {
-                motions.push(f.clone());
-            }
-        }
-        for m in &motions {
-            let clip = if ext(m, "bvh") {
-                let mut clip = io::read_clip(None, m)?;
-                if let Some(cm) = self.bvh_unit_cm {
-                    if !(cm.is_finite() && cm > 0.0) {
-                        bail!("--bvh-unit-cm must be a positive number of centimetres");
-                    }
-                    clip.skeleton.units.cm_per_unit = cm;
-                    clip.skeleton.units.declared = true;
-                }
-                clip
-            } else {
-                io::read_clip(asf.as_deref(), m)?
+        let files: Vec<PathBuf> = self.amc.iter().chain(&self.files).cloned().collect();
+        if !files.is_empty() || self.asf.is_some() {
+            let options = ClipOptions {
+                asf: self.asf.clone(),
+                bvh_unit_cm: self.bvh_unit_cm,
             };
-            out.push(Loaded {
-                name: m.display().to_string(),
-                clip,
-            });
+            out.extend(
+                lab::clips::load(&files, &options)?
+                    .into_iter()
+                    .map(|l| Loaded {
+                        name: l.source.motion.display().to_string(),
+                        clip: l.clip,
+                    }),
+            );
         }
         if out.is_empty() {
             bail!("no clip given: pass a .bvh file, --asf SKEL --amc MOTION, or --demo");

@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context as _, Result};
 use clap::Parser;
 
-use crate::{codec_cmd, report_cmd, run_cmd, study_cmd};
+use crate::{report_cmd, run_cmd, study_cmd};
 
 /// Arguments of `study demo`.
 #[derive(Debug, clap::Args)]
@@ -41,8 +41,8 @@ enum Mode {
     Window,
 }
 
-const CODECS: &str = "wavelet-perceptual,spiht";
-const RATES: &str = "10,20,30,40";
+const CODECS: &[&str] = &["wavelet-perceptual", "spiht"];
+const RATES: &[f64] = &[10.0, 20.0, 30.0, 40.0];
 
 fn study_text(protocol: &str, mode: Mode) -> String {
     let common = format!(
@@ -107,7 +107,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
             out.display()
         );
     }
-    fs::create_dir_all(out.join("clips")).with_context(|| format!("creating {}", out.display()))?;
+    fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
     println!(
         "study demo: a short study on a generated walking figure, written to {}",
         out.display()
@@ -134,30 +134,25 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         Mode::Simulated
     };
     // In the window, a two-second walk keeps each trial short.
-    let clip = motion::synth::walking_clip(&motion::synth::WalkParams {
+    let walk = motion::synth::WalkParams {
         duration_s: if mode == Mode::Window { 2.0 } else { 4.0 },
         ..motion::synth::WalkParams::default()
-    });
-    let (asf, amc) = (out.join("clips/walk.asf"), out.join("clips/walk.amc"));
-    motion::io::write_clip(&clip, &amc, Some(&asf))?;
-
+    };
     let s = |p: &Path| p.display().to_string();
-    let stimuli = out.join("stimuli");
-    println!("\n[1/3] stimuli: codecs {CODECS} at CR {RATES}");
-    let sweep: codec_cmd::SweepArgs = parse(&[
-        "sweep",
-        "--clips",
-        &s(&amc),
-        &s(&asf),
-        "--codecs",
-        CODECS,
-        "--cr",
-        RATES,
-        "--quiet",
-        "-o",
-        &s(&stimuli),
-    ])?;
-    codec_cmd::sweep(&sweep).context("making the stimuli")?;
+    let rates: Vec<String> = RATES.iter().map(f64::to_string).collect();
+    println!(
+        "\n[1/3] stimuli: codecs {} at CR {}",
+        CODECS.join(","),
+        rates.join(",")
+    );
+    let made =
+        lab::generated::walk_stimuli(&out, &walk, CODECS, RATES).context("making the stimuli")?;
+    println!(
+        "{} stimuli ({} references) in {}",
+        made.manifest.stimuli.len(),
+        made.references,
+        out.join("stimuli").display()
+    );
 
     let subjects = args.subjects.to_string();
     let seed = args.seed.to_string();

@@ -11,13 +11,10 @@ mod clip_cmd;
 mod codec_cmd;
 mod demo_cmd;
 mod gui;
-mod live;
 mod markers_cmd;
 mod primitives_cmd;
 mod report_cmd;
 mod run_cmd;
-mod session;
-mod stimuli;
 mod study_cmd;
 
 /// Perceptual user studies of motion-capture compression.

@@ -1,17 +1,17 @@
 //! `study primitives ...`: build and inspect the primitive database of thesis ch. 5.
 
 use std::io::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
 use codecs::primitives::{Database, SegmentParams, TrainParams};
-use motion::{Clip, io};
+use motion::Clip;
 
 /// Primitive-database subcommands.
 #[derive(Debug, clap::Subcommand)]
 pub enum PrimitivesCommand {
-    /// Train a database on clips (offline): `.bvh` files, or `.asf` followed by its `.amc`
-    /// files (each AMC uses the last ASF before it).
+    /// Train a database on clips (offline): `.bvh` files and `.amc` files with their `.asf`
+    /// files, paired as every command pairs them.
     Train {
         /// Training clips.
         #[arg(required = true)]
@@ -39,32 +39,6 @@ pub enum PrimitivesCommand {
     },
 }
 
-/// Loads clips given as `.bvh`, or `.asf` followed by `.amc` files.
-fn load_clips(files: &[PathBuf]) -> Result<Vec<Clip>> {
-    let ext = |p: &Path, e: &str| p.extension().is_some_and(|x| x.eq_ignore_ascii_case(e));
-    let mut asf: Option<&Path> = None;
-    let mut clips = Vec::new();
-    for f in files {
-        if ext(f, "asf") {
-            asf = Some(f);
-        } else if ext(f, "amc") {
-            let Some(a) = asf else {
-                bail!(
-                    "{}: an AMC file needs an ASF before it on the command line",
-                    f.display()
-                );
-            };
-            clips.push(io::read_clip(Some(a), f)?);
-        } else {
-            clips.push(io::read_clip(None, f)?);
-        }
-    }
-    if clips.is_empty() {
-        bail!("no training clips given");
-    }
-    Ok(clips)
-}
-
 /// Runs a primitives subcommand.
 ///
 /// # Errors
@@ -88,8 +62,8 @@ pub fn run(cmd: PrimitivesCommand) -> Result<()> {
             if !(1..=4096).contains(&k_max) {
                 bail!("--k-max must be between 1 and 4096");
             }
-            let loaded = load_clips(&clips)?;
-            let refs: Vec<&Clip> = loaded.iter().collect();
+            let loaded = lab::clips::load(&clips, &lab::clips::ClipOptions::default())?;
+            let refs: Vec<&Clip> = loaded.iter().map(|l| &l.clip).collect();
             let params = TrainParams {
                 k_max,
                 k_start: TrainParams::default().k_start.min(k_max),
@@ -101,7 +75,7 @@ pub fn run(cmd: PrimitivesCommand) -> Result<()> {
                 seed,
                 ..TrainParams::default()
             };
-            let frames: usize = loaded.iter().map(Clip::frames).sum();
+            let frames: usize = refs.iter().map(|c| c.frames()).sum();
             eprintln!("training on {} clips, {frames} frames", loaded.len());
             let db = Database::train(&refs, &params, |done, total| {
                 eprint!("\r  joints clustered: {done}/{total}");

@@ -156,12 +156,14 @@ pub fn run(args: &ReportArgs) -> Result<()> {
         .study
         .clone()
         .unwrap_or_else(|| args.results.join(&run.study_file));
-    let study = StudyDefinition::load(&study_path).with_context(|| {
-        format!(
-            "loading the study file {} (pass --study to name another)",
-            study_path.display()
-        )
-    })?;
+    let study = lab::StudyFile::load(&study_path)
+        .with_context(|| {
+            format!(
+                "loading the study file {} (pass --study to name another)",
+                study_path.display()
+            )
+        })?
+        .definition;
     let converted = from_results::convert(
         &sessions,
         &study.manifest,

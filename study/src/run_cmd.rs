@@ -3,23 +3,20 @@
 
 use std::fmt::Write as _;
 use std::fs;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::Arc;
 
 use anyhow::{Context as _, bail};
 use clap::Args;
-use protocols::StudyDefinition;
-use protocols::study::content_hash;
-use results::RunManifest;
-use results::store::{DisplayInfo, MANIFEST_FORMAT_VERSION, RUN_FILE, write_new};
+use lab::StudyFile;
+use lab::session::{self, Opened, Recorder, SessionOf};
+use results::store::DisplayInfo;
 
 use crate::gui::render::BACKGROUND;
 use crate::gui::scene::{Figure, FrameShapes, View};
 use crate::gui::screens::{Exit, StudyUi};
 use crate::gui::timing::FrameClock;
 use crate::gui::window::{self, Next, WindowOptions, WindowReport};
-use crate::session::{self, Opened, Recorder, SessionOf, now_ms};
-use crate::stimuli::StimulusLibrary;
 
 /// Window size `WxH`.
 fn parse_size(s: &str) -> Result<[f32; 2], String> {
@@ -105,73 +102,6 @@ pub struct DisplayTestArgs {
     pub json: Option<PathBuf>,
 }
 
-/// A subject's plan index: stable for an id and session, different between subjects.
-fn subject_index(subject: &str, session: u32) -> u32 {
-    let mut h: u32 = 0x811c_9dc5;
-    for b in subject.bytes().chain(format!("/{session}").bytes()) {
-        h ^= u32::from(b);
-        h = h.wrapping_mul(0x0100_0193);
-    }
-    h
-}
-
-fn check_subject(id: &str) -> anyhow::Result<()> {
-    if id.is_empty()
-        || id.len() > 64
-        || !id
-            .chars()
-            .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
-    {
-        bail!("--subject {id:?}: use 1-64 letters, digits, '-' or '_' (it names a folder)");
-    }
-    Ok(())
-}
-
-/// The results directory of a real study: created with its run manifest and the archived
-/// study on first use.
-fn open_results_dir(
-    out: &Path,
-    args: &RunArgs,
-    study: &StudyDefinition,
-    study_bytes: &[u8],
-) -> anyhow::Result<()> {
-    let hash = content_hash(study_bytes);
-    if out.join(RUN_FILE).exists() {
-        let run: RunManifest = results::store::read_json(&out.join(RUN_FILE))?;
-        if run.study != study.name {
-            bail!(
-                "{} holds results of study {:?}, not {:?}",
-                out.display(),
-                run.study,
-                study.name
-            );
-        }
-        if run.study_hash != hash {
-            eprintln!(
-                "note: {} changed since the first session in {} (hash {} -> {hash})",
-                args.study.display(),
-                out.display(),
-                run.study_hash
-            );
-        }
-    } else {
-        fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-        let run = RunManifest {
-            format_version: MANIFEST_FORMAT_VERSION,
-            study: study.name.clone(),
-            study_hash: hash,
-            study_file: "study.toml".into(),
-            plan_seed: study.seed,
-            observer_seed: None,
-            subjects: 0,
-            software_version: env!("CARGO_PKG_VERSION").into(),
-            created_ms: now_ms(),
-        };
-        write_new(&out.join(RUN_FILE), &serde_json::to_vec_pretty(&run)?)?;
-    }
-    crate::study_cmd::archive_study(out, &args.study, study_bytes, study)
-}
-
 /// `study run`: one subject's session in the window.
 ///
 /// # Errors
@@ -182,10 +112,8 @@ fn open_results_dir(
     reason = "the session's setup, its window loop and how it ended, in the order they happen"
 )]
 pub fn run(args: &RunArgs) -> anyhow::Result<()> {
-    check_subject(&args.subject)?;
-    let study_bytes =
-        fs::read(&args.study).with_context(|| format!("reading {}", args.study.display()))?;
-    let study = StudyDefinition::load(&args.study)?;
+    session::check_subject(&args.subject)?;
+    let file = StudyFile::load(&args.study)?;
     if !window::display_available() {
         bail!(
             "no display (DISPLAY and WAYLAND_DISPLAY are unset): `study run` shows stimuli to a \
@@ -194,27 +122,27 @@ pub fn run(args: &RunArgs) -> anyhow::Result<()> {
             args.study.display()
         );
     }
-    let out = args.output.clone().unwrap_or_else(|| {
-        args.study
-            .parent()
-            .unwrap_or(Path::new("."))
-            .join(format!("results-{}", study.name))
-    });
-    open_results_dir(&out, args, &study, &study_bytes)?;
-    let dir = out.join(format!("{}_s{}", args.subject, args.session));
-    let index = subject_index(&args.subject, args.session);
-    let study_hash = content_hash(&study_bytes);
+    let study = &file.definition;
+    let out = args
+        .output
+        .clone()
+        .unwrap_or_else(|| file.dir().join(format!("results-{}", study.name)));
+    for note in lab::results_dir::open_for_subjects(&out, &file)? {
+        eprintln!("{note}");
+    }
+    let dir = session::session_dir(&out, &args.subject, args.session);
+    let index = session::subject_index(&args.subject, args.session);
     let fresh = session::new_manifest(
-        &study,
+        study,
         SessionOf {
-            study_hash: &study_hash,
+            study_hash: &file.hash,
             subject: args.subject.clone(),
             subject_index: index,
             session: args.session,
             observer_seed: None,
         },
     );
-    let recorder = match Recorder::open(&study, index, &dir, args.resume, fresh)? {
+    let recorder = match Recorder::open(study, index, &dir, args.resume, fresh)? {
         Opened::Finished(m) => {
             let m = *m;
             println!(
@@ -232,10 +160,9 @@ pub fn run(args: &RunArgs) -> anyhow::Result<()> {
             recorder
         }
     };
-    let library = StimulusLibrary::new(&study, &args.study);
-    let live = crate::live::LiveStimuli::from_study(&study, &args.study)?;
-    let study = Arc::new(study);
-    let mut screens = StudyUi::new(Arc::clone(&study), library, live, recorder, true);
+    let stimuli = lab::source::open(&file)?;
+    let study = Arc::new(file.definition);
+    let mut screens = StudyUi::new(Arc::clone(&study), stimuli, recorder, true);
     let options = args.window.options(format!("study: {}", study.name));
     let exit = std::rc::Rc::new(std::cell::RefCell::new(None::<Exit>));
     let exit_seen = std::rc::Rc::clone(&exit);
@@ -456,15 +383,8 @@ mod tests {
     use super::*;
 
     #[test]
-    fn sizes_and_subject_ids_are_checked() {
+    fn sizes_are_checked() {
         assert_eq!(parse_size("1280x720"), Ok([1280.0, 720.0]));
         assert!(parse_size("1280").is_err() && parse_size("100x100").is_err());
-        assert!(check_subject("S01_a-b").is_ok());
-        for bad in ["", "../x", "a b", "s/1"] {
-            assert!(check_subject(bad).is_err(), "{bad:?}");
-        }
-        assert_eq!(subject_index("S01", 1), subject_index("S01", 1));
-        assert_ne!(subject_index("S01", 1), subject_index("S02", 1));
-        assert_ne!(subject_index("S01", 1), subject_index("S01", 2));
     }
 }

@@ -233,9 +233,14 @@ fn simulated_live_staircase_recovers_the_observers_true_threshold() {
     }
     let truth = truth.expect("the observers' threshold lies inside [8, 80]");
 
-    let study_def = protocols::StudyDefinition::load(&toml).unwrap();
+    let study_def = lab::StudyFile::load(&toml).unwrap().definition;
     let converted = analysis::from_results::convert(&sessions, &study_def.manifest, None).unwrap();
-    let t = analysis::staircase::staircase_thresholds(&converted.data.staircases, 6, 0.95).unwrap();
+    let t = analysis::staircase::staircase_thresholds(
+        &converted.data.staircases,
+        6,
+        analysis::Confidence::default(),
+    )
+    .unwrap();
     assert!(t.unconverged.is_empty(), "{:?}", t.unconverged);
     let ci = t.summary.unwrap().ci_t.unwrap();
     eprintln!(
@@ -253,7 +258,8 @@ fn simulated_live_staircase_recovers_the_observers_true_threshold() {
     );
     // The JND report's share at the true threshold is near one half.
     let values: Vec<f64> = t.per_subject.iter().map(|p| p.1).collect();
-    let share = analysis::jnd::unnoticed_share(&values, truth, 0.95).unwrap();
+    let share =
+        analysis::jnd::unnoticed_share(&values, truth, analysis::Confidence::default()).unwrap();
     let (lo, hi) = share.model_ci.unwrap();
     assert!(
         lo <= 0.5 && 0.5 <= hi,

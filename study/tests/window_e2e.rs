@@ -18,11 +18,11 @@ use common::{Env, find_window, press, setup};
 /// The shared walk stimuli and a MOS study of 2 familiarization + 2 test + 2 hidden-repeat
 /// trials.
 fn write_study(dir: &Path) {
-    common::walk_stimuli::write_walk_stimuli(dir);
+    common::write_walk_stimuli(dir);
     std::fs::write(
         dir.join("study.toml"),
-        "format_version = 1\nname = \"e2e\"\nprotocol = \"mos\"\nstimuli = \"stimuli.json\"\n\
-         seed = 5\n[conditions]\nclips = [\"walk\"]\ncodecs = [\"x\"]\ntarget_cr = [10, 20]\n\
+        "format_version = 1\nname = \"e2e\"\nprotocol = \"mos\"\nstimuli = \"stimuli/stimuli.json\"\n\
+         seed = 5\n[conditions]\nclips = [\"walk\"]\ncodecs = [\"spiht\"]\ntarget_cr = [10, 20]\n\
          [presentation]\nplayback_count = 1\n\
          [session]\nfamiliarization = 2\nhidden_repeats = 2\n",
     )

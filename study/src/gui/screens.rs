@@ -19,9 +19,8 @@ use super::flow::{Presentation, Show, stimulus_at};
 use super::render::{BACKGROUND, SkeletonCallback};
 use super::scene::{Figure, FrameShapes, View};
 use super::timing::FrameClock;
-use crate::live::LiveStimuli;
-use crate::session::Recorder;
-use crate::stimuli::StimulusLibrary;
+use lab::session::Recorder;
+use lab::source::StimulusSource;
 
 /// The BT.500 five-grade quality labels, best first.
 pub const QUALITY_LABELS: [&str; 5] = ["Excellent", "Good", "Fair", "Poor", "Bad"];
@@ -137,8 +136,7 @@ fn quality_label(scale: &RatingScale, v: f64) -> Option<&'static str> {
 /// The subject's screens over one open session.
 pub struct StudyUi {
     study: Arc<StudyDefinition>,
-    library: StimulusLibrary,
-    live: Option<LiveStimuli>,
+    stimuli: Box<dyn StimulusSource>,
     recorder: Box<Recorder>,
     screen: Screen,
     pause: Pause,
@@ -151,14 +149,13 @@ pub struct StudyUi {
 }
 
 impl StudyUi {
-    /// Screens for `recorder`'s session. Stimuli come from `library`, or are encoded per
-    /// trial by `live` (codec-in-the-loop staircase). `gpu`: draw the skeletons through the
+    /// Screens for `recorder`'s session, showing what `stimuli` gives each trial (files, or
+    /// clips encoded per trial by a live staircase). `gpu`: draw the skeletons through the
     /// wgpu paint callback (off in UI tests, which have no renderer). A resumed session shows
     /// its subject fields as entered.
     pub fn new(
         study: Arc<StudyDefinition>,
-        library: StimulusLibrary,
-        live: Option<LiveStimuli>,
+        stimuli: Box<dyn StimulusSource>,
         recorder: Box<Recorder>,
         gpu: bool,
     ) -> StudyUi {
@@ -179,8 +176,7 @@ impl StudyUi {
         let planned = planned_trials(&study);
         StudyUi {
             study,
-            library,
-            live,
+            stimuli,
             recorder,
             screen: Screen::Welcome,
             pause: Pause::None,
@@ -193,10 +189,10 @@ impl StudyUi {
         }
     }
 
-    /// The live staircase's stimuli (UI tests wait for their prefetch).
+    /// The session's stimulus source (UI tests wait for what it prepares).
     #[cfg(test)]
-    pub fn live_mut(&mut self) -> Option<&mut LiveStimuli> {
-        self.live.as_mut()
+    pub fn stimuli_mut(&mut self) -> &mut dyn StimulusSource {
+        self.stimuli.as_mut()
     }
 
     /// Where the reference is in the trial on screen (UI tests answer right or wrong).
@@ -365,8 +361,8 @@ impl StudyUi {
         }
     }
 
-    fn fail(&mut self, e: &anyhow::Error) {
-        let text = format!("{e:#}");
+    fn fail(&mut self, e: &(dyn std::error::Error + 'static)) {
+        let text = lab::error::chain(e);
         self.screen = Screen::Failed(format!("The session stopped: {text}"));
         self.exit = Some(Exit::Failed(text));
     }
@@ -405,29 +401,20 @@ impl StudyUi {
         }
     }
 
-    fn load_trial(&mut self, trial: Trial, now: f64) -> anyhow::Result<TrialScreen> {
+    fn load_trial(&mut self, trial: Trial, now: f64) -> lab::Result<TrialScreen> {
         let first = match trial.arrangement {
             Arrangement::SideBySide => Position::Left,
             Arrangement::Sequential => Position::First,
             Arrangement::Abab => Position::A,
         };
-        // A live trial's test stimulus is encoded now unless it was prefetched (cached by
+        // A live trial's test stimulus is encoded now unless it was prepared (cached by
         // level); others are files.
-        let (reference, test, encoding) = match self.live.as_mut() {
-            Some(live) => {
-                let made = live.resolve(&trial)?;
-                // While the subject watches this trial, encode the stimuli a correct and a
-                // wrong answer lead to, so the next trial starts without waiting for the codec.
-                live.prefetch(&self.recorder.lookahead(self.recorder.elapsed_ms()));
-                let encoding = Some(made.encoding());
-                (made.reference, made.test, encoding)
-            }
-            None => (
-                self.library.clip(&trial.reference)?,
-                self.library.clip(&trial.stimulus)?,
-                None,
-            ),
-        };
+        let shown = self.stimuli.stimuli(&trial)?;
+        // While the subject watches this trial, prepare the stimuli a correct and a wrong
+        // answer lead to, so the next trial starts without waiting for the codec.
+        self.stimuli
+            .prepare(&self.recorder.lookahead(self.recorder.elapsed_ms()));
+        let (reference, test, encoding) = (shown.reference, shown.test, shown.encoding);
         let view = *self
             .views
             .entry(trial.reference.clone())

@@ -14,13 +14,8 @@ use results::trials::read_trials;
 
 use super::screens::{Exit, StudyUi};
 use super::timing::FrameClock;
-use crate::live::LiveStimuli;
-use crate::session::{Opened, Recorder};
-use crate::stimuli::StimulusLibrary;
-
-/// The window tests' generated walk stimuli, shared with `tests/`.
-#[path = "../../tests/common/walk_stimuli.rs"]
-mod walk_stimuli;
+use lab::StudyFile;
+use lab::session::{Opened, Recorder};
 
 /// Seconds per kittest step.
 const DT: f32 = 0.05;
@@ -46,12 +41,17 @@ fn fixture(name: &str, study_body: &str) -> Fixture {
     ));
     std::fs::create_dir_all(&dir).unwrap();
     // A one-second walk: short presentations keep the tests quick.
-    walk_stimuli::write_walk_stimuli(&dir);
+    let walk = motion::synth::WalkParams {
+        duration_s: 1.0,
+        frame_rate_hz: 120.0,
+        ..motion::synth::WalkParams::default()
+    };
+    lab::generated::walk_stimuli(&dir, &walk, &["spiht"], &[10.0, 20.0]).unwrap();
     let study_path = dir.join("study.toml");
     std::fs::write(
         &study_path,
         format!(
-            "format_version = 1\nname = \"ui-{name}\"\nstimuli = \"stimuli.json\"\nseed = 3\n{study_body}"
+            "format_version = 1\nname = \"ui-{name}\"\nstimuli = \"stimuli/stimuli.json\"\nseed = 3\n{study_body}"
         ),
     )
     .unwrap();
@@ -59,25 +59,25 @@ fn fixture(name: &str, study_body: &str) -> Fixture {
 }
 
 const MOS: &str = "protocol = \"mos\"\n\
-    [conditions]\nclips = [\"walk\"]\ncodecs = [\"x\"]\ntarget_cr = [10, 20]\n\
+    [conditions]\nclips = [\"walk\"]\ncodecs = [\"spiht\"]\ntarget_cr = [10, 20]\n\
     [presentation]\nplayback_count = 1\nmax_replays = 1\n\
     [session]\nfamiliarization = 0\nhidden_repeats = 0\nsubject_fields = [\"age\"]\n";
 
 const CONSENT: &str = "protocol = \"mos\"\n\
-    [conditions]\nclips = [\"walk\"]\ncodecs = [\"x\"]\ntarget_cr = [10]\n\
+    [conditions]\nclips = [\"walk\"]\ncodecs = [\"spiht\"]\ntarget_cr = [10]\n\
     [session]\nfamiliarization = 0\nhidden_repeats = 0\n\
     consent = \"Your answers are stored without your name.\"\n\
     instructions = \"Rate the motion on the right.\"\n";
 
 const DSCQS: &str = "protocol = \"dscqs\"\n\
-    [conditions]\nclips = [\"walk\"]\ncodecs = [\"x\"]\ntarget_cr = [10]\n\
+    [conditions]\nclips = [\"walk\"]\ncodecs = [\"spiht\"]\ntarget_cr = [10]\n\
     [presentation]\ngap_ms = 200\n\
     [scale]\nkind = \"categorical\"\n\
     [session]\nfamiliarization = 0\nhidden_repeats = 0\n";
 
 const AFC: &str = "protocol = \"staircase\"\n\
     [presentation]\narrangement = \"side_by_side\"\n\
-    [staircase]\nparam = \"cr\"\ncodec = \"x\"\nstart = 20\nstep = 10\nmin = 10\nmax = 20\n\
+    [staircase]\nparam = \"cr\"\ncodec = \"spiht\"\nstart = 20\nstep = 10\nmin = 10\nmax = 20\n\
     stop_reversals = 2\nmax_trials = 3\n\
     [[staircase.tracks]]\nclip = \"walk\"\n";
 
@@ -94,8 +94,9 @@ struct Run {
 }
 
 fn harness(fx: Fixture) -> (Harness<'static, (StudyUi, FrameClock)>, Run) {
-    let study = StudyDefinition::load(&fx.study_path).unwrap();
-    let live = LiveStimuli::from_study(&study, &fx.study_path).unwrap();
+    let file = StudyFile::load(&fx.study_path).unwrap();
+    let stimuli = lab::source::open(&file).unwrap();
+    let study = file.definition;
     let session_dir = fx.dir.join("results").join("S01_s1");
     std::fs::create_dir_all(session_dir.parent().unwrap()).unwrap();
     let manifest = fresh_manifest(&study);
@@ -104,8 +105,7 @@ fn harness(fx: Fixture) -> (Harness<'static, (StudyUi, FrameClock)>, Run) {
     else {
         panic!("new session reported finished");
     };
-    let library = StimulusLibrary::new(&study, &fx.study_path);
-    let ui = StudyUi::new(Arc::new(study), library, live, recorder, false);
+    let ui = StudyUi::new(Arc::new(study), stimuli, recorder, false);
     let h = Harness::builder()
         .with_size(egui::vec2(1280.0, 720.0))
         .with_step_dt(DT)
@@ -117,9 +117,9 @@ fn harness(fx: Fixture) -> (Harness<'static, (StudyUi, FrameClock)>, Run) {
 }
 
 fn fresh_manifest(study: &StudyDefinition) -> results::SessionManifest {
-    crate::session::new_manifest(
+    lab::session::new_manifest(
         study,
-        crate::session::SessionOf {
+        lab::session::SessionOf {
             study_hash: "test",
             subject: "S01".into(),
             subject_index: 0,
@@ -350,10 +350,10 @@ fn a_live_staircase_prefetches_the_next_levels_while_a_trial_runs() {
     let (mut h, run) = harness(fixture("live", LIVE));
     begin(&mut h);
     assert!(h.query_by_label("Trial 1").is_some());
-    let live = h.state_mut().0.live_mut().unwrap();
-    live.wait_prefetch();
+    let live = h.state_mut().0.stimuli_mut();
+    live.settle();
     // Level 20 shown; a correct answer keeps 20 (two-down), a wrong one goes up to 30.
-    assert_eq!(live.cached(), 2);
+    assert_eq!(live.ready(), 2);
     watch(&mut h, 1.0);
     let wrong = match rows(&run.session_dir).len() {
         0 => h.state().0.pending_reference().unwrap().other(),
@@ -374,8 +374,8 @@ fn a_live_staircase_prefetches_the_next_levels_while_a_trial_runs() {
     // Trial 2 at 30 came from the cache; its own lookahead adds 40 (wrong) only, since a
     // correct answer keeps 30.
     assert!(h.query_by_label("Trial 2").is_some());
-    let live = h.state_mut().0.live_mut().unwrap();
-    live.wait_prefetch();
-    assert_eq!(live.cached(), 3);
+    let live = h.state_mut().0.stimuli_mut();
+    live.settle();
+    assert_eq!(live.ready(), 3);
     drop(run.fx);
 }

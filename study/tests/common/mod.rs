@@ -2,10 +2,20 @@
 //! `xdotool`. Without the tools the tests fail under `CI` and are skipped elsewhere.
 #![allow(dead_code, reason = "each test file uses its own part of the harness")]
 
-pub mod walk_stimuli;
-
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
+
+/// The window tests' stimuli: a one-second generated walk (short presentations keep the
+/// tests quick) and SPIHT at 10:1 and 20:1, in `dir/stimuli/stimuli.json`.
+pub fn write_walk_stimuli(dir: &Path) {
+    let walk = motion::synth::WalkParams {
+        duration_s: 1.0,
+        // AMC files carry no rate: CMU's 120 Hz is assumed when they are read back.
+        frame_rate_hz: 120.0,
+        ..motion::synth::WalkParams::default()
+    };
+    lab::generated::walk_stimuli(dir, &walk, &["spiht"], &[10.0, 20.0]).unwrap();
+}
 use std::time::{Duration, Instant};
 
 pub fn have(tool: &str) -> bool {

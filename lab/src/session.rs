@@ -1,18 +1,53 @@
 //! One subject's session on disk: open or resume the results folder, replay the logged
 //! responses into the protocol engine, then log each new response (fsynced) before the next
-//! trial is asked for. The study window and `study simulate` both use it; it knows nothing of
+//! trial is asked for. The study window and simulation both use it; it knows nothing of
 //! drawing or of observers.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::{Instant, SystemTime, UNIX_EPOCH};
 
-use anyhow::Context as _;
 use protocols::{
     FrameTiming, Outcome, Response, Session, SessionStatus, StimulusEncoding, StudyDefinition,
     Trial, TrialRecord,
 };
 use results::store::{SessionLock, SessionState, read_json};
 use results::{SessionLog, SessionManifest};
+
+use crate::error::{Context as _, Result, io_error, refused};
+
+/// A subject's plan index: stable for an id and session, different between subjects (FNV-1a
+/// of `subject/session`).
+pub fn subject_index(subject: &str, session: u32) -> u32 {
+    let mut h: u32 = 0x811c_9dc5;
+    for b in subject.bytes().chain(format!("/{session}").bytes()) {
+        h ^= u32::from(b);
+        h = h.wrapping_mul(0x0100_0193);
+    }
+    h
+}
+
+/// Checks a subject id: 1-64 letters, digits, `-` or `_` (it names a folder).
+///
+/// # Errors
+/// Any other id.
+pub fn check_subject(id: &str) -> Result<()> {
+    if id.is_empty()
+        || id.len() > 64
+        || !id
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
+    {
+        return Err(refused(format!(
+            "--subject {id:?}: use 1-64 letters, digits, '-' or '_' (it names a folder)"
+        )));
+    }
+    Ok(())
+}
+
+/// The folder of `subject`'s session `session` inside a results directory.
+pub fn session_dir(results: &Path, subject: &str, session: u32) -> PathBuf {
+    results.join(format!("{subject}_s{session}"))
+}
 
 /// Per-frame presentation intervals of a window session, beside `trials.csv`.
 pub const FRAMES_FILE: &str = "frames.csv";
@@ -104,7 +139,7 @@ impl Recorder {
         dir: &Path,
         resume: bool,
         fresh: SessionManifest,
-    ) -> anyhow::Result<Opened> {
+    ) -> Result<Opened> {
         let mut engine = Session::new(study, subject_index)?;
         let (log, logged, mut manifest) = if resume && dir.exists() {
             let manifest_path = dir.join(results::store::SESSION_FILE);
@@ -138,17 +173,17 @@ impl Recorder {
             (resumed.log, resumed.records, m)
         } else {
             if dir.exists() {
-                anyhow::bail!(
+                return Err(refused(format!(
                     "{} already exists; results are never overwritten (use --resume to continue)",
                     dir.display()
-                );
+                )));
             }
             (SessionLog::create(dir)?, Vec::new(), fresh)
         };
         for rec in &logged {
             engine
                 .replay(&rec.trial, &rec.response, &rec.outcome)
-                .with_context(|| "cannot resume: replaying the logged responses")?;
+                .context(|| "cannot resume: replaying the logged responses".to_string())?;
         }
         manifest.trials_logged = log.rows();
         log.write_manifest(&manifest)?;
@@ -191,10 +226,7 @@ impl Recorder {
     ///
     /// # Errors
     /// The manifest cannot be written.
-    pub fn update_manifest(
-        &mut self,
-        change: impl FnOnce(&mut SessionManifest),
-    ) -> anyhow::Result<()> {
+    pub fn update_manifest(&mut self, change: impl FnOnce(&mut SessionManifest)) -> Result<()> {
         change(&mut self.manifest);
         self.log.write_manifest(&self.manifest)?;
         Ok(())
@@ -204,7 +236,7 @@ impl Recorder {
     ///
     /// # Errors
     /// Engine errors (a staircase level without a stimulus).
-    pub fn next_trial(&mut self, elapsed_ms: u64) -> anyhow::Result<Option<Trial>> {
+    pub fn next_trial(&mut self, elapsed_ms: u64) -> Result<Option<Trial>> {
         Ok(self.engine.next_trial(elapsed_ms)?)
     }
 
@@ -228,7 +260,7 @@ impl Recorder {
         elapsed_ms: u64,
         encoding: Option<StimulusEncoding>,
         timing: Option<FrameTiming>,
-    ) -> anyhow::Result<Outcome> {
+    ) -> Result<Outcome> {
         let outcome = self.engine.respond(&response)?;
         let record = TrialRecord {
             study: self.study.clone(),
@@ -256,7 +288,7 @@ impl Recorder {
     ///
     /// # Errors
     /// The file cannot be written.
-    pub fn append_frame_intervals(&mut self, index: u32, intervals: &[f64]) -> anyhow::Result<()> {
+    pub fn append_frame_intervals(&mut self, index: u32, intervals: &[f64]) -> Result<()> {
         use std::fmt::Write as _;
         use std::io::Write as _;
         let path = self.log.dir().join(FRAMES_FILE);
@@ -272,10 +304,10 @@ impl Recorder {
             .create(true)
             .append(true)
             .open(&path)
-            .with_context(|| format!("opening {}", path.display()))?;
+            .map_err(io_error(&path))?;
         f.write_all(text.as_bytes())
             .and_then(|()| f.flush())
-            .with_context(|| format!("writing {}", path.display()))?;
+            .map_err(io_error(&path))?;
         Ok(())
     }
 
@@ -283,7 +315,7 @@ impl Recorder {
     ///
     /// # Errors
     /// The manifest cannot be written.
-    pub fn finish(&mut self) -> anyhow::Result<SessionState> {
+    pub fn finish(&mut self) -> Result<SessionState> {
         self.manifest.status = match self.engine.status() {
             SessionStatus::TimeLimit => SessionState::TimeLimit,
             SessionStatus::Complete | SessionStatus::Running => SessionState::Complete,
@@ -330,5 +362,21 @@ impl Recorder {
                 format!(", thresholds {}", thresholds.join(" "))
             }
         )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn subject_ids_are_checked_and_indexed() {
+        assert!(check_subject("S01_a-b").is_ok());
+        for bad in ["", "../x", "a b", "s/1"] {
+            assert!(check_subject(bad).is_err(), "{bad:?}");
+        }
+        assert_eq!(subject_index("S01", 1), subject_index("S01", 1));
+        assert_ne!(subject_index("S01", 1), subject_index("S02", 1));
+        assert_ne!(subject_index("S01", 1), subject_index("S01", 2));
     }
 }

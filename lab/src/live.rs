@@ -19,16 +19,20 @@
 //! reports the error.
 
 use std::collections::{BTreeMap, HashMap};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::{Arc, Condvar, Mutex, PoisonError};
 use std::thread::JoinHandle;
 
-use anyhow::{Context as _, anyhow, bail};
-use codecs::codec::CodecContext;
-use codecs::codec::{Codec, Params, RateControl};
+use codecs::codec::{Codec, CodecContext, Params};
 use codecs::primitives::Database;
-use motion::clip::Clip;
-use protocols::{StaircaseStudy, StimulusEncoding, StudyDefinition, Trial};
+use motion::Clip;
+use protocols::{StaircaseStudy, StimulusEncoding, StudyError, StudyIssue, Trial};
+
+use crate::catalog::Codecs;
+use crate::error::{LabError, Result, chain, refused};
+use crate::source::{StimulusSource, TrialStimuli};
+use crate::stimulus::{self, Request};
+use crate::study::StudyFile;
 
 /// The stimuli of one live staircase study: its codec, source clips and a cache of encoded
 /// levels, filled on demand or ahead of time by background threads.
@@ -90,121 +94,61 @@ impl LiveStimulus {
     }
 }
 
-/// The codec called `name`, with the decoder context loaded from the study (the primitive
-/// codec's database).
-fn codec_named(name: &str, database: Option<Arc<Database>>) -> anyhow::Result<Box<dyn Codec>> {
-    let ctx = CodecContext {
-        primitives: database,
-    };
-    codecs::codec::by_name_in(name, &ctx).ok_or_else(|| {
-        let known: Vec<&str> = codecs::codec::registry_in(&ctx)
-            .iter()
-            .map(|c| c.name())
-            .collect();
-        anyhow!(
-            "unknown codec {name:?} (known: {}; `study codecs` lists them)",
-            known.join(", ")
-        )
-    })
-}
-
 impl LiveStimuli {
-    /// The live stimuli of `study` (read from `study_path`), or `None` when the study has no
-    /// live staircase. Checks the codec and its parameters and loads every source clip and
-    /// the decoder context, so a bad setting stops the session before its first trial.
+    /// The live stimuli of `study`, or `None` when the study has no live staircase. Loads
+    /// the decoder context and every source clip now, so a missing file stops the session
+    /// before its first trial; the study's codec settings were checked when it was loaded.
     ///
     /// # Errors
-    /// Unknown codec or parameter, a level range the codec cannot encode, an unreadable clip
-    /// or database (named by file).
-    pub fn from_study(
-        study: &StudyDefinition,
-        study_path: &Path,
-    ) -> anyhow::Result<Option<LiveStimuli>> {
-        let Some(sc) = &study.staircase else {
+    /// Every decoder context or source clip that cannot be read, in one
+    /// [`StudyError::Invalid`] keyed by the study file's entries.
+    pub fn from_study(study: &StudyFile) -> Result<Option<LiveStimuli>> {
+        let def = &study.definition;
+        let Some(sc) = &def.staircase else {
             return Ok(None);
         };
         let Some(live) = &sc.live else {
             return Ok(None);
         };
-        let where_ = || format!("{}: staircase.live", study_path.display());
-        let base = study_path.parent().unwrap_or(Path::new("."));
+        let mut issues = Vec::new();
+        let mut issue = |key: String, err: &LabError| {
+            issues.push(StudyIssue {
+                key,
+                reason: chain(err),
+            });
+        };
         let database = match &live.database {
-            Some(db) => {
-                let path = base.join(db);
-                let d = Database::read(&path).with_context(|| {
-                    format!("{}: staircase.live.database", study_path.display())
-                })?;
-                Some(Arc::new(d))
-            }
+            Some(db) => match Database::read(&study.dir().join(db)) {
+                Ok(d) => Some(Arc::new(d)),
+                Err(e) => {
+                    issue("staircase.live.database".into(), &e.into());
+                    None
+                }
+            },
             None => None,
         };
-        let codec = codec_named(&sc.codec, database)
-            .with_context(|| format!("{}: staircase.codec", study_path.display()))?;
-        let accepted = codec.default_params();
-        let list = || accepted.keys().cloned().collect::<Vec<_>>().join(", ");
-        if !accepted.contains_key(&sc.param) {
-            bail!(
-                "{}: staircase.param: codec {:?} has no parameter {:?} (accepted: {})",
-                study_path.display(),
-                sc.codec,
-                sc.param,
-                list()
-            );
-        }
-        for k in live.params.keys() {
-            if !accepted.contains_key(k) {
-                bail!(
-                    "{}.params.{k}: codec {:?} has no such parameter (accepted: {})",
-                    where_(),
-                    sc.codec,
-                    list()
-                );
-            }
-        }
-        if sc.param == "cr" {
-            if codec.rate_control() == RateControl::None {
-                bail!(
-                    "{}: staircase.param: codec {:?} takes no target compression ratio",
-                    study_path.display(),
-                    sc.codec
-                );
-            }
-            for t in &sc.tracks {
-                if t.settings.min.is_none_or(|m| m <= 0.0) {
-                    bail!(
-                        "{}: staircase.min: a compression ratio level needs min > 0",
-                        study_path.display()
-                    );
-                }
-            }
-        }
-        let manifest_path = base.join(&study.stimuli_path);
-        let manifest_dir = manifest_path.parent().unwrap_or(Path::new("."));
+        let manifest_dir = study.manifest_dir();
         let mut clips = Vec::with_capacity(live.clips.len());
-        for c in &live.clips {
-            let s = study.manifest.get(&c.reference).ok_or_else(|| {
-                anyhow!(
-                    "{}: reference {:?} is not in the manifest",
-                    where_(),
-                    c.reference
-                )
-            })?;
-            let file: PathBuf = manifest_dir.join(&s.file);
-            let skeleton = s.skeleton.as_deref().map(|k| manifest_dir.join(k));
-            let clip = motion::io::read_clip(skeleton.as_deref(), &file).with_context(|| {
-                format!(
-                    "loading the source of live clip {:?} (stimulus {:?} in {})",
-                    c.clip,
-                    c.reference,
-                    manifest_path.display()
-                )
-            })?;
-            clips.push((c.clip.clone(), c.reference.clone(), Arc::new(clip)));
+        for (i, c) in live.clips.iter().enumerate() {
+            match source_clip(def, &manifest_dir, &c.reference) {
+                Ok(clip) => clips.push((c.clip.clone(), c.reference.clone(), Arc::new(clip))),
+                Err(e) => issue(format!("staircase.live.clips[{i}]"), &e),
+            }
         }
+        if !issues.is_empty() {
+            return Err(StudyError::Invalid {
+                path: study.path.clone(),
+                issues,
+            }
+            .into());
+        }
+        let codecs = Codecs::new(CodecContext {
+            primitives: database,
+        });
         Ok(Some(LiveStimuli {
             encoder: Arc::new(Encoder {
                 staircase: sc.clone(),
-                codec,
+                codec: codecs.get(&sc.codec)?,
                 fixed: live.params.clone(),
                 clips,
             }),
@@ -235,13 +179,27 @@ impl LiveStimuli {
             .map(|(c, r, _)| (c.as_str(), r.as_str()))
     }
 
+    /// Clip `index` (in [`Self::clips`] order) encoded at `level` (cached), without a trial:
+    /// what a check shows of the settings before any session.
+    ///
+    /// # Errors
+    /// No such clip, or a codec error at that level.
+    pub fn at_level(&self, index: usize, level: f64) -> Result<LiveStimulus> {
+        if index >= self.encoder.clips.len() || !level.is_finite() {
+            return Err(refused(format!(
+                "live clip {index} at level {level}: no such clip or level"
+            )));
+        }
+        self.cache.fetch(&self.encoder, (index, level.to_bits()))
+    }
+
     /// Encodes+decodes (cached) the trial's distorted stimulus. A level that a background
     /// thread is encoding is waited for.
     ///
     /// # Errors
     /// A trial that is not one of this study's live trials (unknown reference, no level, a
     /// stimulus id that does not name this codec and level), or a codec error at that level.
-    pub fn resolve(&self, trial: &Trial) -> anyhow::Result<LiveStimulus> {
+    pub fn resolve(&self, trial: &Trial) -> Result<LiveStimulus> {
         let key = self.encoder.key(trial)?;
         self.cache.fetch(&self.encoder, key)
     }
@@ -299,7 +257,7 @@ impl Cache {
     }
 
     /// The stimulus of `key`: cached, awaited from the thread encoding it, or encoded now.
-    fn fetch(&self, encoder: &Encoder, key: Key) -> anyhow::Result<LiveStimulus> {
+    fn fetch(&self, encoder: &Encoder, key: Key) -> Result<LiveStimulus> {
         let mut slots = self.lock();
         loop {
             match slots.get(&key) {
@@ -346,74 +304,114 @@ impl Drop for Claim<'_> {
 
 impl Encoder {
     /// The cache key of a live trial of this study.
-    fn key(&self, trial: &Trial) -> anyhow::Result<Key> {
+    fn key(&self, trial: &Trial) -> Result<Key> {
         let idx = self
             .clips
             .iter()
             .position(|(_, r, _)| *r == trial.reference)
             .ok_or_else(|| {
-                anyhow!(
+                refused(format!(
                     "trial {}: reference {:?} is not a clip of this live staircase",
-                    trial.index,
-                    trial.reference
-                )
+                    trial.index, trial.reference
+                ))
             })?;
         let level = trial
             .level
             .filter(|l| l.is_finite())
-            .ok_or_else(|| anyhow!("trial {}: no finite staircase level", trial.index))?;
+            .ok_or_else(|| refused(format!("trial {}: no finite staircase level", trial.index)))?;
         let expected = self.staircase.live_stimulus_id(&self.clips[idx].0, level);
         if trial.stimulus != expected {
-            bail!(
+            return Err(refused(format!(
                 "trial {}: stimulus {:?} is not the live stimulus {expected:?} of this study",
-                trial.index,
-                trial.stimulus
-            );
+                trial.index, trial.stimulus
+            )));
         }
         Ok((idx, level.to_bits()))
     }
 
     /// Encodes, decodes and measures clip `key.0` at level `key.1`.
-    fn encode(&self, (idx, bits): Key) -> anyhow::Result<LiveStimulus> {
+    fn encode(&self, (idx, bits): Key) -> Result<LiveStimulus> {
         let level = f64::from_bits(bits);
         let (name, _, source) = &self.clips[idx];
         let mut requested = self.fixed.clone();
         requested.insert(self.staircase.param.clone(), level);
-        let stream = self.codec.encode(source, &requested).with_context(|| {
-            format!(
-                "encoding clip {name:?} with {} at {} = {level}",
-                self.codec.name(),
-                self.staircase.param
-            )
-        })?;
-        let decoded = self
-            .codec
-            .decode(&stream, &source.skeleton)
-            .with_context(|| {
-                format!(
-                    "decoding clip {name:?} at {} = {level}",
+        let request = Request {
+            params: requested,
+            target_cr: None,
+        };
+        let made = stimulus::make(self.codec.as_ref(), source, &request).map_err(|e| {
+            LabError::Context {
+                what: format!(
+                    "clip {name:?} with {} at {} = {level}",
+                    self.codec.name(),
                     self.staircase.param
-                )
-            })?;
-        let metrics = codecs::metrics::compare(source, &decoded).with_context(|| {
-            format!(
-                "measuring clip {name:?} at {} = {level}",
-                self.staircase.param
-            )
+                ),
+                source: Box::new(e),
+            }
         })?;
         // The stream's parameters are what the encoder really used (e.g. the α a rate search
         // found); the requested ones fill in what it does not store (a target `cr`).
-        let mut params = stream.params.clone();
-        for (k, v) in requested {
+        let mut params = made.stream.params.clone();
+        for (k, v) in request.params {
             params.entry(k).or_insert(v);
         }
         Ok(LiveStimulus {
             reference: Arc::clone(source),
-            test: Arc::new(decoded),
+            achieved_cr: made.achieved_cr(),
+            rms_cm: made.metrics.rms_cm,
+            test: Arc::new(made.decoded),
             params,
-            achieved_cr: stream.compression_ratio(),
-            rms_cm: metrics.rms_cm,
         })
+    }
+}
+
+/// The source clip of reference stimulus `reference`, read from the manifest's files.
+fn source_clip(
+    def: &protocols::StudyDefinition,
+    manifest_dir: &Path,
+    reference: &str,
+) -> Result<Clip> {
+    let s = def
+        .manifest
+        .get(reference)
+        .ok_or_else(|| refused(format!("reference {reference:?} is not in the manifest")))?;
+    let file = manifest_dir.join(&s.file);
+    let skeleton = s.skeleton.as_deref().map(|k| manifest_dir.join(k));
+    Ok(motion::io::read_clip(skeleton.as_deref(), &file)?)
+}
+
+impl StimulusSource for LiveStimuli {
+    fn stimuli(&self, trial: &Trial) -> Result<TrialStimuli> {
+        let made = self.resolve(trial)?;
+        Ok(TrialStimuli {
+            encoding: Some(made.encoding()),
+            reference: made.reference,
+            test: made.test,
+        })
+    }
+
+    fn encoding(&self, trial: &Trial) -> Result<Option<StimulusEncoding>> {
+        Ok(Some(self.resolve(trial)?.encoding()))
+    }
+
+    fn prepare(&mut self, upcoming: &[Trial]) {
+        self.prefetch(upcoming);
+    }
+
+    fn settle(&mut self) {
+        self.wait_prefetch();
+    }
+
+    fn ready(&self) -> usize {
+        self.cached()
+    }
+
+    fn summary(&self) -> Option<String> {
+        Some(format!(
+            "live staircase: {} clip × level stimuli encoded with {}",
+            self.cached(),
+            self.codec_name()
+        ))
     }
 }
 
@@ -421,9 +419,9 @@ impl Encoder {
 mod tests {
     use super::*;
 
-    fn example() -> (StudyDefinition, PathBuf) {
+    fn example() -> StudyFile {
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/live-staircase.toml");
-        (StudyDefinition::load(&path).unwrap(), path)
+        StudyFile::load(&path).unwrap()
     }
 
     fn same(a: &LiveStimulus, b: &LiveStimulus) {
@@ -438,10 +436,10 @@ mod tests {
     #[test]
     fn every_next_trial_is_prefetched_and_equals_a_foreground_encoding() {
         use protocols::{Answer, Response, Session};
-        let (study, path) = example();
-        let mut live = LiveStimuli::from_study(&study, &path).unwrap().unwrap();
-        let fresh = LiveStimuli::from_study(&study, &path).unwrap().unwrap();
-        let mut session = Session::new(&study, 1).unwrap();
+        let study = example();
+        let mut live = LiveStimuli::from_study(&study).unwrap().unwrap();
+        let fresh = LiveStimuli::from_study(&study).unwrap().unwrap();
+        let mut session = Session::new(&study.definition, 1).unwrap();
         let mut trials = 0;
         while let Some(t) = session.next_trial(0).unwrap()
             && trials < 12
@@ -481,9 +479,9 @@ mod tests {
     #[test]
     fn a_level_in_flight_is_awaited_and_foreign_trials_are_skipped() {
         use protocols::Session;
-        let (study, path) = example();
-        let mut live = LiveStimuli::from_study(&study, &path).unwrap().unwrap();
-        let mut session = Session::new(&study, 0).unwrap();
+        let study = example();
+        let mut live = LiveStimuli::from_study(&study).unwrap().unwrap();
+        let mut session = Session::new(&study.definition, 0).unwrap();
         let t = session.next_trial(0).unwrap().unwrap();
         let mut foreign = t.clone();
         foreign.reference = "nobody/reference".into();
@@ -491,7 +489,7 @@ mod tests {
         let got = live.resolve(&t).unwrap();
         live.wait_prefetch();
         assert_eq!(live.cached(), 1);
-        let fresh = LiveStimuli::from_study(&study, &path).unwrap().unwrap();
+        let fresh = LiveStimuli::from_study(&study).unwrap().unwrap();
         same(&got, &fresh.resolve(&t).unwrap());
         let err = live.resolve(&foreign).unwrap_err().to_string();
         assert!(err.contains("not a clip of this live staircase"), "{err}");
@@ -502,18 +500,18 @@ mod tests {
     #[test]
     fn a_failed_prefetch_is_reported_by_the_trial_that_needs_it() {
         use protocols::Session;
-        let (study, path) = example();
-        let mut live = LiveStimuli::from_study(&study, &path).unwrap().unwrap();
-        let mut session = Session::new(&study, 0).unwrap();
+        let study = example();
+        let mut live = LiveStimuli::from_study(&study).unwrap().unwrap();
+        let mut session = Session::new(&study.definition, 0).unwrap();
         let mut t = session.next_trial(0).unwrap().unwrap();
-        let sc = study.staircase.as_ref().unwrap();
+        let sc = study.definition.staircase.as_ref().unwrap();
         let clip = live.clips().next().unwrap().0.to_string();
         t.level = Some(1e5);
         t.stimulus = sc.live_stimulus_id(&clip, 1e5);
         live.prefetch(std::slice::from_ref(&t));
         live.wait_prefetch();
         assert_eq!(live.cached(), 0);
-        let err = format!("{:#}", live.resolve(&t).unwrap_err());
+        let err = chain(&live.resolve(&t).unwrap_err());
         assert!(
             err.contains("at cr = 100000") && err.contains("0.1..=10000"),
             "{err}"

@@ -14,19 +14,16 @@
 //!   the time from the response to a ready stimulus.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
 
-#[path = "../src/live.rs"]
-#[allow(dead_code)]
-mod live;
-
 use std::hint::black_box;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Duration;
 
 use codecs::primitives::{Database, TrainParams};
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
-use live::LiveStimuli;
+use lab::StudyFile;
+use lab::live::LiveStimuli;
 use motion::{Clip, data, io};
-use protocols::{Answer, Response, Session, StudyDefinition, Trial};
+use protocols::{Answer, Response, Session, Trial};
 
 const FRAMES: usize = 1200;
 
@@ -105,14 +102,14 @@ database = "others.mpdb"
     dir
 }
 
-fn open(path: &Path, study: &StudyDefinition) -> LiveStimuli {
-    LiveStimuli::from_study(study, path).unwrap().unwrap()
+fn open(study: &StudyFile) -> LiveStimuli {
+    LiveStimuli::from_study(study).unwrap().unwrap()
 }
 
 /// A fresh cache that has shown the first trial; the session waits for its answer.
-fn first_trial(path: &Path, study: &StudyDefinition) -> (LiveStimuli, Session, Trial) {
-    let live = open(path, study);
-    let mut session = Session::new(study, 0).unwrap();
+fn first_trial(study: &StudyFile) -> (LiveStimuli, Session, Trial) {
+    let live = open(study);
+    let mut session = Session::new(&study.definition, 0).unwrap();
     let t = session.next_trial(0).unwrap().unwrap();
     live.resolve(&t).unwrap();
     (live, session, t)
@@ -133,8 +130,7 @@ fn answer(session: &mut Session, t: &Trial) -> Trial {
 
 fn bench(c: &mut Criterion) {
     let dir = study_dir();
-    let path = dir.join("study.toml");
-    let study = StudyDefinition::load(&path).unwrap();
+    let study = StudyFile::load(&dir.join("study.toml")).unwrap();
     let mut g = c.benchmark_group("live");
     g.sample_size(10)
         .warm_up_time(Duration::from_millis(500))
@@ -142,7 +138,7 @@ fn bench(c: &mut Criterion) {
     g.bench_function("new_level_cold", |b| {
         b.iter_batched(
             || {
-                let (live, mut session, t) = first_trial(&path, &study);
+                let (live, mut session, t) = first_trial(&study);
                 let next = answer(&mut session, &t);
                 (live, next)
             },
@@ -155,7 +151,7 @@ fn bench(c: &mut Criterion) {
     });
     g.bench_function("prefetch_both_branches", |b| {
         b.iter_batched(
-            || first_trial(&path, &study),
+            || first_trial(&study),
             |(mut live, session, _)| {
                 live.prefetch(&session.lookahead(0));
                 live.wait_prefetch();
@@ -167,7 +163,7 @@ fn bench(c: &mut Criterion) {
     g.bench_function("after_response_prefetched", |b| {
         b.iter_batched(
             || {
-                let (mut live, mut session, t) = first_trial(&path, &study);
+                let (mut live, mut session, t) = first_trial(&study);
                 live.prefetch(&session.lookahead(0));
                 live.wait_prefetch();
                 let cached = live.cached();

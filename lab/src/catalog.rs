@@ -1,0 +1,77 @@
+//! The codec suite as the study file and the commands see it: names, parameters, rate control,
+//! and the decoder context (the primitive database) a codec needs.
+
+use std::path::Path;
+use std::sync::Arc;
+
+use codecs::codec::{self, Codec, CodecContext, RateControl};
+use codecs::primitives::Database;
+use protocols::{CodecCatalog, CodecInfo};
+
+use crate::error::{Context as _, Result, refused};
+
+/// The codec registry, with the context its codecs are built in. What `protocols` checks a
+/// study file's codec settings against ([`CodecCatalog`]), and where commands find a codec by
+/// name.
+#[derive(Debug, Clone, Default)]
+pub struct Codecs {
+    ctx: CodecContext,
+}
+
+impl Codecs {
+    /// The codecs with decoder context `ctx`.
+    pub fn new(ctx: CodecContext) -> Codecs {
+        Codecs { ctx }
+    }
+
+    /// The codecs with the primitive database at `db`, if one is named.
+    ///
+    /// # Errors
+    /// The database cannot be read (named in the message).
+    pub fn with_database(db: Option<&Path>) -> Result<Codecs> {
+        let Some(path) = db else {
+            return Ok(Codecs::default());
+        };
+        let d = Database::read(path)
+            .context(|| format!("reading the primitive database {}", path.display()))?;
+        Ok(Codecs::new(CodecContext::with_primitives(Arc::new(d))))
+    }
+
+    /// The decoder context.
+    pub fn context(&self) -> &CodecContext {
+        &self.ctx
+    }
+
+    /// Every codec, in id order.
+    pub fn all(&self) -> Vec<Box<dyn Codec>> {
+        codec::registry_in(&self.ctx)
+    }
+
+    /// The codec called `name`.
+    ///
+    /// # Errors
+    /// An unknown name, with the known ones.
+    pub fn get(&self, name: &str) -> Result<Box<dyn Codec>> {
+        codec::by_name_in(name, &self.ctx).ok_or_else(|| {
+            refused(format!(
+                "unknown codec `{name}`; known: {} (`study codecs` lists them)",
+                self.names().join(", ")
+            ))
+        })
+    }
+}
+
+impl CodecCatalog for Codecs {
+    fn codec(&self, name: &str) -> Option<CodecInfo> {
+        let c = codec::by_name_in(name, &self.ctx)?;
+        Some(CodecInfo {
+            params: c.default_params().into_keys().collect(),
+            target_cr: c.rate_control() != RateControl::None,
+            needs_database: c.name() == codec::primitive::NAME,
+        })
+    }
+
+    fn names(&self) -> Vec<String> {
+        self.all().iter().map(|c| c.name().to_string()).collect()
+    }
+}

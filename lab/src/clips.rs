@@ -1,0 +1,92 @@
+//! Clip sets: the files a command names, paired by [`motion::pairing`]'s one rule and read.
+
+use std::path::{Path, PathBuf};
+
+use motion::Clip;
+use motion::pairing::{self, ClipSource};
+
+use crate::error::{Result, refused};
+
+/// How a set of clip files is read.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ClipOptions {
+    /// The ASF skeleton given for every AMC not named after an ASF of the set (`--asf`).
+    pub asf: Option<PathBuf>,
+    /// Length unit of BVH files in cm, overriding the one inferred from the skeleton's height
+    /// (BVH states no unit).
+    pub bvh_unit_cm: Option<f64>,
+}
+
+/// A clip read from its files.
+#[derive(Debug, Clone)]
+pub struct LoadedClip {
+    /// Where it came from (its name is the motion file's stem).
+    pub source: ClipSource,
+    /// The clip.
+    pub clip: Clip,
+}
+
+/// Pairs `files` (motions and skeletons in any order) without reading them.
+///
+/// # Errors
+/// Files that do not pair for certain ([`motion::pairing::PairingError`]).
+pub fn sources(files: &[PathBuf], options: &ClipOptions) -> Result<Vec<ClipSource>> {
+    Ok(pairing::pair(files, options.asf.as_deref())?)
+}
+
+/// Pairs and reads every clip `files` name.
+///
+/// # Errors
+/// Files that do not pair, cannot be read, or a bad BVH unit.
+pub fn load(files: &[PathBuf], options: &ClipOptions) -> Result<Vec<LoadedClip>> {
+    if let Some(cm) = options.bvh_unit_cm
+        && !(cm.is_finite() && cm > 0.0)
+    {
+        return Err(refused(
+            "--bvh-unit-cm must be a positive number of centimetres",
+        ));
+    }
+    sources(files, options)?
+        .into_iter()
+        .map(|source| {
+            let clip = read(&source, options.bvh_unit_cm)?;
+            Ok(LoadedClip { source, clip })
+        })
+        .collect()
+}
+
+/// Pairs and reads the one clip `files` name.
+///
+/// # Errors
+/// As [`load`], and when the files name no clip or several.
+pub fn load_one(files: &[PathBuf], options: &ClipOptions) -> Result<LoadedClip> {
+    let mut all = load(files, options)?;
+    if all.len() != 1 {
+        return Err(refused(format!(
+            "expected one clip, the files name {}",
+            all.len()
+        )));
+    }
+    Ok(all.remove(0))
+}
+
+/// Reads one paired clip; `bvh_unit_cm` overrides a BVH file's inferred unit.
+///
+/// # Errors
+/// The files cannot be read.
+pub fn read(source: &ClipSource, bvh_unit_cm: Option<f64>) -> Result<Clip> {
+    let mut clip = motion::io::read_clip(source.asf.as_deref(), &source.motion)?;
+    if let Some(cm) = bvh_unit_cm
+        && clip.skeleton.format == motion::SkeletonFormat::Bvh
+    {
+        clip.skeleton.units.cm_per_unit = cm;
+        clip.skeleton.units.declared = true;
+    }
+    Ok(clip)
+}
+
+/// The file name of `p` without its extension (`clip` when it has none).
+pub fn stem_of(p: &Path) -> String {
+    p.file_stem()
+        .map_or_else(|| "clip".into(), |s| s.to_string_lossy().into_owned())
+}

@@ -1,0 +1,34 @@
+//! What running a perceptual study needs beyond the pure libraries, shared by every front end
+//! (the `study` command and its window today, a server tomorrow). It takes plain option
+//! structs and returns typed results; it never parses arguments and never draws.
+//!
+//! - [`catalog`]: the codec registry as study files and commands see it ([`Codecs`]).
+//! - [`clips`]: clip sets, paired by the one rule of [`motion::pairing`] and read.
+//! - [`stimulus`]: one stimulus made (encode, decode, measure, timings).
+//! - [`sweep`]: a stimulus set (clips × codecs × rates) with `stimuli.json` and `rd.csv`;
+//!   [`generated`] makes one from the generated walk.
+//! - [`study`]: a study file as a run uses it (bytes, hash, definition, archived copy).
+//! - [`results_dir`]: a study's results directory, created and checked.
+//! - [`session`]: one subject's session on disk ([`session::Recorder`]).
+//! - [`source`]: where a trial's stimuli come from ([`source::StimulusSource`]): the
+//!   manifest's files, or [`live`] encoding per trial with prefetch.
+//! - [`simulate`]: whole sessions with simulated observers.
+//! - [`error`]: the crate's error type, [`LabError`].
+
+pub mod catalog;
+pub mod clips;
+pub mod error;
+pub mod generated;
+pub mod live;
+pub mod results_dir;
+pub mod session;
+pub mod simulate;
+pub mod source;
+pub mod stimulus;
+pub mod study;
+pub mod sweep;
+
+pub use catalog::Codecs;
+pub use error::{LabError, Result};
+pub use source::{StimulusSource, TrialStimuli};
+pub use study::StudyFile;

@@ -1,0 +1,135 @@
+//! A study file as a run uses it: its bytes and their hash (recorded with every session), the
+//! checked definition, and the copy kept with its results.
+
+use std::fs;
+use std::path::{Path, PathBuf};
+
+use protocols::StudyDefinition;
+use protocols::study::content_hash;
+use results::store::write_new;
+
+use crate::catalog::Codecs;
+use crate::error::{Context as _, Result, io_error, refused};
+
+/// The name of the study copy inside a results directory.
+pub const STUDY_COPY: &str = "study.toml";
+/// The name of the stimulus manifest copy inside a results directory.
+pub const MANIFEST_COPY: &str = "stimuli.json";
+
+/// A loaded study file.
+#[derive(Debug, Clone)]
+pub struct StudyFile {
+    /// Where it was read from.
+    pub path: PathBuf,
+    /// Its bytes.
+    pub bytes: Vec<u8>,
+    /// [`content_hash`] of the bytes.
+    pub hash: String,
+    /// The checked definition.
+    pub definition: StudyDefinition,
+}
+
+impl StudyFile {
+    /// Reads and checks the study file at `path` and its stimulus manifest, the codec settings
+    /// against the codec registry included: every problem comes back in one
+    /// [`protocols::StudyError`].
+    ///
+    /// # Errors
+    /// The file cannot be read, or the study's problems.
+    pub fn load(path: &Path) -> Result<StudyFile> {
+        let bytes = fs::read(path).map_err(io_error(path))?;
+        let definition = StudyDefinition::load(path, &Codecs::default())?;
+        Ok(StudyFile {
+            path: path.to_path_buf(),
+            hash: content_hash(&bytes),
+            bytes,
+            definition,
+        })
+    }
+
+    /// The folder the study's relative paths start from.
+    pub fn dir(&self) -> &Path {
+        self.path.parent().unwrap_or(Path::new("."))
+    }
+
+    /// The stimulus manifest's folder (its file paths are relative to it).
+    pub fn manifest_dir(&self) -> PathBuf {
+        let manifest = self.dir().join(&self.definition.stimuli_path);
+        manifest
+            .parent()
+            .map_or_else(|| self.dir().to_path_buf(), Path::to_path_buf)
+    }
+
+    /// Keeps the study file and its stimulus manifest inside the results directory `out`, so
+    /// that the folder is self-contained: a report finds both without the original files, and
+    /// a lab can archive one folder. The copy's `stimuli` key is pointed at the manifest copy,
+    /// whose file paths are made absolute. A copy already there is kept.
+    ///
+    /// # Errors
+    /// The study text is not TOML (it was validated already, so only a race could cause
+    /// this), a manifest copy differs from this manifest, or the copies cannot be written.
+    pub fn archive(&self, out: &Path) -> Result<()> {
+        let copy = out.join(STUDY_COPY);
+        if copy.exists() {
+            return Ok(());
+        }
+        let original = &self.path;
+        let text = std::str::from_utf8(&self.bytes)
+            .map_err(|_| refused(format!("{} is not UTF-8", original.display())))?;
+        let mut table: toml::Table = text.parse().map_err(|e: toml::de::Error| {
+            refused(format!("re-reading {}: {e}", original.display()))
+        })?;
+        // The manifest's file paths are relative to its own folder: make them absolute in the
+        // copy so they still name the clips from inside the results directory.
+        let base = self.dir();
+        let manifest_dir = table
+            .get("stimuli")
+            .and_then(toml::Value::as_str)
+            .map(|m| base.join(m))
+            .and_then(|m| m.parent().map(Path::to_path_buf))
+            .unwrap_or_else(|| base.to_path_buf());
+        let manifest_dir = fs::canonicalize(&manifest_dir).unwrap_or(manifest_dir);
+        let mut manifest = self.definition.manifest.clone();
+        let absolute = |p: &str| manifest_dir.join(p).display().to_string();
+        for st in &mut manifest.stimuli {
+            st.file = absolute(&st.file);
+            st.skeleton = st.skeleton.as_deref().map(absolute);
+            st.bitstream = st.bitstream.as_deref().map(absolute);
+        }
+        table.insert("stimuli".into(), toml::Value::String(MANIFEST_COPY.into()));
+        // A live staircase's decoder context is named relative to the study file: point the
+        // copy at the original so the copy still loads it.
+        if let Some(toml::Value::String(db)) = table
+            .get_mut("staircase")
+            .and_then(|s| s.get_mut("live"))
+            .and_then(|l| l.get_mut("database"))
+        {
+            let p = base.join(db.as_str());
+            *db = fs::canonicalize(&p).unwrap_or(p).display().to_string();
+        }
+        let body =
+            toml::to_string(&table).map_err(|e| refused(format!("writing the study copy: {e}")))?;
+        let header = format!(
+            "# Copy of {} kept with its results; `stimuli` points at the manifest copy beside it.\n",
+            original.display()
+        );
+        // A run killed between the two copies left a complete manifest copy (write_new is
+        // atomic) but no study copy: keep an identical one instead of refusing the resume.
+        let manifest_copy = out.join(MANIFEST_COPY);
+        let manifest_bytes = serde_json::to_vec_pretty(&manifest)?;
+        match fs::read(&manifest_copy) {
+            Ok(existing) if existing == manifest_bytes => {}
+            Ok(_) => {
+                return Err(refused(format!(
+                    "{} exists and differs from the manifest of {}; results are never overwritten",
+                    manifest_copy.display(),
+                    original.display()
+                )));
+            }
+            Err(_) => write_new(&manifest_copy, &manifest_bytes)?,
+        }
+        write_new(&copy, format!("{header}{body}").as_bytes())
+            .context(|| format!("keeping a copy of {}", original.display()))?;
+        Ok(())
+    }
+}
