@@ -8,7 +8,7 @@ use codecs::codec::{self, Codec, CodecContext, RateControl};
 use codecs::primitives::Database;
 use protocols::{CodecCatalog, CodecInfo};
 
-use crate::error::{Context as _, Result, refused};
+use crate::error::{Result, refused};
 
 /// The codec registry, with the context its codecs are built in. What `protocols` checks a
 /// study file's codec settings against ([`CodecCatalog`]), and where commands find a codec by
@@ -27,13 +27,12 @@ impl Codecs {
     /// The codecs with the primitive database at `db`, if one is named.
     ///
     /// # Errors
-    /// The database cannot be read (named in the message).
+    /// The database cannot be read (the error names the file).
     pub fn with_database(db: Option<&Path>) -> Result<Codecs> {
         let Some(path) = db else {
             return Ok(Codecs::default());
         };
-        let d = Database::read(path)
-            .context(|| format!("reading the primitive database {}", path.display()))?;
+        let d = Database::read(path)?;
         Ok(Codecs::new(CodecContext::with_primitives(Arc::new(d))))
     }
 

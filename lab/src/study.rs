@@ -1,4 +1,4 @@
-//! A study file as a run uses it: its bytes and their hash (recorded with every session), the
+//! A study file as a run uses it: its text and its hash (recorded with every session), the
 //! checked definition, and the copy kept with its results.
 
 use std::fs;
@@ -9,7 +9,7 @@ use protocols::study::content_hash;
 use results::store::write_new;
 
 use crate::catalog::Codecs;
-use crate::error::{Context as _, Result, io_error, refused};
+use crate::error::{Context as _, Result, refused};
 
 /// The name of the study copy inside a results directory.
 pub const STUDY_COPY: &str = "study.toml";
@@ -21,9 +21,9 @@ pub const MANIFEST_COPY: &str = "stimuli.json";
 pub struct StudyFile {
     /// Where it was read from.
     pub path: PathBuf,
-    /// Its bytes.
-    pub bytes: Vec<u8>,
-    /// [`content_hash`] of the bytes.
+    /// Its text, as read once: what the definition, the hash and the archived copy come from.
+    pub text: String,
+    /// [`content_hash`] of the text.
     pub hash: String,
     /// The checked definition.
     pub definition: StudyDefinition,
@@ -35,14 +35,13 @@ impl StudyFile {
     /// [`protocols::StudyError`].
     ///
     /// # Errors
-    /// The file cannot be read, or the study's problems.
+    /// The study's problems (an unreadable file among them).
     pub fn load(path: &Path) -> Result<StudyFile> {
-        let bytes = fs::read(path).map_err(io_error(path))?;
-        let definition = StudyDefinition::load(path, &Codecs::default())?;
+        let (definition, text) = StudyDefinition::load_text(path, &Codecs::default())?;
         Ok(StudyFile {
             path: path.to_path_buf(),
-            hash: content_hash(&bytes),
-            bytes,
+            hash: content_hash(text.as_bytes()),
+            text,
             definition,
         })
     }
@@ -66,17 +65,14 @@ impl StudyFile {
     /// whose file paths are made absolute. A copy already there is kept.
     ///
     /// # Errors
-    /// The study text is not TOML (it was validated already, so only a race could cause
-    /// this), a manifest copy differs from this manifest, or the copies cannot be written.
+    /// A manifest copy differs from this manifest, or the copies cannot be written.
     pub fn archive(&self, out: &Path) -> Result<()> {
         let copy = out.join(STUDY_COPY);
         if copy.exists() {
             return Ok(());
         }
         let original = &self.path;
-        let text = std::str::from_utf8(&self.bytes)
-            .map_err(|_| refused(format!("{} is not UTF-8", original.display())))?;
-        let mut table: toml::Table = text.parse().map_err(|e: toml::de::Error| {
+        let mut table: toml::Table = self.text.parse().map_err(|e: toml::de::Error| {
             refused(format!("re-reading {}: {e}", original.display()))
         })?;
         // The manifest's file paths are relative to its own folder: make them absolute in the

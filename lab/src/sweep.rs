@@ -82,7 +82,8 @@ pub fn sweep(
             )));
         }
     }
-    let codecs = Codecs::with_database(options.database.as_deref())?;
+    let codecs = Codecs::with_database(options.database.as_deref())
+        .context(|| "reading the primitive database".to_string())?;
     for name in &options.codecs {
         if codecs.get(name)?.rate_control() == RateControl::None {
             return Err(refused(format!(

@@ -153,7 +153,8 @@ pub fn encode(args: &EncodeArgs) -> Result<()> {
         bvh_unit_cm: None,
     };
     let loaded = clips::load_one(&args.input, &options)?;
-    let codecs = Codecs::with_database(args.db.as_deref())?;
+    let codecs = Codecs::with_database(args.db.as_deref())
+        .context("reading the primitive database (--db)")?;
     let c = codecs.get(&args.codec)?;
     let request = Request {
         params: parse_params(&args.params)?,
@@ -203,7 +204,8 @@ pub fn decode(args: &DecodeArgs) -> Result<()> {
     let stream =
         Bitstream::from_bytes(&bytes).with_context(|| format!("{}", args.bitstream.display()))?;
     let skeleton = read_skeleton(&args.skeleton)?;
-    let codecs = Codecs::with_database(args.db.as_deref())?;
+    let codecs = Codecs::with_database(args.db.as_deref())
+        .context("reading the primitive database (--db)")?;
     let clip = codec::decode_any_in(&stream, &skeleton, codecs.context())
         .with_context(|| format!("decoding {}", args.bitstream.display()))?;
     std::fs::create_dir_all(&args.output)

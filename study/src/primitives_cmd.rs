@@ -16,6 +16,9 @@ pub enum PrimitivesCommand {
         /// Training clips.
         #[arg(required = true)]
         clips: Vec<PathBuf>,
+        /// ASF skeleton of the AMC motions not named after one of the files.
+        #[arg(long, value_name = "SKEL")]
+        asf: Option<PathBuf>,
         /// Output database file.
         #[arg(short, long, value_name = "DB")]
         output: PathBuf,
@@ -47,6 +50,7 @@ pub fn run(cmd: PrimitivesCommand) -> Result<()> {
     match cmd {
         PrimitivesCommand::Train {
             clips,
+            asf,
             output,
             k_max,
             error_bound,
@@ -62,7 +66,11 @@ pub fn run(cmd: PrimitivesCommand) -> Result<()> {
             if !(1..=4096).contains(&k_max) {
                 bail!("--k-max must be between 1 and 4096");
             }
-            let loaded = lab::clips::load(&clips, &lab::clips::ClipOptions::default())?;
+            let options = lab::clips::ClipOptions {
+                asf,
+                bvh_unit_cm: None,
+            };
+            let loaded = lab::clips::load(&clips, &options)?;
             let refs: Vec<&Clip> = loaded.iter().map(|l| &l.clip).collect();
             let params = TrainParams {
                 k_max,

@@ -107,10 +107,6 @@ pub struct DisplayTestArgs {
 /// # Errors
 /// A bad study file or subject id, an existing session without `--resume`, no display, or a
 /// results folder that cannot be written.
-#[expect(
-    clippy::too_many_lines,
-    reason = "the session's setup, its window loop and how it ended, in the order they happen"
-)]
 pub fn run(args: &RunArgs) -> anyhow::Result<()> {
     session::check_subject(&args.subject)?;
     let file = StudyFile::load(&args.study)?;
@@ -122,92 +118,19 @@ pub fn run(args: &RunArgs) -> anyhow::Result<()> {
             args.study.display()
         );
     }
-    let study = &file.definition;
     let out = args
         .output
         .clone()
-        .unwrap_or_else(|| file.dir().join(format!("results-{}", study.name)));
-    for note in lab::results_dir::open_for_subjects(&out, &file)? {
-        eprintln!("{note}");
-    }
-    let dir = session::session_dir(&out, &args.subject, args.session);
-    let index = session::subject_index(&args.subject, args.session);
-    let fresh = session::new_manifest(
-        study,
-        SessionOf {
-            study_hash: &file.hash,
-            subject: args.subject.clone(),
-            subject_index: index,
-            session: args.session,
-            observer_seed: None,
-        },
-    );
-    let recorder = match Recorder::open(study, index, &dir, args.resume, fresh)? {
-        Opened::Finished(m) => {
-            let m = *m;
-            println!(
-                "{}: session already {:?} with {} trials; nothing to do",
-                dir.display(),
-                m.status,
-                m.trials_logged
-            );
-            return Ok(());
-        }
-        Opened::Ready { recorder, resumed } => {
-            if resumed > 0 {
-                println!("{}: resuming after {resumed} logged trials", dir.display());
-            }
-            recorder
-        }
+        .unwrap_or_else(|| file.dir().join(format!("results-{}", file.definition.name)));
+    let Some(recorder) = open_session(args, &file, &out)? else {
+        return Ok(());
     };
     let stimuli = lab::source::open(&file)?;
     let study = Arc::new(file.definition);
-    let mut screens = StudyUi::new(Arc::clone(&study), stimuli, recorder, true);
+    let screens = StudyUi::new(Arc::clone(&study), stimuli, recorder, true);
     let options = args.window.options(format!("study: {}", study.name));
-    let exit = std::rc::Rc::new(std::cell::RefCell::new(None::<Exit>));
-    let exit_seen = std::rc::Rc::clone(&exit);
-    let mut display_logged = false;
-    let mut end_shown_at: Option<f64> = None;
-    let report = window::run_window(&options, move |ui, ctx| {
-        if ctx.close_requested {
-            // Mid-session this opens the quit confirmation instead of closing.
-            screens.close_requested();
-        }
-        if !display_logged && ctx.clock.calibrated() {
-            display_logged = true;
-            let info = display_info(ctx.facts, ctx.clock);
-            if let Err(e) = screens
-                .recorder_mut()
-                .update_manifest(|m| m.display = Some(info))
-            {
-                eprintln!("warning: writing the display information: {e:#}");
-            }
-        }
-        screens.ui(ui, ctx.clock);
-        if let Some(e) = screens.exit() {
-            *exit_seen.borrow_mut() = Some(e.clone());
-            // Leave the last screen up briefly so the subject sees it.
-            let now = ui.input(|i| i.time);
-            let since = *end_shown_at.get_or_insert(now);
-            return if now - since > 1.5 || ctx.close_requested {
-                Next::Close
-            } else {
-                Next::Animate
-            };
-        }
-        if screens.animating() {
-            Next::Animate
-        } else {
-            // Idle screens still need frames to measure the display before the first trial.
-            if ctx.clock.calibrated() {
-                Next::Idle
-            } else {
-                Next::Animate
-            }
-        }
-    })?;
+    let (report, exit) = run_screens(&options, screens)?;
     print_timing(&report);
-    let exit = exit.borrow().clone();
     match exit {
         Some(Exit::Finished(summary)) => {
             println!("{summary}");
@@ -230,6 +153,100 @@ pub fn run(args: &RunArgs) -> anyhow::Result<()> {
         Some(Exit::Failed(e)) => bail!("{e} (the session is resumable with --resume)"),
         None => bail!("the window closed before the session ended (resumable with --resume)"),
     }
+}
+
+/// The subject's session in results directory `out`: new, or resumed with `--resume`;
+/// `None` (said on stdout) when it is already finished.
+fn open_session(
+    args: &RunArgs,
+    file: &StudyFile,
+    out: &std::path::Path,
+) -> anyhow::Result<Option<Box<Recorder>>> {
+    for note in lab::results_dir::open_for_subjects(out, file)? {
+        eprintln!("{note}");
+    }
+    let dir = session::session_dir(out, &args.subject, args.session);
+    let index = session::subject_index(&args.subject, args.session);
+    let fresh = session::new_manifest(
+        &file.definition,
+        SessionOf {
+            study_hash: &file.hash,
+            subject: args.subject.clone(),
+            subject_index: index,
+            session: args.session,
+            observer_seed: None,
+        },
+    );
+    Ok(
+        match Recorder::open(&file.definition, index, &dir, args.resume, fresh)? {
+            Opened::Finished(m) => {
+                println!(
+                    "{}: session already {:?} with {} trials; nothing to do",
+                    dir.display(),
+                    m.status,
+                    m.trials_logged
+                );
+                None
+            }
+            Opened::Ready { recorder, resumed } => {
+                if resumed > 0 {
+                    println!("{}: resuming after {resumed} logged trials", dir.display());
+                }
+                Some(recorder)
+            }
+        },
+    )
+}
+
+/// Runs the window over `screens` until the session ends or the window closes; returns the
+/// frame timing and how the session ended (`None`: the window closed first).
+fn run_screens(
+    options: &WindowOptions,
+    mut screens: StudyUi,
+) -> anyhow::Result<(WindowReport, Option<Exit>)> {
+    let exit = std::rc::Rc::new(std::cell::RefCell::new(None::<Exit>));
+    let exit_seen = std::rc::Rc::clone(&exit);
+    let mut display_logged = false;
+    let mut end_shown_at: Option<f64> = None;
+    let report = window::run_window(options, move |ui, ctx| {
+        if ctx.close_requested {
+            // Mid-session this opens the quit confirmation instead of closing.
+            screens.close_requested();
+        }
+        if !display_logged && ctx.clock.calibrated() {
+            display_logged = true;
+            let info = display_info(ctx.facts, ctx.clock);
+            if let Err(e) = screens
+                .recorder_mut()
+                .update_manifest(|m| m.display = Some(info))
+            {
+                eprintln!(
+                    "warning: writing the display information: {}",
+                    lab::error::chain(&e)
+                );
+            }
+        }
+        screens.ui(ui, ctx.clock);
+        if let Some(e) = screens.exit() {
+            *exit_seen.borrow_mut() = Some(e.clone());
+            // Leave the last screen up briefly so the subject sees it.
+            let now = ui.input(|i| i.time);
+            let since = *end_shown_at.get_or_insert(now);
+            return if now - since > 1.5 || ctx.close_requested {
+                Next::Close
+            } else {
+                Next::Animate
+            };
+        }
+        // Idle screens still need frames to measure the display before the first trial.
+        if screens.animating() || !ctx.clock.calibrated() {
+            Next::Animate
+        } else {
+            Next::Idle
+        }
+    })?;
+    let exit = exit.borrow().clone();
+    Ok((report, exit))
 }
 
 fn display_info(facts: &window::DisplayFacts, clock: &FrameClock) -> DisplayInfo {

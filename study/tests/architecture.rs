@@ -120,6 +120,152 @@ fn crate_dependencies_follow_the_architecture_table() {
     assert!(problems.is_empty(), "{}", problems.join("\n"));
 }
 
+/// The platform this test runs on (`rustc -vV`'s host).
+fn host() -> String {
+    let rustc = std::env::var("RUSTC").unwrap_or_else(|_| "rustc".into());
+    let out = Command::new(rustc).arg("-vV").output().unwrap();
+    String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .find_map(|l| l.strip_prefix("host: "))
+        .unwrap()
+        .to_string()
+}
+
+/// Package id → (name, its dependencies' package ids with whether each is a dev-dependency
+/// only).
+type Graph = BTreeMap<String, (String, Vec<(String, bool)>)>;
+
+/// The full dependency graph on this platform (the crates of other platforms are not
+/// downloaded here).
+fn graph(root: &Path) -> Graph {
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let out = Command::new(cargo)
+        .args(["metadata", "--format-version", "1", "--offline", "--locked"])
+        .args(["--filter-platform", &host()])
+        .current_dir(root)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let meta: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let names: BTreeMap<String, String> = meta["packages"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| {
+            (
+                p["id"].as_str().unwrap().to_string(),
+                p["name"].as_str().unwrap().to_string(),
+            )
+        })
+        .collect();
+    meta["resolve"]["nodes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|n| {
+            let id = n["id"].as_str().unwrap().to_string();
+            let deps = n["deps"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|d| {
+                    let dev_only = d["dep_kinds"]
+                        .as_array()
+                        .unwrap()
+                        .iter()
+                        .all(|k| k["kind"].as_str() == Some("dev"));
+                    (d["pkg"].as_str().unwrap().to_string(), dev_only)
+                })
+                .collect();
+            (id.clone(), (names[&id].clone(), deps))
+        })
+        .collect()
+}
+
+/// The chain of crates from `start` to the first crate named in `targets`, if any: the
+/// start's own dependencies of every kind, then what those need to build (their
+/// dev-dependencies are not built for it).
+fn path_to(
+    g: &Graph,
+    start: &str,
+    targets: &BTreeSet<String>,
+) -> Option<Vec<String>> {
+    let mut seen = BTreeSet::new();
+    let mut queue =
+        std::collections::VecDeque::from([(start.to_string(), vec![g[start].0.clone()])]);
+    while let Some((id, chain)) = queue.pop_front() {
+        for (dep, dev_only) in &g[&id].1 {
+            if (*dev_only && id != start) || !seen.insert(dep.clone()) {
+                continue;
+            }
+            let mut next = chain.clone();
+            next.push(g[dep].0.clone());
+            if targets.contains(&g[dep].0) {
+                return Some(next);
+            }
+            queue.push_back((dep.clone(), next));
+        }
+    }
+    None
+}
+
+#[test]
+fn no_library_crate_reaches_a_gui_crate_through_any_path() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let g = graph(&root);
+    let gui: BTreeSet<String> = GUI.iter().map(|s| (*s).to_string()).collect();
+    let table = rules(&std::fs::read_to_string(root.join("ARCHITECTURE.md")).unwrap());
+    let mut problems = Vec::new();
+    let mut checked = 0;
+    for (id, (name, _)) in &g {
+        let Some(rule) = table.get(name) else {
+            continue;
+        };
+        if !rule.forbidden.contains("wgpu") {
+            continue;
+        }
+        checked += 1;
+        if let Some(chain) = path_to(&g, id, &gui) {
+            problems.push(chain.join(" -> "));
+        }
+    }
+    assert_eq!(
+        checked,
+        table.len() - 1,
+        "every crate but study is GUI-free"
+    );
+    assert!(problems.is_empty(), "{}", problems.join("\n"));
+    // The check can fail: study itself reaches the GUI stack.
+    let study = g.iter().find(|(_, (n, _))| n == "study").unwrap().0;
+    assert!(path_to(&g, study, &gui).is_some());
+}
+
+#[test]
+fn every_file_the_architecture_names_exists() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let text = std::fs::read_to_string(root.join("ARCHITECTURE.md")).unwrap();
+    let mut named = 0;
+    for cell in text.split('`').skip(1).step_by(2) {
+        let is_path = cell.contains('/')
+            && cell
+                .split('/')
+                .next()
+                .is_some_and(|c| root.join(c).join("Cargo.toml").is_file());
+        if is_path {
+            named += 1;
+            assert!(
+                root.join(cell).exists(),
+                "ARCHITECTURE.md names {cell}, which is not there"
+            );
+        }
+    }
+    assert!(named >= 20, "only {named} files named");
+}
+
 #[test]
 fn the_rule_parser_sees_a_forbidden_dependency() {
     // The check above must be able to fail: a table that forbids what codecs uses trips it.

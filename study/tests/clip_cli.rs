@@ -175,5 +175,9 @@ fn bad_input_prints_one_clear_message_and_fails() {
         "--amc",
         &Path::new("x.amc").display().to_string(),
     ]);
-    assert!(String::from_utf8_lossy(&out.stderr).contains("needs its ASF skeleton"));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("x.amc: no ASF skeleton for this motion: give x.asf"),
+        "{err}"
+    );
 }

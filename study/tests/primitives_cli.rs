@@ -57,8 +57,15 @@ fn train_then_info_then_refuse_a_corrupt_database() {
         !out.status.success() && err.contains("bad.pdb") && err.contains("checksum"),
         "{err}"
     );
-    let out = study(&["primitives", "train", &p("w.amc"), "-o", &p("x.pdb")]);
-    assert!(String::from_utf8_lossy(&out.stderr).contains("needs an ASF before it"));
+    // An AMC alone in its folder has no skeleton to be read with.
+    std::fs::create_dir_all(dir.join("alone")).unwrap();
+    std::fs::copy(dir.join("w.amc"), dir.join("alone/w.amc")).unwrap();
+    let out = study(&["primitives", "train", &p("alone/w.amc"), "-o", &p("x.pdb")]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("w.amc: no ASF skeleton for this motion"),
+        "{err}"
+    );
 }
 
 /// `--db` on encode, decode and sweep with a database trained by `study primitives train` on

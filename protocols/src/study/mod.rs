@@ -438,6 +438,15 @@ impl StudyDefinition {
     /// # Errors
     /// [`StudyError`] with every problem found.
     pub fn load(path: &Path, codecs: &dyn CodecCatalog) -> Result<Self, StudyError> {
+        Self::load_text(path, codecs).map(|(study, _)| study)
+    }
+
+    /// As [`StudyDefinition::load`], also returning the text the definition was read from (a
+    /// runner hashes and archives exactly those bytes, read once).
+    ///
+    /// # Errors
+    /// [`StudyError`] with every problem found.
+    pub fn load_text(path: &Path, codecs: &dyn CodecCatalog) -> Result<(Self, String), StudyError> {
         let text = read_limited(path, MAX_STUDY_BYTES)?;
         let base = path.parent().unwrap_or(Path::new("."));
         let manifest = |rel: &str| {
@@ -446,7 +455,8 @@ impl StudyDefinition {
             serde_json::from_str::<StimulusManifest>(&t)
                 .map_err(|e| format!("{}: {e}", p.display()))
         };
-        Self::parse(&text, path, manifest, codecs)
+        let study = Self::parse(&text, path, manifest, codecs)?;
+        Ok((study, text))
     }
 
     /// Validates study `text` (named `path` in errors); `manifest` loads the manifest named by

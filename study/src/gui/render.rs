@@ -121,12 +121,52 @@ fn sphere_mesh(rings: u16, sectors: u16) -> (Vec<f32>, Vec<u16>) {
     (v, idx)
 }
 
+/// What the skeleton's two render pipelines share: shader, layout, depth, samples, target.
+struct Stage<'a> {
+    device: &'a wgpu::Device,
+    layout: &'a wgpu::PipelineLayout,
+    shader: &'a wgpu::ShaderModule,
+    depth_stencil: Option<wgpu::DepthStencilState>,
+    multisample: wgpu::MultisampleState,
+    color: &'a [Option<wgpu::ColorTargetState>],
+}
+
+impl Stage<'_> {
+    /// A pipeline of the shader's `(vertex, fragment)` entry points over `buffers`.
+    fn pipeline(
+        &self,
+        label: &str,
+        (vs, fs): (&str, &str),
+        buffers: &[Option<wgpu::VertexBufferLayout<'_>>],
+        primitive: wgpu::PrimitiveState,
+    ) -> wgpu::RenderPipeline {
+        self.device
+            .create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some(label),
+                layout: Some(self.layout),
+                vertex: wgpu::VertexState {
+                    module: self.shader,
+                    entry_point: Some(vs),
+                    compilation_options: wgpu::PipelineCompilationOptions::default(),
+                    buffers,
+                },
+                primitive,
+                depth_stencil: self.depth_stencil.clone(),
+                multisample: self.multisample,
+                fragment: Some(wgpu::FragmentState {
+                    module: self.shader,
+                    entry_point: Some(fs),
+                    compilation_options: wgpu::PipelineCompilationOptions::default(),
+                    targets: self.color,
+                }),
+                multiview_mask: None,
+                cache: None,
+            })
+    }
+}
+
 impl SkeletonRenderer {
     /// Builds the pipelines for passes with `targets`.
-    #[expect(
-        clippy::too_many_lines,
-        reason = "two pipeline descriptors spelled out field by field read best together"
-    )]
     pub fn new(device: &wgpu::Device, targets: Targets) -> SkeletonRenderer {
         let shader = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("skeleton"),
@@ -182,51 +222,29 @@ impl SkeletonRenderer {
                 attributes: &instance_attrs,
             }),
         ];
-        let mesh_pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("skeleton meshes"),
-            layout: Some(&pipeline_layout),
-            vertex: wgpu::VertexState {
-                module: &shader,
-                entry_point: Some("vs_mesh"),
-                compilation_options: wgpu::PipelineCompilationOptions::default(),
-                buffers: &buffers,
-            },
-            primitive: wgpu::PrimitiveState {
+        let stage = Stage {
+            device,
+            layout: &pipeline_layout,
+            shader: &shader,
+            depth_stencil,
+            multisample,
+            color: &color,
+        };
+        let mesh_pipeline = stage.pipeline(
+            "skeleton meshes",
+            ("vs_mesh", "fs_mesh"),
+            &buffers,
+            wgpu::PrimitiveState {
                 cull_mode: Some(wgpu::Face::Back),
                 ..wgpu::PrimitiveState::default()
             },
-            depth_stencil: depth_stencil.clone(),
-            multisample,
-            fragment: Some(wgpu::FragmentState {
-                module: &shader,
-                entry_point: Some("fs_mesh"),
-                compilation_options: wgpu::PipelineCompilationOptions::default(),
-                targets: &color,
-            }),
-            multiview_mask: None,
-            cache: None,
-        });
-        let ground_pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("ground"),
-            layout: Some(&pipeline_layout),
-            vertex: wgpu::VertexState {
-                module: &shader,
-                entry_point: Some("vs_ground"),
-                compilation_options: wgpu::PipelineCompilationOptions::default(),
-                buffers: &[],
-            },
-            primitive: wgpu::PrimitiveState::default(),
-            depth_stencil,
-            multisample,
-            fragment: Some(wgpu::FragmentState {
-                module: &shader,
-                entry_point: Some("fs_ground"),
-                compilation_options: wgpu::PipelineCompilationOptions::default(),
-                targets: &color,
-            }),
-            multiview_mask: None,
-            cache: None,
-        });
+        );
+        let ground_pipeline = stage.pipeline(
+            "ground",
+            ("vs_ground", "fs_ground"),
+            &[],
+            wgpu::PrimitiveState::default(),
+        );
         let (cv, ci) = cylinder_mesh(10);
         let (sv, si) = sphere_mesh(6, 10);
         SkeletonRenderer {
@@ -532,11 +550,28 @@ impl Offscreen {
     ///
     /// # Errors
     /// The frame cannot be read back.
-    #[expect(
-        clippy::too_many_lines,
-        reason = "targets, pass and readback of one frame in wgpu's descriptor style"
-    )]
     pub fn render(&mut self, width: u32, height: u32, panes: &[Pane<'_>]) -> anyhow::Result<Image> {
+        let targets = self.targets(width, height);
+        for (k, p) in panes.iter().enumerate() {
+            let aspect = p.width as f32 / p.height.max(1) as f32;
+            self.renderer
+                .prepare(&self.device, &self.queue, k, p.view, aspect, p.shapes);
+        }
+        let mut encoder = self
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
+        self.draw_panes(&mut encoder, &targets, panes);
+        let rgba = self.read_back(encoder, &targets.resolved, width, height)?;
+        Ok(Image {
+            width,
+            height,
+            rgba,
+        })
+    }
+
+    /// The frame's textures: the resolved colour target (read back), the multisampled one
+    /// when MSAA is on, and the depth buffer.
+    fn targets(&self, width: u32, height: u32) -> FrameTargets {
         let size = wgpu::Extent3d {
             width,
             height,
@@ -554,79 +589,91 @@ impl Offscreen {
                 view_formats: &[],
             })
         };
+        let view = |t: &wgpu::Texture| t.create_view(&wgpu::TextureViewDescriptor::default());
         let resolved = texture(
             OFFSCREEN_FORMAT,
             1,
             wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
         );
         let msaa = (self.samples > 1).then(|| {
-            texture(
+            view(&texture(
                 OFFSCREEN_FORMAT,
                 self.samples,
                 wgpu::TextureUsages::RENDER_ATTACHMENT,
-            )
+            ))
         });
-        let depth = texture(
+        let depth = view(&texture(
             OFFSCREEN_DEPTH,
             self.samples,
             wgpu::TextureUsages::RENDER_ATTACHMENT,
-        );
-        let resolved_view = resolved.create_view(&wgpu::TextureViewDescriptor::default());
-        let msaa_view = msaa
-            .as_ref()
-            .map(|t| t.create_view(&wgpu::TextureViewDescriptor::default()));
-        let depth_view = depth.create_view(&wgpu::TextureViewDescriptor::default());
-        for (k, p) in panes.iter().enumerate() {
-            let aspect = p.width as f32 / p.height.max(1) as f32;
-            self.renderer
-                .prepare(&self.device, &self.queue, k, p.view, aspect, p.shapes);
+        ));
+        FrameTargets {
+            resolved_view: view(&resolved),
+            resolved,
+            msaa,
+            depth,
         }
-        let mut encoder = self
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
-        {
-            let (view, resolve_target) = match &msaa_view {
-                Some(m) => (m, Some(&resolved_view)),
-                None => (&resolved_view, None),
-            };
-            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("offscreen"),
-                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                    view,
-                    depth_slice: None,
-                    resolve_target,
-                    ops: wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(wgpu::Color {
-                            r: f64::from(BACKGROUND[0]),
-                            g: f64::from(BACKGROUND[1]),
-                            b: f64::from(BACKGROUND[2]),
-                            a: 1.0,
-                        }),
-                        store: wgpu::StoreOp::Store,
-                    },
-                })],
-                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                    view: &depth_view,
-                    depth_ops: Some(wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(1.0),
-                        store: wgpu::StoreOp::Discard,
+    }
+
+    /// One render pass: cleared to [`BACKGROUND`], each pane in its viewport.
+    fn draw_panes(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        targets: &FrameTargets,
+        panes: &[Pane<'_>],
+    ) {
+        let (view, resolve_target) = match &targets.msaa {
+            Some(m) => (m, Some(&targets.resolved_view)),
+            None => (&targets.resolved_view, None),
+        };
+        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("offscreen"),
+            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                view,
+                depth_slice: None,
+                resolve_target,
+                ops: wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(wgpu::Color {
+                        r: f64::from(BACKGROUND[0]),
+                        g: f64::from(BACKGROUND[1]),
+                        b: f64::from(BACKGROUND[2]),
+                        a: 1.0,
                     }),
-                    stencil_ops: None,
+                    store: wgpu::StoreOp::Store,
+                },
+            })],
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: &targets.depth,
+                depth_ops: Some(wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(1.0),
+                    store: wgpu::StoreOp::Discard,
                 }),
-                ..wgpu::RenderPassDescriptor::default()
-            });
-            for (k, p) in panes.iter().enumerate() {
-                pass.set_viewport(
-                    p.x as f32,
-                    p.y as f32,
-                    p.width as f32,
-                    p.height as f32,
-                    0.0,
-                    1.0,
-                );
-                self.renderer.paint(&mut pass, k);
-            }
+                stencil_ops: None,
+            }),
+            ..wgpu::RenderPassDescriptor::default()
+        });
+        for (k, p) in panes.iter().enumerate() {
+            pass.set_viewport(
+                p.x as f32,
+                p.y as f32,
+                p.width as f32,
+                p.height as f32,
+                0.0,
+                1.0,
+            );
+            self.renderer.paint(&mut pass, k);
         }
+    }
+
+    /// Submits `encoder` with a copy of `resolved` into a mapped buffer and returns its
+    /// pixels, RGBA rows without the copy's row padding.
+    fn read_back(
+        &self,
+        mut encoder: wgpu::CommandEncoder,
+        resolved: &wgpu::Texture,
+        width: u32,
+        height: u32,
+    ) -> anyhow::Result<Vec<u8>> {
         let row = (width * 4).div_ceil(256) * 256;
         let readback = self.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("readback"),
@@ -644,7 +691,7 @@ impl Offscreen {
                     rows_per_image: Some(height),
                 },
             },
-            size,
+            resolved.size(),
         );
         self.queue.submit([encoder.finish()]);
         let slice = readback.slice(..);
@@ -669,10 +716,16 @@ impl Offscreen {
         }
         drop(data);
         readback.unmap();
-        Ok(Image {
-            width,
-            height,
-            rgba,
-        })
+        Ok(rgba)
     }
+}
+
+/// The textures one offscreen frame is drawn into.
+struct FrameTargets {
+    /// Single-sampled colour target, copied to the readback buffer.
+    resolved: wgpu::Texture,
+    resolved_view: wgpu::TextureView,
+    /// Multisampled colour target resolved into `resolved`, when MSAA is on.
+    msaa: Option<wgpu::TextureView>,
+    depth: wgpu::TextureView,
 }

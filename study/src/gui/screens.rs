@@ -15,7 +15,7 @@ use protocols::record::{Answer, Arrangement, Block, Position, Protocol, Response
 use protocols::study::{RatingScale, ScaleKind};
 use protocols::{FrameTiming, StimulusEncoding, StudyDefinition};
 
-use super::flow::{Presentation, Show, stimulus_at};
+use super::flow::{Frame, Presentation, Show, stimulus_at};
 use super::render::{BACKGROUND, SkeletonCallback};
 use super::scene::{Figure, FrameShapes, View};
 use super::timing::FrameClock;
@@ -448,10 +448,8 @@ impl StudyUi {
         })
     }
 
-    #[expect(
-        clippy::too_many_lines,
-        reason = "one trial screen: stimuli, progress and the protocol's answer widgets"
-    )]
+    /// One frame of the trial on screen: progress, the protocol's answer widgets and the
+    /// stimuli; an answer is logged before the next trial starts.
     fn trial_screen(&mut self, ui: &mut Ui, now: f64, active: bool, clock: &mut FrameClock) {
         let Screen::Trial(t) = &mut self.screen else {
             return;
@@ -461,237 +459,70 @@ impl StudyUi {
             t.gate_open_s = Some(now);
         }
         let open = active && t.presentation.accepts_response();
-        let protocol = self.study.protocol;
-        let scale = self.study.scale;
-        let mut answer: Option<Answer> = None;
-        let mut replay = false;
-
-        // Progress.
-        let done = self.recorder.answered();
-        egui::Panel::top("progress").show(ui, |ui| {
-            ui.horizontal(|ui| {
-                let text = match self.planned {
-                    Some(n) => format!("Trial {} of {n}", done + 1),
-                    None => format!("Trial {}", done + 1),
-                };
-                ui.label(text);
-                if t.trial.block == Block::Familiarization {
-                    ui.label(RichText::new("(practice)").italics());
-                }
-                if let Some(n) = self.planned.filter(|n| *n > 0) {
-                    ui.add(
-                        egui::ProgressBar::new(done as f32 / n as f32)
-                            .desired_width(240.0)
-                            .show_percentage(),
-                    );
-                }
-            });
-        });
-
-        // Answer widgets.
-        egui::Panel::bottom("answer")
+        progress_panel(ui, t, self.recorder.answered(), self.planned);
+        let (answer, replay) = egui::Panel::bottom("answer")
             .min_size(150.0)
             .show(ui, |ui| {
                 ui.add_space(8.0);
-                ui.vertical_centered(|ui| match protocol {
-                    Protocol::Mos => {
-                        ui.label(
-                            RichText::new("Rate the quality of the compressed motion").size(18.0),
-                        );
-                        rating_row(ui, &scale, &mut t.rating, open, "rating");
-                        if open {
-                            keyboard_rating(ui, &scale, &mut t.rating);
-                        }
-                        let confirm = ui
-                            .add_enabled(open && t.rating.is_some(), egui::Button::new("Continue"))
-                            .clicked()
-                            || (open
-                                && t.rating.is_some()
-                                && ui.input(|i| i.key_pressed(Key::Enter)));
-                        if confirm {
-                            answer = t.rating.map(Answer::Rating);
-                        }
-                    }
-                    Protocol::Dscqs => {
-                        ui.label(RichText::new("Rate the quality of A and of B").size(18.0));
-                        ui.horizontal(|ui| {
-                            ui.label(RichText::new("A").strong().size(18.0));
-                            rating_row(ui, &scale, &mut t.rating, open, "rating A");
-                        });
-                        ui.horizontal(|ui| {
-                            ui.label(RichText::new("B").strong().size(18.0));
-                            rating_row(ui, &scale, &mut t.rating_b, open, "rating B");
-                        });
-                        if open {
-                            // Keys: number keys rate A, then B; arrows adjust the row being
-                            // rated; Backspace goes back to A.
-                            let row = if t.editing_b {
-                                &mut t.rating_b
-                            } else {
-                                &mut t.rating
-                            };
-                            keyboard_rating(ui, &scale, row);
-                            let digit = ui.input(|i| DIGITS.iter().any(|k| i.key_pressed(*k)));
-                            if digit && !t.editing_b && t.rating.is_some() {
-                                t.editing_b = true;
-                            }
-                            if ui.input(|i| i.key_pressed(Key::Backspace)) {
-                                t.editing_b = false;
-                            }
-                        }
-                        let both = t.rating.zip(t.rating_b);
-                        let confirm = ui
-                            .add_enabled(open && both.is_some(), egui::Button::new("Continue"))
-                            .clicked()
-                            || (open && both.is_some() && ui.input(|i| i.key_pressed(Key::Enter)));
-                        if confirm {
-                            answer = both.map(|(a, b)| Answer::Pair { a, b });
-                        }
-                    }
-                    Protocol::Staircase => {
-                        ui.label(RichText::new(AFC_QUESTION).size(20.0));
-                        let (l, r, lk, rk) = match t.trial.arrangement {
-                            Arrangement::Sequential => {
-                                (Position::First, Position::Second, Key::Num1, Key::Num2)
-                            }
-                            Arrangement::Abab => (Position::A, Position::B, Key::A, Key::B),
-                            Arrangement::SideBySide => (
-                                Position::Left,
-                                Position::Right,
-                                Key::ArrowLeft,
-                                Key::ArrowRight,
-                            ),
-                        };
-                        ui.horizontal(|ui| {
-                            let w = 140.0;
-                            ui.add_space(((ui.available_width() - 2.0 * w - 24.0) * 0.5).max(0.0));
-                            for p in [l, r] {
-                                let b =
-                                    egui::Button::new(RichText::new(position_label(p)).size(18.0))
-                                        .min_size(Vec2::new(w, 40.0));
-                                if ui.add_enabled(open, b).clicked() {
-                                    answer = Some(Answer::Choice(p));
-                                }
-                            }
-                        });
-                        if open {
-                            // Arrow keys (or 1/2, A/B) answer at once.
-                            ui.input(|i| {
-                                if i.key_pressed(lk) {
-                                    answer = Some(Answer::Choice(l));
-                                } else if i.key_pressed(rk) {
-                                    answer = Some(Answer::Choice(r));
-                                }
-                            });
-                        }
-                    }
-                });
-                ui.horizontal(|ui| {
-                    if t.presentation.can_replay()
-                        && ui
-                            .add_enabled(active, egui::Button::new("Replay"))
-                            .clicked()
-                    {
-                        replay = true;
-                    }
-                    if !t.presentation.accepts_response() {
-                        ui.label(RichText::new("Watch the motions…").weak());
-                    }
-                });
-            });
-
-        // Stimuli.
-        egui::CentralPanel::default()
-            .frame(egui::Frame::new().fill(Color32::from_gray(96)))
-            .show(ui, |ui| {
-                let full = ui.available_rect_before_wrap();
-                let painter = ui.painter();
-                match frame.show {
-                    Show::Grey => {}
-                    Show::Both => {
-                        let gap = 12.0;
-                        let w = (full.width() - gap) * 0.5;
-                        let h = w.min(full.height());
-                        let top = full.center().y - h * 0.5;
-                        for k in 0..2 {
-                            let left = full.left() + k as f32 * (w + gap);
-                            let rect =
-                                egui::Rect::from_min_size(egui::pos2(left, top), Vec2::new(w, h));
-                            draw_viewport(painter, self.gpu, t, k, rect, frame.clip_time_s);
-                        }
-                    }
-                    Show::One(p) => {
-                        let k = usize::from(p != t.first);
-                        let h = full.height() - 40.0;
-                        let w = (h * 16.0 / 9.0).min(full.width());
-                        let rect = egui::Rect::from_center_size(
-                            full.center() + Vec2::new(0.0, 20.0),
-                            Vec2::new(w, h),
-                        );
-                        draw_viewport(painter, self.gpu, t, k, rect, frame.clip_time_s);
-                    }
-                }
-                if let Some(label) = frame.label {
-                    ui.with_layout(Layout::top_down(Align::Center), |ui| {
-                        ui.label(
-                            RichText::new(label)
-                                .size(30.0)
-                                .strong()
-                                .color(Color32::WHITE),
-                        );
-                    });
-                }
-                if frame.show == Show::Grey && frame.finished {
-                    ui.centered_and_justified(|ui| {
-                        ui.label(
-                            RichText::new("Please answer below")
-                                .size(22.0)
-                                .color(Color32::WHITE),
-                        );
-                    });
-                }
-            });
-
+                let answer = ui
+                    .vertical_centered(|ui| match self.study.protocol {
+                        Protocol::Mos => mos_answer(ui, t, &self.study.scale, open),
+                        Protocol::Dscqs => dscqs_answer(ui, t, &self.study.scale, open),
+                        Protocol::Staircase => afc_answer(ui, t, open),
+                    })
+                    .inner;
+                (answer, replay_row(ui, t, active))
+            })
+            .inner;
+        stimuli_panel(ui, t, &frame, self.gpu);
         if replay {
             t.presentation.replay(now);
         }
-        if let Some(answer) = answer {
-            let response_time_ms = t
-                .gate_open_s
-                .map_or(0, |g| ((now - g).max(0.0) * 1e3) as u64);
-            let stats = clock.end_segment();
-            // Timing is only known once the refresh period was measured (always, in the
-            // window: trials start after it).
-            let timing = clock.calibrated().then_some(FrameTiming {
-                frames_shown: stats.frames,
-                interval_sd_ms: stats.sd_ms,
-            });
-            let response = Response {
-                answer,
-                response_time_ms,
-                replays: t.presentation.replays(),
-                dropped_frames: stats.dropped,
-            };
-            let trial = t.trial.clone();
-            let encoding = t.encoding.take();
-            let elapsed = self.recorder.elapsed_ms();
-            let index = trial.index;
-            let logged = self
-                .recorder
-                .record(trial, response, elapsed, encoding, timing)
-                .and_then(|_| {
-                    if timing.is_some() {
-                        self.recorder
-                            .append_frame_intervals(index, clock.segment_intervals())
-                    } else {
-                        Ok(())
-                    }
-                });
-            match logged {
-                Ok(()) => self.advance(now, clock),
-                Err(e) => self.fail(&e),
-            }
+        let Some(answer) = answer else {
+            return;
+        };
+        let response_time_ms = t
+            .gate_open_s
+            .map_or(0, |g| ((now - g).max(0.0) * 1e3) as u64);
+        let stats = clock.end_segment();
+        let response = Response {
+            answer,
+            response_time_ms,
+            replays: t.presentation.replays(),
+            dropped_frames: stats.dropped,
+        };
+        // Timing is only known once the refresh period was measured (always, in the window:
+        // trials start after it).
+        let timing = clock.calibrated().then_some(FrameTiming {
+            frames_shown: stats.frames,
+            interval_sd_ms: stats.sd_ms,
+        });
+        let (trial, encoding) = (t.trial.clone(), t.encoding.take());
+        match self.log_answer(trial, response, encoding, timing, clock) {
+            Ok(()) => self.advance(now, clock),
+            Err(e) => self.fail(&e),
         }
+    }
+
+    /// Logs an answer (fsynced) and, when the display was measured, the trial's frame
+    /// intervals.
+    fn log_answer(
+        &mut self,
+        trial: Trial,
+        response: Response,
+        encoding: Option<StimulusEncoding>,
+        timing: Option<FrameTiming>,
+        clock: &FrameClock,
+    ) -> lab::Result<()> {
+        let elapsed = self.recorder.elapsed_ms();
+        let index = trial.index;
+        self.recorder
+            .record(trial, response, elapsed, encoding, timing)?;
+        if timing.is_some() {
+            self.recorder
+                .append_frame_intervals(index, clock.segment_intervals())?;
+        }
+        Ok(())
     }
 
     fn pause_dialog(&mut self, ui: &mut Ui, now: f64, clock: &mut FrameClock) {
@@ -841,6 +672,197 @@ fn keyboard_rating(ui: &Ui, scale: &RatingScale, value: &mut Option<f64>) {
             *value = step(-1);
         }
     });
+}
+
+/// "Trial k of n", a practice mark and a progress bar.
+fn progress_panel(ui: &mut Ui, t: &TrialScreen, done: u32, planned: Option<u32>) {
+    egui::Panel::top("progress").show(ui, |ui| {
+        ui.horizontal(|ui| {
+            let text = match planned {
+                Some(n) => format!("Trial {} of {n}", done + 1),
+                None => format!("Trial {}", done + 1),
+            };
+            ui.label(text);
+            if t.trial.block == Block::Familiarization {
+                ui.label(RichText::new("(practice)").italics());
+            }
+            if let Some(n) = planned.filter(|n| *n > 0) {
+                ui.add(
+                    egui::ProgressBar::new(done as f32 / n as f32)
+                        .desired_width(240.0)
+                        .show_percentage(),
+                );
+            }
+        });
+    });
+}
+
+/// Whether Continue (or Enter) confirms an answer that is complete.
+fn confirmed(ui: &mut Ui, open: bool, complete: bool) -> bool {
+    ui.add_enabled(open && complete, egui::Button::new("Continue"))
+        .clicked()
+        || (open && complete && ui.input(|i| i.key_pressed(Key::Enter)))
+}
+
+/// MOS: one rating of the compressed motion.
+fn mos_answer(ui: &mut Ui, t: &mut TrialScreen, scale: &RatingScale, open: bool) -> Option<Answer> {
+    ui.label(RichText::new("Rate the quality of the compressed motion").size(18.0));
+    rating_row(ui, scale, &mut t.rating, open, "rating");
+    if open {
+        keyboard_rating(ui, scale, &mut t.rating);
+    }
+    if confirmed(ui, open, t.rating.is_some()) {
+        return t.rating.map(Answer::Rating);
+    }
+    None
+}
+
+/// DSCQS: a rating of A and one of B.
+fn dscqs_answer(
+    ui: &mut Ui,
+    t: &mut TrialScreen,
+    scale: &RatingScale,
+    open: bool,
+) -> Option<Answer> {
+    ui.label(RichText::new("Rate the quality of A and of B").size(18.0));
+    ui.horizontal(|ui| {
+        ui.label(RichText::new("A").strong().size(18.0));
+        rating_row(ui, scale, &mut t.rating, open, "rating A");
+    });
+    ui.horizontal(|ui| {
+        ui.label(RichText::new("B").strong().size(18.0));
+        rating_row(ui, scale, &mut t.rating_b, open, "rating B");
+    });
+    if open {
+        // Keys: number keys rate A, then B; arrows adjust the row being rated; Backspace goes
+        // back to A.
+        let row = if t.editing_b {
+            &mut t.rating_b
+        } else {
+            &mut t.rating
+        };
+        keyboard_rating(ui, scale, row);
+        let digit = ui.input(|i| DIGITS.iter().any(|k| i.key_pressed(*k)));
+        if digit && !t.editing_b && t.rating.is_some() {
+            t.editing_b = true;
+        }
+        if ui.input(|i| i.key_pressed(Key::Backspace)) {
+            t.editing_b = false;
+        }
+    }
+    let both = t.rating.zip(t.rating_b);
+    if confirmed(ui, open, both.is_some()) {
+        return both.map(|(a, b)| Answer::Pair { a, b });
+    }
+    None
+}
+
+/// 2AFC: which of the two is the distorted one, by button or key.
+fn afc_answer(ui: &mut Ui, t: &TrialScreen, open: bool) -> Option<Answer> {
+    ui.label(RichText::new(AFC_QUESTION).size(20.0));
+    let (l, r, lk, rk) = match t.trial.arrangement {
+        Arrangement::Sequential => (Position::First, Position::Second, Key::Num1, Key::Num2),
+        Arrangement::Abab => (Position::A, Position::B, Key::A, Key::B),
+        Arrangement::SideBySide => (
+            Position::Left,
+            Position::Right,
+            Key::ArrowLeft,
+            Key::ArrowRight,
+        ),
+    };
+    let mut answer = None;
+    ui.horizontal(|ui| {
+        let w = 140.0;
+        ui.add_space(((ui.available_width() - 2.0 * w - 24.0) * 0.5).max(0.0));
+        for p in [l, r] {
+            let b = egui::Button::new(RichText::new(position_label(p)).size(18.0))
+                .min_size(Vec2::new(w, 40.0));
+            if ui.add_enabled(open, b).clicked() {
+                answer = Some(Answer::Choice(p));
+            }
+        }
+    });
+    if open {
+        // Arrow keys (or 1/2, A/B) answer at once.
+        ui.input(|i| {
+            if i.key_pressed(lk) {
+                answer = Some(Answer::Choice(l));
+            } else if i.key_pressed(rk) {
+                answer = Some(Answer::Choice(r));
+            }
+        });
+    }
+    answer
+}
+
+/// The Replay button (where replays are left) and the "watch" hint; true when pressed.
+fn replay_row(ui: &mut Ui, t: &TrialScreen, active: bool) -> bool {
+    ui.horizontal(|ui| {
+        let replay = t.presentation.can_replay()
+            && ui
+                .add_enabled(active, egui::Button::new("Replay"))
+                .clicked();
+        if !t.presentation.accepts_response() {
+            ui.label(RichText::new("Watch the motions…").weak());
+        }
+        replay
+    })
+    .inner
+}
+
+/// The stimuli as the presentation schedule shows them now: both side by side, one of them,
+/// or the grey between, with the position's label.
+fn stimuli_panel(ui: &mut Ui, t: &mut TrialScreen, frame: &Frame, gpu: bool) {
+    egui::CentralPanel::default()
+        .frame(egui::Frame::new().fill(Color32::from_gray(96)))
+        .show(ui, |ui| {
+            let full = ui.available_rect_before_wrap();
+            let painter = ui.painter();
+            match frame.show {
+                Show::Grey => {}
+                Show::Both => {
+                    let gap = 12.0;
+                    let w = (full.width() - gap) * 0.5;
+                    let h = w.min(full.height());
+                    let top = full.center().y - h * 0.5;
+                    for k in 0..2 {
+                        let left = full.left() + k as f32 * (w + gap);
+                        let rect =
+                            egui::Rect::from_min_size(egui::pos2(left, top), Vec2::new(w, h));
+                        draw_viewport(painter, gpu, t, k, rect, frame.clip_time_s);
+                    }
+                }
+                Show::One(p) => {
+                    let k = usize::from(p != t.first);
+                    let h = full.height() - 40.0;
+                    let w = (h * 16.0 / 9.0).min(full.width());
+                    let rect = egui::Rect::from_center_size(
+                        full.center() + Vec2::new(0.0, 20.0),
+                        Vec2::new(w, h),
+                    );
+                    draw_viewport(painter, gpu, t, k, rect, frame.clip_time_s);
+                }
+            }
+            if let Some(label) = frame.label {
+                ui.with_layout(Layout::top_down(Align::Center), |ui| {
+                    ui.label(
+                        RichText::new(label)
+                            .size(30.0)
+                            .strong()
+                            .color(Color32::WHITE),
+                    );
+                });
+            }
+            if frame.show == Show::Grey && frame.finished {
+                ui.centered_and_justified(|ui| {
+                    ui.label(
+                        RichText::new("Please answer below")
+                            .size(22.0)
+                            .color(Color32::WHITE),
+                    );
+                });
+            }
+        });
 }
 
 fn draw_viewport(
