@@ -112,27 +112,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         "study demo: a short study on a generated walking figure, written to {}",
         out.display()
     );
-    let mut mode = if args.simulate {
-        println!(
-            "--simulate: every session runs with {} simulated observers.",
-            args.subjects
-        );
-        Mode::Simulated
-    } else if crate::gui::window::display_available() {
-        println!(
-            "A display is available: each study runs {} simulated observers, then one session of \
-             yours in the study window (subject `you`; Ctrl+Shift+P pauses or quits).",
-            args.subjects
-        );
-        Mode::Window
-    } else {
-        println!(
-            "No display (DISPLAY and WAYLAND_DISPLAY are unset): every session runs with {} \
-             simulated observers, none in the study window.",
-            args.subjects
-        );
-        Mode::Simulated
-    };
+    let mut mode = choose_mode(args);
     // In the window, a two-second walk keeps each trial short.
     let walk = motion::synth::WalkParams {
         duration_s: if mode == Mode::Window { 2.0 } else { 4.0 },
@@ -199,6 +179,31 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         out.join("report-mos/report.html").display()
     );
     Ok(())
+}
+
+/// Simulated observers only (`--simulate`, or no display), or also the window; says which.
+fn choose_mode(args: &DemoArgs) -> Mode {
+    if args.simulate {
+        println!(
+            "--simulate: every session runs with {} simulated observers.",
+            args.subjects
+        );
+        Mode::Simulated
+    } else if crate::gui::window::display_available() {
+        println!(
+            "A display is available: each study runs {} simulated observers, then one session of \
+             yours in the study window (subject `you`; Ctrl+Shift+P pauses or quits).",
+            args.subjects
+        );
+        Mode::Window
+    } else {
+        println!(
+            "No display (DISPLAY and WAYLAND_DISPLAY are unset): every session runs with {} \
+             simulated observers, none in the study window.",
+            args.subjects
+        );
+        Mode::Simulated
+    }
 }
 
 /// Prints the Markdown tables of a report (the part a reader wants first).

@@ -189,11 +189,7 @@ fn graph(root: &Path) -> Graph {
 /// The chain of crates from `start` to the first crate named in `targets`, if any: the
 /// start's own dependencies of every kind, then what those need to build (their
 /// dev-dependencies are not built for it).
-fn path_to(
-    g: &Graph,
-    start: &str,
-    targets: &BTreeSet<String>,
-) -> Option<Vec<String>> {
+fn path_to(g: &Graph, start: &str, targets: &BTreeSet<String>) -> Option<Vec<String>> {
     let mut seen = BTreeSet::new();
     let mut queue =
         std::collections::VecDeque::from([(start.to_string(), vec![g[start].0.clone()])]);
