@@ -69,20 +69,13 @@ fn rules(text: &str) -> BTreeMap<String, Rule> {
     out
 }
 
-#[test]
-fn crate_dependencies_follow_the_architecture_table() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    let table = rules(&std::fs::read_to_string(root.join("ARCHITECTURE.md")).unwrap());
+/// `cargo metadata` of the workspace at `root` with `args`, offline.
+fn metadata(root: &Path, args: &[&str]) -> serde_json::Value {
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     let out = Command::new(cargo)
-        .args([
-            "metadata",
-            "--format-version",
-            "1",
-            "--no-deps",
-            "--offline",
-        ])
-        .current_dir(&root)
+        .args(["metadata", "--format-version", "1", "--offline"])
+        .args(args)
+        .current_dir(root)
         .output()
         .unwrap();
     assert!(
@@ -90,7 +83,14 @@ fn crate_dependencies_follow_the_architecture_table() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let meta: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+#[test]
+fn crate_dependencies_follow_the_architecture_table() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let table = rules(&std::fs::read_to_string(root.join("ARCHITECTURE.md")).unwrap());
+    let meta = metadata(&root, &["--no-deps"]);
     let packages = meta["packages"].as_array().unwrap();
     let ours: BTreeSet<String> = packages
         .iter()
@@ -138,19 +138,7 @@ type Graph = BTreeMap<String, (String, Vec<(String, bool)>)>;
 /// The full dependency graph on this platform (the crates of other platforms are not
 /// downloaded here).
 fn graph(root: &Path) -> Graph {
-    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    let out = Command::new(cargo)
-        .args(["metadata", "--format-version", "1", "--offline", "--locked"])
-        .args(["--filter-platform", &host()])
-        .current_dir(root)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let meta: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let meta = metadata(root, &["--locked", "--filter-platform", &host()]);
     let names: BTreeMap<String, String> = meta["packages"]
         .as_array()
         .unwrap()

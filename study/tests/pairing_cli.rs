@@ -115,43 +115,51 @@ impl Lists {
     }
 }
 
+/// `head` + `files` + `tail` + `-o out` (+ `--asf`), as strings.
+fn command(
+    head: &[&str],
+    files: &[PathBuf],
+    tail: &[&str],
+    out: &Path,
+    asf: Option<&Path>,
+) -> Vec<String> {
+    let mut args: Vec<String> = head.iter().map(|a| (*a).to_string()).collect();
+    args.extend(files.iter().map(|f| s(f)));
+    args.extend(tail.iter().map(|a| (*a).to_string()));
+    args.extend(["-o".to_string(), s(out)]);
+    if let Some(a) = asf {
+        args.extend(["--asf".to_string(), s(a)]);
+    }
+    args
+}
+
+/// `clip info`, `encode`, `sweep` and `primitives train` on `files` (outputs under
+/// `out-<tag>`).
 fn run_all(l: &Lists, tag: &str, files: &[PathBuf], asf: Option<&Path>) -> [Output; 4] {
-    let with_asf = |mut args: Vec<String>| {
-        if let Some(a) = asf {
-            args.extend(["--asf".to_string(), s(a)]);
-        }
-        args
-    };
     let out = l.p(&format!("out-{tag}"));
-    let mut encode = vec!["encode".to_string()];
-    encode.extend(files.iter().map(|f| s(f)));
-    encode.extend(
-        ["--codec", "spiht", "--cr", "20", "-o"]
-            .map(String::from)
-            .into_iter()
-            .chain([s(&out.join("encode"))]),
-    );
-    let mut sweep = vec!["sweep".to_string(), "--clips".to_string()];
-    sweep.extend(files.iter().map(|f| s(f)));
-    sweep.extend(
-        ["--codecs", "spiht", "--cr", "20", "--quiet", "-o"]
-            .map(String::from)
-            .into_iter()
-            .chain([s(&out.join("sweep"))]),
-    );
-    let mut train = vec!["primitives".to_string(), "train".to_string()];
-    train.extend(files.iter().map(|f| s(f)));
-    train.extend(
-        ["--k-max", "5", "-o"]
-            .map(String::from)
-            .into_iter()
-            .chain([s(&out.join("db.mpdb"))]),
-    );
     [
         info(files, asf),
-        study(&with_asf(encode)),
-        study(&with_asf(sweep)),
-        study(&with_asf(train)),
+        study(&command(
+            &["encode"],
+            files,
+            &["--codec", "spiht", "--cr", "20"],
+            &out.join("encode"),
+            asf,
+        )),
+        study(&command(
+            &["sweep", "--clips"],
+            files,
+            &["--codecs", "spiht", "--cr", "20", "--quiet"],
+            &out.join("sweep"),
+            asf,
+        )),
+        study(&command(
+            &["primitives", "train"],
+            files,
+            &["--k-max", "5"],
+            &out.join("db.mpdb"),
+            asf,
+        )),
     ]
 }
 
