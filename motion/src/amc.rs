@@ -15,15 +15,7 @@ use crate::text::{fmt_num, lines, number, read_text, syntax};
 /// The frame rate of CMU AMC files, which do not state one.
 pub const CMU_FRAME_RATE_HZ: f64 = 120.0;
 
-/// Reads an AMC file for `skeleton` at [`CMU_FRAME_RATE_HZ`] with the default limits.
-///
-/// # Errors
-/// A [`ParseError`] naming the file, line and reason.
-pub fn read_amc(path: &Path, skeleton: &Skeleton) -> Result<Clip, ParseError> {
-    read_amc_with(path, skeleton, CMU_FRAME_RATE_HZ, &Limits::default())
-}
-
-/// Reads an AMC file with an explicit frame rate and limits.
+/// Reads an AMC file with an explicit frame rate (CMU files: [`CMU_FRAME_RATE_HZ`]) and limits.
 ///
 /// # Errors
 /// A [`ParseError`] naming the file, line and reason.
