@@ -441,8 +441,8 @@ mod tests {
 
     fn sample() -> Bitstream {
         let mut params = BTreeMap::new();
-        params.insert("alpha".to_string(), 0.05);
-        params.insert("qp".to_string(), 9.0);
+        params.insert(crate::codec::keys::ALPHA.to_string(), 0.05);
+        params.insert(crate::codec::keys::QP.to_string(), 9.0);
         Bitstream {
             codec_id: 3,
             params,
