@@ -44,7 +44,7 @@
 use super::prep::{position_sensitivity, unwrapped_matrix, wrap_flagged};
 use super::{
     Codec, CodecError, Params, RateControl, check_stream, decode_on_two_threads, header, int_param,
-    merged, real_param,
+    keys, merged, params_of, real_param,
 };
 use crate::bitstream::Bitstream;
 use crate::entropy::{BitModel, IntModel, RangeDecoder, RangeEncoder, UintModel};
@@ -122,39 +122,79 @@ pub fn crowd_budgets(distances: &[f64], total: f64) -> Vec<f64> {
         .collect()
 }
 
-#[derive(Debug, Clone, Copy)]
-struct Settings {
+/// The parameters of a SPIHT codec, read and range-checked once from [`Params`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct SpihtSettings {
+    /// Target compression ratio ([`keys::CR`], 0.1..=10 000), reached natively.
     cr: f64,
+    /// Segment length in frames ([`keys::WINDOW`], 8..=4096).
     window: usize,
+    /// [`keys::WAVELET`].
     wavelet: Wavelet,
-    scores: [f64; 6],
-    /// Energy term and bone length of `F`: position-aware (default) or as printed.
+    /// Body-part scores `S` ([`keys::SCORE_LEGS`] ..., each 0..=1).
+    score_legs: f64,
+    score_arms: f64,
+    score_torso: f64,
+    score_head: f64,
+    /// Energy term and bone length of `F`: position-aware ([`keys::ALLOCATION`] 0, the
+    /// default) or as printed (1).
     position: bool,
 }
 
-fn settings(name: &'static str, p: &Params) -> Result<Settings, CodecError> {
-    let cr = real_param(name, p, "cr", 0.1, 10_000.0)?;
-    let window = int_param(name, p, "window", 8, 4096)? as usize;
-    let wavelet =
-        Wavelet::from_id(int_param(name, p, "wavelet", 0, 1)? as u8).unwrap_or(Wavelet::Cdf97);
-    let legs = real_param(name, p, "score_legs", 0.0, 1.0)?;
-    let arms = real_param(name, p, "score_arms", 0.0, 1.0)?;
-    let torso = real_param(name, p, "score_torso", 0.0, 1.0)?;
-    let head = real_param(name, p, "score_head", 0.0, 1.0)?;
-    let position = int_param(name, p, "allocation", 0, 1)? == 0;
-    // Order of BodyPart::ALL: torso, head, left arm, right arm, left leg, right leg.
-    Ok(Settings {
-        cr,
-        window,
-        wavelet,
-        scores: [torso, head, arms, arms, legs, legs],
-        position,
-    })
+impl SpihtSettings {
+    /// The defaults of both SPIHT codecs.
+    const DEFAULT: SpihtSettings = SpihtSettings {
+        cr: 20.0,
+        window: 128,
+        wavelet: Wavelet::Cdf97,
+        score_legs: 1.0,
+        score_arms: 0.5,
+        score_torso: 0.5,
+        score_head: 0.5,
+        position: true,
+    };
+
+    /// Reads the settings of codec `codec` from `p`, every key within its range.
+    fn from_params(codec: &'static str, p: &Params) -> Result<SpihtSettings, CodecError> {
+        Ok(SpihtSettings {
+            cr: real_param(codec, p, keys::CR, 0.1, 10_000.0)?,
+            window: int_param(codec, p, keys::WINDOW, 8, 4096)? as usize,
+            wavelet: Wavelet::from_id(int_param(codec, p, keys::WAVELET, 0, 1)? as u8)
+                .unwrap_or(Wavelet::Cdf97),
+            score_legs: real_param(codec, p, keys::SCORE_LEGS, 0.0, 1.0)?,
+            score_arms: real_param(codec, p, keys::SCORE_ARMS, 0.0, 1.0)?,
+            score_torso: real_param(codec, p, keys::SCORE_TORSO, 0.0, 1.0)?,
+            score_head: real_param(codec, p, keys::SCORE_HEAD, 0.0, 1.0)?,
+            position: int_param(codec, p, keys::ALLOCATION, 0, 1)? == 0,
+        })
+    }
+
+    /// The parameters a stream records (all of them, the target CR included).
+    fn to_params(self) -> Params {
+        params_of(&[
+            (keys::CR, self.cr),
+            (keys::WINDOW, self.window as f64),
+            (keys::WAVELET, f64::from(self.wavelet.id())),
+            (keys::SCORE_LEGS, self.score_legs),
+            (keys::SCORE_ARMS, self.score_arms),
+            (keys::SCORE_TORSO, self.score_torso),
+            (keys::SCORE_HEAD, self.score_head),
+            (keys::ALLOCATION, if self.position { 0.0 } else { 1.0 }),
+        ])
+    }
+
+    /// Body-part scores in the order of [`BodyPart::ALL`]: torso, head, left arm, right arm,
+    /// left leg, right leg.
+    fn scores(self) -> [f64; 6] {
+        let (legs, arms) = (self.score_legs, self.score_arms);
+        [self.score_torso, self.score_head, arms, arms, legs, legs]
+    }
 }
 
 /// Static part of `F_c` per channel: body-part score × depth factor (eq. 6.2) × normalized
 /// bone length.
-fn static_factors(skeleton: &Skeleton, s: &Settings) -> Vec<f64> {
+fn static_factors(skeleton: &Skeleton, s: &SpihtSettings) -> Vec<f64> {
+    let scores = s.scores();
     let mut longest = [0.0f64; 6];
     for (j, joint) in skeleton.joints.iter().enumerate() {
         let k = part_index(joint.body_part);
@@ -176,9 +216,9 @@ fn static_factors(skeleton: &Skeleton, s: &Settings) -> Vec<f64> {
             };
             if s.position {
                 // The bone length enters through the position sensitivity of the energy.
-                s.scores[k] * depth
+                scores[k] * depth
             } else {
-                s.scores[k] * depth * len
+                scores[k] * depth * len
             }
         })
         .collect()
@@ -743,12 +783,11 @@ impl SpihtCodec {
         clippy::too_many_lines,
         reason = "pass 1 (side information) and pass 2 (budgets, bits) share their state"
     )]
-    fn encode_native(self, clip: &Clip, p: Params) -> Result<Bitstream, CodecError> {
-        let s = settings(self.name(), &p)?;
+    fn encode_native(self, clip: &Clip, s: &SpihtSettings) -> Result<Bitstream, CodecError> {
         let frames = clip.frames();
         let n_ch = clip.channel_count();
         let (data, flags) = unwrapped_matrix(clip);
-        let factors = static_factors(&clip.skeleton, &s);
+        let factors = static_factors(&clip.skeleton, s);
         let sens = sensitivities(&clip.skeleton);
         let mut t = Transform::new(s.wavelet);
 
@@ -816,8 +855,7 @@ impl SpihtCodec {
         let side_bytes = enc.finish();
 
         // Budget: the whole container at the target CR.
-        let mut out_params = p;
-        let container = header(&self, clip, out_params.clone(), Vec::new())?.byte_len();
+        let container = header(&self, clip, s.to_params(), Vec::new())?.byte_len();
         let n_seg = coeffs.len();
         let target_bytes = 4.0 * (n_ch * frames) as f64 / s.cr;
         let fixed = container + PAYLOAD_TAG.len() + 4 + side_bytes.len() + 8 * n_seg;
@@ -874,8 +912,7 @@ impl SpihtCodec {
             payload.extend_from_slice(&(total as u32).to_le_bytes());
             payload.extend_from_slice(&bytes);
         }
-        out_params.insert("cr".into(), s.cr);
-        header(&self, clip, out_params, payload)
+        header(&self, clip, s.to_params(), payload)
     }
 }
 
@@ -901,19 +938,7 @@ impl Codec for SpihtCodec {
     }
 
     fn default_params(&self) -> Params {
-        [
-            ("cr", 20.0),
-            ("window", 128.0),
-            ("wavelet", f64::from(Wavelet::Cdf97.id())),
-            ("score_legs", 1.0),
-            ("score_arms", 0.5),
-            ("score_torso", 0.5),
-            ("score_head", 0.5),
-            ("allocation", 0.0),
-        ]
-        .into_iter()
-        .map(|(k, v)| (k.to_string(), v))
-        .collect()
+        SpihtSettings::DEFAULT.to_params()
     }
 
     fn rate_control(&self) -> RateControl {
@@ -922,7 +947,7 @@ impl Codec for SpihtCodec {
 
     fn encode(&self, clip: &Clip, params: &Params) -> Result<Bitstream, CodecError> {
         let p = merged(self, params)?;
-        self.encode_native(clip, p)
+        self.encode_native(clip, &SpihtSettings::from_params(self.name(), &p)?)
     }
 
     fn decode(&self, stream: &Bitstream, skeleton: &Skeleton) -> Result<Clip, CodecError> {
@@ -942,7 +967,7 @@ impl SpihtCodec {
         check_stream(&self, stream, skeleton)?;
         let mut p = self.default_params();
         p.extend(stream.params.iter().map(|(k, v)| (k.clone(), *v)));
-        let s = settings(self.name(), &p)?;
+        let s = SpihtSettings::from_params(self.name(), &p)?;
         let frames = stream.frames as usize;
         let n_ch = stream.channels as usize;
         let factors = static_factors(skeleton, &s);
@@ -1148,6 +1173,31 @@ pub fn truncate(stream: &Bitstream, fraction: f64) -> Result<Bitstream, CodecErr
 mod tests {
     use super::*;
 
+    /// The settings read back what they record, and the defaults are the default parameters.
+    #[test]
+    #[expect(clippy::float_cmp, reason = "the scores are copied, not computed")]
+    fn settings_round_trip_through_params() {
+        let c = SpihtCodec::new(true);
+        let s = SpihtSettings::from_params(c.name(), &c.default_params()).unwrap();
+        assert_eq!(s, SpihtSettings::DEFAULT);
+        assert_eq!(s.to_params(), c.default_params());
+        let other = SpihtSettings {
+            cr: 7.5,
+            window: 64,
+            wavelet: Wavelet::D4,
+            score_legs: 0.9,
+            score_arms: 0.8,
+            score_torso: 0.7,
+            score_head: 0.6,
+            position: false,
+        };
+        assert_eq!(
+            SpihtSettings::from_params(c.name(), &other.to_params()).unwrap(),
+            other
+        );
+        assert_eq!(other.scores(), [0.7, 0.6, 0.8, 0.8, 0.9, 0.9]);
+    }
+
     #[test]
     fn pow2_is_exact() {
         for p in -1100..1100 {
@@ -1228,7 +1278,7 @@ mod tests {
         let c = SpihtCodec::new(true);
         for cr in [1.0, 12.0] {
             let mut p = Params::new();
-            p.insert("cr".into(), cr);
+            p.insert(keys::CR.into(), cr);
             let s = c.encode(&clip, &p).unwrap();
             let threaded = c.decode_channels(&s, &clip.skeleton, true).unwrap();
             let one = c.decode_channels(&s, &clip.skeleton, false).unwrap();
