@@ -51,7 +51,8 @@ use std::collections::BTreeMap;
 use std::sync::Arc;
 
 use super::{
-    Codec, CodecError, Params, RateControl, check_stream, header, int_param, merged, real_param,
+    Codec, CodecError, Params, RateControl, check_stream, header, int_param, keys, merged,
+    params_of, real_param,
 };
 use crate::bitstream::Bitstream;
 use crate::entropy::{BitModel, EntropyError, IntModel, RangeDecoder, RangeEncoder, UintModel};
@@ -98,13 +99,82 @@ pub struct PrimitiveCodec {
     joints: BTreeMap<String, Vec<Primitive>>,
 }
 
-/// Parameters as the codec uses them.
-#[derive(Debug, Clone, Copy)]
-struct Settings {
+/// The parameters of the `primitive` codec, read and range-checked once from [`Params`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct PrimitiveSettings {
+    /// The leg joints' threshold `t_L` in radians ([`keys::T_L`], 1e-4..=1).
     t_l: f64,
+    /// `t_U / t_L` ([`keys::UPPER_RATIO`], 1..=10).
     upper_ratio: f64,
+    /// Frames smoothed each side of a join ([`keys::SMOOTH`], 0..=16).
     smooth: usize,
+    /// Coarsest step over the threshold ([`keys::STEP_FLOOR`], 0..=4).
     step_floor: f64,
+    /// Fingerprint of the primitive database ([`keys::DB`]).
+    db: u32,
+}
+
+impl PrimitiveSettings {
+    /// The defaults, with the database of fingerprint `db`.
+    fn defaults(db: u32) -> PrimitiveSettings {
+        PrimitiveSettings {
+            t_l: 0.012,
+            upper_ratio: 2.0,
+            smooth: 0,
+            step_floor: 0.5,
+            db,
+        }
+    }
+
+    /// Reads the settings from `p`: first that [`keys::DB`] names the database of
+    /// fingerprint `fingerprint` ([`CodecError::DatabaseMismatch`] otherwise), then every
+    /// other key within its range.
+    fn from_params(p: &Params, fingerprint: u32) -> Result<PrimitiveSettings, CodecError> {
+        let v = p.get(keys::DB).copied().unwrap_or(f64::NAN);
+        if v.fract() != 0.0 || !(0.0..=f64::from(u32::MAX)).contains(&v) {
+            return Err(CodecError::Param {
+                codec: NAME,
+                key: keys::DB.into(),
+                value: v,
+                detail: "must be a database fingerprint (an integer in 0..=4294967295)".into(),
+            });
+        }
+        let db = v as u32;
+        if db != fingerprint {
+            return Err(CodecError::DatabaseMismatch {
+                codec: NAME,
+                stream: db,
+                given: fingerprint,
+            });
+        }
+        Ok(PrimitiveSettings {
+            t_l: real_param(NAME, p, keys::T_L, 1e-4, 1.0)?,
+            upper_ratio: real_param(NAME, p, keys::UPPER_RATIO, 1.0, 10.0)?,
+            smooth: int_param(NAME, p, keys::SMOOTH, 0, 16)? as usize,
+            step_floor: real_param(NAME, p, keys::STEP_FLOOR, 0.0, 4.0)?,
+            db,
+        })
+    }
+
+    /// The parameters a stream records (every key but [`keys::CR`]).
+    fn to_params(self) -> Params {
+        params_of(&[
+            (keys::T_L, self.t_l),
+            (keys::UPPER_RATIO, self.upper_ratio),
+            (keys::SMOOTH, self.smooth as f64),
+            (keys::STEP_FLOOR, self.step_floor),
+            (keys::DB, f64::from(self.db)),
+        ])
+    }
+
+    /// The threshold `t_j` of joint `joint`: `t_L` on the legs, `t_U` elsewhere.
+    fn threshold(self, skeleton: &Skeleton, joint: usize) -> f64 {
+        if skeleton.joints[joint].body_part.is_leg() {
+            self.t_l
+        } else {
+            self.upper_ratio * self.t_l
+        }
+    }
 }
 
 /// Adaptive models of the payload.
@@ -396,45 +466,6 @@ impl PrimitiveCodec {
             .ok_or(CodecError::NoDatabase { codec: NAME })
     }
 
-    /// Refuses parameters or streams made with another database.
-    fn check_db_param(&self, p: &Params) -> Result<(), CodecError> {
-        let v = p.get("db").copied().unwrap_or(f64::NAN);
-        if v.fract() != 0.0 || !(0.0..=f64::from(u32::MAX)).contains(&v) {
-            return Err(CodecError::Param {
-                codec: NAME,
-                key: "db".into(),
-                value: v,
-                detail: "must be a database fingerprint (an integer in 0..=4294967295)".into(),
-            });
-        }
-        let stream = v as u32;
-        if stream != self.fingerprint {
-            return Err(CodecError::DatabaseMismatch {
-                codec: NAME,
-                stream,
-                given: self.fingerprint,
-            });
-        }
-        Ok(())
-    }
-
-    fn settings(p: &Params) -> Result<Settings, CodecError> {
-        Ok(Settings {
-            t_l: real_param(NAME, p, "t_l", 1e-4, 1.0)?,
-            upper_ratio: real_param(NAME, p, "upper_ratio", 1.0, 10.0)?,
-            smooth: int_param(NAME, p, "smooth", 0, 16)? as usize,
-            step_floor: real_param(NAME, p, "step_floor", 0.0, 4.0)?,
-        })
-    }
-
-    fn threshold(s: &Settings, skeleton: &Skeleton, joint: usize) -> f64 {
-        if skeleton.joints[joint].body_part.is_leg() {
-            s.t_l
-        } else {
-            s.upper_ratio * s.t_l
-        }
-    }
-
     fn primitives_of(&self, name: &str) -> &[Primitive] {
         self.joints.get(name).map_or(&[], Vec::as_slice)
     }
@@ -451,9 +482,8 @@ impl PrimitiveCodec {
         clippy::too_many_lines,
         reason = "one pass over joints, segments and the translation windows"
     )]
-    fn encode_native(&self, clip: &Clip, p: Params) -> Result<Bitstream, CodecError> {
+    fn encode_native(&self, clip: &Clip, s: &PrimitiveSettings) -> Result<Bitstream, CodecError> {
         let db = self.require_db()?;
-        let s = Self::settings(&p)?;
         let qc = to_quaternions(clip);
         let skeleton = &clip.skeleton;
         let mut enc = RangeEncoder::new();
@@ -464,12 +494,7 @@ impl PrimitiveCodec {
         for (k, &j) in qc.joints.iter().enumerate() {
             let prims = self.primitives_of(&skeleton.joints[j].name);
             let axes = rotation_axes(skeleton, j);
-            let check = Check::new(
-                skeleton,
-                &axes,
-                Self::threshold(&s, skeleton, j),
-                s.step_floor,
-            );
+            let check = Check::new(skeleton, &axes, s.threshold(skeleton, j), s.step_floor);
             let track = &qc.rotations[k];
             let mut hold = Quat::IDENTITY;
             let mut prev_step = 0i64;
@@ -567,10 +592,7 @@ impl PrimitiveCodec {
                 start = end;
             }
         }
-        let mut out = p;
-        out.remove("cr");
-        out.insert("db".into(), f64::from(self.fingerprint));
-        header(self, clip, out, enc.finish())
+        header(self, clip, s.to_params(), enc.finish())
     }
 }
 
@@ -687,22 +709,14 @@ impl Codec for PrimitiveCodec {
     }
 
     fn default_params(&self) -> Params {
-        [
-            ("t_l", 0.012),
-            ("upper_ratio", 2.0),
-            ("smooth", 0.0),
-            ("step_floor", 0.5),
-            ("db", f64::from(self.fingerprint)),
-            ("cr", 0.0),
-        ]
-        .into_iter()
-        .map(|(k, v)| (k.to_string(), v))
-        .collect()
+        let mut p = PrimitiveSettings::defaults(self.fingerprint).to_params();
+        p.insert(keys::CR.to_string(), 0.0);
+        p
     }
 
     fn rate_control(&self) -> RateControl {
         RateControl::SearchIncreasing {
-            key: "t_l",
+            key: keys::T_L,
             min: 1e-4,
             max: 1.0,
         }
@@ -711,13 +725,13 @@ impl Codec for PrimitiveCodec {
     fn encode(&self, clip: &Clip, params: &Params) -> Result<Bitstream, CodecError> {
         self.require_db()?;
         let p = merged(self, params)?;
-        self.check_db_param(&p)?;
-        Self::settings(&p)?;
-        let target = p.get("cr").copied().unwrap_or(0.0);
+        let s = PrimitiveSettings::from_params(&p, self.fingerprint)?;
+        // The rate search sets the knob (t_L) itself: the settings are read per encode it runs.
+        let target = p.get(keys::CR).copied().unwrap_or(0.0);
         if target > 0.0 {
             return crate::rate::search(self, clip, &p, target);
         }
-        self.encode_native(clip, p)
+        self.encode_native(clip, &s)
     }
 
     #[expect(
@@ -728,10 +742,10 @@ impl Codec for PrimitiveCodec {
         check_stream(self, stream, skeleton)?;
         let db = self.require_db()?;
         let mut p = self.default_params();
-        p.insert("db".into(), f64::NAN);
+        // A stream must name its database: no default.
+        p.insert(keys::DB.into(), f64::NAN);
         p.extend(stream.params.iter().map(|(k, v)| (k.clone(), *v)));
-        self.check_db_param(&p)?;
-        let s = Self::settings(&p)?;
+        let s = PrimitiveSettings::from_params(&p, self.fingerprint)?;
         let frames = stream.frames as usize;
         let mut dec = RangeDecoder::new(&stream.payload);
         let corrupt = |dec: &RangeDecoder<'_>, detail: &str| CodecError::Payload {
@@ -892,5 +906,44 @@ impl Codec for PrimitiveCodec {
             joints,
             rotations,
         }))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The settings read back what they record, the defaults are the default parameters, and
+    /// a stream of another database is refused before any other key is read.
+    #[test]
+    fn settings_round_trip_through_params() {
+        let c = PrimitiveCodec::without_database();
+        let mut defaults = c.default_params();
+        assert_eq!(defaults.remove(keys::CR), Some(0.0));
+        let s = PrimitiveSettings::from_params(&defaults, 0).unwrap();
+        assert_eq!(s, PrimitiveSettings::defaults(0));
+        assert_eq!(s.to_params(), defaults);
+        let other = PrimitiveSettings {
+            t_l: 0.02,
+            upper_ratio: 3.0,
+            smooth: 4,
+            step_floor: 0.0,
+            db: 0xDEAD_BEEF,
+        };
+        let p = other.to_params();
+        assert_eq!(
+            PrimitiveSettings::from_params(&p, 0xDEAD_BEEF).unwrap(),
+            other
+        );
+        let mut bad = p.clone();
+        bad.insert(keys::T_L.into(), 5.0);
+        assert!(matches!(
+            PrimitiveSettings::from_params(&bad, 1),
+            Err(CodecError::DatabaseMismatch {
+                stream: 0xDEAD_BEEF,
+                given: 1,
+                ..
+            })
+        ));
     }
 }
