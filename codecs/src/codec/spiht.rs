@@ -362,12 +362,93 @@ fn top_plane(c: &[f64]) -> Option<i64> {
     (m > 0.0).then(|| m.log2().floor() as i64)
 }
 
-#[expect(
-    clippy::too_many_lines,
-    clippy::needless_range_loop,
-    reason = "SPIHT's passes as in Said & Pearlman, with node indices"
-)]
+/// Whether any node of `a..b` has children.
+#[inline]
+fn any_has_children(a: usize, b: usize, n0: usize, n: usize) -> bool {
+    (a..b).any(|k| {
+        let (x, y) = children(k, n0, n);
+        x < y
+    })
+}
+
+/// The largest magnitudes below each node, which the encoder's set significance tests read.
+#[derive(Debug, Default)]
+struct Maxima {
+    /// `dmax[j]`: the largest `|c|` among the descendants of `j`.
+    dmax: Vec<f64>,
+    /// `gmax[j]`: the largest `|c|` among the descendants of `j`'s children.
+    gmax: Vec<f64>,
+}
+
+impl Maxima {
+    /// Fills both for the coefficients `c` (approximation band `n0`), leaves first.
+    fn compute(&mut self, c: &[f64], n0: usize) {
+        let n = c.len();
+        let (dmax, gmax) = (&mut self.dmax, &mut self.gmax);
+        dmax.clear();
+        dmax.resize(n, 0.0);
+        gmax.clear();
+        gmax.resize(n, 0.0);
+        for j in (0..n).rev() {
+            let (a, b) = children(j, n0, n);
+            let (mut d, mut g) = (0.0f64, 0.0f64);
+            for k in a..b {
+                d = d.max(c[k].abs()).max(dmax[k]);
+                g = g.max(dmax[k]);
+            }
+            dmax[j] = d;
+            gmax[j] = g;
+        }
+    }
+}
+
+/// SPIHT's three lists (Said & Pearlman), shared by encoder and decoder: insignificant
+/// pixels, significant pixels, insignificant sets (node, type B).
+#[derive(Debug, Default)]
+struct Lists {
+    lip: Vec<usize>,
+    lsp: Vec<usize>,
+    lis: Vec<(usize, bool)>,
+}
+
+impl Lists {
+    /// The initial lists of `n` coefficients with approximation band `n0`: every
+    /// approximation coefficient in the LIP, and as a type-A set in the LIS where it has
+    /// children; the LSP empty.
+    fn init(&mut self, n0: usize, n: usize) {
+        self.lip.clear();
+        self.lsp.clear();
+        self.lis.clear();
+        self.lip.extend(0..n0.min(n));
+        self.lis.extend(
+            (0..n0.min(n))
+                .filter(|&j| children(j, n0, n).0 < children(j, n0, n).1)
+                .map(|j| (j, false)),
+        );
+    }
+}
+
+/// Where the encoder's bits go: 0/1 bytes appended to `out` until it holds `limit`.
+struct BitSink<'a> {
+    out: &'a mut Vec<u8>,
+    limit: usize,
+}
+
+impl BitSink<'_> {
+    /// Appends a bit, or `None` once the budget is spent: the embedded stream ends there.
+    #[inline]
+    fn put(&mut self, b: bool) -> Option<()> {
+        if self.out.len() >= self.limit {
+            return None;
+        }
+        self.out.push(u8::from(b));
+        Some(())
+    }
+}
+
 /// SPIHT encoder for one channel-segment: appends at most `budget` bits (0/1 bytes) to `out`.
+/// Bit planes `nmax` down to `nmax − MAX_PLANES`, each a sorting pass (LIP, then LIS) and a
+/// refinement pass; `None` where the budget ends the stream before the last plane.
 fn spiht_encode(
     c: &[f64],
     n0: usize,
@@ -375,112 +456,111 @@ fn spiht_encode(
     budget: usize,
     out: &mut Vec<u8>,
     scratch: &mut Scratch,
-) {
-    let n = c.len();
+) -> Option<()> {
     let limit = out.len() + budget;
-    // dmax[j]: largest |c| among descendants; gmax[j]: among descendants of the children.
-    let dmax = &mut scratch.dmax;
-    let gmax = &mut scratch.gmax;
-    dmax.clear();
-    dmax.resize(n, 0.0);
-    gmax.clear();
-    gmax.resize(n, 0.0);
-    for j in (0..n).rev() {
-        let (a, b) = children(j, n0, n);
-        let (mut d, mut g) = (0.0f64, 0.0f64);
-        for k in a..b {
-            d = d.max(c[k].abs()).max(dmax[k]);
-            g = g.max(dmax[k]);
-        }
-        dmax[j] = d;
-        gmax[j] = g;
-    }
-    let lip = &mut scratch.lip;
-    let lsp = &mut scratch.lsp;
-    let lis = &mut scratch.lis;
-    lip.clear();
-    lsp.clear();
-    lis.clear();
-    lip.extend(0..n0.min(n));
-    lis.extend(
-        (0..n0.min(n))
-            .filter(|&j| children(j, n0, n).0 < children(j, n0, n).1)
-            .map(|j| (j, false)),
-    );
-    macro_rules! put {
-        ($b:expr) => {
-            if out.len() >= limit {
-                return;
-            }
-            out.push(u8::from($b));
-        };
-    }
+    let Scratch { maxima, lists } = scratch;
+    maxima.compute(c, n0);
+    lists.init(n0, c.len());
+    let sink = &mut BitSink { out, limit };
     for plane in (nmax - MAX_PLANES..=nmax).rev() {
         let t = pow2(plane);
-        let lsp_before = lsp.len();
-        // Sorting pass: LIP.
-        let mut keep = 0;
-        for idx in 0..lip.len() {
-            let i = lip[idx];
-            let sig = c[i].abs() >= t;
-            put!(sig);
-            if sig {
-                put!(c[i] < 0.0);
-                lsp.push(i);
-            } else {
-                lip[keep] = i;
-                keep += 1;
-            }
-        }
-        lip.truncate(keep);
-        // Sorting pass: LIS (entries appended during the pass are processed in it).
-        let mut e = 0;
-        while e < lis.len() {
-            let (j, type_b) = lis[e];
-            if type_b {
-                let sig = gmax[j] >= t;
-                put!(sig);
-                if sig {
-                    let (a, b) = children(j, n0, n);
-                    for k in a..b {
-                        lis.push((k, false));
-                    }
-                    lis[e].0 = usize::MAX;
-                }
-            } else {
-                let sig = dmax[j] >= t;
-                put!(sig);
-                if sig {
-                    let (a, b) = children(j, n0, n);
-                    for k in a..b {
-                        let s = c[k].abs() >= t;
-                        put!(s);
-                        if s {
-                            put!(c[k] < 0.0);
-                            lsp.push(k);
-                        } else {
-                            lip.push(k);
-                        }
-                    }
-                    let has_grandchildren = (a..b).any(|k| {
-                        let (x, y) = children(k, n0, n);
-                        x < y
-                    });
-                    if has_grandchildren {
-                        lis.push((j, true));
-                    }
-                    lis[e].0 = usize::MAX;
-                }
-            }
-            e += 1;
-        }
-        lis.retain(|&(j, _)| j != usize::MAX);
-        // Refinement pass.
-        for &i in &lsp[..lsp_before] {
-            let bit = ((c[i].abs() / t).floor() as u64) & 1 == 1;
-            put!(bit);
+        let lsp_before = lists.lsp.len();
+        encode_lip(c, t, lists, sink)?;
+        encode_lis(c, n0, t, maxima, lists, sink)?;
+        encode_refinement(c, t, &lists.lsp[..lsp_before], sink)?;
+    }
+    Some(())
+}
+
+/// Sorting pass over the LIP at threshold `t`: a significance bit per entry, and the sign of
+/// each newly significant coefficient, which moves to the LSP.
+#[inline]
+fn encode_lip(c: &[f64], t: f64, lists: &mut Lists, sink: &mut BitSink<'_>) -> Option<()> {
+    let Lists { lip, lsp, .. } = lists;
+    let mut keep = 0;
+    for idx in 0..lip.len() {
+        let i = lip[idx];
+        let sig = c[i].abs() >= t;
+        sink.put(sig)?;
+        if sig {
+            sink.put(c[i] < 0.0)?;
+            lsp.push(i);
+        } else {
+            lip[keep] = i;
+            keep += 1;
         }
     }
+    lip.truncate(keep);
+    Some(())
+}
+
+/// Sorting pass over the LIS at threshold `t` (entries appended during the pass are
+/// processed in it): a significant type-A set codes its children and becomes a type-B set
+/// where they have children; a significant type-B set splits into its children's sets.
+#[inline]
+#[expect(
+    clippy::needless_range_loop,
+    reason = "a node's children are an index range"
+)]
+fn encode_lis(
+    c: &[f64],
+    n0: usize,
+    t: f64,
+    maxima: &Maxima,
+    lists: &mut Lists,
+    sink: &mut BitSink<'_>,
+) -> Option<()> {
+    let n = c.len();
+    let Lists { lip, lsp, lis } = lists;
+    let mut e = 0;
+    while e < lis.len() {
+        let (j, type_b) = lis[e];
+        if type_b {
+            let sig = maxima.gmax[j] >= t;
+            sink.put(sig)?;
+            if sig {
+                let (a, b) = children(j, n0, n);
+                for k in a..b {
+                    lis.push((k, false));
+                }
+                lis[e].0 = usize::MAX;
+            }
+        } else {
+            let sig = maxima.dmax[j] >= t;
+            sink.put(sig)?;
+            if sig {
+                let (a, b) = children(j, n0, n);
+                for k in a..b {
+                    let s = c[k].abs() >= t;
+                    sink.put(s)?;
+                    if s {
+                        sink.put(c[k] < 0.0)?;
+                        lsp.push(k);
+                    } else {
+                        lip.push(k);
+                    }
+                }
+                if any_has_children(a, b, n0, n) {
+                    lis.push((j, true));
+                }
+                lis[e].0 = usize::MAX;
+            }
+        }
+        e += 1;
+    }
+    lis.retain(|&(j, _)| j != usize::MAX);
+    Some(())
+}
+
+/// Refinement pass at threshold `t`: bit `plane` of every coefficient that was significant
+/// before this plane (`lsp`).
+#[inline]
+fn encode_refinement(c: &[f64], t: f64, lsp: &[usize], sink: &mut BitSink<'_>) -> Option<()> {
+    for &i in lsp {
+        let bit = ((c[i].abs() / t).floor() as u64) & 1 == 1;
+        sink.put(bit)?;
+    }
+    Some(())
 }
 
 /// `2^plane`, exactly, built from the exponent bits in the normal range (`exp2` is a libm
@@ -568,98 +648,132 @@ impl PackedBits {
     }
 }
 
-#[expect(
-    clippy::needless_range_loop,
-    reason = "SPIHT's passes with node indices, mirroring the encoder"
-)]
-/// SPIHT decoder: reads from `bits` until it runs out, reconstructs into `rec` (zeroed first).
-fn spiht_decode(bits: &PackedBits, n0: usize, nmax: i64, rec: &mut [f64], scratch: &mut Scratch) {
-    let n = rec.len();
-    rec.fill(0.0);
-    let mut pos = 0usize;
-    let lip = &mut scratch.lip;
-    let lsp = &mut scratch.lsp;
-    let lis = &mut scratch.lis;
-    lip.clear();
-    lsp.clear();
-    lis.clear();
-    lip.extend(0..n0.min(n));
-    lis.extend(
-        (0..n0.min(n))
-            .filter(|&j| children(j, n0, n).0 < children(j, n0, n).1)
-            .map(|j| (j, false)),
-    );
-    macro_rules! get {
-        () => {{
-            let Some(b) = bits.get(pos) else { return };
-            pos += 1;
-            b
-        }};
+/// Where the decoder's bits come from: `bits` from `pos` on.
+struct BitSource<'a> {
+    bits: &'a PackedBits,
+    pos: usize,
+}
+
+impl BitSource<'_> {
+    /// The next bit, or `None` where the stream ends.
+    #[inline]
+    fn get(&mut self) -> Option<bool> {
+        let b = self.bits.get(self.pos)?;
+        self.pos += 1;
+        Some(b)
     }
+}
+
+/// SPIHT decoder: reads from `bits` until it runs out, reconstructs into `rec` (zeroed first).
+/// It mirrors [`spiht_encode`] step by step; `None` where the bits end before the last plane.
+fn spiht_decode(
+    bits: &PackedBits,
+    n0: usize,
+    nmax: i64,
+    rec: &mut [f64],
+    scratch: &mut Scratch,
+) -> Option<()> {
+    rec.fill(0.0);
+    let lists = &mut scratch.lists;
+    lists.init(n0, rec.len());
+    let src = &mut BitSource { bits, pos: 0 };
     for plane in (nmax - MAX_PLANES..=nmax).rev() {
         let t = pow2(plane);
-        let lsp_before = lsp.len();
-        let mut keep = 0;
-        for idx in 0..lip.len() {
-            let i = lip[idx];
-            if get!() {
-                let neg = get!();
-                rec[i] = if neg { -1.5 * t } else { 1.5 * t };
-                lsp.push(i);
-            } else {
-                lip[keep] = i;
-                keep += 1;
-            }
+        let lsp_before = lists.lsp.len();
+        decode_lip(rec, t, lists, src)?;
+        decode_lis(rec, n0, t, lists, src)?;
+        decode_refinement(rec, t, &lists.lsp[..lsp_before], src)?;
+    }
+    Some(())
+}
+
+/// Mirror of [`encode_lip`]: a coefficient found significant at `t` is set to `±1.5·t`.
+#[inline]
+fn decode_lip(rec: &mut [f64], t: f64, lists: &mut Lists, src: &mut BitSource<'_>) -> Option<()> {
+    let Lists { lip, lsp, .. } = lists;
+    let mut keep = 0;
+    for idx in 0..lip.len() {
+        let i = lip[idx];
+        if src.get()? {
+            let neg = src.get()?;
+            rec[i] = if neg { -1.5 * t } else { 1.5 * t };
+            lsp.push(i);
+        } else {
+            lip[keep] = i;
+            keep += 1;
         }
-        lip.truncate(keep);
-        let mut e = 0;
-        while e < lis.len() {
-            let (j, type_b) = lis[e];
-            if type_b {
-                if get!() {
-                    let (a, b) = children(j, n0, n);
-                    for k in a..b {
-                        lis.push((k, false));
-                    }
-                    lis[e].0 = usize::MAX;
-                }
-            } else if get!() {
+    }
+    lip.truncate(keep);
+    Some(())
+}
+
+/// Mirror of [`encode_lis`].
+#[inline]
+#[expect(
+    clippy::needless_range_loop,
+    reason = "a node's children are an index range"
+)]
+fn decode_lis(
+    rec: &mut [f64],
+    n0: usize,
+    t: f64,
+    lists: &mut Lists,
+    src: &mut BitSource<'_>,
+) -> Option<()> {
+    let n = rec.len();
+    let Lists { lip, lsp, lis } = lists;
+    let mut e = 0;
+    while e < lis.len() {
+        let (j, type_b) = lis[e];
+        if type_b {
+            if src.get()? {
                 let (a, b) = children(j, n0, n);
                 for k in a..b {
-                    if get!() {
-                        let neg = get!();
-                        rec[k] = if neg { -1.5 * t } else { 1.5 * t };
-                        lsp.push(k);
-                    } else {
-                        lip.push(k);
-                    }
-                }
-                let has_grandchildren = (a..b).any(|k| {
-                    let (x, y) = children(k, n0, n);
-                    x < y
-                });
-                if has_grandchildren {
-                    lis.push((j, true));
+                    lis.push((k, false));
                 }
                 lis[e].0 = usize::MAX;
             }
-            e += 1;
+        } else if src.get()? {
+            let (a, b) = children(j, n0, n);
+            for k in a..b {
+                if src.get()? {
+                    let neg = src.get()?;
+                    rec[k] = if neg { -1.5 * t } else { 1.5 * t };
+                    lsp.push(k);
+                } else {
+                    lip.push(k);
+                }
+            }
+            if any_has_children(a, b, n0, n) {
+                lis.push((j, true));
+            }
+            lis[e].0 = usize::MAX;
         }
-        lis.retain(|&(j, _)| j != usize::MAX);
-        // Refinement pass: one bit per coefficient found significant in an earlier plane
-        // moves its magnitude half a step up or down (most of a near-lossless stream's bits,
-        // so the bits are read straight from the words and the update has no branch).
-        let half = 0.5 * t;
-        let count = lsp_before.min(bits.len.saturating_sub(pos));
-        for (k, &i) in lsp[..count].iter().enumerate() {
-            let up = bits.bit(pos + k);
-            rec[i] += (2.0 * up as f64 - 1.0) * half.copysign(rec[i]);
-        }
-        pos += count;
-        if count < lsp_before {
-            return;
-        }
+        e += 1;
     }
+    lis.retain(|&(j, _)| j != usize::MAX);
+    Some(())
+}
+
+/// Mirror of [`encode_refinement`]: one bit per coefficient found significant in an earlier
+/// plane moves its magnitude half a step up or down (most of a near-lossless stream's bits,
+/// so the bits are read straight from the words and the update has no branch).
+#[inline]
+fn decode_refinement(
+    rec: &mut [f64],
+    t: f64,
+    lsp: &[usize],
+    src: &mut BitSource<'_>,
+) -> Option<()> {
+    let half = 0.5 * t;
+    let (bits, pos) = (src.bits, src.pos);
+    let count = lsp.len().min(bits.len.saturating_sub(pos));
+    for (k, &i) in lsp[..count].iter().enumerate() {
+        let up = bits.bit(pos + k);
+        rec[i] += (2.0 * up as f64 - 1.0) * half.copysign(rec[i]);
+    }
+    src.pos = pos + count;
+    (count == lsp.len()).then_some(())
 }
 
 /// One segment as read from the payload: where it lies, every channel's side information,
@@ -690,13 +804,11 @@ impl Segment<'_> {
     }
 }
 
+/// Buffers of the SPIHT passes, reused from one channel-segment to the next.
 #[derive(Debug, Default)]
 struct Scratch {
-    dmax: Vec<f64>,
-    gmax: Vec<f64>,
-    lip: Vec<usize>,
-    lsp: Vec<usize>,
-    lis: Vec<(usize, bool)>,
+    maxima: Maxima,
+    lists: Lists,
 }
 
 /// Side information of one channel-segment.
@@ -758,7 +870,8 @@ impl SpihtCodec {
                     for &(from, count) in &seg.runs[c * LAYERS..(c + 1) * LAYERS] {
                         bits.append_run(seg.bytes, from, count);
                     }
-                    spiht_decode(&bits, seg.n0, nm, &mut rec, &mut scratch);
+                    // `None`: the stream ends before its last plane, as a cut one does.
+                    let _ = spiht_decode(&bits, seg.n0, nm, &mut rec, &mut scratch);
                 }
                 t.inverse(&rec, len, seg.levels, &mut out)
                     .map_err(|e| self.err(seg.offset, &e.to_string()))?;
@@ -883,7 +996,8 @@ impl SpihtCodec {
             for c in 0..n_ch {
                 streams[c].clear();
                 if let Some(nm) = sides[k][c].nmax {
-                    spiht_encode(
+                    // `None`: the budget ended the stream early, as it should at any rate.
+                    let _ = spiht_encode(
                         &coeffs[k][c],
                         n0,
                         nm,
