@@ -47,7 +47,7 @@ use super::{
     keys, merged, params_of, real_param,
 };
 use crate::bitstream::Bitstream;
-use crate::entropy::{BitModel, IntModel, RangeDecoder, RangeEncoder, UintModel};
+use crate::entropy::{BitModel, EntropyError, IntModel, RangeDecoder, RangeEncoder, UintModel};
 use crate::wavelet::{Transform, Wavelet, band_lengths};
 use motion::clip::{BodyPart, Clip, Skeleton};
 
@@ -819,22 +819,140 @@ struct Side {
     energy: u32,
 }
 
-struct SideModels {
+/// The side information's models and, per channel, the previous segment's mean and top
+/// plane that its codes are relative to. Encoder and decoder step through it alike.
+struct SideCoder {
     mean: IntModel,
     empty: BitModel,
     nmax: IntModel,
     energy: UintModel,
+    prev_mean: Vec<i64>,
+    prev_nmax: Vec<i64>,
 }
 
-impl SideModels {
-    fn new() -> SideModels {
-        SideModels {
+impl SideCoder {
+    fn new(channels: usize) -> SideCoder {
+        SideCoder {
             mean: IntModel::default(),
             empty: BitModel::default(),
             nmax: IntModel::default(),
             energy: UintModel::default(),
+            prev_mean: vec![0; channels],
+            prev_nmax: vec![0; channels],
         }
     }
+
+    /// Codes one segment's side information, channel after channel: the mean (change), the
+    /// empty flag, and for a channel with coefficients its top plane (change) and energy code.
+    fn encode(&mut self, enc: &mut RangeEncoder, sides: &[Side]) -> Result<(), EntropyError> {
+        for (c, side) in sides.iter().enumerate() {
+            self.mean.encode(enc, side.mean_q - self.prev_mean[c])?;
+            self.prev_mean[c] = side.mean_q;
+            enc.bit(&mut self.empty, side.nmax.is_none());
+            if let Some(nm) = side.nmax {
+                self.nmax.encode(enc, nm - self.prev_nmax[c])?;
+                self.prev_nmax[c] = nm;
+                self.energy.encode(enc, side.energy)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Mirror of [`SideCoder::encode`]: reads one segment's side information into `sides`,
+    /// each value checked against its range; the error names the field.
+    fn decode(
+        &mut self,
+        dec: &mut RangeDecoder<'_>,
+        sides: &mut [Side],
+    ) -> Result<(), &'static str> {
+        for (c, side) in sides.iter_mut().enumerate() {
+            let dm = self.mean.decode(dec).ok_or("mean")?;
+            let mean_q = self.prev_mean[c].checked_add(dm).ok_or("mean")?;
+            if mean_q.unsigned_abs() > 1 << 40 {
+                return Err("mean out of range");
+            }
+            self.prev_mean[c] = mean_q;
+            let empty = dec.bit(&mut self.empty);
+            let (nmax, energy) = if empty {
+                (None, ENERGY_ZERO)
+            } else {
+                let nm = self.prev_nmax[c].checked_add(self.nmax.decode(dec).ok_or("n_max")?);
+                let nm = nm
+                    .filter(|v| (-200..=200).contains(v))
+                    .ok_or("n_max out of range")?;
+                self.prev_nmax[c] = nm;
+                let e = self.energy.decode(dec).ok_or("energy")?;
+                if e > ENERGY_ZERO {
+                    return Err("energy code");
+                }
+                (Some(nm), e)
+            };
+            *side = Side {
+                mean_q,
+                nmax,
+                energy,
+            };
+        }
+        Ok(())
+    }
+}
+
+/// A channel-segment `x` minus its mean, the mean quantized to [`MEAN_STEP`] (sent as side
+/// information), and the wavelet coefficients of the rest at `levels`.
+fn centred_transform(
+    t: &mut Transform,
+    x: &[f64],
+    levels: usize,
+    centred: &mut Vec<f64>,
+) -> (i64, Vec<f64>) {
+    let mean = x.iter().sum::<f64>() / x.len() as f64;
+    let mean_q = (mean / MEAN_STEP).round() as i64;
+    let mq = mean_q as f64 * MEAN_STEP;
+    centred.clear();
+    centred.extend(x.iter().map(|v| v - mq));
+    let mut co = Vec::new();
+    t.forward(centred, levels, &mut co);
+    (mean_q, co)
+}
+
+/// A segment's bytes from its channels' embedded streams (`streams[c]` holds `budgets[c]`
+/// bits as 0/1 bytes): layer 0 of every channel, then layer 1, ...; and its bit count.
+fn interleave_layers(streams: &[Vec<u8>], budgets: &[usize]) -> (usize, Vec<u8>) {
+    let total: usize = budgets.iter().sum();
+    let mut bytes = vec![0u8; total.div_ceil(8)];
+    let mut w = 0usize;
+    for r in 0..LAYERS {
+        for (stream, &budget) in streams.iter().zip(budgets) {
+            for &b in &stream[layer_bound(budget, r)..layer_bound(budget, r + 1)] {
+                bytes[w / 8] |= b << (7 - w % 8);
+                w += 1;
+            }
+        }
+    }
+    (total, bytes)
+}
+
+/// Mirror of [`interleave_layers`]: where channel `c`'s layer `r` lies in a segment of
+/// `present` bits, as `runs[c * LAYERS + r] = (first bit, bits present)`.
+fn layer_runs(budgets: &[usize], present: usize) -> Vec<(usize, usize)> {
+    let mut runs = vec![(0, 0); budgets.len() * LAYERS];
+    let mut from = 0usize;
+    for r in 0..LAYERS {
+        for (c, &b) in budgets.iter().enumerate() {
+            let n_bits = layer_bound(b, r + 1) - layer_bound(b, r);
+            runs[c * LAYERS + r] = (from, n_bits.min(present.saturating_sub(from)));
+            from += n_bits;
+        }
+    }
+    runs
+}
+
+/// What pass 1 of the encoder finds: the range-coded side information, and per segment and
+/// channel the coefficients and side information.
+struct SideInformation {
+    bytes: Vec<u8>,
+    coeffs: Vec<Vec<Vec<f64>>>,
+    sides: Vec<Vec<Side>>,
 }
 
 fn segments(frames: usize, window: usize) -> impl Iterator<Item = (usize, usize)> {
@@ -892,29 +1010,40 @@ impl SpihtCodec {
         }
     }
 
-    #[expect(
-        clippy::too_many_lines,
-        reason = "pass 1 (side information) and pass 2 (budgets, bits) share their state"
-    )]
+    /// Encodes with settings `s`: pass 1 (transform and side information), the budget,
+    /// pass 2 (every segment's embedded streams, layer by layer).
     fn encode_native(self, clip: &Clip, s: &SpihtSettings) -> Result<Bitstream, CodecError> {
+        let (data, flags) = unwrapped_matrix(clip);
+        let side = self.side_information(clip, s, &data, &flags)?;
+        let avail_bits = self.available_bits(clip, s, side.bytes.len(), side.coeffs.len())?;
+        let mut payload = PAYLOAD_TAG.to_vec();
+        payload.extend_from_slice(&(side.bytes.len() as u32).to_le_bytes());
+        payload.extend_from_slice(&side.bytes);
+        self.code_segments(clip, s, &side, avail_bits, &mut payload);
+        header(&self, clip, s.to_params(), payload)
+    }
+
+    /// Pass 1: the unwrap flags, then per segment every channel's centred transform and side
+    /// information (mean, top plane, energy code), range coded.
+    fn side_information(
+        self,
+        clip: &Clip,
+        s: &SpihtSettings,
+        data: &[f64],
+        flags: &[bool],
+    ) -> Result<SideInformation, CodecError> {
         let frames = clip.frames();
         let n_ch = clip.channel_count();
-        let (data, flags) = unwrapped_matrix(clip);
-        let factors = static_factors(&clip.skeleton, s);
         let sens = sensitivities(&clip.skeleton);
         let mut t = Transform::new(s.wavelet);
-
-        // Pass 1: transform, side information.
         let mut enc = RangeEncoder::new();
-        let mut sm = SideModels::new();
         let mut flag_model = BitModel::default();
-        for &f in &flags {
+        for &f in flags {
             enc.bit(&mut flag_model, f);
         }
+        let mut coder = SideCoder::new(n_ch);
         let mut coeffs: Vec<Vec<Vec<f64>>> = Vec::new();
         let mut sides: Vec<Vec<Side>> = Vec::new();
-        let mut prev_mean = vec![0i64; n_ch];
-        let mut prev_nmax = vec![0i64; n_ch];
         let mut centred = Vec::new();
         for (start, len) in segments(frames, s.window) {
             let levels = s.wavelet.max_level(len);
@@ -923,13 +1052,7 @@ impl SpihtCodec {
             let mut stats = Vec::with_capacity(n_ch);
             for c in 0..n_ch {
                 let x = &data[c * frames + start..c * frames + start + len];
-                let mean = x.iter().sum::<f64>() / len as f64;
-                let mean_q = (mean / MEAN_STEP).round() as i64;
-                let mq = mean_q as f64 * MEAN_STEP;
-                centred.clear();
-                centred.extend(x.iter().map(|v| v - mq));
-                let mut co = Vec::new();
-                t.forward(&centred, levels, &mut co);
+                let (mean_q, co) = centred_transform(&mut t, x, levels, &mut centred);
                 stats.push(diff_stats(x));
                 seg_c.push(co);
                 seg_s.push(Side {
@@ -943,90 +1066,85 @@ impl SpihtCodec {
             } else {
                 energy_codes(&stats, len)
             };
-            for c in 0..n_ch {
-                let nmax = top_plane(&seg_c[c]);
-                let energy = codes[c];
-                let mean_q = seg_s[c].mean_q;
-                let e = |e: crate::entropy::EntropyError| self.err(0, &e.to_string());
-                sm.mean.encode(&mut enc, mean_q - prev_mean[c]).map_err(e)?;
-                prev_mean[c] = mean_q;
-                enc.bit(&mut sm.empty, nmax.is_none());
-                if let Some(nm) = nmax {
-                    sm.nmax.encode(&mut enc, nm - prev_nmax[c]).map_err(e)?;
-                    prev_nmax[c] = nm;
-                    sm.energy.encode(&mut enc, energy).map_err(e)?;
-                }
-                seg_s[c] = Side {
-                    mean_q,
-                    nmax,
-                    energy,
-                };
+            for ((side, co), &energy) in seg_s.iter_mut().zip(&seg_c).zip(&codes) {
+                side.nmax = top_plane(co);
+                side.energy = energy;
             }
+            coder
+                .encode(&mut enc, &seg_s)
+                .map_err(|e| self.err(0, &e.to_string()))?;
             coeffs.push(seg_c);
             sides.push(seg_s);
         }
-        let side_bytes = enc.finish();
+        Ok(SideInformation {
+            bytes: enc.finish(),
+            coeffs,
+            sides,
+        })
+    }
 
-        // Budget: the whole container at the target CR.
+    /// The bits the segments may hold: the whole container at the target CR, less the
+    /// header, the side information and the segments' sizes.
+    fn available_bits(
+        self,
+        clip: &Clip,
+        s: &SpihtSettings,
+        side_bytes: usize,
+        n_seg: usize,
+    ) -> Result<f64, CodecError> {
+        let values = clip.channel_count() * clip.frames();
         let container = header(&self, clip, s.to_params(), Vec::new())?.byte_len();
-        let n_seg = coeffs.len();
-        let target_bytes = 4.0 * (n_ch * frames) as f64 / s.cr;
-        let fixed = container + PAYLOAD_TAG.len() + 4 + side_bytes.len() + 8 * n_seg;
+        let target_bytes = 4.0 * values as f64 / s.cr;
+        let fixed = container + PAYLOAD_TAG.len() + 4 + side_bytes + 8 * n_seg;
         let avail_bits = ((target_bytes - fixed as f64) * 8.0).floor();
         if avail_bits < 0.0 {
             return Err(CodecError::Rate {
                 codec: self.name(),
                 target: s.cr,
-                closest: 4.0 * (n_ch * frames) as f64 / fixed as f64,
+                closest: 4.0 * values as f64 / fixed as f64,
             });
         }
-        let mut payload = PAYLOAD_TAG.to_vec();
-        payload.extend_from_slice(&(side_bytes.len() as u32).to_le_bytes());
-        payload.extend_from_slice(&side_bytes);
+        Ok(avail_bits)
+    }
+
+    /// Pass 2: per segment its budget (whole bytes, so that the CR is exact up to rounding
+    /// per segment), every channel's embedded stream cut at its share (eq. 6.1), and the bits
+    /// layer by layer, appended to `payload`.
+    fn code_segments(
+        self,
+        clip: &Clip,
+        s: &SpihtSettings,
+        side: &SideInformation,
+        avail_bits: f64,
+        payload: &mut Vec<u8>,
+    ) {
+        let frames = clip.frames();
+        let factors = static_factors(&clip.skeleton, s);
         let mut scratch = Scratch::default();
-        let mut streams: Vec<Vec<u8>> = vec![Vec::new(); n_ch];
-        // Segment budgets whole bytes, so that the CR is exact up to rounding per segment.
+        let mut streams: Vec<Vec<u8>> = vec![Vec::new(); clip.channel_count()];
         let mut used_bits = 0usize;
         for (k, (start, len)) in segments(frames, s.window).enumerate() {
             let end_bits = ((avail_bits * (start + len) as f64 / frames as f64) as usize) / 8 * 8;
             let seg_budget = end_bits.saturating_sub(used_bits);
             let levels = s.wavelet.max_level(len);
             let n0 = band_lengths(len, levels)[0];
-            let budgets = allocate(&factors, &sides[k], self.perceptual, s.position, seg_budget);
-            for c in 0..n_ch {
-                streams[c].clear();
-                if let Some(nm) = sides[k][c].nmax {
+            let sides = &side.sides[k];
+            let budgets = allocate(&factors, sides, self.perceptual, s.position, seg_budget);
+            for (c, stream) in streams.iter_mut().enumerate() {
+                stream.clear();
+                if let Some(nm) = sides[c].nmax {
                     // `None`: the budget ended the stream early, as it should at any rate.
-                    let _ = spiht_encode(
-                        &coeffs[k][c],
-                        n0,
-                        nm,
-                        budgets[c],
-                        &mut streams[c],
-                        &mut scratch,
-                    );
+                    let _ =
+                        spiht_encode(&side.coeffs[k][c], n0, nm, budgets[c], stream, &mut scratch);
                 }
-                streams[c].resize(budgets[c], 0); // pad a stream that finished early
+                stream.resize(budgets[c], 0); // pad a stream that finished early
             }
-            let total: usize = budgets.iter().sum();
+            let (total, bytes) = interleave_layers(&streams, &budgets);
             used_bits += total.div_ceil(8) * 8;
-            let mut bytes = vec![0u8; total.div_ceil(8)];
-            let mut w = 0usize;
-            for r in 0..LAYERS {
-                for c in 0..n_ch {
-                    for &b in
-                        &streams[c][layer_bound(budgets[c], r)..layer_bound(budgets[c], r + 1)]
-                    {
-                        bytes[w / 8] |= b << (7 - w % 8);
-                        w += 1;
-                    }
-                }
-            }
             payload.extend_from_slice(&(seg_budget as u32).to_le_bytes());
             payload.extend_from_slice(&(total as u32).to_le_bytes());
             payload.extend_from_slice(&bytes);
         }
-        header(&self, clip, s.to_params(), payload)
     }
 }
 
@@ -1070,8 +1188,10 @@ impl Codec for SpihtCodec {
 }
 
 impl SpihtCodec {
-    /// Decodes `stream`, its channels shared by two threads when `threads` is set.
-    #[expect(clippy::too_many_lines, reason = "mirrors the encoder step by step")]
+    /// Decodes `stream`, its channels shared by two threads when `threads` is set. The steps
+    /// mirror the encoder's: side information and segment layout ([`SpihtCodec::read_payload`]
+    /// for [`SpihtCodec::side_information`] and [`SpihtCodec::code_segments`]), then every
+    /// channel's embedded streams ([`SpihtCodec::reconstruct_all`]).
     fn decode_channels(
         self,
         stream: &Bitstream,
@@ -1086,23 +1206,44 @@ impl SpihtCodec {
         let n_ch = stream.channels as usize;
         let factors = static_factors(skeleton, &s);
         let pl = untagged(self.name(), &stream.payload)?;
-        let read_u32 = |at: usize| -> Result<u32, CodecError> {
-            pl.get(at..at + 4)
-                .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-                .ok_or_else(|| self.err(at, "truncated"))
-        };
-        let side_len = read_u32(0)? as usize;
+        let (flags, segs) = self.read_payload(pl, &s, &factors, frames, n_ch)?;
+        let mut data = vec![0.0; n_ch * frames];
+        self.reconstruct_all(s.wavelet, &segs, &mut data, frames, n_ch, threads)?;
+        wrap_flagged(&mut data, frames, &flags);
+        Ok(Clip::new(
+            skeleton.clone(),
+            stream.frame_rate_hz,
+            frames,
+            data,
+        )?)
+    }
+
+    /// The `u32` at byte `at` of the payload.
+    fn u32_at(self, pl: &[u8], at: usize) -> Result<u32, CodecError> {
+        pl.get(at..at + 4)
+            .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+            .ok_or_else(|| self.err(at, "truncated"))
+    }
+
+    /// The untagged payload read up to its end: the unwrap flags and every segment, its side
+    /// information (mirror of pass 1) and where its channels' layers lie (mirror of pass 2).
+    fn read_payload<'a>(
+        self,
+        pl: &'a [u8],
+        s: &SpihtSettings,
+        factors: &[f64],
+        frames: usize,
+        n_ch: usize,
+    ) -> Result<(Vec<bool>, Vec<Segment<'a>>), CodecError> {
+        let side_len = self.u32_at(pl, 0)? as usize;
         let side = pl
             .get(4..4 + side_len)
             .ok_or_else(|| self.err(0, "side information truncated"))?;
         let mut pos = 4 + side_len;
         let mut dec = RangeDecoder::new(side);
-        let mut sm = SideModels::new();
         let mut flag_model = BitModel::default();
         let flags: Vec<bool> = (0..n_ch).map(|_| dec.bit(&mut flag_model)).collect();
-        let mut prev_mean = vec![0i64; n_ch];
-        let mut prev_nmax = vec![0i64; n_ch];
-        let mut data = vec![0.0; n_ch * frames];
+        let mut coder = SideCoder::new(n_ch);
         let mut segs: Vec<Segment> = Vec::new();
         let mut sides = vec![
             Side {
@@ -1112,87 +1253,76 @@ impl SpihtCodec {
             };
             n_ch
         ];
-        for (start, len) in segments(frames, s.window) {
-            for c in 0..n_ch {
-                let bad = |what: &str| self.err(4, what);
-                let dm = sm.mean.decode(&mut dec).ok_or_else(|| bad("mean"))?;
-                let mean_q = prev_mean[c].checked_add(dm).ok_or_else(|| bad("mean"))?;
-                if mean_q.unsigned_abs() > 1 << 40 {
-                    return Err(bad("mean out of range"));
-                }
-                prev_mean[c] = mean_q;
-                let empty = dec.bit(&mut sm.empty);
-                let (nmax, energy) = if empty {
-                    (None, ENERGY_ZERO)
-                } else {
-                    let nm = prev_nmax[c]
-                        .checked_add(sm.nmax.decode(&mut dec).ok_or_else(|| bad("n_max"))?);
-                    let nm = nm
-                        .filter(|v| (-200..=200).contains(v))
-                        .ok_or_else(|| bad("n_max out of range"))?;
-                    prev_nmax[c] = nm;
-                    let e = sm.energy.decode(&mut dec).ok_or_else(|| bad("energy"))?;
-                    if e > ENERGY_ZERO {
-                        return Err(bad("energy code"));
-                    }
-                    (Some(nm), e)
-                };
-                sides[c] = Side {
-                    mean_q,
-                    nmax,
-                    energy,
-                };
-            }
+        for span in segments(frames, s.window) {
+            coder
+                .decode(&mut dec, &mut sides)
+                .map_err(|what| self.err(4, what))?;
             if dec.overrun() > 0 {
                 return Err(self.err(4 + side_len, "side information ends early"));
             }
-            let seg_budget = read_u32(pos)? as usize;
-            let present = read_u32(pos + 4)? as usize;
-            pos += 8;
-            // A segment never holds more than 512 bits per value (CR ≥ 0.1 caps it at 320).
-            if seg_budget > len * n_ch * 512 {
-                return Err(self.err(pos - 8, "segment budget beyond any rate"));
-            }
-            let budgets = allocate(&factors, &sides, self.perceptual, s.position, seg_budget);
-            let total: usize = budgets.iter().sum();
-            if present > total {
-                return Err(self.err(pos - 4, "more bits than the budget"));
-            }
-            let bytes = pl
-                .get(pos..pos + present.div_ceil(8))
-                .ok_or_else(|| self.err(pos, "segment truncated"))?;
-            pos += present.div_ceil(8);
-            // Layer r holds every channel's r-th run, channel after channel.
-            let mut runs = vec![(0, 0); n_ch * LAYERS];
-            let mut from = 0usize;
-            for r in 0..LAYERS {
-                for (c, &b) in budgets.iter().enumerate() {
-                    let n_bits = layer_bound(b, r + 1) - layer_bound(b, r);
-                    runs[c * LAYERS + r] = (from, n_bits.min(present.saturating_sub(from)));
-                    from += n_bits;
-                }
-            }
-            let levels = s.wavelet.max_level(len);
-            let lens = band_lengths(len, levels);
-            segs.push(Segment {
-                start,
-                len,
-                levels,
-                n0: lens[0],
-                n_coef: lens.iter().sum(),
-                offset: pos - present.div_ceil(8),
-                sides: sides.clone(),
-                bytes,
-                runs,
-            });
+            segs.push(self.read_segment(pl, &mut pos, span, s, factors, &sides)?);
         }
         if pos != pl.len() {
             return Err(self.err(pos, "trailing bytes in payload"));
         }
-        // Each channel's segments decode on their own. One thread, or two with `threads`, take
-        // channels from a queue, those with the most bits first: a channel's cost is not
-        // proportional to its bits (a stream past its last bit plane ends in padding), so a
-        // fixed split leaves one thread idle.
+        Ok((flags, segs))
+    }
+
+    /// The segment `(start, len)` at byte `*pos` (moved past it): its budget and bit count,
+    /// checked against the rate and its channels' shares of the budget, and its bits.
+    fn read_segment<'a>(
+        self,
+        pl: &'a [u8],
+        pos: &mut usize,
+        (start, len): (usize, usize),
+        s: &SpihtSettings,
+        factors: &[f64],
+        sides: &[Side],
+    ) -> Result<Segment<'a>, CodecError> {
+        let seg_budget = self.u32_at(pl, *pos)? as usize;
+        let present = self.u32_at(pl, *pos + 4)? as usize;
+        *pos += 8;
+        // A segment never holds more than 512 bits per value (CR ≥ 0.1 caps it at 320).
+        if seg_budget > len * sides.len() * 512 {
+            return Err(self.err(*pos - 8, "segment budget beyond any rate"));
+        }
+        let budgets = allocate(factors, sides, self.perceptual, s.position, seg_budget);
+        let total: usize = budgets.iter().sum();
+        if present > total {
+            return Err(self.err(*pos - 4, "more bits than the budget"));
+        }
+        let bytes = pl
+            .get(*pos..*pos + present.div_ceil(8))
+            .ok_or_else(|| self.err(*pos, "segment truncated"))?;
+        *pos += present.div_ceil(8);
+        let levels = s.wavelet.max_level(len);
+        let lens = band_lengths(len, levels);
+        Ok(Segment {
+            start,
+            len,
+            levels,
+            n0: lens[0],
+            n_coef: lens.iter().sum(),
+            offset: *pos - present.div_ceil(8),
+            sides: sides.to_vec(),
+            bytes,
+            runs: layer_runs(&budgets, present),
+        })
+    }
+
+    /// Every channel's rows of `data` from the segments. Each channel's segments decode on
+    /// their own. One thread, or two with `threads`, take channels from a queue, those with
+    /// the most bits first: a channel's cost is not proportional to its bits (a stream past
+    /// its last bit plane ends in padding), so a fixed split leaves one thread idle.
+    fn reconstruct_all(
+        self,
+        wavelet: Wavelet,
+        segs: &[Segment<'_>],
+        data: &mut [f64],
+        frames: usize,
+        n_ch: usize,
+        threads: bool,
+    ) -> Result<(), CodecError> {
         let mut queue: Vec<(usize, &mut [f64])> =
             data.chunks_mut(frames.max(1)).enumerate().collect();
         let bits: Vec<usize> = (0..n_ch)
@@ -1200,7 +1330,7 @@ impl SpihtCodec {
             .collect();
         queue.sort_by_key(|&(c, _)| bits[c]);
         let queue = std::sync::Mutex::new(queue);
-        let rebuild = || self.reconstruct(s.wavelet, &segs, &queue);
+        let rebuild = || self.reconstruct(wavelet, segs, &queue);
         if threads {
             std::thread::scope(|scope| {
                 let other = scope.spawn(rebuild);
@@ -1209,17 +1339,10 @@ impl SpihtCodec {
                     .join()
                     .unwrap_or_else(|_| Err(self.err(0, "a decoder thread stopped unexpectedly")));
                 mine.and(theirs)
-            })?;
+            })
         } else {
-            rebuild()?;
+            rebuild()
         }
-        wrap_flagged(&mut data, frames, &flags);
-        Ok(Clip::new(
-            skeleton.clone(),
-            stream.frame_rate_hz,
-            frames,
-            data,
-        )?)
     }
 }
 
