@@ -22,7 +22,7 @@ fn bench(c: &mut Criterion) {
         .map(|f| (f.name, io::read_clip(f.asf.as_deref(), &f.motion).unwrap()))
         .collect();
     let mut params = Params::new();
-    params.insert("t_l".into(), 0.01);
+    params.insert(codec::keys::T_L.into(), 0.01);
     for (i, (name, clip)) in clips.iter().enumerate() {
         let others: Vec<&Clip> = clips
             .iter()
@@ -35,7 +35,7 @@ fn bench(c: &mut Criterion) {
         let codec = codec::by_name_in("primitive", &ctx).unwrap();
         let stream = codec.encode(clip, &params).unwrap();
         let mut literal = params.clone();
-        literal.insert("step_floor".into(), 0.0);
+        literal.insert(codec::keys::STEP_FLOOR.into(), 0.0);
         let cr_literal = codec.encode(clip, &literal).unwrap().compression_ratio();
         println!(
             "primitive/{name}: {} frames, CR {:.2} at t_L = 0.01 (step_floor 0: {cr_literal:.2}), {} bytes",

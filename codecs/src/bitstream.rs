@@ -245,135 +245,26 @@ impl Bitstream {
     ///
     /// # Errors
     /// As [`Bitstream::from_bytes`].
-    #[expect(
-        clippy::too_many_lines,
-        reason = "one linear check per header field, in format order"
-    )]
     pub fn from_bytes_with(
         data: &[u8],
         limits: &StreamLimits,
     ) -> Result<Bitstream, BitstreamError> {
-        const MIN_LEN: usize = 4 + 2 + 2 + 8 + 4 + 4 + 8 + 4 + 4;
-        if data.len() < MIN_LEN {
-            return Err(BitstreamError::Truncated {
-                field: "header",
-                offset: 0,
-                need: MIN_LEN,
-                have: data.len(),
-            });
-        }
-        let mut r = Reader { data, pos: 0 };
-        let magic: [u8; 4] = r.array("magic")?;
-        if magic != MAGIC {
-            return Err(BitstreamError::Magic(magic));
-        }
-        // CRC before interpreting anything else: an altered stream stops here.
-        let body = &data[..data.len() - 4];
-        let mut stored_bytes = [0u8; 4];
-        stored_bytes.copy_from_slice(&data[data.len() - 4..]);
-        let stored = u32::from_le_bytes(stored_bytes);
-        let computed = crc32fast::hash(body);
-        if stored != computed {
-            return Err(BitstreamError::Crc { stored, computed });
-        }
-        let r_body = &mut Reader {
-            data: body,
-            pos: r.pos,
-        };
-        let version = u16::from_le_bytes(r_body.array("version")?);
+        let (body, pos) = checked_body(data)?;
+        let r = &mut Reader { data: body, pos };
+        let version = u16::from_le_bytes(r.array("version")?);
         if version != FORMAT_VERSION {
             return Err(BitstreamError::Version(version));
         }
-        let [codec_id] = r_body.array::<1>("codec id")?;
-        let [n_params] = r_body.array::<1>("parameter count")?;
-        if usize::from(n_params) > MAX_PARAMS {
-            return Err(BitstreamError::Limit {
-                field: "parameter count",
-                offset: 7,
-                value: u64::from(n_params),
-                limit: MAX_PARAMS as u64,
-            });
-        }
-        let mut params = BTreeMap::new();
-        for _ in 0..n_params {
-            let offset = r_body.pos;
-            let [klen] = r_body.array::<1>("parameter key length")?;
-            if klen == 0 || usize::from(klen) > MAX_KEY_LEN {
-                return Err(BitstreamError::Param {
-                    offset,
-                    detail: format!("key length {klen}"),
-                });
-            }
-            let key = r_body.take(usize::from(klen), "parameter key")?;
-            if !key.iter().all(u8::is_ascii_graphic) {
-                return Err(BitstreamError::Param {
-                    offset,
-                    detail: "key is not printable ASCII".into(),
-                });
-            }
-            let value = f64::from_le_bytes(r_body.array("parameter value")?);
-            if !value.is_finite() {
-                return Err(BitstreamError::Param {
-                    offset,
-                    detail: format!("value {value}"),
-                });
-            }
-            let key = String::from_utf8_lossy(key).into_owned();
-            if params.insert(key.clone(), value).is_some() {
-                return Err(BitstreamError::Param {
-                    offset,
-                    detail: format!("duplicate key `{key}`"),
-                });
-            }
-        }
-        let fingerprint = u64::from_le_bytes(r_body.array("fingerprint")?);
-        let ch_off = r_body.pos;
-        let channels = u32::from_le_bytes(r_body.array("channels")?);
-        let frames = u32::from_le_bytes(r_body.array("frames")?);
-        let limit = |field, offset, value: u64, limit: u64| {
-            if value > limit {
-                Err(BitstreamError::Limit {
-                    field,
-                    offset,
-                    value,
-                    limit,
-                })
-            } else {
-                Ok(())
-            }
-        };
-        limit(
-            "channels",
-            ch_off,
-            u64::from(channels),
-            u64::from(limits.max_channels),
-        )?;
-        limit(
-            "frames",
-            ch_off + 4,
-            u64::from(frames),
-            u64::from(limits.max_frames),
-        )?;
-        limit(
-            "values",
-            ch_off,
-            u64::from(channels) * u64::from(frames),
-            limits.max_values,
-        )?;
-        let frame_rate_hz = f64::from_le_bytes(r_body.array("frame rate")?);
+        let [codec_id] = r.array::<1>("codec id")?;
+        let params = read_params(r)?;
+        let fingerprint = u64::from_le_bytes(r.array("fingerprint")?);
+        let (channels, frames) = read_shape(r, limits)?;
+        let frame_rate_hz = f64::from_le_bytes(r.array("frame rate")?);
         if !(frame_rate_hz.is_finite() && frame_rate_hz > 0.0) {
             return Err(BitstreamError::FrameRate(frame_rate_hz));
         }
-        let pl_off = r_body.pos;
-        let payload_len = u32::from_le_bytes(r_body.array("payload length")?);
-        limit(
-            "payload length",
-            pl_off,
-            u64::from(payload_len),
-            u64::from(limits.max_payload),
-        )?;
-        let payload = r_body.take(payload_len as usize, "payload")?.to_vec();
-        let trailing = body.len() - r_body.pos;
+        let payload = read_payload(r, limits)?;
+        let trailing = body.len() - r.pos;
         if trailing != 0 {
             return Err(BitstreamError::Trailing(trailing));
         }
@@ -410,14 +301,148 @@ impl Bitstream {
     }
 }
 
+/// The bytes before the CRC once the length, the magic and the CRC are checked, and the
+/// offset after the magic. The CRC is checked before anything else is interpreted: an
+/// altered stream stops here.
+fn checked_body(data: &[u8]) -> Result<(&[u8], usize), BitstreamError> {
+    const MIN_LEN: usize = 4 + 2 + 2 + 8 + 4 + 4 + 8 + 4 + 4;
+    if data.len() < MIN_LEN {
+        return Err(BitstreamError::Truncated {
+            field: "header",
+            offset: 0,
+            need: MIN_LEN,
+            have: data.len(),
+        });
+    }
+    let mut r = Reader { data, pos: 0 };
+    let magic: [u8; 4] = r.array("magic")?;
+    if magic != MAGIC {
+        return Err(BitstreamError::Magic(magic));
+    }
+    let body = &data[..data.len() - 4];
+    let mut stored_bytes = [0u8; 4];
+    stored_bytes.copy_from_slice(&data[data.len() - 4..]);
+    let stored = u32::from_le_bytes(stored_bytes);
+    let computed = crc32fast::hash(body);
+    if stored != computed {
+        return Err(BitstreamError::Crc { stored, computed });
+    }
+    Ok((body, r.pos))
+}
+
+/// The parameter count and the parameters: printable ASCII keys of 1 to [`MAX_KEY_LEN`]
+/// bytes, each once, with finite values.
+fn read_params(r: &mut Reader<'_>) -> Result<BTreeMap<String, f64>, BitstreamError> {
+    let [n_params] = r.array::<1>("parameter count")?;
+    if usize::from(n_params) > MAX_PARAMS {
+        return Err(BitstreamError::Limit {
+            field: "parameter count",
+            offset: 7,
+            value: u64::from(n_params),
+            limit: MAX_PARAMS as u64,
+        });
+    }
+    let mut params = BTreeMap::new();
+    for _ in 0..n_params {
+        let offset = r.pos;
+        let [klen] = r.array::<1>("parameter key length")?;
+        if klen == 0 || usize::from(klen) > MAX_KEY_LEN {
+            return Err(BitstreamError::Param {
+                offset,
+                detail: format!("key length {klen}"),
+            });
+        }
+        let key = r.take(usize::from(klen), "parameter key")?;
+        if !key.iter().all(u8::is_ascii_graphic) {
+            return Err(BitstreamError::Param {
+                offset,
+                detail: "key is not printable ASCII".into(),
+            });
+        }
+        let value = f64::from_le_bytes(r.array("parameter value")?);
+        if !value.is_finite() {
+            return Err(BitstreamError::Param {
+                offset,
+                detail: format!("value {value}"),
+            });
+        }
+        let key = String::from_utf8_lossy(key).into_owned();
+        if params.insert(key.clone(), value).is_some() {
+            return Err(BitstreamError::Param {
+                offset,
+                detail: format!("duplicate key `{key}`"),
+            });
+        }
+    }
+    Ok(params)
+}
+
+/// [`BitstreamError::Limit`] when `value` exceeds `limit`.
+fn check_limit(
+    field: &'static str,
+    offset: usize,
+    value: u64,
+    limit: u64,
+) -> Result<(), BitstreamError> {
+    if value > limit {
+        Err(BitstreamError::Limit {
+            field,
+            offset,
+            value,
+            limit,
+        })
+    } else {
+        Ok(())
+    }
+}
+
+/// Channels and frames, each and their product within `limits`.
+fn read_shape(r: &mut Reader<'_>, limits: &StreamLimits) -> Result<(u32, u32), BitstreamError> {
+    let ch_off = r.pos;
+    let channels = u32::from_le_bytes(r.array("channels")?);
+    let frames = u32::from_le_bytes(r.array("frames")?);
+    check_limit(
+        "channels",
+        ch_off,
+        u64::from(channels),
+        u64::from(limits.max_channels),
+    )?;
+    check_limit(
+        "frames",
+        ch_off + 4,
+        u64::from(frames),
+        u64::from(limits.max_frames),
+    )?;
+    check_limit(
+        "values",
+        ch_off,
+        u64::from(channels) * u64::from(frames),
+        limits.max_values,
+    )?;
+    Ok((channels, frames))
+}
+
+/// The payload length, within `limits` and the bytes present, and the payload.
+fn read_payload(r: &mut Reader<'_>, limits: &StreamLimits) -> Result<Vec<u8>, BitstreamError> {
+    let pl_off = r.pos;
+    let payload_len = u32::from_le_bytes(r.array("payload length")?);
+    check_limit(
+        "payload length",
+        pl_off,
+        u64::from(payload_len),
+        u64::from(limits.max_payload),
+    )?;
+    Ok(r.take(payload_len as usize, "payload")?.to_vec())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
     fn sample() -> Bitstream {
         let mut params = BTreeMap::new();
-        params.insert("alpha".to_string(), 0.05);
-        params.insert("qp".to_string(), 9.0);
+        params.insert(crate::codec::keys::ALPHA.to_string(), 0.05);
+        params.insert(crate::codec::keys::QP.to_string(), 9.0);
         Bitstream {
             codec_id: 3,
             params,

@@ -7,7 +7,8 @@
 //! error threshold `t_l`, along which the CR grows instead ([`RateControl::SearchIncreasing`]).
 
 use crate::bitstream::Bitstream;
-use crate::codec::{Codec, CodecError, Params, RateControl};
+use crate::codec::wavelet_codec::{QP_MAX, QP_MIN};
+use crate::codec::{Codec, CodecError, Params, RateControl, keys};
 use motion::clip::Clip;
 
 /// Relative tolerance on the achieved CR.
@@ -30,13 +31,13 @@ pub fn encode_to_cr(
     if !(target.is_finite() && target > 0.0) || codec.rate_control() == RateControl::None {
         return Err(CodecError::Param {
             codec: codec.name(),
-            key: "cr".into(),
+            key: keys::CR.into(),
             value: target,
             detail: "this codec takes no target rate (or the target is not positive)".into(),
         });
     }
     let mut p = params.clone();
-    p.insert("cr".into(), target);
+    p.insert(keys::CR.into(), target);
     codec.encode(clip, &p)
 }
 
@@ -57,7 +58,7 @@ pub(crate) fn search(
         RateControl::Native | RateControl::None => {
             return Err(CodecError::Param {
                 codec: codec.name(),
-                key: "cr".into(),
+                key: keys::CR.into(),
                 value: target,
                 detail: "no searchable rate parameter".into(),
             });
@@ -70,7 +71,7 @@ pub(crate) fn search(
         increasing,
     };
     let mut p = params.clone();
-    p.insert("cr".into(), 0.0);
+    p.insert(keys::CR.into(), 0.0);
     // When the parameter's range cannot reach the target, step the quantizer (QP) the
     // needed way and search again.
     let mut last = None;
@@ -79,12 +80,12 @@ pub(crate) fn search(
             Ok(s) => return Ok(s),
             Err(closest) => {
                 last = Some(closest);
-                let Some(&qp) = p.get("qp") else { break };
+                let Some(&qp) = p.get(keys::QP) else { break };
                 let next = if closest < target { qp - 1.0 } else { qp + 1.0 };
-                if !(4.0..=16.0).contains(&next) {
+                if !(f64::from(QP_MIN)..=f64::from(QP_MAX)).contains(&next) {
                     break;
                 }
-                p.insert("qp".into(), next);
+                p.insert(keys::QP.into(), next);
             }
         }
     }

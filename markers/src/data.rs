@@ -164,22 +164,8 @@ pub fn read_csv_with(path: &Path, limits: &MarkerLimits) -> Result<MarkerSet, Ma
 /// # Errors
 /// [`MarkerError::Csv`] naming the line for a missing header, a wrong field count, a bad
 /// number, a duplicated sample; [`MarkerError::Limit`] when the shape exceeds `limits`.
-#[expect(
-    clippy::too_many_lines,
-    reason = "one pass over the lines, each check next to its error"
-)]
 pub fn parse_csv(text: &str, path: &Path, limits: &MarkerLimits) -> Result<MarkerSet, MarkerError> {
-    let err = |line: usize, reason: String| MarkerError::Csv {
-        path: path.to_path_buf(),
-        line,
-        reason,
-    };
-    let mut rate_hz = 120.0;
-    let mut header_seen = false;
-    let mut names: Vec<String> = Vec::new();
-    let mut index: std::collections::HashMap<String, usize> = std::collections::HashMap::new();
-    let mut rows: Vec<(usize, usize, Option<[f64; 3]>, usize)> = Vec::new();
-    let mut max_frame = None;
+    let mut csv = CsvReader::new(path, limits);
     for (i, raw) in text.lines().enumerate() {
         let line_no = i + 1;
         let line = raw.trim();
@@ -187,36 +173,94 @@ pub fn parse_csv(text: &str, path: &Path, limits: &MarkerLimits) -> Result<Marke
             continue;
         }
         if let Some(comment) = line.strip_prefix('#') {
-            if let Some((k, v)) = comment.split_once('=')
-                && k.trim() == "frame_rate_hz"
-            {
-                rate_hz = v
-                    .trim()
-                    .parse::<f64>()
-                    .ok()
-                    .filter(|r| r.is_finite() && *r > 0.0)
-                    .ok_or_else(|| {
-                        err(
-                            line_no,
-                            format!("frame_rate_hz {:?} is not a positive number", v.trim()),
-                        )
-                    })?;
-            }
+            csv.comment(line_no, comment)?;
             continue;
         }
         let fields: Vec<&str> = line.split(',').map(str::trim).collect();
-        if !header_seen {
-            if fields != ["frame", "marker", "x", "y", "z"] {
-                return Err(err(
-                    line_no,
-                    format!("expected the header `frame,marker,x,y,z`, found {line:?}"),
-                ));
-            }
-            header_seen = true;
-            continue;
+        if csv.header_seen {
+            csv.sample_row(line_no, &fields)?;
+        } else {
+            csv.header(line_no, line, &fields)?;
         }
+    }
+    csv.into_set()
+}
+
+/// One CSV sample row as read: frame, marker index, position (`None`: a gap), line.
+type CsvRow = (usize, usize, Option<[f64; 3]>, usize);
+
+/// The CSV reader's state between lines.
+struct CsvReader<'a> {
+    path: &'a Path,
+    limits: &'a MarkerLimits,
+    rate_hz: f64,
+    header_seen: bool,
+    /// Marker names in order of first appearance, and their indices.
+    names: Vec<String>,
+    index: std::collections::HashMap<String, usize>,
+    rows: Vec<CsvRow>,
+    max_frame: Option<usize>,
+}
+
+impl<'a> CsvReader<'a> {
+    fn new(path: &'a Path, limits: &'a MarkerLimits) -> CsvReader<'a> {
+        CsvReader {
+            path,
+            limits,
+            rate_hz: 120.0,
+            header_seen: false,
+            names: Vec::new(),
+            index: std::collections::HashMap::new(),
+            rows: Vec::new(),
+            max_frame: None,
+        }
+    }
+
+    fn err(&self, line: usize, reason: String) -> MarkerError {
+        MarkerError::Csv {
+            path: self.path.to_path_buf(),
+            line,
+            reason,
+        }
+    }
+
+    /// A `#` comment line (after the `#`): `frame_rate_hz = R` sets the rate, anything else
+    /// is ignored.
+    fn comment(&mut self, line_no: usize, comment: &str) -> Result<(), MarkerError> {
+        if let Some((k, v)) = comment.split_once('=')
+            && k.trim() == "frame_rate_hz"
+        {
+            self.rate_hz = v
+                .trim()
+                .parse::<f64>()
+                .ok()
+                .filter(|r| r.is_finite() && *r > 0.0)
+                .ok_or_else(|| {
+                    self.err(
+                        line_no,
+                        format!("frame_rate_hz {:?} is not a positive number", v.trim()),
+                    )
+                })?;
+        }
+        Ok(())
+    }
+
+    /// The first line that is not a comment: it must be the header.
+    fn header(&mut self, line_no: usize, line: &str, fields: &[&str]) -> Result<(), MarkerError> {
+        if fields != ["frame", "marker", "x", "y", "z"] {
+            return Err(self.err(
+                line_no,
+                format!("expected the header `frame,marker,x,y,z`, found {line:?}"),
+            ));
+        }
+        self.header_seen = true;
+        Ok(())
+    }
+
+    /// A sample row `frame,marker,x,y,z`.
+    fn sample_row(&mut self, line_no: usize, fields: &[&str]) -> Result<(), MarkerError> {
         if fields.len() != 5 {
-            return Err(err(
+            return Err(self.err(
                 line_no,
                 format!(
                     "expected 5 fields (frame,marker,x,y,z), found {}",
@@ -225,82 +269,96 @@ pub fn parse_csv(text: &str, path: &Path, limits: &MarkerLimits) -> Result<Marke
             ));
         }
         let frame: usize = fields[0].parse().map_err(|_| {
-            err(
+            self.err(
                 line_no,
                 format!("frame {:?} is not a non-negative integer", fields[0]),
             )
         })?;
-        if frame >= limits.max_frames {
+        if frame >= self.limits.max_frames {
             return Err(MarkerError::Limit {
-                path: path.to_path_buf(),
+                path: self.path.to_path_buf(),
                 what: "frame count",
                 value: frame as u64 + 1,
-                max: limits.max_frames as u64,
+                max: self.limits.max_frames as u64,
             });
         }
         let name = fields[1];
         if name.is_empty() {
-            return Err(err(line_no, "empty marker name".into()));
+            return Err(self.err(line_no, "empty marker name".into()));
         }
-        let marker = if let Some(&m) = index.get(name) {
-            m
-        } else {
-            if names.len() >= limits.max_markers {
-                return Err(MarkerError::Limit {
-                    path: path.to_path_buf(),
-                    what: "marker count",
-                    value: names.len() as u64 + 1,
-                    max: limits.max_markers as u64,
+        let marker = self.marker_index(name)?;
+        let position = self.position(line_no, &fields[2..])?;
+        self.max_frame = Some(self.max_frame.map_or(frame, |m: usize| m.max(frame)));
+        self.rows.push((frame, marker, position, line_no));
+        Ok(())
+    }
+
+    /// The index of marker `name`, numbering a new name within the marker limit.
+    fn marker_index(&mut self, name: &str) -> Result<usize, MarkerError> {
+        if let Some(&m) = self.index.get(name) {
+            return Ok(m);
+        }
+        if self.names.len() >= self.limits.max_markers {
+            return Err(MarkerError::Limit {
+                path: self.path.to_path_buf(),
+                what: "marker count",
+                value: self.names.len() as u64 + 1,
+                max: self.limits.max_markers as u64,
+            });
+        }
+        self.index.insert(name.to_string(), self.names.len());
+        self.names.push(name.to_string());
+        Ok(self.names.len() - 1)
+    }
+
+    /// The `x,y,z` fields in mm: a gap when all three are empty.
+    fn position(&self, line_no: usize, xyz: &[&str]) -> Result<Option<[f64; 3]>, MarkerError> {
+        if xyz.iter().all(|f| f.is_empty()) {
+            return Ok(None);
+        }
+        let mut p = [0.0; 3];
+        for (k, f) in xyz.iter().enumerate() {
+            p[k] = f
+                .parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| {
+                    self.err(
+                        line_no,
+                        format!("{} {:?} is not a finite number", ["x", "y", "z"][k], f),
+                    )
+                })?;
+        }
+        Ok(Some(p))
+    }
+
+    /// The set: its shape checked against the limits, each sample given at most once.
+    fn into_set(self) -> Result<MarkerSet, MarkerError> {
+        if !self.header_seen {
+            return Err(self.err(1, "missing the header `frame,marker,x,y,z`".into()));
+        }
+        let frames = self.max_frame.map_or(0, |m| m + 1);
+        check_shape(self.path, self.names.len(), frames, self.limits)?;
+        let mut set = MarkerSet::new(self.names, frames, self.rate_hz);
+        let mut seen = vec![false; set.samples.len()];
+        let markers = set.marker_count();
+        for (frame, marker, position, line_no) in self.rows {
+            let k = frame * markers + marker;
+            if seen[k] {
+                return Err(MarkerError::Csv {
+                    path: self.path.to_path_buf(),
+                    line: line_no,
+                    reason: format!(
+                        "marker {:?} appears twice in frame {frame}",
+                        set.names[marker]
+                    ),
                 });
             }
-            index.insert(name.to_string(), names.len());
-            names.push(name.to_string());
-            names.len() - 1
-        };
-        let position = if fields[2..].iter().all(|f| f.is_empty()) {
-            None
-        } else {
-            let mut p = [0.0; 3];
-            for (k, f) in fields[2..].iter().enumerate() {
-                p[k] = f
-                    .parse::<f64>()
-                    .ok()
-                    .filter(|v| v.is_finite())
-                    .ok_or_else(|| {
-                        err(
-                            line_no,
-                            format!("{} {:?} is not a finite number", ["x", "y", "z"][k], f),
-                        )
-                    })?;
-            }
-            Some(p)
-        };
-        max_frame = Some(max_frame.map_or(frame, |m: usize| m.max(frame)));
-        rows.push((frame, marker, position, line_no));
-    }
-    if !header_seen {
-        return Err(err(1, "missing the header `frame,marker,x,y,z`".into()));
-    }
-    let frames = max_frame.map_or(0, |m| m + 1);
-    check_shape(path, names.len(), frames, limits)?;
-    let mut set = MarkerSet::new(names, frames, rate_hz);
-    let mut seen = vec![false; set.samples.len()];
-    let markers = set.marker_count();
-    for (frame, marker, position, line_no) in rows {
-        let k = frame * markers + marker;
-        if seen[k] {
-            return Err(err(
-                line_no,
-                format!(
-                    "marker {:?} appears twice in frame {frame}",
-                    set.names[marker]
-                ),
-            ));
+            seen[k] = true;
+            set.samples[k] = position;
         }
-        seen[k] = true;
-        set.samples[k] = position;
+        Ok(set)
     }
-    Ok(set)
 }
 
 /// Formats a marker set as CSV (gaps are omitted rows); [`parse_csv`] reads it back exactly.

@@ -85,36 +85,8 @@ fn check(points: &[[f64; 3]], what: &str) -> Result<(), MarkerError> {
     Ok(())
 }
 
-/// Moments of eq. 2-4: mean `x̄`, covariance `C` and third-moment vector `S`, both with the
-/// `1/(N−1)` normalisation of the paper.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Moments {
-    /// Mean position (eq. 3).
-    pub mean: [f64; 3],
-    /// Covariance `C` (eq. 2), row-major.
-    pub covariance: [[f64; 3]; 3],
-    /// Third central moment vector `S` (eq. 4).
-    pub third: [f64; 3],
-}
-
-/// Computes eq. 2-4 over at least [`MIN_SAMPLES`] finite points.
-///
-/// # Errors
-/// [`MarkerError::TooFewSamples`] or [`MarkerError::NonFinite`].
-pub fn moments(points: &[[f64; 3]]) -> Result<Moments, MarkerError> {
-    check(points, "points")?;
-    let (mean, c, s) = raw_moments(points);
-    Ok(Moments {
-        mean: [mean.x, mean.y, mean.z],
-        covariance: [
-            [c[(0, 0)], c[(0, 1)], c[(0, 2)]],
-            [c[(1, 0)], c[(1, 1)], c[(1, 2)]],
-            [c[(2, 0)], c[(2, 1)], c[(2, 2)]],
-        ],
-        third: [s.x, s.y, s.z],
-    })
-}
-
+/// Moments of eq. 2-4: mean `x̄` (eq. 3), covariance `C` (eq. 2) and third-moment vector `S`
+/// (eq. 4), both with the `1/(N−1)` normalisation of the paper.
 fn raw_moments(points: &[[f64; 3]]) -> (Vector3<f64>, Matrix3<f64>, Vector3<f64>) {
     let n = points.len() as f64;
     // Eq. 3.

@@ -103,25 +103,49 @@ pub fn read_segments(path: &Path) -> Result<SegmentMap, MarkerError> {
 /// [`MarkerError::Segments`] for invalid TOML, unknown keys, wrong types, a missing or
 /// duplicated name, an unknown or later-listed parent, no root or more than one, a root with
 /// fewer than 3 markers, a segment without markers or a marker on two segments.
-#[expect(
-    clippy::too_many_lines,
-    reason = "one walk over the TOML tree, each check next to its key path"
-)]
 pub fn parse_segments(text: &str, path: &Path) -> Result<SegmentMap, MarkerError> {
-    let err = |key: &str, reason: String| MarkerError::Segments {
+    let table: toml::Table = text
+        .parse()
+        .map_err(|e: toml::de::Error| seg_err(path, "(file)", e.message().to_string()))?;
+    let (gdke, list) = map_options(&table, path)?;
+    let mut segments: Vec<SegmentSpec> = Vec::with_capacity(list.len());
+    let mut marker_owner: std::collections::HashMap<String, String> =
+        std::collections::HashMap::new();
+    for (i, item) in list.iter().enumerate() {
+        let fields = segment_fields(i, item, path)?;
+        segments.push(fields.resolve(i, &segments, &mut marker_owner, path)?);
+    }
+    if segments.is_empty() {
+        return Err(seg_err(path, "segment", "no segments".into()));
+    }
+    Ok(SegmentMap {
+        path: path.to_path_buf(),
+        segments,
+        gdke,
+    })
+}
+
+/// An error of the assignment file at `key`.
+fn seg_err(path: &Path, key: &str, reason: String) -> MarkerError {
+    MarkerError::Segments {
         path: path.to_path_buf(),
         key: key.to_string(),
         reason,
-    };
-    let table: toml::Table = text
-        .parse()
-        .map_err(|e: toml::de::Error| err("(file)", e.message().to_string()))?;
+    }
+}
+
+/// The top-level keys: the GDKE thresholds and the `[[segment]]` tables.
+fn map_options<'t>(
+    table: &'t toml::Table,
+    path: &Path,
+) -> Result<(GdkeOptions, &'t toml::value::Array), MarkerError> {
+    let err = |key: &str, reason: String| seg_err(path, key, reason);
     let mut gdke = GdkeOptions {
         hinge_condition: 1e3,
         still_std: 5.0,
     };
     let mut list = None;
-    for (key, value) in &table {
+    for (key, value) in table {
         match key.as_str() {
             "hinge_condition" | "still_std_mm" => {
                 let v = match value {
@@ -155,72 +179,117 @@ pub fn parse_segments(text: &str, path: &Path) -> Result<SegmentMap, MarkerError
     let Some(list) = list else {
         return Err(err("segment", "no [[segment]] tables".into()));
     };
-    let mut segments: Vec<SegmentSpec> = Vec::with_capacity(list.len());
-    let mut marker_owner: std::collections::HashMap<String, String> =
-        std::collections::HashMap::new();
-    for (i, item) in list.iter().enumerate() {
-        let at = |k: &str| format!("segment[{i}]{k}");
-        let toml::Value::Table(t) = item else {
-            return Err(err(&at(""), "expected a table".into()));
-        };
-        let mut name = None;
-        let mut parent = None;
-        let mut markers = None;
-        let mut kind = KindHint::Auto;
-        for (k, v) in t {
-            match (k.as_str(), v) {
-                ("name", toml::Value::String(s)) => name = Some(s.clone()),
-                ("parent", toml::Value::String(s)) => parent = Some(s.clone()),
-                ("markers", toml::Value::Array(a)) => {
-                    let mut names = Vec::with_capacity(a.len());
-                    for (m, v) in a.iter().enumerate() {
-                        let toml::Value::String(s) = v else {
-                            return Err(err(
-                                &at(&format!(".markers[{m}]")),
-                                "expected a string".into(),
-                            ));
-                        };
-                        if s.is_empty() {
-                            return Err(err(
-                                &at(&format!(".markers[{m}]")),
-                                "empty marker name".into(),
-                            ));
-                        }
-                        names.push(s.clone());
+    Ok((gdke, list))
+}
+
+/// The keys of one `[[segment]]` table as written, before names are resolved.
+struct SegmentFields {
+    name: Option<String>,
+    parent: Option<String>,
+    markers: Option<Vec<String>>,
+    kind: KindHint,
+}
+
+/// Reads the keys of `segment[i]`, each checked for its type.
+fn segment_fields(i: usize, item: &toml::Value, path: &Path) -> Result<SegmentFields, MarkerError> {
+    let at = |k: &str| format!("segment[{i}]{k}");
+    let toml::Value::Table(t) = item else {
+        return Err(seg_err(path, &at(""), "expected a table".into()));
+    };
+    let mut fields = SegmentFields {
+        name: None,
+        parent: None,
+        markers: None,
+        kind: KindHint::Auto,
+    };
+    for (k, v) in t {
+        match (k.as_str(), v) {
+            ("name", toml::Value::String(s)) => fields.name = Some(s.clone()),
+            ("parent", toml::Value::String(s)) => fields.parent = Some(s.clone()),
+            ("markers", toml::Value::Array(a)) => {
+                fields.markers = Some(marker_names(a, &at, path)?);
+            }
+            ("joint", toml::Value::String(s)) => {
+                fields.kind = match s.as_str() {
+                    "auto" => KindHint::Auto,
+                    "spherical" => KindHint::Spherical,
+                    "hinge" => KindHint::Hinge,
+                    other => {
+                        return Err(seg_err(
+                            path,
+                            &at(".joint"),
+                            format!("{other:?} is not auto, spherical or hinge"),
+                        ));
                     }
-                    markers = Some(names);
-                }
-                ("joint", toml::Value::String(s)) => {
-                    kind = match s.as_str() {
-                        "auto" => KindHint::Auto,
-                        "spherical" => KindHint::Spherical,
-                        "hinge" => KindHint::Hinge,
-                        other => {
-                            return Err(err(
-                                &at(".joint"),
-                                format!("{other:?} is not auto, spherical or hinge"),
-                            ));
-                        }
-                    };
-                }
-                ("name" | "parent" | "joint", _) => {
-                    return Err(err(&at(&format!(".{k}")), "expected a string".into()));
-                }
-                ("markers", _) => {
-                    return Err(err(
-                        &at(".markers"),
-                        "expected an array of marker names".into(),
-                    ));
-                }
-                (other, _) => {
-                    return Err(err(
-                        &at(&format!(".{other}")),
-                        "unknown key (expected name, parent, markers, joint)".into(),
-                    ));
-                }
+                };
+            }
+            ("name" | "parent" | "joint", _) => {
+                return Err(seg_err(
+                    path,
+                    &at(&format!(".{k}")),
+                    "expected a string".into(),
+                ));
+            }
+            ("markers", _) => {
+                return Err(seg_err(
+                    path,
+                    &at(".markers"),
+                    "expected an array of marker names".into(),
+                ));
+            }
+            (other, _) => {
+                return Err(seg_err(
+                    path,
+                    &at(&format!(".{other}")),
+                    "unknown key (expected name, parent, markers, joint)".into(),
+                ));
             }
         }
-        let Some(name) = name.filter(|n| !n.trim().is_empty()) else {
+    }
+    Ok(fields)
+}
+
+/// The `markers` array of a segment: non-empty strings (`at` names the segment's keys).
+fn marker_names(
+    a: &[toml::Value],
+    at: &dyn Fn(&str) -> String,
+    path: &Path,
+) -> Result<Vec<String>, MarkerError> {
+    let mut names = Vec::with_capacity(a.len());
+    for (m, v) in a.iter().enumerate() {
+        let toml::Value::String(s) = v else {
+            return Err(seg_err(
+                path,
+                &at(&format!(".markers[{m}]")),
+                "expected a string".into(),
+            ));
+        };
+        if s.is_empty() {
+            return Err(seg_err(
+                path,
+                &at(&format!(".markers[{m}]")),
+                "empty marker name".into(),
+            ));
+        }
+        names.push(s.clone());
+    }
+    Ok(names)
+}
+
+impl SegmentFields {
+    /// The segment `i`: a new name, a parent listed before it (only the root has none), at
+    /// least one marker (three on the root), each marker on no other segment (`marker_owner`
+    /// records which segment has it).
+    fn resolve(
+        self,
+        i: usize,
+        segments: &[SegmentSpec],
+        marker_owner: &mut std::collections::HashMap<String, String>,
+        path: &Path,
+    ) -> Result<SegmentSpec, MarkerError> {
+        let at = |k: &str| format!("segment[{i}]{k}");
+        let err = |key: &str, reason: String| seg_err(path, key, reason);
+        let Some(name) = self.name.filter(|n| !n.trim().is_empty()) else {
             return Err(err(&at(".name"), "missing or empty segment name".into()));
         };
         if segments.iter().any(|s| s.name == name) {
@@ -229,7 +298,7 @@ pub fn parse_segments(text: &str, path: &Path) -> Result<SegmentMap, MarkerError
                 format!("segment {name:?} is listed twice"),
             ));
         }
-        let parent = match parent {
+        let parent = match self.parent {
             None => {
                 if i != 0 {
                     return Err(err(
@@ -255,7 +324,7 @@ pub fn parse_segments(text: &str, path: &Path) -> Result<SegmentMap, MarkerError
                 Some(k)
             }
         };
-        let Some(markers) = markers.filter(|m| !m.is_empty()) else {
+        let Some(markers) = self.markers.filter(|m| !m.is_empty()) else {
             return Err(err(&at(".markers"), "missing or empty marker list".into()));
         };
         if parent.is_none() && markers.len() < 3 {
@@ -272,21 +341,13 @@ pub fn parse_segments(text: &str, path: &Path) -> Result<SegmentMap, MarkerError
                 ));
             }
         }
-        segments.push(SegmentSpec {
+        Ok(SegmentSpec {
             name,
             parent,
             markers,
-            kind,
-        });
+            kind: self.kind,
+        })
     }
-    if segments.is_empty() {
-        return Err(err("segment", "no segments".into()));
-    }
-    Ok(SegmentMap {
-        path: path.to_path_buf(),
-        segments,
-        gdke,
-    })
 }
 
 /// A segment's pose in one frame: origin `x_k` and axes `M_k` (columns).
@@ -581,10 +642,8 @@ pub(super) fn check_order(map: &SegmentMap) -> Result<(), MarkerError> {
     Ok(())
 }
 
-#[expect(
-    clippy::too_many_lines,
-    reason = "one root-to-leaf pass, kept in one place"
-)]
+/// The root-to-leaf pass (section 2.5) over a trial: each segment's joint from its markers in
+/// its parent's frame, then its own frames, in map order.
 pub(super) fn pass(
     set: &MarkerSet,
     map: &SegmentMap,
@@ -598,7 +657,28 @@ pub(super) fn pass(
             "the marker set has no frames".into(),
         ));
     }
-    // Resolve marker names.
+    let marker_ix = marker_columns(set, map)?;
+    let n_seg = map.segments.len();
+    let mut pass = Pass {
+        seg_frames: Vec::with_capacity(n_seg),
+        joints: Vec::with_capacity(n_seg),
+        own_point: Vec::with_capacity(n_seg),
+        centroids: Vec::with_capacity(n_seg),
+        rigid_of: Vec::with_capacity(n_seg),
+    };
+    for (si, seg) in map.segments.iter().enumerate() {
+        let solved = solve_segment(set, map, seg, &marker_ix[si], samples, &pass)?;
+        pass.own_point.push(solved.own_point);
+        pass.rigid_of.push(solved.rigid);
+        pass.centroids.push(solved.centroid);
+        pass.seg_frames.push(solved.frames);
+        pass.joints.push(solved.joint);
+    }
+    Ok(pass)
+}
+
+/// Each segment's marker columns in `set`, in the map's order.
+fn marker_columns(set: &MarkerSet, map: &SegmentMap) -> Result<Vec<Vec<usize>>, MarkerError> {
     let mut marker_ix: Vec<Vec<usize>> = Vec::with_capacity(map.segments.len());
     for (i, s) in map.segments.iter().enumerate() {
         let mut ix = Vec::with_capacity(s.markers.len());
@@ -614,192 +694,251 @@ pub(super) fn pass(
         }
         marker_ix.push(ix);
     }
-    let n_seg = map.segments.len();
-    let mut seg_frames: Vec<Vec<Frame>> = Vec::with_capacity(n_seg);
-    let mut joints: Vec<SolvedJoint> = Vec::with_capacity(n_seg);
-    // Joint point of each segment in its own frame (u_j).
-    let mut own_point: Vec<Vector3<f64>> = Vec::with_capacity(n_seg);
-    // Marker columns rigid with each segment.
-    let mut rigid_of: Vec<Vec<usize>> = Vec::with_capacity(n_seg);
-    // Marker templates in each segment's frame (for end sites).
-    let mut centroids: Vec<Vector3<f64>> = Vec::with_capacity(n_seg);
-    for (si, seg) in map.segments.iter().enumerate() {
-        let mk = &marker_ix[si];
-        let pos = |f: usize, k: usize| set.get(f, mk[k]).map(v3);
-        // Joint centre relative to the parent (GDKE per marker).
-        let mut centre_world: Vec<Option<Vector3<f64>>> = vec![None; frames];
-        let mut axis_world: Vec<Option<Vector3<f64>>> = vec![None; frames];
-        let mut solved = SolvedJoint {
-            segment: seg.name.clone(),
-            kind: JointKind::NotMoving,
-            centre_parent_mm: [0.0; 3],
-            markers_used: 0,
-            held_frames: 0,
-        };
-        if let Some(p) = seg.parent {
-            let pf = &seg_frames[p];
-            let local: Vec<Vec<Option<Vector3<f64>>>> = (0..mk.len())
-                .map(|k| {
-                    (0..frames)
-                        .map(|f| pos(f, k).map(|x| pf[f].to_local(&x)))
-                        .collect()
-                })
-                .collect();
-            let keep = match samples {
-                Samples::All => None,
-                Samples::Moving => moving_frames(&local, set.frame_rate_hz),
-            };
-            let tracks: Vec<Vec<[f64; 3]>> = local
-                .iter()
-                .map(|t| {
-                    t.iter()
-                        .enumerate()
-                        .filter(|(f, _)| keep.as_ref().is_none_or(|k| k[*f]))
-                        .filter_map(|(_, x)| x.map(|v| [v.x, v.y, v.z]))
-                        .collect()
-                })
-                .collect();
-            let refs: Vec<&[[f64; 3]]> = tracks.iter().map(Vec::as_slice).collect();
-            let fit = match gdke_pooled(&refs, &map.gdke, seg.kind) {
-                Ok(fit) => fit,
-                Err(MarkerError::TooFewSamples { got, .. }) => {
-                    return Err(solve_err(
-                        &seg.name,
-                        format!("its markers are seen in at most {got} frames, at least 4 needed"),
-                    ));
-                }
-                Err(e) => return Err(e),
-            };
-            let (centre, kind, used) = (
-                v3(fit.centre),
-                fit.kind,
-                tracks.iter().filter(|t| t.len() >= 4).count(),
-            );
-            solved.kind = kind;
-            solved.centre_parent_mm = [centre.x, centre.y, centre.z];
-            solved.markers_used = used;
-            for f in 0..frames {
-                centre_world[f] = Some(pf[f].to_world(&centre));
-                if let JointKind::Hinge { axis } = kind {
-                    axis_world[f] = Some(pf[f].axes * v3(axis));
-                }
-            }
-        }
-        // Canonical frames (section 2.5).
-        let canon = Canon {
-            frames: (0..frames)
-                .map(|f| match mk.len() {
-                    0 => None,
-                    1 => {
-                        let (o, c, n) = (pos(f, 0)?, centre_world[f]?, axis_world[f]?);
-                        frame_from_axis(&o, &c, &n)
-                    }
-                    2 => frame_from_points(&pos(f, 0)?, &pos(f, 1)?, &centre_world[f]?),
-                    _ => frame_from_points(&pos(f, 0)?, &pos(f, 1)?, &pos(f, 2)?),
-                })
-                .collect(),
-        };
-        if mk.len() == 1 && !matches!(solved.kind, JointKind::Hinge { .. }) {
-            return Err(solve_err(
-                &seg.name,
-                "a segment with one marker needs a hinge joint (section 2.5 case 1), but this joint is not one".into(),
-            ));
-        }
-        // Markers rigid with this segment: its own, plus, when its joint does not move, those
-        // rigid with its parent (a still joint makes one rigid body, and more markers spread
-        // wider give a steadier frame).
-        let mut rigid: Vec<usize> = mk.clone();
-        if solved.kind == JointKind::NotMoving
-            && let Some(p) = seg.parent
-        {
-            rigid.extend(rigid_of[p].iter().copied());
-        }
-        let posr = |f: usize, k: usize| set.get(f, rigid[k]).map(v3);
-        let nr = rigid.len();
-        // Templates: mean local position of each marker (and the centre) over canonical frames.
-        let mut sums = vec![(Vector3::zeros(), 0usize); nr + 1];
-        for (f, cf) in canon.frames.iter().enumerate() {
-            let Some(cf) = cf else { continue };
-            for (k, s) in sums.iter_mut().enumerate().take(nr) {
-                if let Some(x) = posr(f, k) {
-                    s.0 += cf.to_local(&x);
-                    s.1 += 1;
-                }
-            }
-            if let Some(c) = centre_world[f] {
-                sums[nr].0 += cf.to_local(&c);
-                sums[nr].1 += 1;
-            }
-        }
-        let template: Vec<Option<Vector3<f64>>> = sums
-            .iter()
-            .map(|(s, n)| (*n > 0).then(|| s / *n as f64))
-            .collect();
-        // Final frames: rigid fit of visible markers and the centre, else the canonical frame.
-        let mut fitted: Vec<Option<Frame>> = (0..frames)
-            .map(|f| {
-                if mk.len() >= 2 {
-                    let mut l = Vec::with_capacity(nr + 1);
-                    let mut w = Vec::with_capacity(nr + 1);
-                    for (k, t) in template.iter().enumerate().take(nr) {
-                        if let (Some(t), Some(x)) = (*t, posr(f, k)) {
-                            l.push(t);
-                            w.push(x);
-                        }
-                    }
-                    if let (Some(t), Some(c)) = (template[nr], centre_world[f]) {
-                        l.push(t);
-                        w.push(c);
-                    }
-                    rigid_fit(&l, &w).or(canon.frames[f])
-                } else {
-                    canon.frames[f]
-                }
-            })
-            .collect();
-        let Some(held) = hold(&mut fitted) else {
-            return Err(solve_err(
-                &seg.name,
-                "its frame cannot be determined in any frame (markers missing or collinear)".into(),
-            ));
-        };
-        solved.held_frames = held;
-        let fitted: Vec<Frame> = fitted.into_iter().flatten().collect();
-        // Marker centroid in the segment's frame (end sites, root point).
-        let present: Vec<Vector3<f64>> = template[..mk.len()].iter().flatten().copied().collect();
-        let centroid = present.iter().sum::<Vector3<f64>>() / present.len().max(1) as f64;
-        let u = if seg.parent.is_some() {
-            // u_j: the joint centre in the segment's own frame, averaged over frames.
-            let mut s = Vector3::zeros();
-            for (f, fr) in fitted.iter().enumerate() {
-                if let Some(c) = centre_world[f] {
-                    s += fr.to_local(&c);
-                }
-            }
-            s / frames as f64
-        } else {
-            solved.centre_parent_mm = [centroid.x, centroid.y, centroid.z];
-            centroid
-        };
-        own_point.push(u);
-        rigid_of.push(rigid);
-        centroids.push(centroid);
-        seg_frames.push(fitted);
-        joints.push(solved);
+    Ok(marker_ix)
+}
+
+/// Position of marker column `columns[k]` at frame `f`, if seen.
+fn marker_at(set: &MarkerSet, columns: &[usize], f: usize, k: usize) -> Option<Vector3<f64>> {
+    set.get(f, columns[k]).map(v3)
+}
+
+/// What [`pass`] finds for one segment (see the fields of [`Pass`]).
+struct SolvedSegment {
+    frames: Vec<Frame>,
+    joint: SolvedJoint,
+    own_point: Vector3<f64>,
+    centroid: Vector3<f64>,
+    rigid: Vec<usize>,
+}
+
+/// The joint centre (and hinge axis) of a segment in world coordinates, per frame.
+struct Centres {
+    world: Vec<Option<Vector3<f64>>>,
+    axis_world: Vec<Option<Vector3<f64>>>,
+}
+
+/// One step of the root-to-leaf pass: the segment's joint, its frames and its points, given
+/// the segments before it (`done`).
+fn solve_segment(
+    set: &MarkerSet,
+    map: &SegmentMap,
+    seg: &SegmentSpec,
+    mk: &[usize],
+    samples: Samples,
+    done: &Pass,
+) -> Result<SolvedSegment, MarkerError> {
+    let frames = set.frames();
+    let mut solved = SolvedJoint {
+        segment: seg.name.clone(),
+        kind: JointKind::NotMoving,
+        centre_parent_mm: [0.0; 3],
+        markers_used: 0,
+        held_frames: 0,
+    };
+    let centres = match seg.parent {
+        Some(p) => joint_centre(set, map, seg, mk, &done.seg_frames[p], samples, &mut solved)?,
+        None => Centres {
+            world: vec![None; frames],
+            axis_world: vec![None; frames],
+        },
+    };
+    let canon = canonical_frames(set, mk, &centres);
+    if mk.len() == 1 && !matches!(solved.kind, JointKind::Hinge { .. }) {
+        return Err(solve_err(
+            &seg.name,
+            "a segment with one marker needs a hinge joint (section 2.5 case 1), but this joint is not one".into(),
+        ));
     }
-    Ok(Pass {
-        seg_frames,
-        joints,
+    // Markers rigid with this segment: its own, plus, when its joint does not move, those
+    // rigid with its parent (a still joint makes one rigid body, and more markers spread
+    // wider give a steadier frame).
+    let mut rigid: Vec<usize> = mk.to_vec();
+    if solved.kind == JointKind::NotMoving
+        && let Some(p) = seg.parent
+    {
+        rigid.extend(done.rigid_of[p].iter().copied());
+    }
+    let template = marker_templates(set, &rigid, &canon, &centres.world);
+    let mut fitted = fitted_frames(set, &rigid, mk.len(), &template, &canon, &centres.world);
+    let Some(held) = hold(&mut fitted) else {
+        return Err(solve_err(
+            &seg.name,
+            "its frame cannot be determined in any frame (markers missing or collinear)".into(),
+        ));
+    };
+    solved.held_frames = held;
+    let fitted: Vec<Frame> = fitted.into_iter().flatten().collect();
+    // Marker centroid in the segment's frame (end sites, root point).
+    let present: Vec<Vector3<f64>> = template[..mk.len()].iter().flatten().copied().collect();
+    let centroid = present.iter().sum::<Vector3<f64>>() / present.len().max(1) as f64;
+    let own_point = if seg.parent.is_some() {
+        // u_j: the joint centre in the segment's own frame, averaged over frames.
+        let mut s = Vector3::zeros();
+        for (f, fr) in fitted.iter().enumerate() {
+            if let Some(c) = centres.world[f] {
+                s += fr.to_local(&c);
+            }
+        }
+        s / frames as f64
+    } else {
+        solved.centre_parent_mm = [centroid.x, centroid.y, centroid.z];
+        centroid
+    };
+    Ok(SolvedSegment {
+        frames: fitted,
+        joint: solved,
         own_point,
-        centroids,
-        rigid_of,
+        centroid,
+        rigid,
     })
 }
 
-#[expect(
-    clippy::too_many_lines,
-    reason = "skeleton and channel matrix built in one place"
-)]
+/// The joint centre of a child segment relative to its parent (frames `pf`), by the pooled
+/// GDKE of its markers in the parent's frame; records the fit in `solved` and returns the
+/// centre (and a hinge's axis) in world coordinates per frame.
+fn joint_centre(
+    set: &MarkerSet,
+    map: &SegmentMap,
+    seg: &SegmentSpec,
+    mk: &[usize],
+    pf: &[Frame],
+    samples: Samples,
+    solved: &mut SolvedJoint,
+) -> Result<Centres, MarkerError> {
+    let frames = set.frames();
+    let local: Vec<Vec<Option<Vector3<f64>>>> = (0..mk.len())
+        .map(|k| {
+            (0..frames)
+                .map(|f| marker_at(set, mk, f, k).map(|x| pf[f].to_local(&x)))
+                .collect()
+        })
+        .collect();
+    let keep = match samples {
+        Samples::All => None,
+        Samples::Moving => moving_frames(&local, set.frame_rate_hz),
+    };
+    let tracks: Vec<Vec<[f64; 3]>> = local
+        .iter()
+        .map(|t| {
+            t.iter()
+                .enumerate()
+                .filter(|(f, _)| keep.as_ref().is_none_or(|k| k[*f]))
+                .filter_map(|(_, x)| x.map(|v| [v.x, v.y, v.z]))
+                .collect()
+        })
+        .collect();
+    let refs: Vec<&[[f64; 3]]> = tracks.iter().map(Vec::as_slice).collect();
+    let fit = match gdke_pooled(&refs, &map.gdke, seg.kind) {
+        Ok(fit) => fit,
+        Err(MarkerError::TooFewSamples { got, .. }) => {
+            return Err(solve_err(
+                &seg.name,
+                format!("its markers are seen in at most {got} frames, at least 4 needed"),
+            ));
+        }
+        Err(e) => return Err(e),
+    };
+    let (centre, kind, used) = (
+        v3(fit.centre),
+        fit.kind,
+        tracks.iter().filter(|t| t.len() >= 4).count(),
+    );
+    solved.kind = kind;
+    solved.centre_parent_mm = [centre.x, centre.y, centre.z];
+    solved.markers_used = used;
+    Ok(Centres {
+        world: (0..frames).map(|f| Some(pf[f].to_world(&centre))).collect(),
+        axis_world: (0..frames)
+            .map(|f| match kind {
+                JointKind::Hinge { axis } => Some(pf[f].axes * v3(axis)),
+                _ => None,
+            })
+            .collect(),
+    })
+}
+
+/// Section 2.5's canonical frame of a segment with markers `mk` in every frame: from three
+/// markers, two and the centre, or one, the centre and the hinge axis.
+fn canonical_frames(set: &MarkerSet, mk: &[usize], centres: &Centres) -> Canon {
+    let pos = |f: usize, k: usize| marker_at(set, mk, f, k);
+    Canon {
+        frames: (0..set.frames())
+            .map(|f| match mk.len() {
+                0 => None,
+                1 => {
+                    let (o, c, n) = (pos(f, 0)?, centres.world[f]?, centres.axis_world[f]?);
+                    frame_from_axis(&o, &c, &n)
+                }
+                2 => frame_from_points(&pos(f, 0)?, &pos(f, 1)?, &centres.world[f]?),
+                _ => frame_from_points(&pos(f, 0)?, &pos(f, 1)?, &pos(f, 2)?),
+            })
+            .collect(),
+    }
+}
+
+/// Templates: the mean local position of each `rigid` marker, then of the joint centre, over
+/// the canonical frames (`None` where never seen).
+fn marker_templates(
+    set: &MarkerSet,
+    rigid: &[usize],
+    canon: &Canon,
+    centre_world: &[Option<Vector3<f64>>],
+) -> Vec<Option<Vector3<f64>>> {
+    let nr = rigid.len();
+    let mut sums = vec![(Vector3::zeros(), 0usize); nr + 1];
+    for (f, cf) in canon.frames.iter().enumerate() {
+        let Some(cf) = cf else { continue };
+        for (k, s) in sums.iter_mut().enumerate().take(nr) {
+            if let Some(x) = marker_at(set, rigid, f, k) {
+                s.0 += cf.to_local(&x);
+                s.1 += 1;
+            }
+        }
+        if let Some(c) = centre_world[f] {
+            sums[nr].0 += cf.to_local(&c);
+            sums[nr].1 += 1;
+        }
+    }
+    sums.iter()
+        .map(|(s, n)| (*n > 0).then(|| s / *n as f64))
+        .collect()
+}
+
+/// Final frames: a rigid fit of the visible `rigid` markers and the centre to their
+/// templates (a segment with at least two own markers), else the canonical frame.
+fn fitted_frames(
+    set: &MarkerSet,
+    rigid: &[usize],
+    own_markers: usize,
+    template: &[Option<Vector3<f64>>],
+    canon: &Canon,
+    centre_world: &[Option<Vector3<f64>>],
+) -> Vec<Option<Frame>> {
+    let nr = rigid.len();
+    (0..set.frames())
+        .map(|f| {
+            if own_markers >= 2 {
+                let mut l = Vec::with_capacity(nr + 1);
+                let mut w = Vec::with_capacity(nr + 1);
+                for (k, t) in template.iter().enumerate().take(nr) {
+                    if let (Some(t), Some(x)) = (*t, marker_at(set, rigid, f, k)) {
+                        l.push(t);
+                        w.push(x);
+                    }
+                }
+                if let (Some(t), Some(c)) = (template[nr], centre_world[f]) {
+                    l.push(t);
+                    w.push(c);
+                }
+                rigid_fit(&l, &w).or(canon.frames[f])
+            } else {
+                canon.frames[f]
+            }
+        })
+        .collect()
+}
+
+/// The solved clip from a pass's frames and joints: skeleton and channel matrix.
 pub(super) fn build_clip(
     set: &MarkerSet,
     map: &SegmentMap,
@@ -808,9 +947,29 @@ pub(super) fn build_clip(
     own_point: &[Vector3<f64>],
     centroids: &[Vector3<f64>],
 ) -> Result<Solved, MarkerError> {
-    let n_seg = map.segments.len();
-    let frames = set.frames();
     // Depth-first pre-order, so that the BVH hierarchy and the channel order agree.
+    let order = depth_first_order(map);
+    let (skeleton, joint_of_segment) = solved_skeleton(map, &order, joints, own_point, centroids);
+    let data = channel_matrix(
+        map,
+        &order,
+        seg_frames,
+        own_point,
+        skeleton.channel_count(),
+        set.frames(),
+    );
+    let clip = Clip::new(skeleton, set.frame_rate_hz, set.frames(), data)
+        .map_err(|e| solve_err(&map.segments[0].name, format!("cannot build the clip: {e}")))?;
+    Ok(Solved {
+        clip,
+        joints: joints.to_vec(),
+        joint_of_segment,
+    })
+}
+
+/// The segments in depth-first pre-order from the root, children in map order.
+fn depth_first_order(map: &SegmentMap) -> Vec<usize> {
+    let n_seg = map.segments.len();
     let mut order = Vec::with_capacity(n_seg);
     let mut stack = vec![0usize];
     while let Some(s) = stack.pop() {
@@ -820,18 +979,25 @@ pub(super) fn build_clip(
             .collect();
         stack.extend(kids.into_iter().rev());
     }
-    let rot = [
-        ChannelKind::Rotation(Axis::Z),
-        ChannelKind::Rotation(Axis::Y),
-        ChannelKind::Rotation(Axis::X),
-    ];
-    let mut skel_joints: Vec<Joint> = Vec::with_capacity(2 * n_seg);
-    let mut joint_of_segment = vec![0usize; n_seg];
-    let joint = |name: String,
-                 parent: Option<usize>,
-                 offset: Vector3<f64>,
-                 dofs: Vec<ChannelKind>,
-                 end: bool| Joint {
+    order
+}
+
+/// The ZYX rotation channels every solved joint has.
+const ZYX: [ChannelKind; 3] = [
+    ChannelKind::Rotation(Axis::Z),
+    ChannelKind::Rotation(Axis::Y),
+    ChannelKind::Rotation(Axis::X),
+];
+
+/// A BVH joint of the solved skeleton (body part and depth are assigned later).
+fn bvh_joint(
+    name: String,
+    parent: Option<usize>,
+    offset: Vector3<f64>,
+    dofs: Vec<ChannelKind>,
+    end: bool,
+) -> Joint {
+    Joint {
         name,
         parent,
         rest: Rest::Offset([offset.x, offset.y, offset.z]),
@@ -843,8 +1009,22 @@ pub(super) fn build_clip(
         end_site: end,
         body_part: BodyPart::Torso,
         chain_depth: 0,
-    };
-    for &s in &order {
+    }
+}
+
+/// The BVH skeleton (units mm) in `order`: one joint per segment at its centre, the root
+/// with translations, an end site at each leaf's marker centroid; and each segment's joint.
+fn solved_skeleton(
+    map: &SegmentMap,
+    order: &[usize],
+    joints: &[SolvedJoint],
+    own_point: &[Vector3<f64>],
+    centroids: &[Vector3<f64>],
+) -> (Skeleton, Vec<usize>) {
+    let n_seg = map.segments.len();
+    let mut skel_joints: Vec<Joint> = Vec::with_capacity(2 * n_seg);
+    let mut joint_of_segment = vec![0usize; n_seg];
+    for &s in order {
         let seg = &map.segments[s];
         let (parent, offset, dofs) = match seg.parent {
             None => {
@@ -853,24 +1033,24 @@ pub(super) fn build_clip(
                     ChannelKind::Translation(Axis::Y),
                     ChannelKind::Translation(Axis::Z),
                 ];
-                d.extend(rot);
+                d.extend(ZYX);
                 (None, Vector3::zeros(), d)
             }
             Some(p) => (
                 Some(joint_of_segment[p]),
                 v3(joints[s].centre_parent_mm) - own_point[p],
-                rot.to_vec(),
+                ZYX.to_vec(),
             ),
         };
         joint_of_segment[s] = skel_joints.len();
-        skel_joints.push(joint(seg.name.clone(), parent, offset, dofs, false));
+        skel_joints.push(bvh_joint(seg.name.clone(), parent, offset, dofs, false));
         let leaf = !map.segments.iter().any(|c| c.parent == Some(s));
         if leaf {
             let mut off = centroids[s] - own_point[s];
             if off.norm() < 1e-6 {
                 off = Vector3::new(0.0, 1.0, 0.0);
             }
-            skel_joints.push(joint(
+            skel_joints.push(bvh_joint(
                 format!("{}_End", seg.name),
                 Some(joint_of_segment[s]),
                 off,
@@ -892,10 +1072,22 @@ pub(super) fn build_clip(
         documentation: vec!["solved from markers by GDKE (seed 003)".into()],
     };
     motion::bodymap::assign(&mut skeleton);
-    let channels = skeleton.channel_count();
+    (skeleton, joint_of_segment)
+}
+
+/// The channel matrix in `order`: the root's joint point, then every segment's rotation
+/// relative to its parent as ZYX Euler angles in degrees.
+fn channel_matrix(
+    map: &SegmentMap,
+    order: &[usize],
+    seg_frames: &[Vec<Frame>],
+    own_point: &[Vector3<f64>],
+    channels: usize,
+    frames: usize,
+) -> Vec<f64> {
     let mut data = vec![0.0; channels * frames];
     let mut c = 0;
-    for &s in &order {
+    for &s in order {
         let seg = &map.segments[s];
         for f in 0..frames {
             let fr = &seg_frames[s][f];
@@ -922,13 +1114,7 @@ pub(super) fn build_clip(
         }
         c += if seg.parent.is_none() { 6 } else { 3 };
     }
-    let clip = Clip::new(skeleton, set.frame_rate_hz, frames, data)
-        .map_err(|e| solve_err(&map.segments[0].name, format!("cannot build the clip: {e}")))?;
-    Ok(Solved {
-        clip,
-        joints: joints.to_vec(),
-        joint_of_segment,
-    })
+    data
 }
 
 #[cfg(test)]

@@ -15,15 +15,7 @@ use crate::text::{fmt_num, lines, number, read_text, syntax};
 /// The frame rate of CMU AMC files, which do not state one.
 pub const CMU_FRAME_RATE_HZ: f64 = 120.0;
 
-/// Reads an AMC file for `skeleton` at [`CMU_FRAME_RATE_HZ`] with the default limits.
-///
-/// # Errors
-/// A [`ParseError`] naming the file, line and reason.
-pub fn read_amc(path: &Path, skeleton: &Skeleton) -> Result<Clip, ParseError> {
-    read_amc_with(path, skeleton, CMU_FRAME_RATE_HZ, &Limits::default())
-}
-
-/// Reads an AMC file with an explicit frame rate and limits.
+/// Reads an AMC file with an explicit frame rate (CMU files: [`CMU_FRAME_RATE_HZ`]) and limits.
 ///
 /// # Errors
 /// A [`ParseError`] naming the file, line and reason.
@@ -42,7 +34,6 @@ pub fn read_amc_with(
 /// # Errors
 /// A [`ParseError`] naming the file, line and reason: unknown bone, wrong number of values,
 /// non-numeric value, non-consecutive frame numbers, a frame missing a bone, no frames.
-#[expect(clippy::too_many_lines, reason = "one pass over header and frames")]
 pub fn parse_amc(
     text: &str,
     path: &Path,
@@ -60,112 +51,152 @@ pub fn parse_amc(
             format!("frame rate {frame_rate_hz} Hz is not positive"),
         ));
     }
-    // Offset of each joint's first channel in a frame.
-    let mut offsets = Vec::with_capacity(skeleton.joints.len());
-    let mut n = 0;
-    for j in &skeleton.joints {
-        offsets.push(n);
-        n += j.dofs.len();
-    }
-    let mut radians = false;
-    let mut values: Vec<f64> = Vec::new(); // frame-major while reading
-    let mut frame = vec![0.0; n];
-    let mut seen = vec![false; skeleton.joints.len()];
-    let mut frames = 0usize;
-    let mut frame_number: Option<i64> = None;
-    let mut frame_line = 0;
-    let mut last_line = 0;
-
-    let finish = |seen: &mut Vec<bool>,
-                  frame: &[f64],
-                  values: &mut Vec<f64>,
-                  frames: usize,
-                  line: usize|
-     -> Result<(), ParseError> {
-        for (j, joint) in skeleton.joints.iter().enumerate() {
-            if !joint.dofs.is_empty() && !seen[j] {
-                return Err(ParseError::MissingBone {
-                    path: path.to_path_buf(),
-                    line,
-                    frame: frames,
-                    name: joint.name.clone(),
-                });
-            }
-        }
-        values.extend_from_slice(frame);
-        seen.fill(false);
-        Ok(())
-    };
-
+    let mut reader = AmcReader::new(path, skeleton, limits);
     for (ln, raw) in lines(text) {
-        last_line = ln;
+        reader.last_line = ln;
         let line = raw.trim();
         if line.is_empty() || line.starts_with('#') {
             continue;
         }
         if let Some(kw) = line.strip_prefix(':') {
-            if frame_number.is_some() {
-                return Err(syntax(path, ln, "header keyword after the first frame"));
-            }
-            match kw.trim().to_ascii_uppercase().as_str() {
-                "FULLY-SPECIFIED" => {}
-                "DEGREES" => radians = false,
-                "RADIANS" => radians = true,
-                other => return Err(syntax(path, ln, format!("unknown header `:{other}`"))),
-            }
+            reader.header_keyword(ln, kw)?;
             continue;
         }
         let mut toks = line.split_whitespace();
         let first = toks.next().unwrap_or_default();
         let rest: Vec<&str> = toks.collect();
         if rest.is_empty() && first.bytes().all(|b| b.is_ascii_digit()) {
-            let num: i64 = first
-                .parse()
-                .map_err(|_| syntax(path, ln, "frame number too large"))?;
-            if let Some(prev) = frame_number {
-                finish(&mut seen, &frame, &mut values, frames, ln)?;
-                if num != prev + 1 {
-                    return Err(ParseError::FrameCount {
-                        path: path.to_path_buf(),
-                        line: ln,
-                        detail: format!("frame {num} follows frame {prev}"),
-                    });
-                }
-            }
-            frames += 1;
-            if frames > limits.max_frames || frames.saturating_mul(n) > limits.max_values {
-                return Err(ParseError::TooLarge {
+            reader.frame_number_line(ln, first)?;
+        } else {
+            reader.bone_line(ln, first, &rest)?;
+        }
+    }
+    reader.finish(frame_rate_hz)
+}
+
+/// The reader's state between the lines of an AMC file.
+struct AmcReader<'a> {
+    path: &'a Path,
+    skeleton: &'a Skeleton,
+    limits: &'a Limits,
+    /// Offset of each joint's first channel in a frame.
+    offsets: Vec<usize>,
+    /// Channels per frame.
+    n: usize,
+    radians: bool,
+    /// The frames read so far, frame-major.
+    values: Vec<f64>,
+    /// The frame being read.
+    frame: Vec<f64>,
+    /// Which joints the frame being read has given.
+    seen: Vec<bool>,
+    frames: usize,
+    /// Number of the frame being read (`None` before the first).
+    frame_number: Option<i64>,
+    /// Line of the frame being read's number.
+    frame_line: usize,
+    last_line: usize,
+}
+
+impl<'a> AmcReader<'a> {
+    fn new(path: &'a Path, skeleton: &'a Skeleton, limits: &'a Limits) -> AmcReader<'a> {
+        let mut offsets = Vec::with_capacity(skeleton.joints.len());
+        let mut n = 0;
+        for j in &skeleton.joints {
+            offsets.push(n);
+            n += j.dofs.len();
+        }
+        AmcReader {
+            path,
+            skeleton,
+            limits,
+            offsets,
+            n,
+            radians: false,
+            values: Vec::new(),
+            frame: vec![0.0; n],
+            seen: vec![false; skeleton.joints.len()],
+            frames: 0,
+            frame_number: None,
+            frame_line: 0,
+            last_line: 0,
+        }
+    }
+
+    /// A `:KEYWORD` header line, allowed only before the first frame.
+    fn header_keyword(&mut self, ln: usize, kw: &str) -> Result<(), ParseError> {
+        if self.frame_number.is_some() {
+            return Err(syntax(
+                self.path,
+                ln,
+                "header keyword after the first frame",
+            ));
+        }
+        match kw.trim().to_ascii_uppercase().as_str() {
+            "FULLY-SPECIFIED" => {}
+            "DEGREES" => self.radians = false,
+            "RADIANS" => self.radians = true,
+            other => return Err(syntax(self.path, ln, format!("unknown header `:{other}`"))),
+        }
+        Ok(())
+    }
+
+    /// A frame number: ends the frame before it (which must follow on), starts a new one
+    /// within the limits.
+    fn frame_number_line(&mut self, ln: usize, first: &str) -> Result<(), ParseError> {
+        let path = self.path;
+        let num: i64 = first
+            .parse()
+            .map_err(|_| syntax(path, ln, "frame number too large"))?;
+        if let Some(prev) = self.frame_number {
+            self.end_frame(ln)?;
+            if num != prev + 1 {
+                return Err(ParseError::FrameCount {
                     path: path.to_path_buf(),
                     line: ln,
-                    what: "number of frames".into(),
-                    value: frames as u64,
-                    limit: limits.max_frames.min(limits.max_values / n.max(1)) as u64,
+                    detail: format!("frame {num} follows frame {prev}"),
                 });
             }
-            frame_number = Some(num);
-            frame_line = ln;
-            continue;
         }
-        if frame_number.is_none() {
+        self.frames += 1;
+        let (frames, n, limits) = (self.frames, self.n, self.limits);
+        if frames > limits.max_frames || frames.saturating_mul(n) > limits.max_values {
+            return Err(ParseError::TooLarge {
+                path: path.to_path_buf(),
+                line: ln,
+                what: "number of frames".into(),
+                value: frames as u64,
+                limit: limits.max_frames.min(limits.max_values / n.max(1)) as u64,
+            });
+        }
+        self.frame_number = Some(num);
+        self.frame_line = ln;
+        Ok(())
+    }
+
+    /// `bone v1 v2 ...`: one bone's values in the frame being read.
+    fn bone_line(&mut self, ln: usize, first: &str, rest: &[&str]) -> Result<(), ParseError> {
+        let path = self.path;
+        if self.frame_number.is_none() {
             return Err(syntax(
                 path,
                 ln,
                 format!("bone line `{first}` before the first frame number"),
             ));
         }
-        let Some(j) = skeleton.joint_index(first) else {
+        let Some(j) = self.skeleton.joint_index(first) else {
             return Err(ParseError::UnknownBone {
                 path: path.to_path_buf(),
                 line: ln,
                 name: first.into(),
             });
         };
-        let joint = &skeleton.joints[j];
-        if seen[j] {
+        let joint = &self.skeleton.joints[j];
+        if self.seen[j] {
             return Err(syntax(
                 path,
                 ln,
-                format!("bone {first} appears twice in frame {frames}"),
+                format!("bone {first} appears twice in frame {}", self.frames),
             ));
         }
         if rest.len() != joint.dofs.len() {
@@ -180,37 +211,55 @@ pub fn parse_amc(
         let what = format!("bone {first}");
         for (k, tok) in rest.iter().enumerate() {
             let v = number(path, ln, &what, tok)?;
-            frame[offsets[j] + k] = if radians && joint.dofs[k].is_rotation() {
+            self.frame[self.offsets[j] + k] = if self.radians && joint.dofs[k].is_rotation() {
                 v.to_degrees()
             } else {
                 v
             };
         }
-        seen[j] = true;
+        self.seen[j] = true;
+        Ok(())
     }
-    if frame_number.is_none() {
-        return Err(ParseError::Truncated {
-            path: path.to_path_buf(),
-            line: last_line,
-            expected: "at least one frame".into(),
-        });
-    }
-    finish(
-        &mut seen,
-        &frame,
-        &mut values,
-        frames,
-        last_line.max(frame_line),
-    )?;
-    // frame-major -> channel-major
-    let mut data = vec![0.0; values.len()];
-    for f in 0..frames {
-        for c in 0..n {
-            data[c * frames + f] = values[f * n + c];
+
+    /// Ends the frame being read: every bone with dofs must have been given.
+    fn end_frame(&mut self, line: usize) -> Result<(), ParseError> {
+        for (j, joint) in self.skeleton.joints.iter().enumerate() {
+            if !joint.dofs.is_empty() && !self.seen[j] {
+                return Err(ParseError::MissingBone {
+                    path: self.path.to_path_buf(),
+                    line,
+                    frame: self.frames,
+                    name: joint.name.clone(),
+                });
+            }
         }
+        self.values.extend_from_slice(&self.frame);
+        self.seen.fill(false);
+        Ok(())
     }
-    Clip::new(skeleton.clone(), frame_rate_hz, frames, data)
-        .map_err(|e| syntax(path, last_line, e.to_string()))
+
+    /// Ends the last frame and builds the clip (channel-major).
+    fn finish(mut self, frame_rate_hz: f64) -> Result<Clip, ParseError> {
+        let (path, last_line) = (self.path, self.last_line);
+        if self.frame_number.is_none() {
+            return Err(ParseError::Truncated {
+                path: path.to_path_buf(),
+                line: last_line,
+                expected: "at least one frame".into(),
+            });
+        }
+        self.end_frame(last_line.max(self.frame_line))?;
+        let (frames, n) = (self.frames, self.n);
+        // frame-major -> channel-major
+        let mut data = vec![0.0; self.values.len()];
+        for f in 0..frames {
+            for c in 0..n {
+                data[c * frames + f] = self.values[f * n + c];
+            }
+        }
+        Clip::new(self.skeleton.clone(), frame_rate_hz, frames, data)
+            .map_err(|e| syntax(path, last_line, e.to_string()))
+    }
 }
 
 /// Writes a clip as AMC text (`:FULLY-SPECIFIED`, `:DEGREES`, frames numbered from 1, bones in

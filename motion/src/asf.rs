@@ -34,8 +34,9 @@ pub fn read_asf_with(path: &Path, limits: &Limits) -> Result<Skeleton, ParseErro
     parse_asf(&text, path, limits)
 }
 
-#[derive(Clone, Copy, PartialEq)]
+#[derive(Clone, Copy, PartialEq, Default)]
 enum Section {
+    #[default]
     None,
     Header,
     Units,
@@ -57,6 +58,54 @@ struct BoneDraft {
     dofs: Vec<ChannelKind>,
     limits: Vec<(f64, f64)>,
     limit_values: Vec<f64>,
+}
+
+/// The `:root` section as read.
+struct RootDraft {
+    order: Option<Vec<ChannelKind>>,
+    axis: [Axis; 3],
+    position: [f64; 3],
+    orientation: [f64; 3],
+}
+
+impl Default for RootDraft {
+    fn default() -> Self {
+        RootDraft {
+            order: None,
+            axis: [Axis::X, Axis::Y, Axis::Z],
+            position: [0.0; 3],
+            orientation: [0.0; 3],
+        }
+    }
+}
+
+/// What the lines of an ASF file have said so far: the reader's state between lines.
+#[derive(Default)]
+struct AsfDraft {
+    section: Section,
+    name: String,
+    units: Units,
+    angle_rad: bool,
+    documentation: Vec<String>,
+    root: RootDraft,
+    bones: Vec<BoneDraft>,
+    /// The bone block between `begin` and `end`, if one is open.
+    current: Option<BoneDraft>,
+    /// The last bone field was `limits`: a line starting with `(` continues it.
+    in_limits: bool,
+    hierarchy: HierarchyDraft,
+    seen_root: bool,
+}
+
+/// The `:hierarchy` section as read.
+#[derive(Default)]
+struct HierarchyDraft {
+    /// Line number, parent, children.
+    lines: Vec<(usize, String, Vec<String>)>,
+    /// Inside `begin` ... `end`.
+    open: bool,
+    /// An `end` has been seen.
+    closed: bool,
 }
 
 fn axis_order(path: &Path, line: usize, tok: &str) -> Result<[Axis; 3], ParseError> {
@@ -114,29 +163,9 @@ fn limit_pairs(
 ///
 /// # Errors
 /// A [`ParseError`] naming the file, line and reason.
-#[expect(
-    clippy::too_many_lines,
-    reason = "one state machine over the file's sections"
-)]
 pub fn parse_asf(text: &str, path: &Path, limits: &Limits) -> Result<Skeleton, ParseError> {
-    let mut section = Section::None;
-    let mut name = String::new();
-    let mut units = Units::default();
-    let mut angle_rad = false;
-    let mut documentation = Vec::new();
-    let mut root_order: Option<Vec<ChannelKind>> = None;
-    let mut root_axis = [Axis::X, Axis::Y, Axis::Z];
-    let mut root_position = [0.0; 3];
-    let mut root_orientation = [0.0; 3];
-    let mut bones: Vec<BoneDraft> = Vec::new();
-    let mut current: Option<BoneDraft> = None;
-    let mut in_limits = false;
-    let mut hierarchy: Vec<(usize, String, Vec<String>)> = Vec::new();
-    let mut hierarchy_open = false;
-    let mut hierarchy_closed = false;
-    let mut seen_root = false;
+    let mut draft = AsfDraft::default();
     let mut last_line = 0;
-
     for (ln, raw) in lines(text) {
         last_line = ln;
         let line = raw.trim();
@@ -145,288 +174,378 @@ pub fn parse_asf(text: &str, path: &Path, limits: &Limits) -> Result<Skeleton, P
         }
         let toks: Vec<&str> = line.split_whitespace().collect();
         if let Some(kw) = toks[0].strip_prefix(':') {
-            if current.is_some() {
-                return Err(syntax(path, ln, "bone block not closed with `end`"));
-            }
-            in_limits = false;
-            section = match kw.to_ascii_lowercase().as_str() {
-                "version" => Section::Header,
-                "name" => {
-                    name = toks[1..].join(" ");
-                    Section::Header
-                }
-                "units" => Section::Units,
-                "documentation" => Section::Documentation,
-                "root" => {
-                    seen_root = true;
-                    Section::Root
-                }
-                "bonedata" => Section::BoneData,
-                "hierarchy" => Section::Hierarchy,
-                "skin" => Section::Skip,
-                other => return Err(syntax(path, ln, format!("unknown section `:{other}`"))),
-            };
-            continue;
+            draft.start_section(path, ln, kw, &toks)?;
+        } else {
+            draft.section_line(path, ln, line, &toks, limits)?;
         }
-        match section {
-            Section::None => {
-                return Err(syntax(path, ln, "text before the first `:` section"));
+    }
+    draft.check_complete(path, last_line)?;
+    draft.into_skeleton(path)
+}
+
+impl AsfDraft {
+    /// A `:keyword` line: the section that the following lines belong to.
+    fn start_section(
+        &mut self,
+        path: &Path,
+        ln: usize,
+        kw: &str,
+        toks: &[&str],
+    ) -> Result<(), ParseError> {
+        if self.current.is_some() {
+            return Err(syntax(path, ln, "bone block not closed with `end`"));
+        }
+        self.in_limits = false;
+        self.section = match kw.to_ascii_lowercase().as_str() {
+            "version" => Section::Header,
+            "name" => {
+                self.name = toks[1..].join(" ");
+                Section::Header
             }
-            Section::Header | Section::Skip => {}
-            Section::Documentation => documentation.push(line.to_string()),
-            Section::Units => {
-                let what = format!("units {}", toks[0]);
-                match toks[0] {
-                    "mass" => units.asf_mass = numbers::<1>(path, ln, &what, &toks[1..])?[0],
-                    "length" => {
-                        let l = numbers::<1>(path, ln, &what, &toks[1..])?[0];
-                        if l <= 0.0 {
-                            return Err(syntax(path, ln, "units length must be positive"));
-                        }
-                        units.asf_length = l;
-                        units.cm_per_unit = CM_PER_INCH / l;
-                        units.declared = true;
-                    }
-                    "angle" => match toks.get(1).map(|t| t.to_ascii_lowercase()).as_deref() {
-                        Some("deg") => angle_rad = false,
-                        Some("rad") => angle_rad = true,
-                        _ => return Err(syntax(path, ln, "units angle must be `deg` or `rad`")),
-                    },
-                    other => return Err(syntax(path, ln, format!("unknown unit `{other}`"))),
-                }
+            "units" => Section::Units,
+            "documentation" => Section::Documentation,
+            "root" => {
+                self.seen_root = true;
+                Section::Root
             }
-            Section::Root => match toks[0] {
-                "order" => {
-                    let order = toks[1..]
-                        .iter()
-                        .map(|t| channel(path, ln, t))
-                        .collect::<Result<Vec<_>, _>>()?;
-                    if order.len() > 6 {
-                        return Err(syntax(path, ln, "root order lists more than 6 channels"));
-                    }
-                    root_order = Some(order);
+            "bonedata" => Section::BoneData,
+            "hierarchy" => Section::Hierarchy,
+            "skin" => Section::Skip,
+            other => return Err(syntax(path, ln, format!("unknown section `:{other}`"))),
+        };
+        Ok(())
+    }
+
+    /// A line inside the current section (`line` trimmed, `toks` its words).
+    fn section_line(
+        &mut self,
+        path: &Path,
+        ln: usize,
+        line: &str,
+        toks: &[&str],
+        limits: &Limits,
+    ) -> Result<(), ParseError> {
+        match self.section {
+            Section::None => Err(syntax(path, ln, "text before the first `:` section")),
+            Section::Header | Section::Skip => Ok(()),
+            Section::Documentation => {
+                self.documentation.push(line.to_string());
+                Ok(())
+            }
+            Section::Units => self.units_line(path, ln, toks),
+            Section::Root => self.root_line(path, ln, toks),
+            Section::BoneData => self.bone_data_line(path, ln, line, toks, limits),
+            Section::Hierarchy => self.hierarchy_line(path, ln, toks),
+        }
+    }
+
+    /// `mass M`, `length L` or `angle deg|rad` under `:units`.
+    fn units_line(&mut self, path: &Path, ln: usize, toks: &[&str]) -> Result<(), ParseError> {
+        let what = format!("units {}", toks[0]);
+        match toks[0] {
+            "mass" => self.units.asf_mass = numbers::<1>(path, ln, &what, &toks[1..])?[0],
+            "length" => {
+                let l = numbers::<1>(path, ln, &what, &toks[1..])?[0];
+                if l <= 0.0 {
+                    return Err(syntax(path, ln, "units length must be positive"));
                 }
-                "axis" => {
-                    let tok = toks.get(1).copied().unwrap_or("");
-                    root_axis = axis_order(path, ln, tok)?;
-                }
-                "position" => root_position = numbers::<3>(path, ln, "root position", &toks[1..])?,
-                "orientation" => {
-                    root_orientation = numbers::<3>(path, ln, "root orientation", &toks[1..])?;
-                }
-                other => return Err(syntax(path, ln, format!("unknown root field `{other}`"))),
+                self.units.asf_length = l;
+                self.units.cm_per_unit = CM_PER_INCH / l;
+                self.units.declared = true;
+            }
+            "angle" => match toks.get(1).map(|t| t.to_ascii_lowercase()).as_deref() {
+                Some("deg") => self.angle_rad = false,
+                Some("rad") => self.angle_rad = true,
+                _ => return Err(syntax(path, ln, "units angle must be `deg` or `rad`")),
             },
-            Section::BoneData => {
-                if toks[0] == "begin" {
-                    if current.is_some() {
-                        return Err(syntax(path, ln, "`begin` inside a bone block"));
-                    }
-                    if bones.len() + 1 >= limits.max_joints {
-                        return Err(ParseError::TooLarge {
-                            path: path.to_path_buf(),
-                            line: ln,
-                            what: "number of bones".into(),
-                            value: bones.len() as u64 + 1,
-                            limit: limits.max_joints as u64,
-                        });
-                    }
-                    current = Some(BoneDraft {
-                        line: ln,
-                        ..BoneDraft::default()
-                    });
-                    in_limits = false;
-                    continue;
+            other => return Err(syntax(path, ln, format!("unknown unit `{other}`"))),
+        }
+        Ok(())
+    }
+
+    /// `order`, `axis`, `position` or `orientation` under `:root`.
+    fn root_line(&mut self, path: &Path, ln: usize, toks: &[&str]) -> Result<(), ParseError> {
+        match toks[0] {
+            "order" => {
+                let order = toks[1..]
+                    .iter()
+                    .map(|t| channel(path, ln, t))
+                    .collect::<Result<Vec<_>, _>>()?;
+                if order.len() > 6 {
+                    return Err(syntax(path, ln, "root order lists more than 6 channels"));
                 }
-                let Some(bone) = current.as_mut() else {
+                self.root.order = Some(order);
+            }
+            "axis" => {
+                let tok = toks.get(1).copied().unwrap_or("");
+                self.root.axis = axis_order(path, ln, tok)?;
+            }
+            "position" => {
+                self.root.position = numbers::<3>(path, ln, "root position", &toks[1..])?;
+            }
+            "orientation" => {
+                self.root.orientation = numbers::<3>(path, ln, "root orientation", &toks[1..])?;
+            }
+            other => return Err(syntax(path, ln, format!("unknown root field `{other}`"))),
+        }
+        Ok(())
+    }
+
+    /// A line under `:bonedata`: `begin`, `end`, a field of the open bone block, or a
+    /// continuation of its `limits`.
+    fn bone_data_line(
+        &mut self,
+        path: &Path,
+        ln: usize,
+        line: &str,
+        toks: &[&str],
+        limits: &Limits,
+    ) -> Result<(), ParseError> {
+        if toks[0] == "begin" {
+            return self.begin_bone(path, ln, limits);
+        }
+        let Some(bone) = self.current.as_mut() else {
+            return Err(syntax(
+                path,
+                ln,
+                format!("`{}` outside a begin/end block", toks[0]),
+            ));
+        };
+        if self.in_limits && toks[0].starts_with('(') {
+            return push_limits(path, ln, line, &mut bone.limit_values);
+        }
+        self.in_limits = false;
+        match toks[0] {
+            "end" => self.end_bone(path, ln),
+            "limits" => {
+                self.in_limits = true;
+                push_limits(path, ln, &line["limits".len()..], &mut bone.limit_values)
+            }
+            _ => bone.field(path, ln, toks),
+        }
+    }
+
+    /// `begin`: opens a bone block, within the joint limit.
+    fn begin_bone(&mut self, path: &Path, ln: usize, limits: &Limits) -> Result<(), ParseError> {
+        if self.current.is_some() {
+            return Err(syntax(path, ln, "`begin` inside a bone block"));
+        }
+        if self.bones.len() + 1 >= limits.max_joints {
+            return Err(ParseError::TooLarge {
+                path: path.to_path_buf(),
+                line: ln,
+                what: "number of bones".into(),
+                value: self.bones.len() as u64 + 1,
+                limit: limits.max_joints as u64,
+            });
+        }
+        self.current = Some(BoneDraft {
+            line: ln,
+            ..BoneDraft::default()
+        });
+        self.in_limits = false;
+        Ok(())
+    }
+
+    /// `end`: closes the open bone block, pairing its limit values per dof.
+    fn end_bone(&mut self, path: &Path, ln: usize) -> Result<(), ParseError> {
+        let mut bone = self.current.take().unwrap_or_default();
+        bone.limits = if bone.limit_values.is_empty() {
+            Vec::new()
+        } else {
+            limit_pairs(path, ln, &bone.limit_values, bone.dofs.len())?
+        };
+        self.bones.push(bone);
+        Ok(())
+    }
+
+    /// `begin`, `end` or `parent child...` under `:hierarchy`.
+    fn hierarchy_line(&mut self, path: &Path, ln: usize, toks: &[&str]) -> Result<(), ParseError> {
+        match toks[0] {
+            "begin" => self.hierarchy.open = true,
+            "end" => {
+                self.hierarchy.open = false;
+                self.hierarchy.closed = true;
+            }
+            parent => {
+                if !self.hierarchy.open {
+                    return Err(syntax(path, ln, "hierarchy line outside begin/end"));
+                }
+                let children = toks[1..].iter().map(|s| (*s).to_string()).collect();
+                self.hierarchy
+                    .lines
+                    .push((ln, parent.to_string(), children));
+            }
+        }
+        Ok(())
+    }
+
+    /// At the end of the text: no open bone block, a root and a closed hierarchy.
+    fn check_complete(&self, path: &Path, last_line: usize) -> Result<(), ParseError> {
+        let missing = |expected: &str| ParseError::Truncated {
+            path: path.to_path_buf(),
+            line: last_line,
+            expected: expected.into(),
+        };
+        if self.current.is_some() {
+            return Err(missing("`end` of a bone block"));
+        }
+        if !self.seen_root {
+            return Err(missing("a `:root` section"));
+        }
+        if !self.hierarchy.closed {
+            return Err(missing("a complete `:hierarchy` section"));
+        }
+        Ok(())
+    }
+
+    /// The file's angle in degrees.
+    fn to_deg(&self, v: f64) -> f64 {
+        if self.angle_rad { v.to_degrees() } else { v }
+    }
+
+    /// The skeleton: the root, then the bones ordered by the hierarchy.
+    fn into_skeleton(self, path: &Path) -> Result<Skeleton, ParseError> {
+        let root = Joint {
+            name: "root".into(),
+            parent: None,
+            rest: Rest::Offset(self.root.position),
+            dofs: self.root.order.clone().unwrap_or_default(),
+            axis_deg: self.root.orientation.map(|v| self.to_deg(v)),
+            axis_order: self.root.axis,
+            limits: Vec::new(),
+            id: None,
+            end_site: false,
+            body_part: BodyPart::Torso,
+            chain_depth: 0,
+        };
+        let drafts = self.bone_joints(path)?;
+        let joints = order_by_hierarchy(path, root, &drafts, &self.hierarchy.lines)?;
+        let mut skeleton = Skeleton {
+            name: self.name,
+            format: SkeletonFormat::Asf,
+            units: self.units,
+            joints,
+            documentation: self.documentation,
+        };
+        bodymap::assign(&mut skeleton);
+        Ok(skeleton)
+    }
+
+    /// Every bone block as a joint (no parent yet) with its `begin` line, in file order.
+    fn bone_joints(&self, path: &Path) -> Result<Vec<(Joint, usize)>, ParseError> {
+        let mut drafts: Vec<(Joint, usize)> = Vec::with_capacity(self.bones.len());
+        for b in &self.bones {
+            let joint = b.to_joint(path, |v| self.to_deg(v))?;
+            if drafts.iter().any(|(j, _)| j.name == joint.name) || joint.name == "root" {
+                return Err(syntax(
+                    path,
+                    b.line,
+                    format!("bone {} is defined twice", joint.name),
+                ));
+            }
+            drafts.push((joint, b.line));
+        }
+        Ok(drafts)
+    }
+}
+
+impl BoneDraft {
+    /// A field line of a bone block other than `begin`, `end` and `limits`.
+    fn field(&mut self, path: &Path, ln: usize, toks: &[&str]) -> Result<(), ParseError> {
+        let bone_name = self.name.clone().unwrap_or_else(|| "?".into());
+        match toks[0] {
+            "id" => {
+                let id = toks.get(1).and_then(|t| t.parse::<u32>().ok());
+                if id.is_none() || toks.len() != 2 {
+                    return Err(syntax(path, ln, "bone id must be one whole number"));
+                }
+                self.id = id;
+            }
+            "name" => {
+                if toks.len() != 2 {
+                    return Err(syntax(path, ln, "bone name must be one word"));
+                }
+                self.name = Some(toks[1].to_string());
+            }
+            "direction" => {
+                let what = format!("direction of bone {bone_name}");
+                self.direction = Some(numbers::<3>(path, ln, &what, &toks[1..])?);
+            }
+            "length" => {
+                let what = format!("length of bone {bone_name}");
+                let l = numbers::<1>(path, ln, &what, &toks[1..])?[0];
+                if l < 0.0 {
+                    return Err(syntax(path, ln, "bone length is negative"));
+                }
+                self.length = Some(l);
+            }
+            "axis" => {
+                if toks.len() != 5 {
+                    return Err(ParseError::WrongCount {
+                        path: path.to_path_buf(),
+                        line: ln,
+                        what: format!("axis of bone {bone_name} (3 angles and an order)"),
+                        expected: 4,
+                        found: toks.len() - 1,
+                    });
+                }
+                let what = format!("axis of bone {bone_name}");
+                let a = numbers::<3>(path, ln, &what, &toks[1..4])?;
+                self.axis = Some((a, axis_order(path, ln, toks[4])?));
+            }
+            "dof" => {
+                let dofs = toks[1..]
+                    .iter()
+                    .map(|t| channel(path, ln, t))
+                    .collect::<Result<Vec<_>, _>>()?;
+                if dofs.len() > 3 || dofs.iter().any(|d| !d.is_rotation()) {
                     return Err(syntax(
                         path,
                         ln,
-                        format!("`{}` outside a begin/end block", toks[0]),
+                        format!("bone {bone_name}: only rx, ry, rz dofs are supported on bones"),
                     ));
-                };
-                if in_limits && toks[0].starts_with('(') {
-                    push_limits(path, ln, line, &mut bone.limit_values)?;
-                    continue;
                 }
-                in_limits = false;
-                let bone_name = bone.name.clone().unwrap_or_else(|| "?".into());
-                match toks[0] {
-                    "end" => {
-                        let mut bone = current.take().unwrap_or_default();
-                        bone.limits = if bone.limit_values.is_empty() {
-                            Vec::new()
-                        } else {
-                            limit_pairs(path, ln, &bone.limit_values, bone.dofs.len())?
-                        };
-                        bones.push(bone);
-                    }
-                    "id" => {
-                        let id = toks.get(1).and_then(|t| t.parse::<u32>().ok());
-                        if id.is_none() || toks.len() != 2 {
-                            return Err(syntax(path, ln, "bone id must be one whole number"));
-                        }
-                        bone.id = id;
-                    }
-                    "name" => {
-                        if toks.len() != 2 {
-                            return Err(syntax(path, ln, "bone name must be one word"));
-                        }
-                        bone.name = Some(toks[1].to_string());
-                    }
-                    "direction" => {
-                        let what = format!("direction of bone {bone_name}");
-                        bone.direction = Some(numbers::<3>(path, ln, &what, &toks[1..])?);
-                    }
-                    "length" => {
-                        let what = format!("length of bone {bone_name}");
-                        let l = numbers::<1>(path, ln, &what, &toks[1..])?[0];
-                        if l < 0.0 {
-                            return Err(syntax(path, ln, "bone length is negative"));
-                        }
-                        bone.length = Some(l);
-                    }
-                    "axis" => {
-                        if toks.len() != 5 {
-                            return Err(ParseError::WrongCount {
-                                path: path.to_path_buf(),
-                                line: ln,
-                                what: format!("axis of bone {bone_name} (3 angles and an order)"),
-                                expected: 4,
-                                found: toks.len() - 1,
-                            });
-                        }
-                        let what = format!("axis of bone {bone_name}");
-                        let a = numbers::<3>(path, ln, &what, &toks[1..4])?;
-                        bone.axis = Some((a, axis_order(path, ln, toks[4])?));
-                    }
-                    "dof" => {
-                        let dofs = toks[1..]
-                            .iter()
-                            .map(|t| channel(path, ln, t))
-                            .collect::<Result<Vec<_>, _>>()?;
-                        if dofs.len() > 3 || dofs.iter().any(|d| !d.is_rotation()) {
-                            return Err(syntax(
-                                path,
-                                ln,
-                                format!(
-                                    "bone {bone_name}: only rx, ry, rz dofs are supported on bones"
-                                ),
-                            ));
-                        }
-                        bone.dofs = dofs;
-                    }
-                    "limits" => {
-                        in_limits = true;
-                        push_limits(path, ln, &line["limits".len()..], &mut bone.limit_values)?;
-                    }
-                    "bodymass" | "cofmass" => {}
-                    other => {
-                        return Err(syntax(path, ln, format!("unknown bone field `{other}`")));
-                    }
-                }
+                self.dofs = dofs;
             }
-            Section::Hierarchy => match toks[0] {
-                "begin" => hierarchy_open = true,
-                "end" => {
-                    hierarchy_open = false;
-                    hierarchy_closed = true;
-                }
-                parent => {
-                    if !hierarchy_open {
-                        return Err(syntax(path, ln, "hierarchy line outside begin/end"));
-                    }
-                    let children = toks[1..].iter().map(|s| (*s).to_string()).collect();
-                    hierarchy.push((ln, parent.to_string(), children));
-                }
-            },
+            "bodymass" | "cofmass" => {}
+            other => {
+                return Err(syntax(path, ln, format!("unknown bone field `{other}`")));
+            }
         }
+        Ok(())
     }
-    if current.is_some() {
-        return Err(ParseError::Truncated {
-            path: path.to_path_buf(),
-            line: last_line,
-            expected: "`end` of a bone block".into(),
-        });
-    }
-    if !seen_root {
-        return Err(ParseError::Truncated {
-            path: path.to_path_buf(),
-            line: last_line,
-            expected: "a `:root` section".into(),
-        });
-    }
-    if !hierarchy_closed {
-        return Err(ParseError::Truncated {
-            path: path.to_path_buf(),
-            line: last_line,
-            expected: "a complete `:hierarchy` section".into(),
-        });
-    }
-    let to_deg = |v: f64| if angle_rad { v.to_degrees() } else { v };
 
-    let root = Joint {
-        name: "root".into(),
-        parent: None,
-        rest: Rest::Offset(root_position),
-        dofs: root_order.unwrap_or_default(),
-        axis_deg: root_orientation.map(to_deg),
-        axis_order: root_axis,
-        limits: Vec::new(),
-        id: None,
-        end_site: false,
-        body_part: BodyPart::Torso,
-        chain_depth: 0,
-    };
-    let mut drafts: Vec<(Joint, usize)> = Vec::with_capacity(bones.len());
-    for b in bones {
-        let Some(bname) = b.name else {
-            return Err(syntax(path, b.line, "bone block without a name"));
+    /// The closed block as a joint (no parent yet), its angles converted by `to_deg`.
+    fn to_joint(&self, path: &Path, to_deg: impl Fn(f64) -> f64) -> Result<Joint, ParseError> {
+        let Some(bname) = self.name.clone() else {
+            return Err(syntax(path, self.line, "bone block without a name"));
         };
-        let direction = b
+        let direction = self
             .direction
-            .ok_or_else(|| syntax(path, b.line, format!("bone {bname} has no direction")))?;
-        let length = b
+            .ok_or_else(|| syntax(path, self.line, format!("bone {bname} has no direction")))?;
+        let length = self
             .length
-            .ok_or_else(|| syntax(path, b.line, format!("bone {bname} has no length")))?;
-        let (axis, order) = b.axis.unwrap_or(([0.0; 3], [Axis::X, Axis::Y, Axis::Z]));
-        if drafts.iter().any(|(j, _)| j.name == bname) || bname == "root" {
-            return Err(syntax(
-                path,
-                b.line,
-                format!("bone {bname} is defined twice"),
-            ));
-        }
-        drafts.push((
-            Joint {
-                name: bname,
-                parent: None,
-                rest: Rest::Bone { direction, length },
-                dofs: b.dofs,
-                axis_deg: axis.map(to_deg),
-                axis_order: order,
-                limits: b
-                    .limits
-                    .into_iter()
-                    .map(|(lo, hi)| (to_deg(lo), to_deg(hi)))
-                    .collect(),
-                id: b.id,
-                end_site: false,
-                body_part: BodyPart::Torso,
-                chain_depth: 0,
-            },
-            b.line,
-        ));
+            .ok_or_else(|| syntax(path, self.line, format!("bone {bname} has no length")))?;
+        let (axis, order) = self.axis.unwrap_or(([0.0; 3], [Axis::X, Axis::Y, Axis::Z]));
+        Ok(Joint {
+            name: bname,
+            parent: None,
+            rest: Rest::Bone { direction, length },
+            dofs: self.dofs.clone(),
+            axis_deg: axis.map(&to_deg),
+            axis_order: order,
+            limits: self
+                .limits
+                .iter()
+                .map(|&(lo, hi)| (to_deg(lo), to_deg(hi)))
+                .collect(),
+            id: self.id,
+            end_site: false,
+            body_part: BodyPart::Torso,
+            chain_depth: 0,
+        })
     }
-    let joints = order_by_hierarchy(path, root, &drafts, &hierarchy)?;
-    let mut skeleton = Skeleton {
-        name,
-        format: SkeletonFormat::Asf,
-        units,
-        joints,
-        documentation,
-    };
-    bodymap::assign(&mut skeleton);
-    Ok(skeleton)
 }
 
 fn push_limits(path: &Path, ln: usize, text: &str, out: &mut Vec<f64>) -> Result<(), ParseError> {

@@ -195,11 +195,35 @@ fn parse_joint(
 ///
 /// # Errors
 /// A [`ParseError`] naming the file, line and reason.
-#[expect(
-    clippy::too_many_lines,
-    reason = "hierarchy, header and frames read in one pass"
-)]
 pub fn parse_bvh(text: &str, path: &Path, limits: &Limits) -> Result<Clip, ParseError> {
+    let (joints, motion_line) = parse_hierarchy(text, path, limits)?;
+    let n: usize = joints.iter().map(|j| j.dofs.len()).sum();
+    let mut rest = lines(text)
+        .skip(motion_line)
+        .filter(|(_, l)| !l.trim().is_empty());
+    let header = motion_header(&mut rest, path, motion_line)?;
+    check_declared_size(&header, n, text.len(), path, limits)?;
+    let data = read_frames(rest, &header, n, path)?;
+    let name = joints[0].name.clone();
+    let mut skeleton = Skeleton {
+        name,
+        format: SkeletonFormat::Bvh,
+        units: Units::default(),
+        joints,
+        documentation: Vec::new(),
+    };
+    skeleton.units = bodymap::infer_bvh_units(&skeleton);
+    bodymap::assign(&mut skeleton);
+    Clip::new(skeleton, 1.0 / header.frame_time_s, header.declared, data)
+        .map_err(|e| syntax(path, header.time_line, e.to_string()))
+}
+
+/// The joints of the `HIERARCHY` section and the line of `MOTION`.
+fn parse_hierarchy(
+    text: &str,
+    path: &Path,
+    limits: &Limits,
+) -> Result<(Vec<Joint>, usize), ParseError> {
     // Split into hierarchy tokens (up to MOTION) and motion lines.
     let mut toks = Vec::new();
     let mut motion_start = None;
@@ -236,12 +260,26 @@ pub fn parse_bvh(text: &str, path: &Path, limits: &Limits) -> Result<Clip, Parse
             expected: "`MOTION`".into(),
         });
     };
-    let n: usize = joints.iter().map(|j| j.dofs.len()).sum();
+    Ok((joints, motion_line))
+}
 
-    // Header lines after MOTION.
-    let mut rest = lines(text)
-        .skip(motion_line)
-        .filter(|(_, l)| !l.trim().is_empty());
+/// The `Frames:` and `Frame Time:` lines after `MOTION`.
+struct MotionHeader {
+    /// Frames declared.
+    declared: usize,
+    /// Line of `Frames:`.
+    frames_line: usize,
+    /// Line of `Frame Time:`.
+    time_line: usize,
+    frame_time_s: f64,
+}
+
+/// Reads the two header lines after `MOTION` from `rest` (the non-blank lines after it).
+fn motion_header<'t>(
+    rest: &mut impl Iterator<Item = (usize, &'t str)>,
+    path: &Path,
+    motion_line: usize,
+) -> Result<MotionHeader, ParseError> {
     let (fl, frames_line) = rest.next().ok_or_else(|| ParseError::Truncated {
         path: path.to_path_buf(),
         line: motion_line,
@@ -270,22 +308,48 @@ pub fn parse_bvh(text: &str, path: &Path, limits: &Limits) -> Result<Clip, Parse
     if frame_time_s <= 0.0 {
         return Err(syntax(path, tl, "Frame Time must be positive"));
     }
-    // Limits before allocation: the declared count against the limits and the bytes left
-    // (every value needs at least two bytes: a digit and a separator).
+    Ok(MotionHeader {
+        declared,
+        frames_line: fl,
+        time_line: tl,
+        frame_time_s,
+    })
+}
+
+/// Limits before allocation: the declared count against the limits and the bytes of the
+/// text (every value needs at least two bytes: a digit and a separator).
+fn check_declared_size(
+    header: &MotionHeader,
+    n: usize,
+    bytes_left: usize,
+    path: &Path,
+    limits: &Limits,
+) -> Result<(), ParseError> {
+    let declared = header.declared;
     let values = declared.saturating_mul(n);
-    let bytes_left = text.len();
     if declared > limits.max_frames || values > limits.max_values || values / 2 > bytes_left {
         return Err(ParseError::TooLarge {
             path: path.to_path_buf(),
-            line: fl,
+            line: header.frames_line,
             what: "declared frames × channels".into(),
             value: values as u64,
             limit: (limits.max_values.min(bytes_left / 2)) as u64,
         });
     }
-    let mut data = vec![0.0; values];
+    Ok(())
+}
+
+/// The channel-major matrix of the frame lines: exactly the declared count, `n` values each.
+fn read_frames<'t>(
+    rest: impl Iterator<Item = (usize, &'t str)>,
+    header: &MotionHeader,
+    n: usize,
+    path: &Path,
+) -> Result<Vec<f64>, ParseError> {
+    let declared = header.declared;
+    let mut data = vec![0.0; declared.saturating_mul(n)];
     let mut f = 0;
-    let mut line_of_last = tl;
+    let mut line_of_last = header.time_line;
     for (ln, line) in rest {
         line_of_last = ln;
         if f == declared {
@@ -323,22 +387,11 @@ pub fn parse_bvh(text: &str, path: &Path, limits: &Limits) -> Result<Clip, Parse
     if declared == 0 {
         return Err(ParseError::FrameCount {
             path: path.to_path_buf(),
-            line: fl,
+            line: header.frames_line,
             detail: "no frames".into(),
         });
     }
-    let name = joints[0].name.clone();
-    let mut skeleton = Skeleton {
-        name,
-        format: SkeletonFormat::Bvh,
-        units: Units::default(),
-        joints,
-        documentation: Vec::new(),
-    };
-    skeleton.units = bodymap::infer_bvh_units(&skeleton);
-    bodymap::assign(&mut skeleton);
-    Clip::new(skeleton, 1.0 / frame_time_s, declared, data)
-        .map_err(|e| syntax(path, tl, e.to_string()))
+    Ok(data)
 }
 
 /// Writes a BVH clip (tabs for nesting, shortest exact numbers).

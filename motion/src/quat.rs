@@ -152,11 +152,6 @@ impl Quat {
         }
     }
 
-    /// Rotates a vector.
-    pub fn rotate(self, v: Vec3) -> Vec3 {
-        crate::math::mul_vec(&self.to_mat3(), &v)
-    }
-
     /// Spherical linear interpolation from `self` (t = 0) to `o` (t = 1) along the shorter arc.
     #[must_use]
     pub fn slerp(self, o: Quat, t: f64) -> Quat {

@@ -39,7 +39,55 @@ pub use spiht::{SpihtCodec, crowd_budgets};
 pub use wavelet_codec::{Selection, TranslationRule, WaveletCodec};
 
 /// Codec parameters by name (`alpha`, `qp`, `window`, `cr`, ...), as the manifest stores them.
+/// The names are the constants of [`keys`]; each codec reads its parameters from here once,
+/// into a typed settings struct that checks every range.
 pub type Params = BTreeMap<String, f64>;
+
+/// The names of codec parameters: the keys of [`Params`], of the stimulus manifest and of the
+/// bitstream header. Which codec takes which key is its [`Codec::default_params`].
+pub mod keys {
+    /// Target compression ratio (every lossy codec; [`crate::rate::encode_to_cr`] sets it).
+    /// Native to SPIHT (0.1..=10 000); the others search their knob for it and do not record
+    /// it in the stream.
+    pub const CR: &str = "cr";
+    /// Wavelet codecs: the kept fraction α of the coefficients (0..=1), their rate knob.
+    pub const ALPHA: &str = "alpha";
+    /// Wavelet codecs: quantization bits QP (4..=16).
+    pub const QP: &str = "qp";
+    /// Wavelet and SPIHT codecs: slice (segment) length in frames (8..=4096).
+    pub const WINDOW: &str = "window";
+    /// Wavelet codecs: the minimum `C` of kept coefficients per channel and slice (0..=4096).
+    pub const C_MIN: &str = "c";
+    /// Wavelet and SPIHT codecs: the wavelet, by [`crate::wavelet::Wavelet::id`].
+    pub const WAVELET: &str = "wavelet";
+    /// Wavelet codecs: how root translations enter the allocation (0 comparable, 1 literal).
+    pub const TRANSLATION: &str = "translation";
+    /// `wavelet-perceptual` and SPIHT: 0 position-aware allocation, 1 the rule as printed.
+    pub const ALLOCATION: &str = "allocation";
+    /// SPIHT: body-part score `S` of the legs (0..=1).
+    pub const SCORE_LEGS: &str = "score_legs";
+    /// SPIHT: body-part score `S` of the arms (0..=1).
+    pub const SCORE_ARMS: &str = "score_arms";
+    /// SPIHT: body-part score `S` of the torso (0..=1).
+    pub const SCORE_TORSO: &str = "score_torso";
+    /// SPIHT: body-part score `S` of the head (0..=1).
+    pub const SCORE_HEAD: &str = "score_head";
+    /// `primitive`: the leg joints' error threshold `t_L` in radians (1e-4..=1), its rate knob.
+    pub const T_L: &str = "t_l";
+    /// `primitive`: `t_U / t_L`, the other joints' threshold over the legs' (1..=10).
+    pub const UPPER_RATIO: &str = "upper_ratio";
+    /// `primitive`: frames smoothed each side of a segment join (0..=16).
+    pub const SMOOTH: &str = "smooth";
+    /// `primitive`: the coarsest quantizer step as a fraction of the threshold (0..=4).
+    pub const STEP_FLOOR: &str = "step_floor";
+    /// `primitive`: the fingerprint of the primitive database.
+    pub const DB: &str = "db";
+}
+
+/// `pairs` as [`Params`].
+pub(crate) fn params_of(pairs: &[(&str, f64)]) -> Params {
+    pairs.iter().map(|&(k, v)| (k.to_string(), v)).collect()
+}
 
 /// Why a clip could not be encoded or a stream decoded.
 #[derive(Debug, thiserror::Error)]
@@ -130,7 +178,7 @@ pub enum RateControl {
     Native,
     /// Bisect this parameter (CR decreases as it grows) in `[min, max]`, on a log scale.
     Search {
-        /// Parameter name.
+        /// Parameter name (one of [`keys`]).
         key: &'static str,
         /// Smallest value.
         min: f64,
@@ -140,7 +188,7 @@ pub enum RateControl {
     /// Bisect this parameter (CR increases as it grows, e.g. an error threshold) in
     /// `[min, max]`, on a log scale.
     SearchIncreasing {
-        /// Parameter name.
+        /// Parameter name (one of [`keys`]).
         key: &'static str,
         /// Smallest value.
         min: f64,

@@ -51,12 +51,13 @@ use std::collections::BTreeMap;
 use std::sync::Arc;
 
 use super::{
-    Codec, CodecError, Params, RateControl, check_stream, header, int_param, merged, real_param,
+    Codec, CodecError, Params, RateControl, check_stream, header, int_param, keys, merged,
+    params_of, real_param,
 };
 use crate::bitstream::Bitstream;
 use crate::entropy::{BitModel, EntropyError, IntModel, RangeDecoder, RangeEncoder, UintModel};
 use crate::primitives::database::{Database, Primitive, segment_distance};
-use crate::primitives::segment::{denormalize, segment_track};
+use crate::primitives::segment::{Segment, denormalize, segment_track};
 use crate::wavelet::{Transform, Wavelet, band_lengths};
 use motion::clip::{Axis, Clip, Skeleton, SkeletonFormat};
 use motion::quat::{
@@ -98,13 +99,82 @@ pub struct PrimitiveCodec {
     joints: BTreeMap<String, Vec<Primitive>>,
 }
 
-/// Parameters as the codec uses them.
-#[derive(Debug, Clone, Copy)]
-struct Settings {
+/// The parameters of the `primitive` codec, read and range-checked once from [`Params`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct PrimitiveSettings {
+    /// The leg joints' threshold `t_L` in radians ([`keys::T_L`], 1e-4..=1).
     t_l: f64,
+    /// `t_U / t_L` ([`keys::UPPER_RATIO`], 1..=10).
     upper_ratio: f64,
+    /// Frames smoothed each side of a join ([`keys::SMOOTH`], 0..=16).
     smooth: usize,
+    /// Coarsest step over the threshold ([`keys::STEP_FLOOR`], 0..=4).
     step_floor: f64,
+    /// Fingerprint of the primitive database ([`keys::DB`]).
+    db: u32,
+}
+
+impl PrimitiveSettings {
+    /// The defaults, with the database of fingerprint `db`.
+    fn defaults(db: u32) -> PrimitiveSettings {
+        PrimitiveSettings {
+            t_l: 0.012,
+            upper_ratio: 2.0,
+            smooth: 0,
+            step_floor: 0.5,
+            db,
+        }
+    }
+
+    /// Reads the settings from `p`: first that [`keys::DB`] names the database of
+    /// fingerprint `fingerprint` ([`CodecError::DatabaseMismatch`] otherwise), then every
+    /// other key within its range.
+    fn from_params(p: &Params, fingerprint: u32) -> Result<PrimitiveSettings, CodecError> {
+        let v = p.get(keys::DB).copied().unwrap_or(f64::NAN);
+        if v.fract() != 0.0 || !(0.0..=f64::from(u32::MAX)).contains(&v) {
+            return Err(CodecError::Param {
+                codec: NAME,
+                key: keys::DB.into(),
+                value: v,
+                detail: "must be a database fingerprint (an integer in 0..=4294967295)".into(),
+            });
+        }
+        let db = v as u32;
+        if db != fingerprint {
+            return Err(CodecError::DatabaseMismatch {
+                codec: NAME,
+                stream: db,
+                given: fingerprint,
+            });
+        }
+        Ok(PrimitiveSettings {
+            t_l: real_param(NAME, p, keys::T_L, 1e-4, 1.0)?,
+            upper_ratio: real_param(NAME, p, keys::UPPER_RATIO, 1.0, 10.0)?,
+            smooth: int_param(NAME, p, keys::SMOOTH, 0, 16)? as usize,
+            step_floor: real_param(NAME, p, keys::STEP_FLOOR, 0.0, 4.0)?,
+            db,
+        })
+    }
+
+    /// The parameters a stream records (every key but [`keys::CR`]).
+    fn to_params(self) -> Params {
+        params_of(&[
+            (keys::T_L, self.t_l),
+            (keys::UPPER_RATIO, self.upper_ratio),
+            (keys::SMOOTH, self.smooth as f64),
+            (keys::STEP_FLOOR, self.step_floor),
+            (keys::DB, f64::from(self.db)),
+        ])
+    }
+
+    /// The threshold `t_j` of joint `joint`: `t_L` on the legs, `t_U` elsewhere.
+    fn threshold(self, skeleton: &Skeleton, joint: usize) -> f64 {
+        if skeleton.joints[joint].body_part.is_leg() {
+            self.t_l
+        } else {
+            self.upper_ratio * self.t_l
+        }
+    }
 }
 
 /// Adaptive models of the payload.
@@ -396,45 +466,6 @@ impl PrimitiveCodec {
             .ok_or(CodecError::NoDatabase { codec: NAME })
     }
 
-    /// Refuses parameters or streams made with another database.
-    fn check_db_param(&self, p: &Params) -> Result<(), CodecError> {
-        let v = p.get("db").copied().unwrap_or(f64::NAN);
-        if v.fract() != 0.0 || !(0.0..=f64::from(u32::MAX)).contains(&v) {
-            return Err(CodecError::Param {
-                codec: NAME,
-                key: "db".into(),
-                value: v,
-                detail: "must be a database fingerprint (an integer in 0..=4294967295)".into(),
-            });
-        }
-        let stream = v as u32;
-        if stream != self.fingerprint {
-            return Err(CodecError::DatabaseMismatch {
-                codec: NAME,
-                stream,
-                given: self.fingerprint,
-            });
-        }
-        Ok(())
-    }
-
-    fn settings(p: &Params) -> Result<Settings, CodecError> {
-        Ok(Settings {
-            t_l: real_param(NAME, p, "t_l", 1e-4, 1.0)?,
-            upper_ratio: real_param(NAME, p, "upper_ratio", 1.0, 10.0)?,
-            smooth: int_param(NAME, p, "smooth", 0, 16)? as usize,
-            step_floor: real_param(NAME, p, "step_floor", 0.0, 4.0)?,
-        })
-    }
-
-    fn threshold(s: &Settings, skeleton: &Skeleton, joint: usize) -> f64 {
-        if skeleton.joints[joint].body_part.is_leg() {
-            s.t_l
-        } else {
-            s.upper_ratio * s.t_l
-        }
-    }
-
     fn primitives_of(&self, name: &str) -> &[Primitive] {
         self.joints.get(name).map_or(&[], Vec::as_slice)
     }
@@ -447,131 +478,176 @@ impl PrimitiveCodec {
         }
     }
 
-    #[expect(
-        clippy::too_many_lines,
-        reason = "one pass over joints, segments and the translation windows"
-    )]
-    fn encode_native(&self, clip: &Clip, p: Params) -> Result<Bitstream, CodecError> {
+    /// Encodes with settings `s`: every rotation joint's segments, then the translation
+    /// channels' windows, in one range-coded payload.
+    fn encode_native(&self, clip: &Clip, s: &PrimitiveSettings) -> Result<Bitstream, CodecError> {
         let db = self.require_db()?;
-        let s = Self::settings(&p)?;
         let qc = to_quaternions(clip);
         let skeleton = &clip.skeleton;
-        let mut enc = RangeEncoder::new();
-        let mut m = Models::new(qc.joints.len());
-        let mut w = Work::new();
-        let mut bands = BandCache::default();
-        let e = |r: Result<(), EntropyError>| r.map_err(|e| Self::enc_err(&e));
+        let mut e = PayloadEncoder {
+            enc: RangeEncoder::new(),
+            m: Models::new(qc.joints.len()),
+            w: Work::new(),
+            bands: BandCache::default(),
+        };
         for (k, &j) in qc.joints.iter().enumerate() {
             let prims = self.primitives_of(&skeleton.joints[j].name);
             let axes = rotation_axes(skeleton, j);
-            let check = Check::new(
-                skeleton,
-                &axes,
-                Self::threshold(&s, skeleton, j),
-                s.step_floor,
-            );
-            let track = &qc.rotations[k];
-            let mut hold = Quat::IDENTITY;
-            let mut prev_step = 0i64;
-            for seg in segment_track(track, clip.frame_rate_hz, db.segment) {
-                let len = seg.len();
-                e(m.len.encode(&mut enc, (len - 1) as u32))?;
-                if prims.is_empty() {
-                    w.reference.clear();
-                    w.reference.resize(len, hold);
-                } else {
-                    let idx = nearest(prims, &seg.normalized);
-                    if prims.len() > 1 {
-                        e(m.index[k].encode(&mut enc, idx as u32))?;
-                    }
-                    denormalize(&prims[idx], len, &mut w.reference);
-                }
-                let src = &track[seg.start..seg.end];
-                if check.within(&w.reference, src) {
-                    enc.bit(&mut m.coded[k], false);
-                    hold = w.reference[len - 1];
-                    continue;
-                }
-                enc.bit(&mut m.coded[k], true);
-                let step_exp = code_difference(&mut w, src, &check);
-                e(m.step.encode(&mut enc, step_exp - prev_step))?;
-                prev_step = step_exp;
-                let b = bands.get(len, 3);
-                e(put_sparse(
-                    &mut enc,
-                    &mut m.nnz,
-                    &mut m.run,
-                    &mut m.value,
-                    &w.q,
-                    b,
-                ))?;
-                hold = w.out[len - 1];
+            let check = Check::new(skeleton, &axes, s.threshold(skeleton, j), s.step_floor);
+            let segments = segment_track(&qc.rotations[k], clip.frame_rate_hz, db.segment);
+            e.joint(k, prims, &check, &qc.rotations[k], &segments)?;
+        }
+        for (c, ch) in clip.channels().iter().enumerate() {
+            if !ch.kind.is_rotation() {
+                e.translation(clip, c)?;
             }
         }
-        let frames = clip.frames();
-        for (c, ch) in clip.channels().iter().enumerate() {
-            if ch.kind.is_rotation() {
+        header(self, clip, s.to_params(), e.enc.finish())
+    }
+}
+
+/// An entropy-coder result as a codec error.
+fn coded(r: Result<(), EntropyError>) -> Result<(), CodecError> {
+    r.map_err(|e| PrimitiveCodec::enc_err(&e))
+}
+
+/// The encoder's range coder, models and buffers.
+struct PayloadEncoder {
+    enc: RangeEncoder,
+    m: Models,
+    w: Work,
+    bands: BandCache,
+}
+
+impl PayloadEncoder {
+    /// Steps 1-4 of the module docs for each of `segments` of the `k`-th rotation joint
+    /// (`track`, its primitives `prims`, its threshold in `check`): the length, the nearest
+    /// primitive (or the held rotation), and the difference where the primitive misses `t_j`.
+    fn joint(
+        &mut self,
+        k: usize,
+        prims: &[Primitive],
+        check: &Check<'_>,
+        track: &[Quat],
+        segments: &[Segment],
+    ) -> Result<(), CodecError> {
+        let mut hold = Quat::IDENTITY;
+        let mut prev_step = 0i64;
+        for seg in segments {
+            let len = seg.len();
+            coded(self.m.len.encode(&mut self.enc, (len - 1) as u32))?;
+            if prims.is_empty() {
+                self.w.reference.clear();
+                self.w.reference.resize(len, hold);
+            } else {
+                let idx = nearest(prims, &seg.normalized);
+                if prims.len() > 1 {
+                    coded(self.m.index[k].encode(&mut self.enc, idx as u32))?;
+                }
+                denormalize(&prims[idx], len, &mut self.w.reference);
+            }
+            let src = &track[seg.start..seg.end];
+            if check.within(&self.w.reference, src) {
+                self.enc.bit(&mut self.m.coded[k], false);
+                hold = self.w.reference[len - 1];
                 continue;
             }
-            let x = clip.channel(c);
-            let mut prev_mean = 0i64;
-            let mut prev_step = 0i64;
-            let mut start = 0;
-            while start < frames {
-                let end = (start + ROOT_WINDOW).min(frames);
-                let win = &x[start..end];
-                let mean = win.iter().sum::<f64>() / win.len() as f64;
-                let mq = (mean * MEAN_SCALE).round();
-                if !mq.is_finite() || mq.abs() >= MEAN_LIMIT as f64 {
-                    return Err(CodecError::Param {
-                        codec: NAME,
-                        key: clip.channel_name(c),
-                        value: mean,
-                        detail: "translation beyond the format's range".into(),
-                    });
-                }
-                let mq = mq as i64;
-                e(m.mean.encode(&mut enc, mq - prev_mean))?;
-                prev_mean = mq;
-                let base = mq as f64 / MEAN_SCALE;
-                w.signal.clear();
-                w.signal.extend(win.iter().map(|v| v - base));
-                w.transform.forward(&w.signal, LEVELS, &mut w.coef);
-                let n = w.coef.len();
-                w.order.clear();
-                w.order.extend(0..n);
-                w.order
-                    .sort_unstable_by(|&a, &b| w.coef[b].abs().total_cmp(&w.coef[a].abs()));
-                // Thesis 5.4: the smallest 50 % of the coefficients are zeroed.
-                let keep = n - n / 2;
-                let step_exp = step_exp_for(w.coef[w.order[0]].abs());
-                let step = step_of(step_exp);
-                w.q.clear();
-                w.q.resize(n, 0);
-                for &i in &w.order[..keep] {
-                    w.q[i] = (w.coef[i] / step).round() as i64;
-                }
-                let b = bands.get(end - start, 1);
-                e(put_sparse(
-                    &mut enc,
-                    &mut m.t_nnz,
-                    &mut m.t_run,
-                    &mut m.t_value,
-                    &w.q,
-                    b,
-                ))?;
-                if w.q.iter().any(|&v| v != 0) {
-                    e(m.t_step.encode(&mut enc, step_exp - prev_step))?;
-                    prev_step = step_exp;
-                }
-                start = end;
-            }
+            self.enc.bit(&mut self.m.coded[k], true);
+            let step_exp = code_difference(&mut self.w, src, check);
+            coded(self.m.step.encode(&mut self.enc, step_exp - prev_step))?;
+            prev_step = step_exp;
+            let b = self.bands.get(len, 3);
+            let m = &mut self.m;
+            coded(put_sparse(
+                &mut self.enc,
+                &mut m.nnz,
+                &mut m.run,
+                &mut m.value,
+                &self.w.q,
+                b,
+            ))?;
+            hold = self.w.out[len - 1];
         }
-        let mut out = p;
-        out.remove("cr");
-        out.insert("db".into(), f64::from(self.fingerprint));
-        header(self, clip, out, enc.finish())
+        Ok(())
     }
+
+    /// Translation channel `c` of `clip`, window by window of [`ROOT_WINDOW`] frames.
+    fn translation(&mut self, clip: &Clip, c: usize) -> Result<(), CodecError> {
+        let (frames, x) = (clip.frames(), clip.channel(c));
+        let mut prev = Previous::default();
+        let mut start = 0;
+        while start < frames {
+            let end = (start + ROOT_WINDOW).min(frames);
+            let win = &x[start..end];
+            let mean = win.iter().sum::<f64>() / win.len() as f64;
+            let mq = (mean * MEAN_SCALE).round();
+            if !mq.is_finite() || mq.abs() >= MEAN_LIMIT as f64 {
+                return Err(CodecError::Param {
+                    codec: NAME,
+                    key: clip.channel_name(c),
+                    value: mean,
+                    detail: "translation beyond the format's range".into(),
+                });
+            }
+            self.translation_window(win, mq as i64, &mut prev)?;
+            start = end;
+        }
+        Ok(())
+    }
+
+    /// One translation window `win` with quantized mean `mq`: the mean (change), then the
+    /// largest 50 % of its wavelet coefficients at 10 bits (thesis 5.4) and their step.
+    fn translation_window(
+        &mut self,
+        win: &[f64],
+        mq: i64,
+        prev: &mut Previous,
+    ) -> Result<(), CodecError> {
+        coded(self.m.mean.encode(&mut self.enc, mq - prev.mean))?;
+        prev.mean = mq;
+        let base = mq as f64 / MEAN_SCALE;
+        let w = &mut self.w;
+        w.signal.clear();
+        w.signal.extend(win.iter().map(|v| v - base));
+        w.transform.forward(&w.signal, LEVELS, &mut w.coef);
+        let n = w.coef.len();
+        w.order.clear();
+        w.order.extend(0..n);
+        w.order
+            .sort_unstable_by(|&a, &b| w.coef[b].abs().total_cmp(&w.coef[a].abs()));
+        // Thesis 5.4: the smallest 50 % of the coefficients are zeroed.
+        let keep = n - n / 2;
+        let step_exp = step_exp_for(w.coef[w.order[0]].abs());
+        let step = step_of(step_exp);
+        w.q.clear();
+        w.q.resize(n, 0);
+        for &i in &w.order[..keep] {
+            w.q[i] = (w.coef[i] / step).round() as i64;
+        }
+        let b = self.bands.get(win.len(), 1);
+        let m = &mut self.m;
+        coded(put_sparse(
+            &mut self.enc,
+            &mut m.t_nnz,
+            &mut m.t_run,
+            &mut m.t_value,
+            &self.w.q,
+            b,
+        ))?;
+        if self.w.q.iter().any(|&v| v != 0) {
+            coded(self.m.t_step.encode(&mut self.enc, step_exp - prev.step))?;
+            prev.step = step_exp;
+        }
+        Ok(())
+    }
+}
+
+/// The previous translation window's quantized mean and step exponent, which a window's are
+/// coded against.
+#[derive(Debug, Default)]
+struct Previous {
+    mean: i64,
+    step: i64,
 }
 
 /// Index of the primitive nearest to a normalized segment (eq. 5.4).
@@ -687,22 +763,14 @@ impl Codec for PrimitiveCodec {
     }
 
     fn default_params(&self) -> Params {
-        [
-            ("t_l", 0.012),
-            ("upper_ratio", 2.0),
-            ("smooth", 0.0),
-            ("step_floor", 0.5),
-            ("db", f64::from(self.fingerprint)),
-            ("cr", 0.0),
-        ]
-        .into_iter()
-        .map(|(k, v)| (k.to_string(), v))
-        .collect()
+        let mut p = PrimitiveSettings::defaults(self.fingerprint).to_params();
+        p.insert(keys::CR.to_string(), 0.0);
+        p
     }
 
     fn rate_control(&self) -> RateControl {
         RateControl::SearchIncreasing {
-            key: "t_l",
+            key: keys::T_L,
             min: 1e-4,
             max: 1.0,
         }
@@ -711,108 +779,36 @@ impl Codec for PrimitiveCodec {
     fn encode(&self, clip: &Clip, params: &Params) -> Result<Bitstream, CodecError> {
         self.require_db()?;
         let p = merged(self, params)?;
-        self.check_db_param(&p)?;
-        Self::settings(&p)?;
-        let target = p.get("cr").copied().unwrap_or(0.0);
+        let s = PrimitiveSettings::from_params(&p, self.fingerprint)?;
+        // The rate search sets the knob (t_L) itself: the settings are read per encode it runs.
+        let target = p.get(keys::CR).copied().unwrap_or(0.0);
         if target > 0.0 {
             return crate::rate::search(self, clip, &p, target);
         }
-        self.encode_native(clip, p)
+        self.encode_native(clip, &s)
     }
 
-    #[expect(
-        clippy::too_many_lines,
-        reason = "mirror of encode_native: joints, segments, translation windows"
-    )]
     fn decode(&self, stream: &Bitstream, skeleton: &Skeleton) -> Result<Clip, CodecError> {
         check_stream(self, stream, skeleton)?;
         let db = self.require_db()?;
         let mut p = self.default_params();
-        p.insert("db".into(), f64::NAN);
+        // A stream must name its database: no default.
+        p.insert(keys::DB.into(), f64::NAN);
         p.extend(stream.params.iter().map(|(k, v)| (k.clone(), *v)));
-        self.check_db_param(&p)?;
-        let s = Self::settings(&p)?;
+        let s = PrimitiveSettings::from_params(&p, self.fingerprint)?;
         let frames = stream.frames as usize;
-        let mut dec = RangeDecoder::new(&stream.payload);
-        let corrupt = |dec: &RangeDecoder<'_>, detail: &str| CodecError::Payload {
-            codec: NAME,
-            offset: dec.position(),
-            detail: detail.to_string(),
-        };
         let joints = rotation_joints(skeleton);
-        let mut m = Models::new(joints.len());
-        let mut w = Work::new();
-        let mut bands = BandCache::default();
-        let max_len = db.segment.max_frames;
+        let mut d = PayloadDecoder {
+            dec: RangeDecoder::new(&stream.payload),
+            m: Models::new(joints.len()),
+            w: Work::new(),
+            bands: BandCache::default(),
+        };
         let mut rotations = Vec::with_capacity(joints.len());
         let mut cuts = Vec::new();
         for (k, &j) in joints.iter().enumerate() {
             let prims = self.primitives_of(&skeleton.joints[j].name);
-            let mut track: Vec<Quat> = Vec::with_capacity(frames);
-            let mut hold = Quat::IDENTITY;
-            let mut prev_step = 0i64;
-            cuts.clear();
-            while track.len() < frames {
-                let len = m
-                    .len
-                    .decode(&mut dec)
-                    .ok_or_else(|| corrupt(&dec, "segment length"))?
-                    as usize
-                    + 1;
-                if len > max_len || track.len() + len > frames {
-                    return Err(corrupt(&dec, "segment longer than S_M or the clip"));
-                }
-                if prims.is_empty() {
-                    w.reference.clear();
-                    w.reference.resize(len, hold);
-                } else {
-                    let idx = if prims.len() > 1 {
-                        m.index[k]
-                            .decode(&mut dec)
-                            .ok_or_else(|| corrupt(&dec, "primitive index"))?
-                            as usize
-                    } else {
-                        0
-                    };
-                    let prim = prims
-                        .get(idx)
-                        .ok_or_else(|| corrupt(&dec, "primitive index beyond the database"))?;
-                    denormalize(prim, len, &mut w.reference);
-                }
-                cuts.push(track.len());
-                if dec.bit(&mut m.coded[k]) {
-                    let ds = m
-                        .step
-                        .decode(&mut dec)
-                        .ok_or_else(|| corrupt(&dec, "step"))?;
-                    let step_exp = prev_step.saturating_add(ds);
-                    if !(STEP_MIN..=STEP_MAX).contains(&step_exp) {
-                        return Err(corrupt(&dec, "quantizer step out of range"));
-                    }
-                    prev_step = step_exp;
-                    let b = bands.get(len, 3);
-                    w.q.clear();
-                    w.q.resize(b.len(), 0);
-                    get_sparse(&mut dec, &mut m.nnz, &mut m.run, &mut m.value, &mut w.q, b)
-                        .map_err(|d| corrupt(&dec, d))?;
-                    reconstruct(
-                        &mut w.transform,
-                        &mut w.chan,
-                        &mut w.deq,
-                        &w.q,
-                        step_of(step_exp),
-                        &w.reference,
-                        &mut w.out,
-                    );
-                    track.extend_from_slice(&w.out);
-                } else {
-                    track.extend_from_slice(&w.reference);
-                }
-                hold = track[track.len() - 1];
-                if dec.overrun() > OVERRUN_LIMIT {
-                    return Err(corrupt(&dec, "payload ends early"));
-                }
-            }
+            let mut track = d.joint(k, prims, frames, db.segment.max_frames, &mut cuts)?;
             if s.smooth > 0 {
                 cuts.push(frames);
                 for c in cuts.windows(3) {
@@ -821,70 +817,14 @@ impl Codec for PrimitiveCodec {
             }
             rotations.push(track);
         }
-        let n_ch = skeleton.channel_count();
-        let mut data = vec![0.0; n_ch * frames];
+        let mut data = vec![0.0; skeleton.channel_count() * frames];
         for (c, ch) in skeleton.channel_layout().iter().enumerate() {
-            if ch.kind.is_rotation() {
-                continue;
-            }
-            let mut prev_mean = 0i64;
-            let mut prev_step = 0i64;
-            let mut start = 0;
-            while start < frames {
-                let end = (start + ROOT_WINDOW).min(frames);
-                let dm = m
-                    .mean
-                    .decode(&mut dec)
-                    .ok_or_else(|| corrupt(&dec, "translation mean"))?;
-                let mq = prev_mean.saturating_add(dm);
-                if mq.abs() > MEAN_LIMIT {
-                    return Err(corrupt(&dec, "translation mean out of range"));
-                }
-                prev_mean = mq;
-                let b = bands.get(end - start, 1);
-                w.q.clear();
-                w.q.resize(b.len(), 0);
-                get_sparse(
-                    &mut dec,
-                    &mut m.t_nnz,
-                    &mut m.t_run,
-                    &mut m.t_value,
-                    &mut w.q,
-                    b,
-                )
-                .map_err(|d| corrupt(&dec, d))?;
-                let base = mq as f64 / MEAN_SCALE;
-                let out = &mut data[c * frames + start..c * frames + end];
-                if w.q.iter().any(|&v| v != 0) {
-                    let ds = m
-                        .t_step
-                        .decode(&mut dec)
-                        .ok_or_else(|| corrupt(&dec, "translation step"))?;
-                    let step_exp = prev_step.saturating_add(ds);
-                    if !(STEP_MIN..=STEP_MAX).contains(&step_exp) {
-                        return Err(corrupt(&dec, "quantizer step out of range"));
-                    }
-                    prev_step = step_exp;
-                    let step = step_of(step_exp);
-                    w.deq.clear();
-                    w.deq.extend(w.q.iter().map(|&v| v as f64 * step));
-                    w.transform
-                        .inverse(&w.deq, end - start, LEVELS, &mut w.signal)
-                        .map_err(|e| corrupt(&dec, &e.to_string()))?;
-                    for (o, v) in out.iter_mut().zip(&w.signal) {
-                        *o = base + v;
-                    }
-                } else {
-                    out.fill(base);
-                }
-                if dec.overrun() > OVERRUN_LIMIT {
-                    return Err(corrupt(&dec, "payload ends early"));
-                }
-                start = end;
+            if !ch.kind.is_rotation() {
+                d.translation(&mut data[c * frames..(c + 1) * frames])?;
             }
         }
-        if dec.overrun() != 0 || dec.position() != stream.payload.len() {
-            return Err(corrupt(&dec, "payload length does not match its content"));
+        if d.dec.overrun() != 0 || d.dec.position() != stream.payload.len() {
+            return Err(d.corrupt("payload length does not match its content"));
         }
         let source = Clip::new(skeleton.clone(), stream.frame_rate_hz, frames, data)?;
         Ok(from_quaternions(&QuatClip {
@@ -892,5 +832,248 @@ impl Codec for PrimitiveCodec {
             joints,
             rotations,
         }))
+    }
+}
+
+/// The decoder's range decoder, models and buffers: the mirror of [`PayloadEncoder`].
+struct PayloadDecoder<'a> {
+    dec: RangeDecoder<'a>,
+    m: Models,
+    w: Work,
+    bands: BandCache,
+}
+
+impl PayloadDecoder<'_> {
+    /// A corrupt payload at the decoder's position.
+    fn corrupt(&self, detail: &str) -> CodecError {
+        CodecError::Payload {
+            codec: NAME,
+            offset: self.dec.position(),
+            detail: detail.to_string(),
+        }
+    }
+
+    /// Mirror of [`PayloadEncoder::joint`]: the `k`-th rotation joint's `frames` rotations,
+    /// segment by segment (at most `max_len` frames each); `cuts` gets each segment's first
+    /// frame.
+    fn joint(
+        &mut self,
+        k: usize,
+        prims: &[Primitive],
+        frames: usize,
+        max_len: usize,
+        cuts: &mut Vec<usize>,
+    ) -> Result<Vec<Quat>, CodecError> {
+        let mut track: Vec<Quat> = Vec::with_capacity(frames);
+        let mut hold = Quat::IDENTITY;
+        let mut prev_step = 0i64;
+        cuts.clear();
+        while track.len() < frames {
+            let len = self
+                .m
+                .len
+                .decode(&mut self.dec)
+                .ok_or_else(|| self.corrupt("segment length"))? as usize
+                + 1;
+            if len > max_len || track.len() + len > frames {
+                return Err(self.corrupt("segment longer than S_M or the clip"));
+            }
+            self.reference(k, prims, len, hold)?;
+            cuts.push(track.len());
+            if self.dec.bit(&mut self.m.coded[k]) {
+                self.difference(len, &mut prev_step)?;
+                track.extend_from_slice(&self.w.out);
+            } else {
+                track.extend_from_slice(&self.w.reference);
+            }
+            hold = track[track.len() - 1];
+            if self.dec.overrun() > OVERRUN_LIMIT {
+                return Err(self.corrupt("payload ends early"));
+            }
+        }
+        Ok(track)
+    }
+
+    /// A segment's reference of `len` frames into `w.reference`: the coded primitive
+    /// denormalized, or `hold` held for a joint the database does not know.
+    fn reference(
+        &mut self,
+        k: usize,
+        prims: &[Primitive],
+        len: usize,
+        hold: Quat,
+    ) -> Result<(), CodecError> {
+        if prims.is_empty() {
+            self.w.reference.clear();
+            self.w.reference.resize(len, hold);
+            return Ok(());
+        }
+        let idx = if prims.len() > 1 {
+            self.m.index[k]
+                .decode(&mut self.dec)
+                .ok_or_else(|| self.corrupt("primitive index"))? as usize
+        } else {
+            0
+        };
+        let prim = prims
+            .get(idx)
+            .ok_or_else(|| self.corrupt("primitive index beyond the database"))?;
+        denormalize(prim, len, &mut self.w.reference);
+        Ok(())
+    }
+
+    /// A coded difference of a `len`-frame segment: its step (change from `prev_step`) and
+    /// coefficients, reconstructed against `w.reference` into `w.out`.
+    fn difference(&mut self, len: usize, prev_step: &mut i64) -> Result<(), CodecError> {
+        let ds = self
+            .m
+            .step
+            .decode(&mut self.dec)
+            .ok_or_else(|| self.corrupt("step"))?;
+        let step_exp = prev_step.saturating_add(ds);
+        if !(STEP_MIN..=STEP_MAX).contains(&step_exp) {
+            return Err(self.corrupt("quantizer step out of range"));
+        }
+        *prev_step = step_exp;
+        let b = self.bands.get(len, 3);
+        let (m, w) = (&mut self.m, &mut self.w);
+        w.q.clear();
+        w.q.resize(b.len(), 0);
+        if let Err(d) = get_sparse(
+            &mut self.dec,
+            &mut m.nnz,
+            &mut m.run,
+            &mut m.value,
+            &mut w.q,
+            b,
+        ) {
+            return Err(self.corrupt(d));
+        }
+        reconstruct(
+            &mut w.transform,
+            &mut w.chan,
+            &mut w.deq,
+            &w.q,
+            step_of(step_exp),
+            &w.reference,
+            &mut w.out,
+        );
+        Ok(())
+    }
+
+    /// Mirror of [`PayloadEncoder::translation`]: one translation channel's row `out`.
+    fn translation(&mut self, out: &mut [f64]) -> Result<(), CodecError> {
+        let frames = out.len();
+        let mut prev = Previous::default();
+        let mut start = 0;
+        while start < frames {
+            let end = (start + ROOT_WINDOW).min(frames);
+            self.translation_window(&mut out[start..end], &mut prev)?;
+            if self.dec.overrun() > OVERRUN_LIMIT {
+                return Err(self.corrupt("payload ends early"));
+            }
+            start = end;
+        }
+        Ok(())
+    }
+
+    /// Mirror of [`PayloadEncoder::translation_window`] into `out`.
+    fn translation_window(
+        &mut self,
+        out: &mut [f64],
+        prev: &mut Previous,
+    ) -> Result<(), CodecError> {
+        let dm = self
+            .m
+            .mean
+            .decode(&mut self.dec)
+            .ok_or_else(|| self.corrupt("translation mean"))?;
+        let mq = prev.mean.saturating_add(dm);
+        if mq.abs() > MEAN_LIMIT {
+            return Err(self.corrupt("translation mean out of range"));
+        }
+        prev.mean = mq;
+        let b = self.bands.get(out.len(), 1);
+        let (m, w) = (&mut self.m, &mut self.w);
+        w.q.clear();
+        w.q.resize(b.len(), 0);
+        if let Err(d) = get_sparse(
+            &mut self.dec,
+            &mut m.t_nnz,
+            &mut m.t_run,
+            &mut m.t_value,
+            &mut w.q,
+            b,
+        ) {
+            return Err(self.corrupt(d));
+        }
+        let base = mq as f64 / MEAN_SCALE;
+        if !self.w.q.iter().any(|&v| v != 0) {
+            out.fill(base);
+            return Ok(());
+        }
+        let ds = self
+            .m
+            .t_step
+            .decode(&mut self.dec)
+            .ok_or_else(|| self.corrupt("translation step"))?;
+        let step_exp = prev.step.saturating_add(ds);
+        if !(STEP_MIN..=STEP_MAX).contains(&step_exp) {
+            return Err(self.corrupt("quantizer step out of range"));
+        }
+        prev.step = step_exp;
+        let step = step_of(step_exp);
+        let w = &mut self.w;
+        w.deq.clear();
+        w.deq.extend(w.q.iter().map(|&v| v as f64 * step));
+        if let Err(e) = w
+            .transform
+            .inverse(&w.deq, out.len(), LEVELS, &mut w.signal)
+        {
+            return Err(self.corrupt(&e.to_string()));
+        }
+        for (o, v) in out.iter_mut().zip(&self.w.signal) {
+            *o = base + v;
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The settings read back what they record, the defaults are the default parameters, and
+    /// a stream of another database is refused before any other key is read.
+    #[test]
+    fn settings_round_trip_through_params() {
+        let c = PrimitiveCodec::without_database();
+        let mut defaults = c.default_params();
+        assert_eq!(defaults.remove(keys::CR), Some(0.0));
+        let s = PrimitiveSettings::from_params(&defaults, 0).unwrap();
+        assert_eq!(s, PrimitiveSettings::defaults(0));
+        assert_eq!(s.to_params(), defaults);
+        let other = PrimitiveSettings {
+            t_l: 0.02,
+            upper_ratio: 3.0,
+            smooth: 4,
+            step_floor: 0.0,
+            db: 0xDEAD_BEEF,
+        };
+        let p = other.to_params();
+        assert_eq!(
+            PrimitiveSettings::from_params(&p, 0xDEAD_BEEF).unwrap(),
+            other
+        );
+        let mut bad = p.clone();
+        bad.insert(keys::T_L.into(), 5.0);
+        assert!(matches!(
+            PrimitiveSettings::from_params(&bad, 1),
+            Err(CodecError::DatabaseMismatch {
+                stream: 0xDEAD_BEEF,
+                given: 1,
+                ..
+            })
+        ));
     }
 }

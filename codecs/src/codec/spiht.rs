@@ -44,10 +44,10 @@
 use super::prep::{position_sensitivity, unwrapped_matrix, wrap_flagged};
 use super::{
     Codec, CodecError, Params, RateControl, check_stream, decode_on_two_threads, header, int_param,
-    merged, real_param,
+    keys, merged, params_of, real_param,
 };
 use crate::bitstream::Bitstream;
-use crate::entropy::{BitModel, IntModel, RangeDecoder, RangeEncoder, UintModel};
+use crate::entropy::{BitModel, EntropyError, IntModel, RangeDecoder, RangeEncoder, UintModel};
 use crate::wavelet::{Transform, Wavelet, band_lengths};
 use motion::clip::{BodyPart, Clip, Skeleton};
 
@@ -122,39 +122,79 @@ pub fn crowd_budgets(distances: &[f64], total: f64) -> Vec<f64> {
         .collect()
 }
 
-#[derive(Debug, Clone, Copy)]
-struct Settings {
+/// The parameters of a SPIHT codec, read and range-checked once from [`Params`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct SpihtSettings {
+    /// Target compression ratio ([`keys::CR`], 0.1..=10 000), reached natively.
     cr: f64,
+    /// Segment length in frames ([`keys::WINDOW`], 8..=4096).
     window: usize,
+    /// [`keys::WAVELET`].
     wavelet: Wavelet,
-    scores: [f64; 6],
-    /// Energy term and bone length of `F`: position-aware (default) or as printed.
+    /// Body-part scores `S` ([`keys::SCORE_LEGS`] ..., each 0..=1).
+    score_legs: f64,
+    score_arms: f64,
+    score_torso: f64,
+    score_head: f64,
+    /// Energy term and bone length of `F`: position-aware ([`keys::ALLOCATION`] 0, the
+    /// default) or as printed (1).
     position: bool,
 }
 
-fn settings(name: &'static str, p: &Params) -> Result<Settings, CodecError> {
-    let cr = real_param(name, p, "cr", 0.1, 10_000.0)?;
-    let window = int_param(name, p, "window", 8, 4096)? as usize;
-    let wavelet =
-        Wavelet::from_id(int_param(name, p, "wavelet", 0, 1)? as u8).unwrap_or(Wavelet::Cdf97);
-    let legs = real_param(name, p, "score_legs", 0.0, 1.0)?;
-    let arms = real_param(name, p, "score_arms", 0.0, 1.0)?;
-    let torso = real_param(name, p, "score_torso", 0.0, 1.0)?;
-    let head = real_param(name, p, "score_head", 0.0, 1.0)?;
-    let position = int_param(name, p, "allocation", 0, 1)? == 0;
-    // Order of BodyPart::ALL: torso, head, left arm, right arm, left leg, right leg.
-    Ok(Settings {
-        cr,
-        window,
-        wavelet,
-        scores: [torso, head, arms, arms, legs, legs],
-        position,
-    })
+impl SpihtSettings {
+    /// The defaults of both SPIHT codecs.
+    const DEFAULT: SpihtSettings = SpihtSettings {
+        cr: 20.0,
+        window: 128,
+        wavelet: Wavelet::Cdf97,
+        score_legs: 1.0,
+        score_arms: 0.5,
+        score_torso: 0.5,
+        score_head: 0.5,
+        position: true,
+    };
+
+    /// Reads the settings of codec `codec` from `p`, every key within its range.
+    fn from_params(codec: &'static str, p: &Params) -> Result<SpihtSettings, CodecError> {
+        Ok(SpihtSettings {
+            cr: real_param(codec, p, keys::CR, 0.1, 10_000.0)?,
+            window: int_param(codec, p, keys::WINDOW, 8, 4096)? as usize,
+            wavelet: Wavelet::from_id(int_param(codec, p, keys::WAVELET, 0, 1)? as u8)
+                .unwrap_or(Wavelet::Cdf97),
+            score_legs: real_param(codec, p, keys::SCORE_LEGS, 0.0, 1.0)?,
+            score_arms: real_param(codec, p, keys::SCORE_ARMS, 0.0, 1.0)?,
+            score_torso: real_param(codec, p, keys::SCORE_TORSO, 0.0, 1.0)?,
+            score_head: real_param(codec, p, keys::SCORE_HEAD, 0.0, 1.0)?,
+            position: int_param(codec, p, keys::ALLOCATION, 0, 1)? == 0,
+        })
+    }
+
+    /// The parameters a stream records (all of them, the target CR included).
+    fn to_params(self) -> Params {
+        params_of(&[
+            (keys::CR, self.cr),
+            (keys::WINDOW, self.window as f64),
+            (keys::WAVELET, f64::from(self.wavelet.id())),
+            (keys::SCORE_LEGS, self.score_legs),
+            (keys::SCORE_ARMS, self.score_arms),
+            (keys::SCORE_TORSO, self.score_torso),
+            (keys::SCORE_HEAD, self.score_head),
+            (keys::ALLOCATION, if self.position { 0.0 } else { 1.0 }),
+        ])
+    }
+
+    /// Body-part scores in the order of [`BodyPart::ALL`]: torso, head, left arm, right arm,
+    /// left leg, right leg.
+    fn scores(self) -> [f64; 6] {
+        let (legs, arms) = (self.score_legs, self.score_arms);
+        [self.score_torso, self.score_head, arms, arms, legs, legs]
+    }
 }
 
 /// Static part of `F_c` per channel: body-part score × depth factor (eq. 6.2) × normalized
 /// bone length.
-fn static_factors(skeleton: &Skeleton, s: &Settings) -> Vec<f64> {
+fn static_factors(skeleton: &Skeleton, s: &SpihtSettings) -> Vec<f64> {
+    let scores = s.scores();
     let mut longest = [0.0f64; 6];
     for (j, joint) in skeleton.joints.iter().enumerate() {
         let k = part_index(joint.body_part);
@@ -176,9 +216,9 @@ fn static_factors(skeleton: &Skeleton, s: &Settings) -> Vec<f64> {
             };
             if s.position {
                 // The bone length enters through the position sensitivity of the energy.
-                s.scores[k] * depth
+                scores[k] * depth
             } else {
-                s.scores[k] * depth * len
+                scores[k] * depth * len
             }
         })
         .collect()
@@ -322,12 +362,93 @@ fn top_plane(c: &[f64]) -> Option<i64> {
     (m > 0.0).then(|| m.log2().floor() as i64)
 }
 
-#[expect(
-    clippy::too_many_lines,
-    clippy::needless_range_loop,
-    reason = "SPIHT's passes as in Said & Pearlman, with node indices"
-)]
+/// Whether any node of `a..b` has children.
+#[inline]
+fn any_has_children(a: usize, b: usize, n0: usize, n: usize) -> bool {
+    (a..b).any(|k| {
+        let (x, y) = children(k, n0, n);
+        x < y
+    })
+}
+
+/// The largest magnitudes below each node, which the encoder's set significance tests read.
+#[derive(Debug, Default)]
+struct Maxima {
+    /// `dmax[j]`: the largest `|c|` among the descendants of `j`.
+    dmax: Vec<f64>,
+    /// `gmax[j]`: the largest `|c|` among the descendants of `j`'s children.
+    gmax: Vec<f64>,
+}
+
+impl Maxima {
+    /// Fills both for the coefficients `c` (approximation band `n0`), leaves first.
+    fn compute(&mut self, c: &[f64], n0: usize) {
+        let n = c.len();
+        let (dmax, gmax) = (&mut self.dmax, &mut self.gmax);
+        dmax.clear();
+        dmax.resize(n, 0.0);
+        gmax.clear();
+        gmax.resize(n, 0.0);
+        for j in (0..n).rev() {
+            let (a, b) = children(j, n0, n);
+            let (mut d, mut g) = (0.0f64, 0.0f64);
+            for k in a..b {
+                d = d.max(c[k].abs()).max(dmax[k]);
+                g = g.max(dmax[k]);
+            }
+            dmax[j] = d;
+            gmax[j] = g;
+        }
+    }
+}
+
+/// SPIHT's three lists (Said & Pearlman), shared by encoder and decoder: insignificant
+/// pixels, significant pixels, insignificant sets (node, type B).
+#[derive(Debug, Default)]
+struct Lists {
+    lip: Vec<usize>,
+    lsp: Vec<usize>,
+    lis: Vec<(usize, bool)>,
+}
+
+impl Lists {
+    /// The initial lists of `n` coefficients with approximation band `n0`: every
+    /// approximation coefficient in the LIP, and as a type-A set in the LIS where it has
+    /// children; the LSP empty.
+    fn init(&mut self, n0: usize, n: usize) {
+        self.lip.clear();
+        self.lsp.clear();
+        self.lis.clear();
+        self.lip.extend(0..n0.min(n));
+        self.lis.extend(
+            (0..n0.min(n))
+                .filter(|&j| children(j, n0, n).0 < children(j, n0, n).1)
+                .map(|j| (j, false)),
+        );
+    }
+}
+
+/// Where the encoder's bits go: 0/1 bytes appended to `out` until it holds `limit`.
+struct BitSink<'a> {
+    out: &'a mut Vec<u8>,
+    limit: usize,
+}
+
+impl BitSink<'_> {
+    /// Appends a bit, or `None` once the budget is spent: the embedded stream ends there.
+    #[inline]
+    fn put(&mut self, b: bool) -> Option<()> {
+        if self.out.len() >= self.limit {
+            return None;
+        }
+        self.out.push(u8::from(b));
+        Some(())
+    }
+}
+
 /// SPIHT encoder for one channel-segment: appends at most `budget` bits (0/1 bytes) to `out`.
+/// Bit planes `nmax` down to `nmax − MAX_PLANES`, each a sorting pass (LIP, then LIS) and a
+/// refinement pass; `None` where the budget ends the stream before the last plane.
 fn spiht_encode(
     c: &[f64],
     n0: usize,
@@ -335,112 +456,111 @@ fn spiht_encode(
     budget: usize,
     out: &mut Vec<u8>,
     scratch: &mut Scratch,
-) {
-    let n = c.len();
+) -> Option<()> {
     let limit = out.len() + budget;
-    // dmax[j]: largest |c| among descendants; gmax[j]: among descendants of the children.
-    let dmax = &mut scratch.dmax;
-    let gmax = &mut scratch.gmax;
-    dmax.clear();
-    dmax.resize(n, 0.0);
-    gmax.clear();
-    gmax.resize(n, 0.0);
-    for j in (0..n).rev() {
-        let (a, b) = children(j, n0, n);
-        let (mut d, mut g) = (0.0f64, 0.0f64);
-        for k in a..b {
-            d = d.max(c[k].abs()).max(dmax[k]);
-            g = g.max(dmax[k]);
-        }
-        dmax[j] = d;
-        gmax[j] = g;
-    }
-    let lip = &mut scratch.lip;
-    let lsp = &mut scratch.lsp;
-    let lis = &mut scratch.lis;
-    lip.clear();
-    lsp.clear();
-    lis.clear();
-    lip.extend(0..n0.min(n));
-    lis.extend(
-        (0..n0.min(n))
-            .filter(|&j| children(j, n0, n).0 < children(j, n0, n).1)
-            .map(|j| (j, false)),
-    );
-    macro_rules! put {
-        ($b:expr) => {
-            if out.len() >= limit {
-                return;
-            }
-            out.push(u8::from($b));
-        };
-    }
+    let Scratch { maxima, lists } = scratch;
+    maxima.compute(c, n0);
+    lists.init(n0, c.len());
+    let sink = &mut BitSink { out, limit };
     for plane in (nmax - MAX_PLANES..=nmax).rev() {
         let t = pow2(plane);
-        let lsp_before = lsp.len();
-        // Sorting pass: LIP.
-        let mut keep = 0;
-        for idx in 0..lip.len() {
-            let i = lip[idx];
-            let sig = c[i].abs() >= t;
-            put!(sig);
-            if sig {
-                put!(c[i] < 0.0);
-                lsp.push(i);
-            } else {
-                lip[keep] = i;
-                keep += 1;
-            }
-        }
-        lip.truncate(keep);
-        // Sorting pass: LIS (entries appended during the pass are processed in it).
-        let mut e = 0;
-        while e < lis.len() {
-            let (j, type_b) = lis[e];
-            if type_b {
-                let sig = gmax[j] >= t;
-                put!(sig);
-                if sig {
-                    let (a, b) = children(j, n0, n);
-                    for k in a..b {
-                        lis.push((k, false));
-                    }
-                    lis[e].0 = usize::MAX;
-                }
-            } else {
-                let sig = dmax[j] >= t;
-                put!(sig);
-                if sig {
-                    let (a, b) = children(j, n0, n);
-                    for k in a..b {
-                        let s = c[k].abs() >= t;
-                        put!(s);
-                        if s {
-                            put!(c[k] < 0.0);
-                            lsp.push(k);
-                        } else {
-                            lip.push(k);
-                        }
-                    }
-                    let has_grandchildren = (a..b).any(|k| {
-                        let (x, y) = children(k, n0, n);
-                        x < y
-                    });
-                    if has_grandchildren {
-                        lis.push((j, true));
-                    }
-                    lis[e].0 = usize::MAX;
-                }
-            }
-            e += 1;
-        }
-        lis.retain(|&(j, _)| j != usize::MAX);
-        // Refinement pass.
-        for &i in &lsp[..lsp_before] {
-            let bit = ((c[i].abs() / t).floor() as u64) & 1 == 1;
-            put!(bit);
+        let lsp_before = lists.lsp.len();
+        encode_lip(c, t, lists, sink)?;
+        encode_lis(c, n0, t, maxima, lists, sink)?;
+        encode_refinement(c, t, &lists.lsp[..lsp_before], sink)?;
+    }
+    Some(())
+}
+
+/// Sorting pass over the LIP at threshold `t`: a significance bit per entry, and the sign of
+/// each newly significant coefficient, which moves to the LSP.
+#[inline]
+fn encode_lip(c: &[f64], t: f64, lists: &mut Lists, sink: &mut BitSink<'_>) -> Option<()> {
+    let Lists { lip, lsp, .. } = lists;
+    let mut keep = 0;
+    for idx in 0..lip.len() {
+        let i = lip[idx];
+        let sig = c[i].abs() >= t;
+        sink.put(sig)?;
+        if sig {
+            sink.put(c[i] < 0.0)?;
+            lsp.push(i);
+        } else {
+            lip[keep] = i;
+            keep += 1;
         }
     }
+    lip.truncate(keep);
+    Some(())
+}
+
+/// Sorting pass over the LIS at threshold `t` (entries appended during the pass are
+/// processed in it): a significant type-A set codes its children and becomes a type-B set
+/// where they have children; a significant type-B set splits into its children's sets.
+#[inline]
+#[expect(
+    clippy::needless_range_loop,
+    reason = "a node's children are an index range"
+)]
+fn encode_lis(
+    c: &[f64],
+    n0: usize,
+    t: f64,
+    maxima: &Maxima,
+    lists: &mut Lists,
+    sink: &mut BitSink<'_>,
+) -> Option<()> {
+    let n = c.len();
+    let Lists { lip, lsp, lis } = lists;
+    let mut e = 0;
+    while e < lis.len() {
+        let (j, type_b) = lis[e];
+        if type_b {
+            let sig = maxima.gmax[j] >= t;
+            sink.put(sig)?;
+            if sig {
+                let (a, b) = children(j, n0, n);
+                for k in a..b {
+                    lis.push((k, false));
+                }
+                lis[e].0 = usize::MAX;
+            }
+        } else {
+            let sig = maxima.dmax[j] >= t;
+            sink.put(sig)?;
+            if sig {
+                let (a, b) = children(j, n0, n);
+                for k in a..b {
+                    let s = c[k].abs() >= t;
+                    sink.put(s)?;
+                    if s {
+                        sink.put(c[k] < 0.0)?;
+                        lsp.push(k);
+                    } else {
+                        lip.push(k);
+                    }
+                }
+                if any_has_children(a, b, n0, n) {
+                    lis.push((j, true));
+                }
+                lis[e].0 = usize::MAX;
+            }
+        }
+        e += 1;
+    }
+    lis.retain(|&(j, _)| j != usize::MAX);
+    Some(())
+}
+
+/// Refinement pass at threshold `t`: bit `plane` of every coefficient that was significant
+/// before this plane (`lsp`).
+#[inline]
+fn encode_refinement(c: &[f64], t: f64, lsp: &[usize], sink: &mut BitSink<'_>) -> Option<()> {
+    for &i in lsp {
+        let bit = ((c[i].abs() / t).floor() as u64) & 1 == 1;
+        sink.put(bit)?;
+    }
+    Some(())
 }
 
 /// `2^plane`, exactly, built from the exponent bits in the normal range (`exp2` is a libm
@@ -528,98 +648,132 @@ impl PackedBits {
     }
 }
 
-#[expect(
-    clippy::needless_range_loop,
-    reason = "SPIHT's passes with node indices, mirroring the encoder"
-)]
-/// SPIHT decoder: reads from `bits` until it runs out, reconstructs into `rec` (zeroed first).
-fn spiht_decode(bits: &PackedBits, n0: usize, nmax: i64, rec: &mut [f64], scratch: &mut Scratch) {
-    let n = rec.len();
-    rec.fill(0.0);
-    let mut pos = 0usize;
-    let lip = &mut scratch.lip;
-    let lsp = &mut scratch.lsp;
-    let lis = &mut scratch.lis;
-    lip.clear();
-    lsp.clear();
-    lis.clear();
-    lip.extend(0..n0.min(n));
-    lis.extend(
-        (0..n0.min(n))
-            .filter(|&j| children(j, n0, n).0 < children(j, n0, n).1)
-            .map(|j| (j, false)),
-    );
-    macro_rules! get {
-        () => {{
-            let Some(b) = bits.get(pos) else { return };
-            pos += 1;
-            b
-        }};
+/// Where the decoder's bits come from: `bits` from `pos` on.
+struct BitSource<'a> {
+    bits: &'a PackedBits,
+    pos: usize,
+}
+
+impl BitSource<'_> {
+    /// The next bit, or `None` where the stream ends.
+    #[inline]
+    fn get(&mut self) -> Option<bool> {
+        let b = self.bits.get(self.pos)?;
+        self.pos += 1;
+        Some(b)
     }
+}
+
+/// SPIHT decoder: reads from `bits` until it runs out, reconstructs into `rec` (zeroed first).
+/// It mirrors [`spiht_encode`] step by step; `None` where the bits end before the last plane.
+fn spiht_decode(
+    bits: &PackedBits,
+    n0: usize,
+    nmax: i64,
+    rec: &mut [f64],
+    scratch: &mut Scratch,
+) -> Option<()> {
+    rec.fill(0.0);
+    let lists = &mut scratch.lists;
+    lists.init(n0, rec.len());
+    let src = &mut BitSource { bits, pos: 0 };
     for plane in (nmax - MAX_PLANES..=nmax).rev() {
         let t = pow2(plane);
-        let lsp_before = lsp.len();
-        let mut keep = 0;
-        for idx in 0..lip.len() {
-            let i = lip[idx];
-            if get!() {
-                let neg = get!();
-                rec[i] = if neg { -1.5 * t } else { 1.5 * t };
-                lsp.push(i);
-            } else {
-                lip[keep] = i;
-                keep += 1;
-            }
+        let lsp_before = lists.lsp.len();
+        decode_lip(rec, t, lists, src)?;
+        decode_lis(rec, n0, t, lists, src)?;
+        decode_refinement(rec, t, &lists.lsp[..lsp_before], src)?;
+    }
+    Some(())
+}
+
+/// Mirror of [`encode_lip`]: a coefficient found significant at `t` is set to `±1.5·t`.
+#[inline]
+fn decode_lip(rec: &mut [f64], t: f64, lists: &mut Lists, src: &mut BitSource<'_>) -> Option<()> {
+    let Lists { lip, lsp, .. } = lists;
+    let mut keep = 0;
+    for idx in 0..lip.len() {
+        let i = lip[idx];
+        if src.get()? {
+            let neg = src.get()?;
+            rec[i] = if neg { -1.5 * t } else { 1.5 * t };
+            lsp.push(i);
+        } else {
+            lip[keep] = i;
+            keep += 1;
         }
-        lip.truncate(keep);
-        let mut e = 0;
-        while e < lis.len() {
-            let (j, type_b) = lis[e];
-            if type_b {
-                if get!() {
-                    let (a, b) = children(j, n0, n);
-                    for k in a..b {
-                        lis.push((k, false));
-                    }
-                    lis[e].0 = usize::MAX;
-                }
-            } else if get!() {
+    }
+    lip.truncate(keep);
+    Some(())
+}
+
+/// Mirror of [`encode_lis`].
+#[inline]
+#[expect(
+    clippy::needless_range_loop,
+    reason = "a node's children are an index range"
+)]
+fn decode_lis(
+    rec: &mut [f64],
+    n0: usize,
+    t: f64,
+    lists: &mut Lists,
+    src: &mut BitSource<'_>,
+) -> Option<()> {
+    let n = rec.len();
+    let Lists { lip, lsp, lis } = lists;
+    let mut e = 0;
+    while e < lis.len() {
+        let (j, type_b) = lis[e];
+        if type_b {
+            if src.get()? {
                 let (a, b) = children(j, n0, n);
                 for k in a..b {
-                    if get!() {
-                        let neg = get!();
-                        rec[k] = if neg { -1.5 * t } else { 1.5 * t };
-                        lsp.push(k);
-                    } else {
-                        lip.push(k);
-                    }
-                }
-                let has_grandchildren = (a..b).any(|k| {
-                    let (x, y) = children(k, n0, n);
-                    x < y
-                });
-                if has_grandchildren {
-                    lis.push((j, true));
+                    lis.push((k, false));
                 }
                 lis[e].0 = usize::MAX;
             }
-            e += 1;
+        } else if src.get()? {
+            let (a, b) = children(j, n0, n);
+            for k in a..b {
+                if src.get()? {
+                    let neg = src.get()?;
+                    rec[k] = if neg { -1.5 * t } else { 1.5 * t };
+                    lsp.push(k);
+                } else {
+                    lip.push(k);
+                }
+            }
+            if any_has_children(a, b, n0, n) {
+                lis.push((j, true));
+            }
+            lis[e].0 = usize::MAX;
         }
-        lis.retain(|&(j, _)| j != usize::MAX);
-        // Refinement pass: one bit per coefficient found significant in an earlier plane
-        // moves its magnitude half a step up or down (most of a near-lossless stream's bits,
-        // so the bits are read straight from the words and the update has no branch).
-        let half = 0.5 * t;
-        let count = lsp_before.min(bits.len.saturating_sub(pos));
-        for (k, &i) in lsp[..count].iter().enumerate() {
-            let up = bits.bit(pos + k);
-            rec[i] += (2.0 * up as f64 - 1.0) * half.copysign(rec[i]);
-        }
-        pos += count;
-        if count < lsp_before {
-            return;
-        }
+        e += 1;
     }
+    lis.retain(|&(j, _)| j != usize::MAX);
+    Some(())
+}
+
+/// Mirror of [`encode_refinement`]: one bit per coefficient found significant in an earlier
+/// plane moves its magnitude half a step up or down (most of a near-lossless stream's bits,
+/// so the bits are read straight from the words and the update has no branch).
+#[inline]
+fn decode_refinement(
+    rec: &mut [f64],
+    t: f64,
+    lsp: &[usize],
+    src: &mut BitSource<'_>,
+) -> Option<()> {
+    let half = 0.5 * t;
+    let (bits, pos) = (src.bits, src.pos);
+    let count = lsp.len().min(bits.len.saturating_sub(pos));
+    for (k, &i) in lsp[..count].iter().enumerate() {
+        let up = bits.bit(pos + k);
+        rec[i] += (2.0 * up as f64 - 1.0) * half.copysign(rec[i]);
+    }
+    src.pos = pos + count;
+    (count == lsp.len()).then_some(())
 }
 
 /// One segment as read from the payload: where it lies, every channel's side information,
@@ -650,13 +804,11 @@ impl Segment<'_> {
     }
 }
 
+/// Buffers of the SPIHT passes, reused from one channel-segment to the next.
 #[derive(Debug, Default)]
 struct Scratch {
-    dmax: Vec<f64>,
-    gmax: Vec<f64>,
-    lip: Vec<usize>,
-    lsp: Vec<usize>,
-    lis: Vec<(usize, bool)>,
+    maxima: Maxima,
+    lists: Lists,
 }
 
 /// Side information of one channel-segment.
@@ -667,22 +819,140 @@ struct Side {
     energy: u32,
 }
 
-struct SideModels {
+/// The side information's models and, per channel, the previous segment's mean and top
+/// plane that its codes are relative to. Encoder and decoder step through it alike.
+struct SideCoder {
     mean: IntModel,
     empty: BitModel,
     nmax: IntModel,
     energy: UintModel,
+    prev_mean: Vec<i64>,
+    prev_nmax: Vec<i64>,
 }
 
-impl SideModels {
-    fn new() -> SideModels {
-        SideModels {
+impl SideCoder {
+    fn new(channels: usize) -> SideCoder {
+        SideCoder {
             mean: IntModel::default(),
             empty: BitModel::default(),
             nmax: IntModel::default(),
             energy: UintModel::default(),
+            prev_mean: vec![0; channels],
+            prev_nmax: vec![0; channels],
         }
     }
+
+    /// Codes one segment's side information, channel after channel: the mean (change), the
+    /// empty flag, and for a channel with coefficients its top plane (change) and energy code.
+    fn encode(&mut self, enc: &mut RangeEncoder, sides: &[Side]) -> Result<(), EntropyError> {
+        for (c, side) in sides.iter().enumerate() {
+            self.mean.encode(enc, side.mean_q - self.prev_mean[c])?;
+            self.prev_mean[c] = side.mean_q;
+            enc.bit(&mut self.empty, side.nmax.is_none());
+            if let Some(nm) = side.nmax {
+                self.nmax.encode(enc, nm - self.prev_nmax[c])?;
+                self.prev_nmax[c] = nm;
+                self.energy.encode(enc, side.energy)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Mirror of [`SideCoder::encode`]: reads one segment's side information into `sides`,
+    /// each value checked against its range; the error names the field.
+    fn decode(
+        &mut self,
+        dec: &mut RangeDecoder<'_>,
+        sides: &mut [Side],
+    ) -> Result<(), &'static str> {
+        for (c, side) in sides.iter_mut().enumerate() {
+            let dm = self.mean.decode(dec).ok_or("mean")?;
+            let mean_q = self.prev_mean[c].checked_add(dm).ok_or("mean")?;
+            if mean_q.unsigned_abs() > 1 << 40 {
+                return Err("mean out of range");
+            }
+            self.prev_mean[c] = mean_q;
+            let empty = dec.bit(&mut self.empty);
+            let (nmax, energy) = if empty {
+                (None, ENERGY_ZERO)
+            } else {
+                let nm = self.prev_nmax[c].checked_add(self.nmax.decode(dec).ok_or("n_max")?);
+                let nm = nm
+                    .filter(|v| (-200..=200).contains(v))
+                    .ok_or("n_max out of range")?;
+                self.prev_nmax[c] = nm;
+                let e = self.energy.decode(dec).ok_or("energy")?;
+                if e > ENERGY_ZERO {
+                    return Err("energy code");
+                }
+                (Some(nm), e)
+            };
+            *side = Side {
+                mean_q,
+                nmax,
+                energy,
+            };
+        }
+        Ok(())
+    }
+}
+
+/// A channel-segment `x` minus its mean, the mean quantized to [`MEAN_STEP`] (sent as side
+/// information), and the wavelet coefficients of the rest at `levels`.
+fn centred_transform(
+    t: &mut Transform,
+    x: &[f64],
+    levels: usize,
+    centred: &mut Vec<f64>,
+) -> (i64, Vec<f64>) {
+    let mean = x.iter().sum::<f64>() / x.len() as f64;
+    let mean_q = (mean / MEAN_STEP).round() as i64;
+    let mq = mean_q as f64 * MEAN_STEP;
+    centred.clear();
+    centred.extend(x.iter().map(|v| v - mq));
+    let mut co = Vec::new();
+    t.forward(centred, levels, &mut co);
+    (mean_q, co)
+}
+
+/// A segment's bytes from its channels' embedded streams (`streams[c]` holds `budgets[c]`
+/// bits as 0/1 bytes): layer 0 of every channel, then layer 1, ...; and its bit count.
+fn interleave_layers(streams: &[Vec<u8>], budgets: &[usize]) -> (usize, Vec<u8>) {
+    let total: usize = budgets.iter().sum();
+    let mut bytes = vec![0u8; total.div_ceil(8)];
+    let mut w = 0usize;
+    for r in 0..LAYERS {
+        for (stream, &budget) in streams.iter().zip(budgets) {
+            for &b in &stream[layer_bound(budget, r)..layer_bound(budget, r + 1)] {
+                bytes[w / 8] |= b << (7 - w % 8);
+                w += 1;
+            }
+        }
+    }
+    (total, bytes)
+}
+
+/// Mirror of [`interleave_layers`]: where channel `c`'s layer `r` lies in a segment of
+/// `present` bits, as `runs[c * LAYERS + r] = (first bit, bits present)`.
+fn layer_runs(budgets: &[usize], present: usize) -> Vec<(usize, usize)> {
+    let mut runs = vec![(0, 0); budgets.len() * LAYERS];
+    let mut from = 0usize;
+    for r in 0..LAYERS {
+        for (c, &b) in budgets.iter().enumerate() {
+            let n_bits = layer_bound(b, r + 1) - layer_bound(b, r);
+            runs[c * LAYERS + r] = (from, n_bits.min(present.saturating_sub(from)));
+            from += n_bits;
+        }
+    }
+    runs
+}
+
+/// What pass 1 of the encoder finds: the range-coded side information, and per segment and
+/// channel the coefficients and side information.
+struct SideInformation {
+    bytes: Vec<u8>,
+    coeffs: Vec<Vec<Vec<f64>>>,
+    sides: Vec<Vec<Side>>,
 }
 
 fn segments(frames: usize, window: usize) -> impl Iterator<Item = (usize, usize)> {
@@ -718,7 +988,8 @@ impl SpihtCodec {
                     for &(from, count) in &seg.runs[c * LAYERS..(c + 1) * LAYERS] {
                         bits.append_run(seg.bytes, from, count);
                     }
-                    spiht_decode(&bits, seg.n0, nm, &mut rec, &mut scratch);
+                    // `None`: the stream ends before its last plane, as a cut one does.
+                    let _ = spiht_decode(&bits, seg.n0, nm, &mut rec, &mut scratch);
                 }
                 t.inverse(&rec, len, seg.levels, &mut out)
                     .map_err(|e| self.err(seg.offset, &e.to_string()))?;
@@ -739,30 +1010,40 @@ impl SpihtCodec {
         }
     }
 
-    #[expect(
-        clippy::too_many_lines,
-        reason = "pass 1 (side information) and pass 2 (budgets, bits) share their state"
-    )]
-    fn encode_native(self, clip: &Clip, p: Params) -> Result<Bitstream, CodecError> {
-        let s = settings(self.name(), &p)?;
+    /// Encodes with settings `s`: pass 1 (transform and side information), the budget,
+    /// pass 2 (every segment's embedded streams, layer by layer).
+    fn encode_native(self, clip: &Clip, s: &SpihtSettings) -> Result<Bitstream, CodecError> {
+        let (data, flags) = unwrapped_matrix(clip);
+        let side = self.side_information(clip, s, &data, &flags)?;
+        let avail_bits = self.available_bits(clip, s, side.bytes.len(), side.coeffs.len())?;
+        let mut payload = PAYLOAD_TAG.to_vec();
+        payload.extend_from_slice(&(side.bytes.len() as u32).to_le_bytes());
+        payload.extend_from_slice(&side.bytes);
+        self.code_segments(clip, s, &side, avail_bits, &mut payload);
+        header(&self, clip, s.to_params(), payload)
+    }
+
+    /// Pass 1: the unwrap flags, then per segment every channel's centred transform and side
+    /// information (mean, top plane, energy code), range coded.
+    fn side_information(
+        self,
+        clip: &Clip,
+        s: &SpihtSettings,
+        data: &[f64],
+        flags: &[bool],
+    ) -> Result<SideInformation, CodecError> {
         let frames = clip.frames();
         let n_ch = clip.channel_count();
-        let (data, flags) = unwrapped_matrix(clip);
-        let factors = static_factors(&clip.skeleton, &s);
         let sens = sensitivities(&clip.skeleton);
         let mut t = Transform::new(s.wavelet);
-
-        // Pass 1: transform, side information.
         let mut enc = RangeEncoder::new();
-        let mut sm = SideModels::new();
         let mut flag_model = BitModel::default();
-        for &f in &flags {
+        for &f in flags {
             enc.bit(&mut flag_model, f);
         }
+        let mut coder = SideCoder::new(n_ch);
         let mut coeffs: Vec<Vec<Vec<f64>>> = Vec::new();
         let mut sides: Vec<Vec<Side>> = Vec::new();
-        let mut prev_mean = vec![0i64; n_ch];
-        let mut prev_nmax = vec![0i64; n_ch];
         let mut centred = Vec::new();
         for (start, len) in segments(frames, s.window) {
             let levels = s.wavelet.max_level(len);
@@ -771,13 +1052,7 @@ impl SpihtCodec {
             let mut stats = Vec::with_capacity(n_ch);
             for c in 0..n_ch {
                 let x = &data[c * frames + start..c * frames + start + len];
-                let mean = x.iter().sum::<f64>() / len as f64;
-                let mean_q = (mean / MEAN_STEP).round() as i64;
-                let mq = mean_q as f64 * MEAN_STEP;
-                centred.clear();
-                centred.extend(x.iter().map(|v| v - mq));
-                let mut co = Vec::new();
-                t.forward(&centred, levels, &mut co);
+                let (mean_q, co) = centred_transform(&mut t, x, levels, &mut centred);
                 stats.push(diff_stats(x));
                 seg_c.push(co);
                 seg_s.push(Side {
@@ -791,91 +1066,85 @@ impl SpihtCodec {
             } else {
                 energy_codes(&stats, len)
             };
-            for c in 0..n_ch {
-                let nmax = top_plane(&seg_c[c]);
-                let energy = codes[c];
-                let mean_q = seg_s[c].mean_q;
-                let e = |e: crate::entropy::EntropyError| self.err(0, &e.to_string());
-                sm.mean.encode(&mut enc, mean_q - prev_mean[c]).map_err(e)?;
-                prev_mean[c] = mean_q;
-                enc.bit(&mut sm.empty, nmax.is_none());
-                if let Some(nm) = nmax {
-                    sm.nmax.encode(&mut enc, nm - prev_nmax[c]).map_err(e)?;
-                    prev_nmax[c] = nm;
-                    sm.energy.encode(&mut enc, energy).map_err(e)?;
-                }
-                seg_s[c] = Side {
-                    mean_q,
-                    nmax,
-                    energy,
-                };
+            for ((side, co), &energy) in seg_s.iter_mut().zip(&seg_c).zip(&codes) {
+                side.nmax = top_plane(co);
+                side.energy = energy;
             }
+            coder
+                .encode(&mut enc, &seg_s)
+                .map_err(|e| self.err(0, &e.to_string()))?;
             coeffs.push(seg_c);
             sides.push(seg_s);
         }
-        let side_bytes = enc.finish();
+        Ok(SideInformation {
+            bytes: enc.finish(),
+            coeffs,
+            sides,
+        })
+    }
 
-        // Budget: the whole container at the target CR.
-        let mut out_params = p;
-        let container = header(&self, clip, out_params.clone(), Vec::new())?.byte_len();
-        let n_seg = coeffs.len();
-        let target_bytes = 4.0 * (n_ch * frames) as f64 / s.cr;
-        let fixed = container + PAYLOAD_TAG.len() + 4 + side_bytes.len() + 8 * n_seg;
+    /// The bits the segments may hold: the whole container at the target CR, less the
+    /// header, the side information and the segments' sizes.
+    fn available_bits(
+        self,
+        clip: &Clip,
+        s: &SpihtSettings,
+        side_bytes: usize,
+        n_seg: usize,
+    ) -> Result<f64, CodecError> {
+        let values = clip.channel_count() * clip.frames();
+        let container = header(&self, clip, s.to_params(), Vec::new())?.byte_len();
+        let target_bytes = 4.0 * values as f64 / s.cr;
+        let fixed = container + PAYLOAD_TAG.len() + 4 + side_bytes + 8 * n_seg;
         let avail_bits = ((target_bytes - fixed as f64) * 8.0).floor();
         if avail_bits < 0.0 {
             return Err(CodecError::Rate {
                 codec: self.name(),
                 target: s.cr,
-                closest: 4.0 * (n_ch * frames) as f64 / fixed as f64,
+                closest: 4.0 * values as f64 / fixed as f64,
             });
         }
-        let mut payload = PAYLOAD_TAG.to_vec();
-        payload.extend_from_slice(&(side_bytes.len() as u32).to_le_bytes());
-        payload.extend_from_slice(&side_bytes);
+        Ok(avail_bits)
+    }
+
+    /// Pass 2: per segment its budget (whole bytes, so that the CR is exact up to rounding
+    /// per segment), every channel's embedded stream cut at its share (eq. 6.1), and the bits
+    /// layer by layer, appended to `payload`.
+    fn code_segments(
+        self,
+        clip: &Clip,
+        s: &SpihtSettings,
+        side: &SideInformation,
+        avail_bits: f64,
+        payload: &mut Vec<u8>,
+    ) {
+        let frames = clip.frames();
+        let factors = static_factors(&clip.skeleton, s);
         let mut scratch = Scratch::default();
-        let mut streams: Vec<Vec<u8>> = vec![Vec::new(); n_ch];
-        // Segment budgets whole bytes, so that the CR is exact up to rounding per segment.
+        let mut streams: Vec<Vec<u8>> = vec![Vec::new(); clip.channel_count()];
         let mut used_bits = 0usize;
         for (k, (start, len)) in segments(frames, s.window).enumerate() {
             let end_bits = ((avail_bits * (start + len) as f64 / frames as f64) as usize) / 8 * 8;
             let seg_budget = end_bits.saturating_sub(used_bits);
             let levels = s.wavelet.max_level(len);
             let n0 = band_lengths(len, levels)[0];
-            let budgets = allocate(&factors, &sides[k], self.perceptual, s.position, seg_budget);
-            for c in 0..n_ch {
-                streams[c].clear();
-                if let Some(nm) = sides[k][c].nmax {
-                    spiht_encode(
-                        &coeffs[k][c],
-                        n0,
-                        nm,
-                        budgets[c],
-                        &mut streams[c],
-                        &mut scratch,
-                    );
+            let sides = &side.sides[k];
+            let budgets = allocate(&factors, sides, self.perceptual, s.position, seg_budget);
+            for (c, stream) in streams.iter_mut().enumerate() {
+                stream.clear();
+                if let Some(nm) = sides[c].nmax {
+                    // `None`: the budget ended the stream early, as it should at any rate.
+                    let _ =
+                        spiht_encode(&side.coeffs[k][c], n0, nm, budgets[c], stream, &mut scratch);
                 }
-                streams[c].resize(budgets[c], 0); // pad a stream that finished early
+                stream.resize(budgets[c], 0); // pad a stream that finished early
             }
-            let total: usize = budgets.iter().sum();
+            let (total, bytes) = interleave_layers(&streams, &budgets);
             used_bits += total.div_ceil(8) * 8;
-            let mut bytes = vec![0u8; total.div_ceil(8)];
-            let mut w = 0usize;
-            for r in 0..LAYERS {
-                for c in 0..n_ch {
-                    for &b in
-                        &streams[c][layer_bound(budgets[c], r)..layer_bound(budgets[c], r + 1)]
-                    {
-                        bytes[w / 8] |= b << (7 - w % 8);
-                        w += 1;
-                    }
-                }
-            }
             payload.extend_from_slice(&(seg_budget as u32).to_le_bytes());
             payload.extend_from_slice(&(total as u32).to_le_bytes());
             payload.extend_from_slice(&bytes);
         }
-        out_params.insert("cr".into(), s.cr);
-        header(&self, clip, out_params, payload)
     }
 }
 
@@ -901,19 +1170,7 @@ impl Codec for SpihtCodec {
     }
 
     fn default_params(&self) -> Params {
-        [
-            ("cr", 20.0),
-            ("window", 128.0),
-            ("wavelet", f64::from(Wavelet::Cdf97.id())),
-            ("score_legs", 1.0),
-            ("score_arms", 0.5),
-            ("score_torso", 0.5),
-            ("score_head", 0.5),
-            ("allocation", 0.0),
-        ]
-        .into_iter()
-        .map(|(k, v)| (k.to_string(), v))
-        .collect()
+        SpihtSettings::DEFAULT.to_params()
     }
 
     fn rate_control(&self) -> RateControl {
@@ -922,7 +1179,7 @@ impl Codec for SpihtCodec {
 
     fn encode(&self, clip: &Clip, params: &Params) -> Result<Bitstream, CodecError> {
         let p = merged(self, params)?;
-        self.encode_native(clip, p)
+        self.encode_native(clip, &SpihtSettings::from_params(self.name(), &p)?)
     }
 
     fn decode(&self, stream: &Bitstream, skeleton: &Skeleton) -> Result<Clip, CodecError> {
@@ -931,8 +1188,10 @@ impl Codec for SpihtCodec {
 }
 
 impl SpihtCodec {
-    /// Decodes `stream`, its channels shared by two threads when `threads` is set.
-    #[expect(clippy::too_many_lines, reason = "mirrors the encoder step by step")]
+    /// Decodes `stream`, its channels shared by two threads when `threads` is set. The steps
+    /// mirror the encoder's: side information and segment layout ([`SpihtCodec::read_payload`]
+    /// for [`SpihtCodec::side_information`] and [`SpihtCodec::code_segments`]), then every
+    /// channel's embedded streams ([`SpihtCodec::reconstruct_all`]).
     fn decode_channels(
         self,
         stream: &Bitstream,
@@ -942,28 +1201,49 @@ impl SpihtCodec {
         check_stream(&self, stream, skeleton)?;
         let mut p = self.default_params();
         p.extend(stream.params.iter().map(|(k, v)| (k.clone(), *v)));
-        let s = settings(self.name(), &p)?;
+        let s = SpihtSettings::from_params(self.name(), &p)?;
         let frames = stream.frames as usize;
         let n_ch = stream.channels as usize;
         let factors = static_factors(skeleton, &s);
         let pl = untagged(self.name(), &stream.payload)?;
-        let read_u32 = |at: usize| -> Result<u32, CodecError> {
-            pl.get(at..at + 4)
-                .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-                .ok_or_else(|| self.err(at, "truncated"))
-        };
-        let side_len = read_u32(0)? as usize;
+        let (flags, segs) = self.read_payload(pl, &s, &factors, frames, n_ch)?;
+        let mut data = vec![0.0; n_ch * frames];
+        self.reconstruct_all(s.wavelet, &segs, &mut data, frames, n_ch, threads)?;
+        wrap_flagged(&mut data, frames, &flags);
+        Ok(Clip::new(
+            skeleton.clone(),
+            stream.frame_rate_hz,
+            frames,
+            data,
+        )?)
+    }
+
+    /// The `u32` at byte `at` of the payload.
+    fn u32_at(self, pl: &[u8], at: usize) -> Result<u32, CodecError> {
+        pl.get(at..at + 4)
+            .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+            .ok_or_else(|| self.err(at, "truncated"))
+    }
+
+    /// The untagged payload read up to its end: the unwrap flags and every segment, its side
+    /// information (mirror of pass 1) and where its channels' layers lie (mirror of pass 2).
+    fn read_payload<'a>(
+        self,
+        pl: &'a [u8],
+        s: &SpihtSettings,
+        factors: &[f64],
+        frames: usize,
+        n_ch: usize,
+    ) -> Result<(Vec<bool>, Vec<Segment<'a>>), CodecError> {
+        let side_len = self.u32_at(pl, 0)? as usize;
         let side = pl
             .get(4..4 + side_len)
             .ok_or_else(|| self.err(0, "side information truncated"))?;
         let mut pos = 4 + side_len;
         let mut dec = RangeDecoder::new(side);
-        let mut sm = SideModels::new();
         let mut flag_model = BitModel::default();
         let flags: Vec<bool> = (0..n_ch).map(|_| dec.bit(&mut flag_model)).collect();
-        let mut prev_mean = vec![0i64; n_ch];
-        let mut prev_nmax = vec![0i64; n_ch];
-        let mut data = vec![0.0; n_ch * frames];
+        let mut coder = SideCoder::new(n_ch);
         let mut segs: Vec<Segment> = Vec::new();
         let mut sides = vec![
             Side {
@@ -973,87 +1253,76 @@ impl SpihtCodec {
             };
             n_ch
         ];
-        for (start, len) in segments(frames, s.window) {
-            for c in 0..n_ch {
-                let bad = |what: &str| self.err(4, what);
-                let dm = sm.mean.decode(&mut dec).ok_or_else(|| bad("mean"))?;
-                let mean_q = prev_mean[c].checked_add(dm).ok_or_else(|| bad("mean"))?;
-                if mean_q.unsigned_abs() > 1 << 40 {
-                    return Err(bad("mean out of range"));
-                }
-                prev_mean[c] = mean_q;
-                let empty = dec.bit(&mut sm.empty);
-                let (nmax, energy) = if empty {
-                    (None, ENERGY_ZERO)
-                } else {
-                    let nm = prev_nmax[c]
-                        .checked_add(sm.nmax.decode(&mut dec).ok_or_else(|| bad("n_max"))?);
-                    let nm = nm
-                        .filter(|v| (-200..=200).contains(v))
-                        .ok_or_else(|| bad("n_max out of range"))?;
-                    prev_nmax[c] = nm;
-                    let e = sm.energy.decode(&mut dec).ok_or_else(|| bad("energy"))?;
-                    if e > ENERGY_ZERO {
-                        return Err(bad("energy code"));
-                    }
-                    (Some(nm), e)
-                };
-                sides[c] = Side {
-                    mean_q,
-                    nmax,
-                    energy,
-                };
-            }
+        for span in segments(frames, s.window) {
+            coder
+                .decode(&mut dec, &mut sides)
+                .map_err(|what| self.err(4, what))?;
             if dec.overrun() > 0 {
                 return Err(self.err(4 + side_len, "side information ends early"));
             }
-            let seg_budget = read_u32(pos)? as usize;
-            let present = read_u32(pos + 4)? as usize;
-            pos += 8;
-            // A segment never holds more than 512 bits per value (CR ≥ 0.1 caps it at 320).
-            if seg_budget > len * n_ch * 512 {
-                return Err(self.err(pos - 8, "segment budget beyond any rate"));
-            }
-            let budgets = allocate(&factors, &sides, self.perceptual, s.position, seg_budget);
-            let total: usize = budgets.iter().sum();
-            if present > total {
-                return Err(self.err(pos - 4, "more bits than the budget"));
-            }
-            let bytes = pl
-                .get(pos..pos + present.div_ceil(8))
-                .ok_or_else(|| self.err(pos, "segment truncated"))?;
-            pos += present.div_ceil(8);
-            // Layer r holds every channel's r-th run, channel after channel.
-            let mut runs = vec![(0, 0); n_ch * LAYERS];
-            let mut from = 0usize;
-            for r in 0..LAYERS {
-                for (c, &b) in budgets.iter().enumerate() {
-                    let n_bits = layer_bound(b, r + 1) - layer_bound(b, r);
-                    runs[c * LAYERS + r] = (from, n_bits.min(present.saturating_sub(from)));
-                    from += n_bits;
-                }
-            }
-            let levels = s.wavelet.max_level(len);
-            let lens = band_lengths(len, levels);
-            segs.push(Segment {
-                start,
-                len,
-                levels,
-                n0: lens[0],
-                n_coef: lens.iter().sum(),
-                offset: pos - present.div_ceil(8),
-                sides: sides.clone(),
-                bytes,
-                runs,
-            });
+            segs.push(self.read_segment(pl, &mut pos, span, s, factors, &sides)?);
         }
         if pos != pl.len() {
             return Err(self.err(pos, "trailing bytes in payload"));
         }
-        // Each channel's segments decode on their own. One thread, or two with `threads`, take
-        // channels from a queue, those with the most bits first: a channel's cost is not
-        // proportional to its bits (a stream past its last bit plane ends in padding), so a
-        // fixed split leaves one thread idle.
+        Ok((flags, segs))
+    }
+
+    /// The segment `(start, len)` at byte `*pos` (moved past it): its budget and bit count,
+    /// checked against the rate and its channels' shares of the budget, and its bits.
+    fn read_segment<'a>(
+        self,
+        pl: &'a [u8],
+        pos: &mut usize,
+        (start, len): (usize, usize),
+        s: &SpihtSettings,
+        factors: &[f64],
+        sides: &[Side],
+    ) -> Result<Segment<'a>, CodecError> {
+        let seg_budget = self.u32_at(pl, *pos)? as usize;
+        let present = self.u32_at(pl, *pos + 4)? as usize;
+        *pos += 8;
+        // A segment never holds more than 512 bits per value (CR ≥ 0.1 caps it at 320).
+        if seg_budget > len * sides.len() * 512 {
+            return Err(self.err(*pos - 8, "segment budget beyond any rate"));
+        }
+        let budgets = allocate(factors, sides, self.perceptual, s.position, seg_budget);
+        let total: usize = budgets.iter().sum();
+        if present > total {
+            return Err(self.err(*pos - 4, "more bits than the budget"));
+        }
+        let bytes = pl
+            .get(*pos..*pos + present.div_ceil(8))
+            .ok_or_else(|| self.err(*pos, "segment truncated"))?;
+        *pos += present.div_ceil(8);
+        let levels = s.wavelet.max_level(len);
+        let lens = band_lengths(len, levels);
+        Ok(Segment {
+            start,
+            len,
+            levels,
+            n0: lens[0],
+            n_coef: lens.iter().sum(),
+            offset: *pos - present.div_ceil(8),
+            sides: sides.to_vec(),
+            bytes,
+            runs: layer_runs(&budgets, present),
+        })
+    }
+
+    /// Every channel's rows of `data` from the segments. Each channel's segments decode on
+    /// their own. One thread, or two with `threads`, take channels from a queue, those with
+    /// the most bits first: a channel's cost is not proportional to its bits (a stream past
+    /// its last bit plane ends in padding), so a fixed split leaves one thread idle.
+    fn reconstruct_all(
+        self,
+        wavelet: Wavelet,
+        segs: &[Segment<'_>],
+        data: &mut [f64],
+        frames: usize,
+        n_ch: usize,
+        threads: bool,
+    ) -> Result<(), CodecError> {
         let mut queue: Vec<(usize, &mut [f64])> =
             data.chunks_mut(frames.max(1)).enumerate().collect();
         let bits: Vec<usize> = (0..n_ch)
@@ -1061,7 +1330,7 @@ impl SpihtCodec {
             .collect();
         queue.sort_by_key(|&(c, _)| bits[c]);
         let queue = std::sync::Mutex::new(queue);
-        let rebuild = || self.reconstruct(s.wavelet, &segs, &queue);
+        let rebuild = || self.reconstruct(wavelet, segs, &queue);
         if threads {
             std::thread::scope(|scope| {
                 let other = scope.spawn(rebuild);
@@ -1070,17 +1339,10 @@ impl SpihtCodec {
                     .join()
                     .unwrap_or_else(|_| Err(self.err(0, "a decoder thread stopped unexpectedly")));
                 mine.and(theirs)
-            })?;
+            })
         } else {
-            rebuild()?;
+            rebuild()
         }
-        wrap_flagged(&mut data, frames, &flags);
-        Ok(Clip::new(
-            skeleton.clone(),
-            stream.frame_rate_hz,
-            frames,
-            data,
-        )?)
     }
 }
 
@@ -1147,6 +1409,31 @@ pub fn truncate(stream: &Bitstream, fraction: f64) -> Result<Bitstream, CodecErr
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The settings read back what they record, and the defaults are the default parameters.
+    #[test]
+    #[expect(clippy::float_cmp, reason = "the scores are copied, not computed")]
+    fn settings_round_trip_through_params() {
+        let c = SpihtCodec::new(true);
+        let s = SpihtSettings::from_params(c.name(), &c.default_params()).unwrap();
+        assert_eq!(s, SpihtSettings::DEFAULT);
+        assert_eq!(s.to_params(), c.default_params());
+        let other = SpihtSettings {
+            cr: 7.5,
+            window: 64,
+            wavelet: Wavelet::D4,
+            score_legs: 0.9,
+            score_arms: 0.8,
+            score_torso: 0.7,
+            score_head: 0.6,
+            position: false,
+        };
+        assert_eq!(
+            SpihtSettings::from_params(c.name(), &other.to_params()).unwrap(),
+            other
+        );
+        assert_eq!(other.scores(), [0.7, 0.6, 0.8, 0.8, 0.9, 0.9]);
+    }
 
     #[test]
     fn pow2_is_exact() {
@@ -1228,7 +1515,7 @@ mod tests {
         let c = SpihtCodec::new(true);
         for cr in [1.0, 12.0] {
             let mut p = Params::new();
-            p.insert("cr".into(), cr);
+            p.insert(keys::CR.into(), cr);
             let s = c.encode(&clip, &p).unwrap();
             let threaded = c.decode_channels(&s, &clip.skeleton, true).unwrap();
             let one = c.decode_channels(&s, &clip.skeleton, false).unwrap();

@@ -70,7 +70,7 @@ use super::prep::{
 };
 use super::{
     Codec, CodecError, Params, RateControl, check_stream, decode_on_two_threads, header, int_param,
-    merged, real_param,
+    keys, merged, params_of, real_param,
 };
 use crate::bitstream::Bitstream;
 use crate::entropy::{
@@ -153,46 +153,108 @@ impl WaveletCodec {
     }
 }
 
-/// Parsed parameters.
-#[derive(Debug, Clone, Copy)]
-struct Settings {
+/// Smallest and largest QP (`qp`): the rate search steps the quantizer within them too.
+pub(crate) const QP_MIN: u32 = 4;
+/// See [`QP_MIN`].
+pub(crate) const QP_MAX: u32 = 16;
+
+/// The parameters of a wavelet codec, read and range-checked once from [`Params`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct WaveletSettings {
+    /// Kept fraction α of the coefficients ([`keys::ALPHA`], 0..=1).
     alpha: f64,
+    /// Quantization bits ([`keys::QP`], [`QP_MIN`]..=[`QP_MAX`]).
     qp: u32,
+    /// Slice length in frames ([`keys::WINDOW`], 8..=4096).
     window: usize,
+    /// Minimum kept coefficients per channel and slice ([`keys::C_MIN`], 0..=4096).
     c_min: usize,
+    /// [`keys::WAVELET`].
     wavelet: Wavelet,
+    /// [`keys::TRANSLATION`]: 0 comparable, 1 literal.
     translation: TranslationRule,
-    allocation: Allocation,
+    /// [`keys::ALLOCATION`]: 0 position, 1 paper; `None` where the parameters lack the key
+    /// (the baselines, which are the paper's rules).
+    allocation: Option<Allocation>,
 }
 
-fn settings(name: &'static str, p: &Params) -> Result<Settings, CodecError> {
-    let alpha = real_param(name, p, "alpha", 0.0, 1.0)?;
-    let qp = int_param(name, p, "qp", 4, 16)? as u32;
-    let window = int_param(name, p, "window", 8, 4096)? as usize;
-    let c_min = int_param(name, p, "c", 0, 4096)? as usize;
-    let wavelet =
-        Wavelet::from_id(int_param(name, p, "wavelet", 0, 1)? as u8).unwrap_or(Wavelet::D4);
-    let translation = if int_param(name, p, "translation", 0, 1)? == 0 {
-        TranslationRule::Comparable
-    } else {
-        TranslationRule::Literal
-    };
-    // Only wavelet-perceptual has the key; the baselines are the paper's rules.
-    let allocation = if p.contains_key("allocation") && int_param(name, p, "allocation", 0, 1)? == 0
-    {
-        Allocation::Position
-    } else {
-        Allocation::Paper
-    };
-    Ok(Settings {
-        alpha,
-        qp,
-        window,
-        c_min,
-        wavelet,
-        translation,
-        allocation,
-    })
+impl WaveletSettings {
+    /// The defaults of the codec with `selection` (only `wavelet-perceptual` has an
+    /// allocation, the position-aware one).
+    fn defaults(selection: Selection) -> WaveletSettings {
+        WaveletSettings {
+            alpha: 0.1,
+            qp: 10,
+            window: 256,
+            c_min: 0,
+            wavelet: Wavelet::D4,
+            translation: TranslationRule::Comparable,
+            allocation: (selection == Selection::Perceptual).then_some(Allocation::Position),
+        }
+    }
+
+    /// Reads the settings of codec `codec` from `p`, every key within its range (keys the
+    /// codec does not know are not looked at).
+    fn from_params(codec: &'static str, p: &Params) -> Result<WaveletSettings, CodecError> {
+        let alpha = real_param(codec, p, keys::ALPHA, 0.0, 1.0)?;
+        let qp = int_param(codec, p, keys::QP, QP_MIN.into(), QP_MAX.into())? as u32;
+        let window = int_param(codec, p, keys::WINDOW, 8, 4096)? as usize;
+        let c_min = int_param(codec, p, keys::C_MIN, 0, 4096)? as usize;
+        let wavelet = Wavelet::from_id(int_param(codec, p, keys::WAVELET, 0, 1)? as u8)
+            .unwrap_or(Wavelet::D4);
+        let translation = if int_param(codec, p, keys::TRANSLATION, 0, 1)? == 0 {
+            TranslationRule::Comparable
+        } else {
+            TranslationRule::Literal
+        };
+        let allocation = if p.contains_key(keys::ALLOCATION) {
+            Some(if int_param(codec, p, keys::ALLOCATION, 0, 1)? == 0 {
+                Allocation::Position
+            } else {
+                Allocation::Paper
+            })
+        } else {
+            None
+        };
+        Ok(WaveletSettings {
+            alpha,
+            qp,
+            window,
+            c_min,
+            wavelet,
+            translation,
+            allocation,
+        })
+    }
+
+    /// The parameters a stream records (every key but [`keys::CR`]).
+    fn to_params(self) -> Params {
+        let translation = match self.translation {
+            TranslationRule::Comparable => 0.0,
+            TranslationRule::Literal => 1.0,
+        };
+        let mut p = params_of(&[
+            (keys::ALPHA, self.alpha),
+            (keys::QP, f64::from(self.qp)),
+            (keys::WINDOW, self.window as f64),
+            (keys::C_MIN, self.c_min as f64),
+            (keys::WAVELET, f64::from(self.wavelet.id())),
+            (keys::TRANSLATION, translation),
+        ]);
+        if let Some(a) = self.allocation {
+            let code = match a {
+                Allocation::Position => 0.0,
+                Allocation::Paper => 1.0,
+            };
+            p.insert(keys::ALLOCATION.to_string(), code);
+        }
+        p
+    }
+
+    /// How the channels share coefficients and steps: [`Allocation::Paper`] without the key.
+    fn allocation(self) -> Allocation {
+        self.allocation.unwrap_or(Allocation::Paper)
+    }
 }
 
 /// Per-band context index of every coefficient position of a slice layout.
@@ -342,8 +404,7 @@ struct Encoder {
 }
 
 impl WaveletCodec {
-    fn encode_native(self, clip: &Clip, p: Params) -> Result<Bitstream, CodecError> {
-        let s = settings(self.name(), &p)?;
+    fn encode_native(self, clip: &Clip, s: &WaveletSettings) -> Result<Bitstream, CodecError> {
         let frames = clip.frames();
         let n_ch = clip.channel_count();
         let (data, flags) = unwrapped_matrix(clip);
@@ -371,7 +432,7 @@ impl WaveletCodec {
             let l = &mut e.lanes[lane_of(c, n_ch, lanes)];
             l.enc.bit(&mut l.m.flag, f);
         }
-        let weights = match (self.selection, s.allocation) {
+        let weights = match (self.selection, s.allocation()) {
             (Selection::Perceptual, Allocation::Position) => {
                 Some(channel_weights(&clip.skeleton, s.translation))
             }
@@ -389,12 +450,12 @@ impl WaveletCodec {
                 let x = &data[c * frames + start..c * frames + start + len];
                 e.t.forward(x, levels, &mut e.coeffs[c]);
                 if weights.is_none() {
-                    importance[c] = self.paper_importance(&s, x, kinds[c], lens[c], max_len);
+                    importance[c] = self.paper_importance(s, x, kinds[c], lens[c], max_len);
                 }
             }
             match &weights {
-                Some(w) => self.slice_position(&s, &mut e, w, n_approx, c_eff)?,
-                None => self.slice_paper(&s, &mut e, &importance, &kinds, n_approx, c_eff)?,
+                Some(w) => self.slice_position(s, &mut e, w, n_approx, c_eff)?,
+                None => self.slice_paper(s, &mut e, &importance, &kinds, n_approx, c_eff)?,
             }
         }
         // Version, lane count, the byte length of every lane but the last, the lanes.
@@ -408,15 +469,13 @@ impl WaveletCodec {
         for lane in &coded {
             payload.extend_from_slice(lane);
         }
-        let mut out = p;
-        out.remove("cr");
-        header(&self, clip, out, payload)
+        header(&self, clip, s.to_params(), payload)
     }
 
     /// Steps 2-3: `A_i` of one channel over a slice.
     fn paper_importance(
         self,
-        s: &Settings,
+        s: &WaveletSettings,
         x: &[f64],
         translation: bool,
         len: f64,
@@ -439,7 +498,7 @@ impl WaveletCodec {
     /// Steps 6-9 as printed: `K_i` per channel, QP bits per channel.
     fn slice_paper(
         self,
-        s: &Settings,
+        s: &WaveletSettings,
         e: &mut Encoder,
         importance: &[f64],
         kinds: &[bool],
@@ -509,7 +568,7 @@ impl WaveletCodec {
     /// units.
     fn slice_position(
         self,
-        s: &Settings,
+        s: &WaveletSettings,
         e: &mut Encoder,
         w: &[f64],
         n_approx: usize,
@@ -637,27 +696,14 @@ impl Codec for WaveletCodec {
     }
 
     fn default_params(&self) -> Params {
-        let mut p: Params = [
-            ("alpha", 0.1),
-            ("qp", 10.0),
-            ("window", 256.0),
-            ("c", 0.0),
-            ("wavelet", f64::from(Wavelet::D4.id())),
-            ("translation", 0.0),
-            ("cr", 0.0),
-        ]
-        .into_iter()
-        .map(|(k, v)| (k.to_string(), v))
-        .collect();
-        if self.selection == Selection::Perceptual {
-            p.insert("allocation".into(), 0.0);
-        }
+        let mut p = WaveletSettings::defaults(self.selection).to_params();
+        p.insert(keys::CR.to_string(), 0.0);
         p
     }
 
     fn rate_control(&self) -> RateControl {
         RateControl::Search {
-            key: "alpha",
+            key: keys::ALPHA,
             min: 1e-4,
             max: 1.0,
         }
@@ -665,11 +711,12 @@ impl Codec for WaveletCodec {
 
     fn encode(&self, clip: &Clip, params: &Params) -> Result<Bitstream, CodecError> {
         let p = merged(self, params)?;
-        let target = p.get("cr").copied().unwrap_or(0.0);
+        // The rate search sets the knob (α) itself: the settings are read per encode it runs.
+        let target = p.get(keys::CR).copied().unwrap_or(0.0);
         if target > 0.0 {
             return crate::rate::search(self, clip, &p, target);
         }
-        self.encode_native(clip, p)
+        self.encode_native(clip, &WaveletSettings::from_params(self.name(), &p)?)
     }
 
     fn decode(&self, stream: &Bitstream, skeleton: &Skeleton) -> Result<Clip, CodecError> {
@@ -689,7 +736,7 @@ impl WaveletCodec {
         let name = self.name();
         let mut p = self.default_params();
         p.extend(stream.params.iter().map(|(k, v)| (k.clone(), *v)));
-        let s = settings(name, &p)?;
+        let s = WaveletSettings::from_params(name, &p)?;
         let frames = stream.frames as usize;
         let n_ch = stream.channels as usize;
         let at = |offset: usize, detail: &str| CodecError::Payload {
@@ -713,7 +760,7 @@ impl WaveletCodec {
         }
         let spans = lane_spans(name, pl, n_ch)?;
         let lanes = spans.len();
-        let weights = match (self.selection, s.allocation) {
+        let weights = match (self.selection, s.allocation()) {
             (Selection::Perceptual, Allocation::Position) => {
                 Some(channel_weights(skeleton, s.translation))
             }
@@ -819,7 +866,7 @@ fn lane_spans(
 /// What every lane's decoder shares.
 struct LaneContext<'a> {
     codec: &'a WaveletCodec,
-    s: &'a Settings,
+    s: &'a WaveletSettings,
     frames: usize,
     weights: Option<&'a [f64]>,
     kinds: &'a [bool],
@@ -942,6 +989,34 @@ mod tests {
     use super::*;
     use motion::synth::{WalkParams, walking_clip};
 
+    /// The settings read back what they record, and the defaults are the default parameters.
+    #[test]
+    fn settings_round_trip_through_params() {
+        for selection in [
+            Selection::Perceptual,
+            Selection::Standard,
+            Selection::BoneLength,
+        ] {
+            let c = WaveletCodec::new(selection);
+            let mut defaults = c.default_params();
+            assert_eq!(defaults.remove(keys::CR), Some(0.0));
+            let s = WaveletSettings::from_params(c.name(), &defaults).unwrap();
+            assert_eq!(s, WaveletSettings::defaults(selection));
+            assert_eq!(s.to_params(), defaults);
+            let other = WaveletSettings {
+                alpha: 0.37,
+                qp: 13,
+                window: 64,
+                c_min: 5,
+                wavelet: Wavelet::Cdf97,
+                translation: TranslationRule::Literal,
+                allocation: s.allocation.map(|_| Allocation::Paper),
+            };
+            let back = WaveletSettings::from_params(c.name(), &other.to_params()).unwrap();
+            assert_eq!(back, other);
+        }
+    }
+
     #[test]
     fn lane_channels_are_the_channels_lane_of_assigns() {
         for n_ch in 1..40 {
@@ -968,8 +1043,8 @@ mod tests {
         });
         let c = WaveletCodec::new(Selection::Perceptual);
         let mut p = Params::new();
-        p.insert("alpha".into(), 1.0);
-        p.insert("qp".into(), 12.0);
+        p.insert(keys::ALPHA.into(), 1.0);
+        p.insert(keys::QP.into(), 12.0);
         let s = c.encode(&clip, &p).unwrap();
         assert_eq!(s.payload[1], 2);
         let threaded = c.decode_lanes(&s, &clip.skeleton, true).unwrap();
