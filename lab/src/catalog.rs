@@ -74,3 +74,21 @@ impl CodecCatalog for Codecs {
         self.all().iter().map(|c| c.name().to_string()).collect()
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// protocols cannot name the codecs' keys (it does not depend on codecs): the two
+    /// spellings of the target-ratio parameter must agree.
+    #[test]
+    fn protocols_and_codecs_name_the_target_ratio_alike() {
+        assert_eq!(protocols::catalog::TARGET_CR_PARAM, codec::keys::CR);
+        let spiht = Codecs::default().codec("spiht").unwrap();
+        assert!(spiht.target_cr && spiht.params.iter().any(|p| p == codec::keys::CR));
+        let raw = Codecs::default().codec("raw-f32").unwrap();
+        assert!(!raw.target_cr);
+        assert!(Codecs::default().codec("primitive").unwrap().needs_database);
+        assert!(Codecs::default().codec("nope").is_none());
+    }
+}

@@ -6,6 +6,7 @@ use analysis::psychometric::{BootstrapOptions, FitOptions, Lapse, Shape};
 use analysis::study::{ReportOptions, analyze};
 use analysis::{CiMethod, Confidence, export, from_results};
 use anyhow::{Context, Result};
+use codecs::codec::keys;
 use protocols::StudyDefinition;
 
 /// Which confidence interval decides findings and fills the tables.
@@ -88,8 +89,8 @@ fn level_label(study: &StudyDefinition) -> String {
         return "Level".to_owned();
     };
     let name = match sc.param.as_str() {
-        "t_l" => "t_L".to_owned(),
-        "cr" => "target CR".to_owned(),
+        keys::T_L => "t_L".to_owned(),
+        keys::CR => "target CR".to_owned(),
         p => p.to_owned(),
     };
     if sc.live.is_some() {
