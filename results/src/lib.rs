@@ -20,14 +20,14 @@ pub use trials::{TornRow, TrialsFile, read_trials};
 #[non_exhaustive]
 pub enum ResultsError {
     /// An I/O call failed.
-    #[error("{}: {op}: {source}", path.display())]
+    #[error("{}: {op}: {cause}", path.display())]
     Io {
         /// File or directory.
         path: PathBuf,
         /// What was being done.
         op: &'static str,
-        /// Cause.
-        source: std::io::Error,
+        /// Cause (part of the message, not a separate link of its chain).
+        cause: std::io::Error,
     },
     /// Refusing to overwrite existing results.
     #[error("{} already exists; results are never overwritten (use --resume to continue, or another folder)", path.display())]
@@ -64,6 +64,16 @@ pub enum ResultsError {
         column: usize,
         /// What is wrong.
         message: String,
+    },
+    /// A manifest of a format version this build does not read.
+    #[error("{}: format_version {version} is not one this build reads (1 to {max}); a newer `study` wrote it?", path.display())]
+    UnknownVersion {
+        /// File.
+        path: PathBuf,
+        /// Its version.
+        version: u32,
+        /// Newest version this build reads.
+        max: u32,
     },
     /// A session directory has a trial log but no `session.json` (interrupted before its first
     /// manifest write).

@@ -20,8 +20,9 @@ use crate::trials::{
     HEADER, TRIALS_FORMAT_VERSION, TornRow, TrialsFile, encode_row_as, read_trials, torn_path,
 };
 
-/// Version of `session.json` and `run.json` written by this build.
-pub const MANIFEST_FORMAT_VERSION: u32 = 1;
+/// Version of `session.json` and `run.json` written by this build. Version 2 added
+/// `manifest_hash`; version 1 files are still read.
+pub const MANIFEST_FORMAT_VERSION: u32 = 2;
 /// Largest manifest accepted by the readers, bytes.
 pub const MAX_MANIFEST_BYTES: u64 = 16 << 20;
 /// Most session directories read from one results directory.
@@ -37,7 +38,7 @@ pub const LOCK_FILE: &str = "session.lock";
 
 fn io(path: &Path, op: &'static str) -> impl FnOnce(std::io::Error) -> ResultsError {
     let path = path.to_path_buf();
-    move |source| ResultsError::Io { path, op, source }
+    move |cause| ResultsError::Io { path, op, cause }
 }
 
 /// Reads a whole file after checking its size against `limit`.
@@ -130,63 +131,101 @@ pub fn write_new(path: &Path, bytes: &[u8]) -> Result<(), ResultsError> {
         Err(e) => Err(ResultsError::Io {
             path: path.to_path_buf(),
             op: "link",
-            source: e,
+            cause: e,
         }),
     }
 }
 
-/// A session lock: `session.lock` holding the writer's process id, removed on drop.
+/// A session lock: an exclusive kernel lock (`flock`) on `session.lock`, held on an open
+/// descriptor for as long as this value lives.
 ///
-/// A lock whose process no longer exists (`/proc/<pid>` absent on Linux) is stale, left by a
-/// crash, and is taken over. Process ids can be reused; a reused id makes a stale lock look
-/// live, which errs on the safe side (the runner refuses and names the file to remove).
+/// The kernel releases the lock when the holder exits, however it exits (a crash, SIGKILL, a
+/// power cut), so a lock left by a dead runner is free at once and no code ever decides that
+/// another process's lock is stale or deletes it. The file holds the holder's pid, for the
+/// message a second runner gets. The holder removes the file when it lets go, while it still
+/// holds the lock; a runner that locked a file which is no longer the one at `session.lock`
+/// (it opened it just before the holder removed it) lets go and starts again on the new one.
 #[derive(Debug)]
 pub struct SessionLock {
     path: PathBuf,
+    file: File,
 }
 
-fn pid_alive(pid: u32) -> bool {
-    let proc_root = Path::new("/proc");
-    if !proc_root.join("self").exists() {
-        return true; // no procfs: cannot tell, assume alive
+/// How long to wait between opening the lock file and locking it, read from
+/// `STUDY_LOCK_GAP_MS` in debug builds only: tests widen the window between the two steps to
+/// show that nothing depends on it.
+fn lock_gap() -> Option<std::time::Duration> {
+    if !cfg!(debug_assertions) {
+        return None;
     }
-    proc_root.join(pid.to_string()).exists()
+    std::env::var("STUDY_LOCK_GAP_MS")
+        .ok()
+        .and_then(|v| v.parse::<u64>().ok())
+        .map(std::time::Duration::from_millis)
+}
+
+/// Whether `file` is still the file at `path` (same device and inode).
+#[cfg(unix)]
+fn same_file(file: &File, path: &Path) -> bool {
+    use std::os::unix::fs::MetadataExt as _;
+    match (file.metadata(), fs::metadata(path)) {
+        (Ok(a), Ok(b)) => a.dev() == b.dev() && a.ino() == b.ino(),
+        _ => false,
+    }
+}
+
+#[cfg(not(unix))]
+fn same_file(_file: &File, path: &Path) -> bool {
+    path.exists()
 }
 
 impl SessionLock {
-    /// Takes the lock of session directory `dir`.
+    /// Takes the lock of session directory `dir`, without waiting.
     ///
     /// # Errors
-    /// [`ResultsError::Locked`] when a live process holds it, [`ResultsError::Io`] otherwise.
+    /// [`ResultsError::Locked`] when another runner holds it (naming its pid as the file
+    /// says), [`ResultsError::Io`] otherwise.
     pub fn acquire(dir: &Path) -> Result<Self, ResultsError> {
         let path = dir.join(LOCK_FILE);
-        let me = std::process::id();
-        for _ in 0..3 {
-            match write_new(&path, format!("{me}\n").as_bytes()) {
-                Ok(()) => return Ok(Self { path }),
-                Err(ResultsError::Exists { .. }) => {
-                    let text = fs::read_to_string(&path).unwrap_or_default();
-                    match text.trim().parse::<u32>() {
-                        Ok(pid) if pid == me || pid_alive(pid) => {
-                            return Err(ResultsError::Locked { path, pid });
-                        }
-                        // Dead holder or unreadable content (lock files are written whole through a
-                        // hard link, so garbage means something else wrote it): stale.
-                        _ => {
-                            let _ = fs::remove_file(&path);
-                        }
-                    }
-                }
-                Err(e) => return Err(e),
+        loop {
+            let mut file = OpenOptions::new()
+                .read(true)
+                .write(true)
+                .create(true)
+                .truncate(false)
+                .open(&path)
+                .map_err(io(&path, "open"))?;
+            if let Some(gap) = lock_gap() {
+                std::thread::sleep(gap);
             }
+            match file.try_lock() {
+                Ok(()) => {}
+                Err(fs::TryLockError::WouldBlock) => {
+                    let mut text = String::new();
+                    let _ = file.read_to_string(&mut text);
+                    let pid = text.trim().parse::<u32>().unwrap_or(0);
+                    return Err(ResultsError::Locked { path, pid });
+                }
+                Err(fs::TryLockError::Error(e)) => return Err(io(&path, "lock")(e)),
+            }
+            if !same_file(&file, &path) {
+                // The holder removed this file after we opened it: ours is an orphan.
+                continue;
+            }
+            file.set_len(0).map_err(io(&path, "truncate"))?;
+            file.write_all(format!("{}\n", std::process::id()).as_bytes())
+                .map_err(io(&path, "write"))?;
+            return Ok(Self { path, file });
         }
-        Err(ResultsError::Locked { path, pid: 0 })
     }
 }
 
 impl Drop for SessionLock {
     fn drop(&mut self) {
-        let _ = fs::remove_file(&self.path);
+        // Removed while still locked; the lock itself goes with the descriptor.
+        if same_file(&self.file, &self.path) {
+            let _ = fs::remove_file(&self.path);
+        }
     }
 }
 
@@ -226,6 +265,9 @@ pub struct SessionManifest {
     pub study: String,
     /// [`protocols::study::content_hash`] of the study file.
     pub study_hash: String,
+    /// Hash of the stimulus manifest the session's plan used (version 2; `None` in version 1).
+    #[serde(default)]
+    pub manifest_hash: Option<String>,
     /// Protocol.
     pub protocol: Protocol,
     /// Subject id.
@@ -272,6 +314,9 @@ pub struct RunManifest {
     pub study: String,
     /// Hash of the study file.
     pub study_hash: String,
+    /// Hash of the stimulus manifest (version 2; `None` in version 1).
+    #[serde(default)]
+    pub manifest_hash: Option<String>,
     /// Copy of the study file kept in the run directory.
     pub study_file: String,
     /// Study seed.
@@ -302,6 +347,45 @@ fn json_error(path: &Path, e: &serde_json::Error) -> ResultsError {
 pub fn read_json<T: for<'de> Deserialize<'de>>(path: &Path) -> Result<T, ResultsError> {
     let bytes = read_limited(path, MAX_MANIFEST_BYTES)?;
     serde_json::from_slice(&bytes).map_err(|e| json_error(path, &e))
+}
+
+/// A manifest with a `format_version`, read by [`read_manifest`].
+pub trait Versioned {
+    /// The file's format version.
+    fn format_version(&self) -> u32;
+}
+
+impl Versioned for SessionManifest {
+    fn format_version(&self) -> u32 {
+        self.format_version
+    }
+}
+
+impl Versioned for RunManifest {
+    fn format_version(&self) -> u32 {
+        self.format_version
+    }
+}
+
+/// Reads `session.json` or `run.json`, refusing a format version this build does not know
+/// (a newer build's file would otherwise be read as if it were one of ours).
+///
+/// # Errors
+/// [`ResultsError::Malformed`] for bad JSON, [`ResultsError::UnknownVersion`], I/O and size
+/// errors.
+pub fn read_manifest<T: Versioned + for<'de> Deserialize<'de>>(
+    path: &Path,
+) -> Result<T, ResultsError> {
+    let m: T = read_json(path)?;
+    let v = m.format_version();
+    if v == 0 || v > MANIFEST_FORMAT_VERSION {
+        return Err(ResultsError::UnknownVersion {
+            path: path.to_path_buf(),
+            version: v,
+            max: MANIFEST_FORMAT_VERSION,
+        });
+    }
+    Ok(m)
 }
 
 /// Writes a JSON manifest atomically.
@@ -355,7 +439,7 @@ impl SessionLog {
                 return Err(ResultsError::Io {
                     path: dir.to_path_buf(),
                     op: "create directory",
-                    source: e,
+                    cause: e,
                 });
             }
         }
@@ -485,7 +569,7 @@ pub struct SessionResults {
 /// # Errors
 /// The first malformed file, named with line and column.
 pub fn read_results_dir(dir: &Path) -> Result<(RunManifest, Vec<SessionResults>), ResultsError> {
-    let run: RunManifest = read_json(&dir.join(RUN_FILE))?;
+    let run: RunManifest = read_manifest(&dir.join(RUN_FILE))?;
     let mut dirs = Vec::new();
     for entry in fs::read_dir(dir).map_err(io(dir, "list"))? {
         let entry = entry.map_err(io(dir, "list"))?;
@@ -509,7 +593,7 @@ pub fn read_results_dir(dir: &Path) -> Result<(RunManifest, Vec<SessionResults>)
     dirs.sort();
     let mut out = Vec::with_capacity(dirs.len());
     for d in dirs {
-        let manifest: SessionManifest = read_json(&d.join(SESSION_FILE))?;
+        let manifest: SessionManifest = read_manifest(&d.join(SESSION_FILE))?;
         let trials = read_trials(&d.join(TRIALS_FILE))?;
         out.push(SessionResults {
             dir: d,

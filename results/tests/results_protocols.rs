@@ -1,5 +1,5 @@
 //! The results store: row round trip, fsynced append, torn-row detection and setting aside,
-//! the session lock (live and stale), never overwriting, atomic manifests, readers with
+//! the session lock (held and left behind), never overwriting, atomic manifests, readers with
 //! file/line/column errors, and 2,400 mutated results files that give errors, never panics.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
 
@@ -132,6 +132,7 @@ fn manifest(trials: u32) -> SessionManifest {
         format_version: MANIFEST_FORMAT_VERSION,
         study: "s".into(),
         study_hash: "00ff".into(),
+        manifest_hash: Some("1234".into()),
         protocol: Protocol::Mos,
         subject: "S001".into(),
         subject_index: 0,
@@ -217,6 +218,7 @@ fn append_then_read_back_and_never_overwrite() {
         format_version: 1,
         study: "s".into(),
         study_hash: "00ff".into(),
+        manifest_hash: None,
         study_file: "study.toml".into(),
         plan_seed: 1,
         observer_seed: None,
@@ -224,9 +226,25 @@ fn append_then_read_back_and_never_overwrite() {
         software_version: "0.1.0".into(),
         created_ms: 0,
     };
-    write_json(&root.join("run.json"), &run).unwrap();
+    // A version 1 run manifest (before `manifest_hash`) is read as it was written.
+    let mut v1 = serde_json::to_value(&run).unwrap();
+    v1.as_object_mut().unwrap().remove("manifest_hash");
+    std::fs::write(root.join("run.json"), v1.to_string()).unwrap();
     let (r, sessions) = read_results_dir(&root).unwrap();
     assert_eq!(r, run);
+    // A version this build does not know is refused, naming the file and the version.
+    let future = RunManifest {
+        format_version: MANIFEST_FORMAT_VERSION + 1,
+        ..run.clone()
+    };
+    write_json(&root.join("run.json"), &future).unwrap();
+    let err = read_results_dir(&root).unwrap_err();
+    assert!(
+        matches!(err, ResultsError::UnknownVersion { version, .. } if version == MANIFEST_FORMAT_VERSION + 1),
+        "{err}"
+    );
+    assert!(err.to_string().contains("run.json"), "{err}");
+    write_json(&root.join("run.json"), &run).unwrap();
     assert_eq!(sessions.len(), 1);
     assert_eq!(sessions[0].manifest, manifest(5));
     assert_eq!(sessions[0].trials.records, recs);
@@ -285,10 +303,11 @@ fn torn_last_row_is_detected_set_aside_and_reported() {
 }
 
 #[test]
-fn stale_lock_is_taken_over_live_lock_is_not() {
+fn lock_left_by_a_dead_runner_is_free_a_held_lock_is_not() {
     let dir = scratch("lock");
-    // pid_max on Linux is at most 2^22, so this process cannot exist.
-    std::fs::write(dir.join("session.lock"), "4194305\n").unwrap();
+    // A lock file left behind by a killed runner holds no kernel lock: whatever pid it names
+    // (here pid 1, which is alive), the next runner takes it.
+    std::fs::write(dir.join("session.lock"), "1\n").unwrap();
     let lock = SessionLock::acquire(&dir).unwrap();
     assert_eq!(
         std::fs::read_to_string(dir.join("session.lock"))
@@ -296,18 +315,16 @@ fn stale_lock_is_taken_over_live_lock_is_not() {
             .trim(),
         std::process::id().to_string()
     );
-    assert!(matches!(
-        SessionLock::acquire(&dir),
-        Err(ResultsError::Locked { .. })
-    ));
+    // A second open file description is refused while the first holds the lock, and is told
+    // who holds it.
+    let me = std::process::id();
+    match SessionLock::acquire(&dir) {
+        Err(ResultsError::Locked { pid, .. }) => assert_eq!(pid, me),
+        other => panic!("second lock: {other:?}"),
+    }
     drop(lock);
-    assert!(!dir.join("session.lock").exists());
-    // PID 1 is alive.
-    std::fs::write(dir.join("session.lock"), "1\n").unwrap();
-    assert!(matches!(
-        SessionLock::acquire(&dir),
-        Err(ResultsError::Locked { pid: 1, .. })
-    ));
+    assert!(!dir.join("session.lock").exists(), "released lock removed");
+    drop(SessionLock::acquire(&dir).unwrap());
 }
 
 #[test]
