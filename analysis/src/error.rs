@@ -109,12 +109,12 @@ pub enum AnalysisError {
         found: String,
     },
     /// Reading or writing a file failed.
-    #[error("{path}: {source}")]
+    #[error("{path}: {cause}")]
     Io {
         /// The file.
         path: PathBuf,
-        /// The underlying error.
-        source: std::io::Error,
+        /// The underlying error (part of the message, not a separate link of its chain).
+        cause: std::io::Error,
     },
     /// Drawing a plot failed.
     #[error("plot {name}: {message}")]
@@ -128,10 +128,10 @@ pub enum AnalysisError {
 
 impl AnalysisError {
     /// Wraps an I/O error with the path it happened on.
-    pub(crate) fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+    pub(crate) fn io(path: impl Into<PathBuf>, cause: std::io::Error) -> Self {
         Self::Io {
             path: path.into(),
-            source,
+            cause,
         }
     }
 }

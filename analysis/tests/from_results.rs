@@ -101,6 +101,7 @@ fn session(subject: &str, protocol: Protocol, records: Vec<TrialRecord>) -> Sess
             format_version: 1,
             study: "s".into(),
             study_hash: "0".into(),
+            manifest_hash: None,
             protocol,
             subject: subject.into(),
             subject_index: 0,

@@ -9,12 +9,12 @@ use std::path::PathBuf;
 #[non_exhaustive]
 pub enum LabError {
     /// A file or folder could not be read or written.
-    #[error("{}: {source}", path.display())]
+    #[error("{}: {cause}", path.display())]
     Io {
         /// The file or folder.
         path: PathBuf,
-        /// The OS error.
-        source: std::io::Error,
+        /// The OS error (part of the message, not a separate link of its chain).
+        cause: std::io::Error,
     },
     /// A study file's problems.
     #[error(transparent)]
@@ -97,7 +97,7 @@ impl<T> Context<T> for Option<T> {
 /// An I/O error on `path`.
 pub fn io_error(path: impl Into<PathBuf>) -> impl FnOnce(std::io::Error) -> LabError {
     let path = path.into();
-    move |source| LabError::Io { path, source }
+    move |cause| LabError::Io { path, cause }
 }
 
 /// A refusal with `reason`.

@@ -5,11 +5,14 @@ use std::fs;
 use std::path::Path;
 
 use results::RunManifest;
-use results::store::{MANIFEST_FORMAT_VERSION, RUN_FILE, read_json, write_json, write_new};
+use results::store::{
+    LOCK_FILE, MANIFEST_FORMAT_VERSION, RUN_FILE, SESSION_FILE, TRIALS_FILE, read_manifest,
+    write_json, write_new,
+};
 
 use crate::error::{Result, io_error, refused};
-use crate::session::now_ms;
-use crate::study::{STUDY_COPY, StudyFile};
+use crate::session::{FRAMES_FILE, check_subject, now_ms};
+use crate::study::{MANIFEST_COPY, STUDY_COPY, StudyFile};
 
 /// What a run manifest of `study` says before any session: the observers' seed and count
 /// (simulation), or none (real subjects).
@@ -18,6 +21,7 @@ fn run_manifest(study: &StudyFile, observer_seed: Option<u64>, subjects: u32) ->
         format_version: MANIFEST_FORMAT_VERSION,
         study: study.definition.name.clone(),
         study_hash: study.hash.clone(),
+        manifest_hash: Some(study.manifest_hash.clone()),
         study_file: STUDY_COPY.into(),
         plan_seed: study.definition.seed,
         observer_seed,
@@ -27,27 +31,135 @@ fn run_manifest(study: &StudyFile, observer_seed: Option<u64>, subjects: u32) ->
     }
 }
 
-/// Opens `out` for a real subject's session of `study`: on first use creates it with its run
-/// manifest and the archived study; later, checks that it holds this study. Returns notes for
-/// the experimenter (the study file changed since the first session).
+/// Whether `name` is one of the files a results directory holds beside its sessions, or a
+/// temporary file one of its writers left behind.
+fn is_results_file(name: &str) -> bool {
+    [RUN_FILE, STUDY_COPY, MANIFEST_COPY].iter().any(|f| {
+        name == *f
+            || name
+                .strip_prefix('.')
+                .and_then(|n| n.strip_prefix(*f))
+                .is_some_and(|rest| rest.starts_with('.'))
+    })
+}
+
+/// Whether `dir` looks like a session folder: `<subject>_s<n>`, holding nothing but a
+/// session's files.
+fn is_session_dir(dir: &Path, name: &str) -> bool {
+    let Some((subject, n)) = name.rsplit_once("_s") else {
+        return false;
+    };
+    if check_subject(subject).is_err() || n.parse::<u32>().is_err() {
+        return false;
+    }
+    let Ok(entries) = fs::read_dir(dir) else {
+        return false;
+    };
+    entries.flatten().all(|e| {
+        let f = e.file_name().to_string_lossy().into_owned();
+        [SESSION_FILE, TRIALS_FILE, LOCK_FILE, FRAMES_FILE].contains(&f.as_str())
+            || f.starts_with("trials.csv.torn-")
+            || f.starts_with(&format!(".{SESSION_FILE}."))
+            || f.starts_with(&format!(".{TRIALS_FILE}."))
+    })
+}
+
+/// What `out` holds that is not a study's results (up to a few names, for the message).
+fn foreign_entries(out: &Path) -> Result<Vec<String>> {
+    let mut found = Vec::new();
+    for entry in fs::read_dir(out).map_err(io_error(out))? {
+        let entry = entry.map_err(io_error(out))?;
+        let name = entry.file_name().to_string_lossy().into_owned();
+        let path = entry.path();
+        let ours = if path.is_dir() {
+            is_session_dir(&path, &name)
+        } else {
+            is_results_file(&name)
+        };
+        if !ours {
+            found.push(name);
+        }
+    }
+    found.sort();
+    Ok(found)
+}
+
+/// Refuses `out` when it holds anything but a study's results, unless `force`.
+fn check_only_results(out: &Path, force: bool) -> Result<()> {
+    if force || !out.exists() {
+        return Ok(());
+    }
+    let found = foreign_entries(out)?;
+    if found.is_empty() {
+        return Ok(());
+    }
+    let shown: Vec<&str> = found.iter().take(5).map(String::as_str).collect();
+    Err(refused(format!(
+        "{} holds files that are not a study's results ({}{}); choose an empty or new folder, or use --force to add results beside them",
+        out.display(),
+        shown.join(", "),
+        if found.len() > shown.len() {
+            format!(" and {} more", found.len() - shown.len())
+        } else {
+            String::new()
+        }
+    )))
+}
+
+/// Refuses `run` (read from `path`) when it records another study than `study`.
+fn check_same_study(path: &Path, run: &RunManifest, study: &StudyFile) -> Result<()> {
+    if run.study != study.definition.name {
+        return Err(refused(format!(
+            "{} holds results of study {:?}; {} is study {:?}",
+            path.display(),
+            run.study,
+            study.path.display(),
+            study.definition.name
+        )));
+    }
+    Ok(())
+}
+
+/// Checks, writing nothing, that `out` can take a real subject's session of `study`: it is
+/// new, empty, or holds this study's results and nothing else (anything else with `force`).
+/// Returns its run manifest, if it has one.
 ///
 /// # Errors
-/// `out` holds another study, or cannot be created or written.
-pub fn open_for_subjects(out: &Path, study: &StudyFile) -> Result<Vec<String>> {
+/// `out` holds another study or other files, or its run manifest cannot be read.
+pub fn check_for_subjects(
+    out: &Path,
+    study: &StudyFile,
+    force: bool,
+) -> Result<Option<RunManifest>> {
+    check_only_results(out, force)?;
+    let run_path = out.join(RUN_FILE);
+    if !run_path.exists() {
+        return Ok(None);
+    }
+    let run: RunManifest = read_manifest(&run_path)?;
+    check_same_study(&run_path, &run, study)?;
+    Ok(Some(run))
+}
+
+/// Opens `out` for a real subject's session of `study`: on first use creates it with its run
+/// manifest and the archived study; later, checks that it holds this study. A folder that
+/// holds anything but this study's results is refused unless `force`. Returns notes for the
+/// experimenter (the study file or stimuli changed since the first session).
+///
+/// # Errors
+/// `out` holds another study or other files, or cannot be created or written.
+pub fn open_for_subjects(out: &Path, study: &StudyFile, force: bool) -> Result<Vec<String>> {
     let mut notes = Vec::new();
-    if out.join(RUN_FILE).exists() {
-        let run: RunManifest = read_json(&out.join(RUN_FILE))?;
-        if run.study != study.definition.name {
-            return Err(refused(format!(
-                "{} holds results of study {:?}, not {:?}",
-                out.display(),
-                run.study,
-                study.definition.name
-            )));
-        }
-        if run.study_hash != study.hash {
+    let run_path = out.join(RUN_FILE);
+    if let Some(run) = check_for_subjects(out, study, force)? {
+        if run.study_hash != study.hash
+            || run
+                .manifest_hash
+                .as_ref()
+                .is_some_and(|h| *h != study.manifest_hash)
+        {
             notes.push(format!(
-                "note: {} changed since the first session in {} (hash {} -> {})",
+                "note: {} or its stimuli changed since the first session in {} (study hash {} -> {})",
                 study.path.display(),
                 out.display(),
                 run.study_hash,
@@ -57,28 +169,27 @@ pub fn open_for_subjects(out: &Path, study: &StudyFile) -> Result<Vec<String>> {
     } else {
         fs::create_dir_all(out).map_err(io_error(out))?;
         let run = run_manifest(study, None, 0);
-        write_new(&out.join(RUN_FILE), &serde_json::to_vec_pretty(&run)?)?;
+        write_new(&run_path, &serde_json::to_vec_pretty(&run)?)?;
     }
     study.archive(out)?;
     Ok(notes)
 }
 
 /// Creates `out` for `subjects` simulated observers of `study` (seed `seed`), or with `resume`
-/// checks that an interrupted run there used the same seeds and count. Returns notes (the
-/// study file changed since the run started).
+/// checks that an interrupted run there is of this study file and stimuli, with the same
+/// seeds and count.
 ///
 /// # Errors
-/// `out` exists without `resume`, is missing or was recorded with other settings with it, or
-/// cannot be written.
+/// `out` exists without `resume`; with it, is missing, holds another study or other files, or
+/// was recorded with another study file, stimuli or settings; or cannot be written.
 pub fn open_for_simulation(
     out: &Path,
     study: &StudyFile,
     seed: u64,
     subjects: u32,
     resume: bool,
-) -> Result<Vec<String>> {
+) -> Result<()> {
     let run = run_manifest(study, Some(seed), subjects);
-    let mut notes = Vec::new();
     if resume {
         if !out.is_dir() {
             return Err(refused(format!(
@@ -86,9 +197,22 @@ pub fn open_for_simulation(
                 out.display()
             )));
         }
+        check_only_results(out, false)?;
         let run_path = out.join(RUN_FILE);
         if run_path.exists() {
-            let old: RunManifest = read_json(&run_path)?;
+            let old: RunManifest = read_manifest(&run_path)?;
+            check_same_study(&run_path, &old, study)?;
+            if old.study_hash != run.study_hash
+                || old.manifest_hash.is_some() && old.manifest_hash != run.manifest_hash
+            {
+                return Err(refused(format!(
+                    "{}: the run was started with another version of {} or its stimuli (study hash {}, now {}); resume with the files it was started with, or start a new run",
+                    run_path.display(),
+                    study.path.display(),
+                    old.study_hash,
+                    run.study_hash
+                )));
+            }
             if old.observer_seed != run.observer_seed
                 || old.subjects != run.subjects
                 || old.plan_seed != run.plan_seed
@@ -100,12 +224,6 @@ pub fn open_for_simulation(
                     old.subjects,
                     old.plan_seed
                 )));
-            }
-            if old.study_hash != run.study_hash {
-                notes.push(format!(
-                    "note: the study file changed since this run started (hash {} -> {}); logged trials are checked by replay",
-                    old.study_hash, run.study_hash
-                ));
             }
         } else {
             write_json(&run_path, &run)?;
@@ -127,5 +245,5 @@ pub fn open_for_simulation(
         write_new(&out.join(RUN_FILE), &serde_json::to_vec_pretty(&run)?)?;
     }
     study.archive(out)?;
-    Ok(notes)
+    Ok(())
 }

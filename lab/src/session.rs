@@ -10,7 +10,7 @@ use protocols::{
     FrameTiming, Outcome, Response, Session, SessionStatus, StimulusEncoding, StudyDefinition,
     Trial, TrialRecord,
 };
-use results::store::{SessionLock, SessionState, read_json};
+use results::store::{SessionLock, SessionState, read_manifest};
 use results::{SessionLog, SessionManifest};
 
 use crate::error::{Context as _, Result, io_error, refused};
@@ -63,6 +63,8 @@ pub fn now_ms() -> u64 {
 pub struct SessionOf<'a> {
     /// Hash of the study file's bytes.
     pub study_hash: &'a str,
+    /// Hash of the stimulus manifest.
+    pub manifest_hash: &'a str,
     /// Subject id.
     pub subject: String,
     /// Subject index (the plan's randomisation).
@@ -79,6 +81,7 @@ pub fn new_manifest(study: &StudyDefinition, of: SessionOf<'_>) -> SessionManife
         format_version: results::store::MANIFEST_FORMAT_VERSION,
         study: study.name.clone(),
         study_hash: of.study_hash.to_string(),
+        manifest_hash: Some(of.manifest_hash.to_string()),
         protocol: study.protocol,
         subject: of.subject,
         subject_index: of.subject_index,
@@ -97,6 +100,128 @@ pub fn new_manifest(study: &StudyDefinition, of: SessionOf<'_>) -> SessionManife
         torn_rows: Vec::new(),
         display: None,
     }
+}
+
+/// Refuses to resume the session recorded in `path` (`old`) as the one `fresh` describes
+/// when they are not the same session of the same study: study name and file hash, stimulus
+/// manifest hash, protocol, subject, plan and seeds.
+fn check_same_session(path: &Path, old: &SessionManifest, fresh: &SessionManifest) -> Result<()> {
+    let mut differ = Vec::new();
+    let mut field = |name: &str, was: String, now: String| {
+        if was != now {
+            differ.push(format!("{name} {was} (now {now})"));
+        }
+    };
+    field(
+        "study",
+        format!("{:?}", old.study),
+        format!("{:?}", fresh.study),
+    );
+    field(
+        "study file hash",
+        old.study_hash.clone(),
+        fresh.study_hash.clone(),
+    );
+    // Sessions written before the manifest hash was recorded have none to compare.
+    if let Some(was) = &old.manifest_hash {
+        field(
+            "stimulus manifest hash",
+            was.clone(),
+            fresh.manifest_hash.clone().unwrap_or_default(),
+        );
+    }
+    field(
+        "protocol",
+        old.protocol.to_string(),
+        fresh.protocol.to_string(),
+    );
+    field(
+        "subject",
+        format!("{:?}", old.subject),
+        format!("{:?}", fresh.subject),
+    );
+    field(
+        "subject index",
+        old.subject_index.to_string(),
+        fresh.subject_index.to_string(),
+    );
+    field(
+        "session",
+        old.session.to_string(),
+        fresh.session.to_string(),
+    );
+    field(
+        "study seed",
+        old.plan_seed.to_string(),
+        fresh.plan_seed.to_string(),
+    );
+    field(
+        "observer seed",
+        format!("{:?}", old.observer_seed),
+        format!("{:?}", fresh.observer_seed),
+    );
+    if differ.is_empty() {
+        return Ok(());
+    }
+    Err(refused(format!(
+        "{}: cannot resume: recorded with {}; resume with the study file and stimuli the session was started with",
+        path.display(),
+        differ.join(", ")
+    )))
+}
+
+/// A logged row must belong to the session being resumed.
+fn check_row_identity(rec: &TrialRecord, m: &SessionManifest) -> std::result::Result<(), String> {
+    if rec.study != m.study || rec.subject != m.subject || rec.session != m.session {
+        return Err(format!(
+            "the row is of study {:?}, subject {:?}, session {}; this session is study {:?}, subject {:?}, session {}",
+            rec.study, rec.subject, rec.session, m.study, m.subject, m.session
+        ));
+    }
+    if rec.protocol != m.protocol {
+        return Err(format!(
+            "the row is a {} trial; this session is {}",
+            rec.protocol, m.protocol
+        ));
+    }
+    Ok(())
+}
+
+/// A live staircase's row must log the codec parameters the study asks for at its level: the
+/// fixed ones and the level's own.
+fn check_live_params(
+    study: &StudyDefinition,
+    rec: &TrialRecord,
+) -> std::result::Result<(), String> {
+    let Some((param, fixed)) = study
+        .staircase
+        .as_ref()
+        .and_then(|s| s.live.as_ref().map(|l| (s.param.as_str(), &l.params)))
+    else {
+        return Ok(());
+    };
+    let Some(level) = rec.trial.level else {
+        return Ok(());
+    };
+    let Some(enc) = &rec.encoding else {
+        return Err("a live staircase trial without its codec parameters".into());
+    };
+    let wanted = fixed
+        .iter()
+        .map(|(k, v)| (k.as_str(), *v))
+        .chain(std::iter::once((param, level)));
+    for (k, want) in wanted {
+        match enc.codec_params.get(k) {
+            // Both are the exact values written by the shortest round-trip formatting.
+            Some(got) if got.to_bits() == want.to_bits() => {}
+            got => {
+                return Err(format!(
+                    "codec parameter {k:?} logged as {got:?}, the study gives {want}"
+                ));
+            }
+        }
+    }
+    Ok(())
 }
 
 /// An open session: the engine, its log and its manifest.
@@ -144,10 +269,13 @@ impl Recorder {
         let (log, logged, mut manifest) = if resume && dir.exists() {
             let manifest_path = dir.join(results::store::SESSION_FILE);
             let old: Option<SessionManifest> = if manifest_path.exists() {
-                Some(read_json(&manifest_path)?)
+                Some(read_manifest(&manifest_path)?)
             } else {
                 None
             };
+            if let Some(m) = &old {
+                check_same_session(&manifest_path, m, &fresh)?;
+            }
             if let Some(m) = old.as_ref().filter(|m| m.status != SessionState::Running) {
                 // A crash after the final manifest write can leave the lock behind: take the
                 // stale lock over and release it (refused if a live runner holds it).
@@ -180,10 +308,17 @@ impl Recorder {
             }
             (SessionLog::create(dir)?, Vec::new(), fresh)
         };
-        for rec in &logged {
+        let trials = dir.join(results::store::TRIALS_FILE);
+        for (i, rec) in logged.iter().enumerate() {
+            // Line 1 is the header.
+            let at = || format!("cannot resume: {} line {}", trials.display(), i + 2);
+            check_row_identity(rec, &manifest)
+                .and_then(|()| check_live_params(study, rec))
+                .map_err(refused)
+                .context(at)?;
             engine
                 .replay(&rec.trial, &rec.response, &rec.outcome)
-                .context(|| "cannot resume: replaying the logged responses".to_string())?;
+                .context(at)?;
         }
         manifest.trials_logged = log.rows();
         log.write_manifest(&manifest)?;
@@ -375,7 +510,8 @@ mod tests {
         for bad in ["", "../x", "a b", "s/1"] {
             assert!(check_subject(bad).is_err(), "{bad:?}");
         }
-        assert_eq!(subject_index("S01", 1), subject_index("S01", 1));
+        // FNV-1a of "S01/1", computed independently (Python).
+        assert_eq!(subject_index("S01", 1), 312_829_725);
         assert_ne!(subject_index("S01", 1), subject_index("S02", 1));
         assert_ne!(subject_index("S01", 1), subject_index("S01", 2));
     }

@@ -37,7 +37,7 @@ pub fn subject_id(index: u32) -> String {
 }
 
 /// Runs `options.subjects` complete simulated sessions into a results directory; `report`
-/// gets one line per session as it ends (and notes on the way).
+/// gets one line per session as it ends.
 ///
 /// # Errors
 /// Study file problems, an existing output without resume, a resume whose logged trials the
@@ -45,15 +45,7 @@ pub fn subject_id(index: u32) -> String {
 pub fn simulate(options: &SimulateOptions, report: &mut dyn FnMut(&str)) -> Result<()> {
     let study = StudyFile::load(&options.study)?;
     let out = &options.output;
-    for note in results_dir::open_for_simulation(
-        out,
-        &study,
-        options.seed,
-        options.subjects,
-        options.resume,
-    )? {
-        report(&note);
-    }
+    results_dir::open_for_simulation(out, &study, options.seed, options.subjects, options.resume)?;
     // One stimulus source (and cache of encoded levels) for every simulated subject.
     let mut stimuli = source::open(&study)?;
     for subject in 0..options.subjects {
@@ -75,6 +67,7 @@ fn new_manifest(study: &StudyFile, seed: u64, subject: u32) -> SessionManifest {
         def,
         SessionOf {
             study_hash: &study.hash,
+            manifest_hash: &study.manifest_hash,
             subject: subject_id(subject),
             subject_index: subject,
             session: 1,

@@ -25,6 +25,9 @@ pub struct StudyFile {
     pub text: String,
     /// [`content_hash`] of the text.
     pub hash: String,
+    /// [`content_hash`] of the stimulus manifest as the definition holds it (its JSON), so a
+    /// re-made stimulus set under an unchanged study file is told apart.
+    pub manifest_hash: String,
     /// The checked definition.
     pub definition: StudyDefinition,
 }
@@ -41,6 +44,7 @@ impl StudyFile {
         Ok(StudyFile {
             path: path.to_path_buf(),
             hash: content_hash(text.as_bytes()),
+            manifest_hash: content_hash(&serde_json::to_vec(&definition.manifest)?),
             text,
             definition,
         })

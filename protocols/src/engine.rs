@@ -86,8 +86,8 @@ pub enum EngineError {
     Staircase(#[from] StaircaseError),
     /// Replay regenerated a trial different from the logged one.
     #[error(
-        "trial {trial}: logged {field} {logged:?} but the study file now gives {regenerated:?}; \
-         the study file (or the manifest) changed since this session was recorded"
+        "trial {trial}: logged {field} {logged:?} but the study gives {regenerated:?}; the row \
+         does not follow from the study and the rows before it (edited or damaged log?)"
     )]
     ReplayMismatch {
         /// Trial index.

@@ -206,8 +206,17 @@ pub fn decode(args: &DecodeArgs) -> Result<()> {
     let skeleton = read_skeleton(&args.skeleton)?;
     let codecs = Codecs::with_database(args.db.as_deref())
         .context("reading the primitive database (--db)")?;
-    let clip = codec::decode_any_in(&stream, &skeleton, codecs.context())
-        .with_context(|| format!("decoding {}", args.bitstream.display()))?;
+    let clip =
+        codec::decode_any_in(&stream, &skeleton, codecs.context()).with_context(
+            || match &args.db {
+                Some(db) => format!(
+                    "decoding {} with the database {}",
+                    args.bitstream.display(),
+                    db.display()
+                ),
+                None => format!("decoding {}", args.bitstream.display()),
+            },
+        )?;
     std::fs::create_dir_all(&args.output)
         .with_context(|| format!("creating {}", args.output.display()))?;
     let asf = (skeleton.format == SkeletonFormat::Asf).then(|| args.skeleton.clone());

@@ -207,7 +207,13 @@ fn solve(args: SolveArgs) -> Result<()> {
         );
         solved
     } else {
-        segments::solve(&set, &map)?
+        segments::solve(&set, &map).with_context(|| {
+            format!(
+                "{}: solving with the segment map {}",
+                markers.display(),
+                seg_path.display()
+            )
+        })?
     };
     if out_asf.is_some() {
         let asf = acclaim::bvh_to_asf(&solved.clip)?;

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use analysis::psychometric::{BootstrapOptions, FitOptions, Lapse, Shape};
 use analysis::study::{ReportOptions, analyze};
 use analysis::{CiMethod, Confidence, export, from_results};
-use anyhow::{Context, Result};
+use anyhow::{Context, Result, bail};
 use codecs::codec::keys;
 use protocols::StudyDefinition;
 
@@ -146,6 +146,24 @@ fn report_options(args: &ReportArgs, study: &StudyDefinition) -> ReportOptions {
     }
 }
 
+/// The Weibull is fitted on the logarithm of the level: a level at or below 0 is refused here,
+/// naming its file and line, rather than by the fit, which knows neither.
+fn check_weibull_levels(sessions: &[results::SessionResults]) -> Result<()> {
+    for s in sessions {
+        for (i, r) in s.trials.records.iter().enumerate() {
+            if let Some(level) = r.trial.level.filter(|l| *l <= 0.0) {
+                bail!(
+                    "{}: line {}: level {level}: the Weibull fit needs levels above 0 (use \
+                     --shape logistic for levels that can be 0 or negative)",
+                    s.dir.join(results::store::TRIALS_FILE).display(),
+                    i + 2
+                );
+            }
+        }
+    }
+    Ok(())
+}
+
 /// Runs `study report`.
 ///
 /// # Errors
@@ -171,6 +189,9 @@ pub fn run(args: &ReportArgs) -> Result<()> {
         Some((study.scale.min, study.scale.max)),
     )?;
     let options = report_options(args, &study);
+    if options.fit.shape == Shape::Weibull {
+        check_weibull_levels(&sessions)?;
+    }
     let analysis = analyze(&converted.data, &options)?;
     let title = format!(
         "Study {} ({} protocol, {} sessions)",

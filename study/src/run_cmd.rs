@@ -80,6 +80,10 @@ pub struct RunArgs {
     /// Default: `results-<study name>` beside the study file.
     #[arg(short = 'o', long = "output")]
     pub output: Option<PathBuf>,
+    /// Use a results directory that also holds files that are not this study's results
+    /// (they are left as they are).
+    #[arg(long)]
+    pub force: bool,
 }
 
 /// Arguments of `study display-test`.
@@ -110,6 +114,12 @@ pub struct DisplayTestArgs {
 pub fn run(args: &RunArgs) -> anyhow::Result<()> {
     session::check_subject(&args.subject)?;
     let file = StudyFile::load(&args.study)?;
+    let out = args
+        .output
+        .clone()
+        .unwrap_or_else(|| file.dir().join(format!("results-{}", file.definition.name)));
+    // Before anything is shown or written: the results folder is this study's.
+    lab::results_dir::check_for_subjects(&out, &file, args.force)?;
     if !window::display_available() {
         bail!(
             "no display (DISPLAY and WAYLAND_DISPLAY are unset): `study run` shows stimuli to a \
@@ -118,10 +128,6 @@ pub fn run(args: &RunArgs) -> anyhow::Result<()> {
             args.study.display()
         );
     }
-    let out = args
-        .output
-        .clone()
-        .unwrap_or_else(|| file.dir().join(format!("results-{}", file.definition.name)));
     let Some(recorder) = open_session(args, &file, &out)? else {
         return Ok(());
     };
@@ -162,7 +168,7 @@ fn open_session(
     file: &StudyFile,
     out: &std::path::Path,
 ) -> anyhow::Result<Option<Box<Recorder>>> {
-    for note in lab::results_dir::open_for_subjects(out, file)? {
+    for note in lab::results_dir::open_for_subjects(out, file, args.force)? {
         eprintln!("{note}");
     }
     let dir = session::session_dir(out, &args.subject, args.session);
@@ -171,6 +177,7 @@ fn open_session(
         &file.definition,
         SessionOf {
             study_hash: &file.hash,
+            manifest_hash: &file.manifest_hash,
             subject: args.subject.clone(),
             subject_index: index,
             session: args.session,

@@ -184,6 +184,10 @@ fn solve_mutated(dir: &Path, bytes: &[u8], what: &str) -> bool {
         "{what}: stderr is not one error line:\n{stderr}"
     );
     assert!(!stderr.contains("panicked"), "{what}:\n{stderr}");
+    assert!(
+        lines[0].contains("m.c3d"),
+        "{what}: names no file:\n{stderr}"
+    );
     lines[0].contains("the parser stopped")
 }
 

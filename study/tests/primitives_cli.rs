@@ -159,7 +159,10 @@ fn primitive_codec_end_to_end_with_db() {
     let out = dec("b.pdb");
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
-        !out.status.success() && err.contains(&format!("{fp:08x}")) && err.contains("fingerprint"),
+        !out.status.success()
+            && err.contains(&format!("{fp:08x}"))
+            && err.contains("fingerprint")
+            && err.contains("b.pdb"),
         "{err}"
     );
     let mut bytes = std::fs::read(dir.join("a.pdb")).unwrap();

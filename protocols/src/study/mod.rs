@@ -65,12 +65,12 @@ impl fmt::Display for StudyIssue {
 #[non_exhaustive]
 pub enum StudyError {
     /// The file could not be read.
-    #[error("{}: cannot read: {source}", path.display())]
+    #[error("{}: cannot read: {cause}", path.display())]
     Io {
         /// File.
         path: PathBuf,
-        /// Cause.
-        source: std::io::Error,
+        /// Cause (part of the message, not a separate link of its chain).
+        cause: std::io::Error,
     },
     /// The file is larger than [`MAX_STUDY_BYTES`].
     #[error("{}: {bytes} bytes is over the {limit}-byte limit", path.display())]
@@ -509,9 +509,9 @@ impl StudyDefinition {
 }
 
 fn read_limited(path: &Path, limit: u64) -> Result<String, StudyError> {
-    let meta = std::fs::metadata(path).map_err(|source| StudyError::Io {
+    let meta = std::fs::metadata(path).map_err(|cause| StudyError::Io {
         path: path.to_path_buf(),
-        source,
+        cause,
     })?;
     if meta.len() > limit {
         return Err(StudyError::TooLarge {
@@ -520,9 +520,9 @@ fn read_limited(path: &Path, limit: u64) -> Result<String, StudyError> {
             limit,
         });
     }
-    std::fs::read_to_string(path).map_err(|source| StudyError::Io {
+    std::fs::read_to_string(path).map_err(|cause| StudyError::Io {
         path: path.to_path_buf(),
-        source,
+        cause,
     })
 }
 

@@ -20,6 +20,20 @@ use crate::catalog::CodecCatalog;
 use crate::manifest::StimulusManifest;
 use crate::record::Protocol;
 
+/// Longest study name.
+const MAX_NAME_LEN: usize = 64;
+
+/// Whether `name` is a safe study name: 1-[`MAX_NAME_LEN`] ASCII letters, digits, `-`, `_`
+/// or `.`, starting with a letter or digit. The name becomes part of a folder name, so no
+/// separator, no `..`, nothing a shell or another file system would read differently.
+fn is_safe_name(name: &str) -> bool {
+    name.len() <= MAX_NAME_LEN
+        && name.starts_with(|c: char| c.is_ascii_alphanumeric())
+        && name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'))
+}
+
 const TOP_KEYS: &[&str] = &[
     "format_version",
     "name",
@@ -125,11 +139,14 @@ fn parse_header(t: &Table, cx: &mut Ctx) -> Header {
     }
     let name = cx.string(t, "", "name");
     let name = cx.required(name, t, "", "name");
-    if name
-        .as_deref()
-        .is_some_and(|n| n.trim().is_empty() || n.len() > 200 || n.chars().any(char::is_control))
-    {
-        cx.err("name", "must be 1-200 printable characters");
+    if let Some(n) = name.as_deref().filter(|n| !is_safe_name(n)) {
+        cx.err(
+            "name",
+            format!(
+                "{n:?}: use 1-{MAX_NAME_LEN} letters, digits, '-', '_' or '.', starting with a \
+                 letter or digit (it names the default results folder)"
+            ),
+        );
     }
     let protocol: Option<Protocol> = cx.parse_enum(t, "", "protocol");
     let protocol = cx.required(protocol, t, "", "protocol");
@@ -154,7 +171,7 @@ fn load_checked_manifest(
 ) -> Option<StimulusManifest> {
     match load_manifest(path) {
         Ok(m) => {
-            check_manifest(&m, cx);
+            check_manifest(path, &m, cx);
             Some(m)
         }
         Err(e) => {
@@ -268,19 +285,28 @@ fn check_live_metric(t: &Table, simulation: &SimulationSettings, cx: &mut Ctx) {
     }
 }
 
-fn check_manifest(m: &StimulusManifest, cx: &mut Ctx) {
+/// The manifest's own problems, each naming its file (`path`, as the `stimuli` key gives it)
+/// and the entry.
+fn check_manifest(path: &str, m: &StimulusManifest, cx: &mut Ctx) {
     if m.version != crate::manifest::MANIFEST_VERSION {
         cx.err(
             "stimuli",
-            format!("manifest version {} is not supported", m.version),
+            format!(
+                "{path}: manifest version {} is not supported (this build reads {})",
+                m.version,
+                crate::manifest::MANIFEST_VERSION
+            ),
         );
     }
     let mut seen = BTreeSet::new();
-    for s in &m.stimuli {
+    for (i, s) in m.stimuli.iter().enumerate() {
         if !seen.insert(s.id.as_str()) {
             cx.err(
                 "stimuli",
-                format!("manifest lists stimulus id {:?} twice", s.id),
+                format!(
+                    "{path}: stimuli[{i}]: stimulus id {:?} is listed twice",
+                    s.id
+                ),
             );
         }
     }

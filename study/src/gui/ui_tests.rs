@@ -121,6 +121,7 @@ fn fresh_manifest(study: &StudyDefinition) -> results::SessionManifest {
         study,
         lab::session::SessionOf {
             study_hash: "test",
+            manifest_hash: "test",
             subject: "S01".into(),
             subject_index: 0,
             session: 1,
