@@ -2,7 +2,7 @@
 //! resumed each time with `--resume`; after every kill the logs hold a prefix of the
 //! uninterrupted run (no response lost or duplicated), and the completed results equal those
 //! of an uninterrupted run with the same seed, timestamps aside. The live staircase (stimuli
-//! encoded by the runner) is killed and resumed the same way.
+//! encoded by the runner) is killed and resumed the same way, and so are MOS and DSCQS.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
 
 use std::path::{Path, PathBuf};
@@ -179,4 +179,11 @@ fn live_staircase_survives_sigkill_and_resumes_identically() {
 #[test]
 fn mos_survives_sigkill_and_resumes_identically() {
     kill_and_resume("mos.toml", 20);
+}
+
+/// DSCQS logs both ratings of a pair and their difference in one row: a kill can never leave
+/// half a pair, and a resumed run rates the same pairs in the same order.
+#[test]
+fn dscqs_survives_sigkill_and_resumes_identically() {
+    kill_and_resume("dscqs.toml", 20);
 }
