@@ -33,7 +33,8 @@ pub fn read_amc_with(
 ///
 /// # Errors
 /// A [`ParseError`] naming the file, line and reason: unknown bone, wrong number of values,
-/// non-numeric value, non-consecutive frame numbers, a frame missing a bone, no frames.
+/// a value that is not a finite number (`nan`, `inf`, `1e999`; in `:RADIANS`, one too large
+/// for degrees), non-consecutive frame numbers, a frame missing a bone, no frames.
 pub fn parse_amc(
     text: &str,
     path: &Path,
@@ -211,11 +212,21 @@ impl<'a> AmcReader<'a> {
         let what = format!("bone {first}");
         for (k, tok) in rest.iter().enumerate() {
             let v = number(path, ln, &what, tok)?;
-            self.frame[self.offsets[j] + k] = if self.radians && joint.dofs[k].is_rotation() {
-                v.to_degrees()
+            let v = if self.radians && joint.dofs[k].is_rotation() {
+                // A finite angle over ~3e306 rad is `inf` in degrees.
+                let deg = v.to_degrees();
+                if !deg.is_finite() {
+                    return Err(syntax(
+                        path,
+                        ln,
+                        format!("{what}: {} rad is too large to hold in degrees", fmt_num(v)),
+                    ));
+                }
+                deg
             } else {
                 v
             };
+            self.frame[self.offsets[j] + k] = v;
         }
         self.seen[j] = true;
         Ok(())

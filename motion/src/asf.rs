@@ -5,19 +5,43 @@
 //! `dof` line; `limits` spread over several lines; `angle rad` converted to degrees. Joints are
 //! returned root first, then bones in file order (reordered only if a child precedes its
 //! parent). Writing emits a canonical file that reads back equal.
+//!
+//! What the reader refuses, naming the file and line: a number that is not finite (the one
+//! exception is `inf` in `limits`, an unbounded range), a bone direction that is zero or whose
+//! length is outside [`DIRECTION_NORMALISED_RANGE`], a bone length over
+//! [`MAX_BONE_LENGTH_CM`], a key given twice in one bone block. A direction off unit length by
+//! more than [`DIRECTION_UNIT_TOLERANCE`] but inside the range is normalised, with a
+//! [`ReadWarning`] ([`parse_asf_with_warnings`]).
 
 use std::fmt::Write as _;
 use std::path::Path;
 
 use crate::bodymap;
 use crate::clip::{Axis, BodyPart, ChannelKind, Joint, Rest, Skeleton, SkeletonFormat, Units};
-use crate::error::{Limits, ParseError, WriteError};
+use crate::error::{Limits, ParseError, ReadWarning, WriteError};
 use crate::text::{fmt_num, lines, number, numbers, read_text, syntax};
 
 /// Centimetres per inch; ASF `length L` means one unit is `1/L` inch.
 const CM_PER_INCH: f64 = 2.54;
 
-/// Reads an ASF file with the default [`Limits`].
+/// The longest bone the reader accepts, in centimetres (the file's `length` times the
+/// `:units length` scale): 100 m is far beyond any capture volume, and far below lengths whose
+/// sums in forward kinematics could overflow to `inf`. CMU bones are at most about 45 cm.
+pub const MAX_BONE_LENGTH_CM: f64 = 1e4;
+
+/// How far the length of a bone `direction` may be from 1 and still be taken as written. CMU
+/// files print six significant digits, so their directions are off by up to 6e-7; a reader that
+/// "corrected" them would change every real skeleton for nothing.
+pub const DIRECTION_UNIT_TOLERANCE: f64 = 1e-4;
+
+/// The lengths of a bone `direction` that are normalised (with a warning) when off unit length;
+/// outside this range the direction is refused. A direction written loosely (`1 1 0`, length
+/// 1.41) is still a direction; one of length 1000 or 1e-9 most likely carries the bone's length
+/// or a corruption, and guessing which would be a silently wrong skeleton.
+pub const DIRECTION_NORMALISED_RANGE: std::ops::RangeInclusive<f64> = 0.5..=2.0;
+
+/// Reads an ASF file with the default [`Limits`], dropping the reader's warnings (see
+/// [`read_asf_with_warnings`] to show them).
 ///
 /// # Errors
 /// A [`ParseError`] naming the file, line and reason.
@@ -25,13 +49,26 @@ pub fn read_asf(path: &Path) -> Result<Skeleton, ParseError> {
     read_asf_with(path, &Limits::default())
 }
 
-/// Reads an ASF file with explicit limits.
+/// Reads an ASF file with explicit limits, dropping the reader's warnings (see
+/// [`read_asf_with_warnings`] to show them).
 ///
 /// # Errors
 /// A [`ParseError`] naming the file, line and reason.
 pub fn read_asf_with(path: &Path, limits: &Limits) -> Result<Skeleton, ParseError> {
+    read_asf_with_warnings(path, limits).map(|(skeleton, _)| skeleton)
+}
+
+/// Reads an ASF file with explicit limits, with what the reader changed (directions
+/// normalised), in file order.
+///
+/// # Errors
+/// A [`ParseError`] naming the file, line and reason.
+pub fn read_asf_with_warnings(
+    path: &Path,
+    limits: &Limits,
+) -> Result<(Skeleton, Vec<ReadWarning>), ParseError> {
     let text = read_text(path, limits)?;
-    parse_asf(&text, path, limits)
+    parse_asf_with_warnings(&text, path, limits)
 }
 
 #[derive(Clone, Copy, PartialEq, Default)]
@@ -58,7 +95,15 @@ struct BoneDraft {
     dofs: Vec<ChannelKind>,
     limits: Vec<(f64, f64)>,
     limit_values: Vec<f64>,
+    /// The line of each of `limit_values` (`limits` may span several lines).
+    limit_lines: Vec<usize>,
+    /// Every key given so far in the block, with its line: a key given twice is refused, and
+    /// a value's problem found after `end` still names the value's line.
+    keys: Vec<(&'static str, usize)>,
 }
+
+/// The keys a bone block may give once each (`bodymass` and `cofmass` are skipped).
+const BONE_KEYS: [&str; 7] = ["id", "name", "direction", "length", "axis", "dof", "limits"];
 
 /// The `:root` section as read.
 struct RootDraft {
@@ -66,6 +111,8 @@ struct RootDraft {
     axis: [Axis; 3],
     position: [f64; 3],
     orientation: [f64; 3],
+    /// Line of `orientation` (0 when absent), for an angle too large to convert.
+    orientation_line: usize,
 }
 
 impl Default for RootDraft {
@@ -75,6 +122,7 @@ impl Default for RootDraft {
             axis: [Axis::X, Axis::Y, Axis::Z],
             position: [0.0; 3],
             orientation: [0.0; 3],
+            orientation_line: 0,
         }
     }
 }
@@ -159,11 +207,25 @@ fn limit_pairs(
     Ok(values.chunks_exact(2).map(|p| (p[0], p[1])).collect())
 }
 
-/// Parses ASF text. `path` is used only in error messages.
+/// Parses ASF text, dropping the reader's warnings (see [`parse_asf_with_warnings`]). `path`
+/// is used only in error messages.
 ///
 /// # Errors
 /// A [`ParseError`] naming the file, line and reason.
 pub fn parse_asf(text: &str, path: &Path, limits: &Limits) -> Result<Skeleton, ParseError> {
+    parse_asf_with_warnings(text, path, limits).map(|(skeleton, _)| skeleton)
+}
+
+/// Parses ASF text, with what the reader changed (a bone direction off unit length,
+/// normalised), in file order. `path` is used only in messages.
+///
+/// # Errors
+/// A [`ParseError`] naming the file, line and reason.
+pub fn parse_asf_with_warnings(
+    text: &str,
+    path: &Path,
+    limits: &Limits,
+) -> Result<(Skeleton, Vec<ReadWarning>), ParseError> {
     let mut draft = AsfDraft::default();
     let mut last_line = 0;
     for (ln, raw) in lines(text) {
@@ -249,8 +311,22 @@ impl AsfDraft {
                 if l <= 0.0 {
                     return Err(syntax(path, ln, "units length must be positive"));
                 }
+                let cm_per_unit = CM_PER_INCH / l;
+                // A subnormal `l` makes a unit `inf` cm, a huge one 0 cm: every length then
+                // reads as `inf` or 0.
+                if !cm_per_unit.is_normal() {
+                    return Err(syntax(
+                        path,
+                        ln,
+                        format!(
+                            "units length {} makes one unit {} cm, which no length can be measured in",
+                            fmt_num(l),
+                            fmt_num(cm_per_unit)
+                        ),
+                    ));
+                }
                 self.units.asf_length = l;
-                self.units.cm_per_unit = CM_PER_INCH / l;
+                self.units.cm_per_unit = cm_per_unit;
                 self.units.declared = true;
             }
             "angle" => match toks.get(1).map(|t| t.to_ascii_lowercase()).as_deref() {
@@ -285,6 +361,7 @@ impl AsfDraft {
             }
             "orientation" => {
                 self.root.orientation = numbers::<3>(path, ln, "root orientation", &toks[1..])?;
+                self.root.orientation_line = ln;
             }
             other => return Err(syntax(path, ln, format!("unknown root field `{other}`"))),
         }
@@ -312,14 +389,15 @@ impl AsfDraft {
             ));
         };
         if self.in_limits && toks[0].starts_with('(') {
-            return push_limits(path, ln, line, &mut bone.limit_values);
+            return bone.push_limits(path, ln, line);
         }
         self.in_limits = false;
         match toks[0] {
             "end" => self.end_bone(path, ln),
             "limits" => {
+                bone.key(path, ln, "limits")?;
                 self.in_limits = true;
-                push_limits(path, ln, &line["limits".len()..], &mut bone.limit_values)
+                bone.push_limits(path, ln, &line["limits".len()..])
             }
             _ => bone.field(path, ln, toks),
         }
@@ -399,19 +477,36 @@ impl AsfDraft {
         Ok(())
     }
 
-    /// The file's angle in degrees.
-    fn to_deg(&self, v: f64) -> f64 {
-        if self.angle_rad { v.to_degrees() } else { v }
+    /// The file's angle `v` (of `what`, on `line`) in degrees. An infinite `v` (an unbounded
+    /// `limits` range) stays as it is; a finite one too large for degrees is refused.
+    fn to_deg(&self, path: &Path, line: usize, what: &str, v: f64) -> Result<f64, ParseError> {
+        if !self.angle_rad || v.is_infinite() {
+            return Ok(v);
+        }
+        let deg = v.to_degrees();
+        if deg.is_finite() {
+            Ok(deg)
+        } else {
+            Err(syntax(
+                path,
+                line,
+                format!("{what}: {} rad is too large to hold in degrees", fmt_num(v)),
+            ))
+        }
     }
 
-    /// The skeleton: the root, then the bones ordered by the hierarchy.
-    fn into_skeleton(self, path: &Path) -> Result<Skeleton, ParseError> {
+    /// The skeleton: the root, then the bones ordered by the hierarchy; and what was changed.
+    fn into_skeleton(self, path: &Path) -> Result<(Skeleton, Vec<ReadWarning>), ParseError> {
+        let mut axis_deg = [0.0; 3];
+        for (d, &v) in axis_deg.iter_mut().zip(&self.root.orientation) {
+            *d = self.to_deg(path, self.root.orientation_line, "root orientation", v)?;
+        }
         let root = Joint {
             name: "root".into(),
             parent: None,
             rest: Rest::Offset(self.root.position),
             dofs: self.root.order.clone().unwrap_or_default(),
-            axis_deg: self.root.orientation.map(|v| self.to_deg(v)),
+            axis_deg,
             axis_order: self.root.axis,
             limits: Vec::new(),
             id: None,
@@ -419,7 +514,8 @@ impl AsfDraft {
             body_part: BodyPart::Torso,
             chain_depth: 0,
         };
-        let drafts = self.bone_joints(path)?;
+        let mut warnings = Vec::new();
+        let drafts = self.bone_joints(path, &mut warnings)?;
         let joints = order_by_hierarchy(path, root, &drafts, &self.hierarchy.lines)?;
         let mut skeleton = Skeleton {
             name: self.name,
@@ -429,14 +525,19 @@ impl AsfDraft {
             documentation: self.documentation,
         };
         bodymap::assign(&mut skeleton);
-        Ok(skeleton)
+        Ok((skeleton, warnings))
     }
 
-    /// Every bone block as a joint (no parent yet) with its `begin` line, in file order.
-    fn bone_joints(&self, path: &Path) -> Result<Vec<(Joint, usize)>, ParseError> {
+    /// Every bone block as a joint (no parent yet) with its `begin` line, in file order;
+    /// directions normalised are added to `warnings`.
+    fn bone_joints(
+        &self,
+        path: &Path,
+        warnings: &mut Vec<ReadWarning>,
+    ) -> Result<Vec<(Joint, usize)>, ParseError> {
         let mut drafts: Vec<(Joint, usize)> = Vec::with_capacity(self.bones.len());
         for b in &self.bones {
-            let joint = b.to_joint(path, |v| self.to_deg(v))?;
+            let joint = self.bone_joint(path, b, warnings)?;
             if drafts.iter().any(|(j, _)| j.name == joint.name) || joint.name == "root" {
                 return Err(syntax(
                     path,
@@ -453,6 +554,9 @@ impl AsfDraft {
 impl BoneDraft {
     /// A field line of a bone block other than `begin`, `end` and `limits`.
     fn field(&mut self, path: &Path, ln: usize, toks: &[&str]) -> Result<(), ParseError> {
+        if let Some(key) = BONE_KEYS.iter().find(|k| **k == toks[0]) {
+            self.key(path, ln, key)?;
+        }
         let bone_name = self.name.clone().unwrap_or_else(|| "?".into());
         match toks[0] {
             "id" => {
@@ -516,31 +620,113 @@ impl BoneDraft {
         Ok(())
     }
 
-    /// The closed block as a joint (no parent yet), its angles converted by `to_deg`.
-    fn to_joint(&self, path: &Path, to_deg: impl Fn(f64) -> f64) -> Result<Joint, ParseError> {
-        let Some(bname) = self.name.clone() else {
-            return Err(syntax(path, self.line, "bone block without a name"));
+    /// Records that `key` is given on line `ln`, refusing a key the block has given before.
+    fn key(&mut self, path: &Path, ln: usize, key: &'static str) -> Result<(), ParseError> {
+        if let Some(&(_, first)) = self.keys.iter().find(|(k, _)| *k == key) {
+            let bone = self
+                .name
+                .as_ref()
+                .map_or_else(String::new, |n| format!("bone {n}: "));
+            return Err(syntax(
+                path,
+                ln,
+                format!("{bone}`{key}` given twice in one bone block (first on line {first})"),
+            ));
+        }
+        self.keys.push((key, ln));
+        Ok(())
+    }
+
+    /// The line `key` was given on, or the block's `begin` line when it was not.
+    fn line_of(&self, key: &str) -> usize {
+        self.keys
+            .iter()
+            .find(|(k, _)| *k == key)
+            .map_or(self.line, |&(_, ln)| ln)
+    }
+
+    /// The limit values of one `limits` line (or of a line continuing it).
+    fn push_limits(&mut self, path: &Path, ln: usize, text: &str) -> Result<(), ParseError> {
+        let cleaned: String = text
+            .chars()
+            .map(|c| if c == '(' || c == ')' { ' ' } else { c })
+            .collect();
+        for tok in cleaned.split_whitespace() {
+            // Limits may be unbounded (`inf`); values elsewhere must be finite.
+            let v = match tok.to_ascii_lowercase().as_str() {
+                "inf" | "+inf" => f64::INFINITY,
+                "-inf" => f64::NEG_INFINITY,
+                _ => number(path, ln, "limits", tok)?,
+            };
+            if self.limit_values.len() >= 6 {
+                return Err(syntax(path, ln, "more than three limit pairs"));
+            }
+            self.limit_values.push(v);
+            self.limit_lines.push(ln);
+        }
+        Ok(())
+    }
+}
+
+impl AsfDraft {
+    /// The closed block `b` as a joint (no parent yet): direction a unit vector, length within
+    /// [`MAX_BONE_LENGTH_CM`], angles in degrees.
+    fn bone_joint(
+        &self,
+        path: &Path,
+        b: &BoneDraft,
+        warnings: &mut Vec<ReadWarning>,
+    ) -> Result<Joint, ParseError> {
+        let Some(bname) = b.name.clone() else {
+            return Err(syntax(path, b.line, "bone block without a name"));
         };
-        let direction = self
+        let direction = b
             .direction
-            .ok_or_else(|| syntax(path, self.line, format!("bone {bname} has no direction")))?;
-        let length = self
+            .ok_or_else(|| syntax(path, b.line, format!("bone {bname} has no direction")))?;
+        let direction = unit_direction(path, b.line_of("direction"), &bname, direction, warnings)?;
+        let length = b
             .length
-            .ok_or_else(|| syntax(path, self.line, format!("bone {bname} has no length")))?;
-        let (axis, order) = self.axis.unwrap_or(([0.0; 3], [Axis::X, Axis::Y, Axis::Z]));
+            .ok_or_else(|| syntax(path, b.line, format!("bone {bname} has no length")))?;
+        let length_cm = length * self.units.cm_per_unit;
+        if length_cm > MAX_BONE_LENGTH_CM {
+            return Err(syntax(
+                path,
+                b.line_of("length"),
+                format!(
+                    "length of bone {bname} is {} cm, over the limit of {} cm",
+                    fmt_num(length_cm),
+                    fmt_num(MAX_BONE_LENGTH_CM)
+                ),
+            ));
+        }
+        let (axis, order) = b.axis.unwrap_or(([0.0; 3], [Axis::X, Axis::Y, Axis::Z]));
+        let what = format!("axis of bone {bname}");
+        let mut axis_deg = [0.0; 3];
+        for (d, v) in axis_deg.iter_mut().zip(axis) {
+            *d = self.to_deg(path, b.line_of("axis"), &what, v)?;
+        }
+        let what = format!("limits of bone {bname}");
+        let line_of_limit = |k: usize| b.limit_lines.get(k).copied().unwrap_or(b.line);
+        let limits = b
+            .limits
+            .iter()
+            .enumerate()
+            .map(|(k, &(lo, hi))| {
+                Ok((
+                    self.to_deg(path, line_of_limit(2 * k), &what, lo)?,
+                    self.to_deg(path, line_of_limit(2 * k + 1), &what, hi)?,
+                ))
+            })
+            .collect::<Result<Vec<_>, ParseError>>()?;
         Ok(Joint {
             name: bname,
             parent: None,
             rest: Rest::Bone { direction, length },
-            dofs: self.dofs.clone(),
-            axis_deg: axis.map(&to_deg),
+            dofs: b.dofs.clone(),
+            axis_deg,
             axis_order: order,
-            limits: self
-                .limits
-                .iter()
-                .map(|&(lo, hi)| (to_deg(lo), to_deg(hi)))
-                .collect(),
-            id: self.id,
+            limits,
+            id: b.id,
             end_site: false,
             body_part: BodyPart::Torso,
             chain_depth: 0,
@@ -548,24 +734,54 @@ impl BoneDraft {
     }
 }
 
-fn push_limits(path: &Path, ln: usize, text: &str, out: &mut Vec<f64>) -> Result<(), ParseError> {
-    let cleaned: String = text
-        .chars()
-        .map(|c| if c == '(' || c == ')' { ' ' } else { c })
-        .collect();
-    for tok in cleaned.split_whitespace() {
-        // Limits may be unbounded (`inf`); values elsewhere must be finite.
-        let v = match tok.to_ascii_lowercase().as_str() {
-            "inf" | "+inf" => f64::INFINITY,
-            "-inf" => f64::NEG_INFINITY,
-            _ => number(path, ln, "limits", tok)?,
-        };
-        if out.len() >= 6 {
-            return Err(syntax(path, ln, "more than three limit pairs"));
-        }
-        out.push(v);
+/// Bone `bone`'s `direction` (given on `line`) as a unit vector: as written within
+/// [`DIRECTION_UNIT_TOLERANCE`] of unit length, normalised with a warning within
+/// [`DIRECTION_NORMALISED_RANGE`], refused otherwise (and when zero).
+fn unit_direction(
+    path: &Path,
+    line: usize,
+    bone: &str,
+    d: [f64; 3],
+    warnings: &mut Vec<ReadWarning>,
+) -> Result<[f64; 3], ParseError> {
+    let written = d.map(fmt_num).join(" ");
+    // Scaled by the largest component, so that neither 1e200 nor 1e-200 over- or underflows
+    // when squared.
+    let scale = d.iter().fold(0.0_f64, |m, c| m.max(c.abs()));
+    if scale <= 0.0 {
+        return Err(syntax(
+            path,
+            line,
+            format!("direction of bone {bone} is {written}: a zero vector points nowhere"),
+        ));
     }
-    Ok(())
+    let norm = scale * d.iter().map(|c| (c / scale).powi(2)).sum::<f64>().sqrt();
+    if (norm - 1.0).abs() <= DIRECTION_UNIT_TOLERANCE {
+        return Ok(d);
+    }
+    if !DIRECTION_NORMALISED_RANGE.contains(&norm) {
+        return Err(syntax(
+            path,
+            line,
+            format!(
+                "direction of bone {bone} is {written}, of length {}: not a unit vector, and too far from one to normalise (lengths {} to {} are)",
+                fmt_num(norm),
+                fmt_num(*DIRECTION_NORMALISED_RANGE.start()),
+                fmt_num(*DIRECTION_NORMALISED_RANGE.end()),
+            ),
+        ));
+    }
+    let unit = d.map(|c| c / norm);
+    warnings.push(ReadWarning {
+        path: path.to_path_buf(),
+        line,
+        message: format!(
+            "direction of bone {bone} is {written}, of length {}: normalised to {}",
+            fmt_num(norm),
+            unit.map(fmt_num).join(" ")
+        ),
+    });
+    Ok(unit)
 }
 
 /// Assigns parents from `:hierarchy` and orders joints so that every parent precedes its

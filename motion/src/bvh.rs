@@ -6,6 +6,10 @@
 //! Line endings may be CRLF, LF or mixed; tokens may be separated by any whitespace. The
 //! declared frame count is checked against the limits and the bytes present before the matrix
 //! is allocated, and must match the lines that follow.
+//!
+//! Refused, naming the file and line: a value that is not a finite number (`nan`, `inf`,
+//! `1e999`), an `OFFSET` component beyond [`MAX_OFFSET_UNITS`], `OFFSET` or `CHANNELS` given
+//! twice in one joint.
 
 use std::fmt::Write as _;
 use std::path::Path;
@@ -14,6 +18,12 @@ use crate::bodymap;
 use crate::clip::{Axis, ChannelKind, Clip, Joint, Rest, Skeleton, SkeletonFormat, Units};
 use crate::error::{Limits, ParseError, WriteError};
 use crate::text::{fmt_num, lines, number, numbers, read_text, syntax};
+
+/// The largest `OFFSET` component the reader accepts, in the file's length units. The unit is
+/// only known once the whole skeleton is read (it is inferred from the skeleton's height), so
+/// the bound is in file units and generous for every unit BVH files use: 100 m in a millimetre
+/// file, 1 km in a centimetre one. CMU's offsets are under 10 units.
+pub const MAX_OFFSET_UNITS: f64 = 1e5;
 
 /// Reads a BVH file with the default [`Limits`].
 ///
@@ -89,32 +99,31 @@ fn new_joint(name: String, parent: Option<usize>) -> Joint {
     Joint::new(name, parent, Rest::Offset([0.0; 3]), Vec::new())
 }
 
-/// Parses the block after a joint's name: `{ OFFSET .. CHANNELS .. children }`.
-fn parse_joint(
-    t: &mut Tokens<'_>,
-    path: &Path,
-    joints: &mut Vec<Joint>,
-    index: usize,
-    limits: &Limits,
-    depth: usize,
-) -> Result<(), ParseError> {
-    if depth > limits.max_joints {
-        return Err(syntax(path, t.last_line, "hierarchy nested too deeply"));
-    }
-    t.expect(path, "{")?;
-    let ln = t.expect(path, "OFFSET")?;
+/// The three values after `OFFSET` in joint `name`'s block, each finite and within
+/// [`MAX_OFFSET_UNITS`].
+fn offset(t: &mut Tokens<'_>, path: &Path, name: &str) -> Result<[f64; 3], ParseError> {
     let mut off = [0.0; 3];
+    let what = format!("OFFSET of {name}");
     for o in &mut off {
         let (l, tok) = t.next(path, "an OFFSET value")?;
-        *o = number(path, l, &format!("OFFSET of {}", joints[index].name), tok)?;
+        *o = number(path, l, &what, tok)?;
+        if o.abs() > MAX_OFFSET_UNITS {
+            return Err(syntax(
+                path,
+                l,
+                format!(
+                    "{what}: {} is beyond the limit of {} file units",
+                    fmt_num(*o),
+                    fmt_num(MAX_OFFSET_UNITS)
+                ),
+            ));
+        }
     }
-    let _ = ln;
-    joints[index].rest = Rest::Offset(off);
-    if joints[index].end_site {
-        t.expect(path, "}")?;
-        return Ok(());
-    }
-    let ln = t.expect(path, "CHANNELS")?;
+    Ok(off)
+}
+
+/// The count and names after `CHANNELS` (on line `ln`): at most six, none twice.
+fn channels(t: &mut Tokens<'_>, path: &Path, ln: usize) -> Result<Vec<ChannelKind>, ParseError> {
     let (l, tok) = t.next(path, "the channel count")?;
     let n: usize = tok.parse().map_err(|_| {
         syntax(
@@ -132,18 +141,62 @@ fn parse_joint(
             limit: 6,
         });
     }
+    let mut dofs = Vec::with_capacity(n);
     for _ in 0..n {
         let (l, tok) = t.next(path, "a channel name")?;
         let ch = bvh_channel(path, l, tok)?;
-        if joints[index].dofs.contains(&ch) {
+        if dofs.contains(&ch) {
             return Err(syntax(path, l, format!("channel {tok} listed twice")));
         }
-        joints[index].dofs.push(ch);
+        dofs.push(ch);
     }
+    Ok(dofs)
+}
+
+/// `key` given again on line `l` in joint `name`'s block, first given on line `first`.
+fn twice(path: &Path, l: usize, key: &str, first: usize, name: &str) -> ParseError {
+    syntax(
+        path,
+        l,
+        format!("joint {name}: `{key}` given twice (first on line {first})"),
+    )
+}
+
+/// Parses the block after a joint's name: `{ OFFSET .. CHANNELS .. children }`.
+fn parse_joint(
+    t: &mut Tokens<'_>,
+    path: &Path,
+    joints: &mut Vec<Joint>,
+    index: usize,
+    limits: &Limits,
+    depth: usize,
+) -> Result<(), ParseError> {
+    if depth > limits.max_joints {
+        return Err(syntax(path, t.last_line, "hierarchy nested too deeply"));
+    }
+    t.expect(path, "{")?;
+    let offset_line = t.expect(path, "OFFSET")?;
+    joints[index].rest = Rest::Offset(offset(t, path, &joints[index].name)?);
+    if joints[index].end_site {
+        let (l, tok) = t.next(path, "`}`")?;
+        return match tok {
+            "}" => Ok(()),
+            "OFFSET" => Err(twice(path, l, tok, offset_line, &joints[index].name)),
+            other => Err(syntax(
+                path,
+                l,
+                format!("expected `}}`, found `{}`", clip_tok(other)),
+            )),
+        };
+    }
+    let channels_line = t.expect(path, "CHANNELS")?;
+    joints[index].dofs = channels(t, path, channels_line)?;
     loop {
         let (l, tok) = t.next(path, "`JOINT`, `End Site` or `}`")?;
         match tok {
             "}" => return Ok(()),
+            "OFFSET" => return Err(twice(path, l, tok, offset_line, &joints[index].name)),
+            "CHANNELS" => return Err(twice(path, l, tok, channels_line, &joints[index].name)),
             "JOINT" | "End" => {
                 if joints.len() >= limits.max_joints {
                     return Err(ParseError::TooLarge {

@@ -119,6 +119,24 @@ pub enum ParseError {
     },
 }
 
+/// Something a reader accepted only after changing it (an ASF bone direction off unit length,
+/// normalised), named by file and line so that a command can show it beside the clip.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ReadWarning {
+    /// The file.
+    pub path: PathBuf,
+    /// 1-based line.
+    pub line: usize,
+    /// What was changed, and to what.
+    pub message: String,
+}
+
+impl std::fmt::Display for ReadWarning {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}:{}: {}", self.path.display(), self.line, self.message)
+    }
+}
+
 /// Size limits a reader checks before it allocates (cf. image-png's `Limits`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Limits {

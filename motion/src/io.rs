@@ -3,7 +3,7 @@
 use std::path::Path;
 
 use crate::clip::{Clip, SkeletonFormat};
-use crate::error::{Limits, ParseError, WriteError};
+use crate::error::{Limits, ParseError, ReadWarning, WriteError};
 use crate::{amc, asf, bvh, convert, text};
 
 fn has_ext(p: &Path, e: &str) -> bool {
@@ -11,12 +11,25 @@ fn has_ext(p: &Path, e: &str) -> bool {
 }
 
 /// Reads a clip: an AMC motion with its ASF skeleton, or a BVH file (`asf` must then be
-/// `None`). AMC clips get CMU's 120 Hz.
+/// `None`). AMC clips get CMU's 120 Hz. The readers' warnings are dropped; see
+/// [`read_clip_with_warnings`] to show them.
 ///
 /// # Errors
 /// A [`ParseError`] naming the file, line and reason; also when the pair of files does not
 /// make sense (an AMC without an ASF, a BVH with one, an unknown extension).
 pub fn read_clip(asf_path: Option<&Path>, motion: &Path) -> Result<Clip, ParseError> {
+    read_clip_with_warnings(asf_path, motion).map(|(clip, _)| clip)
+}
+
+/// As [`read_clip`], with what the readers changed while reading (an ASF bone direction
+/// normalised), each naming its file and line.
+///
+/// # Errors
+/// As [`read_clip`].
+pub fn read_clip_with_warnings(
+    asf_path: Option<&Path>,
+    motion: &Path,
+) -> Result<(Clip, Vec<ReadWarning>), ParseError> {
     let limits = Limits::default();
     if has_ext(motion, "bvh") {
         if let Some(a) = asf_path {
@@ -26,7 +39,7 @@ pub fn read_clip(asf_path: Option<&Path>, motion: &Path) -> Result<Clip, ParseEr
                 "a BVH file carries its own skeleton; give no ASF",
             ));
         }
-        return bvh::read_bvh_with(motion, &limits);
+        return Ok((bvh::read_bvh_with(motion, &limits)?, Vec::new()));
     }
     if has_ext(motion, "amc") {
         let Some(a) = asf_path else {
@@ -36,8 +49,9 @@ pub fn read_clip(asf_path: Option<&Path>, motion: &Path) -> Result<Clip, ParseEr
                 "an AMC motion needs its ASF skeleton (--asf)",
             ));
         };
-        let skeleton = asf::read_asf_with(a, &limits)?;
-        return amc::read_amc_with(motion, &skeleton, amc::CMU_FRAME_RATE_HZ, &limits);
+        let (skeleton, warnings) = asf::read_asf_with_warnings(a, &limits)?;
+        let clip = amc::read_amc_with(motion, &skeleton, amc::CMU_FRAME_RATE_HZ, &limits)?;
+        return Ok((clip, warnings));
     }
     Err(text::syntax(
         motion,

@@ -39,4 +39,4 @@ pub use clip::{
     Axis, BodyPart, Channel, ChannelKind, Clip, ClipError, Joint, Rest, Skeleton, SkeletonFormat,
     Units,
 };
-pub use error::{Limits, ParseError, WriteError};
+pub use error::{Limits, ParseError, ReadWarning, WriteError};
