@@ -70,12 +70,18 @@ pub fn load_one(files: &[PathBuf], options: &ClipOptions) -> Result<LoadedClip> 
     Ok(all.remove(0))
 }
 
-/// Reads one paired clip; `bvh_unit_cm` overrides a BVH file's inferred unit.
+/// Reads one paired clip; `bvh_unit_cm` overrides a BVH file's inferred unit. What the
+/// readers changed while reading (an ASF bone direction normalised) is said on stderr, each
+/// warning naming its file and line.
 ///
 /// # Errors
 /// The files cannot be read.
 pub fn read(source: &ClipSource, bvh_unit_cm: Option<f64>) -> Result<Clip> {
-    let mut clip = motion::io::read_clip(source.asf.as_deref(), &source.motion)?;
+    let (mut clip, warnings) =
+        motion::io::read_clip_with_warnings(source.asf.as_deref(), &source.motion)?;
+    for w in warnings {
+        eprintln!("warning: {w}");
+    }
     if let Some(cm) = bvh_unit_cm
         && clip.skeleton.format == motion::SkeletonFormat::Bvh
     {

@@ -361,3 +361,47 @@ fn report_names_the_row_of_a_level_the_fit_cannot_take() {
         "{err}"
     );
 }
+
+#[test]
+fn clip_commands_refuse_a_zero_direction_and_warn_of_a_normalised_one() {
+    let dir = scratch("asf");
+    let walk = motion::synth::WalkParams {
+        duration_s: 0.5,
+        ..motion::synth::WalkParams::default()
+    };
+    lab::generated::walk_stimuli(&dir, &walk, &["spiht"], &[10.0]).unwrap();
+    let asf = dir.join("clips/walk.asf");
+    let amc = dir.join("clips/walk.amc");
+    let text = std::fs::read_to_string(&asf).unwrap();
+    let (n, line) = text
+        .lines()
+        .enumerate()
+        .find(|(_, l)| l.trim_start().starts_with("direction"))
+        .unwrap();
+    let with = |direction: &str| {
+        std::fs::write(
+            &asf,
+            text.replacen(line, &format!("  direction {direction}"), 1),
+        )
+        .unwrap();
+        study(&["clip", "info", "--asf", p(&asf), "--amc", p(&amc)])
+    };
+    let o = with("0 0 0");
+    let err = stderr(&o);
+    assert!(!o.status.success());
+    assert!(err.contains(&format!("walk.asf:{}", n + 1)), "{err}");
+    assert!(err.contains("zero"), "{err}");
+    let o = with("0 -1000 0");
+    assert!(!o.status.success(), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains(&format!("walk.asf:{}", n + 1)),
+        "{}",
+        stderr(&o)
+    );
+    // Twice the unit length: read, normalised, and said once.
+    let o = with("0 2 0");
+    let err = stderr(&o);
+    assert!(o.status.success(), "{err}");
+    assert_eq!(err.matches("warning: ").count(), 1, "{err}");
+    assert!(err.contains(&format!("walk.asf:{}", n + 1)), "{err}");
+}
