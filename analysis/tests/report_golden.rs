@@ -199,7 +199,11 @@ fn check_ttests(baseline: Option<&str>, key: &str) {
         close(test.t, f(&e["t"]), &format!("{what}: t"));
         // df = pairs − 1: 6 subjects rated both at 10:1, 5 at 20:1.
         close(test.df, f(&e["df"]), &format!("{what}: df"));
-        assert_eq!(test.df as u64 + 1, e["n"].as_u64().unwrap(), "{what}: pairs");
+        assert_eq!(
+            test.df as u64 + 1,
+            e["n"].as_u64().unwrap(),
+            "{what}: pairs"
+        );
         close(test.p, f(&e["p"]), &format!("{what}: p"));
         close(
             r.p_holm.unwrap(),
