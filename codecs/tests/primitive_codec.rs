@@ -136,7 +136,7 @@ fn every_shared_clip_round_trips_within_its_joint_thresholds() {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 24, failure_persistence: None, ..ProptestConfig::default() })]
+    #![proptest_config(ProptestConfig { cases: 24, failure_persistence: Some(Box::new(proptest::test_runner::FileFailurePersistence::WithSource("proptest-regressions"))), ..ProptestConfig::default() })]
 
     /// Thesis 5.3.4's contract, over clips, thresholds and start frames: every decoded frame
     /// (hence every segment's maximum) is within t_j of the source, for every joint.
@@ -371,7 +371,7 @@ fn apply(b: &mut Vec<u8>, m: &Mutation) {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 10_000, failure_persistence: None, ..ProptestConfig::default() })]
+    #![proptest_config(ProptestConfig { cases: 10_000, failure_persistence: Some(Box::new(proptest::test_runner::FileFailurePersistence::WithSource("proptest-regressions"))), ..ProptestConfig::default() })]
 
     /// 10,000 mutated streams: every changed stream is refused (the container's CRC), none
     /// panics, none allocates past the cap.
@@ -392,7 +392,7 @@ proptest! {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 3_000, failure_persistence: None, ..ProptestConfig::default() })]
+    #![proptest_config(ProptestConfig { cases: 3_000, failure_persistence: Some(Box::new(proptest::test_runner::FileFailurePersistence::WithSource("proptest-regressions"))), ..ProptestConfig::default() })]
 
     /// Payload corruption behind a recomputed CRC reaches the codec's own checks: Ok or Err,
     /// never a panic, and any clip returned has the right shape and finite values.
