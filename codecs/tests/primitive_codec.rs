@@ -81,6 +81,8 @@ fn params(pairs: &[(&str, f64)]) -> Params {
 fn joint_errors(source: &Clip, decoded: &Clip, t_l: f64) -> Vec<(String, f64, f64)> {
     let a = to_quaternions(source);
     let b = to_quaternions(decoded);
+    assert_eq!(a.joints, b.joints);
+    assert_eq!(decoded.frames(), source.frames());
     a.joints
         .iter()
         .enumerate()
@@ -155,6 +157,8 @@ proptest! {
         let d = c.decode(&s, &piece.skeleton).unwrap();
         let qa = to_quaternions(&piece);
         let qb = to_quaternions(&d);
+        prop_assert_eq!(&qa.joints, &qb.joints);
+        prop_assert_eq!(d.frames(), piece.frames());
         for (k, &j) in qa.joints.iter().enumerate() {
             let joint = &piece.skeleton.joints[j];
             let t = if joint.body_part.is_leg() { t_l } else { upper * t_l };
