@@ -258,10 +258,11 @@ fn mixed_protocols_and_unknown_stimuli_are_errors() {
 
 #[test]
 fn staircase_records_become_tracks_and_2afc_trials() {
-    let levels = [
+    // One length in both types: a level without an answer does not compile.
+    let levels: [f64; 9] = [
         0.024, 0.024, 0.022, 0.022, 0.020, 0.022, 0.022, 0.020, 0.022,
     ];
-    let correct = [true, true, true, true, false, true, true, false, true];
+    let correct: [bool; 9] = [true, true, true, true, false, true, true, false, true];
     let records = levels
         .iter()
         .zip(correct)

@@ -173,7 +173,9 @@ fn t_tests_from_summary_statistics_match_scipy() {
 fn holm_matches_statsmodels() {
     let g = golden();
     let adjusted = ttest::holm(&floats(&g["holm"]["p"])).unwrap();
-    for (a, e) in adjusted.iter().zip(floats(&g["holm"]["adjusted"])) {
+    let expected = floats(&g["holm"]["adjusted"]);
+    assert_eq!(adjusted.len(), expected.len());
+    for (a, e) in adjusted.iter().zip(expected) {
         close(*a, e, REL, "holm");
     }
 }
@@ -230,7 +232,9 @@ fn acr_hr_dmos_and_zscores_match_numpy() {
         check_summary(&s.summary, &e["expected"], "acr-hr");
     }
     let z = zscore_by_subject(&rs).unwrap();
-    for (a, e) in z.iter().zip(floats(&g["zscores"])) {
+    let expected = floats(&g["zscores"]);
+    assert_eq!(z.len(), expected.len());
+    for (a, e) in z.iter().zip(expected) {
         close(a.score, e, REL, "zscore");
     }
 }
@@ -325,6 +329,7 @@ fn psychometric_fits_match_scipy_optimize() {
     let levels = floats(&d["levels"]);
     let n = d["n"].as_array().unwrap();
     let k = d["k"].as_array().unwrap();
+    assert_eq!((n.len(), k.len()), (levels.len(), levels.len()));
     let data = GroupedTrials {
         levels: levels
             .iter()

@@ -391,6 +391,7 @@ proptest! {
     #[test]
     fn holm_adjusted_is_at_least_raw_and_at_most_one(ps in prop::collection::vec(0.0f64..=1.0, 0..20)) {
         let adj = ttest::holm(&ps).unwrap();
+        prop_assert_eq!(adj.len(), ps.len());
         for (a, p) in adj.iter().zip(&ps) {
             prop_assert!(*a >= *p && *a <= 1.0);
         }
@@ -426,6 +427,7 @@ fn large_sparse_ids_give_the_same_statistics() {
     }
     let sa = bt500_screening(&data.ratings).unwrap();
     let sb = bt500_screening(&sparse).unwrap();
+    assert_eq!(sa.observers.len(), sb.observers.len());
     for (x, y) in sa.observers.iter().zip(&sb.observers) {
         assert_eq!(
             (x.p, x.q, x.rejected, x.subject * 97_000_003 + 11),
@@ -434,6 +436,7 @@ fn large_sparse_ids_give_the_same_statistics() {
     }
     let ra = repeat_consistency(&data.ratings).unwrap();
     let rb = repeat_consistency(&sparse).unwrap();
+    assert_eq!(ra.len(), rb.len());
     assert!(
         ra.iter()
             .zip(&rb)

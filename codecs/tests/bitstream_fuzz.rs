@@ -95,7 +95,7 @@ fn decode_all(bytes: &[u8], skeleton: &Skeleton) -> bool {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 10_000, failure_persistence: None, ..ProptestConfig::default() })]
+    #![proptest_config(ProptestConfig { cases: 10_000, failure_persistence: Some(Box::new(proptest::test_runner::FileFailurePersistence::WithSource("proptest-regressions"))), ..ProptestConfig::default() })]
 
     /// 10,000 mutated streams per run: every one is refused (CRC, sizes, limits), none panics.
     #[test]
@@ -109,7 +109,7 @@ proptest! {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 1_000, failure_persistence: None, ..ProptestConfig::default() })]
+    #![proptest_config(ProptestConfig { cases: 1_000, failure_persistence: Some(Box::new(proptest::test_runner::FileFailurePersistence::WithSource("proptest-regressions"))), ..ProptestConfig::default() })]
 
     /// Payload corruption behind a recomputed CRC (what a buggy encoder or an attacker makes)
     /// reaches the codecs' own checks: they return Ok or Err, never panic, never allocate past

@@ -171,6 +171,10 @@ fn minimum_kept_is_at_least_the_coarsest_band() {
         .encode(&clip, &params(&[("alpha", 0.0), ("c", 0.0), ("qp", 12.0)]))
         .unwrap();
     let d = c.decode(&s, &clip.skeleton).unwrap();
+    assert_eq!(
+        (d.channel_count(), d.frames()),
+        (clip.channel_count(), clip.frames())
+    );
     for ch in 0..clip.channel_count() {
         for (a, b) in clip.channel(ch).chunks(256).zip(d.channel(ch).chunks(256)) {
             let mean = |x: &[f64]| x.iter().sum::<f64>() / x.len() as f64;

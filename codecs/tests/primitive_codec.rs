@@ -81,6 +81,8 @@ fn params(pairs: &[(&str, f64)]) -> Params {
 fn joint_errors(source: &Clip, decoded: &Clip, t_l: f64) -> Vec<(String, f64, f64)> {
     let a = to_quaternions(source);
     let b = to_quaternions(decoded);
+    assert_eq!(a.joints, b.joints);
+    assert_eq!(decoded.frames(), source.frames());
     a.joints
         .iter()
         .enumerate()
@@ -136,7 +138,7 @@ fn every_shared_clip_round_trips_within_its_joint_thresholds() {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 24, failure_persistence: None, ..ProptestConfig::default() })]
+    #![proptest_config(ProptestConfig { cases: 24, failure_persistence: Some(Box::new(proptest::test_runner::FileFailurePersistence::WithSource("proptest-regressions"))), ..ProptestConfig::default() })]
 
     /// Thesis 5.3.4's contract, over clips, thresholds and start frames: every decoded frame
     /// (hence every segment's maximum) is within t_j of the source, for every joint.
@@ -155,6 +157,8 @@ proptest! {
         let d = c.decode(&s, &piece.skeleton).unwrap();
         let qa = to_quaternions(&piece);
         let qb = to_quaternions(&d);
+        prop_assert_eq!(&qa.joints, &qb.joints);
+        prop_assert_eq!(d.frames(), piece.frames());
         for (k, &j) in qa.joints.iter().enumerate() {
             let joint = &piece.skeleton.joints[j];
             let t = if joint.body_part.is_leg() { t_l } else { upper * t_l };
@@ -371,7 +375,7 @@ fn apply(b: &mut Vec<u8>, m: &Mutation) {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 10_000, failure_persistence: None, ..ProptestConfig::default() })]
+    #![proptest_config(ProptestConfig { cases: 10_000, failure_persistence: Some(Box::new(proptest::test_runner::FileFailurePersistence::WithSource("proptest-regressions"))), ..ProptestConfig::default() })]
 
     /// 10,000 mutated streams: every changed stream is refused (the container's CRC), none
     /// panics, none allocates past the cap.
@@ -392,7 +396,7 @@ proptest! {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 3_000, failure_persistence: None, ..ProptestConfig::default() })]
+    #![proptest_config(ProptestConfig { cases: 3_000, failure_persistence: Some(Box::new(proptest::test_runner::FileFailurePersistence::WithSource("proptest-regressions"))), ..ProptestConfig::default() })]
 
     /// Payload corruption behind a recomputed CRC reaches the codec's own checks: Ok or Err,
     /// never a panic, and any clip returned has the right shape and finite values.

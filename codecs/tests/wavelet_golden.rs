@@ -109,6 +109,7 @@ fn perfect_reconstruction_all_lengths_and_levels() {
             for levels in 0..=w.max_level(n).max(1) {
                 t.forward(&x, levels, &mut coeffs);
                 t.inverse(&coeffs, n, levels, &mut back).unwrap();
+                assert_eq!(back.len(), n, "{w:?} n={n} levels={levels}");
                 let err = x
                     .iter()
                     .zip(&back)

@@ -355,6 +355,7 @@ fn calibrated_solve_of_cmu_reaches_1_cm_at_2_mm() {
         &motion,
         &segments::solve(&motion.markers, &map).unwrap(),
     );
+    assert_eq!(calibrated.len(), plain.len(), "the same joints both ways");
     eprintln!("joint      calibrated                 without calibration");
     for (c, p) in calibrated.iter().zip(&plain) {
         eprintln!(

@@ -1,0 +1,193 @@
+#!/usr/bin/env python3
+"""Golden values for the report's tables (`analysis::analyze` + `StudyAnalysis::to_report`).
+
+A small hand-made study: two codecs (A, B) on one clip at 10:1 and 20:1, six subjects, one
+hidden repeat (subject 1 rates A at 10:1 twice) and one missing rating (subject 6 never saw
+B at 20:1), plus staircase tracks of three subjects, one of them short of reversals. The
+expected numbers come from SciPy / statsmodels / NumPy, independent of the Rust code, and
+the expected table cells are those numbers formatted as the report prints them (3 decimals
+for scores, 4 for staircase levels, p below 0.001 in Rust's `{:.2e}` form).
+
+What the analysis must do, as this script does it:
+- MOS per condition over every rating (a hidden repeat counts twice), Student-t interval
+  mean +- t(0.975, n - 1) * SD / sqrt(n).
+- Codec comparisons at equal clip and ratio: paired t-test over the subjects who rated both,
+  each subject's repeats averaged first; Holm over the table. Without a baseline every pair
+  two-sided; with baseline B, "A scores higher than B" one-sided.
+- Staircase: reversal = the level moves the other way after a trial than the last move
+  before it; threshold = mean of the last 3 reversal levels; per subject the mean of its
+  converged tracks; across subjects mean, SD, min, max and the Student-t interval.
+
+Install: pip install scipy statsmodels numpy
+Run from the repository root: python3 scripts/golden/report_tables.py
+"""
+import json
+import math
+
+import numpy as np
+import scipy
+import statsmodels
+from scipy import stats
+from statsmodels.stats.multitest import multipletests
+
+CONFIDENCE = 0.95
+LAST_REVERSALS = 3
+
+CONDITIONS = [  # id, codec, clip, compression ratio
+    (1, "A", "walk", 10.0),
+    (2, "B", "walk", 10.0),
+    (3, "A", "walk", 20.0),
+    (4, "B", "walk", 20.0),
+]
+
+# (subject, condition, score), in presentation order.
+RATINGS = [
+    (1, 1, 5), (1, 2, 4), (1, 3, 4), (1, 4, 3), (1, 1, 4),
+    (2, 1, 4), (2, 2, 4), (2, 3, 4), (2, 4, 2),
+    (3, 1, 5), (3, 2, 3), (3, 3, 3), (3, 4, 3),
+    (4, 1, 4), (4, 2, 3), (4, 3, 4), (4, 4, 2),
+    (5, 1, 5), (5, 2, 4), (5, 3, 3), (5, 4, 2),
+    (6, 1, 4), (6, 2, 2), (6, 3, 3),
+]
+
+# Staircase tracks: subject, label, levels in units of 0.001 (t_L, thesis ch. 5).
+TRACKS = [
+    (1, "walk", [24, 22, 20, 18, 16, 18, 16, 14, 16, 14, 12, 14]),
+    (2, "walk", [24, 22, 20, 18, 20, 18, 16, 14, 12, 14, 12, 10, 12, 14]),
+    (2, "run", [24, 22, 20, 22, 20, 18, 16, 18, 20, 18, 16]),
+    (3, "walk", [24, 22, 20, 18, 16, 14, 16, 18]),  # one reversal: unconverged
+    (3, "run", [24, 22, 24, 22, 20, 22, 20, 18, 20, 22]),
+]
+
+
+def rust_fixed(x, decimals):
+    return f"{x:.{decimals}f}"
+
+
+def rust_p(p):
+    """analysis::tables::fmt_p: 3 decimals from 0.001, else Rust's `{:.2e}` (1.07e-6)."""
+    if p >= 0.001:
+        return f"{p:.3f}"
+    mantissa, exponent = f"{p:.2e}".split("e")
+    return f"{mantissa}e{int(exponent)}"
+
+
+def ratio(cr):
+    return f"{cr:.0f}:1" if cr == int(cr) else f"{cr:.1f}:1"
+
+
+def interval(values):
+    v = np.asarray(values, dtype=float)
+    n = len(v)
+    mean = float(np.mean(v))
+    sd = float(np.std(v, ddof=1))
+    half = float(stats.t.ppf(0.5 + CONFIDENCE / 2, n - 1) * sd / math.sqrt(n))
+    return {"n": n, "mean": mean, "sd": sd, "half_width": half,
+            "lower": mean - half, "upper": mean + half}
+
+
+def mos_table():
+    rows = []
+    for cid, codec, clip, cr in sorted(CONDITIONS, key=lambda c: (c[1], c[2], c[3])):
+        s = interval([score for _, c, score in RATINGS if c == cid])
+        cells = [codec, clip, ratio(cr), str(s["n"]), rust_fixed(s["mean"], 3),
+                 rust_fixed(s["sd"], 3), rust_fixed(s["half_width"], 3),
+                 rust_fixed(s["lower"], 3), rust_fixed(s["upper"], 3)]
+        rows.append({"condition": cid, "numbers": s, "cells": cells})
+    return rows
+
+
+def subject_means(cid):
+    per = {}
+    for subject, c, score in RATINGS:
+        if c == cid:
+            per.setdefault(subject, []).append(score)
+    return {s: float(np.mean(v)) for s, v in per.items()}
+
+
+def ttest_table(baseline):
+    rows = []
+    for cr in (10.0, 20.0):
+        by_codec = {codec: cid for cid, codec, _, r in CONDITIONS if r == cr}
+        if baseline is None:
+            pairs = [("A", "B", "two-sided")]
+        else:
+            pairs = [(c, baseline, "greater") for c in sorted(by_codec) if c != baseline]
+        for first, second, alternative in pairs:
+            ma, mb = subject_means(by_codec[first]), subject_means(by_codec[second])
+            common = sorted(set(ma) & set(mb))
+            a = np.array([ma[s] for s in common])
+            b = np.array([mb[s] for s in common])
+            r = stats.ttest_rel(a, b, alternative=alternative)
+            d = a - b
+            rows.append({"clip": "walk", "cr": cr, "first": first, "second": second,
+                         "n": len(common), "mean_first": float(a.mean()),
+                         "mean_second": float(b.mean()), "t": float(r.statistic),
+                         "df": float(r.df), "p": float(r.pvalue),
+                         "effect_size": float(d.mean() / d.std(ddof=1))})
+    holm = multipletests([r["p"] for r in rows], method="holm")[1]
+    for r, p in zip(rows, holm):
+        r["p_holm"] = float(p)
+        r["cells"] = ["walk", ratio(r["cr"]), r["first"], rust_fixed(r["mean_first"], 3),
+                      r["second"], rust_fixed(r["mean_second"], 3), rust_fixed(r["t"], 3),
+                      rust_fixed(r["df"], 2), rust_p(r["p"]), rust_p(r["p_holm"]),
+                      rust_fixed(r["effect_size"], 3)]
+    return rows
+
+
+def reversal_levels(levels):
+    moves = np.sign(np.diff(levels))
+    out, last = [], 0
+    for i, m in enumerate(moves):
+        if m == 0:
+            continue
+        if last != 0 and m != last:
+            out.append(levels[i])
+        last = m
+    return out
+
+
+def threshold_table():
+    per, unconverged = {}, []
+    for subject, label, units in TRACKS:
+        levels = [u * 0.001 for u in units]
+        rev = reversal_levels(levels)
+        if len(rev) < LAST_REVERSALS:
+            unconverged.append([subject, label])
+            continue
+        per.setdefault(subject, []).append(float(np.mean(rev[-LAST_REVERSALS:])))
+    per_subject = {s: float(np.mean(v)) for s, v in sorted(per.items())}
+    values = list(per_subject.values())
+    s = interval(values)
+    s["min"], s["max"] = min(values), max(values)
+    cells = [str(len(values)), str(len(unconverged)), str(LAST_REVERSALS),
+             rust_fixed(s["mean"], 4), rust_fixed(s["sd"], 4), rust_fixed(s["min"], 4),
+             rust_fixed(s["max"], 4), rust_fixed(s["lower"], 4), rust_fixed(s["upper"], 4)]
+    return {"per_subject": [[k, v] for k, v in per_subject.items()],
+            "unconverged": unconverged, "numbers": s, "cells": cells}
+
+
+def main():
+    out = {
+        "generator": "scripts/golden/report_tables.py",
+        "versions": {"scipy": scipy.__version__, "statsmodels": statsmodels.__version__,
+                     "numpy": np.__version__},
+        "confidence": CONFIDENCE,
+        "last_reversals": LAST_REVERSALS,
+        "conditions": [{"id": i, "codec": c, "clip": k, "compression_ratio": r}
+                       for i, c, k, r in CONDITIONS],
+        "ratings": [{"subject": s, "condition": c, "score": float(x)} for s, c, x in RATINGS],
+        "tracks": [{"subject": s, "label": label, "levels": [u * 0.001 for u in units]}
+                   for s, label, units in TRACKS],
+        "mos": mos_table(),
+        "ttests_two_sided": ttest_table(None),
+        "ttests_baseline_b": ttest_table("B"),
+        "thresholds": threshold_table(),
+    }
+    with open("analysis/tests/data/report_tables_golden.json", "w") as f:
+        json.dump(out, f, indent=1)
+        f.write("\n")
+
+
+if __name__ == "__main__":
+    main()
