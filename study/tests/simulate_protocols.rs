@@ -181,7 +181,7 @@ fn resume_with_a_changed_study_is_a_clear_error() {
     assert!(!r.status.success());
     let err = String::from_utf8_lossy(&r.stderr);
     assert!(
-        err.contains("study file") && err.contains("changed"),
+        err.contains("s.toml") && err.contains("another version"),
         "{err}"
     );
 }
