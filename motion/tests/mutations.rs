@@ -345,6 +345,7 @@ fn bones_without_dof_lines_and_radians_headers_are_read() {
     }
     assert!(c > 0);
     let back = amc::parse_amc(&rad, &inp.amc.0, &inp.skeleton, 120.0, &Limits::default()).unwrap();
+    assert_eq!(deg.data().len(), back.data().len());
     for (a, b) in deg.data().iter().zip(back.data()) {
         assert!((a - b).abs() < 1e-9, "{a} vs {b}");
     }
