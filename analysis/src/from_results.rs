@@ -258,9 +258,12 @@ fn convert_record(
                 .trial
                 .staircase
                 .ok_or_else(|| bad(path, index, "staircase", "missing staircase index"))?;
+            // Logs written before the exact level grid hold accumulated levels
+            // (0.003999999999999993 beside 0.004): every table keys them on the grid.
             let level = record
                 .trial
                 .level
+                .map(protocols::staircase::canonical_level)
                 .ok_or_else(|| bad(path, index, "level", "missing staircase level"))?;
             if !level.is_finite() {
                 return Err(bad(
@@ -297,7 +300,11 @@ fn convert_record(
 /// The CR (and error) a staircase trial's stimulus reached at its level: logged in the row by
 /// a live staircase, else the manifest's for a prepared stimulus. The clip is the reference's.
 fn encoded_level(record: &TrialRecord, manifest: &StimulusManifest) -> Option<EncodedLevel> {
-    let level = record.trial.level.filter(|l| l.is_finite())?;
+    let level = record
+        .trial
+        .level
+        .filter(|l| l.is_finite())
+        .map(protocols::staircase::canonical_level)?;
     let clip = manifest
         .get(&record.trial.reference)
         .or_else(|| manifest.get(&record.trial.stimulus))?

@@ -326,3 +326,41 @@ fn staircase_records_become_tracks_and_2afc_trials() {
         "{err:?}"
     );
 }
+
+#[test]
+fn accumulated_levels_of_older_logs_are_keyed_on_the_grid() {
+    // Before the exact grid, a staircase accumulated `level - step`: ten steps down from 0.024
+    // logged 0.003999999999999993 where another path logged 0.004.
+    let accumulated = (0..10).fold(0.024_f64, |x, _| x - 0.002);
+    assert_ne!(accumulated.to_bits(), 0.004_f64.to_bits());
+    let track = |subject: &str, level: f64| {
+        let mut r = record(
+            Protocol::Staircase,
+            subject,
+            0,
+            Block::Test,
+            "walk/p/cr20",
+            Answer::Choice(Position::Left),
+            outcome(1.0),
+        );
+        r.outcome.correct = Some(true);
+        r.trial.staircase = Some(0);
+        r.trial.level = Some(level);
+        session(subject, Protocol::Staircase, vec![r])
+    };
+    let c = convert(
+        &[track("ann", accumulated), track("bob", 0.004)],
+        &manifest(),
+        None,
+    )
+    .unwrap();
+    let levels: Vec<u64> = c.data.two_afc.iter().map(|t| t.level.to_bits()).collect();
+    assert_eq!(levels, vec![0.004_f64.to_bits(); 2]);
+    let encoded: Vec<u64> = c
+        .data
+        .encoded_levels
+        .iter()
+        .map(|e| e.level.to_bits())
+        .collect();
+    assert_eq!(encoded, vec![0.004_f64.to_bits(); 2]);
+}

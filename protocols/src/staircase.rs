@@ -9,6 +9,13 @@
 //! sequences. Extension over PsychoPy: a down step that is `down_up_ratio` times the up step
 //! (García-Pérez 1998: 0.5488 makes 2-down-1-up converge on 80.35 % correct), and a hard cap on
 //! the number of trials.
+//!
+//! Levels lie on an exact grid ([`GridPoint`]): a level is computed from the value it started
+//! from (the start, or the bound it was last clamped to) and the number of up and down steps
+//! since (rounded to 12 significant digits), never accumulated step by step as PsychoPy does. Every path to one grid point gives
+//! the same number, so logs and tables never hold 0.003999999999999993 beside 0.004; PsychoPy's
+//! accumulated levels differ from ours by float rounding only (the golden tests compare within
+//! 1e-12 relative for linear steps, 1e-9 for log and dB).
 
 use serde::{Deserialize, Serialize};
 
@@ -126,7 +133,7 @@ pub struct Staircase {
     reversal_levels: Vec<f64>,
     correct_counter: i64,
     direction: Direction,
-    next_level: f64,
+    next: GridPoint,
     initial_rule: bool,
     finished: bool,
 }
@@ -206,7 +213,7 @@ impl Staircase {
             return Err(e);
         }
         Ok(Self {
-            next_level: settings.start,
+            next: GridPoint::start(&settings),
             settings,
             answers: Vec::new(),
             levels: Vec::new(),
@@ -226,7 +233,7 @@ impl Staircase {
 
     /// Level of the next trial, or `None` once finished.
     pub fn next_level(&self) -> Option<f64> {
-        (!self.finished).then_some(self.next_level)
+        (!self.finished).then_some(self.next.level(&self.settings))
     }
 
     /// Whether the stop rule has fired.
@@ -271,7 +278,7 @@ impl Staircase {
                 trials: self.levels.len(),
             });
         }
-        let level = self.next_level;
+        let level = self.next.level(&self.settings);
         self.levels.push(level);
         let trial = self.levels.len() - 1;
         let previous = self.answers.last().copied();
@@ -346,47 +353,102 @@ impl Staircase {
 
     /// Moves the next level one step up or down and starts counting answers afresh.
     fn step(&mut self, up: bool) {
-        self.next_level = stepped(&self.settings, self.next_level, up);
+        self.next = self.next.stepped(&self.settings, up);
         self.correct_counter = 0;
     }
 }
 
-/// The level one step up (`up`) or down from `level`, clamped to `[min, max]`: where a
-/// staircase with `settings` goes after `n_up` wrong or `n_down` correct answers in a row. A
-/// down step is `step × down_up_ratio`; log and dB steps multiply and divide by `10^step` and
-/// `10^(step/20)` as PsychoPy's `StairHandler` does. The study file's check that every
-/// reachable level has a stimulus walks the levels with this same function, so it sees exactly
-/// the values a session will show.
-pub fn stepped(settings: &StaircaseSettings, level: f64, up: bool) -> f64 {
-    // The operations and their order are PsychoPy's (tests/staircase_psychopy.rs compares
-    // levels bit for bit): a down step divides rather than multiplying by 10^-step.
-    let mut x = level;
-    if up {
-        let s = settings.step;
-        match settings.step_type {
-            StepType::Linear => x += s,
-            StepType::Log => x *= 10_f64.powf(s),
-            StepType::Db => x *= 10_f64.powf(s / 20.0),
+/// Digits a grid level keeps: enough for any study's levels, few enough that `0.024 − 9 ×
+/// 0.002` reads as the 0.006 the study file means (not 0.005999999999999998) and equals a bound
+/// written as that decimal.
+const LEVEL_DIGITS: usize = 12;
+
+/// `x` rounded to [`LEVEL_DIGITS`] significant digits (through its decimal form, so the result
+/// is the nearest double to that decimal): the level a grid point has. Readers of logs written
+/// before the exact grid (levels accumulated step by step) key them with this, so that
+/// 0.003999999999999993 and 0.004 are one level in every table.
+pub fn canonical_level(x: f64) -> f64 {
+    if x == 0.0 || !x.is_finite() {
+        return x;
+    }
+    format!("{x:.prec$e}", prec = LEVEL_DIGITS - 1)
+        .parse()
+        .unwrap_or(x)
+}
+
+/// A point of a staircase's level grid: the level it started from (the start level, or the
+/// bound it was last clamped to) and the up and down steps taken since.
+///
+/// The level is `base + (ups − downs × down_up_ratio) × step` for linear steps, and `base ×
+/// 10^((ups − downs × ratio) × step)` (log10 units) or `base × 10^((ups − downs × ratio) ×
+/// step / 20)` (dB) otherwise, computed from the counts each time and rounded to 12
+/// significant digits: with `down_up_ratio` 1 every path with the same net count gives the
+/// same number, bit for bit, and a linear level is the decimal the start and step make. A step that would leave
+/// `[min, max]` lands on the bound, which becomes the new base (PsychoPy clamps the same way).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct GridPoint {
+    /// `f64::to_bits` of the base level (bits, so the point can be a map key).
+    base: u64,
+    ups: i64,
+    downs: i64,
+}
+
+impl GridPoint {
+    /// The start level of `settings`.
+    pub fn start(settings: &StaircaseSettings) -> Self {
+        Self {
+            base: settings.start.to_bits(),
+            ups: 0,
+            downs: 0,
         }
-    } else {
-        let s = settings.step * settings.down_up_ratio;
-        match settings.step_type {
-            StepType::Linear => x -= s,
-            StepType::Log => x /= 10_f64.powf(s),
-            StepType::Db => x /= 10_f64.powf(s / 20.0),
+    }
+
+    /// The level at this point.
+    pub fn level(&self, settings: &StaircaseSettings) -> f64 {
+        let base = f64::from_bits(self.base);
+        #[expect(
+            clippy::cast_precision_loss,
+            reason = "step counts are at most a session's trials, far below 2^52"
+        )]
+        let k = self.ups as f64 - self.downs as f64 * settings.down_up_ratio;
+        let x = match settings.step_type {
+            StepType::Linear => base + k * settings.step,
+            StepType::Log => base * 10_f64.powf(k * settings.step),
+            StepType::Db => base * 10_f64.powf(k * settings.step / 20.0),
+        };
+        canonical_level(x)
+    }
+
+    /// The point one step up (`up`) or down from this one, clamped to `[min, max]`: where a
+    /// staircase with `settings` goes after `n_up` wrong or `n_down` correct answers in a row.
+    /// The study file's check that every reachable level has a stimulus walks the grid with
+    /// this same function, so it sees exactly the levels a session will show.
+    #[must_use]
+    pub fn stepped(&self, settings: &StaircaseSettings, up: bool) -> Self {
+        let mut next = *self;
+        if up {
+            next.ups += 1;
+        } else {
+            next.downs += 1;
+        }
+        if settings.down_up_ratio.to_bits() == 1.0_f64.to_bits() {
+            // One net count per level: paths that reach it compare equal as points too.
+            let common = next.ups.min(next.downs);
+            next.ups -= common;
+            next.downs -= common;
+        }
+        let x = next.level(settings);
+        let bound = |b: f64| Self {
+            base: b.to_bits(),
+            ups: 0,
+            downs: 0,
+        };
+        match (settings.min, settings.max) {
+            (Some(lo), _) if x < lo => bound(lo),
+            (_, Some(hi)) if x > hi => bound(hi),
+            _ => next,
         }
     }
-    if let Some(lo) = settings.min
-        && x < lo
-    {
-        x = lo;
-    }
-    if let Some(hi) = settings.max
-        && x > hi
-    {
-        x = hi;
-    }
-    x
 }
 
 #[cfg(test)]
@@ -410,48 +472,96 @@ mod tests {
     }
 
     #[test]
-    fn stepped_moves_by_the_step_type_and_clamps() {
+    fn grid_points_step_by_the_step_type_and_clamp() {
         let lin = StaircaseSettings {
+            start: 0.024,
             step: 0.002,
             down_up_ratio: 0.5,
             min: Some(0.001),
             max: Some(0.03),
             ..StaircaseSettings::default()
         };
-        assert!((stepped(&lin, 0.024, true) - 0.026).abs() < 1e-15);
+        let p = GridPoint::start(&lin);
+        assert!((p.stepped(&lin, true).level(&lin) - 0.026).abs() < 1e-15);
         assert!(
-            (stepped(&lin, 0.024, false) - 0.023).abs() < 1e-15,
+            (p.stepped(&lin, false).level(&lin) - 0.023).abs() < 1e-15,
             "half a step down"
         );
+        let mut low = p;
+        for _ in 0..60 {
+            low = low.stepped(&lin, false);
+        }
         assert_eq!(
-            stepped(&lin, 0.0015, false).to_bits(),
+            low.level(&lin).to_bits(),
             0.001_f64.to_bits(),
             "clamped to min"
         );
+        assert!(
+            (low.stepped(&lin, true).level(&lin) - 0.003).abs() < 1e-15,
+            "from the bound"
+        );
+        let mut high = p;
+        for _ in 0..4 {
+            high = high.stepped(&lin, true);
+        }
         assert_eq!(
-            stepped(&lin, 0.0295, true).to_bits(),
+            high.level(&lin).to_bits(),
             0.03_f64.to_bits(),
             "clamped to max"
         );
         let log = StaircaseSettings {
+            start: 2.0,
             step_type: StepType::Log,
             step: 1.0,
+            down_up_ratio: 1.0,
             min: None,
             max: None,
             ..StaircaseSettings::default()
         };
-        assert!((stepped(&log, 2.0, true) - 20.0).abs() < 1e-12);
-        // Down divides by 10^step, as PsychoPy does (not a multiply by 10^-step).
-        assert_eq!(
-            stepped(&log, 0.012, false).to_bits(),
-            (0.012 / 10_f64.powf(1.0)).to_bits()
-        );
+        let p = GridPoint::start(&log);
+        assert!((p.stepped(&log, true).level(&log) - 20.0).abs() < 1e-12);
+        assert!((p.stepped(&log, false).level(&log) - 0.2).abs() < 1e-15);
         let db = StaircaseSettings {
             step_type: StepType::Db,
             step: 20.0,
             ..log
         };
-        assert!((stepped(&db, 2.0, false) - 0.2).abs() < 1e-12);
+        assert!((GridPoint::start(&db).stepped(&db, false).level(&db) - 0.2).abs() < 1e-15);
+    }
+
+    #[test]
+    fn every_path_to_a_grid_point_gives_the_same_level() {
+        // The thesis staircase: accumulated, 0.024 - 10 x 0.002 went 0.003999999999999993 on
+        // one path and 0.004 on another; on the grid both are one number.
+        let s = StaircaseSettings {
+            min: Some(0.002),
+            max: Some(0.04),
+            ..StaircaseSettings::default()
+        };
+        let mut rng = 0x5eed_u64;
+        let mut by_net: std::collections::HashMap<i64, u64> = std::collections::HashMap::new();
+        for _ in 0..500 {
+            let mut p = GridPoint::start(&s);
+            let mut net = 0_i64;
+            for _ in 0..14 {
+                rng = rng.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
+                let up = rng >> 63 == 1;
+                // Stay inside the bounds, where the net count alone decides the level.
+                if (up && net < 7) || (!up && net > -10) {
+                    p = p.stepped(&s, up);
+                    net += if up { 1 } else { -1 };
+                }
+                let bits = p.level(&s).to_bits();
+                assert_eq!(*by_net.entry(net).or_insert(bits), bits, "net {net}");
+            }
+        }
+        assert_eq!(by_net.len(), 18, "every net count from -10 to 7 reached");
+        let accumulated = (0..10).fold(0.024_f64, |x, _| x - 0.002);
+        assert_ne!(
+            accumulated.to_bits(),
+            0.004_f64.to_bits(),
+            "the defect being fixed"
+        );
     }
 
     #[test]

@@ -120,7 +120,10 @@ fn replay_detects_a_changed_study() {
         .try_for_each(|(t, r, o)| s.replay(t, r, o))
         .unwrap_err();
     assert!(matches!(err, EngineError::ReplayMismatch { .. }), "{err}");
-    assert!(err.to_string().contains("does not follow from the study"), "{err}");
+    assert!(
+        err.to_string().contains("does not follow from the study"),
+        "{err}"
+    );
 }
 
 #[test]

@@ -17,7 +17,7 @@ use std::collections::HashMap;
 
 use protocols::observer::PsychometricFunction;
 use protocols::rng::StudyRng;
-use protocols::staircase::stepped;
+use protocols::staircase::GridPoint;
 use protocols::study::Psychometric;
 use protocols::{Staircase, StaircaseSettings, StepType};
 
@@ -70,17 +70,16 @@ enum Dir {
 /// stop, nothing else does.
 #[derive(Debug, Clone, Copy)]
 struct Chain {
+    point: GridPoint,
     level: f64,
     counter: i64,
     previous: Option<bool>,
     direction: Dir,
 }
 
-/// The state with its level on a grid of 2^-20 step: distinct levels within 60 trials differ
-/// by at least 0.0128 step (17 up vs 31 down steps of 0.5488), paths to one level by float
-/// rounding (~1e-18), so the key merges exactly the paths that reach one level
-/// (`exact_threshold` checks every merge).
-type Key = (i64, i64, Option<bool>, Dir);
+/// The state, its level as the engine's grid point: paths that reach one grid point merge
+/// exactly (`exact_threshold` checks every merge).
+type Key = (GridPoint, i64, Option<bool>, Dir);
 
 /// The chain's states after some trials, each with its probability by reversal count.
 type Layer = HashMap<Key, (Chain, Vec<f64>)>;
@@ -88,6 +87,7 @@ type Layer = HashMap<Key, (Chain, Vec<f64>)>;
 impl Chain {
     fn start(s: &StaircaseSettings) -> Self {
         Self {
+            point: GridPoint::start(s),
             level: s.start,
             counter: 0,
             previous: None,
@@ -96,12 +96,7 @@ impl Chain {
     }
 
     fn key(&self) -> Key {
-        (
-            (self.level / STEP * f64::from(1 << 20)).round() as i64,
-            self.counter,
-            self.previous,
-            self.direction,
-        )
+        (self.point, self.counter, self.previous, self.direction)
     }
 
     /// One answer, by `Staircase::add_response`'s rules: the new state and whether the trial
@@ -113,22 +108,23 @@ impl Chain {
             (false, Some(false)) => self.counter - 1,
             (false, _) => -1,
         };
-        let (mut direction, mut level) = (self.direction, self.level);
+        let (mut direction, mut point) = (self.direction, self.point);
         let mut reversal = false;
         if counter >= i64::from(s.n_down) {
             reversal = direction == Dir::Up;
             direction = Dir::Down;
-            level = stepped(s, level, false);
+            point = point.stepped(s, false);
             counter = 0;
         } else if counter <= -i64::from(s.n_up) {
             reversal = direction == Dir::Down;
             direction = Dir::Up;
-            level = stepped(s, level, true);
+            point = point.stepped(s, true);
             counter = 0;
         }
         (
             Self {
-                level,
+                point,
+                level: point.level(s),
                 counter,
                 previous: Some(correct),
                 direction,

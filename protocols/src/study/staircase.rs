@@ -11,7 +11,7 @@ use super::live::parse_live;
 use super::{MAX_TRACKS, StaircaseStudy, Track};
 use crate::catalog::{CodecCatalog, TARGET_CR_PARAM};
 use crate::manifest::StimulusManifest;
-use crate::staircase::{StaircaseSettings, StepType, check_settings, stepped};
+use crate::staircase::{GridPoint, StaircaseSettings, StepType, check_settings};
 
 /// Most levels enumerated when checking that every staircase level has a stimulus.
 const MAX_ENUMERATED_LEVELS: usize = 4096;
@@ -344,30 +344,32 @@ fn manifest_levels(
 }
 
 /// Every level the staircase can reach must have a stimulus within the tolerance. Reachable
-/// levels are enumerated when they form a small set (equal linear steps), each step taken by
-/// [`stepped`] as a session takes it; otherwise the stimuli's tolerance intervals must cover
-/// [min, max].
+/// levels are enumerated when they form a small set, each step taken by
+/// [`GridPoint::stepped`] as a session takes it; otherwise the stimuli's tolerance intervals
+/// must cover [min, max].
 fn check_levels(track: &Track, tol: f64, path: &str, cx: &mut Ctx) {
     let s = &track.settings;
     let (Some(lo), Some(hi)) = (s.min, s.max) else {
         return;
     };
-    let key = |v: f64| format!("{v:.12e}");
-    let mut seen: BTreeMap<String, f64> = BTreeMap::new();
-    let mut queue = vec![s.start];
+    let mut points = std::collections::HashSet::new();
+    let mut seen: BTreeMap<u64, f64> = BTreeMap::new();
+    let mut queue = vec![GridPoint::start(s)];
     let mut bounded = true;
-    while let Some(v) = queue.pop() {
-        if seen.insert(key(v), v).is_some() {
+    while let Some(p) = queue.pop() {
+        if !points.insert(p) {
             continue;
         }
-        if seen.len() > MAX_ENUMERATED_LEVELS {
+        let v = p.level(s);
+        seen.insert(v.to_bits(), v);
+        if points.len() > MAX_ENUMERATED_LEVELS {
             bounded = false;
             break;
         }
         for up in [true, false] {
-            let x = stepped(s, v, up);
-            if !seen.contains_key(&key(x)) {
-                queue.push(x);
+            let next = p.stepped(s, up);
+            if !points.contains(&next) {
+                queue.push(next);
             }
         }
     }
