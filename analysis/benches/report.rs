@@ -50,7 +50,7 @@ fn bench(c: &mut Criterion) {
         b.iter(|| {
             let a = analyze(black_box(&data), &options).unwrap();
             a.to_report(&data, &options, "bench")
-                .write(&dir, false)
+                .write(&dir, false, files::Mode::Replace)
                 .unwrap()
         });
     });

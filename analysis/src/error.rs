@@ -116,6 +116,9 @@ pub enum AnalysisError {
         /// The underlying error (part of the message, not a separate link of its chain).
         cause: std::io::Error,
     },
+    /// An output file could not be written, or exists and was not to be replaced.
+    #[error(transparent)]
+    File(#[from] files::Error),
     /// Drawing a plot failed.
     #[error("plot {name}: {message}")]
     Plot {

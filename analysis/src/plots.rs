@@ -5,7 +5,6 @@
 //! the binary) as the `sans-serif` family, so PNG labels render on a bare machine with no fonts
 //! installed and SVG layout uses real glyph metrics.
 
-use std::path::Path;
 use std::sync::OnceLock;
 
 use plotters::coord::Shift;
@@ -149,16 +148,32 @@ impl Figure {
         Ok(svg)
     }
 
-    /// Draws to a PNG file.
+    /// Draws to a PNG image in memory (8-bit RGB), for the caller to write whole
+    /// ([`files::write`]); plotters' own PNG writer would create the file in place.
     ///
     /// # Errors
-    /// [`AnalysisError::Plot`] when the font cannot be registered, drawing or writing fails.
-    pub fn render_png(&self, path: &Path) -> Result<(), AnalysisError> {
+    /// [`AnalysisError::Plot`] when the font cannot be registered, drawing or encoding fails.
+    pub fn render_png(&self) -> Result<Vec<u8>, AnalysisError> {
         ensure_font()?;
-        let root = BitMapBackend::new(path, SIZE_PX).into_drawing_area();
-        self.draw(&root).map_err(|e| self.plot_error(&e))?;
-        root.present().map_err(|e| self.plot_error(&e))?;
-        Ok(())
+        let (w, h) = SIZE_PX;
+        let mut rgb = vec![0u8; (w * h * 3) as usize];
+        {
+            let root = BitMapBackend::with_buffer(&mut rgb, SIZE_PX).into_drawing_area();
+            self.draw(&root).map_err(|e| self.plot_error(&e))?;
+            root.present().map_err(|e| self.plot_error(&e))?;
+        }
+        let mut out = Vec::new();
+        let mut encoder = png::Encoder::new(&mut out, w, h);
+        encoder.set_color(png::ColorType::Rgb);
+        encoder.set_depth(png::BitDepth::Eight);
+        encoder
+            .write_header()
+            .and_then(|mut writer| {
+                writer.write_image_data(&rgb)?;
+                writer.finish()
+            })
+            .map_err(|e| self.plot_error(&e))?;
+        Ok(out)
     }
 
     fn plot_error(&self, e: &dyn std::fmt::Display) -> AnalysisError {

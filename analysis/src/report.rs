@@ -104,24 +104,35 @@ impl Report {
     }
 
     /// Writes `report.md`, `report.html`, `tables/*.{csv,md,tex}` and `figures/*.{svg,png}`
-    /// into `dir` (created if missing). With `png` false only SVGs are drawn.
+    /// into `dir` (created if missing). With `png` false only SVGs are drawn. Each file is
+    /// written whole or not at all ([`files::write`]); an existing file is replaced only with
+    /// [`files::Mode::Replace`]. The pages come last, so a `report.md` is there only when every
+    /// table and figure it shows is.
     ///
     /// # Errors
-    /// [`AnalysisError::Io`] naming the file that could not be written; [`AnalysisError::Plot`]
-    /// when a figure fails to draw.
-    pub fn write(&self, dir: &Path, png: bool) -> Result<WrittenFiles, AnalysisError> {
+    /// [`AnalysisError::File`] naming the file that could not be written or exists;
+    /// [`AnalysisError::Io`] for a folder that cannot be created; [`AnalysisError::Plot`] when
+    /// a figure fails to draw.
+    pub fn write(
+        &self,
+        dir: &Path,
+        png: bool,
+        mode: files::Mode,
+    ) -> Result<WrittenFiles, AnalysisError> {
         let tables_dir = dir.join("tables");
         let figures_dir = dir.join("figures");
         for d in [dir, &tables_dir, &figures_dir] {
             std::fs::create_dir_all(d).map_err(|e| AnalysisError::io(d, e))?;
         }
         let mut written = WrittenFiles::default();
-        let put =
-            |files: &mut Vec<PathBuf>, path: PathBuf, text: &str| -> Result<(), AnalysisError> {
-                std::fs::write(&path, text).map_err(|e| AnalysisError::io(&path, e))?;
-                files.push(path);
-                Ok(())
-            };
+        let put = |written: &mut Vec<PathBuf>,
+                   path: PathBuf,
+                   bytes: &[u8]|
+         -> Result<(), AnalysisError> {
+            files::write(&path, bytes, mode)?;
+            written.push(path);
+            Ok(())
+        };
         let mut md = format!("# {}\n\n", self.title);
         let mut html = format!(
             "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>{0}</title>\n<style>body{{font-family:sans-serif;max-width:60em;margin:auto}}table{{border-collapse:collapse;margin:1em 0}}td,th{{border:1px solid #aaa;padding:2px 6px;text-align:right}}caption{{font-weight:bold}}</style></head><body>\n<h1>{0}</h1>\n",
@@ -140,17 +151,17 @@ impl Report {
                         put(
                             &mut written.files,
                             tables_dir.join(format!("{}.csv", t.name)),
-                            &t.to_csv(),
+                            t.to_csv().as_bytes(),
                         )?;
                         put(
                             &mut written.files,
                             tables_dir.join(format!("{}.md", t.name)),
-                            &t.to_markdown(),
+                            t.to_markdown().as_bytes(),
                         )?;
                         put(
                             &mut written.files,
                             tables_dir.join(format!("{}.tex", t.name)),
-                            &t.to_latex(),
+                            t.to_latex().as_bytes(),
                         )?;
                         let _ = writeln!(md, "{}", t.to_markdown());
                         html.push_str(&t.to_html());
@@ -160,12 +171,14 @@ impl Report {
                         put(
                             &mut written.files,
                             figures_dir.join(format!("{name}.svg")),
-                            &svg,
+                            svg.as_bytes(),
                         )?;
                         if png {
-                            let path = figures_dir.join(format!("{name}.png"));
-                            figure.render_png(&path)?;
-                            written.files.push(path);
+                            put(
+                                &mut written.files,
+                                figures_dir.join(format!("{name}.png")),
+                                &figure.render_png()?,
+                            )?;
                         }
                         let _ = write!(md, "![{}](figures/{name}.svg)\n\n", figure.title());
                         let body = svg.trim_start_matches(|c| c != '<');
@@ -184,8 +197,8 @@ impl Report {
             }
         }
         html.push_str("</body></html>\n");
-        put(&mut written.files, dir.join("report.md"), &md)?;
-        put(&mut written.files, dir.join("report.html"), &html)?;
+        put(&mut written.files, dir.join("report.md"), md.as_bytes())?;
+        put(&mut written.files, dir.join("report.html"), html.as_bytes())?;
         Ok(written)
     }
 }

@@ -135,7 +135,7 @@ fn report_writes_every_table_and_figure() {
         .to_report(&data, &opts, "Simulated study");
     let dir = std::env::temp_dir().join(format!("analysis-report-test-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
-    let written = report.write(&dir, true).unwrap();
+    let written = report.write(&dir, true, files::Mode::New).unwrap();
     for name in [
         "mos",
         "mos_screened",
@@ -176,6 +176,12 @@ fn report_writes_every_table_and_figure() {
         );
         let png = std::fs::read(dir.join("figures").join(format!("{fig}.png"))).unwrap();
         assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");
+        let info = png::Decoder::new(std::io::Cursor::new(png))
+            .read_info()
+            .unwrap()
+            .info()
+            .clone();
+        assert_eq!((info.width, info.height), (800, 520), "{fig}");
     }
     let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
     assert_eq!(html.matches("<svg").count(), 6, "every figure inlined");
@@ -183,6 +189,20 @@ fn report_writes_every_table_and_figure() {
     let md = std::fs::read_to_string(dir.join("report.md")).unwrap();
     assert!(md.contains("![MOS vs compression ratio](figures/mos_vs_cr.svg)"));
     assert!(written.files.len() >= 11 * 3 + 10 + 2);
+    // A second report into the same folder replaces nothing unless asked to.
+    std::fs::write(dir.join("report.md"), "the first report").unwrap();
+    let again = report.write(&dir, false, files::Mode::New).unwrap_err();
+    assert!(
+        matches!(&again, analysis::AnalysisError::File(e) if e.is_refusal()),
+        "{again}"
+    );
+    assert!(again.to_string().contains("already exists"), "{again}");
+    assert_eq!(
+        std::fs::read_to_string(dir.join("report.md")).unwrap(),
+        "the first report"
+    );
+    report.write(&dir, false, files::Mode::Replace).unwrap();
+    assert_eq!(std::fs::read_to_string(dir.join("report.md")).unwrap(), md);
     if std::env::var_os("ANALYSIS_KEEP_REPORT").is_none() {
         std::fs::remove_dir_all(&dir).unwrap();
     }

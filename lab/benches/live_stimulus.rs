@@ -55,12 +55,13 @@ fn study_dir() -> PathBuf {
             &clip.excerpt(from..from + FRAMES),
             &dir.join(format!("clips/{name}.amc")),
             Some(&dir.join("clips/lambada.asf")),
+            files::Mode::Replace,
         )
         .unwrap();
     }
     let refs: Vec<&Clip> = others.iter().collect();
     Database::train(&refs, &TrainParams::default(), |_, _| {})
-        .write(&dir.join("others.mpdb"))
+        .write(&dir.join("others.mpdb"), files::Mode::Replace)
         .unwrap();
     std::fs::write(
         dir.join("stimuli.json"),

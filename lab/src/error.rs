@@ -16,6 +16,10 @@ pub enum LabError {
         /// The OS error (part of the message, not a separate link of its chain).
         cause: std::io::Error,
     },
+    /// An output file could not be written, or exists and was not to be replaced (an output
+    /// folder holding files, without `force`).
+    #[error(transparent)]
+    File(#[from] files::Error),
     /// A study file's problems.
     #[error(transparent)]
     Study(#[from] protocols::StudyError),

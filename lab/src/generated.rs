@@ -11,10 +11,12 @@ use crate::sweep::{self, SweepOptions, SweepSummary};
 
 /// The generated walk `walk` written as `dir/clips/walk.asf` + `dir/clips/walk.amc`, and swept
 /// into `dir/stimuli` (manifest `dir/stimuli/stimuli.json`, clip name `walk`) with `codecs`
-/// at every ratio of `targets`.
+/// at every ratio of `targets`. Nothing existing is replaced: `dir` is meant to be a fresh
+/// folder.
 ///
 /// # Errors
-/// As [`sweep::sweep`], or the clip cannot be written.
+/// As [`sweep::sweep`] (also when `dir/stimuli` holds files), or the clip cannot be written
+/// (also when it exists).
 pub fn walk_stimuli(
     dir: &Path,
     walk: &WalkParams,
@@ -24,7 +26,7 @@ pub fn walk_stimuli(
     let clips = dir.join("clips");
     std::fs::create_dir_all(&clips).map_err(io_error(&clips))?;
     let (asf, amc) = (clips.join("walk.asf"), clips.join("walk.amc"));
-    motion::io::write_clip(&walking_clip(walk), &amc, Some(&asf))?;
+    motion::io::write_clip(&walking_clip(walk), &amc, Some(&asf), files::Mode::New)?;
     let options = SweepOptions {
         clips: vec![amc, asf],
         clip_options: ClipOptions::default(),
@@ -33,6 +35,7 @@ pub fn walk_stimuli(
         output: dir.join("stimuli"),
         jobs: std::thread::available_parallelism().map_or(1, usize::from),
         database: None,
+        force: false,
     };
     sweep::sweep(&options, &|_, _| {})
 }

@@ -77,32 +77,44 @@ pub fn make(codec: &dyn Codec, clip: &Clip, request: &Request) -> Result<Made> {
     })
 }
 
+/// The files [`write_clip_as`] writes for `clip`: `<dir>/<stem>.bvh`, or `<dir>/<stem>.amc`
+/// with its skeleton, `asf` if given (an existing file, not written) else `<dir>/<stem>.asf`;
+/// as (motion file, skeleton file, whether the skeleton is written).
+pub fn clip_files(
+    clip: &Clip,
+    dir: &Path,
+    stem: &str,
+    asf: Option<&Path>,
+) -> (PathBuf, Option<PathBuf>, bool) {
+    match clip.skeleton.format {
+        SkeletonFormat::Bvh => (dir.join(format!("{stem}.bvh")), None, false),
+        SkeletonFormat::Asf => (
+            dir.join(format!("{stem}.amc")),
+            Some(asf.map_or_else(|| dir.join(format!("{stem}.asf")), Path::to_path_buf)),
+            asf.is_none(),
+        ),
+    }
+}
+
 /// Writes `clip` in its own format as `<dir>/<stem>.bvh`, or `<dir>/<stem>.amc` with its
-/// skeleton at `asf` (default `<dir>/<stem>.asf`, written only if it does not exist yet);
-/// returns the motion file and the ASF, if any.
+/// skeleton: `asf` names an existing skeleton file the motion refers to (the sweep's
+/// reference skeleton, a decoded stream's input skeleton), which is not written; without it
+/// the skeleton is written to `<dir>/<stem>.asf`. Returns the motion file and the ASF, if any
+/// ([`clip_files`]). Files are written whole or not at all; existing ones are replaced only
+/// with [`files::Mode::Replace`].
 ///
 /// # Errors
-/// The files cannot be written.
+/// The files cannot be written, or exist under [`files::Mode::New`].
 pub fn write_clip_as(
     clip: &Clip,
     dir: &Path,
     stem: &str,
     asf: Option<&Path>,
+    mode: files::Mode,
 ) -> Result<(PathBuf, Option<PathBuf>)> {
-    match clip.skeleton.format {
-        SkeletonFormat::Bvh => {
-            let m = dir.join(format!("{stem}.bvh"));
-            motion::io::write_clip(clip, &m, None)
-                .context(|| format!("writing {}", m.display()))?;
-            Ok((m, None))
-        }
-        SkeletonFormat::Asf => {
-            let m = dir.join(format!("{stem}.amc"));
-            let a = asf.map_or_else(|| dir.join(format!("{stem}.asf")), Path::to_path_buf);
-            let write_asf = (!a.exists()).then_some(a.as_path());
-            motion::io::write_clip(clip, &m, write_asf)
-                .context(|| format!("writing {}", m.display()))?;
-            Ok((m, Some(a)))
-        }
-    }
+    let (m, a, write_asf) = clip_files(clip, dir, stem, asf);
+    let written_asf = a.as_deref().filter(|_| write_asf);
+    motion::io::write_clip(clip, &m, written_asf, mode)
+        .context(|| format!("writing {}", m.display()))?;
+    Ok((m, a))
 }

@@ -41,6 +41,10 @@ pub struct SweepOptions {
     pub jobs: usize,
     /// Primitive database for the `primitive` codec.
     pub database: Option<PathBuf>,
+    /// Write into an output folder that holds files, replacing those of the same names
+    /// (atomically, each whole); without it such a folder is refused before anything is
+    /// made. Files of an earlier sweep that this one does not make are left as they are.
+    pub force: bool,
 }
 
 /// What a sweep wrote.
@@ -70,7 +74,10 @@ struct Job {
 ///
 /// # Errors
 /// A bad target, an unknown codec or one without rate control, clips that do not pair or
-/// read, a codec failing a target, or an output that cannot be written.
+/// read, an output folder holding files without [`SweepOptions::force`]
+/// ([`files::Error::NotEmpty`], naming the folder and what it holds), a codec failing a
+/// target, or an output that cannot be written. Every file is written whole or not at all
+/// ([`files::write`]), so a failed sweep (a full disk) leaves complete files only.
 pub fn sweep(
     options: &SweepOptions,
     progress: &(dyn Fn(usize, usize) + Sync),
@@ -93,7 +100,8 @@ pub fn sweep(
     }
     let inputs = clips::sources(&options.clips, &options.clip_options)?;
     let out = &options.output;
-    std::fs::create_dir_all(out).map_err(io_error(out))?;
+    let mode = files::Mode::from_force(options.force);
+    files::prepare_dir(out, mode)?;
     let mut manifest = StimulusManifest {
         version: MANIFEST_VERSION,
         stimuli: Vec::new(),
@@ -103,7 +111,7 @@ pub fn sweep(
         let clip = clips::read(source, options.clip_options.bvh_unit_cm)?;
         let dir = out.join(&source.name);
         std::fs::create_dir_all(&dir).map_err(io_error(&dir))?;
-        let (file, skeleton) = stimulus::write_clip_as(&clip, &dir, "reference", None)?;
+        let (file, skeleton) = stimulus::write_clip_as(&clip, &dir, "reference", None, mode)?;
         manifest.stimuli.push(reference_stimulus(
             out,
             &source.name,
@@ -131,7 +139,7 @@ pub fn sweep(
     let results = run_jobs(
         &jobs,
         options.jobs,
-        |job| make_job(job, &sweep_clips, out, &codecs),
+        |job| make_job(job, &sweep_clips, out, &codecs, mode),
         progress,
     )?;
     let mut csv = String::from(RD_HEADER);
@@ -140,11 +148,11 @@ pub fn sweep(
         csv.push_str(&row);
         manifest.stimuli.push(stimulus);
     }
+    // The table, then the manifest: a stimuli.json on disk means every file it names is
+    // complete.
+    files::write(&out.join(RD_FILE), csv, mode)?;
     let json = serde_json::to_string_pretty(&manifest)?;
-    let manifest_path = out.join(MANIFEST_FILE);
-    std::fs::write(&manifest_path, json).map_err(io_error(&manifest_path))?;
-    let rd = out.join(RD_FILE);
-    std::fs::write(&rd, csv).map_err(io_error(&rd))?;
+    files::write(&out.join(MANIFEST_FILE), json, mode)?;
     Ok(SweepSummary {
         manifest,
         references: sweep_clips.len(),
@@ -215,6 +223,7 @@ fn make_job(
     clips: &[SweepClip],
     out: &Path,
     codecs: &Codecs,
+    mode: files::Mode,
 ) -> Result<(Stimulus, String), LabError> {
     let c = &clips[job.clip];
     let codec = codecs.get(&job.codec)?;
@@ -226,8 +235,9 @@ fn make_job(
         .context(|| format!("{}: {} at CR {}", c.name, job.codec, job.target))?;
     let stem = format!("{}-cr{}", job.codec, job.target);
     let mcz = c.dir.join(format!("{stem}.mcz"));
-    std::fs::write(&mcz, &made.bytes).map_err(io_error(&mcz))?;
-    let (file, _) = stimulus::write_clip_as(&made.decoded, &c.dir, &stem, c.skeleton.as_deref())?;
+    files::write(&mcz, &made.bytes, mode)?;
+    let (file, _) =
+        stimulus::write_clip_as(&made.decoded, &c.dir, &stem, c.skeleton.as_deref(), mode)?;
     let achieved = made.achieved_cr();
     let m = &made.metrics;
     let row = format!(

@@ -2,6 +2,8 @@
 //! and its bitstream decodes with the reference skeleton.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
 
+use std::path::{Path, PathBuf};
+
 use codecs::bitstream::Bitstream;
 use codecs::codec;
 use lab::clips::ClipOptions;
@@ -31,6 +33,7 @@ fn sweep_two_shared_clips_three_codecs_four_rates() {
         output: out.clone(),
         jobs: 2,
         database: None,
+        force: false,
     };
     let calls = std::sync::atomic::AtomicUsize::new(0);
     let summary = sweep(&options, &|done, total| {
@@ -84,4 +87,116 @@ fn sweep_two_shared_clips_three_codecs_four_rates() {
     let csv = std::fs::read_to_string(out.join("rd.csv")).unwrap();
     assert_eq!(csv.lines().count(), 1 + 24);
     std::fs::remove_dir_all(&out).unwrap();
+}
+
+/// A fresh scratch folder holding a one-second generated walk as `clips/walk.{asf,amc}`.
+fn walk_dir(name: &str) -> (PathBuf, Vec<PathBuf>) {
+    let dir = std::env::temp_dir().join(format!("lab-sweep-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(dir.join("clips")).unwrap();
+    let walk = motion::synth::walking_clip(&motion::synth::WalkParams {
+        duration_s: 1.0,
+        ..motion::synth::WalkParams::default()
+    });
+    let (asf, amc) = (dir.join("clips/walk.asf"), dir.join("clips/walk.amc"));
+    motion::io::write_clip(&walk, &amc, Some(&asf), files::Mode::New).unwrap();
+    (dir, vec![amc, asf])
+}
+
+fn walk_sweep(clips: &[PathBuf], out: &Path, force: bool) -> lab::Result<lab::sweep::SweepSummary> {
+    let options = SweepOptions {
+        clips: clips.to_vec(),
+        clip_options: ClipOptions::default(),
+        codecs: vec!["spiht".into()],
+        targets: vec![10.0],
+        output: out.to_path_buf(),
+        jobs: 1,
+        database: None,
+        force,
+    };
+    sweep(&options, &|_, _| {})
+}
+
+/// Every file under `dir`, relative, sorted.
+fn tree(dir: &Path) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                out.push(p.strip_prefix(dir).unwrap().display().to_string());
+            }
+        }
+    }
+    out.sort();
+    out
+}
+
+#[test]
+fn a_sweep_into_a_folder_holding_files_is_refused_unless_forced() {
+    let (dir, clips) = walk_dir("refuse");
+    let out = dir.join("stimuli");
+    // An existing empty folder is fine.
+    std::fs::create_dir_all(&out).unwrap();
+    walk_sweep(&clips, &out, false).unwrap();
+    let first = tree(&out);
+    assert_eq!(
+        first,
+        [
+            "rd.csv",
+            "stimuli.json",
+            "walk/reference.amc",
+            "walk/reference.asf",
+            "walk/spiht-cr10.amc",
+            "walk/spiht-cr10.mcz",
+        ]
+    );
+    // Again, without force: refused before anything is written, naming the folder and what
+    // it holds.
+    std::fs::write(out.join("rd.csv"), "the first sweep's table").unwrap();
+    let e = walk_sweep(&clips, &out, false).unwrap_err();
+    let text = e.to_string();
+    assert!(
+        matches!(&e, lab::LabError::File(files::Error::NotEmpty { dir, .. }) if dir == &out),
+        "{text}"
+    );
+    assert!(
+        text.contains(&format!(
+            "{} is not empty: it holds rd.csv, stimuli.json, walk/",
+            out.display()
+        )),
+        "{text}"
+    );
+    assert!(text.contains("--force"), "{text}");
+    assert_eq!(
+        std::fs::read_to_string(out.join("rd.csv")).unwrap(),
+        "the first sweep's table"
+    );
+    assert_eq!(tree(&out), first);
+    // With force: the same files, replaced, and nothing else (no temporary files).
+    walk_sweep(&clips, &out, true).unwrap();
+    assert_eq!(tree(&out), first);
+    assert!(
+        std::fs::read_to_string(out.join("rd.csv"))
+            .unwrap()
+            .starts_with("clip,codec,")
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn a_forced_sweep_rewrites_the_reference_skeleton() {
+    // The stimuli of a clip refer to its reference skeleton; a forced sweep of another clip
+    // under the same name must not keep the old one.
+    let (dir, clips) = walk_dir("skeleton");
+    let out = dir.join("stimuli");
+    walk_sweep(&clips, &out, false).unwrap();
+    std::fs::write(out.join("walk/reference.asf"), "stale").unwrap();
+    walk_sweep(&clips, &out, true).unwrap();
+    let skeleton = motion::asf::read_asf(&out.join("walk/reference.asf")).unwrap();
+    assert_eq!(skeleton, motion::asf::read_asf(&clips[1]).unwrap());
+    std::fs::remove_dir_all(&dir).unwrap();
 }

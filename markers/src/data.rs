@@ -376,15 +376,13 @@ pub fn format_csv(set: &MarkerSet) -> String {
     out
 }
 
-/// Writes a marker set as CSV.
+/// Writes a marker set as CSV, whole or not at all ([`files::write`]); an existing file is
+/// replaced only with [`files::Mode::Replace`].
 ///
 /// # Errors
-/// [`MarkerError::Io`].
-pub fn write_csv(set: &MarkerSet, path: &Path) -> Result<(), MarkerError> {
-    std::fs::write(path, format_csv(set)).map_err(|err| MarkerError::Io {
-        path: path.to_path_buf(),
-        err,
-    })
+/// [`MarkerError::File`].
+pub fn write_csv(set: &MarkerSet, path: &Path, mode: files::Mode) -> Result<(), MarkerError> {
+    Ok(files::write(path, format_csv(set), mode)?)
 }
 
 fn c3d_err(path: &Path, reason: impl Into<String>) -> MarkerError {
@@ -582,12 +580,14 @@ pub fn parse_c3d(
 }
 
 /// Writes a marker set as a floating-point C3D file (units mm, gaps as zeroed points with a
-/// residual of −1, i.e. invalid).
+/// residual of −1, i.e. invalid), whole or not at all; an existing file is replaced only with
+/// [`files::Mode::Replace`].
 ///
 /// # Errors
 /// [`MarkerError::C3d`] when the set has more than 65 535 frames or markers (the header's
-/// 16-bit counts) or `c3dio` refuses the file, [`MarkerError::Io`].
-pub fn write_c3d(set: &MarkerSet, path: &Path) -> Result<(), MarkerError> {
+/// 16-bit counts) or `c3dio` refuses the file, [`MarkerError::File`] or [`MarkerError::Io`].
+pub fn write_c3d(set: &MarkerSet, path: &Path, mode: files::Mode) -> Result<(), MarkerError> {
+    files::check_new(path, mode)?;
     if set.frames == 0 || set.frames > 65_535 || set.marker_count() > 65_535 {
         return Err(c3d_err(
             path,
@@ -633,30 +633,21 @@ pub fn write_c3d(set: &MarkerSet, path: &Path) -> Result<(), MarkerError> {
             .collect();
         pts.points.push_row(row);
     }
-    let tmp = path.with_extension("c3d.tmp.c3d");
-    catch_quiet(|| c3d.write_path(tmp.clone()).map(|_| ()))
+    // c3dio writes only to a path it opens itself (and, unlike the C3D specification, does
+    // not pad the data section to whole 512-byte blocks, which its own reader expects): it
+    // writes to a reserved temporary name, removed on every path out of here, and the padded
+    // bytes go to the target through `files`.
+    let scratch = files::TempPath::beside(path, "c3d")?;
+    catch_quiet(|| c3d.write_path(scratch.path().to_path_buf()).map(|_| ()))
         .map_err(|why| c3d_err(path, format!("the C3D writer stopped: {why}")))?
         .map_err(|e| c3d_err(path, format!("{e:?}")))?;
-    // c3dio does not pad the data section to whole 512-byte blocks, which its own reader
-    // (and the C3D specification) expects.
-    let io = |err| MarkerError::Io {
-        path: path.to_path_buf(),
+    let mut bytes = std::fs::read(scratch.path()).map_err(|err| MarkerError::Io {
+        path: scratch.path().to_path_buf(),
         err,
-    };
-    let len = std::fs::metadata(&tmp).map_err(io)?.len();
-    if len % 512 != 0 {
-        use std::io::Write as _;
-        let mut file = std::fs::OpenOptions::new()
-            .append(true)
-            .open(&tmp)
-            .map_err(io)?;
-        file.write_all(&vec![0u8; (512 - len % 512) as usize])
-            .map_err(io)?;
-    }
-    std::fs::rename(&tmp, path).map_err(|err| MarkerError::Io {
-        path: path.to_path_buf(),
-        err,
-    })
+    })?;
+    drop(scratch);
+    bytes.resize(bytes.len().div_ceil(512) * 512, 0);
+    Ok(files::write(path, bytes, mode)?)
 }
 
 /// Reads a marker file by extension: `.c3d` or `.csv`.
@@ -679,10 +670,10 @@ pub fn read_markers(path: &Path) -> Result<MarkerSet, MarkerError> {
 ///
 /// # Errors
 /// As [`write_c3d`] / [`write_csv`]; [`MarkerError::Csv`] at line 0 for another extension.
-pub fn write_markers(set: &MarkerSet, path: &Path) -> Result<(), MarkerError> {
+pub fn write_markers(set: &MarkerSet, path: &Path, mode: files::Mode) -> Result<(), MarkerError> {
     match ext(path).as_deref() {
-        Some("c3d") => write_c3d(set, path),
-        Some("csv") => write_csv(set, path),
+        Some("c3d") => write_c3d(set, path, mode),
+        Some("csv") => write_csv(set, path, mode),
         _ => Err(MarkerError::Csv {
             path: path.to_path_buf(),
             line: 0,

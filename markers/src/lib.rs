@@ -42,7 +42,7 @@ pub enum MarkerError {
         /// Index of the sample.
         index: usize,
     },
-    /// The file could not be read or written.
+    /// The file could not be read.
     #[error("{path}: {err}")]
     Io {
         /// The file.
@@ -50,6 +50,9 @@ pub enum MarkerError {
         /// The OS error.
         err: std::io::Error,
     },
+    /// The file could not be written, or exists and was not to be replaced.
+    #[error(transparent)]
+    File(#[from] files::Error),
     /// A CSV marker file is malformed.
     #[error("{path}:{line}: {reason}")]
     Csv {

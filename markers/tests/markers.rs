@@ -369,7 +369,7 @@ fn c3d_round_trips_with_gaps() {
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("small.c3d");
     let set = small_set();
-    data::write_c3d(&set, &path).unwrap();
+    data::write_c3d(&set, &path, files::Mode::Replace).unwrap();
     let back = data::read_c3d(&path).unwrap();
     assert_eq!(back.names(), set.names());
     assert_eq!(back.frames(), set.frames());
@@ -455,7 +455,7 @@ fn written_c3d() -> Vec<u8> {
     let dir = std::env::temp_dir().join(format!("markers-prop-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("p.c3d");
-    data::write_c3d(&small_set(), &path).unwrap();
+    data::write_c3d(&small_set(), &path, files::Mode::Replace).unwrap();
     let bytes = std::fs::read(&path).unwrap();
     std::fs::remove_dir_all(&dir).ok();
     bytes

@@ -34,8 +34,8 @@ fn round_trip(bvh: &Clip, tag: &str) -> (f64, f64) {
         dir.join("solved.amc"),
     );
     let AsfSolved { clip, asf_point_of } = bvh_to_asf(bvh).unwrap();
-    motion::io::write_clip(bvh, &bvh_path, None).unwrap();
-    motion::io::write_clip(&clip, &amc_path, Some(&asf_path)).unwrap();
+    motion::io::write_clip(bvh, &bvh_path, None, files::Mode::Replace).unwrap();
+    motion::io::write_clip(&clip, &amc_path, Some(&asf_path), files::Mode::Replace).unwrap();
     let bvh_back = motion::io::read_clip(None, &bvh_path).unwrap();
     let asf_back = motion::io::read_clip(Some(&asf_path), &amc_path).unwrap();
     std::fs::remove_dir_all(&dir).ok();

@@ -165,14 +165,10 @@ impl Default for Limits {
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum WriteError {
-    /// The file could not be created or written.
-    #[error("{path}: cannot write: {err}")]
-    Io {
-        /// The file.
-        path: PathBuf,
-        /// The OS error.
-        err: std::io::Error,
-    },
+    /// The file could not be written, or exists and was not to be replaced (the error names
+    /// the file).
+    #[error(transparent)]
+    File(#[from] files::Error),
     /// The clip cannot be expressed in the requested format.
     #[error("{path}: {reason}")]
     Unsupported {

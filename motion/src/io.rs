@@ -2,6 +2,8 @@
 
 use std::path::Path;
 
+use files::Mode;
+
 use crate::clip::{Clip, SkeletonFormat};
 use crate::error::{Limits, ParseError, ReadWarning, WriteError};
 use crate::{amc, asf, bvh, convert, text};
@@ -60,29 +62,21 @@ pub fn read_clip_with_warnings(
     ))
 }
 
-fn write_file(path: &Path, contents: &str) -> Result<(), WriteError> {
-    let io = |err| WriteError::Io {
-        path: path.to_path_buf(),
-        err,
-    };
-    // Write beside the target and rename, so a crash never leaves half a clip.
-    let tmp = path.with_extension(format!(
-        "{}.tmp",
-        path.extension()
-            .map(|e| e.to_string_lossy().into_owned())
-            .unwrap_or_default()
-    ));
-    std::fs::write(&tmp, contents).map_err(io)?;
-    std::fs::rename(&tmp, path).map_err(io)
-}
-
 /// Writes a clip by the motion file's extension: `.bvh` (an ASF clip is converted), or `.amc`
-/// (with its skeleton written to `asf_path` when given).
+/// (with its skeleton written to `asf_path` when given). Each file is written whole or not at
+/// all ([`files::write`]); with [`Mode::New`] an existing motion or skeleton file is refused
+/// before either is written, with [`Mode::Replace`] both are replaced.
 ///
 /// # Errors
-/// [`WriteError`] on I/O failure or when the clip cannot be expressed in that format (a BVH
-/// clip as AMC).
-pub fn write_clip(clip: &Clip, motion: &Path, asf_path: Option<&Path>) -> Result<(), WriteError> {
+/// [`WriteError::File`] on I/O failure or an existing file under [`Mode::New`];
+/// [`WriteError::Unsupported`] when the clip cannot be expressed in that format (a BVH clip as
+/// AMC).
+pub fn write_clip(
+    clip: &Clip,
+    motion: &Path,
+    asf_path: Option<&Path>,
+    mode: Mode,
+) -> Result<(), WriteError> {
     if has_ext(motion, "bvh") {
         let bvh_clip = if clip.skeleton.format == SkeletonFormat::Asf {
             convert::asf_to_bvh(clip).map_err(|e| WriteError::Unsupported {
@@ -92,14 +86,24 @@ pub fn write_clip(clip: &Clip, motion: &Path, asf_path: Option<&Path>) -> Result
         } else {
             clip.clone()
         };
-        return write_file(motion, &bvh::write_bvh(&bvh_clip, motion)?);
+        let text = bvh::write_bvh(&bvh_clip, motion)?;
+        files::write(motion, text, mode)?;
+        return Ok(());
     }
     if has_ext(motion, "amc") {
         let text = amc::write_amc(clip, motion)?;
-        if let Some(a) = asf_path {
-            write_file(a, &asf::write_asf(&clip.skeleton, a)?)?;
+        let skeleton = asf_path
+            .map(|a| Ok::<_, WriteError>((a, asf::write_asf(&clip.skeleton, a)?)))
+            .transpose()?;
+        // Both names are checked before either file is written, so a refusal leaves no half
+        // pair behind.
+        files::check_new(motion, mode)?;
+        if let Some((a, text)) = skeleton {
+            files::check_new(a, mode)?;
+            files::write(a, text, mode)?;
         }
-        return write_file(motion, &text);
+        files::write(motion, text, mode)?;
+        return Ok(());
     }
     Err(WriteError::Unsupported {
         path: motion.to_path_buf(),

@@ -79,18 +79,18 @@ fn writers_round_trip_every_value_bit_for_bit() {
                     tmp(&format!("{}.asf", c.name)),
                     tmp(&format!("{}.amc", c.name)),
                 );
-                io::write_clip(&clip, &m, Some(&a)).unwrap();
+                io::write_clip(&clip, &m, Some(&a), files::Mode::Replace).unwrap();
                 let back = io::read_clip(Some(&a), &m).unwrap();
                 assert_eq!(back.skeleton, clip.skeleton, "{}", c.name);
                 assert_same_values(&clip, &back, &c.name);
                 // Twice: the writer's output is a fixed point.
                 let text1 = std::fs::read_to_string(&m).unwrap();
-                io::write_clip(&back, &m, Some(&a)).unwrap();
+                io::write_clip(&back, &m, Some(&a), files::Mode::Replace).unwrap();
                 assert_eq!(text1, std::fs::read_to_string(&m).unwrap());
             }
             SkeletonFormat::Bvh => {
                 let b = tmp(&format!("{}.bvh", c.name));
-                io::write_clip(&clip, &b, None).unwrap();
+                io::write_clip(&clip, &b, None, files::Mode::Replace).unwrap();
                 let back = io::read_clip(None, &b).unwrap();
                 assert_eq!(back.skeleton, clip.skeleton, "{}", c.name);
                 assert_same_values(&clip, &back, &c.name);
@@ -107,7 +107,7 @@ fn asf_to_bvh_conversion_keeps_every_joint_position() {
         let conv = convert::asf_to_bvh(&clip).unwrap();
         // Through a file, as a user would do it.
         let path = tmp(&format!("{}-conv.bvh", c.name));
-        io::write_clip(&clip, &path, None).unwrap();
+        io::write_clip(&clip, &path, None, files::Mode::Replace).unwrap();
         let read = bvh::read_bvh(&path).unwrap();
         assert_eq!(read.skeleton.joints.len(), conv.skeleton.joints.len());
         let pa = fk::positions(&clip);
@@ -247,7 +247,7 @@ fn synthetic_walk_is_a_valid_clip_that_walks_forward() {
     }
     // Round trip through files, like a real clip.
     let (a, m) = (tmp("walk.asf"), tmp("walk.amc"));
-    io::write_clip(&clip, &m, Some(&a)).unwrap();
+    io::write_clip(&clip, &m, Some(&a), files::Mode::Replace).unwrap();
     let back = io::read_clip(Some(&a), &m).unwrap();
     assert_same_values(&clip, &back, "walk");
 }

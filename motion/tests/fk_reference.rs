@@ -89,9 +89,9 @@ fn fk_matches_the_independent_reference_on_generated_and_converted_motion() {
         ..Default::default()
     });
     let (a, m, b) = (dir.join("w.asf"), dir.join("w.amc"), dir.join("w.bvh"));
-    io::write_clip(&walk, &m, Some(&a)).unwrap();
+    io::write_clip(&walk, &m, Some(&a), files::Mode::Replace).unwrap();
     compare(&walk, &[&a, &m], "walk (ASF/AMC)");
-    io::write_clip(&walk, &b, None).unwrap();
+    io::write_clip(&walk, &b, None, files::Mode::Replace).unwrap();
     let conv = io::read_clip(None, &b).unwrap();
     compare(&conv, &[&b], "walk converted to BVH");
 }

@@ -75,64 +75,44 @@ pub fn read_limited(path: &Path, limit: u64) -> Result<Vec<u8>, ResultsError> {
 /// # Errors
 /// [`ResultsError::Io`].
 pub fn sync_dir(dir: &Path) -> Result<(), ResultsError> {
-    File::open(dir)
-        .and_then(|d| d.sync_all())
-        .map_err(io(dir, "fsync directory"))
+    files::sync_dir(dir).map_err(from_files)
 }
 
-/// Writes `bytes` to `path` atomically: temporary file, fsync, rename, fsync of the directory.
+/// Writes `bytes` to `path` atomically, replacing it if it exists ([`files::write`] with
+/// [`files::Mode::Replace`]: temporary file, fsync, rename, fsync of the directory). For a
+/// session's own manifest, which each write replaces.
 ///
 /// # Errors
 /// [`ResultsError::Io`].
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), ResultsError> {
-    let (dir, tmp) = write_synced_temp(path, "tmp", bytes)?;
-    fs::rename(&tmp, path).map_err(io(path, "rename"))?;
-    sync_dir(&dir)
+    files::write(path, bytes, files::Mode::Replace).map_err(from_files)
 }
 
-/// Writes `bytes` to a fresh temporary file beside `path` (`.<name>.<tag>-<pid>`) and fsyncs
-/// it; returns the directory and the temporary file.
-fn write_synced_temp(
-    path: &Path,
-    tag: &str,
-    bytes: &[u8],
-) -> Result<(PathBuf, PathBuf), ResultsError> {
-    let dir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let tmp = dir.join(format!(".{name}.{tag}-{}", std::process::id()));
-    let mut f = OpenOptions::new()
-        .write(true)
-        .create(true)
-        .truncate(true)
-        .open(&tmp)
-        .map_err(io(&tmp, "create"))?;
-    f.write_all(bytes).map_err(io(&tmp, "write"))?;
-    f.sync_all().map_err(io(&tmp, "fsync"))?;
-    Ok((dir, tmp))
-}
-
-/// Writes `bytes` to a new file `path`, failing if it exists: temporary file, fsync, hard
-/// link (which refuses an existing target), fsync of the directory.
+/// Writes `bytes` to a new file `path`, failing if it exists ([`files::write`] with
+/// [`files::Mode::New`]: temporary file, fsync, hard link, which refuses an existing target,
+/// fsync of the directory).
 ///
 /// # Errors
 /// [`ResultsError::Exists`] or [`ResultsError::Io`].
 pub fn write_new(path: &Path, bytes: &[u8]) -> Result<(), ResultsError> {
-    let (dir, tmp) = write_synced_temp(path, "new", bytes)?;
-    let linked = fs::hard_link(&tmp, path);
-    let _ = fs::remove_file(&tmp);
-    match linked {
-        Ok(()) => sync_dir(&dir),
-        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => Err(ResultsError::Exists {
-            path: path.to_path_buf(),
-        }),
-        Err(e) => Err(ResultsError::Io {
-            path: path.to_path_buf(),
-            op: "link",
-            cause: e,
-        }),
+    files::write(path, bytes, files::Mode::New).map_err(from_files)
+}
+
+/// The results error for a `files` error: an existing file is [`ResultsError::Exists`] (whose
+/// message says results are never overwritten), anything else an I/O error on its path.
+fn from_files(e: files::Error) -> ResultsError {
+    match e {
+        files::Error::Exists { path } => ResultsError::Exists { path },
+        files::Error::Io { path, op, source } => ResultsError::Io {
+            path,
+            op,
+            cause: source,
+        },
+        other => ResultsError::Io {
+            path: other.path().to_path_buf(),
+            op: "write",
+            cause: std::io::Error::other(other.to_string()),
+        },
     }
 }
 

@@ -4,7 +4,7 @@ use std::fmt::Write as _;
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use lab::clips::ClipOptions;
 use motion::{Clip, SkeletonFormat, fk, io, synth};
 
@@ -103,6 +103,10 @@ pub enum ClipCommand {
         /// Positions in centimetres instead of file units.
         #[arg(long)]
         cm: bool,
+        /// Replace output files that exist (atomically); without it an existing output is
+        /// refused.
+        #[arg(long)]
+        force: bool,
     },
     /// Convert between formats: ASF/AMC → BVH, or rewrite in the same format.
     Convert {
@@ -114,6 +118,10 @@ pub enum ClipCommand {
         /// Output skeleton for `.amc` output.
         #[arg(long, value_name = "SKEL")]
         out_asf: Option<PathBuf>,
+        /// Replace output files that exist (atomically); without it an existing output is
+        /// refused.
+        #[arg(long)]
+        force: bool,
     },
     /// Render stills of the clips side by side as the study window draws them (offscreen,
     /// no display needed), e.g. a reference and its decoded stimulus for a figure.
@@ -129,6 +137,10 @@ pub enum ClipCommand {
         /// Output PNG.
         #[arg(short, long, value_name = "OUT")]
         output: PathBuf,
+        /// Replace output files that exist (atomically); without it an existing output is
+        /// refused.
+        #[arg(long)]
+        force: bool,
     },
 }
 
@@ -150,21 +162,24 @@ pub fn run(cmd: ClipCommand) -> Result<()> {
             csv,
             npy,
             cm,
+            force,
         } => {
+            let mode = files::Mode::from_force(force);
             let loaded = input.load_one()?;
             let pos = fk::positions(&loaded.clip);
             let scale = if cm { pos.cm_per_unit } else { 1.0 };
             if let Some(path) = npy {
-                write_npy(&path, &pos, scale)?;
                 let names = path.with_extension("joints.txt");
-                std::fs::write(&names, pos.names.join("\n") + "\n")
-                    .with_context(|| format!("writing {}", names.display()))?;
+                // Both refused before either is written.
+                files::check_new(&path, mode)?;
+                files::check_new(&names, mode)?;
+                files::write(&path, npy_bytes(&pos, scale)?, mode)?;
+                files::write(&names, pos.names.join("\n") + "\n", mode)?;
                 return Ok(());
             }
             let text = positions_csv(&pos, scale);
             match csv {
-                Some(path) => std::fs::write(&path, text)
-                    .with_context(|| format!("writing {}", path.display()))?,
+                Some(path) => files::write(&path, text, mode)?,
                 None => std::io::stdout().lock().write_all(text.as_bytes())?,
             }
             Ok(())
@@ -173,6 +188,7 @@ pub fn run(cmd: ClipCommand) -> Result<()> {
             input,
             output,
             out_asf,
+            force,
         } => {
             let loaded = input.load_one()?;
             let amc_out = output
@@ -181,7 +197,12 @@ pub fn run(cmd: ClipCommand) -> Result<()> {
             if amc_out && out_asf.is_none() && loaded.clip.skeleton.format == SkeletonFormat::Asf {
                 bail!("AMC output needs --out-asf for its skeleton");
             }
-            io::write_clip(&loaded.clip, &output, out_asf.as_deref())?;
+            io::write_clip(
+                &loaded.clip,
+                &output,
+                out_asf.as_deref(),
+                files::Mode::from_force(force),
+            )?;
             eprintln!("wrote {}", output.display());
             Ok(())
         }
@@ -190,13 +211,25 @@ pub fn run(cmd: ClipCommand) -> Result<()> {
             times,
             pane,
             output,
-        } => render(&input.load()?, &times, pane, &output),
+            force,
+        } => {
+            let mode = files::Mode::from_force(force);
+            // Refused before the (slow) offscreen render.
+            files::check_new(&output, mode)?;
+            render(&input.load()?, &times, pane, &output, mode)
+        }
     }
 }
 
 /// Draws every clip (columns) at every time (rows) with the first clip's camera, so a
 /// reference and its stimuli are framed alike.
-fn render(clips: &[Loaded], times: &[f64], pane: u32, output: &Path) -> Result<()> {
+fn render(
+    clips: &[Loaded],
+    times: &[f64],
+    pane: u32,
+    output: &Path,
+    mode: files::Mode,
+) -> Result<()> {
     use crate::gui::render::{Offscreen, Pane};
     use crate::gui::scene::{Figure, FrameShapes, View};
     let Some(first) = clips.first() else {
@@ -235,7 +268,7 @@ fn render(clips: &[Loaded], times: &[f64], pane: u32, output: &Path) -> Result<(
         .collect();
     let mut offscreen = Offscreen::new(4)?;
     let image = offscreen.render(cols * pane, rows * pane, &panes)?;
-    image.write_png(output)?;
+    image.write_png(output, mode)?;
     eprintln!(
         "wrote {} ({} × {} panes, adapter {})",
         output.display(),
@@ -264,8 +297,8 @@ fn positions_csv(pos: &fk::Positions, scale: f64) -> String {
     s
 }
 
-/// Writes a NumPy v1.0 `.npy` file of little-endian float64, shape (frames, joints, 3).
-fn write_npy(path: &Path, pos: &fk::Positions, scale: f64) -> Result<()> {
+/// A NumPy v1.0 `.npy` file of little-endian float64, shape (frames, joints, 3).
+fn npy_bytes(pos: &fk::Positions, scale: f64) -> Result<Vec<u8>> {
     let mut header = format!(
         "{{'descr': '<f8', 'fortran_order': False, 'shape': ({}, {}, 3), }}",
         pos.frames(),
@@ -287,7 +320,7 @@ fn write_npy(path: &Path, pos: &fk::Positions, scale: f64) -> Result<()> {
             }
         }
     }
-    std::fs::write(path, bytes).with_context(|| format!("writing {}", path.display()))
+    Ok(bytes)
 }
 
 /// The report of `study clip info` for one clip.

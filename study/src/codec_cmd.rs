@@ -38,6 +38,10 @@ pub struct EncodeArgs {
     /// Output folder.
     #[arg(short, long)]
     pub output: PathBuf,
+    /// Replace output files that exist (each atomically); without it an existing output is
+    /// refused before anything is written.
+    #[arg(long)]
+    pub force: bool,
 }
 
 /// Arguments of `study decode`.
@@ -54,6 +58,10 @@ pub struct DecodeArgs {
     /// Output folder.
     #[arg(short, long)]
     pub output: PathBuf,
+    /// Replace output files that exist (each atomically); without it an existing output is
+    /// refused before anything is written.
+    #[arg(long)]
+    pub force: bool,
 }
 
 /// Arguments of `study sweep`.
@@ -86,6 +94,10 @@ pub struct SweepArgs {
     /// Primitive database for the `primitive` codec.
     #[arg(long, value_name = "FILE")]
     pub db: Option<PathBuf>,
+    /// Write into an output folder that holds files, replacing those of the same names (each
+    /// atomically); without it such a folder is refused before anything is made.
+    #[arg(long)]
+    pub force: bool,
 }
 
 /// `study codecs`: prints every codec (the `primitive` codec with a note that it needs
@@ -160,13 +172,23 @@ pub fn encode(args: &EncodeArgs) -> Result<()> {
         params: parse_params(&args.params)?,
         target_cr: args.cr,
     };
+    // Every output is checked before the (possibly long) encode, so a refusal costs nothing
+    // and leaves no partial set behind.
+    let mode = files::Mode::from_force(args.force);
+    let stem = format!("{}.{}", loaded.source.name, c.name());
+    let mcz = args.output.join(format!("{stem}.mcz"));
+    let (motion_file, asf_file, _) = stimulus::clip_files(&loaded.clip, &args.output, &stem, None);
+    for p in std::iter::once(&mcz)
+        .chain([&motion_file])
+        .chain(asf_file.as_ref())
+    {
+        files::check_new(p, mode)?;
+    }
     let made = stimulus::make(c.as_ref(), &loaded.clip, &request)?;
     std::fs::create_dir_all(&args.output)
         .with_context(|| format!("creating {}", args.output.display()))?;
-    let stem = format!("{}.{}", loaded.source.name, c.name());
-    let mcz = args.output.join(format!("{stem}.mcz"));
-    std::fs::write(&mcz, &made.bytes).with_context(|| format!("writing {}", mcz.display()))?;
-    let (motion, _) = stimulus::write_clip_as(&made.decoded, &args.output, &stem, None)?;
+    files::write(&mcz, &made.bytes, mode)?;
+    let (motion, _) = stimulus::write_clip_as(&made.decoded, &args.output, &stem, None, mode)?;
     let m = &made.metrics;
     println!(
         "{}: {} bytes, CR {:.2}, joint RMS {:.3} cm (max {:.2} cm), angle {:.3}°, encode {:.2} ms, decode {:.2} ms",
@@ -219,12 +241,14 @@ pub fn decode(args: &DecodeArgs) -> Result<()> {
         )?;
     std::fs::create_dir_all(&args.output)
         .with_context(|| format!("creating {}", args.output.display()))?;
+    // An ASF clip refers to the skeleton it was decoded for; only the motion is written.
     let asf = (skeleton.format == SkeletonFormat::Asf).then(|| args.skeleton.clone());
     let (motion, _) = stimulus::write_clip_as(
         &clip,
         &args.output,
         &stem_of(&args.bitstream),
         asf.as_deref(),
+        files::Mode::from_force(args.force),
     )?;
     println!(
         "decoded {} frames × {} channels into {}",
@@ -253,6 +277,7 @@ pub fn sweep(args: &SweepArgs) -> Result<()> {
             .jobs
             .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, usize::from)),
         database: args.db.clone(),
+        force: args.force,
     };
     let bar = if args.quiet {
         indicatif::ProgressBar::hidden()

@@ -138,8 +138,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     let seed = args.seed.to_string();
     for protocol in ["mos", "dscqs", "staircase"] {
         let study = out.join(format!("{protocol}.toml"));
-        fs::write(&study, study_text(protocol, mode))
-            .with_context(|| format!("writing {}", study.display()))?;
+        files::write(&study, study_text(protocol, mode), files::Mode::New)?;
         let results = out.join(format!("results-{protocol}"));
         println!(
             "\n[2/3] {protocol}: simulated sessions into {}",

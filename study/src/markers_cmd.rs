@@ -67,6 +67,10 @@ pub struct SynthArgs {
     /// frame.
     #[arg(long, requires = "calibration_out")]
     rom_rest_pose: bool,
+    /// Replace output files that exist (each atomically); without it an existing output is
+    /// refused before anything is written.
+    #[arg(long)]
+    force: bool,
 }
 
 /// Arguments of `study markers solve`.
@@ -87,6 +91,10 @@ pub struct SolveArgs {
     /// centres, hinge axes and classifications are estimated on it and applied to MARKERS.
     #[arg(long, value_name = "ROM")]
     calibration: Option<PathBuf>,
+    /// Replace output files that exist (each atomically); without it an existing output is
+    /// refused before the solve.
+    #[arg(long)]
+    force: bool,
 }
 
 /// Runs a markers subcommand.
@@ -114,7 +122,15 @@ fn synth(args: SynthArgs) -> Result<()> {
         rom_seconds_per_axis,
         rom_ignore_limits,
         rom_rest_pose,
+        force,
     } = args;
+    let mode = files::Mode::from_force(force);
+    for p in std::iter::once(&output)
+        .chain(&segments_out)
+        .chain(&calibration_out)
+    {
+        files::check_new(p, mode)?;
+    }
     let loaded = input.load_one()?;
     let options = synth::SynthOptions {
         noise_mm,
@@ -123,7 +139,7 @@ fn synth(args: SynthArgs) -> Result<()> {
         seed,
     };
     let capture = synth::synth_capture(&loaded.clip, &options)?;
-    data::write_markers(&capture.markers, &output)?;
+    data::write_markers(&capture.markers, &output, mode)?;
     eprintln!(
         "wrote {}: {} markers × {} frames, {} gaps",
         output.display(),
@@ -132,8 +148,7 @@ fn synth(args: SynthArgs) -> Result<()> {
         capture.markers.gap_count()
     );
     if let Some(path) = segments_out {
-        std::fs::write(&path, synth::segment_map_toml(&loaded.clip))
-            .with_context(|| format!("writing {}", path.display()))?;
+        files::write(&path, synth::segment_map_toml(&loaded.clip), mode)?;
         eprintln!("wrote {}", path.display());
     }
     if let Some(path) = calibration_out {
@@ -148,7 +163,7 @@ fn synth(args: SynthArgs) -> Result<()> {
             respect_limits: !rom_ignore_limits,
         };
         let trial = synth::rom_capture(&loaded.clip, &rom, &options)?;
-        data::write_markers(&trial.markers, &path)?;
+        data::write_markers(&trial.markers, &path, mode)?;
         eprintln!(
             "wrote {}: range-of-motion trial, {} markers × {} frames ({:.1} s), {} gaps",
             path.display(),
@@ -168,7 +183,9 @@ fn solve(args: SolveArgs) -> Result<()> {
         output,
         out_asf,
         calibration,
+        force,
     } = args;
+    let mode = files::Mode::from_force(force);
     let is = |p: &PathBuf, e: &str| p.extension().is_some_and(|x| x.eq_ignore_ascii_case(e));
     match (is(&output, "bvh"), is(&output, "amc"), &out_asf) {
         (true, _, None) => {}
@@ -186,6 +203,9 @@ fn solve(args: SolveArgs) -> Result<()> {
             "{}: the solved clip is written as .bvh or .amc",
             output.display()
         ),
+    }
+    for p in std::iter::once(&output).chain(&out_asf) {
+        files::check_new(p, mode)?;
     }
     let set = data::read_markers(&markers)?;
     let map = segments::read_segments(&seg_path)?;
@@ -217,9 +237,9 @@ fn solve(args: SolveArgs) -> Result<()> {
     };
     if out_asf.is_some() {
         let asf = acclaim::bvh_to_asf(&solved.clip)?;
-        motion::io::write_clip(&asf.clip, &output, out_asf.as_deref())?;
+        motion::io::write_clip(&asf.clip, &output, out_asf.as_deref(), mode)?;
     } else {
-        motion::io::write_clip(&solved.clip, &output, None)?;
+        motion::io::write_clip(&solved.clip, &output, None, mode)?;
     }
     for (i, j) in solved.joints.iter().enumerate() {
         let kind = match j.kind {

@@ -34,6 +34,10 @@ pub enum PrimitivesCommand {
         /// Seed of the k-means++ seeding.
         #[arg(long, default_value_t = 0x5EED)]
         seed: u64,
+        /// Replace the database file if it exists (atomically); without it an existing
+        /// file is refused before training.
+        #[arg(long)]
+        force: bool,
     },
     /// Print a database's joints, primitive counts and clustering errors.
     Info {
@@ -56,7 +60,9 @@ pub fn run(cmd: PrimitivesCommand) -> Result<()> {
             error_bound,
             max_frames,
             seed,
+            force,
         } => {
+            let mode = files::Mode::from_force(force);
             if !(error_bound.is_finite() && error_bound > 0.0) {
                 bail!("--error-bound must be a positive number of radians");
             }
@@ -66,6 +72,7 @@ pub fn run(cmd: PrimitivesCommand) -> Result<()> {
             if !(1..=4096).contains(&k_max) {
                 bail!("--k-max must be between 1 and 4096");
             }
+            files::check_new(&output, mode)?;
             let options = lab::clips::ClipOptions {
                 asf,
                 bvh_unit_cm: None,
@@ -89,7 +96,7 @@ pub fn run(cmd: PrimitivesCommand) -> Result<()> {
                 eprint!("\r  joints clustered: {done}/{total}");
             });
             eprintln!();
-            db.write(&output)?;
+            db.write(&output, mode)?;
             eprintln!(
                 "wrote {} ({} bytes, fingerprint {:08x})",
                 output.display(),

@@ -80,6 +80,10 @@ pub struct ReportArgs {
     /// Write SVG figures only (no PNG).
     #[arg(long)]
     pub no_png: bool,
+    /// Write into an output directory that holds files, replacing those of the same names
+    /// (each atomically); without it such a directory is refused before the analysis.
+    #[arg(long)]
+    pub force: bool,
 }
 
 /// The staircase level's name in tables and figures: the thesis's `t_L`, a target ratio, or
@@ -192,6 +196,8 @@ pub fn run(args: &ReportArgs) -> Result<()> {
     if options.fit.shape == Shape::Weibull {
         check_weibull_levels(&sessions)?;
     }
+    let mode = files::Mode::from_force(args.force);
+    files::prepare_dir(&args.output, mode)?;
     let analysis = analyze(&converted.data, &options)?;
     let title = format!(
         "Study {} ({} protocol, {} sessions)",
@@ -218,24 +224,22 @@ pub fn run(args: &ReportArgs) -> Result<()> {
             .collect::<Vec<_>>()
             .join(", ")
     ));
-    let written = report.write(&args.output, !args.no_png)?;
-    let tidy = args.output.join("ratings.csv");
-    std::fs::write(
-        &tidy,
+    let written = report.write(&args.output, !args.no_png, mode)?;
+    files::write(
+        &args.output.join("ratings.csv"),
         export::tidy_csv(&converted.data.ratings, &converted.data.conditions),
-    )
-    .with_context(|| format!("writing {}", tidy.display()))?;
-    let sureal = args.output.join("sureal_dataset.py");
-    std::fs::write(
-        &sureal,
+        mode,
+    )?;
+    files::write(
+        &args.output.join("sureal_dataset.py"),
         export::sureal_dataset(
             &run.study,
             &converted.data.ratings,
             &converted.data.conditions,
             study.scale.max,
         ),
-    )
-    .with_context(|| format!("writing {}", sureal.display()))?;
+        mode,
+    )?;
     println!(
         "{}: {} files ({} ratings, {} DSCQS pairs, {} staircases, {} 2AFC trials); open {}",
         args.output.display(),

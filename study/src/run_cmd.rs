@@ -2,11 +2,10 @@
 //! window's frame timing on this display.
 
 use std::fmt::Write as _;
-use std::fs;
 use std::path::PathBuf;
 use std::sync::Arc;
 
-use anyhow::{Context as _, bail};
+use anyhow::bail;
 use clap::Args;
 use lab::StudyFile;
 use lab::session::{self, Opened, Recorder, SessionOf};
@@ -396,8 +395,7 @@ pub fn display_test(args: &DisplayTestArgs) -> anyhow::Result<()> {
             "cpu_p50_ms": percentile(&cpu, 0.5),
             "cpu_p99_ms": percentile(&cpu, 0.99),
         });
-        fs::write(path, serde_json::to_vec_pretty(&json)?)
-            .with_context(|| format!("writing {}", path.display()))?;
+        files::write(path, serde_json::to_vec_pretty(&json)?, files::Mode::New)?;
     }
     Ok(())
 }

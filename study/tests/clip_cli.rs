@@ -103,7 +103,8 @@ fn positions_csv_has_one_row_per_joint_and_frame_with_file_names() {
         assert!(text.contains(",LeftToe_End,"));
         assert_eq!(text.lines().count(), 1 + 994 * 38);
     }
-    ok(&["clip", "positions", "--demo", "--csv", &o]);
+    // The same file again: replaced only with --force.
+    ok(&["clip", "positions", "--demo", "--csv", &o, "--force"]);
     let text = std::fs::read_to_string(&out).unwrap();
     assert!(text.lines().nth(1).unwrap().starts_with("0,root,"));
 }

@@ -87,7 +87,8 @@ fn example_clips_are_the_generated_motions() {
             .extension()
             .is_some_and(|e| e.eq_ignore_ascii_case("amc"));
         let asf = is_amc.then(|| out.join("walker.asf"));
-        motion::io::write_clip(&clip, &out.join(file), asf.as_deref()).unwrap();
+        motion::io::write_clip(&clip, &out.join(file), asf.as_deref(), files::Mode::Replace)
+            .unwrap();
         if !regenerate {
             for f in std::iter::once(file).chain(asf.as_ref().map(|_| "walker.asf")) {
                 assert_eq!(

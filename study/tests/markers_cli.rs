@@ -154,7 +154,7 @@ fn small_c3d(dir: &Path) -> Vec<u8> {
         }
     }
     let path = dir.join("base.c3d");
-    data::write_c3d(&set, &path).unwrap();
+    data::write_c3d(&set, &path, files::Mode::Replace).unwrap();
     std::fs::read(&path).unwrap()
 }
 
@@ -324,7 +324,7 @@ fn mismatched_calibration_trial_names_the_file_and_marker() {
                 out.set(f, i, set.get(f, m));
             }
         }
-        data::write_csv(&out, to).unwrap();
+        data::write_csv(&out, to, files::Mode::Replace).unwrap();
     };
     let gone = data::read_markers(&c3d).unwrap().names()[7].clone();
     let (rom_less, motion_less) = (dir.join("rom-less.csv"), dir.join("motion-less.csv"));

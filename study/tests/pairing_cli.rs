@@ -46,6 +46,7 @@ fn write_clips(dir: &Path) {
             clip,
             &dir.join(format!("{name}.amc")),
             Some(&dir.join(format!("{name}.asf"))),
+            files::Mode::Replace,
         )
         .unwrap();
     }

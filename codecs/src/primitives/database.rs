@@ -84,11 +84,11 @@ pub struct Database {
     pub joints: Vec<JointPrimitives>,
 }
 
-/// Why a database file could not be read.
+/// Why a database file could not be read or written.
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum DatabaseError {
-    /// The file could not be read or written.
+    /// The file could not be read.
     #[error("{path}: {err}")]
     Io {
         /// The file.
@@ -96,6 +96,9 @@ pub enum DatabaseError {
         /// The OS error.
         err: std::io::Error,
     },
+    /// The file could not be written, or exists and was not to be replaced.
+    #[error(transparent)]
+    File(#[from] files::Error),
     /// Not a primitive database.
     #[error("{path}: not a primitive database (bad magic)")]
     BadMagic {
@@ -457,15 +460,14 @@ impl Database {
         })
     }
 
-    /// Writes the database file.
+    /// Writes the database file, whole or not at all ([`files::write`]); an existing file is
+    /// replaced only with [`files::Mode::Replace`].
     ///
     /// # Errors
-    /// [`DatabaseError::Io`] when the file cannot be written.
-    pub fn write(&self, path: &Path) -> Result<(), DatabaseError> {
-        std::fs::write(path, self.to_bytes()).map_err(|err| DatabaseError::Io {
-            path: path.to_path_buf(),
-            err,
-        })
+    /// [`DatabaseError::File`] when the file cannot be written or exists under
+    /// [`files::Mode::New`].
+    pub fn write(&self, path: &Path, mode: files::Mode) -> Result<(), DatabaseError> {
+        Ok(files::write(path, self.to_bytes(), mode)?)
     }
 
     /// Reads a database file.

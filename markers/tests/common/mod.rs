@@ -12,7 +12,7 @@ pub fn assert_survives_a_bvh_round_trip(clip: &motion::Clip, tag: &str) {
     let dir = std::env::temp_dir().join(format!("{tag}-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("solved.bvh");
-    motion::io::write_clip(clip, &path, None).unwrap();
+    motion::io::write_clip(clip, &path, None, files::Mode::Replace).unwrap();
     let back = motion::io::read_clip(None, &path).unwrap();
     std::fs::remove_dir_all(&dir).ok();
     let (a, b) = (motion::fk::positions(clip), motion::fk::positions(&back));

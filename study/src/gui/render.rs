@@ -427,14 +427,14 @@ impl Image {
         p
     }
 
-    /// Writes the image as PNG.
+    /// Writes the image as PNG, whole or not at all ([`files::AtomicFile`]); an existing file
+    /// is replaced only with [`files::Mode::Replace`].
     ///
     /// # Errors
-    /// I/O or encoder errors, naming the file.
-    pub fn write_png(&self, path: &std::path::Path) -> anyhow::Result<()> {
-        let file =
-            std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
-        let mut enc = png::Encoder::new(std::io::BufWriter::new(file), self.width, self.height);
+    /// I/O or encoder errors, or an existing file under [`files::Mode::New`], naming the file.
+    pub fn write_png(&self, path: &std::path::Path, mode: files::Mode) -> anyhow::Result<()> {
+        let mut file = files::AtomicFile::create(path, mode)?;
+        let mut enc = png::Encoder::new(&mut file, self.width, self.height);
         enc.set_color(png::ColorType::Rgba);
         enc.set_depth(png::BitDepth::Eight);
         let mut w = enc
@@ -444,6 +444,7 @@ impl Image {
             .with_context(|| format!("writing {}", path.display()))?;
         w.finish()
             .with_context(|| format!("writing {}", path.display()))?;
+        file.commit()?;
         Ok(())
     }
 

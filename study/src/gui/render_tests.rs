@@ -74,7 +74,7 @@ fn a_known_pose_matches_the_reference_image() {
     }
     let path = reference_path();
     if std::env::var_os("UPDATE_REFERENCE").is_some() {
-        img.write_png(&path).unwrap();
+        img.write_png(&path, files::Mode::Replace).unwrap();
         eprintln!("wrote {}", path.display());
         return;
     }
