@@ -114,7 +114,7 @@ pub fn write_clip_as(
 ) -> Result<(PathBuf, Option<PathBuf>)> {
     let (m, a, write_asf) = clip_files(clip, dir, stem, asf);
     let written_asf = a.as_deref().filter(|_| write_asf);
-    motion::io::write_clip(clip, &m, written_asf, mode)
-        .context(|| format!("writing {}", m.display()))?;
+    // The writer's errors name the file already.
+    motion::io::write_clip(clip, &m, written_asf, mode)?;
     Ok((m, a))
 }

@@ -103,6 +103,9 @@ pub struct DisplayTestArgs {
     /// Also write the measurements as JSON here.
     #[arg(long)]
     pub json: Option<PathBuf>,
+    /// Replace an existing `--json` file.
+    #[arg(long)]
+    pub force: bool,
 }
 
 /// `study run`: one subject's session in the window.
@@ -317,6 +320,11 @@ pub fn display_test(args: &DisplayTestArgs) -> anyhow::Result<()> {
     if !(args.seconds.is_finite() && args.seconds > 0.0 && args.seconds <= 3600.0) {
         bail!("--seconds {}: expected 0 < seconds ≤ 3600", args.seconds);
     }
+    // Refused before the measurement, not after it.
+    let mode = files::Mode::from_force(args.force);
+    if let Some(path) = &args.json {
+        files::check_new(path, mode)?;
+    }
     let clip = match &args.clip {
         Some(p) => motion::io::read_clip(args.asf.as_deref(), p)?,
         None => motion::synth::walking_clip(&motion::synth::WalkParams::default()),
@@ -395,7 +403,7 @@ pub fn display_test(args: &DisplayTestArgs) -> anyhow::Result<()> {
             "cpu_p50_ms": percentile(&cpu, 0.5),
             "cpu_p99_ms": percentile(&cpu, 0.99),
         });
-        files::write(path, serde_json::to_vec_pretty(&json)?, files::Mode::New)?;
+        files::write(path, serde_json::to_vec_pretty(&json)?, mode)?;
     }
     Ok(())
 }
