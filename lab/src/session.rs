@@ -49,6 +49,30 @@ pub fn session_dir(results: &Path, subject: &str, session: u32) -> PathBuf {
     results.join(format!("{subject}_s{session}"))
 }
 
+/// Removes session folder `dir` if nothing happened in it: no trial logged and never
+/// resumed, what a runner that could not open its window leaves. Returns whether it did; a
+/// folder holding anything else is left as it is.
+///
+/// # Errors
+/// The folder's files cannot be read or removed.
+pub fn discard_unstarted(dir: &Path) -> Result<bool> {
+    use results::store::{LOCK_FILE, SESSION_FILE, TRIALS_FILE};
+    let manifest: SessionManifest = read_manifest(&dir.join(SESSION_FILE))?;
+    let trials = results::read_trials(&dir.join(TRIALS_FILE))?;
+    if manifest.resumes > 0 || !trials.records.is_empty() || trials.torn.is_some() {
+        return Ok(false);
+    }
+    for f in [SESSION_FILE, TRIALS_FILE, LOCK_FILE] {
+        match std::fs::remove_file(dir.join(f)) {
+            Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+                return Err(io_error(dir.join(f))(e));
+            }
+            _ => {}
+        }
+    }
+    Ok(std::fs::remove_dir(dir).is_ok())
+}
+
 /// Per-frame presentation intervals of a window session, beside `trials.csv`.
 pub const FRAMES_FILE: &str = "frames.csv";
 
@@ -276,7 +300,10 @@ impl Recorder {
             if let Some(m) = &old {
                 check_same_session(&manifest_path, m, &fresh)?;
             }
-            if let Some(m) = old.as_ref().filter(|m| m.status != SessionState::Running) {
+            if let Some(m) = old
+                .as_ref()
+                .filter(|m| matches!(m.status, SessionState::Complete | SessionState::TimeLimit))
+            {
                 // A crash after the final manifest write can leave the lock behind: take the
                 // stale lock over and release it (refused if a live runner holds it).
                 drop(SessionLock::acquire(dir)?);
@@ -285,6 +312,8 @@ impl Recorder {
             let resumed = SessionLog::resume(dir)?;
             let mut m = old.unwrap_or(fresh);
             m.resumes += 1;
+            m.status = SessionState::Running;
+            m.ended_ms = None;
             if let Some((row, aside)) = &resumed.torn {
                 let name = aside
                     .file_name()
@@ -412,7 +441,10 @@ impl Recorder {
             timing,
         };
         self.log.append(&record)?;
+        // The manifest's count follows every row, so a session stopped at any point (but a
+        // kill between these two writes) reads as many trials in both files.
         self.manifest.trials_logged = self.log.rows();
+        self.log.write_manifest(&self.manifest)?;
         Ok(outcome)
     }
 
@@ -443,6 +475,19 @@ impl Recorder {
         f.write_all(text.as_bytes())
             .and_then(|()| f.flush())
             .map_err(io_error(&path))?;
+        Ok(())
+    }
+
+    /// Marks the session interrupted (stopped on purpose before its end, resumable) and
+    /// writes the manifest with the rows on disk.
+    ///
+    /// # Errors
+    /// The manifest cannot be written.
+    pub fn interrupt(&mut self) -> Result<()> {
+        self.manifest.status = SessionState::Interrupted;
+        self.manifest.trials_logged = self.log.rows();
+        self.manifest.ended_ms = Some(now_ms());
+        self.log.write_manifest(&self.manifest)?;
         Ok(())
     }
 

@@ -213,8 +213,11 @@ impl Drop for SessionLock {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum SessionState {
-    /// Started, not finished (or interrupted).
+    /// Started, not finished: being run, or stopped without a word (a crash, SIGKILL).
     Running,
+    /// Stopped on purpose before the end (the experimenter quit, SIGINT or SIGTERM), with its
+    /// state saved: resumable, like a running one.
+    Interrupted,
     /// Every trial done.
     Complete,
     /// Ended by the session time limit.

@@ -4,8 +4,9 @@
 use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 
-use anyhow::bail;
+use anyhow::{Context as _, bail};
 use clap::Args;
 use lab::StudyFile;
 use lab::session::{self, Opened, Recorder, SessionOf};
@@ -130,15 +131,46 @@ pub fn run(args: &RunArgs) -> anyhow::Result<()> {
             args.study.display()
         );
     }
+    // SIGINT (Ctrl+C in the experimenter's terminal) and SIGTERM stop the session the way
+    // "Quit and save" does: state saved, session marked interrupted, resume command printed.
+    let signalled = Arc::new(AtomicBool::new(false));
+    for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        signal_hook::flag::register(sig, Arc::clone(&signalled))
+            .context("installing the SIGINT/SIGTERM handler")?;
+    }
     let Some(recorder) = open_session(args, &file, &out)? else {
         return Ok(());
     };
+    let dir = session::session_dir(&out, &args.subject, args.session);
     let stimuli = lab::source::open(&file)?;
     let study = Arc::new(file.definition);
     let screens = StudyUi::new(Arc::clone(&study), stimuli, recorder, true);
     let options = args.window.options(format!("study: {}", study.name));
-    let (report, exit) = run_screens(&options, screens)?;
+    let (report, exit) = match run_screens(&options, screens, &signalled) {
+        Ok(r) => r,
+        Err(e) => {
+            // A window that never opened leaves no session behind (a resumed one is kept).
+            if !args.resume && session::discard_unstarted(&dir).unwrap_or(false) {
+                return Err(e.context(format!(
+                    "the window did not open; no session was recorded in {}",
+                    dir.display()
+                )));
+            }
+            return Err(e);
+        }
+    };
     print_timing(&report);
+    let resume = || {
+        format!(
+            "study run {} --subject {} --session {} --resume{}",
+            args.study.display(),
+            args.subject,
+            args.session,
+            args.output
+                .as_ref()
+                .map_or_else(String::new, |o| format!(" -o {}", o.display()))
+        )
+    };
     match exit {
         Some(Exit::Finished(summary)) => {
             println!("{summary}");
@@ -147,14 +179,15 @@ pub fn run(args: &RunArgs) -> anyhow::Result<()> {
         }
         Some(Exit::Quit { logged }) => {
             println!(
-                "session stopped by the experimenter after {logged} trials; continue with: \
-                 study run {} --subject {} --session {} --resume{}",
-                args.study.display(),
-                args.subject,
-                args.session,
-                args.output
-                    .as_ref()
-                    .map_or_else(String::new, |o| format!(" -o {}", o.display()))
+                "session stopped by the experimenter after {logged} trials; continue with: {}",
+                resume()
+            );
+            Ok(())
+        }
+        Some(Exit::Signalled { logged }) => {
+            println!(
+                "session interrupted by a signal after {logged} trials, saved; continue with: {}",
+                resume()
             );
             Ok(())
         }
@@ -212,7 +245,9 @@ fn open_session(
 fn run_screens(
     options: &WindowOptions,
     mut screens: StudyUi,
+    signalled: &Arc<AtomicBool>,
 ) -> anyhow::Result<(WindowReport, Option<Exit>)> {
+    let signalled = Arc::clone(signalled);
     let exit = std::rc::Rc::new(std::cell::RefCell::new(None::<Exit>));
     let exit_seen = std::rc::Rc::clone(&exit);
     let mut display_logged = false;
@@ -235,9 +270,16 @@ fn run_screens(
                 );
             }
         }
+        if signalled.load(Ordering::Relaxed) {
+            let logged = screens.recorder_mut().answered();
+            screens.stop(Exit::Signalled { logged });
+        }
         screens.ui(ui, ctx.clock);
         if let Some(e) = screens.exit() {
             *exit_seen.borrow_mut() = Some(e.clone());
+            if matches!(e, Exit::Signalled { .. }) {
+                return Next::Close;
+            }
             // Leave the last screen up briefly so the subject sees it.
             let now = ui.input(|i| i.time);
             let since = *end_shown_at.get_or_insert(now);

@@ -236,3 +236,79 @@ fn without_a_display_run_says_so_and_writes_nothing() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("--subject"));
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// SIGINT (Ctrl+C in the experimenter's terminal) in the middle of a session: the runner
+/// saves, marks the session interrupted with as many trials in the manifest as rows on disk,
+/// prints the resume command and exits; `--resume` then completes the session, each trial
+/// once.
+#[test]
+fn sigint_saves_the_session_and_resume_completes_it() {
+    let Some(env) = setup("sigint") else { return };
+    write_study(&env.dir);
+    let mut child = spawn_run(&env, false);
+    let wid = find_window(&env, &mut child, "study: e2e");
+    answer_until(&env, &wid, &["Return", "4", "Return"], 2);
+    let ok = std::process::Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap()
+        .success();
+    assert!(ok);
+    let out = child.wait_with_output().unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        stdout.contains("interrupted by a signal after 2 trials") && stdout.contains("--resume"),
+        "{stdout}"
+    );
+    let manifest = |env: &Env| -> results::SessionManifest {
+        results::store::read_json(&session_dir(env).join("session.json")).unwrap()
+    };
+    let m = manifest(&env);
+    assert_eq!(m.status, results::store::SessionState::Interrupted);
+    assert_eq!(m.trials_logged as usize, logged_rows(&env));
+    assert_eq!(logged_rows(&env), 2);
+
+    let mut child = spawn_run(&env, true);
+    let wid = find_window(&env, &mut child, "study: e2e");
+    std::thread::sleep(Duration::from_millis(500));
+    answer_until(&env, &wid, &["Return", "3", "Return"], 6);
+    let out = child.wait_with_output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let trials = results::trials::read_trials(&session_dir(&env).join("trials.csv")).unwrap();
+    let idx: Vec<u32> = trials.records.iter().map(|r| r.trial.index).collect();
+    assert_eq!(idx, [0, 1, 2, 3, 4, 5], "every trial exactly once");
+    let m = manifest(&env);
+    assert_eq!(m.status, results::store::SessionState::Complete);
+    assert_eq!((m.trials_logged, m.resumes), (6, 1));
+}
+
+/// A display that cannot be opened (a DISPLAY naming no X server) stops `study run` with an
+/// error and leaves no session folder behind.
+#[test]
+fn a_window_that_cannot_open_leaves_no_session() {
+    let dir = std::env::temp_dir().join(format!("study-nowindow-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    write_study(&dir);
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_study"))
+        .args(["run", "study.toml", "--subject", "S01", "-o", "results"])
+        .env("DISPLAY", ":4093")
+        .env_remove("WAYLAND_DISPLAY")
+        .current_dir(&dir)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{err}");
+    assert!(err.contains("no session was recorded"), "{err}");
+    assert!(!dir.join("results/S01_s1").exists(), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

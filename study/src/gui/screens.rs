@@ -75,6 +75,11 @@ pub enum Exit {
         /// Trials logged so far.
         logged: u32,
     },
+    /// SIGINT or SIGTERM stopped the session; it is resumable.
+    Signalled {
+        /// Trials logged so far.
+        logged: u32,
+    },
     /// An error stopped the session (it is resumable).
     Failed(String),
 }
@@ -217,6 +222,27 @@ impl StudyUi {
     /// True while a trial presentation is running (the window repaints continuously then).
     pub fn animating(&self) -> bool {
         matches!(self.screen, Screen::Trial(_))
+    }
+
+    /// Stops the session before its end (the experimenter quit, or a signal): the manifest
+    /// is marked interrupted with the rows on disk, and the end screen says it can be resumed.
+    /// Does nothing once the session has ended.
+    pub fn stop(&mut self, why: Exit) {
+        if self.exit.is_some() {
+            return;
+        }
+        let logged = self.recorder.answered();
+        if let Err(e) = self.recorder.interrupt() {
+            self.exit = Some(Exit::Failed(format!(
+                "saving the interrupted session: {}",
+                lab::error::chain(&e)
+            )));
+            return;
+        }
+        self.screen = Screen::End(format!(
+            "Session paused after {logged} trials; it can be resumed."
+        ));
+        self.exit = Some(why);
     }
 
     /// The window's close button: asks for confirmation instead of closing mid-session.
@@ -553,10 +579,7 @@ impl StudyUi {
                     ui.horizontal(|ui| {
                         if ui.button("Quit and save").clicked() {
                             self.pause = Pause::None;
-                            self.exit = Some(Exit::Quit { logged });
-                            self.screen = Screen::End(format!(
-                                "Session paused after {logged} trials; it can be resumed."
-                            ));
+                            self.stop(Exit::Quit { logged });
                         }
                         if ui.button("Back").clicked() {
                             self.pause = Pause::None;

@@ -329,7 +329,11 @@ fn pause_and_quit_need_confirmation_and_record_nothing() {
     assert_eq!(h.state().0.exit(), Some(&Exit::Quit { logged: 1 }));
     assert_eq!(rows(&run.session_dir).len(), 1);
     let m: results::SessionManifest = read_json(&run.session_dir.join(SESSION_FILE)).unwrap();
-    assert_eq!(m.status, SessionState::Running);
+    assert_eq!(m.status, SessionState::Interrupted);
+    assert_eq!(m.trials_logged, 1, "the manifest counts the rows on disk");
+    // A signal afterwards changes nothing: the session has already stopped.
+    h.state_mut().0.stop(Exit::Signalled { logged: 1 });
+    assert_eq!(h.state().0.exit(), Some(&Exit::Quit { logged: 1 }));
     drop(run.fx);
 }
 

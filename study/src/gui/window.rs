@@ -172,7 +172,10 @@ impl<F: FnMut(&mut egui::Ui, &mut FrameContext<'_>) -> Next> eframe::App for Win
         self.publish(frame.info().cpu_usage);
         match next {
             Next::Animate => ui.ctx().request_repaint(),
-            Next::Idle => {}
+            // Still woken a few times a second, so a signal is noticed on an idle screen.
+            Next::Idle => ui
+                .ctx()
+                .request_repaint_after(std::time::Duration::from_millis(200)),
             Next::Close => {
                 self.closing = true;
                 ui.ctx().send_viewport_cmd(egui::ViewportCommand::Close);
