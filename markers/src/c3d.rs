@@ -35,9 +35,42 @@ fn c3d_err(path: &Path, reason: impl Into<String>) -> MarkerError {
     }
 }
 
+/// Where a C3D file's sections are and what its header says, once checked.
+struct Layout {
+    /// Byte where the parameter section starts.
+    parameters_at: usize,
+    /// Byte where the data section starts.
+    data_at: usize,
+    /// MIPS: big-endian words.
+    big_endian: bool,
+    /// Points per frame (header word 2).
+    markers: usize,
+    /// Analog samples per frame, all channels (header word 3).
+    analog_samples: usize,
+    /// Float storage: `POINT:SCALE` (header words 7-8) negative or zero, as `c3dio` decides.
+    float: bool,
+}
+
+/// Whether the header's scale (bytes 12-15) marks float storage: negative or zero. For DEC the
+/// sign and exponent sit in the first 16-bit word, as they do in the high word of an IEEE float.
+fn float_storage(bytes: &[u8], processor: u8) -> bool {
+    let b = [bytes[12], bytes[13], bytes[14], bytes[15]];
+    let bits = match processor {
+        0x56 => u32::from_be_bytes(b),
+        0x55 => u32::from_le_bytes([b[2], b[3], b[0], b[1]]),
+        _ => u32::from_le_bytes(b),
+    };
+    let (negative, zero) = (bits >> 31 == 1, bits << 1 == 0);
+    negative || zero
+}
+
 /// Checks the 512-byte C3D header against the file length before `c3dio` allocates from it:
 /// the header's marker and frame counts must fit in the file.
-fn check_c3d_header(bytes: &[u8], path: &Path, limits: &MarkerLimits) -> Result<(), MarkerError> {
+fn check_c3d_header(
+    bytes: &[u8],
+    path: &Path,
+    limits: &MarkerLimits,
+) -> Result<Layout, MarkerError> {
     if bytes.len() < 1024 {
         return Err(c3d_err(
             path,
@@ -110,7 +143,97 @@ fn check_c3d_header(bytes: &[u8], path: &Path, limits: &MarkerLimits) -> Result<
             ),
         ));
     }
-    Ok(())
+    Ok(Layout {
+        parameters_at: (param_block - 1) * 512,
+        data_at: (data_block - 1) * 512,
+        big_endian: big,
+        markers,
+        analog_samples: analog,
+        float: float_storage(bytes, processor),
+    })
+}
+
+/// The position of the value of parameter `group:name` in `section` (a parameter section from
+/// its 4-byte header on) and its element size, if the chain of records from the start reaches
+/// it and its first element lies inside the section. Every step moves forward and stays in
+/// `section`, so the walk ends on any input.
+fn find_parameter(
+    section: &[u8],
+    big_endian: bool,
+    group: &str,
+    name: &str,
+) -> Option<(i8, usize)> {
+    // (id, name, first byte after the offset) of each record.
+    let mut records: Vec<(i8, &[u8], usize)> = Vec::new();
+    let mut pos = 4;
+    while pos + 2 <= section.len() {
+        let n = usize::from((section[pos] as i8).unsigned_abs());
+        let id = section[pos + 1] as i8;
+        if n == 0 || id == 0 {
+            break;
+        }
+        let offset_at = pos + 2 + n;
+        let offset = section.get(offset_at..offset_at + 2)?;
+        let offset = [offset[0], offset[1]];
+        let offset = if big_endian {
+            i16::from_be_bytes(offset)
+        } else {
+            i16::from_le_bytes(offset)
+        };
+        records.push((id, &section[pos + 2..offset_at], offset_at + 2));
+        // 0 marks the last record; a negative offset cannot be followed.
+        let Ok(step) = usize::try_from(offset) else {
+            break;
+        };
+        if step == 0 {
+            break;
+        }
+        pos = offset_at + step;
+    }
+    let (group_id, _, _) = records
+        .iter()
+        .find(|(id, n, _)| *id < 0 && n.eq_ignore_ascii_case(group.as_bytes()))?;
+    let (_, _, body) = records.iter().find(|(id, n, _)| {
+        i16::from(*id) == -i16::from(*group_id) && n.eq_ignore_ascii_case(name.as_bytes())
+    })?;
+    let element = *section.get(*body)? as i8;
+    let data = body + 2 + usize::from(*section.get(body + 1)?);
+    (data + usize::from(element.unsigned_abs()) <= section.len()).then_some((element, data))
+}
+
+/// `bytes` without the analog samples, for `c3dio` to read the points from, or `None` when
+/// there are none (or the layout leaves no parameter section to find `ANALOG:USED` in).
+///
+/// `c3dio` parses the analog channels too and refuses a file whose `ANALOG` group lacks a
+/// parameter it wants (py-c3d writes no `ANALOG:UNITS`), though the points are all this reader
+/// returns. So it gets the file as if it had no analog channels: header words 3 and 10 zero,
+/// `ANALOG:USED` 0, and each frame's analog samples cut from the data section.
+fn points_only(bytes: &[u8], layout: &Layout) -> Option<Vec<u8>> {
+    if layout.analog_samples == 0 || layout.data_at <= layout.parameters_at {
+        return None;
+    }
+    let (point_bytes, analog_bytes) = if layout.float {
+        (16 * layout.markers, 4 * layout.analog_samples)
+    } else {
+        (8 * layout.markers, 2 * layout.analog_samples)
+    };
+    let stride = point_bytes + analog_bytes;
+    let frames = (bytes.len() - layout.data_at) / stride;
+    let mut out = Vec::with_capacity(layout.data_at + frames * point_bytes + 512);
+    out.extend_from_slice(&bytes[..layout.data_at]);
+    out[4..6].fill(0);
+    out[18..20].fill(0);
+    let section = &out[layout.parameters_at..layout.data_at];
+    if let Some((2, at)) = find_parameter(section, layout.big_endian, "ANALOG", "USED") {
+        let at = layout.parameters_at + at;
+        out[at..at + 2].fill(0);
+    }
+    for f in 0..frames {
+        let start = layout.data_at + f * stride;
+        out.extend_from_slice(&bytes[start..start + point_bytes]);
+    }
+    out.resize(out.len().div_ceil(512) * 512, 0);
+    Some(out)
 }
 
 /// Reads a C3D file with [`MarkerLimits::default`]; see [`read_c3d_with`].
@@ -124,7 +247,8 @@ pub fn read_c3d(path: &Path) -> Result<MarkerSet, MarkerError> {
 /// Reads the 3-D points of a C3D file: labels from `POINT:LABELS` (continued in `LABELS2`,
 /// `LABELS3`, … past 255 points), units from `POINT:UNITS`
 /// (`mm`, `cm` or `m`, converted to mm; empty means mm), and a gap wherever the residual is
-/// negative, a coordinate is not finite, or the point is exactly (0, 0, 0).
+/// negative, a coordinate is not finite, or the point is exactly (0, 0, 0). Analog channels
+/// are skipped, and so is whatever the `ANALOG` group lacks.
 ///
 /// # Errors
 /// [`MarkerError::Io`], [`MarkerError::Limit`] (checked on the file size and the header's
@@ -147,7 +271,9 @@ pub fn parse_c3d(
     path: &Path,
     limits: &MarkerLimits,
 ) -> Result<MarkerSet, MarkerError> {
-    check_c3d_header(bytes, path, limits)?;
+    let layout = check_c3d_header(bytes, path, limits)?;
+    let points_only = points_only(bytes, &layout);
+    let bytes = points_only.as_deref().unwrap_or(bytes);
     // c3dio indexes its input without bounds checks in places; a malformed file that passes
     // the header checks above must still end as this error, not a crash, and without the
     // panic hook printing c3dio's message next to it.
