@@ -33,7 +33,6 @@ import numpy as np
 
 
 def versions():
-    import c3d
     import ezc3d
     from importlib.metadata import version
     return {"ezc3d": getattr(ezc3d, "__version__", version("ezc3d")),
