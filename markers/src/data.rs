@@ -1,5 +1,5 @@
 //! Marker trajectories: a markers × frames set of positions in millimetres with gaps, read
-//! from and written to C3D (via `c3dio`) and a simple CSV (`frame,marker,x,y,z`).
+//! from and written to C3D ([`crate::c3d`]) and a simple CSV (`frame,marker,x,y,z`).
 //!
 //! Missing samples are `None`, never zeros: in C3D a negative residual marks a sample invalid,
 //! and a sample at exactly (0, 0, 0) is the "zeroed" missing point of seed 003 (section 2.4).
@@ -7,8 +7,9 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use super::quiet::catch_quiet;
 use super::{MarkerError, MarkerLimits};
+
+pub use super::c3d::{parse_c3d, read_c3d, read_c3d_with, write_c3d};
 
 /// Marker positions in millimetres over frames; `None` is a gap.
 #[derive(Debug, Clone, PartialEq)]
@@ -82,7 +83,7 @@ impl MarkerSet {
     }
 }
 
-fn file_len(path: &Path, limits: &MarkerLimits) -> Result<u64, MarkerError> {
+pub(crate) fn file_len(path: &Path, limits: &MarkerLimits) -> Result<u64, MarkerError> {
     let len = std::fs::metadata(path)
         .map_err(|err| MarkerError::Io {
             path: path.to_path_buf(),
@@ -100,7 +101,7 @@ fn file_len(path: &Path, limits: &MarkerLimits) -> Result<u64, MarkerError> {
     Ok(len)
 }
 
-fn check_shape(
+pub(crate) fn check_shape(
     path: &Path,
     markers: usize,
     frames: usize,
@@ -383,271 +384,6 @@ pub fn format_csv(set: &MarkerSet) -> String {
 /// [`MarkerError::File`].
 pub fn write_csv(set: &MarkerSet, path: &Path, mode: files::Mode) -> Result<(), MarkerError> {
     Ok(files::write(path, format_csv(set), mode)?)
-}
-
-fn c3d_err(path: &Path, reason: impl Into<String>) -> MarkerError {
-    MarkerError::C3d {
-        path: path.to_path_buf(),
-        reason: reason.into(),
-    }
-}
-
-/// Checks the 512-byte C3D header against the file length before `c3dio` allocates from it:
-/// the header's marker and frame counts must fit in the file.
-fn check_c3d_header(bytes: &[u8], path: &Path, limits: &MarkerLimits) -> Result<(), MarkerError> {
-    if bytes.len() < 1024 {
-        return Err(c3d_err(
-            path,
-            format!(
-                "{} bytes: shorter than a header and a parameter block",
-                bytes.len()
-            ),
-        ));
-    }
-    if bytes[1] != 0x50 {
-        return Err(c3d_err(
-            path,
-            format!("header byte 2 is {:#04x}, not 0x50", bytes[1]),
-        ));
-    }
-    let param_block = bytes[0] as usize;
-    if param_block < 2 || param_block * 512 > bytes.len() {
-        return Err(c3d_err(
-            path,
-            format!("parameter section starts at block {param_block}, outside the file"),
-        ));
-    }
-    // Processor type: parameter block byte 4 (0x54 Intel, 0x55 DEC, 0x56 MIPS big-endian).
-    let processor = bytes[(param_block - 1) * 512 + 3];
-    let big = match processor {
-        0x54 | 0x55 => false,
-        0x56 => true,
-        other => {
-            return Err(c3d_err(
-                path,
-                format!("unknown processor type {other:#04x}"),
-            ));
-        }
-    };
-    let word = |i: usize| {
-        let b = [bytes[i], bytes[i + 1]];
-        if big {
-            u16::from_be_bytes(b)
-        } else {
-            u16::from_le_bytes(b)
-        }
-    };
-    let markers = word(2) as usize;
-    let analog = word(4) as usize;
-    let (first, last) = (word(6), word(8));
-    if last < first {
-        return Err(c3d_err(
-            path,
-            format!("last frame {last} precedes first frame {first}"),
-        ));
-    }
-    let frames = (last - first) as usize + 1;
-    check_shape(path, markers, frames, limits)?;
-    let data_block = word(16) as usize;
-    if data_block < 2 || data_block.saturating_sub(1) * 512 > bytes.len() {
-        return Err(c3d_err(
-            path,
-            format!("data section starts at block {data_block}, outside the file"),
-        ));
-    }
-    // Integer samples are 8 bytes per point and 2 per analog value; anything smaller than
-    // that cannot be a valid file.
-    let need = frames.saturating_mul(markers.saturating_mul(8).saturating_add(analog * 2));
-    let have = bytes.len() - (data_block - 1) * 512;
-    if need > have {
-        return Err(c3d_err(
-            path,
-            format!(
-                "header claims {markers} markers × {frames} frames, but the data section holds only {have} bytes"
-            ),
-        ));
-    }
-    Ok(())
-}
-
-/// Reads a C3D file with [`MarkerLimits::default`]; see [`read_c3d_with`].
-///
-/// # Errors
-/// See [`read_c3d_with`].
-pub fn read_c3d(path: &Path) -> Result<MarkerSet, MarkerError> {
-    read_c3d_with(path, &MarkerLimits::default())
-}
-
-/// Reads the 3-D points of a C3D file: labels from `POINT:LABELS`, units from `POINT:UNITS`
-/// (`mm`, `cm` or `m`, converted to mm; empty means mm), and a gap wherever the residual is
-/// negative, a coordinate is not finite, or the point is exactly (0, 0, 0).
-///
-/// # Errors
-/// [`MarkerError::Io`], [`MarkerError::Limit`] (checked on the file size and the header's
-/// counts before parsing), or [`MarkerError::C3d`] for a malformed file.
-pub fn read_c3d_with(path: &Path, limits: &MarkerLimits) -> Result<MarkerSet, MarkerError> {
-    file_len(path, limits)?;
-    let bytes = std::fs::read(path).map_err(|err| MarkerError::Io {
-        path: path.to_path_buf(),
-        err,
-    })?;
-    parse_c3d(&bytes, path, limits)
-}
-
-/// Parses C3D bytes; `path` is only used in errors. See [`read_c3d_with`].
-///
-/// # Errors
-/// [`MarkerError::Limit`] or [`MarkerError::C3d`].
-pub fn parse_c3d(
-    bytes: &[u8],
-    path: &Path,
-    limits: &MarkerLimits,
-) -> Result<MarkerSet, MarkerError> {
-    check_c3d_header(bytes, path, limits)?;
-    // c3dio indexes its input without bounds checks in places; a malformed file that passes
-    // the header checks above must still end as this error, not a crash, and without the
-    // panic hook printing c3dio's message next to it.
-    let parsed = catch_quiet(|| c3dio::C3d::from_bytes(bytes).map_err(Box::new))
-        .map_err(|why| {
-            c3d_err(
-                path,
-                format!("malformed file (the parser stopped on inconsistent data: {why})"),
-            )
-        })?
-        .map_err(|e| c3d_err(path, format!("{e:?}")))?;
-    let points = &parsed.points;
-    let markers = points.points.cols();
-    let frames = points.points.rows();
-    check_shape(path, markers, frames, limits)?;
-    let unit: String = points
-        .units
-        .iter()
-        .collect::<String>()
-        .trim()
-        .to_ascii_lowercase();
-    let mm_per_unit = match unit.as_str() {
-        "" | "mm" => 1.0,
-        "cm" => 10.0,
-        "m" => 1000.0,
-        other => {
-            return Err(c3d_err(
-                path,
-                format!("POINT:UNITS {other:?} is not mm, cm or m"),
-            ));
-        }
-    };
-    let mut names: Vec<String> = (0..markers)
-        .map(|m| {
-            points
-                .labels
-                .get(m)
-                .map(|l| l.trim().to_string())
-                .filter(|l| !l.is_empty())
-                .unwrap_or_else(|| format!("M{m:03}"))
-        })
-        .collect();
-    // Labels must be unique for the segment file to name them.
-    for m in 0..names.len() {
-        if names[..m].contains(&names[m]) {
-            names[m] = format!("{}#{m}", names[m]);
-        }
-    }
-    let rate = f64::from(points.frame_rate);
-    let rate = if rate.is_finite() && rate > 0.0 {
-        rate
-    } else {
-        120.0
-    };
-    let mut set = MarkerSet::new(names, frames, rate);
-    for f in 0..frames {
-        for m in 0..markers {
-            let Some(p) = points.points.get(f, m) else {
-                continue;
-            };
-            let xyz = [
-                f64::from(p.point[0]),
-                f64::from(p.point[1]),
-                f64::from(p.point[2]),
-            ];
-            let zeroed = xyz.iter().all(|v| *v == 0.0);
-            if p.residual < 0.0 || zeroed {
-                continue;
-            }
-            set.set(f, m, Some(xyz.map(|v| v * mm_per_unit)));
-        }
-    }
-    Ok(set)
-}
-
-/// Writes a marker set as a floating-point C3D file (units mm, gaps as zeroed points with a
-/// residual of −1, i.e. invalid), whole or not at all; an existing file is replaced only with
-/// [`files::Mode::Replace`].
-///
-/// # Errors
-/// [`MarkerError::C3d`] when the set has more than 65 535 frames or markers (the header's
-/// 16-bit counts) or `c3dio` refuses the file, [`MarkerError::File`] or [`MarkerError::Io`].
-pub fn write_c3d(set: &MarkerSet, path: &Path, mode: files::Mode) -> Result<(), MarkerError> {
-    files::check_new(path, mode)?;
-    if set.frames == 0 || set.frames > 65_535 || set.marker_count() > 65_535 {
-        return Err(c3d_err(
-            path,
-            format!(
-                "{} markers × {} frames: C3D needs 1 to 65 535 of each",
-                set.marker_count(),
-                set.frames
-            ),
-        ));
-    }
-    let mut c3d = c3dio::C3d::new();
-    for group in [
-        "POINT",
-        "ANALOG",
-        "FORCE_PLATFORM",
-        "EVENT",
-        "EVENT_CONTEXT",
-        "MANUFACTURER",
-        "SEG",
-    ] {
-        c3d.parameters.insert_group(group, String::new());
-    }
-    let pts = &mut c3d.points;
-    pts.labels.clone_from(&set.names);
-    pts.descriptions = vec![String::new(); set.marker_count()];
-    pts.units = ['m', 'm', ' ', ' '];
-    pts.frame_rate = set.frame_rate_hz as f32;
-    pts.scale_factor = 1.0;
-    pts.format = c3dio::DataFormat::Float;
-    pts.first_frame = 1;
-    pts.last_frame = set.frames as u16;
-    for f in 0..set.frames {
-        let row: Vec<c3dio::MarkerPoint> = (0..set.marker_count())
-            .map(|m| {
-                if let Some([x, y, z]) = set.get(f, m) {
-                    c3dio::MarkerPoint::new(x as f32, y as f32, z as f32)
-                } else {
-                    let mut gap = c3dio::MarkerPoint::new(0.0, 0.0, 0.0);
-                    gap.residual = -1.0;
-                    gap
-                }
-            })
-            .collect();
-        pts.points.push_row(row);
-    }
-    // c3dio writes only to a path it opens itself (and, unlike the C3D specification, does
-    // not pad the data section to whole 512-byte blocks, which its own reader expects): it
-    // writes to a reserved temporary name, removed on every path out of here, and the padded
-    // bytes go to the target through `files`.
-    let scratch = files::TempPath::beside(path, "c3d")?;
-    catch_quiet(|| c3d.write_path(scratch.path().to_path_buf()).map(|_| ()))
-        .map_err(|why| c3d_err(path, format!("the C3D writer stopped: {why}")))?
-        .map_err(|e| c3d_err(path, format!("{e:?}")))?;
-    let mut bytes = std::fs::read(scratch.path()).map_err(|err| MarkerError::Io {
-        path: scratch.path().to_path_buf(),
-        err,
-    })?;
-    drop(scratch);
-    bytes.resize(bytes.len().div_ceil(512) * 512, 0);
-    Ok(files::write(path, bytes, mode)?)
 }
 
 /// Reads a marker file by extension: `.c3d` or `.csv`.

@@ -5,7 +5,8 @@
 //! marker of a child segment expressed in its parent's frame, the centre of rotation is
 //! `c = x̄ + ½·C⁻¹·S` (eq. 5), with a planar (hinge) variant (eq. 6) when the covariance is
 //! near-singular. [`gdke`] holds the estimator and an iterative least-squares sphere fit for
-//! comparison; [`data`] the marker set with C3D and CSV I/O; [`segments`] the segment/marker
+//! comparison; [`data`] the marker set with CSV I/O; [`c3d`] C3D files (read through `c3dio`,
+//! written by our own standard writer); [`segments`] the segment/marker
 //! assignment file, segment frames (section 2.5) and the solver that produces a
 //! [`Clip`](motion::Clip); [`calibration`] joint centres estimated on a range-of-motion trial
 //! and applied to a motion trial; [`acclaim`] the solved clip as ASF/AMC; [`synth`] synthetic
@@ -13,6 +14,7 @@
 //! parser's panics without printing them.
 
 pub mod acclaim;
+pub mod c3d;
 pub mod calibration;
 pub mod data;
 pub mod gdke;

@@ -6,6 +6,7 @@ mod common;
 use std::path::Path;
 
 use common::{assert_survives_a_bvh_round_trip, dist, walk_clip};
+use markers::c3d::{C3dStorage, format_c3d, write_c3d_with};
 use markers::data::{self, MarkerSet};
 use markers::gdke::{GdkeOptions, JointKind, LsqOptions, gdke, least_squares_sphere};
 use markers::segments::{self, parse_segments};
@@ -384,6 +385,115 @@ fn c3d_round_trips_with_gaps() {
         }
     }
     std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn c3d_integer_storage_round_trips_within_half_a_step() {
+    let dir = std::env::temp_dir().join(format!("markers-int-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("small.c3d");
+    let set = small_set();
+    write_c3d_with(&set, &path, C3dStorage::Integer, files::Mode::Replace).unwrap();
+    let bytes = std::fs::read(&path).unwrap();
+    // Header words 7-8: POINT:SCALE, positive for integer storage; the largest |coordinate|
+    // (1004 mm) maps to at most 32 000 steps.
+    let scale = f64::from(f32::from_le_bytes(bytes[12..16].try_into().unwrap()));
+    assert!(
+        scale > 0.0 && 1004.0 / scale <= 32_000.0 && 1004.0 / scale > 31_999.0,
+        "{scale}"
+    );
+    // 8 bytes per point: 15 samples in one block after header and parameters.
+    assert_eq!(bytes.len() % 512, 0);
+    let back = data::read_c3d(&path).unwrap();
+    assert_eq!(back.names(), set.names());
+    for f in 0..set.frames() {
+        for m in 0..set.marker_count() {
+            match (set.get(f, m), back.get(f, m)) {
+                (Some(a), Some(b)) => {
+                    for k in 0..3 {
+                        assert!((a[k] - b[k]).abs() <= scale * 0.5 + 1e-4, "{a:?} {b:?}");
+                    }
+                }
+                (None, None) => {}
+                (a, b) => panic!("frame {f} marker {m}: {a:?} vs {b:?}"),
+            }
+        }
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A file with analog samples between the frames and an `ANALOG` group that names none of
+/// LABELS, SCALE, OFFSET, UNITS (py-c3d writes no UNITS, which `c3dio` insists on): the
+/// points still read, exactly.
+#[test]
+fn c3d_points_read_past_analog_samples_and_an_incomplete_analog_group() {
+    let set = small_set();
+    let bytes = format_c3d(&set, C3dStorage::Float, Path::new("a.c3d")).unwrap();
+    let word = |b: &[u8], i: usize| usize::from(u16::from_le_bytes([b[i], b[i + 1]]));
+    let data_at = (word(&bytes, 16) - 1) * 512;
+    let mut with_analog = bytes[..data_at].to_vec();
+    // One channel at twice the point rate: 2 samples per frame in all (word 3), 2 per channel
+    // (word 10), ANALOG:USED 1 (its value follows name, offset, type and dimension count).
+    with_analog[4..6].copy_from_slice(&2u16.to_le_bytes());
+    with_analog[18..20].copy_from_slice(&2u16.to_le_bytes());
+    let find = |hay: &[u8], needle: &[u8]| hay.windows(needle.len()).position(|w| w == needle);
+    let analog = find(&with_analog, b"ANALOG").unwrap();
+    let used = analog + find(&with_analog[analog..], b"USED").unwrap();
+    assert_eq!(word(&with_analog, used + 8), 0);
+    with_analog[used + 8..used + 10].copy_from_slice(&1i16.to_le_bytes());
+    let point_bytes = 16 * set.marker_count();
+    for f in 0..set.frames() {
+        let frame = data_at + f * point_bytes;
+        with_analog.extend_from_slice(&bytes[frame..frame + point_bytes]);
+        for k in 0..2 {
+            with_analog.extend_from_slice(&(f as f32 * 10.0 + k as f32).to_le_bytes());
+        }
+    }
+    with_analog.resize(with_analog.len().div_ceil(512) * 512, 0);
+    let back = data::parse_c3d(&with_analog, Path::new("a.c3d"), &MarkerLimits::default()).unwrap();
+    assert_eq!(back, set);
+}
+
+#[test]
+fn c3d_writer_refuses_sets_c3d_cannot_hold() {
+    let p = Path::new("out.c3d");
+    let refused = |set: &MarkerSet, needle: &str| {
+        let e = format_c3d(set, C3dStorage::Float, p).unwrap_err();
+        assert!(matches!(e, MarkerError::C3d { .. }), "{e}");
+        assert!(e.to_string().starts_with("out.c3d: C3D: "), "{e}");
+        assert!(e.to_string().contains(needle), "{e}");
+    };
+    refused(&MarkerSet::new(Vec::new(), 3, 100.0), "1 to 32 767 markers");
+    // 65 535 frames would be FRAMES = 0xFFFF, which ezc3d and py-c3d misread.
+    refused(
+        &MarkerSet::new(vec!["A".into()], 65_535, 100.0),
+        "65 534 frames",
+    );
+    assert!(
+        format_c3d(
+            &MarkerSet::new(vec!["A".into()], 65_534, 100.0),
+            C3dStorage::Float,
+            p
+        )
+        .is_ok()
+    );
+    refused(&MarkerSet::new(vec!["A".into()], 3, 0.0), "frame rate");
+    refused(&MarkerSet::new(vec!["A".into()], 3, f64::NAN), "frame rate");
+    refused(&MarkerSet::new(vec!["A ".into()], 3, 100.0), "space");
+    refused(&MarkerSet::new(vec!["Kn\u{e4}e".into()], 3, 100.0), "ASCII");
+    refused(
+        &MarkerSet::new(vec!["x".repeat(256)], 3, 100.0),
+        "255 bytes",
+    );
+    // 2 000 labels of 80 characters: 160 kB, more than the 255-block parameter section.
+    let long: Vec<String> = (0..2000).map(|i| format!("{i:080}")).collect();
+    refused(
+        &MarkerSet::new(long, 3, 100.0),
+        "255 a C3D parameter section holds",
+    );
+    let mut huge = MarkerSet::new(vec!["A".into()], 1, 100.0);
+    huge.set(0, 0, Some([1e39, 0.0, 0.0]));
+    refused(&huge, "32-bit float range");
 }
 
 #[test]
