@@ -363,7 +363,7 @@ impl Staircase {
 /// written as that decimal.
 const LEVEL_DIGITS: usize = 12;
 
-/// `x` rounded to [`LEVEL_DIGITS`] significant digits (through its decimal form, so the result
+/// `x` rounded to 12 significant digits (through its decimal form, so the result
 /// is the nearest double to that decimal): the level a grid point has. Readers of logs written
 /// before the exact grid (levels accumulated step by step) key them with this, so that
 /// 0.003999999999999993 and 0.004 are one level in every table.
