@@ -13,21 +13,27 @@
 //! 2. bisection between the last probe within the bound and the last one beyond it, until the
 //!    two knob values are within [`KNOB_STEP`] (1 %) of each other.
 //!
-//! Every codec's knob spans a factor of 10⁴ (ln 10⁴ = 9.21), so a search takes
-//! 2 + ⌈log₂(9.21 / ln 1.01)⌉ = 12 encodes (each with its decode and measurement), or 1 when
-//! the smallest stream is within the bound. A codec that reaches ratios natively (SPIHT)
-//! refuses its knob's end, 10 000:1, on a clip whose side information alone exceeds that
-//! budget, naming the largest ratio it reaches; that becomes the end (a narrower span, so no
-//! more bisections), and the refused try is one more encode: [`MAX_ENCODES`] = 13 in all. The stream returned is the
-//! last one within the bound; the last one beyond it, one step (≤ 1 % of the knob) toward
-//! smaller streams, is reported as [`Bounded::smaller`]. The search assumes max error falls as
-//! the stream grows, as it does along every codec's knob up to quantisation noise; where it
-//! does not, the stream returned is still within the bound (only probes that were measured
-//! within it are ever returned), but a smaller one may exist.
+//! Every codec's knob spans a factor of 10⁴ (ln 10⁴ = 9.21), so one knob search takes
+//! 2 + ⌈log₂(9.21 / ln 1.01)⌉ = 12 encodes (each with its decode and measurement), 2 when the
+//! bound is unreachable, 1 when the smallest stream is within it. A codec that reaches ratios
+//! natively (SPIHT) refuses its knob's end, 10 000:1, on a clip whose side information alone
+//! exceeds that budget, naming the largest ratio it reaches; that becomes the end (a narrower
+//! span, so no more bisections), and the refused try is one more encode: [`MAX_KNOB_ENCODES`]
+//! = 13. The stream returned is the last one within the bound; the last one beyond it, one
+//! step (≤ 1 % of the knob) toward smaller streams, is reported as [`Bounded::smaller`]. The
+//! search assumes max error falls as the stream grows, as it does along every codec's knob up
+//! to quantisation noise; where it does not, the stream returned is still within the bound
+//! (only probes measured within it are ever returned), but a smaller one may exist.
 //!
-//! The other parameters are fixed as given: the search never steps the wavelet codecs'
-//! quantiser (QP) as the CR search does, so a stimulus is made with the parameters it is
-//! labelled with.
+//! The wavelet codecs' error has a floor set by their quantiser (QP bits): at the default
+//! QP 10 even α = 1 leaves 2-9 cm of max error on the shared CMU clips. When `qp` is not
+//! given, the search therefore also walks QP ([`QP_RANGE`]): from the default up until the
+//! bound is reachable, then one step at a time in the direction that makes the stream
+//! smaller, while it does (a knob search per QP; the smallest stream found wins, assuming
+//! size is unimodal along QP). That is 12 encodes per reachable QP tried and 2 per
+//! unreachable one; on the shared clips at 0.5-1 cm, 3-5 QPs. A `qp` given (`--param qp=12`,
+//! a sweep variant) is kept, so a stimulus is made with the parameters it is labelled with.
+//! The other parameters are always kept as given.
 
 use std::time::Instant;
 
@@ -41,9 +47,13 @@ use crate::stimulus::{self, Made, Request};
 /// [`Bounded::smaller`] differ by at most this factor in the knob.
 pub const KNOB_STEP: f64 = 0.01;
 
-/// Most encodes a search runs (see the module docs): 12, and one more for a codec that
-/// reaches ratios natively.
-pub const MAX_ENCODES: usize = 13;
+/// Most encodes one knob search runs (see the module docs): 12, and one more for a codec
+/// that reaches ratios natively.
+pub const MAX_KNOB_ENCODES: usize = 13;
+
+/// The quantiser bits the wavelet codecs take ([`keys::QP`], 4..=16), which the search walks
+/// when `qp` is not given.
+pub const QP_RANGE: (u32, u32) = (4, 16);
 
 /// The knob of SPIHT-like codecs that reach a target ratio natively: the ratio itself, from
 /// 1:1 (a float32 per value) to 10 000:1.
@@ -135,8 +145,12 @@ pub struct Bounded {
     /// The probe one step toward smaller streams, which exceeds the bound; `None` when
     /// [`Bounded::made`] is the codec's smallest stream (the knob's end).
     pub smaller: Option<Probe>,
-    /// Encodes run (at most [`MAX_ENCODES`]).
+    /// Encodes run, over every QP tried.
     pub encodes: usize,
+    /// The QPs tried when the search walked the quantiser (module docs), in order, each with
+    /// the bytes of its smallest stream within the bound (`None`: unreachable at that QP);
+    /// empty when it did not.
+    pub qp_tried: Vec<(u32, Option<usize>)>,
 }
 
 /// Checks `params` leave the knob to the search: neither the target ratio nor the knob may
@@ -168,8 +182,8 @@ pub fn check_params(codec: &dyn Codec, params: &Params) -> Result<Knob> {
 ///
 /// # Errors
 /// A bound that is not positive and finite, parameters [`check_params`] refuses,
-/// [`LabError::BoundUnreachable`] when even the knob's largest stream exceeds the bound, or
-/// any error of encoding, decoding or measuring.
+/// [`LabError::BoundUnreachable`] when even the knob's largest stream exceeds the bound (at
+/// every QP, where QP is walked), or any error of encoding, decoding or measuring.
 pub fn make_within(
     codec: &dyn Codec,
     clip: &Clip,
@@ -181,8 +195,98 @@ pub fn make_within(
             "--max-error-cm {max_error_cm}: the bound must be a positive number of cm"
         )));
     }
-    let mut knob = check_params(codec, params)?;
+    let knob = check_params(codec, params)?;
     let t0 = Instant::now();
+    let walk_qp = !params.contains_key(keys::QP);
+    let default_qp = codec
+        .default_params()
+        .get(keys::QP)
+        .copied()
+        .filter(|_| walk_qp);
+    let mut best = match default_qp {
+        None => search_knob(codec, clip, params, knob, max_error_cm)?,
+        Some(qp) => search_qp(codec, clip, params, knob, max_error_cm, qp as u32)?,
+    };
+    best.made.encode_ms = t0.elapsed().as_secs_f64() * 1e3;
+    Ok(best)
+}
+
+/// The QP walk of the module docs, from `start`.
+fn search_qp(
+    codec: &dyn Codec,
+    clip: &Clip,
+    params: &Params,
+    knob: Knob,
+    max_error_cm: f64,
+    start: u32,
+) -> Result<Bounded> {
+    let (lo, hi) = QP_RANGE;
+    let mut encodes = 0;
+    let mut tried = Vec::new();
+    // The knob search at `qp`: `Ok(Err(_))` when the bound is out of its reach.
+    let mut at = |qp: u32| -> Result<Result<Bounded, LabError>> {
+        let mut p = params.clone();
+        p.insert(keys::QP.into(), f64::from(qp));
+        match search_knob(codec, clip, &p, knob, max_error_cm) {
+            Ok(b) => {
+                encodes += b.encodes;
+                tried.push((qp, Some(b.made.bytes.len())));
+                Ok(Ok(b))
+            }
+            Err(e @ LabError::BoundUnreachable { .. }) => {
+                // Its two ends were encoded.
+                encodes += 2;
+                tried.push((qp, None));
+                Ok(Err(e))
+            }
+            Err(e) => Err(e),
+        }
+    };
+    // Up from the start until the bound is reachable: more bits, a lower error floor.
+    let start = start.clamp(lo, hi);
+    let mut qp = start;
+    let mut best = loop {
+        match at(qp)? {
+            Ok(b) => break b,
+            Err(e) if qp == hi => return Err(e),
+            Err(_) => qp += 1,
+        }
+    };
+    // Then toward smaller streams, one QP at a time while the stream shrinks: down (only
+    // from the start: below a QP that had to be stepped up the bound is out of reach), and
+    // up unless down was smaller.
+    let found = qp;
+    let directions: &[i32] = if found == start { &[-1, 1] } else { &[1] };
+    let mut improved = false;
+    for &d in directions {
+        if improved {
+            break;
+        }
+        let mut q = found;
+        while let Some(next) = q.checked_add_signed(d).filter(|n| (lo..=hi).contains(n)) {
+            q = next;
+            match at(q)? {
+                Ok(b) if b.made.bytes.len() < best.made.bytes.len() => {
+                    best = b;
+                    improved = true;
+                }
+                _ => break,
+            }
+        }
+    }
+    best.encodes = encodes;
+    best.qp_tried = tried;
+    Ok(best)
+}
+
+/// One knob search (bracketing and bisection of the module docs) at fixed `params`.
+fn search_knob(
+    codec: &dyn Codec,
+    clip: &Clip,
+    params: &Params,
+    mut knob: Knob,
+    max_error_cm: f64,
+) -> Result<Bounded> {
     let mut encodes = 0;
     let mut probe = |knob: Knob, u: f64| -> Result<(f64, Made)> {
         let value = knob.at(u);
@@ -225,11 +329,14 @@ pub fn make_within(
         let mut hi = (1.0, beyond(v1, &small));
         let (v0, large) = probe(knob, 0.0)?;
         if !within(&large) {
+            let qp = params
+                .get(keys::QP)
+                .map_or_else(String::new, |q| format!(", qp = {q}"));
             return Err(LabError::BoundUnreachable {
                 codec: codec.name().to_string(),
                 max_error_cm,
                 closest_cm: large.metrics.max_cm,
-                knob: format!("{} = {v0}", knob.key),
+                knob: format!("{} = {v0}{qp}", knob.key),
             });
         }
         let mut lo = (0.0, v0, large);
@@ -244,14 +351,13 @@ pub fn make_within(
         }
         (lo.1, lo.2, Some(hi.1))
     };
-    let mut made = made;
-    made.encode_ms = t0.elapsed().as_secs_f64() * 1e3;
     Ok(Bounded {
         made,
         knob,
         value,
         smaller,
         encodes,
+        qp_tried: Vec::new(),
     })
 }
 
@@ -259,13 +365,32 @@ pub fn make_within(
 mod tests {
     use super::*;
 
+    /// [`QP_RANGE`] is what the wavelet codecs take (codecs::codec::keys::QP); lab cannot
+    /// see the codecs' own constants.
+    #[test]
+    fn qp_range_is_the_wavelet_codecs() {
+        let clip = motion::synth::walking_clip(&motion::synth::WalkParams {
+            duration_s: 0.5,
+            ..motion::synth::WalkParams::default()
+        });
+        let codec = codecs::codec::by_name("wavelet-perceptual").unwrap();
+        let encode = |qp: u32| {
+            let p: Params = [(keys::QP.to_string(), f64::from(qp))].into();
+            codec.encode(&clip, &p)
+        };
+        let (lo, hi) = QP_RANGE;
+        assert!(encode(lo).is_ok() && encode(hi).is_ok());
+        assert!(encode(lo - 1).is_err() && encode(hi + 1).is_err());
+        assert!(codec.default_params().contains_key(keys::QP));
+    }
+
     /// The documented count: 2 bracketing encodes and the bisections a span of 10⁴ needs to
     /// come within 1 %.
     #[test]
     fn max_encodes_is_what_the_bisection_takes() {
         let span = 1e4f64.ln();
         let bisections = (span / KNOB_STEP.ln_1p()).log2().ceil() as usize;
-        assert_eq!(1 + 2 + bisections, MAX_ENCODES);
+        assert_eq!(1 + 2 + bisections, MAX_KNOB_ENCODES);
         for codec in codecs::codec::registry() {
             if let Some(k) = Knob::of(codec.as_ref()) {
                 assert!((k.span() - span).abs() < 1e-9, "{}", codec.name());

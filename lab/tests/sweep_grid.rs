@@ -8,7 +8,7 @@ use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
 use codecs::codec::{self, Params};
-use lab::bounded::{self, MAX_ENCODES};
+use lab::bounded::{self, MAX_KNOB_ENCODES};
 use lab::clips::ClipOptions;
 use lab::stimulus::{self, Request};
 use lab::sweep::{SweepOptions, Target, sweep};
@@ -283,7 +283,8 @@ fn the_bounded_search_stops_where_one_step_smaller_exceeds_the_bound() {
             "{name}: {}",
             b.made.metrics.max_cm
         );
-        assert!(b.encodes <= MAX_ENCODES, "{name}: {}", b.encodes);
+        assert!(b.encodes <= MAX_KNOB_ENCODES, "{name}: {}", b.encodes);
+        assert!(b.qp_tried.is_empty(), "{name}: qp is given or not taken");
         if name != "spiht" {
             // The documented count: the two ends and ten bisections of a 10⁴ span.
             assert_eq!(b.encodes, 12, "{name}");
@@ -336,7 +337,8 @@ fn a_bound_the_smallest_stream_meets_takes_one_encode_and_one_no_stream_meets_is
         b.value
     );
     let wavelet = codec::by_name("wavelet-perceptual").unwrap();
-    let b = bounded::make_within(wavelet.as_ref(), &clip, &Params::new(), 1e6).unwrap();
+    let qp: Params = [("qp".to_string(), 10.0)].into();
+    let b = bounded::make_within(wavelet.as_ref(), &clip, &qp, 1e6).unwrap();
     assert_eq!((b.encodes, b.smaller, b.value), (1, None, 1e-4));
     let e = bounded::make_within(spiht.as_ref(), &clip, &Params::new(), 1e-9).unwrap_err();
     assert!(matches!(e, lab::LabError::BoundUnreachable { .. }), "{e}");
@@ -352,4 +354,41 @@ fn a_bound_the_smallest_stream_meets_takes_one_encode_and_one_no_stream_meets_is
     assert!(e.to_string().contains("--param cr"), "{e}");
     let raw = codec::by_name("raw-f32").unwrap();
     assert!(bounded::make_within(raw.as_ref(), &clip, &Params::new(), 1.0).is_err());
+}
+
+/// Without `qp` the wavelet codecs' search walks the quantiser: at the default QP 10 the walk
+/// cannot reach 0.3 cm whatever α; more bits can, and the QP kept is the one whose stream is
+/// smallest among those tried, its neighbours larger or out of reach.
+#[test]
+fn without_qp_the_wavelet_search_walks_the_quantiser_to_the_smallest_stream() {
+    let clip = motion::synth::walking_clip(&motion::synth::WalkParams {
+        duration_s: 2.0,
+        ..motion::synth::WalkParams::default()
+    });
+    let codec = codec::by_name("wavelet-perceptual").unwrap();
+    let bound = 0.3;
+    let fixed: Params = [("qp".to_string(), 10.0)].into();
+    assert!(matches!(
+        bounded::make_within(codec.as_ref(), &clip, &fixed, bound),
+        Err(lab::LabError::BoundUnreachable { .. })
+    ));
+    let b = bounded::make_within(codec.as_ref(), &clip, &Params::new(), bound).unwrap();
+    assert!(b.made.metrics.max_cm <= bound, "{}", b.made.metrics.max_cm);
+    let qp = b.made.stream.params["qp"] as u32;
+    assert!(qp > 10, "{qp}");
+    let tried = &b.qp_tried;
+    assert_eq!(tried[0], (10, None), "{tried:?}");
+    let bytes = |q: u32| tried.iter().find(|t| t.0 == q).map(|t| t.1);
+    assert_eq!(bytes(qp), Some(Some(b.made.bytes.len())), "{tried:?}");
+    // Its neighbours were tried and are no smaller (or out of reach).
+    for q in [qp - 1, qp + 1] {
+        let n = bytes(q).unwrap_or_else(|| panic!("qp {q} not tried: {tried:?}"));
+        assert!(n.is_none_or(|n| n >= b.made.bytes.len()), "{tried:?}");
+    }
+    // Every reachable QP tried ran a full knob search, every unreachable one its two ends.
+    let want: usize = tried
+        .iter()
+        .map(|t| if t.1.is_some() { 12 } else { 2 })
+        .sum();
+    assert_eq!(b.encodes, want, "{tried:?}");
 }

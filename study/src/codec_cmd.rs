@@ -219,19 +219,16 @@ pub fn encode(args: &EncodeArgs) -> Result<()> {
     {
         files::check_new(p, mode)?;
     }
-    let (made, search) = match args.max_error_cm {
-        Some(bound) => {
-            let b = lab::bounded::make_within(c.as_ref(), &loaded.clip, &params, bound)?;
-            let line = bounded_line(&b, bound);
-            (b.made, Some(line))
-        }
-        None => {
-            let request = Request {
-                params,
-                target_cr: args.cr,
-            };
-            (stimulus::make(c.as_ref(), &loaded.clip, &request)?, None)
-        }
+    let (made, search) = if let Some(bound) = args.max_error_cm {
+        let b = lab::bounded::make_within(c.as_ref(), &loaded.clip, &params, bound)?;
+        let line = bounded_line(&b, bound);
+        (b.made, Some(line))
+    } else {
+        let request = Request {
+            params,
+            target_cr: args.cr,
+        };
+        (stimulus::make(c.as_ref(), &loaded.clip, &request)?, None)
     };
     std::fs::create_dir_all(&args.output)
         .with_context(|| format!("creating {}", args.output.display()))?;
@@ -289,8 +286,28 @@ fn bounded_line(b: &lab::bounded::Bounded, bound: f64) -> String {
         ),
         None => format!("the codec's smallest stream along {key}"),
     };
+    let qp = if b.qp_tried.is_empty() {
+        String::new()
+    } else {
+        let tried: Vec<String> = b
+            .qp_tried
+            .iter()
+            .map(|(q, bytes)| match bytes {
+                Some(n) => format!("{q}: {n} bytes"),
+                None => format!("{q}: out of reach"),
+            })
+            .collect();
+        let kept = b
+            .made
+            .stream
+            .params
+            .get(codec::keys::QP)
+            .copied()
+            .unwrap_or(f64::NAN);
+        format!(" at qp {kept} (tried {})", tried.join(", "))
+    };
     format!(
-        "max error ≤ {bound} cm: {key} {:.6} after {} encodes; {next}",
+        "max error ≤ {bound} cm: {key} {:.6}{qp} after {} encodes; {next}",
         b.value, b.encodes
     )
 }
