@@ -367,12 +367,9 @@ fn accumulated_levels_of_older_logs_are_keyed_on_the_grid() {
     assert_eq!(encoded, vec![0.004_f64.to_bits(); 2]);
 }
 
-/// Two variants of one codec at one target ratio (`study sweep --param qp=9,11`) are two
-/// conditions with two labels everywhere: the MOS and DMOS tables, the paired t-test between
-/// them, the rate curves (one per variant, not one curve with two points at 20:1), and the
-/// tidy CSV.
-#[test]
-fn two_variants_at_one_ratio_get_two_labels_in_every_table_test_and_curve() {
+/// Ratings of two variants of one codec at one target ratio (`study sweep --param
+/// qp=9,11`) and the reference, by three subjects.
+fn variant_study() -> analysis::from_results::ConvertedResults {
     let variant = |id: &str, qp: f64| Stimulus {
         params: [("qp".to_string(), qp), ("alpha".to_string(), 0.1)].into(),
         variant: [("qp".to_string(), qp)].into(),
@@ -414,7 +411,23 @@ fn two_variants_at_one_ratio_get_two_labels_in_every_table_test_and_curve() {
         session_of("bob", [2.5, 4.0, 5.0]),
         session_of("cy", [3.5, 4.0, 4.5]),
     ];
-    let c = convert(&sessions, &m, Some((1.0, 5.0))).unwrap();
+    convert(&sessions, &m, Some((1.0, 5.0))).unwrap()
+}
+
+fn report_options() -> ReportOptions {
+    ReportOptions {
+        figures: false,
+        level_label: "Level".to_owned(),
+        ..ReportOptions::default()
+    }
+}
+
+/// Two variants of one codec at one target ratio are two conditions with two labels
+/// everywhere: the MOS and DMOS tables, the paired t-test between them, the rate curves (one
+/// per variant, not one curve with two points at 20:1), and the tidy CSV.
+#[test]
+fn two_variants_at_one_ratio_get_two_labels_in_every_table_test_and_curve() {
+    let c = variant_study();
     let mut methods: Vec<String> = c
         .data
         .conditions
@@ -428,11 +441,7 @@ fn two_variants_at_one_ratio_get_two_labels_in_every_table_test_and_curve() {
         "wavelet-perceptual/qp9".to_string(),
     ];
     assert_eq!(methods, want);
-    let options = ReportOptions {
-        figures: false,
-        level_label: "Level".to_owned(),
-        ..ReportOptions::default()
-    };
+    let options = report_options();
     let a = analyze(&c.data, &options).unwrap();
     // One paired test, variant against variant.
     assert_eq!(a.comparisons.len(), 1);
@@ -475,11 +484,16 @@ fn two_variants_at_one_ratio_get_two_labels_in_every_table_test_and_curve() {
     );
     let csv = analysis::export::tidy_csv(&c.data.ratings, &c.data.conditions);
     assert!(csv.contains(",wavelet-perceptual/qp9,walk,20,"), "{csv}");
-    // A baseline names one variant; the codec's name alone is ambiguous here, so no test.
+}
+
+/// A baseline names one variant; the codec's name alone is ambiguous there, so no test.
+#[test]
+fn a_baseline_names_one_variant() {
+    let c = variant_study();
     let against = |base: &str| {
         let o = ReportOptions {
             baseline_codec: Some(base.to_owned()),
-            ..options.clone()
+            ..report_options()
         };
         analyze(&c.data, &o).unwrap().comparisons
     };
