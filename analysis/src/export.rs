@@ -16,7 +16,8 @@ fn csv_field(s: &str) -> String {
 }
 
 /// One row per rating: `subject,condition,codec,clip,compression_ratio,score` (empty ratio for
-/// references, empty codec and clip for unknown conditions). Reads with `pandas.read_csv` and
+/// references, empty codec and clip for unknown conditions); `codec` is the condition's method,
+/// with its varied parameters when it has any ([`ConditionInfo::method`]). Reads with `pandas.read_csv` and
 /// `readr::read_csv` as is.
 pub fn tidy_csv(ratings: &[Rating], conditions: &[ConditionInfo]) -> String {
     let by_id: HashMap<u32, &ConditionInfo> = conditions.iter().map(|c| (c.id, c)).collect();
@@ -29,7 +30,7 @@ pub fn tidy_csv(ratings: &[Rating], conditions: &[ConditionInfo]) -> String {
             "{},{},{},{},{},{}",
             r.subject,
             r.condition,
-            info.map_or_else(String::new, |i| csv_field(&i.codec)),
+            info.map_or_else(String::new, |i| csv_field(&i.method())),
             info.map_or_else(String::new, |i| csv_field(&i.clip)),
             info.and_then(|i| i.compression_ratio)
                 .map_or_else(String::new, |x| x.to_string()),
@@ -89,7 +90,7 @@ pub fn sureal_dataset(
         };
         let content_id = clips.get(c.clip.as_str()).copied().unwrap_or(0);
         let path = match c.compression_ratio {
-            Some(cr) => format!("{}/{}_{cr}", c.clip, c.codec),
+            Some(cr) => format!("{}/{}_{cr}", c.clip, c.method()),
             None => format!("{}/reference", c.clip),
         };
         let os_text = os

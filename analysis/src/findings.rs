@@ -8,17 +8,32 @@ use serde::Serialize;
 
 use crate::descriptive::{CiMethod, ConditionStats, Summary};
 
-/// What a test condition is: codec, clip and compression ratio (x in x:1).
+/// What a test condition is: codec and its varied parameters, clip and compression ratio (x
+/// in x:1).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct ConditionInfo {
     /// Condition id (as in [`crate::Rating::condition`]).
     pub id: u32,
     /// Codec name (or method / weighting label).
     pub codec: String,
+    /// The codec parameters the stimulus' sweep varied (the manifest's `variant`): two
+    /// variants of a codec at one ratio are two methods ([`ConditionInfo::method`]). Empty
+    /// when nothing was varied.
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    pub params: BTreeMap<String, f64>,
     /// Clip name, e.g. "2_2".
     pub clip: String,
     /// Compression ratio x of x:1; `None` for references.
     pub compression_ratio: Option<f64>,
+}
+
+impl ConditionInfo {
+    /// The label of the condition's method in every table, test and plot: the codec, with
+    /// its varied parameters when it has any (`wavelet-perceptual/qp9-window128`, as in the
+    /// stimulus id); the codec alone otherwise.
+    pub fn method(&self) -> String {
+        protocols::manifest::method_label(&self.codec, &self.params)
+    }
 }
 
 /// The limit a finding is checked against.
@@ -42,10 +57,10 @@ pub struct RatePoint {
     pub summary: Summary,
 }
 
-/// A rate curve and its finding for one codec and clip.
+/// A rate curve and its finding for one method (codec and variant) and clip.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct RateFinding {
-    /// Codec.
+    /// The method ([`ConditionInfo::method`]): the codec, with its varied parameters.
     pub codec: String,
     /// Clip.
     pub clip: String,
@@ -66,7 +81,7 @@ fn passes(summary: &Summary, limit: Limit, method: CiMethod) -> bool {
     }
 }
 
-/// Builds rate curves per (codec, clip) from condition statistics and finds, for each, the
+/// Builds rate curves per (method, clip) from condition statistics and finds, for each, the
 /// highest compression ratio whose CI bound (by `method`) stays within `limit`. The run must be
 /// unbroken from the lowest ratio: a pass at 60:1 after a failure at 50:1 is noise, not a
 /// finding. Conditions without a ratio (references) are skipped.
@@ -86,7 +101,7 @@ pub fn rate_findings(
             continue;
         };
         curves
-            .entry((info.codec.clone(), info.clip.clone()))
+            .entry((info.method(), info.clip.clone()))
             .or_default()
             .push(RatePoint {
                 compression_ratio: cr,

@@ -176,6 +176,7 @@ pub fn convert(
         data.conditions.push(ConditionInfo {
             id: id as u32,
             codec: s.codec.clone(),
+            params: s.variant.clone(),
             clip: s.clip.clone(),
             // The nominal (target) ratio groups codecs made for the same rate, as the seeds'
             // tables do ("20:1"); the achieved ratio stands in when there was no target.

@@ -57,7 +57,9 @@ pub struct ReportOptions {
     /// DMOS limit for rate findings (0.2 in thesis §6.4.3).
     pub dmos_limit: f64,
     /// Codec every other codec is compared against with a one-tailed test ("A scores higher
-    /// than the baseline"); `None` compares all pairs two-tailed.
+    /// than the baseline"); `None` compares all pairs two-tailed. A method label
+    /// (`wavelet-standard/qp9-window128`) names one variant; a codec name alone names the
+    /// codec's one condition at a clip and ratio (none when it has several variants there).
     pub baseline_codec: Option<String>,
     /// Reversals averaged per staircase (3 in thesis §5.4).
     pub last_reversals: usize,
@@ -241,7 +243,7 @@ fn compare_codecs(
     }
     let mut rows = Vec::new();
     for ((clip, cr_bits), mut conds) in groups {
-        conds.sort_by(|a, b| a.codec.cmp(&b.codec));
+        conds.sort_by_key(|c| c.method());
         for (a, b, alt) in codec_pairs(&conds, options.baseline_codec.as_deref()) {
             let (Some(sa), Some(sb)) = (by_condition.get(&a.id), by_condition.get(&b.id)) else {
                 continue;
@@ -251,8 +253,8 @@ fn compare_codecs(
             rows.push(ComparisonRow {
                 clip: clip.clone(),
                 compression_ratio: Some(f64::from_bits(cr_bits)),
-                first: (a.codec.clone(), mean_or_nan(&xa)),
-                second: (b.codec.clone(), mean_or_nan(&xb)),
+                first: (a.method(), mean_or_nan(&xa)),
+                second: (b.method(), mean_or_nan(&xb)),
                 test,
                 p_holm: None,
             });
@@ -292,11 +294,20 @@ fn codec_pairs<'a>(
     let mut pairs = Vec::new();
     match baseline {
         Some(base) => {
-            if let Some(b) = conds.iter().find(|c| c.codec == base) {
+            let by_codec: Vec<&&ConditionInfo> = conds.iter().filter(|c| c.codec == base).collect();
+            let baseline =
+                conds
+                    .iter()
+                    .find(|c| c.method() == base)
+                    .or(match by_codec.as_slice() {
+                        [one] => Some(*one),
+                        _ => None,
+                    });
+            if let Some(b) = baseline {
                 pairs.extend(
                     conds
                         .iter()
-                        .filter(|c| c.codec != base)
+                        .filter(|c| c.id != b.id)
                         .map(|a| (*a, *b, Alternative::Greater)),
                 );
             }

@@ -2,6 +2,8 @@
 //! analysis recovers what was put in (threshold coverage, power by simulation) and to benchmark
 //! `study report` on a million rows. Every function takes an explicit seed (ChaCha8).
 
+use std::collections::BTreeMap;
+
 use rand::{Rng, RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -74,6 +76,7 @@ pub fn mos_study(spec: &MosStudySpec) -> StudyData {
                 conditions.push(ConditionInfo {
                     id,
                     codec: codec.clone(),
+                    params: BTreeMap::new(),
                     clip: clip.clone(),
                     compression_ratio: Some(ratio),
                 });

@@ -210,8 +210,7 @@ pub fn mos_table(
         .iter()
         .map(|s| {
             let info = by_id.get(&s.condition);
-            let codec =
-                info.map_or_else(|| format!("condition {}", s.condition), |i| i.codec.clone());
+            let codec = info.map_or_else(|| format!("condition {}", s.condition), |i| i.method());
             let clip = info.map_or_else(String::new, |i| i.clip.clone());
             let cr = info.and_then(|i| i.compression_ratio);
             let ci = s.summary.ci(method);
@@ -336,8 +335,8 @@ pub fn dmos_table(
             continue;
         };
         let row = match info.compression_ratio {
-            Some(cr) => format!("{} @ {}", info.codec, ratio(Some(cr))),
-            None => info.codec.clone(),
+            Some(cr) => format!("{} @ {}", info.method(), ratio(Some(cr))),
+            None => info.method(),
         };
         if !clips.contains(&info.clip) {
             clips.push(info.clip.clone());

@@ -20,7 +20,9 @@ fn stimulus(id: &str, clip: &str, codec: &str, cr: f64) -> Stimulus {
         clip: clip.into(),
         codec: codec.into(),
         params: BTreeMap::new(),
+        variant: BTreeMap::new(),
         target_cr: None,
+        target_max_error_cm: None,
         achieved_cr: cr,
         bytes: 0,
         file: format!("{id}.amc"),
@@ -363,4 +365,143 @@ fn accumulated_levels_of_older_logs_are_keyed_on_the_grid() {
         .map(|e| e.level.to_bits())
         .collect();
     assert_eq!(encoded, vec![0.004_f64.to_bits(); 2]);
+}
+
+/// Ratings of two variants of one codec at one target ratio (`study sweep --param
+/// qp=9,11`) and the reference, by three subjects.
+fn variant_study() -> analysis::from_results::ConvertedResults {
+    let variant = |id: &str, qp: f64| Stimulus {
+        params: [("qp".to_string(), qp), ("alpha".to_string(), 0.1)].into(),
+        variant: [("qp".to_string(), qp)].into(),
+        target_cr: Some(20.0),
+        ..stimulus(id, "walk", "wavelet-perceptual", 19.9)
+    };
+    let m = StimulusManifest {
+        version: 2,
+        stimuli: vec![
+            stimulus("walk/ref", "walk", "reference", 1.0),
+            variant("walk/wavelet-perceptual/qp9/cr20", 9.0),
+            variant("walk/wavelet-perceptual/qp11/cr20", 11.0),
+        ],
+    };
+    let session_of = |subject: &str, scores: [f64; 3]| {
+        let r = |i, stim: &str, v: f64| {
+            record(
+                Protocol::Mos,
+                subject,
+                i,
+                Block::Test,
+                stim,
+                Answer::Rating(v),
+                outcome(v),
+            )
+        };
+        session(
+            subject,
+            Protocol::Mos,
+            vec![
+                r(0, "walk/wavelet-perceptual/qp9/cr20", scores[0]),
+                r(1, "walk/wavelet-perceptual/qp11/cr20", scores[1]),
+                r(2, "walk/ref", scores[2]),
+            ],
+        )
+    };
+    let sessions = vec![
+        session_of("ann", [3.0, 4.5, 5.0]),
+        session_of("bob", [2.5, 4.0, 5.0]),
+        session_of("cy", [3.5, 4.0, 4.5]),
+    ];
+    convert(&sessions, &m, Some((1.0, 5.0))).unwrap()
+}
+
+fn report_options() -> ReportOptions {
+    ReportOptions {
+        figures: false,
+        level_label: "Level".to_owned(),
+        ..ReportOptions::default()
+    }
+}
+
+/// Two variants of one codec at one target ratio are two conditions with two labels
+/// everywhere: the MOS and DMOS tables, the paired t-test between them, the rate curves (one
+/// per variant, not one curve with two points at 20:1), and the tidy CSV.
+#[test]
+fn two_variants_at_one_ratio_get_two_labels_in_every_table_test_and_curve() {
+    let c = variant_study();
+    let mut methods: Vec<String> = c
+        .data
+        .conditions
+        .iter()
+        .filter(|i| i.compression_ratio.is_some())
+        .map(analysis::ConditionInfo::method)
+        .collect();
+    methods.sort();
+    let want = [
+        "wavelet-perceptual/qp11".to_string(),
+        "wavelet-perceptual/qp9".to_string(),
+    ];
+    assert_eq!(methods, want);
+    let options = report_options();
+    let a = analyze(&c.data, &options).unwrap();
+    // One paired test, variant against variant.
+    assert_eq!(a.comparisons.len(), 1);
+    let row = &a.comparisons[0];
+    assert_eq!(
+        [row.first.0.as_str(), row.second.0.as_str()],
+        ["wavelet-perceptual/qp11", "wavelet-perceptual/qp9"]
+    );
+    // One rate curve per variant.
+    let curves: Vec<(&str, usize)> = a
+        .mos_findings
+        .iter()
+        .map(|f| (f.codec.as_str(), f.points.len()))
+        .collect();
+    assert_eq!(
+        curves,
+        [
+            ("wavelet-perceptual/qp11", 1),
+            ("wavelet-perceptual/qp9", 1)
+        ]
+    );
+    let report = a.to_report(&c.data, &options, "variants");
+    let mos = report.tables().find(|t| t.name == "mos").unwrap();
+    let labels: Vec<&str> = mos
+        .rows
+        .iter()
+        .filter(|r| r[2] == "20:1")
+        .map(|r| r[0].as_str())
+        .collect();
+    assert_eq!(
+        labels,
+        ["wavelet-perceptual/qp11", "wavelet-perceptual/qp9"]
+    );
+    let dmos = report.tables().find(|t| t.name == "dmos").unwrap();
+    let rows: Vec<&str> = dmos.rows.iter().map(|r| r[0].as_str()).collect();
+    assert!(
+        rows.contains(&"wavelet-perceptual/qp9 @ 20:1")
+            && rows.contains(&"wavelet-perceptual/qp11 @ 20:1"),
+        "{rows:?}"
+    );
+    let csv = analysis::export::tidy_csv(&c.data.ratings, &c.data.conditions);
+    assert!(csv.contains(",wavelet-perceptual/qp9,walk,20,"), "{csv}");
+}
+
+/// A baseline names one variant; the codec's name alone is ambiguous there, so no test.
+#[test]
+fn a_baseline_names_one_variant() {
+    let c = variant_study();
+    let against = |base: &str| {
+        let o = ReportOptions {
+            baseline_codec: Some(base.to_owned()),
+            ..report_options()
+        };
+        analyze(&c.data, &o).unwrap().comparisons
+    };
+    let rows = against("wavelet-perceptual/qp9");
+    assert_eq!(rows.len(), 1);
+    assert_eq!(
+        [rows[0].first.0.as_str(), rows[0].second.0.as_str()],
+        ["wavelet-perceptual/qp11", "wavelet-perceptual/qp9"]
+    );
+    assert!(against("wavelet-perceptual").is_empty());
 }

@@ -45,6 +45,7 @@ fn data(g: &Value) -> StudyData {
         .map(|c| ConditionInfo {
             id: c["id"].as_u64().unwrap() as u32,
             codec: c["codec"].as_str().unwrap().to_owned(),
+            params: std::collections::BTreeMap::new(),
             clip: c["clip"].as_str().unwrap().to_owned(),
             compression_ratio: Some(f(&c["compression_ratio"])),
         })

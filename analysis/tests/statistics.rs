@@ -287,6 +287,7 @@ fn rate_finding_needs_an_unbroken_run_from_the_lowest_ratio() {
         .map(|(i, &cr)| ConditionInfo {
             id: i as u32,
             codec: "c".into(),
+            params: std::collections::BTreeMap::new(),
             clip: "k".into(),
             compression_ratio: Some(cr),
         })

@@ -60,6 +60,40 @@ impl Codecs {
     }
 }
 
+impl Codecs {
+    /// Checks that codec `name` takes every parameter of `keys` and that none is set by its
+    /// rate control (`cr`, or its knob: `alpha`, `t_l`), which a sweep's target sets.
+    ///
+    /// # Errors
+    /// [`crate::LabError::Refused`] naming the parameter, the codec and the keys it accepts.
+    pub fn check_varied_params(&self, name: &str, keys: &[&str]) -> Result<()> {
+        let c = self.get(name)?;
+        let accepted = c.default_params();
+        let knob = match c.rate_control() {
+            RateControl::Search { key, .. } | RateControl::SearchIncreasing { key, .. } => {
+                Some(key)
+            }
+            RateControl::Native | RateControl::None => None,
+        };
+        for &key in keys {
+            if !accepted.contains_key(key) {
+                return Err(refused(format!(
+                    "--param {key}: codec `{name}` does not take it; it takes {} \
+                     (`study codecs` lists them)",
+                    accepted.keys().cloned().collect::<Vec<_>>().join(", ")
+                )));
+            }
+            if key == codec::keys::CR || Some(key) == knob {
+                return Err(refused(format!(
+                    "--param {key}: codec `{name}` sets {key} itself to reach each target; \
+                     vary its other parameters"
+                )));
+            }
+        }
+        Ok(())
+    }
+}
+
 impl CodecCatalog for Codecs {
     fn codec(&self, name: &str) -> Option<CodecInfo> {
         let c = codec::by_name_in(name, &self.ctx)?;

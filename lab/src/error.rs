@@ -56,6 +56,21 @@ pub enum LabError {
     /// A JSON file could not be written.
     #[error(transparent)]
     Json(#[from] serde_json::Error),
+    /// An error bound no stream of the codec meets: even its largest stream along the rate
+    /// knob exceeds it.
+    #[error(
+        "codec `{codec}`: max joint error {max_error_cm} cm not reachable (closest {closest_cm:.4} cm, at {knob})"
+    )]
+    BoundUnreachable {
+        /// Codec name.
+        codec: String,
+        /// The bound asked for, cm.
+        max_error_cm: f64,
+        /// The largest stream's max joint error, cm.
+        closest_cm: f64,
+        /// The knob setting of that stream (`alpha = 1`).
+        knob: String,
+    },
     /// A request that cannot be carried out as asked (an existing folder, a resume with other
     /// settings, an unknown codec), with the reason.
     #[error("{0}")]

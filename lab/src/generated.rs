@@ -32,6 +32,8 @@ pub fn walk_stimuli(
         clip_options: ClipOptions::default(),
         codecs: codecs.iter().map(|c| (*c).to_string()).collect(),
         targets: targets.to_vec(),
+        max_errors_cm: Vec::new(),
+        params: Vec::new(),
         output: dir.join("stimuli"),
         jobs: std::thread::available_parallelism().map_or(1, usize::from),
         database: None,

@@ -4,8 +4,10 @@
 //!
 //! - [`catalog`]: the codec registry as study files and commands see it ([`Codecs`]).
 //! - [`clips`]: clip sets, paired by the one rule of [`motion::pairing`] and read.
-//! - [`stimulus`]: one stimulus made (encode, decode, measure, timings).
-//! - [`sweep`]: a stimulus set (clips × codecs × rates) with `stimuli.json` and `rd.csv`;
+//! - [`stimulus`]: one stimulus made (encode, decode, measure, timings, worst window).
+//! - [`bounded`]: the smallest stream within a max joint error (`--max-error-cm`).
+//! - [`sweep`]: a stimulus set (clips × codecs × parameter variants × rates or error bounds)
+//!   with `stimuli.json` and `rd.csv`;
 //!   [`generated`] makes one from the generated walk.
 //! - [`study`]: a study file as a run uses it (bytes, hash, definition, archived copy).
 //! - [`results_dir`]: a study's results directory, created and checked.
@@ -15,6 +17,7 @@
 //! - [`simulate`]: whole sessions with simulated observers.
 //! - [`error`]: the crate's error type, [`LabError`].
 
+pub mod bounded;
 pub mod catalog;
 pub mod clips;
 pub mod error;

@@ -1,31 +1,41 @@
-//! A stimulus set: every clip × codec × target compression ratio, made on worker threads and
-//! written with its reference copies, a `stimuli.json` manifest and a rate–distortion CSV.
+//! A stimulus set: every clip × codec × parameter variant × target (a compression ratio, or a
+//! bound on the max joint error), made on worker threads and written with its reference
+//! copies, a `stimuli.json` manifest and a rate–distortion CSV.
+//!
+//! A variant is one combination of [`SweepOptions::params`] (their Cartesian product); its
+//! parameters are part of the stimulus id (`walk/wavelet-perceptual/qp9-window128/cr20`),
+//! the manifest entry's `variant` and the `rd.csv` row, and absent from all three when no
+//! parameter is varied, so ids stay what they were. A target a codec cannot reach (the
+//! primitive codec at 60:1, a bound below what its largest stream achieves) is recorded as an
+//! `unreachable` row of `rd.csv` and in [`SweepSummary::unreachable`]; the sweep goes on,
+//! and `stimuli.json` lists what was made.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use codecs::codec::RateControl;
+use codecs::codec::{CodecError, Params, RateControl};
 use motion::Clip;
 use protocols::manifest::{
-    MANIFEST_VERSION, REFERENCE_CODEC, Stimulus, StimulusManifest, StimulusMetrics,
+    MANIFEST_VERSION, REFERENCE_CODEC, Stimulus, StimulusManifest, StimulusMetrics, variant_label,
 };
 
+use crate::bounded;
 use crate::catalog::Codecs;
 use crate::clips::{self, ClipOptions};
-use crate::error::{Context as _, LabError, Result, io_error, refused};
-use crate::stimulus::{self, Request};
+use crate::error::{Context as _, LabError, Result, chain, io_error, refused};
+use crate::stimulus::{self, Made, Request};
 
 /// The manifest file a sweep writes.
 pub const MANIFEST_FILE: &str = "stimuli.json";
 /// The rate–distortion table a sweep writes.
 pub const RD_FILE: &str = "rd.csv";
-/// Header of [`RD_FILE`].
-const RD_HEADER: &str = "clip,codec,target_cr,achieved_cr,bytes,rms_cm,max_cm,mean_angle_deg,foot_slide_cm_s,encode_ms,decode_ms\n";
+/// Header of [`RD_FILE`] (columns in `docs/codecs.md`, "rd.csv").
+const RD_HEADER: &str = "clip,codec,params,target_cr,target_max_error_cm,status,achieved_cr,bytes,rms_cm,max_cm,worst_window_rms_cm,worst_window_start_frame,mean_angle_deg,foot_slide_cm_s,encode_ms,decode_ms,id,reason\n";
 
 /// What a sweep makes.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Default)]
 pub struct SweepOptions {
     /// Clip files: motions and skeletons, paired by [`motion::pairing`].
     pub clips: Vec<PathBuf>,
@@ -35,6 +45,14 @@ pub struct SweepOptions {
     pub codecs: Vec<String>,
     /// Target compression ratios.
     pub targets: Vec<f64>,
+    /// Bounds on the max joint position error, cm: for each, the smallest stream within it
+    /// ([`bounded::make_within`]). A sweep needs targets, bounds or both.
+    pub max_errors_cm: Vec<f64>,
+    /// Codec parameters to vary, each key with its values (`qp` → 7, 9, 11): every codec is
+    /// run at every combination (the Cartesian product) and every target. Each key must be a
+    /// parameter of every codec swept, and neither `cr` nor the codec's rate knob (`alpha`,
+    /// `t_l`), which the rate control sets. Empty: the codecs' defaults.
+    pub params: Vec<(String, Vec<f64>)>,
     /// Output folder (gets the manifest, the CSV and one folder per clip).
     pub output: PathBuf,
     /// Worker threads (at least 1).
@@ -50,10 +68,49 @@ pub struct SweepOptions {
 /// What a sweep wrote.
 #[derive(Debug, Clone)]
 pub struct SweepSummary {
-    /// The manifest written (references first, then the jobs in clip, codec, rate order).
+    /// The manifest written (references first, then the stimuli made in clip, codec,
+    /// variant, target order).
     pub manifest: StimulusManifest,
     /// Reference clips among them.
     pub references: usize,
+    /// The targets not reached, in the same order (also `unreachable` rows of `rd.csv`).
+    pub unreachable: Vec<Unreachable>,
+}
+
+/// What one stimulus of a sweep is made for.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Target {
+    /// A compression ratio, reached by the codec's rate control within ±2 %.
+    Cr(f64),
+    /// A bound on the max joint position error, cm: the smallest stream within it.
+    MaxErrorCm(f64),
+}
+
+impl Target {
+    /// The target's part of a stimulus id and file name: `cr20`, `max0.5cm`.
+    pub fn label(self) -> String {
+        match self {
+            Target::Cr(t) => format!("cr{t}"),
+            Target::MaxErrorCm(e) => format!("max{e}cm"),
+        }
+    }
+}
+
+/// A stimulus a sweep could not make because its target cannot be reached.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Unreachable {
+    /// The id it would have had.
+    pub id: String,
+    /// Clip name.
+    pub clip: String,
+    /// Codec name.
+    pub codec: String,
+    /// The varied parameters.
+    pub variant: Params,
+    /// The target.
+    pub target: Target,
+    /// Why (the codec's message, with the closest it came).
+    pub reason: String,
 }
 
 /// A sweep's clip: name, clip, its ASF in the output (for AMC), its output folder.
@@ -67,28 +124,34 @@ struct SweepClip {
 struct Job {
     clip: usize,
     codec: String,
-    target: f64,
+    variant: Params,
+    target: Target,
+}
+
+/// What became of one job.
+enum Outcome {
+    /// Made: its manifest entry and `rd.csv` row.
+    Made(Box<Stimulus>, RdRow),
+    /// Not reachable: what was asked and why, and its `rd.csv` row.
+    Unreachable(Unreachable, RdRow),
 }
 
 /// Runs a sweep; `progress(done, total)` is called from the workers after each stimulus.
 ///
 /// # Errors
-/// A bad target, an unknown codec or one without rate control, clips that do not pair or
-/// read, an output folder holding files without [`SweepOptions::force`]
-/// ([`files::Error::NotEmpty`], naming the folder and what it holds), a codec failing a
-/// target, or an output that cannot be written. Every file is written whole or not at all
-/// ([`files::write`]), so a failed sweep (a full disk) leaves complete files only.
+/// A bad target or bound (not positive, or given twice), no target at all, an unknown codec
+/// or one without rate control, a varied parameter a codec does not take (naming the codec's
+/// keys) or that its rate control sets, clips that do not pair or read, an output folder
+/// holding files without [`SweepOptions::force`] ([`files::Error::NotEmpty`], naming the
+/// folder and what it holds), a codec refusing a parameter's value, or an output that cannot
+/// be written; all but the last two before anything is encoded. A target the codec cannot
+/// reach is no error ([`SweepSummary::unreachable`]). Every file is written whole or not at
+/// all ([`files::write`]), so a failed sweep (a full disk) leaves complete files only.
 pub fn sweep(
     options: &SweepOptions,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<SweepSummary> {
-    for &t in &options.targets {
-        if !(t.is_finite() && t > 0.0) {
-            return Err(refused(format!(
-                "--cr {t}: compression ratios must be positive"
-            )));
-        }
-    }
+    let targets = check_targets(options)?;
     let codecs = Codecs::with_database(options.database.as_deref())
         .context(|| "reading the primitive database".to_string())?;
     for name in &options.codecs {
@@ -97,6 +160,11 @@ pub fn sweep(
                 "codec `{name}` takes no target rate; sweep lossy codecs"
             )));
         }
+    }
+    let variants = variants(&options.params)?;
+    for name in &options.codecs {
+        let keys: Vec<&str> = options.params.iter().map(|(k, _)| k.as_str()).collect();
+        codecs.check_varied_params(name, &keys)?;
     }
     let inputs = clips::sources(&options.clips, &options.clip_options)?;
     let out = &options.output;
@@ -125,17 +193,21 @@ pub fn sweep(
             dir,
         });
     }
-    let jobs: Vec<Job> = (0..sweep_clips.len())
-        .flat_map(|clip| {
-            options.codecs.iter().flat_map(move |codec| {
-                options.targets.iter().map(move |&target| Job {
-                    clip,
-                    codec: codec.clone(),
-                    target,
-                })
-            })
-        })
-        .collect();
+    let mut jobs = Vec::new();
+    for clip in 0..sweep_clips.len() {
+        for codec in &options.codecs {
+            for variant in &variants {
+                for &target in &targets {
+                    jobs.push(Job {
+                        clip,
+                        codec: codec.clone(),
+                        variant: variant.clone(),
+                        target,
+                    });
+                }
+            }
+        }
+    }
     let results = run_jobs(
         &jobs,
         options.jobs,
@@ -143,10 +215,18 @@ pub fn sweep(
         progress,
     )?;
     let mut csv = String::from(RD_HEADER);
+    let mut unreachable = Vec::new();
     for r in results {
-        let (stimulus, row) = r?;
-        csv.push_str(&row);
-        manifest.stimuli.push(stimulus);
+        match r? {
+            Outcome::Made(stimulus, row) => {
+                csv.push_str(&row.to_csv());
+                manifest.stimuli.push(*stimulus);
+            }
+            Outcome::Unreachable(u, row) => {
+                csv.push_str(&row.to_csv());
+                unreachable.push(u);
+            }
+        }
     }
     // The table, then the manifest: a stimuli.json on disk means every file it names is
     // complete.
@@ -156,7 +236,84 @@ pub fn sweep(
     Ok(SweepSummary {
         manifest,
         references: sweep_clips.len(),
+        unreachable,
     })
+}
+
+/// The sweep's targets, ratios first: each positive, none twice (they would make one id
+/// twice), and at least one.
+fn check_targets(options: &SweepOptions) -> Result<Vec<Target>> {
+    for &t in &options.targets {
+        if !(t.is_finite() && t > 0.0) {
+            return Err(refused(format!(
+                "--cr {t}: compression ratios must be positive"
+            )));
+        }
+    }
+    for &e in &options.max_errors_cm {
+        if !(e.is_finite() && e > 0.0) {
+            return Err(refused(format!(
+                "--max-error-cm {e}: error bounds must be a positive number of cm"
+            )));
+        }
+    }
+    once_each("--cr", &options.targets)?;
+    once_each("--max-error-cm", &options.max_errors_cm)?;
+    let targets: Vec<Target> = options
+        .targets
+        .iter()
+        .map(|&t| Target::Cr(t))
+        .chain(options.max_errors_cm.iter().map(|&e| Target::MaxErrorCm(e)))
+        .collect();
+    if targets.is_empty() {
+        return Err(refused(
+            "nothing to make: give target ratios (--cr) or error bounds (--max-error-cm)",
+        ));
+    }
+    Ok(targets)
+}
+
+/// Refuses a value listed twice in `flag`'s list.
+fn once_each(flag: &str, values: &[f64]) -> Result<()> {
+    for (i, v) in values.iter().enumerate() {
+        if values[..i].contains(v) {
+            return Err(refused(format!("{flag}: {v} is listed twice")));
+        }
+    }
+    Ok(())
+}
+
+/// Every combination of the varied parameters' values (one empty set when none varies), in
+/// the order the values were given, the first parameter slowest.
+fn variants(params: &[(String, Vec<f64>)]) -> Result<Vec<Params>> {
+    let mut out = vec![Params::new()];
+    for (i, (key, values)) in params.iter().enumerate() {
+        if params[..i].iter().any(|(k, _)| k == key) {
+            return Err(refused(format!(
+                "--param {key} is given twice; list its values in one: {key}=7,9,11"
+            )));
+        }
+        if values.is_empty() {
+            return Err(refused(format!("--param {key}: no values")));
+        }
+        for v in values {
+            if !v.is_finite() {
+                return Err(refused(format!("--param {key}={v}: not a finite number")));
+            }
+        }
+        once_each(&format!("--param {key}"), values)?;
+        out = out
+            .iter()
+            .flat_map(|p| {
+                values.iter().map(move |v| {
+                    let mut p = p.clone();
+                    p.insert(key.clone(), *v);
+                    p
+                })
+            })
+            .collect();
+    }
+    Ok(out)
 }
 
 /// Runs `make` over `jobs` on `threads` workers; results in job order.
@@ -205,7 +362,9 @@ fn reference_stimulus(out: &Path, name: &str, file: &Path, skeleton: Option<&Pat
         clip: name.to_string(),
         codec: REFERENCE_CODEC.into(),
         params: BTreeMap::new(),
+        variant: BTreeMap::new(),
         target_cr: None,
+        target_max_error_cm: None,
         achieved_cr: 1.0,
         bytes: 0,
         file: rel(out, file),
@@ -217,50 +376,102 @@ fn reference_stimulus(out: &Path, name: &str, file: &Path, skeleton: Option<&Pat
     }
 }
 
-/// One stimulus and its CSV row.
+/// The id of a sweep stimulus: clip, codec, the variant when one is varied, and the target
+/// (`walk/wavelet-perceptual/qp9-window128/cr20`, `walk/spiht/max0.5cm`).
+pub fn stimulus_id(clip: &str, codec: &str, variant: &Params, target: Target) -> String {
+    if variant.is_empty() {
+        format!("{clip}/{codec}/{}", target.label())
+    } else {
+        format!(
+            "{clip}/{codec}/{}/{}",
+            variant_label(variant),
+            target.label()
+        )
+    }
+}
+
+/// One stimulus and its CSV row, or its target recorded as unreachable.
 fn make_job(
     job: &Job,
     clips: &[SweepClip],
     out: &Path,
     codecs: &Codecs,
     mode: files::Mode,
-) -> Result<(Stimulus, String), LabError> {
+) -> Result<Outcome, LabError> {
     let c = &clips[job.clip];
     let codec = codecs.get(&job.codec)?;
-    let request = Request {
-        params: codecs::codec::Params::new(),
-        target_cr: Some(job.target),
+    let id = stimulus_id(&c.name, &job.codec, &job.variant, job.target);
+    let made = match job.target {
+        Target::Cr(t) => stimulus::make(
+            codec.as_ref(),
+            &c.clip,
+            &Request {
+                params: job.variant.clone(),
+                target_cr: Some(t),
+            },
+        ),
+        Target::MaxErrorCm(e) => {
+            bounded::make_within(codec.as_ref(), &c.clip, &job.variant, e).map(|b| b.made)
+        }
     };
-    let made = stimulus::make(codec.as_ref(), &c.clip, &request)
-        .context(|| format!("{}: {} at CR {}", c.name, job.codec, job.target))?;
-    let stem = format!("{}-cr{}", job.codec, job.target);
+    let unreachable = |reason: String| {
+        let row = RdRow::unreachable(c, job, &id, &reason);
+        Outcome::Unreachable(
+            Unreachable {
+                id: id.clone(),
+                clip: c.name.clone(),
+                codec: job.codec.clone(),
+                variant: job.variant.clone(),
+                target: job.target,
+                reason,
+            },
+            row,
+        )
+    };
+    let made = match made {
+        Ok(m) => m,
+        Err(e @ (LabError::Codec(CodecError::Rate { .. }) | LabError::BoundUnreachable { .. })) => {
+            return Ok(unreachable(chain(&e)));
+        }
+        Err(e) => {
+            return Err(e).context(|| id.clone());
+        }
+    };
+    // The CR search of the wavelet codecs steps the quantiser when α alone cannot reach a
+    // target; the stream would then not be the variant its id names.
+    if let Some(reason) = off_variant(&made, &job.variant, job.target) {
+        return Ok(unreachable(reason));
+    }
+    let stem = if job.variant.is_empty() {
+        format!("{}-{}", job.codec, job.target.label())
+    } else {
+        format!(
+            "{}-{}-{}",
+            job.codec,
+            variant_label(&job.variant),
+            job.target.label()
+        )
+    };
     let mcz = c.dir.join(format!("{stem}.mcz"));
     files::write(&mcz, &made.bytes, mode)?;
     let (file, _) =
         stimulus::write_clip_as(&made.decoded, &c.dir, &stem, c.skeleton.as_deref(), mode)?;
-    let achieved = made.achieved_cr();
+    let row = RdRow::made(c, job, &id, &made);
     let m = &made.metrics;
-    let row = format!(
-        "{},{},{},{achieved:.4},{},{:.5},{:.5},{:.5},{},{:.3},{:.3}\n",
-        c.name,
-        job.codec,
-        job.target,
-        made.bytes.len(),
-        m.rms_cm,
-        m.max_cm,
-        m.mean_angle_deg,
-        m.foot_slide_cm_s
-            .map_or_else(String::new, |v| format!("{v:.5}")),
-        made.encode_ms,
-        made.decode_ms,
-    );
+    let w = made.worst_window;
+    let (target_cr, target_max_error_cm) = match job.target {
+        Target::Cr(t) => (Some(t), None),
+        Target::MaxErrorCm(e) => (None, Some(e)),
+    };
     let stimulus = Stimulus {
-        id: format!("{}/{}/cr{}", c.name, job.codec, job.target),
+        id,
         clip: c.name.clone(),
         codec: job.codec.clone(),
         params: made.stream.params.clone(),
-        target_cr: Some(job.target),
-        achieved_cr: achieved,
+        variant: job.variant.clone(),
+        target_cr,
+        target_max_error_cm,
+        achieved_cr: made.achieved_cr(),
         bytes: made.bytes.len() as u64,
         file: rel(out, &file),
         skeleton: c.skeleton.as_deref().map(|s| rel(out, s)),
@@ -270,9 +481,153 @@ fn make_job(
             max_cm: m.max_cm,
             mean_angle_deg: m.mean_angle_deg,
             foot_slide_cm_s: m.foot_slide_cm_s,
+            worst_window_rms_cm: w.map(|w| w.rms_cm),
+            worst_window_start_frame: w.map(|w| w.start_frame as u64),
+            worst_window_frames: w.map(|w| w.frames as u64),
         }),
         encode_ms: Some(made.encode_ms),
         decode_ms: Some(made.decode_ms),
     };
-    Ok((stimulus, row))
+    Ok(Outcome::Made(Box::new(stimulus), row))
+}
+
+/// Why `made` is not the variant asked for: a varied parameter the stream records with
+/// another value.
+fn off_variant(made: &Made, variant: &Params, target: Target) -> Option<String> {
+    let off: Vec<String> = variant
+        .iter()
+        .filter_map(|(k, v)| {
+            let got = made.stream.params.get(k)?;
+            // The stream records the value it was given, bit for bit, unless the rate control
+            // changed it.
+            (got.to_bits() != v.to_bits()).then(|| format!("{k} {got} (asked {v})"))
+        })
+        .collect();
+    (!off.is_empty()).then(|| {
+        format!(
+            "{} needs {}: the rate control left the variant",
+            target.label(),
+            off.join(", ")
+        )
+    })
+}
+
+/// One row of [`RD_FILE`]; empty cells for what an unreachable target has not.
+struct RdRow {
+    clip: String,
+    codec: String,
+    params: String,
+    target: Target,
+    status: &'static str,
+    achieved_cr: Option<f64>,
+    bytes: Option<usize>,
+    rms_cm: Option<f64>,
+    max_cm: Option<f64>,
+    worst_window_rms_cm: Option<f64>,
+    worst_window_start_frame: Option<usize>,
+    mean_angle_deg: Option<f64>,
+    foot_slide_cm_s: Option<f64>,
+    encode_ms: Option<f64>,
+    decode_ms: Option<f64>,
+    id: String,
+    reason: String,
+}
+
+impl RdRow {
+    /// The `params` cell: `qp=9;window=128` (`;`, not `,`, inside a CSV cell).
+    fn params_cell(variant: &Params) -> String {
+        variant
+            .iter()
+            .map(|(k, v)| format!("{k}={v}"))
+            .collect::<Vec<_>>()
+            .join(";")
+    }
+
+    fn made(c: &SweepClip, job: &Job, id: &str, made: &Made) -> RdRow {
+        let m = &made.metrics;
+        RdRow {
+            clip: c.name.clone(),
+            codec: job.codec.clone(),
+            params: Self::params_cell(&job.variant),
+            target: job.target,
+            status: "made",
+            achieved_cr: Some(made.achieved_cr()),
+            bytes: Some(made.bytes.len()),
+            rms_cm: Some(m.rms_cm),
+            max_cm: Some(m.max_cm),
+            worst_window_rms_cm: made.worst_window.map(|w| w.rms_cm),
+            worst_window_start_frame: made.worst_window.map(|w| w.start_frame),
+            mean_angle_deg: Some(m.mean_angle_deg),
+            foot_slide_cm_s: m.foot_slide_cm_s,
+            encode_ms: Some(made.encode_ms),
+            decode_ms: Some(made.decode_ms),
+            id: id.to_string(),
+            reason: String::new(),
+        }
+    }
+
+    fn unreachable(c: &SweepClip, job: &Job, id: &str, reason: &str) -> RdRow {
+        RdRow {
+            clip: c.name.clone(),
+            codec: job.codec.clone(),
+            params: Self::params_cell(&job.variant),
+            target: job.target,
+            status: "unreachable",
+            achieved_cr: None,
+            bytes: None,
+            rms_cm: None,
+            max_cm: None,
+            worst_window_rms_cm: None,
+            worst_window_start_frame: None,
+            mean_angle_deg: None,
+            foot_slide_cm_s: None,
+            encode_ms: None,
+            decode_ms: None,
+            id: id.to_string(),
+            reason: reason.to_string(),
+        }
+    }
+
+    /// The row as a CSV line (with its newline).
+    fn to_csv(&self) -> String {
+        let num =
+            |v: Option<f64>, digits: usize| v.map_or_else(String::new, |v| format!("{v:.digits$}"));
+        let (target_cr, bound) = match self.target {
+            Target::Cr(t) => (t.to_string(), String::new()),
+            Target::MaxErrorCm(e) => (String::new(), e.to_string()),
+        };
+        let cells = [
+            csv_field(&self.clip),
+            csv_field(&self.codec),
+            csv_field(&self.params),
+            target_cr,
+            bound,
+            self.status.to_string(),
+            num(self.achieved_cr, 4),
+            self.bytes.map_or_else(String::new, |b| b.to_string()),
+            num(self.rms_cm, 5),
+            num(self.max_cm, 5),
+            num(self.worst_window_rms_cm, 5),
+            self.worst_window_start_frame
+                .map_or_else(String::new, |f| f.to_string()),
+            num(self.mean_angle_deg, 5),
+            num(self.foot_slide_cm_s, 5),
+            num(self.encode_ms, 3),
+            num(self.decode_ms, 3),
+            csv_field(&self.id),
+            csv_field(&self.reason),
+        ];
+        let mut line = cells.join(",");
+        line.push('\n');
+        line
+    }
+}
+
+/// `s` as one CSV cell (RFC 4180: quoted when it holds a comma, quote or line break).
+fn csv_field(s: &str) -> String {
+    if s.contains([',', '"', '\n', '\r']) {
+        format!("\"{}\"", s.replace('"', "\"\""))
+    } else {
+        s.to_string()
+    }
 }

@@ -8,8 +8,13 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
-/// Current version of the `stimuli.json` format.
-pub const MANIFEST_VERSION: u32 = 1;
+/// Current version of the `stimuli.json` format. Version 2 added a stimulus' `variant`,
+/// `target_max_error_cm` and the worst-window fields of its metrics; every one of them is
+/// optional, so a version-1 manifest reads as a version-2 one without them.
+pub const MANIFEST_VERSION: u32 = 2;
+
+/// The oldest `stimuli.json` version this build reads.
+pub const MANIFEST_VERSION_MIN: u32 = 1;
 
 /// The codec name that marks an unprocessed reference clip.
 pub const REFERENCE_CODEC: &str = "reference";
@@ -34,12 +39,22 @@ pub struct Stimulus {
     pub clip: String,
     /// Codec name, or [`REFERENCE_CODEC`] for the source itself.
     pub codec: String,
-    /// Codec parameters as written by the codec (e.g. `alpha`, `qp`, `window`, `t_l`).
+    /// Codec parameters as written by the codec (e.g. `alpha`, `qp`, `window`, `t_l`): every
+    /// parameter the stream records, the ones the rate control chose included.
     #[serde(default)]
     pub params: BTreeMap<String, f64>,
+    /// The parameters the sweep was asked to set (`study sweep --param qp=9,11`), which tell
+    /// variants of one codec at one target apart; empty when the codec ran with its defaults.
+    /// They are part of the id ([`variant_label`]) and of the analysis' condition labels.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub variant: BTreeMap<String, f64>,
     /// Requested compression ratio, if the stimulus was made for a target rate.
     #[serde(default)]
     pub target_cr: Option<f64>,
+    /// Requested bound on the largest joint position error, cm, if the stimulus is the
+    /// smallest stream found whose max error stays within it (`study sweep --max-error-cm`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub target_max_error_cm: Option<f64>,
     /// Compression ratio reached (4 bytes × channels × frames / bitstream bytes); 1 for a
     /// reference.
     pub achieved_cr: f64,
@@ -78,6 +93,46 @@ pub struct StimulusMetrics {
     /// Difference in mean horizontal foot speed while in contact, cm/s.
     #[serde(default)]
     pub foot_slide_cm_s: Option<f64>,
+    /// Joint position RMS error of the worst window (1 s of frames, sliding; see
+    /// `docs/codecs.md`), cm: where a clip-wide RMS hides a broken stretch.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub worst_window_rms_cm: Option<f64>,
+    /// First frame of that window (0-based).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub worst_window_start_frame: Option<u64>,
+    /// Frames in that window (the clip's rate rounded, or the whole clip when shorter).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub worst_window_frames: Option<u64>,
+}
+
+/// The variant part of a stimulus id and of a condition label: `key` then value for every
+/// parameter, in key order, joined by `-` (`qp9-window128`); empty for no parameters. Values
+/// print as Rust's shortest round-trip decimal (`0.25`, `128`), so a label reads back to the
+/// numbers that made it.
+pub fn variant_label(params: &BTreeMap<String, f64>) -> String {
+    params
+        .iter()
+        .map(|(k, v)| format!("{k}{v}"))
+        .collect::<Vec<_>>()
+        .join("-")
+}
+
+/// The method a stimulus (or a condition) shows: the codec name, then `/` and its
+/// [`variant_label`] when it has a variant (`wavelet-perceptual/qp9-window128`); the codec
+/// name alone otherwise, so labels of sweeps without `--param` are what they always were.
+pub fn method_label(codec: &str, variant: &BTreeMap<String, f64>) -> String {
+    if variant.is_empty() {
+        codec.to_string()
+    } else {
+        format!("{codec}/{}", variant_label(variant))
+    }
+}
+
+impl Stimulus {
+    /// The stimulus' method: codec and variant ([`method_label`]).
+    pub fn method(&self) -> String {
+        method_label(&self.codec, &self.variant)
+    }
 }
 
 impl StimulusManifest {

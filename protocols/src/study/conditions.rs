@@ -1,14 +1,19 @@
 //! `[conditions]` (the test stimuli of a MOS or DSCQS study: a list or a clips × codecs ×
-//! target_cr grid) and the familiarization stimuli chosen among them.
+//! target_cr × params grid) and the familiarization stimuli chosen among them.
+//!
+//! A grid cell with a target ratio is one condition: when a manifest holds several variants
+//! of a codec at one ratio (`study sweep --param`), the study names the one it means in
+//! `params` (every combination of its values is a cell), or the cell is refused as ambiguous,
+//! naming the parameters the candidates differ in.
 
-use std::collections::BTreeSet;
+use std::collections::{BTreeMap, BTreeSet};
 
-use toml::Table;
+use toml::{Table, Value};
 
 use super::Condition;
 use super::check::Ctx;
 use super::session::FamSpec;
-use crate::manifest::{REFERENCE_CODEC, StimulusManifest};
+use crate::manifest::{REFERENCE_CODEC, Stimulus, StimulusManifest};
 
 fn condition_of(id: &str, m: &StimulusManifest, key: &str, cx: &mut Ctx) -> Option<Condition> {
     let Some(s) = m.get(id) else {
@@ -38,12 +43,118 @@ fn condition_of(id: &str, m: &StimulusManifest, key: &str, cx: &mut Ctx) -> Opti
     })
 }
 
+/// Whether two parameter values (or target ratios) are the same number, as written to and
+/// read back from a manifest.
+fn same_value(a: f64, b: f64) -> bool {
+    (a - b).abs() <= 1e-9 * b.abs().max(1.0)
+}
+
+/// `conditions.params`: codec parameter → the values the grid takes (a number or an array of
+/// numbers), in key order.
+fn parse_param_grid(t: &Table, cx: &mut Ctx) -> Vec<(String, Vec<f64>)> {
+    const P: &str = "conditions";
+    let Some(table) = cx.table(t, P, "params") else {
+        return Vec::new();
+    };
+    let mut grid = Vec::new();
+    for (k, v) in table {
+        let key = format!("{P}.params");
+        let values = match v {
+            Value::Array(_) => cx.floats(table, &key, k),
+            _ => cx.float(table, &key, k).map(|x| vec![x]),
+        };
+        match values {
+            Some(values) if values.is_empty() => {
+                cx.err(format!("{key}.{k}"), "no values");
+            }
+            Some(values) => grid.push((k.clone(), values)),
+            None => {}
+        }
+    }
+    grid
+}
+
+/// Every combination of the grid's values, one map per combination (one empty map for no
+/// grid).
+fn param_combinations(grid: &[(String, Vec<f64>)]) -> Vec<BTreeMap<String, f64>> {
+    let mut out = vec![BTreeMap::new()];
+    for (k, values) in grid {
+        out = out
+            .iter()
+            .flat_map(|m| {
+                values.iter().map(move |v| {
+                    let mut m = m.clone();
+                    m.insert(k.clone(), *v);
+                    m
+                })
+            })
+            .collect();
+    }
+    out
+}
+
+/// ` with qp = 9, window = 128` for a non-empty combination, else nothing.
+fn with_params(combo: &BTreeMap<String, f64>) -> String {
+    if combo.is_empty() {
+        return String::new();
+    }
+    let parts: Vec<String> = combo.iter().map(|(k, v)| format!("{k} = {v}")).collect();
+    format!(" with {}", parts.join(", "))
+}
+
+/// The refusal of a grid cell that matches several stimuli: which variant parameters tell
+/// them apart, and how to name one.
+fn ambiguous(hits: &[&Stimulus], cell: &str) -> String {
+    // The variant keys, compared on what each stream records (a stimulus made with the
+    // defaults has no variant but records the value it used).
+    let keys: BTreeSet<&str> = hits
+        .iter()
+        .flat_map(|s| s.variant.keys().map(String::as_str))
+        .collect();
+    let differ: Vec<&str> = keys
+        .into_iter()
+        .filter(|k| {
+            let values: BTreeSet<Option<u64>> = hits
+                .iter()
+                .map(|s| s.params.get(*k).map(|v| v.to_bits()))
+                .collect();
+            values.len() > 1
+        })
+        .collect();
+    let ids: Vec<String> = hits.iter().map(|s| format!("{:?}", s.id)).collect();
+    let example = hits
+        .iter()
+        .find(|s| !s.variant.is_empty())
+        .map(|s| {
+            differ
+                .iter()
+                .filter_map(|k| s.params.get(*k).map(|v| format!("{k} = {v}")))
+                .collect::<Vec<_>>()
+        })
+        .unwrap_or_default();
+    let how = if differ.is_empty() || example.is_empty() {
+        "list the one you mean in conditions.stimuli".to_string()
+    } else {
+        format!(
+            "they differ in {}: name the variant with conditions.params (e.g. params = {{ {} }}) \
+             or list the stimuli in conditions.stimuli",
+            differ.join(", "),
+            example.join(", ")
+        )
+    };
+    format!(
+        "{} stimuli match {cell} ({}); {how}",
+        hits.len(),
+        ids.join(", ")
+    )
+}
+
 pub(super) fn parse_conditions(t: &Table, m: &StimulusManifest, cx: &mut Ctx) -> Vec<Condition> {
     const P: &str = "conditions";
-    cx.known(t, P, &["stimuli", "clips", "codecs", "target_cr"]);
+    cx.known(t, P, &["stimuli", "clips", "codecs", "target_cr", "params"]);
     let mut out = Vec::new();
     let list = cx.strings(t, P, "stimuli");
-    let grid_keys = ["clips", "codecs", "target_cr"]
+    let grid_keys = ["clips", "codecs", "target_cr", "params"]
         .iter()
         .any(|k| t.contains_key(*k));
     if let Some(list) = list {
@@ -75,46 +186,62 @@ pub(super) fn parse_conditions(t: &Table, m: &StimulusManifest, cx: &mut Ctx) ->
         let codecs = cx.strings(t, P, "codecs");
         let codecs = cx.required(codecs, t, P, "codecs").unwrap_or_default();
         let crs = cx.floats(t, P, "target_cr");
+        let combos = param_combinations(&parse_param_grid(t, cx));
         for (ci, clip) in clips.iter().enumerate() {
             for (di, codec) in codecs.iter().enumerate() {
-                let matching: Vec<_> = m
-                    .stimuli
-                    .iter()
-                    .filter(|s| &s.clip == clip && &s.codec == codec)
-                    .collect();
-                match &crs {
-                    None if matching.is_empty() => {
-                        cx.err(
-                            format!("{P}.codecs[{di}]"),
-                            format!(
-                                "no stimulus of clip {clip:?} (clips[{ci}]) with codec {codec:?}"
-                            ),
-                        );
-                    }
-                    None => {
-                        for s in matching {
-                            out.extend(condition_of(&s.id, m, &format!("{P}.codecs[{di}]"), cx));
-                        }
-                    }
-                    Some(crs) => {
-                        for (ri, cr) in crs.iter().enumerate() {
-                            let hit: Vec<_> = matching
+                for combo in &combos {
+                    let matching: Vec<&Stimulus> = m
+                        .stimuli
+                        .iter()
+                        .filter(|s| &s.clip == clip && &s.codec == codec)
+                        .filter(|s| {
+                            combo
                                 .iter()
-                                .filter(|s| {
-                                    s.target_cr
-                                        .is_some_and(|t| (t - cr).abs() <= 1e-9 * cr.abs().max(1.0))
-                                })
-                                .collect();
-                            if hit.is_empty() {
-                                cx.err(format!("{P}.target_cr[{ri}]"), format!("no stimulus of clip {clip:?} with codec {codec:?} at target_cr {cr}"));
-                            }
-                            for s in hit {
+                                .all(|(k, v)| s.params.get(k).is_some_and(|x| same_value(*x, *v)))
+                        })
+                        .collect();
+                    let params = with_params(combo);
+                    match &crs {
+                        None if matching.is_empty() => {
+                            cx.err(
+                                format!("{P}.codecs[{di}]"),
+                                format!(
+                                    "no stimulus of clip {clip:?} (clips[{ci}]) with codec \
+                                     {codec:?}{params}"
+                                ),
+                            );
+                        }
+                        // Without target_cr a cell is every stimulus of the clip and codec
+                        // (and named parameters): every rate and variant, each its own
+                        // condition.
+                        None => {
+                            for s in matching {
                                 out.extend(condition_of(
                                     &s.id,
                                     m,
-                                    &format!("{P}.target_cr[{ri}]"),
+                                    &format!("{P}.codecs[{di}]"),
                                     cx,
                                 ));
+                            }
+                        }
+                        Some(crs) => {
+                            for (ri, cr) in crs.iter().enumerate() {
+                                let key = format!("{P}.target_cr[{ri}]");
+                                let hit: Vec<&Stimulus> = matching
+                                    .iter()
+                                    .copied()
+                                    .filter(|s| s.target_cr.is_some_and(|t| same_value(t, *cr)))
+                                    .collect();
+                                let cell = format!(
+                                    "clip {clip:?} with codec {codec:?} at target_cr {cr}{params}"
+                                );
+                                match hit.as_slice() {
+                                    [] => cx.err(key, format!("no stimulus of {cell}")),
+                                    [s] => out.extend(condition_of(&s.id, m, &key, cx)),
+                                    // One cell, one condition: a grid never picks several
+                                    // variants of a codec at one rate unasked.
+                                    _ => cx.err(key, ambiguous(&hit, &cell)),
+                                }
                             }
                         }
                     }

@@ -311,6 +311,29 @@ fn manifest_track(
         );
         return None;
     }
+    // Several variants of the codec (`study sweep --param`) give one level several stimuli;
+    // the track would show whichever sorts first. Refused, naming them.
+    if let Some(w) = levels
+        .windows(2)
+        .find(|w| (w[0].0 - w[1].0).abs() <= 1e-9 * w[1].0.abs().max(1.0))
+    {
+        let same: Vec<String> = levels
+            .iter()
+            .filter(|(v, _)| (v - w[0].0).abs() <= 1e-9 * w[0].0.abs().max(1.0))
+            .map(|(_, id)| format!("{id:?}"))
+            .collect();
+        cx.err(
+            join(tp, "clip"),
+            format!(
+                "{} stimuli of clip {clip:?} with codec {codec:?} have {param} = {} ({}): a \
+                 track needs one stimulus per level; give the variants their own manifest",
+                same.len(),
+                w[0].0,
+                same.join(", ")
+            ),
+        );
+        return None;
+    }
     Some(Track {
         name: head.name,
         clip,

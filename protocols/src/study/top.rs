@@ -288,13 +288,14 @@ fn check_live_metric(t: &Table, simulation: &SimulationSettings, cx: &mut Ctx) {
 /// The manifest's own problems, each naming its file (`path`, as the `stimuli` key gives it)
 /// and the entry.
 fn check_manifest(path: &str, m: &StimulusManifest, cx: &mut Ctx) {
-    if m.version != crate::manifest::MANIFEST_VERSION {
+    use crate::manifest::{MANIFEST_VERSION, MANIFEST_VERSION_MIN};
+    if !(MANIFEST_VERSION_MIN..=MANIFEST_VERSION).contains(&m.version) {
         cx.err(
             "stimuli",
             format!(
-                "{path}: manifest version {} is not supported (this build reads {})",
+                "{path}: manifest version {} is not supported (this build reads \
+                 {MANIFEST_VERSION_MIN} to {MANIFEST_VERSION})",
                 m.version,
-                crate::manifest::MANIFEST_VERSION
             ),
         );
     }
