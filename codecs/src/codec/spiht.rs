@@ -471,11 +471,11 @@ fn spiht_encode(
     out: &mut Vec<u8>,
     scratch: &mut Scratch,
 ) -> Option<()> {
-    spiht_encode_traced(c, n0, nmax, budget, out, scratch, |_, _| {})
+    spiht_encode_traced(c, n0, nmax, budget, out, scratch, |_, _| true)
 }
 
 /// [`spiht_encode`], calling `plane_done(plane, bits written so far)` after every complete bit
-/// plane (what [`rd_curve`] reads).
+/// plane (what [`rd_curve`] reads); the stream ends there when it returns `false`.
 fn spiht_encode_traced(
     c: &[f64],
     n0: usize,
@@ -483,10 +483,10 @@ fn spiht_encode_traced(
     budget: usize,
     out: &mut Vec<u8>,
     scratch: &mut Scratch,
-    mut plane_done: impl FnMut(i64, usize),
+    mut plane_done: impl FnMut(i64, usize) -> bool,
 ) -> Option<()> {
     let start = out.len();
-    let limit = start + budget;
+    let limit = start.saturating_add(budget);
     let Scratch { maxima, lists } = scratch;
     maxima.compute(c, n0);
     lists.init(n0, c.len());
@@ -497,7 +497,9 @@ fn spiht_encode_traced(
         encode_lip(c, t, lists, sink)?;
         encode_lis(c, n0, t, maxima, lists, sink)?;
         encode_refinement(c, t, &lists.lsp[..lsp_before], sink)?;
-        plane_done(plane, sink.out.len() - start);
+        if !plane_done(plane, sink.out.len() - start) {
+            return None;
+        }
     }
     Some(())
 }
@@ -506,15 +508,15 @@ fn spiht_encode_traced(
 type Curve = Vec<(usize, f64)>;
 
 /// The rate-distortion curve of one channel-segment's embedded stream: `(bits, squared
-/// error)` before any bit and after every bit plane its first `budget` bits complete. After
-/// plane `p` the decoder holds `(⌊|c|/2^p⌋ + ½)·2^p` for every `|c| ≥ 2^p` and 0 for the rest
-/// ([`decode_lip`], [`decode_refinement`]), so the error is exact at those points; between
-/// them [`curve_error`] interpolates.
+/// error)` before any bit and after every bit plane, up to the first plane that ends at or past
+/// `bits` (or the stream's last). After plane `p` the decoder holds `(⌊|c|/2^p⌋ + ½)·2^p` for
+/// every `|c| ≥ 2^p` and 0 for the rest ([`decode_lip`], [`decode_refinement`]), so the error
+/// is exact at those points; between them [`curve_error`] interpolates.
 fn rd_curve(
     c: &[f64],
     n0: usize,
     nmax: Option<i64>,
-    budget: usize,
+    bits: usize,
     scratch: &mut Scratch,
     stream: &mut Vec<u8>,
 ) -> Curve {
@@ -523,7 +525,7 @@ fn rd_curve(
         return curve;
     };
     stream.clear();
-    let _ = spiht_encode_traced(c, n0, nm, budget, stream, scratch, |plane, bits| {
+    let _ = spiht_encode_traced(c, n0, nm, usize::MAX, stream, scratch, |plane, done| {
         let t = pow2(plane);
         let err: f64 = c
             .iter()
@@ -537,14 +539,15 @@ fn rd_curve(
                 (a - rec) * (a - rec)
             })
             .sum();
-        curve.push((bits, err));
+        curve.push((done, err));
+        done < bits
     });
     curve
 }
 
 /// The squared error after `bits` bits of a stream with `curve` ([`rd_curve`]): linear between
 /// its points (within a plane the error falls about evenly with the bits), the last point's
-/// beyond them.
+/// beyond them (the stream has ended there).
 fn curve_error(curve: &[(usize, f64)], bits: usize) -> f64 {
     match curve.iter().position(|&(b, _)| b > bits) {
         None => curve.last().map_or(0.0, |&(_, e)| e),
