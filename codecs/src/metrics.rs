@@ -1,7 +1,10 @@
 //! Objective error of a decoded clip against its reference, via forward kinematics.
 //!
 //! - joint position error in cm (FK points × `cm_per_unit`): RMS and max per joint and overall,
-//!   and the RMS over joints of every frame (the per-frame error curve);
+//!   and the RMS and max over joints of every frame (the per-frame error curves), from which
+//!   [`Metrics::windows`] and [`Metrics::worst_window`] give the error of consecutive windows
+//!   of frames, and [`Metrics::worst_stretch`] the worst stretch starting at any frame (RMS over
+//!   a whole clip hides a broken stretch: a codec's short last window);
 //! - mean angle error in degrees: for every joint with rotation channels and every frame, the
 //!   angle of the rotation between the reference's and the decoded local rotation (geodesic,
 //!   0-180°), averaged. Comparing the Euler channels one by one would count a pose written
@@ -39,6 +42,119 @@ pub struct Metrics {
     pub joint_max_cm: Vec<f64>,
     /// RMS error over joints of each frame, cm.
     pub frame_rms_cm: Vec<f64>,
+    /// Largest joint error of each frame, cm.
+    pub frame_max_cm: Vec<f64>,
+}
+
+/// The joint position error of one window of consecutive frames ([`Metrics::windows`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WindowError {
+    /// First frame of the window (0-based).
+    pub start_frame: usize,
+    /// Frames in the window: the window length asked for, fewer in the clip's last window.
+    pub frames: usize,
+    /// Joint position RMS over all joints and the window's frames, cm.
+    pub rms_cm: f64,
+    /// Largest joint position error in the window, cm.
+    pub max_cm: f64,
+}
+
+impl Metrics {
+    /// The error of every window of `window_frames` consecutive frames, in order: windows
+    /// start at frames 0, `window_frames`, `2·window_frames`, ..., and the last holds what is
+    /// left of the clip, so it is shorter when the clip's length is not a multiple of
+    /// `window_frames`. That short window is measured on its own, not merged into the one
+    /// before: a windowed codec's short last slice (issue 20) shows there, and would be
+    /// diluted otherwise. Empty when `window_frames` is 0 or the clip has no frames. Costs
+    /// O(frames).
+    pub fn windows(&self, window_frames: usize) -> impl Iterator<Item = WindowError> + '_ {
+        let frames = self.frame_rms_cm.len();
+        let starts = if window_frames == 0 {
+            0
+        } else {
+            frames.div_ceil(window_frames)
+        };
+        (0..starts).map(move |k| {
+            let start_frame = k * window_frames;
+            let end = (start_frame + window_frames).min(frames);
+            let sq: f64 = self.frame_rms_cm[start_frame..end]
+                .iter()
+                .map(|v| v * v)
+                .sum();
+            let max_cm = self.frame_max_cm[start_frame..end]
+                .iter()
+                .copied()
+                .fold(0.0, f64::max);
+            WindowError {
+                start_frame,
+                frames: end - start_frame,
+                rms_cm: (sq / (end - start_frame) as f64).sqrt(),
+                max_cm,
+            }
+        })
+    }
+
+    /// The window of [`Metrics::windows`] with the largest RMS (the first of equals), `None`
+    /// when there is none (`window_frames` 0, or no frames). For a codec with windows of `W`
+    /// frames, `worst_window(W)` is its worst window; for what a viewer sees, a second of
+    /// frames (`frame_rate_hz` rounded) is a natural length.
+    ///
+    /// ```
+    /// use codecs::metrics::compare;
+    /// use motion::synth::{WalkParams, walking_clip};
+    ///
+    /// let clip = walking_clip(&WalkParams { duration_s: 1.0, ..WalkParams::default() });
+    /// let mut decoded = clip.clone();
+    /// // Move the root 1 unit along its first translation channel in the last 10 frames.
+    /// let tx = clip.channels().iter().position(|c| !c.kind.is_rotation()).unwrap();
+    /// let n = clip.frames();
+    /// for v in &mut decoded.channel_mut(tx)[n - 10..] {
+    ///     *v += 1.0;
+    /// }
+    /// let m = compare(&clip, &decoded).unwrap();
+    /// let worst = m.worst_window(32).unwrap();
+    /// assert_eq!(worst.start_frame + worst.frames, n);
+    /// assert!(worst.rms_cm > m.rms_cm);
+    /// ```
+    pub fn worst_window(&self, window_frames: usize) -> Option<WindowError> {
+        self.windows(window_frames)
+            .fold(None, |worst: Option<WindowError>, w| match worst {
+                Some(b) if b.rms_cm >= w.rms_cm => Some(b),
+                _ => Some(w),
+            })
+    }
+
+    /// The worst stretch of `window_frames` consecutive frames starting at any frame (a
+    /// sliding window, so that it does not depend on where a codec's own windows fall): the
+    /// one whose RMS `sqrt(mean over its frames of frame_rms_cm²)` is largest (the earliest on
+    /// a tie), with its largest joint error. A clip shorter than the window is one window;
+    /// `None` when there are no frames or `window_frames` is 0. This is what a viewer sees at
+    /// its worst: the sweep, `rd.csv`, `stimuli.json` and `study encode` report it for a
+    /// second of frames.
+    pub fn worst_stretch(&self, window_frames: usize) -> Option<WindowError> {
+        let sq: Vec<f64> = self.frame_rms_cm.iter().map(|r| r * r).collect();
+        if sq.is_empty() || window_frames == 0 {
+            return None;
+        }
+        let w = window_frames.min(sq.len());
+        // Each window's sum is taken afresh (O(frames × window), 1.5 M additions for a 100-s
+        // clip at 120 Hz): a running sum would carry its rounding from one window to the next.
+        let (start, sum) = (0..=sq.len() - w)
+            .map(|i| (i, sq[i..i + w].iter().sum::<f64>()))
+            .fold((0, f64::NEG_INFINITY), |best, (i, s)| {
+                if s > best.1 { (i, s) } else { best }
+            });
+        let max_cm = self
+            .frame_max_cm
+            .get(start..start + w)
+            .map_or(0.0, |m| m.iter().copied().fold(0.0, f64::max));
+        Some(WindowError {
+            start_frame: start,
+            frames: w,
+            rms_cm: (sum / w as f64).sqrt(),
+            max_cm,
+        })
+    }
 }
 
 /// Why two clips cannot be compared.
@@ -78,17 +194,21 @@ pub fn compare(reference: &Clip, decoded: &Clip) -> Result<Metrics, MetricsError
     let mut joint_sq = vec![0.0; joints];
     let mut joint_max = vec![0.0f64; joints];
     let mut frame_rms = Vec::with_capacity(frames);
+    let mut frame_max = Vec::with_capacity(frames);
     let mut total_sq = 0.0;
     for f in 0..frames {
         let mut fs = 0.0;
+        let mut fm = 0.0f64;
         for j in 0..joints {
             let (p, q) = (a.point(f, j), b.point(f, j));
             let d2 =
                 ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)) * cm * cm;
             joint_sq[j] += d2;
             joint_max[j] = joint_max[j].max(d2.sqrt());
+            fm = fm.max(d2);
             fs += d2;
         }
+        frame_max.push(fm.sqrt());
         total_sq += fs;
         frame_rms.push(if joints > 0 {
             (fs / joints as f64).sqrt()
@@ -144,6 +264,7 @@ pub fn compare(reference: &Clip, decoded: &Clip) -> Result<Metrics, MetricsError
         joint_rms_cm: joint_rms,
         joint_max_cm: joint_max,
         frame_rms_cm: frame_rms,
+        frame_max_cm: frame_max,
     })
 }
 
@@ -200,6 +321,97 @@ mod tests {
         assert!(m.rms_cm.abs() < 1e-12 && m.max_cm.abs() < 1e-12 && m.mean_angle_deg.abs() < 1e-12);
         assert!(m.foot_slide_cm_s.unwrap().abs() < 1e-12);
         assert_eq!(m.frame_rms_cm.len(), clip.frames());
+    }
+
+    /// Metrics of a clip against itself, with the per-frame curves replaced by `frame_rms`
+    /// (and a max of twice it).
+    fn with_curve(frame_rms: Vec<f64>) -> Metrics {
+        let clip = walking_clip(&WalkParams {
+            duration_s: 0.1,
+            ..WalkParams::default()
+        });
+        let mut m = compare(&clip, &clip).unwrap();
+        m.frame_max_cm = frame_rms.iter().map(|v| 2.0 * v).collect();
+        m.frame_rms_cm = frame_rms;
+        m
+    }
+
+    #[test]
+    fn the_worst_stretch_is_the_rms_of_the_worst_consecutive_frames() {
+        // A 2-frame window over 1, 1, 3, 4, 1: frames 2-3, sqrt((9 + 16) / 2).
+        let m = with_curve(vec![1.0, 1.0, 3.0, 4.0, 1.0]);
+        let w = m.worst_stretch(2).unwrap();
+        assert_eq!((w.start_frame, w.frames), (2, 2));
+        assert!((w.rms_cm - 12.5f64.sqrt()).abs() < 1e-12, "{}", w.rms_cm);
+        assert!((w.max_cm - 8.0).abs() < 1e-12, "{}", w.max_cm);
+        // A flat curve: the earliest window, at the curve's value.
+        let w = with_curve(vec![0.5; 300]).worst_stretch(120).unwrap();
+        assert_eq!((w.start_frame, w.frames), (0, 120));
+        assert!((w.rms_cm - 0.5).abs() < 1e-12);
+        // A broken tail shows although the clip's RMS hides it.
+        let mut curve = vec![0.1; 1558];
+        for v in &mut curve[1536..] {
+            *v = 4.2;
+        }
+        let w = with_curve(curve).worst_stretch(120).unwrap();
+        assert_eq!(w.start_frame, 1558 - 120);
+        assert!(w.rms_cm > 1.5, "{}", w.rms_cm);
+        // Shorter than the window: the whole clip; no frames: none.
+        let w = with_curve(vec![3.0, 4.0]).worst_stretch(120).unwrap();
+        assert_eq!((w.start_frame, w.frames), (0, 2));
+        assert!((w.rms_cm - 12.5f64.sqrt()).abs() < 1e-12);
+        assert_eq!(with_curve(Vec::new()).worst_stretch(120), None);
+        assert_eq!(with_curve(vec![1.0]).worst_stretch(0), None);
+    }
+
+    /// Windows tile the clip from frame 0, the last one shorter; their RMS and max agree with
+    /// the per-frame curves, and together they give the clip's RMS and max.
+    #[test]
+    fn windows_tile_the_clip_and_the_worst_is_the_broken_one() {
+        let clip = walking_clip(&WalkParams {
+            duration_s: 1.0,
+            ..WalkParams::default()
+        });
+        let n = clip.frames();
+        let mut decoded = clip.clone();
+        for c in 0..clip.channel_count() {
+            for (f, v) in decoded.channel_mut(c).iter_mut().enumerate() {
+                *v += 0.01 * ((f * 7 + c) % 5) as f64;
+            }
+        }
+        let rx = clip
+            .channels()
+            .iter()
+            .position(|c| c.kind.is_rotation())
+            .unwrap();
+        for v in &mut decoded.channel_mut(rx)[n - 3..] {
+            *v += 20.0;
+        }
+        let m = compare(&clip, &decoded).unwrap();
+        assert_eq!(m.frame_max_cm.len(), n);
+        let w = 16;
+        let all: Vec<WindowError> = m.windows(w).collect();
+        assert_eq!(all.len(), n.div_ceil(w));
+        assert_eq!(all.iter().map(|x| x.frames).sum::<usize>(), n);
+        assert_eq!(
+            all.last().unwrap().frames,
+            if n.is_multiple_of(w) { w } else { n % w }
+        );
+        let sq: f64 = all
+            .iter()
+            .map(|x| x.rms_cm * x.rms_cm * x.frames as f64)
+            .sum();
+        assert!(((sq / n as f64).sqrt() - m.rms_cm).abs() < 1e-9);
+        let max = all.iter().map(|x| x.max_cm).fold(0.0, f64::max);
+        assert!((max - m.max_cm).abs() < 1e-12);
+        let worst = m.worst_window(w).unwrap();
+        assert_eq!(worst, *all.last().unwrap());
+        assert!(worst.rms_cm > 2.0 * m.rms_cm, "{worst:?} vs {}", m.rms_cm);
+        // One window holding the whole clip is the clip.
+        let whole = m.worst_window(n + 5).unwrap();
+        assert_eq!((whole.start_frame, whole.frames), (0, n));
+        assert!((whole.rms_cm - m.rms_cm).abs() < 1e-9);
+        assert_eq!(m.worst_window(0), None);
     }
 
     #[test]

@@ -12,7 +12,7 @@ use std::time::Instant;
 
 use codecs::bitstream::Bitstream;
 use codecs::codec::{Codec, Params};
-use codecs::metrics::{self, Metrics};
+use codecs::metrics::{self, Metrics, WindowError};
 use codecs::rate;
 use motion::{Clip, SkeletonFormat};
 
@@ -46,26 +46,7 @@ pub struct Made {
     pub decode_ms: f64,
     /// The worst 1-s window of the error ([`worst_window`] over [`window_frames`] of the
     /// clip's rate); `None` for a clip without frames.
-    pub worst_window: Option<WorstWindow>,
-}
-
-/// The stretch of a clip where the decoded motion is worst: the window of frames with the
-/// largest joint position RMS error.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct WorstWindow {
-    /// First frame of the window (0-based).
-    pub start_frame: usize,
-    /// Frames in it (the window asked for, or the whole clip when it is shorter).
-    pub frames: usize,
-    /// Joint position RMS error over the window's joints and frames, cm.
-    pub rms_cm: f64,
-}
-
-impl WorstWindow {
-    /// The window's start in seconds at `frame_rate_hz`.
-    pub fn start_s(&self, frame_rate_hz: f64) -> f64 {
-        self.start_frame as f64 / frame_rate_hz
-    }
+    pub worst_window: Option<WindowError>,
 }
 
 /// Frames in the worst-window metric's window at `frame_rate_hz`: one second, the rate
@@ -78,33 +59,11 @@ pub fn window_frames(frame_rate_hz: f64) -> usize {
     }
 }
 
-/// The worst window of `window_frames` consecutive frames of `metrics`: over every start
-/// frame (a sliding window, so that it does not depend on where a codec's own windows fall),
-/// the one whose RMS error `sqrt(mean over its frames of frame_rms_cm²)` is largest (the
-/// earliest on a tie); a clip shorter than the window is one window. `frame_rms_cm` is the
-/// RMS over joints of each frame, so the window's value is the RMS over its joints and
-/// frames. `None` when there are no frames (or `window_frames` is 0).
-///
-/// This is the one place the sweep, `rd.csv`, `stimuli.json` and `study encode` take the
-/// worst window from (the codecs crate's own helper can replace its body).
-pub fn worst_window(metrics: &Metrics, window_frames: usize) -> Option<WorstWindow> {
-    let sq: Vec<f64> = metrics.frame_rms_cm.iter().map(|r| r * r).collect();
-    if sq.is_empty() || window_frames == 0 {
-        return None;
-    }
-    let w = window_frames.min(sq.len());
-    // Each window's sum is taken afresh (O(frames × window), 1.5 M additions for a 100-s
-    // clip at 120 Hz): a running sum would carry its rounding from one window to the next.
-    let (start, sum) = (0..=sq.len() - w)
-        .map(|i| (i, sq[i..i + w].iter().sum::<f64>()))
-        .fold((0, f64::NEG_INFINITY), |best, (i, s)| {
-            if s > best.1 { (i, s) } else { best }
-        });
-    Some(WorstWindow {
-        start_frame: start,
-        frames: w,
-        rms_cm: (sum / w as f64).sqrt(),
-    })
+/// The worst 1-s stretch of `metrics` ([`Metrics::worst_stretch`] over [`window_frames`] of
+/// `frame_rate_hz`): the one place the sweep, `rd.csv`, `stimuli.json` and `study encode`
+/// take the worst window from.
+pub fn worst_window(metrics: &Metrics, frame_rate_hz: f64) -> Option<WindowError> {
+    metrics.worst_stretch(window_frames(frame_rate_hz))
 }
 
 impl Made {
@@ -133,7 +92,7 @@ pub fn make(codec: &dyn Codec, clip: &Clip, request: &Request) -> Result<Made> {
         .context(|| format!("decoding what {} encoded", codec.name()))?;
     let decode_ms = t1.elapsed().as_secs_f64() * 1e3;
     let metrics = metrics::compare(clip, &decoded)?;
-    let worst_window = worst_window(&metrics, window_frames(clip.frame_rate_hz));
+    let worst_window = worst_window(&metrics, clip.frame_rate_hz);
     Ok(Made {
         stream,
         bytes,
@@ -192,42 +151,23 @@ mod tests {
     use super::*;
     use motion::synth::{WalkParams, walking_clip};
 
-    /// Metrics of a clip against itself, with the per-frame curve replaced by `frame_rms`.
-    fn with_curve(frame_rms: Vec<f64>) -> Metrics {
+    #[test]
+    fn the_worst_window_is_the_worst_second() {
         let clip = walking_clip(&WalkParams {
-            duration_s: 0.1,
+            duration_s: 3.0,
             ..WalkParams::default()
         });
         let mut m = metrics::compare(&clip, &clip).unwrap();
-        m.frame_rms_cm = frame_rms;
-        m
-    }
-
-    #[test]
-    fn the_worst_window_is_the_rms_of_the_worst_stretch() {
-        // A 2-frame window over 1, 1, 3, 4, 1: frames 2-3, sqrt((9 + 16) / 2).
-        let m = with_curve(vec![1.0, 1.0, 3.0, 4.0, 1.0]);
-        let w = worst_window(&m, 2).unwrap();
-        assert_eq!((w.start_frame, w.frames), (2, 2));
-        assert!((w.rms_cm - 12.5f64.sqrt()).abs() < 1e-12, "{}", w.rms_cm);
-        // A flat curve: the earliest window, at the curve's value.
-        let w = worst_window(&with_curve(vec![0.5; 300]), 120).unwrap();
-        assert_eq!((w.start_frame, w.frames), (0, 120));
-        assert!((w.rms_cm - 0.5).abs() < 1e-12);
-        // A broken tail shows although the clip's RMS hides it.
-        let mut curve = vec![0.1; 1558];
-        for v in &mut curve[1536..] {
-            *v = 4.2;
-        }
-        let w = worst_window(&with_curve(curve), 120).unwrap();
-        assert_eq!(w.start_frame, 1558 - 120);
-        assert!(w.rms_cm > 1.5, "{}", w.rms_cm);
-        // Shorter than the window: the whole clip; no frames: none.
-        let w = worst_window(&with_curve(vec![3.0, 4.0]), 120).unwrap();
-        assert_eq!((w.start_frame, w.frames), (0, 2));
-        assert!((w.rms_cm - 12.5f64.sqrt()).abs() < 1e-12);
-        assert_eq!(worst_window(&with_curve(Vec::new()), 120), None);
-        assert_eq!(worst_window(&with_curve(vec![1.0]), 0), None);
+        m.frame_rms_cm = vec![0.1; clip.frames()];
+        m.frame_max_cm = vec![0.2; clip.frames()];
+        let n = clip.frames();
+        m.frame_rms_cm[n - 10] = 5.0;
+        let w = worst_window(&m, clip.frame_rate_hz).unwrap();
+        assert_eq!(w.frames, window_frames(clip.frame_rate_hz));
+        assert!(
+            w.start_frame <= n - 10 && n - 10 < w.start_frame + w.frames,
+            "{w:?}"
+        );
     }
 
     #[test]

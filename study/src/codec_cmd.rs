@@ -254,7 +254,8 @@ pub fn encode(args: &EncodeArgs) -> Result<()> {
     Ok(())
 }
 
-/// `worst 1-s window RMS 0.412 cm at 12.93 s (frames 1552-1671)` (docs/codecs.md).
+/// `worst 1-s window RMS 0.412 cm, max 1.210 cm, at 12.93 s (frames 1552-1671)`
+/// (docs/codecs.md).
 fn worst_window_text(made: &stimulus::Made, frame_rate_hz: f64) -> String {
     let Some(w) = made.worst_window else {
         return "no frames".to_string();
@@ -268,9 +269,10 @@ fn worst_window_text(made: &stimulus::Made, frame_rate_hz: f64) -> String {
         )
     };
     format!(
-        "worst {span} RMS {:.3} cm at {:.2} s (frames {}-{})",
+        "worst {span} RMS {:.3} cm, max {:.3} cm, at {:.2} s (frames {}-{})",
         w.rms_cm,
-        w.start_s(frame_rate_hz),
+        w.max_cm,
+        w.start_frame as f64 / frame_rate_hz,
         w.start_frame,
         w.start_frame + w.frames - 1
     )

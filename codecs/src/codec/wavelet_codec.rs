@@ -1,7 +1,8 @@
 //! The perceptual wavelet codec of paper 000 section III / thesis ch. 3, and its two baselines
 //! from the same code path.
 //!
-//! Per slice of `W` frames (the last may be shorter, step 1) and per channel `i` of `N`:
+//! Per slice of `W` frames (the last may be shorter, step 1; see (d)) and per channel `i` of
+//! `N`:
 //! 1. `l_i`: the length the channel's joint swings (`Skeleton::swung_length`) over the longest
 //!    such length of the skeleton (step 3);
 //! 2. `v_i = Σ_p |c_{i,p+1} − c_{i,p}| / W` over the slice (eq. 1 / 3.1);
@@ -15,7 +16,7 @@
 //! 7. adaptive binary range coding ([`crate::entropy`]) with per-band contexts (step 9; the
 //!    paper used LZW).
 //!
-//! Two things the text leaves open, decided here:
+//! What the text leaves open, decided here:
 //!
 //! **(a) Translation channels.** `v_i` of a root translation is in length units per frame while
 //! rotations are in degrees per frame, so taken literally ([`TranslationRule::Literal`]) the rule
@@ -50,6 +51,25 @@
 //! halves the joint RMS error of the printed rule at 20:1 and 40:1 (`docs/codecs.md`;
 //! `tests/codecs.rs::position_allocation_beats_the_printed_rule`). The printed rule stays as
 //! `allocation = 1`; `wavelet-standard` and `wavelet-bone` are always the printed baselines.
+//!
+//! **(d) The short last slice** (a clip whose length is not a multiple of `W`) is coded at the
+//! previous slice's operating point, not at its own share of α alone: under
+//! [`Allocation::Position`] it keeps every coefficient the previous slice's threshold keeps (or
+//! what its own share keeps, where that is more) and takes the previous slice's step (no
+//! coarser than the threshold, floored for its own value range); under the printed rule each
+//! channel also keeps every detail at least as large as the smallest that channel kept in the
+//! previous slice (QP bits per channel as before). Its own share broke it: a slice of `n`
+//! frames has fewer levels, so its always-kept approximation band is a large part of `α·N·n`
+//! (6 of 22 coefficients per channel with D4), which at 20:1 leaves no detail budget; the step
+//! then came from the largest weighted approximation coefficient (the root translation's) and
+//! every low-sensitivity channel's mean rounded to zero (a 1 558-frame clip: 37 of 62 channels
+//! at exactly 0 in its 22-frame tail). The same threshold and step is the same slope on the
+//! rate-distortion curve, so the tail gets the bits its content needs at the clip's quality and
+//! the rate search moves α for the rest. Merging the tail into the previous slice (the last
+//! slice `W..2W−1` frames) was measured too: lower clip RMS, but the clip's last frames then lie
+//! at the periodized edge of a long slice (a 2-frame tail up to 2.9× the clip's RMS at 60:1);
+//! overlapping windows code up to `W − 1` frames twice. Nothing in the payload changes (a
+//! slice's step and counts were in the stream already), so every decoder reads these streams.
 //!
 //! Rotation channels are unwrapped (jumps over 180° taken as wraps) before the transform and
 //! wrapped back into (−180°, 180°] after decoding, for the channels where unwrapping changed
@@ -398,6 +418,14 @@ struct Encoder {
     t: Transform,
     coeffs: Vec<Vec<f64>>,
     prev_step: Vec<i64>,
+    /// The previous slice's selection thresholds, which a short last slice is coded with
+    /// (decision (d)): [`Allocation::Position`] uses entry 0 (the slice's threshold on
+    /// `s_i·|c|`), the printed rule one per channel (the smallest kept detail magnitude,
+    /// infinite where only the approximation band was kept).
+    prev_thr: Vec<f64>,
+    /// [`Allocation::Position`]: the previous slice's step before the floor that keeps every
+    /// value within `MAX_VALUE_BITS` (each slice applies that floor for its own values).
+    prev_delta: f64,
     mags: Vec<f64>,
     q: Vec<i64>,
     bands: Vec<u8>,
@@ -424,6 +452,8 @@ impl WaveletCodec {
             t: Transform::new(s.wavelet),
             coeffs: vec![Vec::new(); n_ch],
             prev_step: vec![0i64; n_ch],
+            prev_thr: vec![f64::INFINITY; n_ch],
+            prev_delta: 0.0,
             mags: Vec::new(),
             q: Vec::new(),
             bands: Vec::new(),
@@ -446,6 +476,8 @@ impl WaveletCodec {
             let n_coef = e.bands.len();
             let n_approx = band_lengths(len, levels)[0];
             let c_eff = s.c_min.max(n_approx).min(n_coef);
+            // Decision (d): a short last slice is coded at its predecessor's thresholds.
+            let borrow = len < s.window && start > 0;
             for c in 0..n_ch {
                 let x = &data[c * frames + start..c * frames + start + len];
                 e.t.forward(x, levels, &mut e.coeffs[c]);
@@ -454,8 +486,10 @@ impl WaveletCodec {
                 }
             }
             match &weights {
-                Some(w) => self.slice_position(s, &mut e, w, n_approx, c_eff)?,
-                None => self.slice_paper(s, &mut e, &importance, &kinds, n_approx, c_eff)?,
+                Some(w) => self.slice_position(s, &mut e, w, n_approx, c_eff, borrow)?,
+                None => {
+                    self.slice_paper(s, &mut e, &importance, &kinds, n_approx, c_eff, borrow)?;
+                }
             }
         }
         // Version, lane count, the byte length of every lane but the last, the lanes.
@@ -495,7 +529,13 @@ impl WaveletCodec {
         }
     }
 
-    /// Steps 6-9 as printed: `K_i` per channel, QP bits per channel.
+    /// Steps 6-9 as printed: `K_i` per channel, QP bits per channel. With `borrow` (a short
+    /// last slice, decision (d)) channel `i` also keeps every detail at least as large as the
+    /// smallest it kept in the previous slice.
+    #[expect(
+        clippy::too_many_arguments,
+        reason = "one slice's inputs; grouping them would only rename them"
+    )]
     fn slice_paper(
         self,
         s: &WaveletSettings,
@@ -504,6 +544,7 @@ impl WaveletCodec {
         kinds: &[bool],
         n_approx: usize,
         c_eff: usize,
+        borrow: bool,
     ) -> Result<(), CodecError> {
         let n_ch = importance.len();
         let n_coef = e.bands.len();
@@ -521,8 +562,14 @@ impl WaveletCodec {
             };
             let k_share = ((acc + share).round() - acc.round()).max(0.0) as usize;
             acc += share;
-            let k = k_share.max(c_eff).min(n_coef);
             let co = &mut e.coeffs[c];
+            let k_share = if borrow {
+                let thr = e.prev_thr[c];
+                k_share.max(n_approx + co[n_approx..].iter().filter(|v| v.abs() >= thr).count())
+            } else {
+                k_share
+            };
+            let k = k_share.max(c_eff).min(n_coef);
             // The approximation band always survives (decision (b)): it ranks first.
             keep_top(
                 co,
@@ -530,6 +577,10 @@ impl WaveletCodec {
                 |i, v| if i < n_approx { f64::INFINITY } else { v.abs() },
                 &mut e.mags,
             );
+            e.prev_thr[c] = co[n_approx..]
+                .iter()
+                .filter(|v| **v != 0.0)
+                .fold(f64::INFINITY, |a, v| a.min(v.abs()));
             // Step 7: linear quantization into QP bits.
             let qp = if kinds[c] && s.translation == TranslationRule::Comparable {
                 s.qp + TRANSLATION_EXTRA_QP
@@ -565,7 +616,9 @@ impl WaveletCodec {
     }
 
     /// Decision (c), [`Allocation::Position`]: one threshold and one step per slice in position
-    /// units.
+    /// units. With `borrow` (a short last slice, decision (d)) the threshold is the previous
+    /// slice's where that one is lower, and the step the previous slice's, no coarser than the
+    /// threshold.
     fn slice_position(
         self,
         s: &WaveletSettings,
@@ -573,6 +626,7 @@ impl WaveletCodec {
         w: &[f64],
         n_approx: usize,
         c_eff: usize,
+        borrow: bool,
     ) -> Result<(), CodecError> {
         let n_ch = w.len();
         let n_coef = e.bands.len();
@@ -585,7 +639,7 @@ impl WaveletCodec {
             e.mags.extend(co[n_approx..].iter().map(|v| v.abs() * wc));
         }
         let n_detail = e.mags.len();
-        let thr = if k_detail == 0 {
+        let mut thr = if k_detail == 0 {
             f64::INFINITY
         } else if k_detail >= n_detail {
             0.0
@@ -594,6 +648,11 @@ impl WaveletCodec {
                 .select_nth_unstable_by(n_detail - k_detail, f64::total_cmp)
                 .1
         };
+        if borrow {
+            // Decision (d): the previous slice's threshold where it keeps more (it always
+            // does where this slice's own share leaves no detail).
+            thr = thr.min(e.prev_thr[0]);
+        }
         let (mut ymax, mut amax) = (0.0f64, 0.0f64);
         for (c, &wc) in w.iter().enumerate() {
             let co = &mut e.coeffs[c];
@@ -627,6 +686,15 @@ impl WaveletCodec {
         if thr.is_finite() && thr > 0.0 {
             delta = delta.min(STEP_OVER_THRESHOLD * thr);
         }
+        if borrow {
+            // Decision (d): the previous slice's step, no coarser than the threshold.
+            delta = e.prev_delta;
+            if thr.is_finite() && thr > 0.0 {
+                delta = delta.min(STEP_OVER_THRESHOLD * thr);
+            }
+        }
+        e.prev_thr[0] = thr;
+        e.prev_delta = delta;
         // A threshold near zero (α ≈ 1 with near-constant channels) must not ask for more than
         // MAX_VALUE_BITS bits of any value.
         delta = delta.max(ymax.max(amax) * (-f64::from(MAX_VALUE_BITS)).exp2());
