@@ -232,7 +232,7 @@ fn encode_reports_max_error_and_worst_window_and_keeps_an_error_bound() {
     assert!(first.contains(" cm, max "), "{stdout}");
     assert!(first.contains(", worst 1-s window RMS "), "{stdout}");
     assert!(
-        first.contains(" cm at ") && first.contains("(frames "),
+        first.contains(" cm, at ") && first.contains("(frames "),
         "{stdout}"
     );
     let bound = 0.5;
