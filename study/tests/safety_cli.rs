@@ -44,6 +44,35 @@ fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
+/// Marks a finished session as interrupted (so `--resume` replays it).
+fn mark_running(session: &Path) {
+    let manifest = session.join("session.json");
+    let m = std::fs::read_to_string(&manifest).unwrap();
+    std::fs::write(&manifest, m.replace("\"complete\"", "\"running\"")).unwrap();
+}
+
+/// Rewrites `trials` with its first `keep` rows, `edit` applied to row `row`; returns the text.
+fn rewrite_rows(
+    trials: &Path,
+    keep: usize,
+    row: usize,
+    edit: impl FnOnce(&mut protocols::TrialRecord),
+) -> String {
+    let file = read_trials(trials).unwrap();
+    let header = std::fs::read_to_string(trials).unwrap();
+    let mut text = format!("{}\n", header.lines().next().unwrap());
+    let mut edit = Some(edit);
+    for (i, rec) in file.records.iter().take(keep).enumerate() {
+        let mut rec = rec.clone();
+        if i == row {
+            (edit.take().unwrap())(&mut rec);
+        }
+        text.push_str(&encode_row_as(&rec, file.format_version).unwrap());
+    }
+    std::fs::write(trials, &text).unwrap();
+    text
+}
+
 fn set_name(study: &Path, name: &str) {
     let text = std::fs::read_to_string(study).unwrap();
     let line = text.lines().find(|l| l.starts_with("name = ")).unwrap();
@@ -204,23 +233,10 @@ fn resume_refuses_rows_of_another_session_naming_file_and_line() {
     assert!(o.status.success(), "{}", stderr(&o));
     let session = out.join("S001_s1");
     // Interrupt the session after its rows, then put a row of another subject in its log.
-    let manifest = session.join("session.json");
-    let m = std::fs::read_to_string(&manifest).unwrap();
-    std::fs::write(&manifest, m.replace("\"complete\"", "\"running\"")).unwrap();
-    let trials = session.join("trials.csv");
-    let file = read_trials(&trials).unwrap();
-    let mut text = String::new();
-    let header = std::fs::read_to_string(&trials).unwrap();
-    text.push_str(header.lines().next().unwrap());
-    text.push('\n');
-    for (i, rec) in file.records.iter().take(6).enumerate() {
-        let mut rec = rec.clone();
-        if i == 4 {
-            rec.subject = "S777".into();
-        }
-        text.push_str(&encode_row_as(&rec, file.format_version).unwrap());
-    }
-    std::fs::write(&trials, text).unwrap();
+    mark_running(&session);
+    rewrite_rows(&session.join("trials.csv"), 6, 4, |rec| {
+        rec.subject = "S777".into();
+    });
     let o = study(&[
         "simulate",
         p(&mos),
@@ -265,22 +281,12 @@ fn resume_refuses_a_live_row_whose_codec_parameters_the_study_does_not_give() {
     let o = study(&args(false));
     assert!(o.status.success(), "{}", stderr(&o));
     let session = out.join("S001_s1");
-    let manifest = session.join("session.json");
-    let m = std::fs::read_to_string(&manifest).unwrap();
-    std::fs::write(&manifest, m.replace("\"complete\"", "\"running\"")).unwrap();
+    mark_running(&session);
     let trials = session.join("trials.csv");
-    let file = read_trials(&trials).unwrap();
-    let header = std::fs::read_to_string(&trials).unwrap();
-    let mut text = format!("{}\n", header.lines().next().unwrap());
-    for (i, rec) in file.records.iter().take(5).enumerate() {
-        let mut rec = rec.clone();
-        if i == 2 {
-            let enc = rec.encoding.as_mut().unwrap();
-            *enc.codec_params.get_mut("window").unwrap() = 256.0;
-        }
-        text.push_str(&encode_row_as(&rec, file.format_version).unwrap());
-    }
-    std::fs::write(&trials, &text).unwrap();
+    let text = rewrite_rows(&trials, 5, 2, |rec| {
+        let enc = rec.encoding.as_mut().unwrap();
+        *enc.codec_params.get_mut("window").unwrap() = 256.0;
+    });
     let o = study(&args(true));
     let err = stderr(&o);
     assert!(!o.status.success());
@@ -341,18 +347,14 @@ fn report_names_the_row_of_a_level_the_fit_cannot_take() {
         p(&out),
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
-    let trials = out.join("S002_s1").join("trials.csv");
-    let log = read_trials(&trials).unwrap();
-    let header = std::fs::read_to_string(&trials).unwrap();
-    let mut text = format!("{}\n", header.lines().next().unwrap());
-    for (i, rec) in log.records.iter().enumerate() {
-        let mut rec = rec.clone();
-        if i == 7 {
+    rewrite_rows(
+        &out.join("S002_s1").join("trials.csv"),
+        usize::MAX,
+        7,
+        |rec| {
             rec.trial.level = Some(0.0);
-        }
-        text.push_str(&encode_row_as(&rec, log.format_version).unwrap());
-    }
-    std::fs::write(&trials, text).unwrap();
+        },
+    );
     let o = study(&["report", p(&out), "-o", p(&dir.join("report"))]);
     let err = stderr(&o);
     assert!(!o.status.success());
