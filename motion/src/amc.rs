@@ -10,7 +10,7 @@ use std::path::Path;
 
 use crate::clip::{Clip, Skeleton, SkeletonFormat};
 use crate::error::{Limits, ParseError, WriteError};
-use crate::text::{fmt_num, lines, number, read_text, syntax};
+use crate::text::{fmt_num, lines, number, push_num, read_text, syntax};
 
 /// The frame rate of CMU AMC files, which do not state one.
 pub const CMU_FRAME_RATE_HZ: f64 = 120.0;
@@ -286,7 +286,15 @@ pub fn write_amc(clip: &Clip, path: &Path) -> Result<String, WriteError> {
             reason: "AMC needs an ASF skeleton; write BVH or convert the clip".into(),
         });
     }
-    let mut s = String::with_capacity(clip.frames() * clip.channel_count() * 10);
+    // Decoded values take up to 17 significant digits (about 20 bytes each), plus a bone
+    // name per line: reserve that once instead of growing a 10 MB string step by step.
+    let named: usize = sk
+        .joints
+        .iter()
+        .filter(|j| !j.dofs.is_empty())
+        .map(|j| j.name.len() + 1)
+        .sum();
+    let mut s = String::with_capacity(clip.frames() * (clip.channel_count() * 20 + named + 8));
     let _ = writeln!(s, "# AMC written by study {}", env!("CARGO_PKG_VERSION"));
     let _ = writeln!(s, ":FULLY-SPECIFIED");
     let _ = writeln!(s, ":DEGREES");
@@ -300,7 +308,7 @@ pub fn write_amc(clip: &Clip, path: &Path) -> Result<String, WriteError> {
             s.push_str(&j.name);
             for _ in &j.dofs {
                 s.push(' ');
-                s.push_str(&fmt_num(clip.value(c, f)));
+                push_num(&mut s, clip.value(c, f));
                 c += 1;
             }
             s.push('\n');
