@@ -10,7 +10,7 @@ use std::path::Path;
 
 use crate::clip::{Clip, Skeleton, SkeletonFormat};
 use crate::error::{Limits, ParseError, WriteError};
-use crate::text::{fmt_num, lines, number, push_num, read_text, syntax};
+use crate::text::{bad_number, fields, fmt_num, lines, parse_finite, push_num, read_text, syntax};
 
 /// The frame rate of CMU AMC files, which do not state one.
 pub const CMU_FRAME_RATE_HZ: f64 = 120.0;
@@ -63,17 +63,30 @@ pub fn parse_amc(
             reader.header_keyword(ln, kw)?;
             continue;
         }
-        let mut toks = line.split_whitespace();
+        let mut toks = fields(line);
         let first = toks.next().unwrap_or_default();
-        let rest: Vec<&str> = toks.collect();
-        if rest.is_empty() && first.bytes().all(|b| b.is_ascii_digit()) {
+        // The values of a bone line, kept on the stack (a CMU bone has at most 6 dofs; a
+        // longer line is only counted, for the error).
+        let mut rest = [""; MAX_LINE_VALUES];
+        let mut found = 0;
+        for tok in toks {
+            if let Some(slot) = rest.get_mut(found) {
+                *slot = tok;
+            }
+            found += 1;
+        }
+        if found == 0 && first.bytes().all(|b| b.is_ascii_digit()) {
             reader.frame_number_line(ln, first)?;
         } else {
-            reader.bone_line(ln, first, &rest)?;
+            reader.bone_line(ln, first, &rest[..found.min(MAX_LINE_VALUES)], found)?;
         }
     }
     reader.finish(frame_rate_hz)
 }
+
+/// Values of a bone line the reader keeps (a joint has at most six dofs, three rotations
+/// and three translations); a line with more is an error whatever they are.
+const MAX_LINE_VALUES: usize = 8;
 
 /// The reader's state between the lines of an AMC file.
 struct AmcReader<'a> {
@@ -97,6 +110,12 @@ struct AmcReader<'a> {
     /// Line of the frame being read's number.
     frame_line: usize,
     last_line: usize,
+    /// The joint of each bone line of the first frame, in the order it gave them: later
+    /// frames list the bones in the same order, so a name is checked against this guess
+    /// before the skeleton is searched.
+    order: Vec<usize>,
+    /// Bone lines read so far in the frame being read.
+    lines_in_frame: usize,
 }
 
 impl<'a> AmcReader<'a> {
@@ -121,6 +140,8 @@ impl<'a> AmcReader<'a> {
             frame_number: None,
             frame_line: 0,
             last_line: 0,
+            order: Vec::new(),
+            lines_in_frame: 0,
         }
     }
 
@@ -172,11 +193,38 @@ impl<'a> AmcReader<'a> {
         }
         self.frame_number = Some(num);
         self.frame_line = ln;
+        self.lines_in_frame = 0;
         Ok(())
     }
 
-    /// `bone v1 v2 ...`: one bone's values in the frame being read.
-    fn bone_line(&mut self, ln: usize, first: &str, rest: &[&str]) -> Result<(), ParseError> {
+    /// The joint named `name`: the one the first frame gave at this line, else found by
+    /// name (and remembered for the next frames).
+    fn joint_named(&mut self, name: &str) -> Option<usize> {
+        let k = self.lines_in_frame;
+        self.lines_in_frame += 1;
+        if let Some(&j) = self.order.get(k)
+            && self.skeleton.joints[j].name == name
+        {
+            return Some(j);
+        }
+        let j = self.skeleton.joint_index(name)?;
+        if let Some(slot) = self.order.get_mut(k) {
+            *slot = j;
+        } else {
+            self.order.push(j);
+        }
+        Some(j)
+    }
+
+    /// `bone v1 v2 ...`: one bone's values in the frame being read; `rest` holds the first
+    /// values of the `found` the line has.
+    fn bone_line(
+        &mut self,
+        ln: usize,
+        first: &str,
+        rest: &[&str],
+        found: usize,
+    ) -> Result<(), ParseError> {
         let path = self.path;
         if self.frame_number.is_none() {
             return Err(syntax(
@@ -185,7 +233,7 @@ impl<'a> AmcReader<'a> {
                 format!("bone line `{first}` before the first frame number"),
             ));
         }
-        let Some(j) = self.skeleton.joint_index(first) else {
+        let Some(j) = self.joint_named(first) else {
             return Err(ParseError::UnknownBone {
                 path: path.to_path_buf(),
                 line: ln,
@@ -200,18 +248,20 @@ impl<'a> AmcReader<'a> {
                 format!("bone {first} appears twice in frame {}", self.frames),
             ));
         }
-        if rest.len() != joint.dofs.len() {
+        if found != joint.dofs.len() || rest.len() != found {
             return Err(ParseError::WrongCount {
                 path: path.to_path_buf(),
                 line: ln,
                 what: format!("bone {first}"),
                 expected: joint.dofs.len(),
-                found: rest.len(),
+                found,
             });
         }
-        let what = format!("bone {first}");
         for (k, tok) in rest.iter().enumerate() {
-            let v = number(path, ln, &what, tok)?;
+            // The error's text is built only when there is an error (one `format!` per line
+            // was a sixth of the reader's time).
+            let v = parse_finite(tok)
+                .ok_or_else(|| bad_number(path, ln, &format!("bone {first}"), tok))?;
             let v = if self.radians && joint.dofs[k].is_rotation() {
                 // A finite angle over ~3e306 rad is `inf` in degrees.
                 let deg = v.to_degrees();
@@ -219,7 +269,10 @@ impl<'a> AmcReader<'a> {
                     return Err(syntax(
                         path,
                         ln,
-                        format!("{what}: {} rad is too large to hold in degrees", fmt_num(v)),
+                        format!(
+                            "bone {first}: {} rad is too large to hold in degrees",
+                            fmt_num(v)
+                        ),
                     ));
                 }
                 deg

@@ -17,7 +17,9 @@ use std::path::Path;
 use crate::bodymap;
 use crate::clip::{Axis, ChannelKind, Clip, Joint, Rest, Skeleton, SkeletonFormat, Units};
 use crate::error::{Limits, ParseError, WriteError};
-use crate::text::{fmt_num, lines, number, numbers, push_num, read_text, syntax};
+use crate::text::{
+    bad_number, fields, fmt_num, lines, number, numbers, parse_finite, push_num, read_text, syntax,
+};
 
 /// The largest `OFFSET` component the reader accepts, in the file's length units. The unit is
 /// only known once the whole skeleton is read (it is inferred from the skeleton's height), so
@@ -413,10 +415,12 @@ fn read_frames<'t>(
             });
         }
         let mut count = 0;
-        for (c, tok) in line.split_whitespace().enumerate() {
+        for (c, tok) in fields(line).enumerate() {
             count += 1;
             if c < n {
-                data[c * declared + f] = number(path, ln, &format!("frame {}", f + 1), tok)?;
+                // The error's text is built only when there is one.
+                data[c * declared + f] = parse_finite(tok)
+                    .ok_or_else(|| bad_number(path, ln, &format!("frame {}", f + 1), tok))?;
             }
         }
         if count != n {

@@ -48,14 +48,108 @@ pub(crate) fn lines(text: &str) -> impl Iterator<Item = (usize, &str)> {
 
 /// Parses one finite number, naming the place on failure.
 pub(crate) fn number(path: &Path, line: usize, what: &str, tok: &str) -> Result<f64, ParseError> {
+    parse_finite(tok).ok_or_else(|| bad_number(path, line, what, tok))
+}
+
+/// `tok` as a finite `f64` (what `str::parse` reads), `None` if it is not one.
+///
+/// Mocap files hold short decimals (`-27.07`, `2.51125`): those are read here directly as
+/// `digits / 10^k`, which is exact, since both are exactly representable (at most 2^53 and
+/// 10^22) and one IEEE division rounds correctly (Clinger's fast path, the one `str::parse`
+/// also takes first, less its general-purpose scanning). Anything else (exponents, more than
+/// 15 digits, `inf`) goes to `str::parse`.
+pub(crate) fn parse_finite(tok: &str) -> Option<f64> {
+    /// Exact powers of ten of `f64`.
+    const POW10: [f64; 23] = [
+        1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15, 1e16,
+        1e17, 1e18, 1e19, 1e20, 1e21, 1e22,
+    ];
+    let b = tok.as_bytes();
+    let (negative, digits) = match b.split_first() {
+        Some((b'-', rest)) => (true, rest),
+        Some((b'+', rest)) => (false, rest),
+        _ => (false, b),
+    };
+    let mut mantissa: u64 = 0;
+    let mut count = 0usize;
+    let mut fraction: Option<usize> = None;
+    let mut fast = !digits.is_empty() && digits.len() <= 16;
+    if fast {
+        for &c in digits {
+            match c {
+                b'0'..=b'9' => {
+                    mantissa = mantissa * 10 + u64::from(c - b'0');
+                    count += 1;
+                    if let Some(f) = fraction.as_mut() {
+                        *f += 1;
+                    }
+                }
+                b'.' if fraction.is_none() => fraction = Some(0),
+                _ => {
+                    fast = false;
+                    break;
+                }
+            }
+        }
+    }
+    // At most 16 characters: at most 15 digits with a point, so the mantissa is below 2^53.
+    if fast && count > 0 && mantissa < (1 << 53) {
+        let v = mantissa as f64 / POW10[fraction.unwrap_or(0)];
+        return Some(if negative { -v } else { v });
+    }
     match tok.parse::<f64>() {
-        Ok(v) if v.is_finite() => Ok(v),
-        _ => Err(ParseError::BadNumber {
-            path: path.to_path_buf(),
-            line,
-            what: what.to_string(),
-            text: tok.chars().take(40).collect(),
-        }),
+        Ok(v) if v.is_finite() => Some(v),
+        _ => None,
+    }
+}
+
+/// The whitespace-separated fields of `line`, as `str::split_whitespace` gives them; an ASCII
+/// line (every mocap file) is split on its bytes, without decoding characters.
+pub(crate) fn fields(line: &str) -> Fields<'_> {
+    if line.is_ascii() {
+        Fields::Ascii { line, pos: 0 }
+    } else {
+        Fields::Unicode(line.split_whitespace())
+    }
+}
+
+/// Iterator of [`fields`].
+pub(crate) enum Fields<'a> {
+    /// An ASCII line and where the next field may start.
+    Ascii { line: &'a str, pos: usize },
+    /// Any other line.
+    Unicode(std::str::SplitWhitespace<'a>),
+}
+
+impl<'a> Iterator for Fields<'a> {
+    type Item = &'a str;
+
+    fn next(&mut self) -> Option<&'a str> {
+        match self {
+            Fields::Unicode(it) => it.next(),
+            Fields::Ascii { line, pos } => {
+                // `char::is_whitespace` on ASCII: space, \t, \n, vertical tab, form feed, \r.
+                let white = |b: u8| matches!(b, b' ' | b'\t' | b'\n' | 0x0B | 0x0C | b'\r');
+                let bytes = line.as_bytes();
+                let start = *pos + bytes.get(*pos..)?.iter().position(|&b| !white(b))?;
+                let end = bytes[start..]
+                    .iter()
+                    .position(|&b| white(b))
+                    .map_or(bytes.len(), |k| start + k);
+                *pos = end;
+                line.get(start..end)
+            }
+        }
+    }
+}
+
+/// The error of [`number`] for `tok`.
+pub(crate) fn bad_number(path: &Path, line: usize, what: &str, tok: &str) -> ParseError {
+    ParseError::BadNumber {
+        path: path.to_path_buf(),
+        line,
+        what: what.to_string(),
+        text: tok.chars().take(40).collect(),
     }
 }
 
@@ -110,8 +204,16 @@ pub(crate) fn push_num(out: &mut String, v: f64) {
         return;
     }
     let mut buf = zmij::Buffer::new();
-    let text = buf.format_finite(v).as_bytes();
-    // zmij's layout is its own (`1e+300`, `0.00001`): take its digits and decimal exponent.
+    let text = buf.format_finite(v);
+    // Inside `Debug`'s decimal range zmij writes plain decimals too, `Debug`'s text but for
+    // the trailing `.0` of integers.
+    if (1e-4..1e16).contains(&v.abs()) && !text.contains('e') {
+        out.push_str(text.strip_suffix(".0").unwrap_or(text));
+        return;
+    }
+    // Elsewhere zmij's layout is its own (`1e+300`, `0.00001`): take its digits and decimal
+    // exponent.
+    let text = text.as_bytes();
     let (negative, text) = match text.split_first() {
         Some((b'-', rest)) => (true, rest),
         _ => (false, text),
@@ -207,6 +309,89 @@ mod tests {
     }
 
     #[test]
+    fn fields_split_as_split_whitespace_does() {
+        for line in [
+            "root 1 2  3",
+            "  lead\tand trail \x0b\x0c ",
+            "",
+            "   ",
+            "one",
+            "caf\u{e9} 1\u{a0}2 3",
+        ] {
+            let got: Vec<&str> = fields(line).collect();
+            let want: Vec<&str> = line.split_whitespace().collect();
+            assert_eq!(got, want, "{line:?}");
+        }
+    }
+
+    /// The fast path reads what `str::parse` reads, bit for bit, and leaves the rest to it.
+    #[test]
+    fn parse_finite_reads_what_parse_reads() {
+        let mut toks: Vec<String> = [
+            "0",
+            "-0",
+            "+0",
+            "0.0",
+            "-0.000",
+            "1",
+            "-27.07",
+            "2.51125",
+            "17.2554",
+            ".5",
+            "5.",
+            "-.5",
+            "123456789012345",
+            "1234567890123456",
+            "12345678901234567",
+            "0.1",
+            "9007199254740993",
+            "1e3",
+            "1E-3",
+            "inf",
+            "-inf",
+            "nan",
+            "1e999",
+            "",
+            "-",
+            "+",
+            ".",
+            "1.2.3",
+            "1-2",
+            "--1",
+            "0x10",
+            " 1",
+            "1 ",
+            "١",
+        ]
+        .iter()
+        .map(|s| (*s).to_string())
+        .collect();
+        let mut x: u64 = 0x2545_F491_4F6C_DD1D;
+        for _ in 0..50_000 {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            let digits = (x % 10_000_000_000) as i64 - 5_000_000_000;
+            let k = ((x >> 40) % 16) as usize;
+            let s = digits.abs().to_string();
+            let s = if k < s.len() {
+                format!("{}.{}", &s[..s.len() - k], &s[s.len() - k..])
+            } else {
+                format!("0.{}{s}", "0".repeat(k - s.len()))
+            };
+            toks.push(if digits < 0 { format!("-{s}") } else { s });
+        }
+        for t in &toks {
+            let want = t.parse::<f64>().ok().filter(|v| v.is_finite());
+            assert_eq!(
+                parse_finite(t).map(f64::to_bits),
+                want.map(f64::to_bits),
+                "{t:?}"
+            );
+        }
+    }
+
+    #[test]
     fn fmt_num_round_trips() {
         for v in [
             10.4194,
@@ -276,7 +461,7 @@ mod tests {
             }
             // Values a clip holds: angles and lengths with a few decimals, and their
             // decoded neighbours.
-            let short = ((x % 4_000_000) as f64 - 2_000_000.0) / 10f64.powi((i % 7) as i32);
+            let short = ((x % 4_000_000) as f64 - 2_000_000.0) / 10f64.powi(i % 7);
             values.push(short);
             values.push(f64::from_bits(short.to_bits().wrapping_add(1)));
         }
