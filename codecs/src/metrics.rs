@@ -192,24 +192,27 @@ fn kinematics(reference: &Clip, decoded: &Clip) -> (Points, Points, f64) {
         .filter(|&j| sk.joints[j].dofs.iter().any(|d| d.is_rotation()))
         .collect();
     let frames = reference.frames();
-    let part =
-        |range: std::ops::Range<usize>| fk_frames(&kin, &rotating, reference, decoded, range);
-    let (a, b, sum) = if frames >= TWO_THREADS_FROM_FRAMES {
+    let n = kin.joint_count();
+    // Both clips' points, filled in place (half each by two threads for a long clip).
+    let mut a = vec![[0.0; 3]; n * frames];
+    let mut b = vec![[0.0; 3]; n * frames];
+    let part = |from: usize, pa: &mut [Vec3], pb: &mut [Vec3]| {
+        fk_frames(&kin, &rotating, reference, decoded, from, pa, pb)
+    };
+    let sum = if frames >= TWO_THREADS_FROM_FRAMES {
         let mid = frames / 2;
-        let (first, second) = std::thread::scope(|s| {
-            let late = s.spawn(|| part(mid..frames));
-            (part(0..mid), late.join())
+        let (a0, a1) = a.split_at_mut(mid * n);
+        let (b0, b1) = b.split_at_mut(mid * n);
+        let (early, late) = std::thread::scope(|s| {
+            let late = s.spawn(|| part(mid, &mut *a1, &mut *b1));
+            (part(0, a0, b0), late.join())
         });
         // A panic in FK would be a bug; the second half is then measured here.
-        let second = second.unwrap_or_else(|_| part(mid..frames));
-        let (mut a, mut b, sum) = first;
-        a.extend_from_slice(&second.0);
-        b.extend_from_slice(&second.1);
-        (a, b, sum + second.2)
+        early + late.unwrap_or_else(|_| part(mid, a1, b1))
     } else {
-        part(0..frames)
+        part(0, &mut a, &mut b)
     };
-    let joints = kin.joint_count();
+    let joints = n;
     let mean = if rotating.is_empty() || frames == 0 {
         0.0
     } else {
@@ -230,36 +233,36 @@ fn kinematics(reference: &Clip, decoded: &Clip) -> (Points, Points, f64) {
     )
 }
 
-/// [`kinematics`] over the frames `range`: both clips' points and the summed angle
-/// (radians).
+/// [`kinematics`] over the frames from `from` on that `pa` and `pb` hold (one point per
+/// joint and frame): both clips' points, and the summed angle (radians).
 fn fk_frames(
     kin: &fk::Kinematics,
     rotating: &[usize],
     reference: &Clip,
     decoded: &Clip,
-    range: std::ops::Range<usize>,
-) -> (Vec<Vec3>, Vec<Vec3>, f64) {
-    let n = kin.joint_count();
-    let mut pa = Vec::with_capacity(n * range.len());
-    let mut pb = Vec::with_capacity(n * range.len());
+    from: usize,
+    pa: &mut [Vec3],
+    pb: &mut [Vec3],
+) -> f64 {
+    let n = kin.joint_count().max(1);
     let (mut va, mut vb) = (Vec::new(), Vec::new());
     let (mut la, mut lb) = (Vec::new(), Vec::new());
     let (mut frame, mut rotations) = (Vec::with_capacity(n), Vec::with_capacity(n));
     let mut sum = 0.0;
-    for f in range {
+    for (f, (qa, qb)) in (from..).zip(pa.chunks_exact_mut(n).zip(pb.chunks_exact_mut(n))) {
         reference.frame_into(f, &mut va);
         decoded.frame_into(f, &mut vb);
         kin.local_transforms(&va, &mut la);
         kin.local_transforms(&vb, &mut lb);
         kin.world(&la, &mut frame, &mut rotations);
-        pa.extend_from_slice(&frame);
+        qa.copy_from_slice(&frame);
         kin.world(&lb, &mut frame, &mut rotations);
-        pb.extend_from_slice(&frame);
+        qb.copy_from_slice(&frame);
         for &j in rotating {
             sum += angle_between(&la[j].rotation, &lb[j].rotation);
         }
     }
-    (pa, pb, sum)
+    sum
 }
 
 /// The angle (radians, 0..=π) of the rotation `aᵀ·b`, from its cosine (trace) and sine (skew
