@@ -6,8 +6,8 @@
 //! - `rate/<clip>/single`: one encode at the parameters the 20:1 search found (the figure the
 //!   `codecs` bench reports).
 //!
-//! Throughput is in frames: µs/frame = 10⁶ / thrpt. Target (issue 20): a search costs at most
-//! 4 single encodes.
+//! The number of encodes each search ran is printed before timing. Throughput is in frames:
+//! µs/frame = 10⁶ / thrpt. Target (issue 20): a search costs at most 4 single encodes.
 #![allow(clippy::unwrap_used, clippy::expect_used, missing_docs)]
 
 use std::hint::black_box;
@@ -30,6 +30,13 @@ fn bench(c: &mut Criterion) {
             .warm_up_time(Duration::from_millis(300))
             .measurement_time(Duration::from_secs(2));
         for target in TARGETS {
+            let s = rate::search_to_cr(codec.as_ref(), &clip, &Params::new(), target).unwrap();
+            println!(
+                "rate/{}/search_cr{target}: {} encodes, CR {:.2}",
+                f.name,
+                s.encodes,
+                s.stream.compression_ratio()
+            );
             g.bench_function(format!("search_cr{target}"), |b| {
                 b.iter(|| {
                     rate::encode_to_cr(codec.as_ref(), black_box(&clip), &Params::new(), target)
