@@ -872,7 +872,7 @@ impl Codec for PrimitiveCodec {
         self.encode_native(clip, &s)
     }
 
-    /// Prepares the clip once ([`PrimitiveCodec::prepare`]: quaternions, segments, nearest
+    /// Prepares the clip once (`PrimitiveCodec::prepare`: quaternions, segments, nearest
     /// primitives) for every `t_l` the search tries.
     fn rate_encoder<'a>(&'a self, clip: &'a Clip) -> Result<RateEncoder<'a>, CodecError> {
         let prep = self.prepare(clip)?;
