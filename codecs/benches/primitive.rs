@@ -5,6 +5,10 @@
 //! K from 5 to 25, error bound 0.01, S_M = 32), as Table 5.1 codes motions with a database
 //! trained elsewhere. The CR of each clip is printed before timing. Throughput is in frames:
 //! µs/frame = 10⁶ / thrpt. Targets: encode ≤ 200 µs/frame, decode ≤ 20 µs/frame.
+//!
+//! `primitive/<clip>/encode_cr20`: `rate::encode_to_cr` to 20:1 (±2 %), the whole search on
+//! `t_L`, as `study encode --codec primitive --cr 20` runs it. Target (issue 20): ≤ 200
+//! µs/frame.
 #![allow(clippy::unwrap_used, clippy::expect_used, missing_docs)]
 
 use std::hint::black_box;
@@ -13,6 +17,7 @@ use std::time::Duration;
 
 use codecs::codec::{self, CodecContext, Params};
 use codecs::primitives::{Database, TrainParams};
+use codecs::rate;
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use motion::{Clip, data, io};
 
@@ -53,6 +58,11 @@ fn bench(c: &mut Criterion) {
         });
         g.bench_function("decode", |b| {
             b.iter(|| codec.decode(black_box(&stream), &clip.skeleton).unwrap());
+        });
+        g.bench_function("encode_cr20", |b| {
+            b.iter(|| {
+                rate::encode_to_cr(codec.as_ref(), black_box(clip), &Params::new(), 20.0).unwrap()
+            });
         });
         g.finish();
     }

@@ -17,6 +17,7 @@
 
 use motion::clip::{BodyPart, Clip};
 use motion::fk;
+use motion::math::Vec3;
 
 /// A foot within this height of its lowest point counts as in contact.
 pub const CONTACT_HEIGHT_CM: f64 = 4.0;
@@ -187,8 +188,9 @@ pub fn compare(reference: &Clip, decoded: &Clip) -> Result<Metrics, MetricsError
             "skeleton fingerprints differ".into(),
         ));
     }
-    let a = fk::positions(reference);
-    let b = fk::positions(decoded);
+    // Forward kinematics of both clips in one pass: the local rotations it computes on the
+    // way also give the angle error.
+    let (a, b, mean_angle_deg) = kinematics(reference, decoded);
     let cm = reference.skeleton.units.cm_per_unit;
     let (frames, joints) = (a.frames(), a.joint_count());
     let mut joint_sq = vec![0.0; joints];
@@ -221,8 +223,6 @@ pub fn compare(reference: &Clip, decoded: &Clip) -> Result<Metrics, MetricsError
     let rms_cm = (total_sq / (nf * joints.max(1) as f64)).sqrt();
     let max_cm = joint_max.iter().copied().fold(0.0, f64::max);
 
-    let mean_angle_deg = mean_rotation_angle_deg(reference, decoded);
-
     let feet: Vec<usize> = [BodyPart::LeftLeg, BodyPart::RightLeg]
         .iter()
         .filter_map(|&part| {
@@ -243,7 +243,7 @@ pub fn compare(reference: &Clip, decoded: &Clip) -> Result<Metrics, MetricsError
                 .fold(f64::INFINITY, f64::min);
             for f in 1..frames {
                 if (a.point(f, j)[1] - low) * cm <= CONTACT_HEIGHT_CM {
-                    let speed = |p: &fk::Positions| {
+                    let speed = |p: &Points| {
                         let (u, v) = (p.point(f, j), p.point(f - 1, j));
                         ((u[0] - v[0]).powi(2) + (u[2] - v[2]).powi(2)).sqrt() * cm * rate
                     };
@@ -260,7 +260,12 @@ pub fn compare(reference: &Clip, decoded: &Clip) -> Result<Metrics, MetricsError
         max_cm,
         mean_angle_deg,
         foot_slide_cm_s,
-        joint_names: a.names.clone(),
+        joint_names: reference
+            .skeleton
+            .joints
+            .iter()
+            .map(|j| j.name.clone())
+            .collect(),
         joint_rms_cm: joint_rms,
         joint_max_cm: joint_max,
         frame_rms_cm: frame_rms,
@@ -268,30 +273,117 @@ pub fn compare(reference: &Clip, decoded: &Clip) -> Result<Metrics, MetricsError
     })
 }
 
-/// Mean over joints with rotation channels and frames of the angle between the two clips'
-/// local rotations, degrees.
-fn mean_rotation_angle_deg(reference: &Clip, decoded: &Clip) -> f64 {
+/// World points of every joint of one clip, frame-major, in file units (what
+/// [`fk::positions`] computes, filled by [`kinematics`]).
+struct Points {
+    frames: usize,
+    joints: usize,
+    xyz: Vec<Vec3>,
+}
+
+impl Points {
+    fn frames(&self) -> usize {
+        self.frames
+    }
+
+    fn joint_count(&self) -> usize {
+        self.joints
+    }
+
+    fn point(&self, frame: usize, joint: usize) -> Vec3 {
+        self.xyz[frame * self.joints + joint]
+    }
+}
+
+/// Clips from this many frames on are measured on two threads, each taking half the frames.
+/// The split depends on the frame count alone, so the sums (and the metrics) are the same on
+/// any machine.
+const TWO_THREADS_FROM_FRAMES: usize = 512;
+
+/// The world points of both clips and the mean, over joints with rotation channels and
+/// frames, of the angle between their local rotations in degrees.
+///
+/// One FK pass per clip and frame: the local transforms it computes for the points give the
+/// angles too (computing them apart was half of `compare`, itself a quarter of `study
+/// encode`).
+fn kinematics(reference: &Clip, decoded: &Clip) -> (Points, Points, f64) {
     let sk = &reference.skeleton;
+    let kin = fk::Kinematics::new(sk);
     let rotating: Vec<usize> = (0..sk.joints.len())
         .filter(|&j| sk.joints[j].dofs.iter().any(|d| d.is_rotation()))
         .collect();
-    if rotating.is_empty() || reference.frames() == 0 {
-        return 0.0;
-    }
-    let kin = fk::Kinematics::new(sk);
+    let frames = reference.frames();
+    let n = kin.joint_count();
+    // Both clips' points, filled in place (half each by two threads for a long clip).
+    let mut a = vec![[0.0; 3]; n * frames];
+    let mut b = vec![[0.0; 3]; n * frames];
+    let part = |from: usize, pa: &mut [Vec3], pb: &mut [Vec3]| {
+        fk_frames(&kin, &rotating, reference, decoded, from, pa, pb)
+    };
+    let sum = if frames >= TWO_THREADS_FROM_FRAMES {
+        let mid = frames / 2;
+        let (a0, a1) = a.split_at_mut(mid * n);
+        let (b0, b1) = b.split_at_mut(mid * n);
+        let (early, late) = std::thread::scope(|s| {
+            let late = s.spawn(|| part(mid, &mut *a1, &mut *b1));
+            (part(0, a0, b0), late.join())
+        });
+        // A panic in FK would be a bug; the second half is then measured here.
+        early + late.unwrap_or_else(|_| part(mid, a1, b1))
+    } else {
+        part(0, &mut a, &mut b)
+    };
+    let joints = n;
+    let mean = if rotating.is_empty() || frames == 0 {
+        0.0
+    } else {
+        (sum / (frames * rotating.len()) as f64).to_degrees()
+    };
+    (
+        Points {
+            frames,
+            joints,
+            xyz: a,
+        },
+        Points {
+            frames,
+            joints,
+            xyz: b,
+        },
+        mean,
+    )
+}
+
+/// [`kinematics`] over the frames from `from` on that `pa` and `pb` hold (one point per
+/// joint and frame): both clips' points, and the summed angle (radians).
+fn fk_frames(
+    kin: &fk::Kinematics,
+    rotating: &[usize],
+    reference: &Clip,
+    decoded: &Clip,
+    from: usize,
+    pa: &mut [Vec3],
+    pb: &mut [Vec3],
+) -> f64 {
+    let n = kin.joint_count().max(1);
     let (mut va, mut vb) = (Vec::new(), Vec::new());
     let (mut la, mut lb) = (Vec::new(), Vec::new());
+    let (mut frame, mut rotations) = (Vec::with_capacity(n), Vec::with_capacity(n));
     let mut sum = 0.0;
-    for f in 0..reference.frames() {
+    for (f, (qa, qb)) in (from..).zip(pa.chunks_exact_mut(n).zip(pb.chunks_exact_mut(n))) {
         reference.frame_into(f, &mut va);
         decoded.frame_into(f, &mut vb);
         kin.local_transforms(&va, &mut la);
         kin.local_transforms(&vb, &mut lb);
-        for &j in &rotating {
+        kin.world(&la, &mut frame, &mut rotations);
+        qa.copy_from_slice(&frame);
+        kin.world(&lb, &mut frame, &mut rotations);
+        qb.copy_from_slice(&frame);
+        for &j in rotating {
             sum += angle_between(&la[j].rotation, &lb[j].rotation);
         }
     }
-    (sum / (reference.frames() * rotating.len()) as f64).to_degrees()
+    sum
 }
 
 /// The angle (radians, 0..=π) of the rotation `aᵀ·b`, from its cosine (trace) and sine (skew
@@ -412,6 +504,65 @@ mod tests {
         assert_eq!((whole.start_frame, whole.frames), (0, n));
         assert!((whole.rms_cm - m.rms_cm).abs() < 1e-9);
         assert_eq!(m.worst_window(0), None);
+    }
+
+    /// Long clips are measured on two threads: the same figures as FK by
+    /// `fk::positions` and the angle loop computed apart, frame by frame.
+    #[test]
+    fn two_thread_pass_measures_what_separate_passes_do() {
+        let clip = walking_clip(&WalkParams {
+            duration_s: 8.0,
+            ..WalkParams::default()
+        });
+        assert!(clip.frames() >= TWO_THREADS_FROM_FRAMES);
+        let mut bent = clip.clone();
+        for c in 0..clip.channel_count() {
+            for (f, v) in bent.channel_mut(c).iter_mut().enumerate() {
+                *v += 0.3 * ((f * (c + 1)) as f64 * 0.01).sin();
+            }
+        }
+        let m = compare(&clip, &bent).unwrap();
+        let (a, b) = (fk::positions(&clip), fk::positions(&bent));
+        let cm = clip.skeleton.units.cm_per_unit;
+        let (mut sq, mut max) = (0.0, 0.0f64);
+        for f in 0..a.frames() {
+            for j in 0..a.joint_count() {
+                let (p, q) = (a.point(f, j), b.point(f, j));
+                let d2 = ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2))
+                    * cm
+                    * cm;
+                sq += d2;
+                max = max.max(d2.sqrt());
+            }
+        }
+        let rms = (sq / (a.frames() * a.joint_count()) as f64).sqrt();
+        let sk = &clip.skeleton;
+        let kin = fk::Kinematics::new(sk);
+        let rotating: Vec<usize> = (0..sk.joints.len())
+            .filter(|&j| sk.joints[j].dofs.iter().any(|d| d.is_rotation()))
+            .collect();
+        let (mut va, mut vb, mut la, mut lb) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        let mut angle = 0.0;
+        for f in 0..clip.frames() {
+            clip.frame_into(f, &mut va);
+            bent.frame_into(f, &mut vb);
+            kin.local_transforms(&va, &mut la);
+            kin.local_transforms(&vb, &mut lb);
+            for &j in &rotating {
+                angle += angle_between(&la[j].rotation, &lb[j].rotation);
+            }
+        }
+        let angle = (angle / (clip.frames() * rotating.len()) as f64).to_degrees();
+        assert!(m.rms_cm > 0.1, "{}", m.rms_cm);
+        assert!(
+            (m.rms_cm - rms).abs() < 1e-12 * rms,
+            "{} vs {rms}",
+            m.rms_cm
+        );
+        assert_eq!(m.max_cm.to_bits(), max.to_bits());
+        assert!((m.mean_angle_deg - angle).abs() < 1e-12 * angle);
+        assert_eq!(m.joint_names, a.names);
+        assert_eq!(m.frame_rms_cm.len(), clip.frames());
     }
 
     #[test]

@@ -262,8 +262,25 @@ fn analysis_step<const L: usize>(
 /// last sample repeated up to `big_n` samples.
 fn periodic_extend(x: &[f64], big_n: usize, pad: usize, ext: &mut Vec<f64>) {
     let n = x.len();
-    let at = |k: usize| x[k.min(n - 1)];
     ext.clear();
+    if pad <= n && (n..=n + 1).contains(&big_n) {
+        // The usual case, without a division per sample: x̃ = x (+ its last sample), whose
+        // last `pad` samples go in front and first `pad` behind. The primitive codec's
+        // bound search runs this on 15-32-sample windows hundreds of thousands of times.
+        let odd = big_n > n;
+        let front = pad - usize::from(odd && pad > 0);
+        ext.extend_from_slice(&x[n - front..]);
+        if odd && pad > 0 {
+            ext.push(x[n - 1]);
+        }
+        ext.extend_from_slice(x);
+        if odd {
+            ext.push(x[n - 1]);
+        }
+        ext.extend_from_slice(&x[..pad]);
+        return;
+    }
+    let at = |k: usize| x[k.min(n - 1)];
     ext.extend((0..pad).map(|u| at((u + big_n * pad - pad) % big_n)));
     ext.extend_from_slice(x);
     if big_n > n {
@@ -513,6 +530,25 @@ pub fn waverec(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The slice-copy path of `periodic_extend` writes what the index formula of its docs
+    /// says, for every length, padding and odd extension it takes.
+    #[test]
+    fn periodic_extend_matches_its_formula() {
+        let mut ext = Vec::new();
+        for n in 1..40usize {
+            let x: Vec<f64> = (0..n).map(|i| i as f64 + 0.5).collect();
+            for big_n in [n, n + (n & 1)] {
+                for pad in 0..8 {
+                    periodic_extend(&x, big_n, pad, &mut ext);
+                    let want: Vec<f64> = (0..big_n + 2 * pad)
+                        .map(|u| x[((u + big_n * pad - pad) % big_n).min(n - 1)])
+                        .collect();
+                    assert_eq!(ext, want, "n {n} big_n {big_n} pad {pad}");
+                }
+            }
+        }
+    }
 
     #[test]
     fn max_level_matches_pywt() {

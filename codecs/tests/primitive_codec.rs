@@ -228,6 +228,29 @@ fn rate_control_searches_t_l_upwards_and_reports_unreachable_targets() {
     }
 }
 
+/// Issue 20: the search on `t_l` reaches a target in at most 4 encodes, on every clip.
+#[test]
+fn rate_search_needs_at_most_four_encodes() {
+    let f = fixture();
+    let c = codec_with(&f.db);
+    for (name, clip) in &f.clips {
+        for target in [8.0, 12.0, 16.0, 20.0, 30.0] {
+            let s = rate::search_to_cr(c.as_ref(), clip, &Params::new(), target)
+                .unwrap_or_else(|e| panic!("{name} {target}: {e}"));
+            let cr = s.stream.compression_ratio();
+            assert!(
+                (cr / target - 1.0).abs() <= rate::CR_TOLERANCE,
+                "{name}: {cr}"
+            );
+            assert!(
+                s.encodes <= 4,
+                "{name} at {target}:1: {} encodes",
+                s.encodes
+            );
+        }
+    }
+}
+
 #[test]
 fn without_a_database_the_codec_is_listed_but_refuses_clearly() {
     let f = fixture();

@@ -77,12 +77,12 @@ impl Knob {
     pub fn of(codec: &dyn Codec) -> Option<Knob> {
         match codec.rate_control() {
             // CR falls as the parameter grows: its largest value makes the largest stream.
-            RateControl::Search { key, min, max } => Some(Knob {
+            RateControl::Search { key, min, max, .. } => Some(Knob {
                 key,
                 largest: max,
                 smallest: min,
             }),
-            RateControl::SearchIncreasing { key, min, max } => Some(Knob {
+            RateControl::SearchIncreasing { key, min, max, .. } => Some(Knob {
                 key,
                 largest: min,
                 smallest: max,

@@ -174,24 +174,36 @@ pub fn sweep(
         version: MANIFEST_VERSION,
         stimuli: Vec::new(),
     };
-    let mut sweep_clips = Vec::new();
-    for source in &inputs {
-        let clip = clips::read(source, options.clip_options.bvh_unit_cm)?;
-        let dir = out.join(&source.name);
-        std::fs::create_dir_all(&dir).map_err(io_error(&dir))?;
-        let (file, skeleton) = stimulus::write_clip_as(&clip, &dir, "reference", None, mode)?;
+    // Reading a clip and writing its reference copy are a parse and a format of every
+    // value: on the worker threads too, one clip each.
+    let read = parallel(
+        &inputs,
+        options.jobs,
+        |_| 0,
+        |source| -> Result<(SweepClip, PathBuf)> {
+            let clip = clips::read(source, options.clip_options.bvh_unit_cm)?;
+            let dir = out.join(&source.name);
+            std::fs::create_dir_all(&dir).map_err(io_error(&dir))?;
+            let (file, skeleton) = stimulus::write_clip_as(&clip, &dir, "reference", None, mode)?;
+            let c = SweepClip {
+                name: source.name.clone(),
+                clip,
+                skeleton,
+                dir,
+            };
+            Ok((c, file))
+        },
+    )?;
+    let mut sweep_clips = Vec::with_capacity(read.len());
+    for r in read {
+        let (c, file) = r?;
         manifest.stimuli.push(reference_stimulus(
             out,
-            &source.name,
+            &c.name,
             &file,
-            skeleton.as_deref(),
+            c.skeleton.as_deref(),
         ));
-        sweep_clips.push(SweepClip {
-            name: source.name.clone(),
-            clip,
-            skeleton,
-            dir,
-        });
+        sweep_clips.push(c);
     }
     let mut jobs = Vec::new();
     for clip in 0..sweep_clips.len() {
@@ -208,11 +220,17 @@ pub fn sweep(
             }
         }
     }
-    let results = run_jobs(
+    let done = AtomicUsize::new(0);
+    let results = parallel(
         &jobs,
         options.jobs,
-        |job| make_job(job, &sweep_clips, out, &codecs, mode),
-        progress,
+        // Longest clips first, so that no worker is left with a long job at the end.
+        |job| sweep_clips[job.clip].clip.frames(),
+        |job| {
+            let r = make_job(job, &sweep_clips, out, &codecs, mode);
+            progress(done.fetch_add(1, Ordering::Relaxed) + 1, jobs.len());
+            r
+        },
     )?;
     let mut csv = String::from(RD_HEADER);
     let mut unreachable = Vec::new();
@@ -316,24 +334,26 @@ fn variants(params: &[(String, Vec<f64>)]) -> Result<Vec<Params>> {
     Ok(out)
 }
 
-/// Runs `make` over `jobs` on `threads` workers; results in job order.
-fn run_jobs<T: Send>(
-    jobs: &[Job],
+/// `make` of every item on `threads` workers, results in item order. Items are handed out
+/// largest `size` first (ties in item order), so the output does not depend on the number of
+/// threads or on which finishes first.
+fn parallel<I: Sync, T: Send>(
+    items: &[I],
     threads: usize,
-    make: impl Fn(&Job) -> T + Sync,
-    progress: &(dyn Fn(usize, usize) + Sync),
+    size: impl Fn(&I) -> usize,
+    make: impl Fn(&I) -> T + Sync,
 ) -> Result<Vec<T>> {
+    let mut order: Vec<usize> = (0..items.len()).collect();
+    order.sort_by_key(|&i| std::cmp::Reverse(size(&items[i])));
     let next = AtomicUsize::new(0);
-    let done = AtomicUsize::new(0);
-    let results: Mutex<Vec<(usize, T)>> = Mutex::new(Vec::new());
+    let results: Mutex<Vec<(usize, T)>> = Mutex::new(Vec::with_capacity(items.len()));
     std::thread::scope(|s| {
-        for _ in 0..threads.clamp(1, 64).min(jobs.len().max(1)) {
+        for _ in 0..threads.clamp(1, 64).min(items.len().max(1)) {
             s.spawn(|| {
                 loop {
-                    let i = next.fetch_add(1, Ordering::Relaxed);
-                    let Some(job) = jobs.get(i) else { break };
-                    let r = make(job);
-                    progress(done.fetch_add(1, Ordering::Relaxed) + 1, jobs.len());
+                    let k = next.fetch_add(1, Ordering::Relaxed);
+                    let Some(&i) = order.get(k) else { break };
+                    let r = make(&items[i]);
                     if let Ok(mut v) = results.lock() {
                         v.push((i, r));
                     }
@@ -344,6 +364,9 @@ fn run_jobs<T: Send>(
     let mut results = results
         .into_inner()
         .map_err(|_| refused("a sweep worker panicked"))?;
+    if results.len() != items.len() {
+        return Err(refused("a sweep worker panicked"));
+    }
     results.sort_by_key(|(i, _)| *i);
     Ok(results.into_iter().map(|(_, r)| r).collect())
 }

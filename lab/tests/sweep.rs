@@ -204,3 +204,64 @@ fn a_forced_sweep_rewrites_the_reference_skeleton() {
     assert_eq!(skeleton, motion::asf::read_asf(&clips[1]).unwrap());
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// The manifest, the table and every file do not depend on the number of workers (jobs
+/// are handed out longest clip first, results kept in clip, codec, rate order); only the
+/// measured times differ.
+#[test]
+fn one_and_two_workers_write_the_same_sweep() {
+    let Some(dir) = motion::data::mocap_dir() else {
+        return;
+    };
+    let base = std::env::temp_dir().join(format!("lab-sweep-jobs-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&base);
+    let run = |jobs: usize| {
+        let out = base.join(format!("jobs{jobs}"));
+        let options = SweepOptions {
+            clips: vec![
+                dir.join("02_01.amc"),
+                dir.join("12.asf"),
+                dir.join("pirouette.amc"),
+                dir.join("pirouette.asf"),
+                dir.join("131_01.bvh"),
+            ],
+            clip_options: ClipOptions::default(),
+            codecs: vec!["wavelet-perceptual".into(), "spiht".into()],
+            targets: vec![20.0, 40.0],
+            max_errors_cm: Vec::new(),
+            params: vec![("qp".into(), vec![9.0, 11.0])],
+            output: out.clone(),
+            jobs,
+            database: None,
+            force: false,
+        };
+        let mut manifest = sweep(&options, &|_, _| {}).unwrap().manifest;
+        for s in &mut manifest.stimuli {
+            s.encode_ms = None;
+            s.decode_ms = None;
+        }
+        let csv: Vec<String> = std::fs::read_to_string(out.join("rd.csv"))
+            .unwrap()
+            .lines()
+            // Every column but the measured times (encode_ms, decode_ms).
+            .map(|l| {
+                let mut cells: Vec<&str> = l.split(',').collect();
+                cells.drain(14..16);
+                cells.join(",")
+            })
+            .collect();
+        let files: Vec<(String, Vec<u8>)> = manifest
+            .stimuli
+            .iter()
+            .flat_map(|s| std::iter::once(&s.file).chain(s.bitstream.as_ref()))
+            .map(|f| (f.clone(), std::fs::read(out.join(f)).unwrap()))
+            .collect();
+        (manifest, csv, files)
+    };
+    let one = run(1);
+    let two = run(2);
+    assert_eq!(one.0, two.0);
+    assert_eq!(one.1, two.1);
+    assert_eq!(one.2, two.2);
+    std::fs::remove_dir_all(&base).unwrap();
+}

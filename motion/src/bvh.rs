@@ -17,7 +17,9 @@ use std::path::Path;
 use crate::bodymap;
 use crate::clip::{Axis, ChannelKind, Clip, Joint, Rest, Skeleton, SkeletonFormat, Units};
 use crate::error::{Limits, ParseError, WriteError};
-use crate::text::{fmt_num, lines, number, numbers, read_text, syntax};
+use crate::text::{
+    bad_number, fields, fmt_num, lines, number, numbers, parse_finite, push_num, read_text, syntax,
+};
 
 /// The largest `OFFSET` component the reader accepts, in the file's length units. The unit is
 /// only known once the whole skeleton is read (it is inferred from the skeleton's height), so
@@ -413,10 +415,12 @@ fn read_frames<'t>(
             });
         }
         let mut count = 0;
-        for (c, tok) in line.split_whitespace().enumerate() {
+        for (c, tok) in fields(line).enumerate() {
             count += 1;
             if c < n {
-                data[c * declared + f] = number(path, ln, &format!("frame {}", f + 1), tok)?;
+                // The error's text is built only when there is one.
+                data[c * declared + f] = parse_finite(tok)
+                    .ok_or_else(|| bad_number(path, ln, &format!("frame {}", f + 1), tok))?;
             }
         }
         if count != n {
@@ -460,7 +464,8 @@ pub fn write_bvh(clip: &Clip, path: &Path) -> Result<String, WriteError> {
             reason: "the clip has an ASF skeleton: convert it to BVH first".into(),
         });
     }
-    let mut s = String::with_capacity(clip.frames() * clip.channel_count() * 9 + 4096);
+    // Decoded values take up to 17 significant digits: about 20 bytes each.
+    let mut s = String::with_capacity(clip.frames() * clip.channel_count() * 20 + 4096);
     s.push_str("HIERARCHY\n");
     write_joint(&mut s, sk, 0, 0);
     s.push_str("MOTION\n");
@@ -471,7 +476,7 @@ pub fn write_bvh(clip: &Clip, path: &Path) -> Result<String, WriteError> {
             if c > 0 {
                 s.push(' ');
             }
-            s.push_str(&fmt_num(clip.value(c, f)));
+            push_num(&mut s, clip.value(c, f));
         }
         s.push('\n');
     }

@@ -257,22 +257,28 @@ impl std::ops::Neg for Quat {
 /// (up to Euler equivalence; with three axes the middle angle is in [−90°, 90°], see
 /// [`decompose_listed_near`] for the other solution).
 pub fn decompose_listed(r: &Mat3, axes: &[Axis]) -> Vec<f64> {
-    match axes {
-        [] => Vec::new(),
-        [a] => {
+    let mut out = vec![0.0; axes.len()];
+    decompose_into(r, axes, &mut out);
+    out
+}
+
+/// [`decompose_listed`] into `out` (one angle per axis), without allocating.
+fn decompose_into(r: &Mat3, axes: &[Axis], out: &mut [f64]) {
+    match (axes, &mut *out) {
+        ([], _) => {}
+        ([a], [o]) => {
             let (j, k) = cyclic_after(*a);
-            vec![r[k][j].atan2(r[j][j]).to_degrees()]
+            *o = r[k][j].atan2(r[j][j]).to_degrees();
         }
-        [a, b] if a != b => {
+        ([a, b], [o1, o2]) if a != b => {
             // R = Ra(α)·Rb(β): column b of R is Ra(α)·e_b, row a is e_aᵀ·Rb(β).
             let (i, j) = (a.index(), b.index());
             let k = 3 - i - j;
             let s = if (j + 3 - i) % 3 == 1 { 1.0 } else { -1.0 };
-            let alpha = (s * r[k][j]).atan2(r[j][j]);
-            let beta = (s * r[i][k]).atan2(r[i][i]);
-            vec![alpha.to_degrees(), beta.to_degrees()]
+            *o1 = (s * r[k][j]).atan2(r[j][j]).to_degrees();
+            *o2 = (s * r[i][k]).atan2(r[i][i]).to_degrees();
         }
-        [a, b, c] if a != b && b != c && a != c => {
+        ([a, b, c], [o1, o2, o3]) if a != b && b != c && a != c => {
             let (i, j, k) = (a.index(), b.index(), c.index());
             let s = if (j + 3 - i) % 3 == 1 { 1.0 } else { -1.0 };
             let beta = (s * r[i][k]).clamp(-1.0, 1.0).asin();
@@ -282,11 +288,15 @@ pub fn decompose_listed(r: &Mat3, axes: &[Axis]) -> Vec<f64> {
             } else {
                 ((-s * r[j][k]).atan2(r[k][k]), (-s * r[i][j]).atan2(r[i][i]))
             };
-            vec![alpha.to_degrees(), beta.to_degrees(), gamma.to_degrees()]
+            (*o1, *o2, *o3) = (alpha.to_degrees(), beta.to_degrees(), gamma.to_degrees());
         }
         // Repeated axes (proper Euler, e.g. ZXZ) or more than three do not occur in mocap
         // files; fit each axis alone, which is exact when only one angle is non-zero.
-        _ => axes.iter().map(|&a| decompose_listed(r, &[a])[0]).collect(),
+        _ => {
+            for (&a, o) in axes.iter().zip(out.iter_mut()) {
+                decompose_into(r, &[a], std::slice::from_mut(o));
+            }
+        }
     }
 }
 
@@ -354,6 +364,24 @@ pub fn project_to_channels(format: SkeletonFormat, axes: &[Axis], q: Quat) -> Qu
         return q;
     }
     let m = q.to_mat3();
+    // Encoders check this for every frame of every try (the primitive codec's bound): the
+    // usual one or two axes are decomposed on the stack.
+    let n = axes.len();
+    if n <= 3 {
+        let mut angles = [0.0; 3];
+        match format {
+            SkeletonFormat::Asf => {
+                let mut order = [Axis::X; 3];
+                for (o, a) in order.iter_mut().zip(axes.iter().rev()) {
+                    *o = *a;
+                }
+                decompose_into(&m, &order[..n], &mut angles[..n]);
+                angles[..n].reverse();
+            }
+            SkeletonFormat::Bvh => decompose_into(&m, axes, &mut angles[..n]),
+        }
+        return channel_rotation(format, axes, &angles[..n]);
+    }
     let angles = match format {
         SkeletonFormat::Asf => {
             let order: Vec<Axis> = axes.iter().rev().copied().collect();

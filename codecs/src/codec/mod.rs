@@ -176,7 +176,8 @@ pub enum CodecError {
 pub enum RateControl {
     /// The codec takes `cr` natively and reaches it exactly.
     Native,
-    /// Bisect this parameter (CR decreases as it grows) in `[min, max]`, on a log scale.
+    /// Search this parameter (CR decreases as it grows) in `[min, max]`, on a log scale
+    /// ([`crate::rate`]).
     Search {
         /// Parameter name (one of [`keys`]).
         key: &'static str,
@@ -184,9 +185,11 @@ pub enum RateControl {
         min: f64,
         /// Largest value.
         max: f64,
+        /// Typical `|d ln CR / d ln value|`: the size of the search's first step.
+        slope: f64,
     },
-    /// Bisect this parameter (CR increases as it grows, e.g. an error threshold) in
-    /// `[min, max]`, on a log scale.
+    /// Search this parameter (CR increases as it grows, e.g. an error threshold) in
+    /// `[min, max]`, on a log scale ([`crate::rate`]).
     SearchIncreasing {
         /// Parameter name (one of [`keys`]).
         key: &'static str,
@@ -194,6 +197,8 @@ pub enum RateControl {
         min: f64,
         /// Largest value.
         max: f64,
+        /// Typical `|d ln CR / d ln value|`: the size of the search's first step.
+        slope: f64,
     },
     /// Lossless or fixed-rate: no target can be asked for.
     None,
@@ -222,7 +227,20 @@ pub trait Codec: Send + Sync {
     /// # Errors
     /// Any [`CodecError`]; never panics on malformed input.
     fn decode(&self, stream: &Bitstream, skeleton: &Skeleton) -> Result<Clip, CodecError>;
+    /// The encoder of `clip` a rate search ([`crate::rate`]) calls once per value of the
+    /// searched parameter it tries, the other parameters unchanged. The default calls
+    /// [`Codec::encode`]; a codec with costly work that does not depend on that parameter
+    /// does it here, once per search.
+    ///
+    /// # Errors
+    /// As [`Codec::encode`].
+    fn rate_encoder<'a>(&'a self, clip: &'a Clip) -> Result<RateEncoder<'a>, CodecError> {
+        Ok(Box::new(move |p: &Params| self.encode(clip, p)))
+    }
 }
+
+/// What [`Codec::rate_encoder`] returns: an encode of one clip with the parameters given.
+pub type RateEncoder<'a> = Box<dyn FnMut(&Params) -> Result<Bitstream, CodecError> + 'a>;
 
 /// What a codec may need besides the stream: today the primitive database of the `primitive`
 /// codec (thesis ch. 5), shared by encoder and decoder. `Default` is an empty context.

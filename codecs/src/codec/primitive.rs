@@ -51,8 +51,8 @@ use std::collections::BTreeMap;
 use std::sync::Arc;
 
 use super::{
-    Codec, CodecError, Params, RateControl, check_stream, header, int_param, keys, merged,
-    params_of, real_param,
+    Codec, CodecError, Params, RateControl, RateEncoder, check_stream, header, int_param, keys,
+    merged, params_of, real_param,
 };
 use crate::bitstream::Bitstream;
 use crate::entropy::{BitModel, EntropyError, IntModel, RangeDecoder, RangeEncoder, UintModel};
@@ -292,6 +292,10 @@ struct Work {
     chan: [Vec<f64>; 3],
     reference: Vec<Quat>,
     out: Vec<Quat>,
+    /// `log(reference⁻¹·source)` per frame of the segment being coded.
+    logs: Vec<[f64; 3]>,
+    /// One channel's coefficients.
+    one: Vec<f64>,
 }
 
 impl Work {
@@ -306,6 +310,8 @@ impl Work {
             chan: [Vec::new(), Vec::new(), Vec::new()],
             reference: Vec::new(),
             out: Vec::new(),
+            logs: Vec::new(),
+            one: Vec::new(),
         }
     }
 }
@@ -481,21 +487,68 @@ impl PrimitiveCodec {
     /// Encodes with settings `s`: every rotation joint's segments, then the translation
     /// channels' windows, in one range-coded payload.
     fn encode_native(&self, clip: &Clip, s: &PrimitiveSettings) -> Result<Bitstream, CodecError> {
+        self.encode_prepared(clip, &self.prepare(clip)?, s)
+    }
+
+    /// Steps 1-2 of the module docs, which do not depend on the thresholds: each rotation
+    /// joint's quaternion track, its segments, their nearest primitives and those
+    /// primitives denormalized to the segments' lengths.
+    fn prepare(&self, clip: &Clip) -> Result<Prepared, CodecError> {
         let db = self.require_db()?;
         let qc = to_quaternions(clip);
         let skeleton = &clip.skeleton;
+        let mut joints = Vec::with_capacity(qc.joints.len());
+        let mut one = Vec::new();
+        for (&j, track) in qc.joints.iter().zip(qc.rotations) {
+            let prims = self.primitives_of(&skeleton.joints[j].name);
+            let segments = segment_track(&track, clip.frame_rate_hz, db.segment);
+            let mut nearest_primitive = Vec::new();
+            let mut reference = Vec::new();
+            if !prims.is_empty() {
+                nearest_primitive.reserve(segments.len());
+                reference.reserve(track.len());
+                for seg in &segments {
+                    let idx = nearest(prims, &seg.normalized);
+                    denormalize(&prims[idx], seg.len(), &mut one);
+                    nearest_primitive.push(idx);
+                    reference.extend_from_slice(&one);
+                }
+            }
+            joints.push(PreparedJoint {
+                joint: j,
+                track,
+                segments,
+                nearest: nearest_primitive,
+                reference,
+            });
+        }
+        Ok(Prepared { joints })
+    }
+
+    /// Encodes `clip`, prepared as `prep`, with settings `s`.
+    fn encode_prepared(
+        &self,
+        clip: &Clip,
+        prep: &Prepared,
+        s: &PrimitiveSettings,
+    ) -> Result<Bitstream, CodecError> {
+        let skeleton = &clip.skeleton;
         let mut e = PayloadEncoder {
             enc: RangeEncoder::new(),
-            m: Models::new(qc.joints.len()),
+            m: Models::new(prep.joints.len()),
             w: Work::new(),
             bands: BandCache::default(),
         };
-        for (k, &j) in qc.joints.iter().enumerate() {
-            let prims = self.primitives_of(&skeleton.joints[j].name);
-            let axes = rotation_axes(skeleton, j);
-            let check = Check::new(skeleton, &axes, s.threshold(skeleton, j), s.step_floor);
-            let segments = segment_track(&qc.rotations[k], clip.frame_rate_hz, db.segment);
-            e.joint(k, prims, &check, &qc.rotations[k], &segments)?;
+        for (k, pj) in prep.joints.iter().enumerate() {
+            let prims = self.primitives_of(&skeleton.joints[pj.joint].name);
+            let axes = rotation_axes(skeleton, pj.joint);
+            let check = Check::new(
+                skeleton,
+                &axes,
+                s.threshold(skeleton, pj.joint),
+                s.step_floor,
+            );
+            e.joint(k, prims.len(), &check, pj)?;
         }
         for (c, ch) in clip.channels().iter().enumerate() {
             if !ch.kind.is_rotation() {
@@ -504,6 +557,27 @@ impl PrimitiveCodec {
         }
         header(self, clip, s.to_params(), e.enc.finish())
     }
+}
+
+/// What [`PrimitiveCodec::prepare`] makes of a clip: one entry per rotation joint.
+struct Prepared {
+    joints: Vec<PreparedJoint>,
+}
+
+/// One rotation joint of a [`Prepared`] clip.
+struct PreparedJoint {
+    /// The joint (skeleton index).
+    joint: usize,
+    /// Its rotation per frame.
+    track: Vec<Quat>,
+    /// Its segments (they tile the track).
+    segments: Vec<Segment>,
+    /// Per segment, the nearest primitive (eq. 5.4); empty when the database has none for
+    /// the joint (its segments are coded against the held rotation).
+    nearest: Vec<usize>,
+    /// Per frame, the nearest primitive of its segment denormalized to the segment's length;
+    /// empty as `nearest` is.
+    reference: Vec<Quat>,
 }
 
 /// An entropy-coder result as a codec error.
@@ -520,33 +594,34 @@ struct PayloadEncoder {
 }
 
 impl PayloadEncoder {
-    /// Steps 1-4 of the module docs for each of `segments` of the `k`-th rotation joint
-    /// (`track`, its primitives `prims`, its threshold in `check`): the length, the nearest
+    /// Steps 1-4 of the module docs for each segment of the `k`-th rotation joint `pj`
+    /// (with `prims` primitives, its threshold in `check`): the length, the nearest
     /// primitive (or the held rotation), and the difference where the primitive misses `t_j`.
     fn joint(
         &mut self,
         k: usize,
-        prims: &[Primitive],
+        prims: usize,
         check: &Check<'_>,
-        track: &[Quat],
-        segments: &[Segment],
+        pj: &PreparedJoint,
     ) -> Result<(), CodecError> {
         let mut hold = Quat::IDENTITY;
         let mut prev_step = 0i64;
-        for seg in segments {
+        for (n, seg) in pj.segments.iter().enumerate() {
             let len = seg.len();
             coded(self.m.len.encode(&mut self.enc, (len - 1) as u32))?;
-            if prims.is_empty() {
-                self.w.reference.clear();
-                self.w.reference.resize(len, hold);
-            } else {
-                let idx = nearest(prims, &seg.normalized);
-                if prims.len() > 1 {
-                    coded(self.m.index[k].encode(&mut self.enc, idx as u32))?;
+            self.w.reference.clear();
+            match pj.nearest.get(n) {
+                Some(&idx) => {
+                    if prims > 1 {
+                        coded(self.m.index[k].encode(&mut self.enc, idx as u32))?;
+                    }
+                    self.w
+                        .reference
+                        .extend_from_slice(&pj.reference[seg.start..seg.end]);
                 }
-                denormalize(&prims[idx], len, &mut self.w.reference);
+                None => self.w.reference.resize(len, hold),
             }
-            let src = &track[seg.start..seg.end];
+            let src = &pj.track[seg.start..seg.end];
             if check.within(&self.w.reference, src) {
                 self.enc.bit(&mut self.m.coded[k], false);
                 hold = self.w.reference[len - 1];
@@ -667,17 +742,18 @@ fn nearest(prims: &[Primitive], seg: &Primitive) -> usize {
 fn code_difference(w: &mut Work, src: &[Quat], check: &Check<'_>) -> i64 {
     let len = src.len();
     w.coef.clear();
-    let mut one = Vec::new();
+    w.logs.clear();
+    w.logs.extend(
+        w.reference
+            .iter()
+            .zip(src)
+            .map(|(r, q)| (r.conj() * *q).log()),
+    );
     for c in 0..3 {
         w.signal.clear();
-        w.signal.extend(
-            w.reference
-                .iter()
-                .zip(src)
-                .map(|(r, q)| (r.conj() * *q).log()[c]),
-        );
-        w.transform.forward(&w.signal, LEVELS, &mut one);
-        w.coef.extend_from_slice(&one);
+        w.signal.extend(w.logs.iter().map(|l| l[c]));
+        w.transform.forward(&w.signal, LEVELS, &mut w.one);
+        w.coef.extend_from_slice(&w.one);
     }
     let n = w.coef.len();
     w.order.clear();
@@ -712,15 +788,21 @@ fn code_difference(w: &mut Work, src: &[Quat], check: &Check<'_>) -> i64 {
     // Bisection on the count kept: `hi` always meets the bound (or is `n` when nothing
     // does), `lo` never does.
     let (mut lo, mut hi) = (0, n);
+    // Whether `w` holds the coding of `hi` (the last try kept `n`, or the last bisection
+    // step met the bound), so that it need not be tried again.
+    let mut holds_hi = true;
     while hi - lo > 1 {
         let mid = lo + (hi - lo) / 2;
-        if try_keep(w, mid, step_exp) {
+        holds_hi = try_keep(w, mid, step_exp);
+        if holds_hi {
             hi = mid;
         } else {
             lo = mid;
         }
     }
-    try_keep(w, hi, step_exp);
+    if !holds_hi {
+        try_keep(w, hi, step_exp);
+    }
     debug_assert_eq!(w.out.len(), len);
     step_exp
 }
@@ -773,6 +855,8 @@ impl Codec for PrimitiveCodec {
             key: keys::T_L,
             min: 1e-4,
             max: 1.0,
+            // ln CR grows by 0.4-0.55 per ln t_L between 8:1 and 40:1 on the shared clips.
+            slope: 0.5,
         }
     }
 
@@ -783,9 +867,23 @@ impl Codec for PrimitiveCodec {
         // The rate search sets the knob (t_L) itself: the settings are read per encode it runs.
         let target = p.get(keys::CR).copied().unwrap_or(0.0);
         if target > 0.0 {
-            return crate::rate::search(self, clip, &p, target);
+            return crate::rate::search(self, clip, &p, target).map(|s| s.stream);
         }
         self.encode_native(clip, &s)
+    }
+
+    /// Prepares the clip once (`PrimitiveCodec::prepare`: quaternions, segments, nearest
+    /// primitives) for every `t_l` the search tries.
+    fn rate_encoder<'a>(&'a self, clip: &'a Clip) -> Result<RateEncoder<'a>, CodecError> {
+        let prep = self.prepare(clip)?;
+        Ok(Box::new(move |params: &Params| {
+            let p = merged(self, params)?;
+            let s = PrimitiveSettings::from_params(&p, self.fingerprint)?;
+            if p.get(keys::CR).copied().unwrap_or(0.0) > 0.0 {
+                return self.encode(clip, params);
+            }
+            self.encode_prepared(clip, &prep, &s)
+        }))
     }
 
     fn decode(&self, stream: &Bitstream, skeleton: &Skeleton) -> Result<Clip, CodecError> {
