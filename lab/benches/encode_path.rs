@@ -95,7 +95,8 @@ fn bench(c: &mut Criterion) {
                 .unwrap();
             let made = stimulus::make(codec.as_ref(), &loaded.clip, &request).unwrap();
             std::fs::write(out.join("whole.mcz"), &made.bytes).unwrap();
-            stimulus::write_clip_as(&made.decoded, &out, "whole", None, files::Mode::Replace).unwrap()
+            stimulus::write_clip_as(&made.decoded, &out, "whole", None, files::Mode::Replace)
+                .unwrap()
         });
     });
     g.bench_function("read", |b| {
@@ -105,7 +106,16 @@ fn bench(c: &mut Criterion) {
         b.iter(|| stimulus::make(codec.as_ref(), black_box(&loaded.clip), &request).unwrap());
     });
     g.bench_function("write", |b| {
-        b.iter(|| stimulus::write_clip_as(black_box(&made.decoded), &out, "part", None, files::Mode::Replace).unwrap());
+        b.iter(|| {
+            stimulus::write_clip_as(
+                black_box(&made.decoded),
+                &out,
+                "part",
+                None,
+                files::Mode::Replace,
+            )
+            .unwrap()
+        });
     });
     g.finish();
     let _ = std::fs::remove_dir_all(&dir);
