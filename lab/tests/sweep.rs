@@ -229,7 +229,7 @@ fn one_and_two_workers_write_the_same_sweep() {
             codecs: vec!["wavelet-perceptual".into(), "spiht".into()],
             targets: vec![20.0, 40.0],
             max_errors_cm: Vec::new(),
-            params: vec![("qp".into(), vec![9.0, 11.0])],
+            params: vec![("window".into(), vec![128.0, 256.0])],
             output: out.clone(),
             jobs,
             database: None,
