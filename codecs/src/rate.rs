@@ -19,10 +19,9 @@
 //!    the search at this QP.
 //!
 //! It ends at the first encode within ±2 % ([`CR_TOLERANCE`]). On the shared clips,
-//! `wavelet-perceptual` takes 1-4 encodes from 10:1 to 50:1 and 3-10 at 60:1 (a jump of its
-//! CR there on two clips), `primitive` 1-4 wherever its range reaches
-//! (`tests/codecs.rs` and `tests/primitive_codec.rs`, `rate_search_needs_at_most_four_
-//! encodes`); the bisection on `[min, max]` it replaced took 2-8 and 7-41 at 60:1
+//! `wavelet-perceptual` takes 1-4 encodes from 10:1 to 60:1, `primitive` 1-4 wherever its
+//! range reaches (`tests/codecs.rs` and `tests/primitive_codec.rs`,
+//! `rate_search_needs_at_most_four_encodes`); the bisection on `[min, max]` it replaced took 2-8 and 7-41 at 60:1
 //! (`wavelet-perceptual`), 3-7 (`primitive`), and 34 to find a target out of reach. When the
 //! parameter's range cannot reach the target (the search stops at a bound, or at a jump),
 //! the quantizer (QP) is stepped the needed way and the search runs again from the closest
