@@ -11,6 +11,7 @@
 //!   [`generated`] makes one from the generated walk.
 //! - [`study`]: a study file as a run uses it (bytes, hash, definition, archived copy).
 //! - [`results_dir`]: a study's results directory, created and checked.
+//! - [`integrity`]: whether a results directory's logs can be trusted, before any statistic.
 //! - [`session`]: one subject's session on disk ([`session::Recorder`]).
 //! - [`source`]: where a trial's stimuli come from ([`source::StimulusSource`]): the
 //!   manifest's files, or [`live`] encoding per trial with prefetch.
@@ -22,6 +23,7 @@ pub mod catalog;
 pub mod clips;
 pub mod error;
 pub mod generated;
+pub mod integrity;
 pub mod live;
 pub mod results_dir;
 pub mod session;

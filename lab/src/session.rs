@@ -195,7 +195,10 @@ fn check_same_session(path: &Path, old: &SessionManifest, fresh: &SessionManifes
 }
 
 /// A logged row must belong to the session being resumed.
-fn check_row_identity(rec: &TrialRecord, m: &SessionManifest) -> std::result::Result<(), String> {
+pub(crate) fn check_row_identity(
+    rec: &TrialRecord,
+    m: &SessionManifest,
+) -> std::result::Result<(), String> {
     if rec.study != m.study || rec.subject != m.subject || rec.session != m.session {
         return Err(format!(
             "the row is of study {:?}, subject {:?}, session {}; this session is study {:?}, subject {:?}, session {}",
@@ -213,7 +216,7 @@ fn check_row_identity(rec: &TrialRecord, m: &SessionManifest) -> std::result::Re
 
 /// A live staircase's row must log the codec parameters the study asks for at its level: the
 /// fixed ones and the level's own.
-fn check_live_params(
+pub(crate) fn check_live_params(
     study: &StudyDefinition,
     rec: &TrialRecord,
 ) -> std::result::Result<(), String> {

@@ -169,7 +169,15 @@ pub fn run(args: &DemoArgs) -> Result<()> {
             }
         }
         let report_dir = out.join(format!("report-{protocol}"));
-        let rep: report_cmd::ReportArgs = parse(&["report", &s(&results), "-o", &s(&report_dir)])?;
+        // A demo user may close the window before the end: their session's trials so far are
+        // reported, and listed as incomplete.
+        let rep: report_cmd::ReportArgs = parse(&[
+            "report",
+            &s(&results),
+            "-o",
+            &s(&report_dir),
+            "--allow-incomplete",
+        ])?;
         report_cmd::run(&rep).with_context(|| format!("reporting the {protocol} study"))?;
         print_tables(&report_dir)?;
     }

@@ -84,6 +84,12 @@ pub struct ReportArgs {
     /// (each atomically); without it such a directory is refused before the analysis.
     #[arg(long)]
     pub force: bool,
+    /// Report on sessions with trials missing at the end (still running, interrupted, or cut
+    /// short), with a warning and a section listing what is missing; without it they are
+    /// refused. Damaged logs (rows twice, out of order, of another session) are refused
+    /// either way.
+    #[arg(long)]
+    pub allow_incomplete: bool,
 }
 
 /// The staircase level's name in tables and figures: the thesis's `t_L`, a target ratio, or
@@ -168,6 +174,49 @@ fn check_weibull_levels(sessions: &[results::SessionResults]) -> Result<()> {
     Ok(())
 }
 
+/// Checks the logs before any statistic ([`lab::integrity`]): damage is refused, every
+/// problem named once; sessions with trials missing at the end are refused unless
+/// `--allow-incomplete`, and then returned (and warned about) for the report to list.
+fn checked_logs(
+    args: &ReportArgs,
+    study: &lab::StudyFile,
+    run: &results::RunManifest,
+    sessions: &[results::SessionResults],
+) -> Result<Vec<lab::integrity::Problem>> {
+    use lab::integrity::Kind;
+    let problems = lab::integrity::check(&args.results, study, run, sessions);
+    let refused: Vec<_> = problems
+        .iter()
+        .filter(|p| p.kind == Kind::Damage || !args.allow_incomplete)
+        .collect();
+    if !refused.is_empty() {
+        let damaged = refused.iter().any(|p| p.kind == Kind::Damage);
+        bail!(
+            "{} cannot be reported: {}\n  {}{}",
+            args.results.display(),
+            if damaged {
+                "its logs are damaged (no statistic is drawn from logs that contradict themselves or the study)"
+            } else {
+                "sessions have trials missing"
+            },
+            refused
+                .iter()
+                .map(ToString::to_string)
+                .collect::<Vec<_>>()
+                .join("\n  "),
+            if damaged {
+                ""
+            } else {
+                "\n(--allow-incomplete reports the trials that are there and lists what is missing)"
+            }
+        );
+    }
+    for p in &problems {
+        eprintln!("warning: {p}");
+    }
+    Ok(problems)
+}
+
 /// Runs `study report`.
 ///
 /// # Errors
@@ -179,14 +228,14 @@ pub fn run(args: &ReportArgs) -> Result<()> {
         .study
         .clone()
         .unwrap_or_else(|| args.results.join(&run.study_file));
-    let study = lab::StudyFile::load(&study_path)
-        .with_context(|| {
-            format!(
-                "loading the study file {} (pass --study to name another)",
-                study_path.display()
-            )
-        })?
-        .definition;
+    let study_file = lab::StudyFile::load(&study_path).with_context(|| {
+        format!(
+            "loading the study file {} (pass --study to name another)",
+            study_path.display()
+        )
+    })?;
+    let incomplete = checked_logs(args, &study_file, &run, &sessions)?;
+    let study = study_file.definition;
     let converted = from_results::convert(
         &sessions,
         &study.manifest,
@@ -206,6 +255,17 @@ pub fn run(args: &ReportArgs) -> Result<()> {
         sessions.len()
     );
     let mut report = analysis.to_report(&converted.data, &options, &title);
+    if !incomplete.is_empty() {
+        let section = report.section("Incomplete sessions");
+        section.text(format!(
+            "Reported with --allow-incomplete: {} of the sessions have trials missing at the end; \
+             their logged trials are in every table.",
+            incomplete.len()
+        ));
+        for p in &incomplete {
+            section.text(p.to_string());
+        }
+    }
     let names = report.section("Subjects and stimuli");
     names.text(format!(
         "Subject ids in the tables: {}. Condition ids: {}.",

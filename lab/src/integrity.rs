@@ -1,0 +1,386 @@
+//! Whether a results directory's logs can be trusted, checked before any statistic is drawn
+//! from them (`study report`).
+//!
+//! Every session is replayed through the protocol engine from the study file it ran, the way
+//! `study run --resume` replays it: the logged trials must be the ones the plan (and, for a
+//! staircase, the logged answers) leads to, in order, each once. That one rule catches rows
+//! duplicated, deleted, reordered or copied in from another subject's log; the checks around
+//! it name what went wrong in words a lab can act on. A problem is one of two kinds:
+//! - [`Kind::Damage`]: the logs contradict themselves or the study (a row twice, a row out of
+//!   order or of another session, a manifest that disagrees with its log or its folder, a
+//!   torn row in a session marked complete). Nothing computed from them can be trusted.
+//! - [`Kind::Incomplete`]: trials are missing at the end (a session still running or
+//!   interrupted, or a log shorter than its manifest says). The rows that are there are
+//!   sound; a report may use them when asked to (`--allow-incomplete`), and lists what is
+//!   missing.
+
+use std::collections::HashMap;
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+use protocols::engine::{Session, SessionStatus};
+use protocols::{Protocol, StudyDefinition};
+use results::store::{SESSION_FILE, SessionState, TRIALS_FILE};
+use results::{RunManifest, SessionResults};
+
+use crate::StudyFile;
+use crate::session::{check_live_params, check_row_identity, session_dir};
+
+/// What kind of problem a log has.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Kind {
+    /// The logs contradict themselves or the study.
+    Damage,
+    /// Trials are missing at the end; the logged rows are sound.
+    Incomplete,
+}
+
+/// One problem of one session's logs.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Problem {
+    /// The file at fault (`trials.csv` or `session.json` of the session).
+    pub path: PathBuf,
+    /// The 1-based line of `trials.csv`, when a row is at fault.
+    pub line: Option<usize>,
+    /// Damage or missing trials.
+    pub kind: Kind,
+    /// What is wrong.
+    pub message: String,
+}
+
+impl fmt::Display for Problem {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}", self.path.display())?;
+        if let Some(line) = self.line {
+            write!(f, ": line {line}")?;
+        }
+        write!(f, ": {}", self.message)
+    }
+}
+
+/// Checks every session of the results directory `results` (as
+/// [`results::read_results_dir`] read it) against `study`, the study file it ran (the copy
+/// archived in `results`, or the original); returns the problems, sessions in order, at most
+/// one replay problem per session (the rows after the first bad one follow from it).
+#[must_use]
+pub fn check(
+    results: &Path,
+    study: &StudyFile,
+    run: &RunManifest,
+    sessions: &[SessionResults],
+) -> Vec<Problem> {
+    // The archived copy points at absolute stimulus paths, so neither its own hash nor its
+    // manifest's is the original's: sessions are held to the run's hashes then.
+    let archived = same_file(&results.join(&run.study_file), &study.path);
+    let mut problems = Vec::new();
+    let mut seen: HashMap<(&str, u32), &Path> = HashMap::new();
+    for s in sessions {
+        let m = &s.manifest;
+        if let Some(first) = seen.insert((m.subject.as_str(), m.session), &s.dir) {
+            problems.push(Problem {
+                path: s.dir.join(SESSION_FILE),
+                line: None,
+                kind: Kind::Damage,
+                message: format!(
+                    "subject {:?} session {} is also recorded in {} (a session copied twice?)",
+                    m.subject,
+                    m.session,
+                    first.display()
+                ),
+            });
+            continue;
+        }
+        check_session(study, archived, run, s, &mut problems);
+    }
+    problems
+}
+
+fn same_file(a: &Path, b: &Path) -> bool {
+    match (std::fs::canonicalize(a), std::fs::canonicalize(b)) {
+        (Ok(a), Ok(b)) => a == b,
+        _ => false,
+    }
+}
+
+/// The manifest's own fields against the run, the study and the folder it is in.
+fn manifest_problem(
+    study: &StudyFile,
+    archived: bool,
+    run: &RunManifest,
+    s: &SessionResults,
+) -> Option<String> {
+    let m = &s.manifest;
+    let folder = s.dir.file_name().map(|n| n.to_string_lossy().into_owned());
+    let expected = session_dir(Path::new(""), &m.subject, m.session);
+    if folder.as_deref() != expected.to_str() {
+        return Some(format!(
+            "records subject {:?} session {}, whose folder is {}, not {}",
+            m.subject,
+            m.session,
+            expected.display(),
+            folder.unwrap_or_default()
+        ));
+    }
+    if m.study != run.study || m.study != study.definition.name {
+        return Some(format!(
+            "is a session of study {:?}; the results directory is of {:?} and the study file of {:?}",
+            m.study, run.study, study.definition.name
+        ));
+    }
+    let (study_hash, manifest_hash, against) = if archived {
+        (
+            &run.study_hash,
+            run.manifest_hash.as_ref(),
+            "the run (run.json)",
+        )
+    } else {
+        (&study.hash, Some(&study.manifest_hash), "the study file")
+    };
+    if m.study_hash != *study_hash {
+        return Some(format!(
+            "was recorded with study file {}, {against} has {study_hash} ({}): report with the study file the session ran",
+            m.study_hash,
+            study.path.display()
+        ));
+    }
+    if let (Some(h), Some(want)) = (&m.manifest_hash, manifest_hash)
+        && h != want
+    {
+        return Some(format!(
+            "was recorded with stimulus manifest {h}, {against} has {want} (stimuli re-made since?)"
+        ));
+    }
+    if m.plan_seed != study.definition.seed {
+        return Some(format!(
+            "was planned with seed {}, the study file gives {}",
+            m.plan_seed, study.definition.seed
+        ));
+    }
+    None
+}
+
+fn check_session(
+    study: &StudyFile,
+    archived: bool,
+    run: &RunManifest,
+    s: &SessionResults,
+    problems: &mut Vec<Problem>,
+) {
+    let m = &s.manifest;
+    let trials = s.dir.join(TRIALS_FILE);
+    let manifest = s.dir.join(SESSION_FILE);
+    let mut push = |path: &Path, line: Option<usize>, kind: Kind, message: String| {
+        problems.push(Problem {
+            path: path.to_path_buf(),
+            line,
+            kind,
+            message,
+        });
+    };
+    if let Some(message) = manifest_problem(study, archived, run, s) {
+        push(&manifest, None, Kind::Damage, message);
+        return;
+    }
+    let rows = s.trials.records.len();
+    let finished = matches!(m.status, SessionState::Complete | SessionState::TimeLimit);
+    if let Some(torn) = &s.trials.torn {
+        if finished {
+            push(
+                &trials,
+                Some(torn.line),
+                Kind::Damage,
+                format!(
+                    "a torn row ({} bytes without a line end) after the session was marked {}",
+                    torn.bytes.len(),
+                    state_name(m.status)
+                ),
+            );
+            return;
+        }
+        push(
+            &trials,
+            Some(torn.line),
+            Kind::Incomplete,
+            format!(
+                "the last row is torn ({} bytes, the session stopped mid-write); `study run --resume` sets it aside",
+                torn.bytes.len()
+            ),
+        );
+    }
+    if let Some((line, message)) = replay_problem(&study.definition, s) {
+        push(&trials, Some(line), Kind::Damage, message);
+        return;
+    }
+    let logged = m.trials_logged as usize;
+    // A running session writes its manifest after each row: a crash between the two leaves
+    // one row more than the manifest counts.
+    let consistent = rows == logged || (!finished && rows == logged + 1);
+    if rows > logged && !consistent {
+        push(
+            &manifest,
+            None,
+            Kind::Damage,
+            format!("records {logged} trials logged, but trials.csv holds {rows} rows"),
+        );
+        return;
+    }
+    if rows < logged {
+        push(
+            &trials,
+            Some(rows + 2),
+            Kind::Incomplete,
+            format!(
+                "ends after {rows} rows; session.json records {logged} trials logged: trials {} to {logged} are missing (the file was cut short)",
+                rows + 1
+            ),
+        );
+        return;
+    }
+    match m.status {
+        SessionState::Running | SessionState::Interrupted => {
+            let left = remaining(&study.definition, s);
+            push(
+                &manifest,
+                None,
+                Kind::Incomplete,
+                format!(
+                    "the session is {} with {rows} trials logged{left}; finish it with `study run --resume` (or `study simulate --resume`)",
+                    state_name(m.status)
+                ),
+            );
+        }
+        SessionState::Complete => {
+            if let Some(left) = unfinished_plan(&study.definition, s) {
+                push(
+                    &trials,
+                    Some(rows + 2),
+                    Kind::Incomplete,
+                    format!(
+                        "ends after {rows} rows, but the session is marked complete and the study plans {left}: rows missing at the end"
+                    ),
+                );
+            }
+        }
+        SessionState::TimeLimit => {}
+    }
+}
+
+fn state_name(state: SessionState) -> &'static str {
+    match state {
+        SessionState::Running => "running",
+        SessionState::Interrupted => "interrupted",
+        SessionState::Complete => "complete",
+        SessionState::TimeLimit => "ended by the time limit",
+    }
+}
+
+/// The first row that does not follow from the plan and the answers before it, with why.
+fn replay_problem(study: &StudyDefinition, s: &SessionResults) -> Option<(usize, String)> {
+    let m = &s.manifest;
+    let mut engine = match Session::new(study, m.subject_index) {
+        Ok(e) => e,
+        Err(e) => return Some((1, format!("the study cannot plan this session: {e}"))),
+    };
+    let mut first_line: HashMap<u32, usize> = HashMap::new();
+    for (i, rec) in s.trials.records.iter().enumerate() {
+        // Line 1 is the header.
+        let line = i + 2;
+        if let Err(e) = check_row_identity(rec, m) {
+            return Some((line, format!("{e} (a row of another log?)")));
+        }
+        let index = rec.trial.index;
+        if let Some(first) = first_line.get(&index) {
+            return Some((
+                line,
+                format!("trial {index} is logged twice (first at line {first})"),
+            ));
+        }
+        first_line.insert(index, line);
+        let due = i as u32;
+        if index > due
+            && let Some(later) = s.trials.records[i + 1..]
+                .iter()
+                .position(|r| r.trial.index == due)
+        {
+            return Some((
+                line,
+                format!(
+                    "rows out of order: trial {index} is logged before trial {due} (line {})",
+                    line + 1 + later
+                ),
+            ));
+        }
+        if index > due {
+            return Some((
+                line,
+                if index == due + 1 {
+                    format!("trial {due} is missing: this row is trial {index}")
+                } else {
+                    format!(
+                        "trials {due} to {} are missing: this row is trial {index}",
+                        index - 1
+                    )
+                },
+            ));
+        }
+        if index < due {
+            return Some((
+                line,
+                format!(
+                    "trial {index} comes after trial {} (rows out of order)",
+                    due - 1
+                ),
+            ));
+        }
+        if let Err(e) = check_live_params(study, rec) {
+            return Some((line, e));
+        }
+        if let Err(e) = engine.replay(&rec.trial, &rec.response, &rec.outcome) {
+            return Some((
+                line,
+                format!("the row is not what the study plans for this subject here: {e}"),
+            ));
+        }
+    }
+    None
+}
+
+/// How many trials the plan still holds after the logged rows, as words (" of N planned"),
+/// or "" when the plan has no fixed length (a staircase).
+fn remaining(study: &StudyDefinition, s: &SessionResults) -> String {
+    if study.protocol == Protocol::Staircase {
+        return String::new();
+    }
+    let Some(engine) = replayed(study, s) else {
+        return String::new();
+    };
+    let left = engine.not_shown().len();
+    format!(
+        " of {} planned ({left} not shown)",
+        s.trials.records.len() + left
+    )
+}
+
+/// What the plan still holds after the rows of a session marked complete, if anything.
+fn unfinished_plan(study: &StudyDefinition, s: &SessionResults) -> Option<String> {
+    let mut engine = replayed(study, s)?;
+    match engine.next_trial(0) {
+        Ok(Some(t)) => Some(if study.protocol == Protocol::Staircase {
+            format!("more staircase trials (trial {} is due)", t.index)
+        } else {
+            format!("{} more trials", engine.not_shown().len() + 1)
+        }),
+        _ => (engine.status() == SessionStatus::Running).then(|| "more trials".to_owned()),
+    }
+}
+
+/// The engine after replaying a session's rows (which [`replay_problem`] found sound).
+fn replayed(study: &StudyDefinition, s: &SessionResults) -> Option<Session> {
+    let mut engine = Session::new(study, s.manifest.subject_index).ok()?;
+    for rec in &s.trials.records {
+        engine
+            .replay(&rec.trial, &rec.response, &rec.outcome)
+            .ok()?;
+    }
+    Some(engine)
+}
