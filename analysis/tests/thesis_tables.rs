@@ -261,12 +261,19 @@ fn p_rises_with_the_unknown_sd_and_student_is_never_above_welch() {
     assert!(at(0.25) > at(0.29) && at(0.29) < at(0.3));
 }
 
-/// Welch p at SD 0.3 and 1.0 per row, and the SD at which p = 0.05 where the call depends on
-/// it, for one count: as printed in the doc.
-fn check_range(count: Count, printed: &[(f64, f64, Option<f64>); 12]) {
-    for (r, &(lo, hi, critical)) in ROWS.into_iter().zip(printed) {
+/// Per row for one count: the Welch SD the printed p implies (`None` where the doc's first
+/// table prints it), Welch p at SD 0.3 and 1.0, and the SD at which p = 0.05 where the call
+/// depends on it; as printed in the doc.
+type Ranges = [(Option<f64>, f64, f64, Option<f64>); 12];
+
+fn check_range(count: Count, printed: &Ranges) {
+    for (r, &(implied, lo, hi, critical)) in ROWS.into_iter().zip(printed) {
         let n = count.n(r.clip);
         let what = format!("{} n={n}", label(r));
+        if let Some(sd) = implied {
+            let at = implied_sd(r, n, Test::Welch, Alternative::Greater, r.p);
+            decimals(at, sd, 2, &format!("{what} SD Welch"));
+        }
         sig2(
             p_greater(r, SD_LO, n, Test::Welch),
             lo,
@@ -292,18 +299,18 @@ fn p_over_plausible_sd_with_22_and_26_ratings() {
     check_range(
         Count::Ratings,
         &[
-            (0.0026, 0.059, Some(0.93)),
-            (1.9e-7, 0.0026, None),
-            (1.7e-14, 1.2e-6, None),
-            (2.4e-7, 0.022, None),
-            (1.3e-13, 3.4e-5, None),
-            (1.9e-13, 6.2e-6, None),
-            (3.1e-5, 0.0099, None),
-            (1.9e-7, 0.0026, None),
-            (4.9e-5, 0.020, None),
-            (1.6e-10, 0.0038, None),
-            (3.0e-8, 0.0031, None),
-            (2.2e-7, 0.0028, None),
+            (None, 0.0026, 0.059, Some(0.93)),
+            (None, 1.9e-7, 0.0026, None),
+            (None, 1.7e-14, 1.2e-6, None),
+            (None, 2.4e-7, 0.022, None),
+            (None, 1.3e-13, 3.4e-5, None),
+            (None, 1.9e-13, 6.2e-6, None),
+            (None, 3.1e-5, 0.0099, None),
+            (None, 1.9e-7, 0.0026, None),
+            (None, 4.9e-5, 0.020, None),
+            (None, 1.6e-10, 0.0038, None),
+            (None, 3.0e-8, 0.0031, None),
+            (None, 2.2e-7, 0.0028, None),
         ],
     );
 }
@@ -313,18 +320,18 @@ fn p_over_plausible_sd_with_15_subjects() {
     check_range(
         Count::Subjects,
         &[
-            (0.011, 0.10, Some(0.70)),
-            (1.6e-5, 0.011, None),
-            (2.7e-10, 5.6e-5, None),
-            (7.3e-5, 0.065, Some(0.91)),
-            (1.9e-8, 0.0014, None),
-            (2.4e-8, 0.00050, None),
-            (0.00050, 0.028, None),
-            (1.6e-5, 0.011, None),
-            (0.00069, 0.046, None),
-            (1.1e-6, 0.022, None),
-            (2.2e-5, 0.020, None),
-            (7.0e-5, 0.018, None),
+            (Some(0.72), 0.011, 0.10, Some(0.70)),
+            (Some(1.09), 1.6e-5, 0.011, None),
+            (Some(0.72), 2.7e-10, 5.6e-5, None),
+            (Some(0.53), 7.3e-5, 0.065, Some(0.91)),
+            (Some(1.18), 1.9e-8, 0.0014, None),
+            (Some(1.52), 2.4e-8, 0.00050, None),
+            (Some(0.76), 0.00050, 0.028, None),
+            (Some(1.09), 1.6e-5, 0.011, None),
+            (Some(0.79), 0.00069, 0.046, None),
+            (Some(0.74), 1.1e-6, 0.022, None),
+            (Some(0.72), 2.2e-5, 0.020, None),
+            (Some(0.82), 7.0e-5, 0.018, None),
         ],
     );
 }
@@ -334,18 +341,18 @@ fn p_over_plausible_sd_with_the_ci_column_n() {
     check_range(
         Count::CiColumn,
         &[
-            (0.016, 0.12, Some(0.62)),
-            (5.5e-5, 0.017, None),
-            (4.3e-9, 0.00017, None),
-            (0.0032, 0.14, Some(0.61)),
-            (4.3e-5, 0.016, None),
-            (4.9e-5, 0.0092, None),
-            (0.0011, 0.038, None),
-            (5.5e-5, 0.017, None),
-            (0.0015, 0.059, Some(0.94)),
-            (0.00036, 0.075, Some(0.85)),
-            (0.0017, 0.069, Some(0.87)),
-            (0.0032, 0.067, Some(0.89)),
+            (Some(0.64), 0.016, 0.12, Some(0.62)),
+            (Some(0.99), 5.5e-5, 0.017, None),
+            (Some(0.63), 4.3e-9, 0.00017, None),
+            (Some(0.33), 0.0032, 0.14, Some(0.61)),
+            (Some(0.74), 4.3e-5, 0.016, None),
+            (Some(0.97), 4.9e-5, 0.0092, None),
+            (Some(0.67), 0.0011, 0.038, None),
+            (Some(0.99), 5.5e-5, 0.017, None),
+            (Some(0.71), 0.0015, 0.059, Some(0.94)),
+            (Some(0.47), 0.00036, 0.075, Some(0.85)),
+            (Some(0.41), 0.0017, 0.069, Some(0.87)),
+            (Some(0.47), 0.0032, 0.067, Some(0.89)),
         ],
     );
 }
