@@ -181,6 +181,7 @@ fn printed_p_implies_t_and_comparison_sd_with_22_and_26_ratings() {
         (2.763, 1.04, 1.07, 0.94, 2.02),
         (2.494, 1.19, 1.22, 1.06, 2.03),
     ];
+    let mut smaller = Vec::new();
     for (r, (t, welch, student, welch_two, max)) in ROWS.into_iter().zip(printed) {
         let what = label(r);
         let n = Count::Ratings.n(r.clip);
@@ -197,7 +198,14 @@ fn printed_p_implies_t_and_comparison_sd_with_22_and_26_ratings() {
         // With equal n the pooled and the Welch standard errors are equal, so Student's df
         // (2n − 2, the larger) needs the larger SD for the same p.
         assert!(sd_student > sd_welch && sd_welch > sd_two, "{what}");
+        smaller.push(1.0 - sd_two / sd_welch);
     }
+    // The two-tailed reading needs an SD 4 to 23 % smaller.
+    let (least, most) = smaller
+        .iter()
+        .fold((f64::INFINITY, 0.0_f64), |(a, b), &x| (a.min(x), b.max(x)));
+    decimals(least, 0.04, 2, "least reduction");
+    decimals(most, 0.23, 2, "largest reduction");
 }
 
 #[test]
@@ -463,11 +471,26 @@ fn a_paired_test_needs_the_sd_of_the_differences() {
 }
 
 #[test]
+fn comparison_means_fit_22_and_26_ratings_on_the_half_step_scale() {
+    // As for Table 3.1: mean · n is a sum of half-step scores, to within the mean's rounding,
+    // for n = 22 / 26 in every row of both tables, and for n = 15 in none.
+    let fits = |mean: f64, n: f64| ((2.0 * mean * n).round() / 2.0 / n - mean).abs() <= 0.0005;
+    for r in ROWS {
+        let n = Count::Ratings.n(r.clip) as f64;
+        for mean in [r.proposed, r.comparison] {
+            assert!(fits(mean, n), "{} {mean}", label(r));
+            assert!(!fits(mean, 15.0), "{} {mean}", label(r));
+        }
+    }
+}
+
+#[test]
 fn duplicated_numbers_across_the_two_tables() {
     let (t32, t33) = ROWS.split_at(6);
-    // 2_2 at 35:1: the same comparison mean and p in both tables.
+    // 2_2 at 35:1: the same comparison mean (70 / 22) and p in both tables.
     assert_eq!(t32[1].comparison.to_bits(), t33[1].comparison.to_bits());
     assert_eq!(t32[1].p.to_bits(), t33[1].p.to_bits());
+    decimals(70.0 / 22.0, t32[1].comparison, 3, "70 / 22");
     // 49_14: the same three p values for different mean differences, so the implied SDs
     // differ (n = 26), and Table 3.2's p does not fall as its difference grows.
     for (a, b) in t32[3..].iter().zip(&t33[3..]) {

@@ -17,7 +17,7 @@ scipy.stats.ttest_ind_from_stats(..., equal_var=False/True, alternative="greater
 from scipy.stats.t.sf. analysis/tests/thesis_tables.rs asserts the same numbers with the
 crate's own ttest::*_from_summary.
 
-Run: python3 scripts/reference/thesis_tables.py   (needs scipy; prints the tables used in
+Run: python3 scripts/reference/thesis_tables.py   (needs scipy; prints the numbers used in
 docs/analysis.md)
 """
 import math
