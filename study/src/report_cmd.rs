@@ -292,12 +292,15 @@ pub fn run(args: &ReportArgs) -> Result<()> {
     )?;
     files::write(
         &args.output.join("sureal_dataset.py"),
-        export::sureal_dataset(
-            &run.study,
-            &converted.data.ratings,
-            &converted.data.conditions,
-            study.scale.max,
-        ),
+        export::SurealDataset {
+            name: &run.study,
+            subjects: &converted.subjects,
+            ratings: &converted.data.ratings,
+            dscqs: &converted.data.dscqs,
+            conditions: &converted.data.conditions,
+            ref_score: study.scale.max,
+        }
+        .to_python(),
         mode,
     )?;
     println!(
