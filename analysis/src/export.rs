@@ -227,24 +227,6 @@ impl SurealDataset<'_> {
     }
 }
 
-/// [`SurealDataset::to_python`] of ratings alone, subjects written `s<id>`.
-pub fn sureal_dataset(
-    name: &str,
-    ratings: &[Rating],
-    conditions: &[ConditionInfo],
-    ref_score: f64,
-) -> String {
-    SurealDataset {
-        name,
-        subjects: &[],
-        ratings,
-        dscqs: &[],
-        conditions,
-        ref_score,
-    }
-    .to_python()
-}
-
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]

@@ -218,7 +218,15 @@ fn exports_for_pandas_and_sureal() {
         Some("subject,condition,codec,clip,compression_ratio,score")
     );
     assert_eq!(lines.count(), data.ratings.len());
-    let py = export::sureal_dataset("sim", &data.ratings, &data.conditions, 5.0);
+    let py = export::SurealDataset {
+        name: "sim",
+        subjects: &[],
+        ratings: &data.ratings,
+        dscqs: &[],
+        conditions: &data.conditions,
+        ref_score: 5.0,
+    }
+    .to_python();
     assert!(py.contains("ref_videos = [") && py.contains("dis_videos = ["));
     assert_eq!(py.matches("'asset_id'").count(), data.conditions.len());
     assert!(py.contains("'content_name': '2_2'"));
