@@ -1,7 +1,7 @@
 //! Differential scores: DSCQS difference scores (BT.500; thesis §6.4.1), the ACR-HR differential
 //! viewer score of ITU-T P.910, and per-subject z-scoring.
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::{BTreeMap, BTreeSet, HashMap};
 
 use serde::Serialize;
 
@@ -127,31 +127,60 @@ pub fn acr_hr_dmos<S: std::hash::BuildHasher>(
 /// [`AnalysisError::UndefinedZScore`] when a subject has fewer than two ratings or gives every
 /// stimulus the same score; [`AnalysisError::NonFinite`] for bad scores.
 pub fn zscore_by_subject(ratings: &[Rating]) -> Result<Vec<Rating>, AnalysisError> {
+    let params = zscore_params(ratings)?;
+    if let Some((&subject, _)) = params.iter().find(|(_, p)| p.is_none()) {
+        return Err(AnalysisError::UndefinedZScore { subject });
+    }
+    Ok(apply_zscores(ratings, &params))
+}
+
+/// As [`zscore_by_subject`], but a subject without a z-score (fewer than two ratings, or the
+/// same score for everything) is left out instead of refusing the whole set; returns the
+/// z-scores of the others and who was left out.
+///
+/// # Errors
+/// [`AnalysisError::NonFinite`] for bad scores.
+pub fn zscore_screened(ratings: &[Rating]) -> Result<(Vec<Rating>, BTreeSet<u32>), AnalysisError> {
+    let params = zscore_params(ratings)?;
+    let excluded: BTreeSet<u32> = params
+        .iter()
+        .filter(|(_, p)| p.is_none())
+        .map(|(&s, _)| s)
+        .collect();
+    Ok((apply_zscores(ratings, &params), excluded))
+}
+
+/// Each subject's (mean, SD), `None` where the z-score is undefined.
+fn zscore_params(ratings: &[Rating]) -> Result<HashMap<u32, Option<(f64, f64)>>, AnalysisError> {
     check_scores(ratings)?;
     let mut by_subject: HashMap<u32, Vec<f64>> = HashMap::new();
     for r in ratings {
         by_subject.entry(r.subject).or_default().push(r.score);
     }
-    let mut params: HashMap<u32, (f64, f64)> = HashMap::with_capacity(by_subject.len());
-    for (subject, scores) in &by_subject {
-        if scores.len() < 2 {
-            return Err(AnalysisError::UndefinedZScore { subject: *subject });
-        }
-        let m = mean_of(scores);
-        let sd = sample_variance(scores, m).max(0.0).sqrt();
-        if sd.is_nan() || sd <= 0.0 {
-            return Err(AnalysisError::UndefinedZScore { subject: *subject });
-        }
-        params.insert(*subject, (m, sd));
-    }
-    Ok(ratings
-        .iter()
-        .map(|r| {
-            let (m, sd) = params.get(&r.subject).copied().unwrap_or((0.0, 1.0));
-            Rating {
-                score: (r.score - m) / sd,
-                ..*r
-            }
+    Ok(by_subject
+        .into_iter()
+        .map(|(subject, scores)| {
+            let m = mean_of(&scores);
+            let sd = if scores.len() < 2 {
+                f64::NAN
+            } else {
+                sample_variance(&scores, m).max(0.0).sqrt()
+            };
+            (subject, (sd.is_finite() && sd > 0.0).then_some((m, sd)))
         })
         .collect())
+}
+
+/// The z-scores of the subjects that have parameters; the others' ratings are dropped.
+fn apply_zscores(ratings: &[Rating], params: &HashMap<u32, Option<(f64, f64)>>) -> Vec<Rating> {
+    ratings
+        .iter()
+        .filter_map(|r| {
+            let (m, sd) = params.get(&r.subject).copied().flatten()?;
+            Some(Rating {
+                score: (r.score - m) / sd,
+                ..*r
+            })
+        })
+        .collect()
 }

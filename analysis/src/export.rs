@@ -20,7 +20,10 @@ fn csv_field(s: &str) -> String {
 /// references, empty codec and clip for unknown conditions); `codec` is the condition's method,
 /// with its varied parameters when it has any ([`ConditionInfo::method`]). Reads with `pandas.read_csv` and
 /// `readr::read_csv` as is.
-pub fn tidy_csv(ratings: &[Rating], conditions: &[ConditionInfo]) -> String {
+///
+/// `subjects` names the numeric subjects (their ids from the results, as
+/// [`crate::study::StudyData::subjects`]); a subject past its end is written as its number.
+pub fn tidy_csv(subjects: &[String], ratings: &[Rating], conditions: &[ConditionInfo]) -> String {
     let by_id: HashMap<u32, &ConditionInfo> = conditions.iter().map(|c| (c.id, c)).collect();
     let mut out = String::with_capacity(ratings.len() * 32 + 64);
     out.push_str("subject,condition,codec,clip,compression_ratio,score\n");
@@ -29,7 +32,9 @@ pub fn tidy_csv(ratings: &[Rating], conditions: &[ConditionInfo]) -> String {
         let _ = writeln!(
             out,
             "{},{},{},{},{},{}",
-            r.subject,
+            subjects
+                .get(r.subject as usize)
+                .map_or_else(|| r.subject.to_string(), |s| csv_field(s)),
             r.condition,
             info.map_or_else(String::new, |i| csv_field(&i.method())),
             info.map_or_else(String::new, |i| csv_field(&i.clip)),

@@ -22,12 +22,11 @@ use crate::study::StudyData;
 /// A results directory turned into analysis inputs.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ConvertedResults {
-    /// The data, with subjects and conditions numbered.
+    /// The data, with subjects and conditions numbered (the subjects' ids in
+    /// [`StudyData::subjects`]).
     pub data: StudyData,
     /// The protocol every session ran.
     pub protocol: Protocol,
-    /// Subject names, indexed by the numeric subject id used in `data`.
-    pub subjects: Vec<String>,
     /// Stimulus ids, indexed by the numeric condition id used in `data`.
     pub stimuli: Vec<String>,
 }
@@ -194,10 +193,10 @@ pub fn convert(
         }
     }
     data.staircases = tracks.into_values().collect();
+    data.subjects = subjects.names;
     Ok(ConvertedResults {
         data,
         protocol,
-        subjects: subjects.names,
         stimuli: stimuli.names,
     })
 }

@@ -25,6 +25,7 @@
 
 mod confidence;
 pub mod descriptive;
+pub mod display;
 mod dist;
 pub mod dmos;
 mod error;

@@ -134,6 +134,25 @@ impl Panel {
         })
     }
 
+    /// One rating per (subject, condition) cell: the subject's mean over its repeats, in
+    /// (subject, condition) order. `ratings` must be the rows this panel indexes.
+    pub(crate) fn subject_means(&self, ratings: &[Rating]) -> Vec<Rating> {
+        self.cells()
+            .map(|(start, end)| {
+                let first = &ratings[self.order[start] as usize];
+                let sum: f64 = self.order[start..end]
+                    .iter()
+                    .map(|&r| ratings[r as usize].score)
+                    .sum();
+                Rating {
+                    subject: first.subject,
+                    condition: first.condition,
+                    score: sum / (end - start) as f64,
+                }
+            })
+            .collect()
+    }
+
     /// Runs of `order` sharing (subject, condition): (start, end) into `order`.
     pub fn cells(&self) -> impl Iterator<Item = (usize, usize)> + '_ {
         let mut start = 0;

@@ -102,8 +102,8 @@ pub enum Figure {
     ScoreDistributions {
         /// Title.
         title: String,
-        /// (subject, scores).
-        per_subject: Vec<(u32, Vec<f64>)>,
+        /// (subject id, scores).
+        per_subject: Vec<(String, Vec<f64>)>,
     },
 }
 
@@ -487,7 +487,7 @@ fn draw_jnd<DB: DrawingBackend>(
 fn draw_distributions<DB: DrawingBackend>(
     root: &DrawingArea<DB, Shift>,
     title: &str,
-    per_subject: &[(u32, Vec<f64>)],
+    per_subject: &[(String, Vec<f64>)],
 ) -> DrawResult<DB> {
     let (mut y0, mut y1) = (f64::INFINITY, f64::NEG_INFINITY);
     for v in per_subject.iter().flat_map(|s| s.1.iter()) {
@@ -502,7 +502,7 @@ fn draw_distributions<DB: DrawingBackend>(
         .x_label_area_size(45)
         .y_label_area_size(55)
         .build_cartesian_2d(-0.5..(columns - 0.5), y0..y1)?;
-    let labels: Vec<String> = per_subject.iter().map(|s| s.0.to_string()).collect();
+    let labels: Vec<String> = per_subject.iter().map(|s| s.0.clone()).collect();
     chart
         .configure_mesh()
         .x_desc("Subject")

@@ -7,7 +7,7 @@ use serde::Serialize;
 
 use crate::confidence::Confidence;
 use crate::descriptive::{CiMethod, ConditionStats, Rating, condition_stats};
-use crate::dmos::{DscqsPair, acr_hr_dmos, dscqs_dmos, zscore_by_subject};
+use crate::dmos::{DscqsPair, acr_hr_dmos, dscqs_dmos, zscore_screened};
 use crate::error::AnalysisError;
 use crate::findings::{ConditionInfo, Limit, RateFinding, rate_findings};
 use crate::jnd::{EncodedLevel, JndAnalysis, jnd_analysis};
@@ -43,6 +43,23 @@ pub struct StudyData {
     /// Compression ratio (and error) reached at each staircase level on each clip, one entry
     /// per trial: logged by a live staircase, or the manifest's for prepared stimuli.
     pub encoded_levels: Vec<EncodedLevel>,
+    /// Subject ids (`S005`) indexed by the numeric subject of the ratings, pairs and tracks;
+    /// tables and figures name subjects by them (by number where a name is missing).
+    pub subjects: Vec<String>,
+}
+
+impl StudyData {
+    /// How tables name subject `id`: its id from the results, else its number.
+    pub fn subject_name(&self, id: u32) -> String {
+        subject_name(&self.subjects, id)
+    }
+}
+
+fn subject_name(names: &[String], id: u32) -> String {
+    match names.get(id as usize) {
+        Some(n) if !n.is_empty() => n.clone(),
+        _ => id.to_string(),
+    }
 }
 
 /// Options of the analysis.
@@ -75,6 +92,13 @@ pub struct ReportOptions {
     pub figures: bool,
     /// Name of the staircase level in tables and figures (e.g. `t_L`, `target CR`).
     pub level_label: String,
+    /// Treat every rating as an observation of its own (n = ratings) in the MOS tables,
+    /// instead of each subject's mean over its repeats (n = subjects, the default). Tests are
+    /// paired and always take the per-subject means; the BT.500 screening always takes every
+    /// presentation, as the standard defines it.
+    pub pool_repeats: bool,
+    /// The rating scale (lowest, highest), printed with the limits so their unit is plain.
+    pub scale: Option<(f64, f64)>,
 }
 
 impl Default for ReportOptions {
@@ -92,6 +116,8 @@ impl Default for ReportOptions {
             zscore: false,
             figures: true,
             level_label: "Level".to_owned(),
+            pool_repeats: false,
+            scale: None,
         }
     }
 }
@@ -99,17 +125,26 @@ impl Default for ReportOptions {
 /// Every statistic of a study.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct StudyAnalysis {
-    /// MOS per condition, all observers.
+    /// MOS per condition, all observers: the mean over subjects of each subject's mean over
+    /// its repeats (over every rating with [`ReportOptions::pool_repeats`]). In a DSCQS study,
+    /// of the test scores.
     pub mos: Vec<ConditionStats>,
-    /// BT.500 screening of the rating panel (when there are ratings).
+    /// BT.500 screening of the observers (when there are ratings): on every presentation's
+    /// score, or in a DSCQS study on the reference − test differences.
     pub screening: Option<ScreeningReport>,
     /// MOS per condition without the rejected observers (when any were rejected).
     pub mos_screened: Option<Vec<ConditionStats>>,
+    /// DMOS per condition without the rejected observers (when any were rejected; DSCQS).
+    pub dmos_screened: Option<Vec<ConditionStats>>,
     /// MOS of per-subject z-scores (when asked for).
     pub mos_zscored: Option<Vec<ConditionStats>>,
+    /// Subjects left out of the z-scores: one score for everything (or a single rating) has no
+    /// z-score.
+    pub zscore_excluded: BTreeSet<u32>,
     /// Hidden-repeat consistency per subject.
     pub repeats: Vec<RepeatConsistency>,
-    /// Paired t-tests between codecs at the same clip and ratio, Holm-corrected.
+    /// Paired t-tests between codecs at the same clip and ratio, Holm-corrected: on the
+    /// per-subject mean scores, or in a DSCQS study on the per-subject mean differences.
     pub comparisons: Vec<ComparisonRow>,
     /// MOS rate findings.
     pub mos_findings: Vec<RateFinding>,
@@ -132,32 +167,73 @@ pub struct StudyAnalysis {
 /// invalid options).
 pub fn analyze(data: &StudyData, options: &ReportOptions) -> Result<StudyAnalysis, AnalysisError> {
     let panel = Panel::new(&data.ratings)?;
-    let mos = condition_stats(&data.ratings, options.confidence)?;
-    let (screening, mos_screened) = if data.ratings.is_empty() {
-        (None, None)
+    let means = panel.subject_means(&data.ratings);
+    let scores: &[Rating] = if options.pool_repeats {
+        &data.ratings
     } else {
-        let s = screening_of_panel(&data.ratings, &panel);
-        let rejected = s.rejected();
-        let screened = if rejected.is_empty() {
-            None
-        } else {
-            Some(condition_stats(
-                &without_subjects(&data.ratings, &rejected),
-                options.confidence,
-            )?)
-        };
-        (Some(s), screened)
+        &means
     };
-    let mos_zscored = if options.zscore && !data.ratings.is_empty() {
-        Some(condition_stats(
-            &zscore_by_subject(&data.ratings)?,
-            options.confidence,
-        )?)
+    let mos = condition_stats(scores, options.confidence)?;
+    // DSCQS is judged on the difference each subject saw (reference − test): the observers
+    // are screened and the codecs compared on it, as the DMOS is.
+    let differences: Vec<Rating> = data
+        .dscqs
+        .iter()
+        .map(|p| Rating {
+            subject: p.subject,
+            condition: p.condition,
+            score: p.reference_score - p.test_score,
+        })
+        .collect();
+    let difference_means = Panel::new(&differences)?.subject_means(&differences);
+    // BT.500's screening is defined per presentation, a repeat being a presentation of its
+    // own (its J·K·R): it takes every rating, never the per-subject means, which would hide
+    // an erratic observer's scatter.
+    let (presented, judged_means): (&[Rating], &[Rating]) = if data.dscqs.is_empty() {
+        (&data.ratings, &means)
     } else {
+        (&differences, &difference_means)
+    };
+    let screening = if presented.is_empty() {
         None
+    } else {
+        Some(screening_of_panel(presented, &Panel::new(presented)?))
+    };
+    let rejected = screening
+        .as_ref()
+        .map(ScreeningReport::rejected)
+        .unwrap_or_default();
+    // Rejected observers leave every table they are in: the MOS, and in DSCQS the DMOS.
+    let mos_screened = if rejected.is_empty() || scores.is_empty() {
+        None
+    } else {
+        let kept = without_subjects(scores, &rejected);
+        Some(condition_stats(&kept, options.confidence)?)
+    };
+    let dmos_screened = if rejected.is_empty() || data.dscqs.is_empty() {
+        None
+    } else {
+        let kept: Vec<DscqsPair> = data
+            .dscqs
+            .iter()
+            .filter(|p| !rejected.contains(&p.subject))
+            .copied()
+            .collect();
+        Some(dscqs_dmos(&kept, options.confidence)?)
+    };
+    let (mos_zscored, zscore_excluded) = if options.zscore && !scores.is_empty() {
+        let (z, excluded) = zscore_screened(scores)?;
+        (Some(condition_stats(&z, options.confidence)?), excluded)
+    } else {
+        (None, BTreeSet::new())
     };
     let repeats = repeats_of_panel(&data.ratings, &panel);
-    let comparisons = compare_codecs(data, &panel, options)?;
+    let comparisons = compare_codecs(
+        &data.conditions,
+        judged_means,
+        !data.dscqs.is_empty(),
+        options,
+    )?;
     let mos_findings = rate_findings(
         &data.conditions,
         &mos,
@@ -177,6 +253,38 @@ pub fn analyze(data: &StudyData, options: &ReportOptions) -> Result<StudyAnalysi
         Limit::DmosBelow(options.dmos_limit),
         options.ci_method,
     );
+    let (thresholds, jnd, psychometric) = adaptive_statistics(data, options)?;
+    Ok(StudyAnalysis {
+        mos,
+        screening,
+        mos_screened,
+        dmos_screened,
+        mos_zscored,
+        zscore_excluded,
+        repeats,
+        comparisons,
+        mos_findings,
+        dmos,
+        dmos_findings,
+        thresholds,
+        psychometric,
+        jnd,
+    })
+}
+
+/// Optional outputs of the staircase and 2AFC data.
+type Adaptive = (
+    Option<ThresholdSummary>,
+    Option<JndAnalysis>,
+    Option<(PsychometricFit, BootstrapCi)>,
+);
+
+/// Staircase thresholds, the JND across viewers, and the psychometric fit with its bootstrap
+/// interval, where the data have staircases and 2AFC trials.
+fn adaptive_statistics(
+    data: &StudyData,
+    options: &ReportOptions,
+) -> Result<Adaptive, AnalysisError> {
     let thresholds = if data.staircases.is_empty() {
         None
     } else {
@@ -205,33 +313,30 @@ pub fn analyze(data: &StudyData, options: &ReportOptions) -> Result<StudyAnalysi
             &options.bootstrap,
         )?)
     };
-    Ok(StudyAnalysis {
-        mos,
-        screening,
-        mos_screened,
-        mos_zscored,
-        repeats,
-        comparisons,
-        mos_findings,
-        dmos,
-        dmos_findings,
-        thresholds,
-        psychometric,
-        jnd,
-    })
+    Ok((thresholds, jnd, psychometric))
 }
 
-/// Paired comparisons between codecs that share a clip and compression ratio. Each subject's
-/// repeats are averaged first; only subjects who rated both conditions enter a test.
+/// Paired comparisons between codecs that share a clip and compression ratio, on `means`
+/// (one per subject and condition, in (subject, condition) order: each subject's repeats
+/// averaged); only subjects who rated both conditions enter a test. `lower_is_better` for
+/// differences (DSCQS): a baseline test then asks whether a codec's DMOS is lower.
 fn compare_codecs(
-    data: &StudyData,
-    panel: &Panel,
+    conditions: &[ConditionInfo],
+    means: &[Rating],
+    lower_is_better: bool,
     options: &ReportOptions,
 ) -> Result<Vec<ComparisonRow>, AnalysisError> {
-    let by_condition = subject_means_by_condition(data, panel);
+    // Per condition: (subject, mean), subject-sorted since `means` runs in subject order.
+    let mut by_condition: BTreeMap<u32, Vec<(u32, f64)>> = BTreeMap::new();
+    for m in means {
+        by_condition
+            .entry(m.condition)
+            .or_default()
+            .push((m.subject, m.score));
+    }
     // Group conditions by (clip, ratio bits).
     let mut groups: BTreeMap<(String, u64), Vec<&ConditionInfo>> = BTreeMap::new();
-    for c in &data.conditions {
+    for c in conditions {
         if let Some(cr) = c.compression_ratio
             && by_condition.contains_key(&c.id)
         {
@@ -241,10 +346,15 @@ fn compare_codecs(
                 .push(c);
         }
     }
+    let better = if lower_is_better {
+        Alternative::Less
+    } else {
+        Alternative::Greater
+    };
     let mut rows = Vec::new();
     for ((clip, cr_bits), mut conds) in groups {
         conds.sort_by_key(|c| c.method());
-        for (a, b, alt) in codec_pairs(&conds, options.baseline_codec.as_deref()) {
+        for (a, b, alt) in codec_pairs(&conds, options.baseline_codec.as_deref(), better) {
             let (Some(sa), Some(sb)) = (by_condition.get(&a.id), by_condition.get(&b.id)) else {
                 continue;
             };
@@ -255,6 +365,7 @@ fn compare_codecs(
                 compression_ratio: Some(f64::from_bits(cr_bits)),
                 first: (a.method(), mean_or_nan(&xa)),
                 second: (b.method(), mean_or_nan(&xb)),
+                alternative: alt,
                 test,
                 p_holm: None,
             });
@@ -264,32 +375,14 @@ fn compare_codecs(
     Ok(rows)
 }
 
-/// Per condition id: (subject index, that subject's mean score over its repeats), sorted by
-/// subject because the panel's cells run in (subject, condition) order.
-fn subject_means_by_condition(data: &StudyData, panel: &Panel) -> BTreeMap<u32, Vec<(u32, f64)>> {
-    let mut per_condition: Vec<Vec<(u32, f64)>> = vec![Vec::new(); panel.conditions.len()];
-    for (start, end) in panel.cells() {
-        let first = panel.order[start] as usize;
-        let sum: f64 = panel.order[start..end]
-            .iter()
-            .map(|&r| data.ratings[r as usize].score)
-            .sum();
-        per_condition[panel.c[first] as usize].push((panel.s[first], sum / (end - start) as f64));
-    }
-    panel
-        .conditions
-        .iter()
-        .copied()
-        .zip(per_condition)
-        .collect()
-}
-
 /// The tests to run among codecs at one clip and ratio (`conds` sorted by codec): each codec
-/// against `baseline`, one-tailed ("scores higher than the baseline"), when the baseline is
-/// among them (else none); without a baseline every pair, two-tailed.
+/// against `baseline`, one-tailed (`better`: "scores higher than the baseline", or for
+/// differences "lower"), when the baseline is among them (else none); without a baseline
+/// every pair, two-tailed.
 fn codec_pairs<'a>(
     conds: &[&'a ConditionInfo],
     baseline: Option<&str>,
+    better: Alternative,
 ) -> Vec<(&'a ConditionInfo, &'a ConditionInfo, Alternative)> {
     let mut pairs = Vec::new();
     match baseline {
@@ -308,7 +401,7 @@ fn codec_pairs<'a>(
                     conds
                         .iter()
                         .filter(|c| c.id != b.id)
-                        .map(|a| (*a, *b, Alternative::Greater)),
+                        .map(|a| (*a, *b, better)),
                 );
             }
         }
@@ -399,10 +492,10 @@ impl StudyAnalysis {
             self.mos_section(&mut report, data, options);
         }
         if !self.comparisons.is_empty() {
-            comparisons_section(&mut report, &self.comparisons);
+            comparisons_section(&mut report, &self.comparisons, data, options);
         }
         if let Some(screening) = &self.screening {
-            screening_section(&mut report, screening, &self.repeats);
+            screening_section(&mut report, screening, &self.repeats, data);
         }
         if !self.dmos.is_empty() {
             self.dmos_section(&mut report, data, options);
@@ -411,7 +504,7 @@ impl StudyAnalysis {
             thresholds_section(&mut report, t, data, options);
         }
         if let Some(j) = &self.jnd {
-            jnd_section(&mut report, j, options);
+            jnd_section(&mut report, j, data, options);
         }
         if let Some((fit, ci)) = &self.psychometric {
             psychometric_section(&mut report, fit, ci, data, options);
@@ -423,16 +516,28 @@ impl StudyAnalysis {
     /// 3.1 layout), the MOS rate findings, and the MOS-vs-CR and per-subject score figures.
     fn mos_section(&self, report: &mut Report, data: &StudyData, options: &ReportOptions) {
         let conf = percent_label(options.confidence);
+        let dscqs = !data.dscqs.is_empty();
+        let subjects = data
+            .ratings
+            .iter()
+            .map(|r| r.subject)
+            .collect::<BTreeSet<_>>()
+            .len();
         let s = report.section("Mean opinion scores");
         s.text(format!(
-            "{} ratings from {} subjects. Mean ± {conf} confidence interval ({:?}); thesis Table 3.1 layout.",
+            "{} ratings{} from {subjects} subjects. {} Mean ± {conf} confidence interval ({:?}); thesis Table 3.1 layout.",
             data.ratings.len(),
-            data.ratings.iter().map(|r| r.subject).collect::<BTreeSet<_>>().len(),
+            if dscqs { " of the test versions" } else { "" },
+            repeats_treatment(options.pool_repeats),
             options.ci_method
         ));
         s.table(tables::mos_table(
             "mos",
-            "MOS per condition (all observers)",
+            if dscqs {
+                "MOS of the test versions per condition (all observers)"
+            } else {
+                "MOS per condition (all observers)"
+            },
             &data.conditions,
             &self.mos,
             options.ci_method,
@@ -447,6 +552,12 @@ impl StudyAnalysis {
             ));
         }
         if let Some(z) = &self.mos_zscored {
+            if !self.zscore_excluded.is_empty() {
+                s.text(format!(
+                    "Left out of the z-scores (one score for every stimulus, so no z-score): {}.",
+                    names_of(data, &self.zscore_excluded)
+                ));
+            }
             s.table(tables::mos_table(
                 "mos_zscored",
                 "Mean of per-subject z-scores per condition",
@@ -458,8 +569,9 @@ impl StudyAnalysis {
         s.table(tables::findings_table(
             "mos_findings",
             &format!(
-                "Highest CR whose lower CI bound stays ≥ MOS {}",
-                options.mos_limit
+                "Highest CR whose lower CI bound stays ≥ MOS {}{}",
+                options.mos_limit,
+                scale_unit(options)
             ),
             &self.mos_findings,
         ));
@@ -477,7 +589,7 @@ impl StudyAnalysis {
                 "score_distributions",
                 Figure::ScoreDistributions {
                     title: "Scores per subject".to_owned(),
-                    per_subject: scores_per_subject(&data.ratings),
+                    per_subject: scores_per_subject(data),
                 },
             );
         }
@@ -487,6 +599,15 @@ impl StudyAnalysis {
     /// findings and the DMOS-vs-CR figure.
     fn dmos_section(&self, report: &mut Report, data: &StudyData, options: &ReportOptions) {
         let s = report.section("Differential MOS");
+        s.text(if data.dscqs.is_empty() {
+            "DMOS = test − hidden reference + 5 per subject (P.910 ACR-HR), averaged per subject over repeats, then over subjects."
+                .to_owned()
+        } else {
+            format!(
+                "DMOS = reference − test score of each DSCQS pair{}, averaged per subject over repeats, then over subjects; the screening and the t-tests use the same differences.",
+                scale_unit(options)
+            )
+        });
         s.table(tables::dmos_table(
             "dmos",
             "DMOS per condition and clip (thesis Table 6.3 layout)",
@@ -500,11 +621,21 @@ impl StudyAnalysis {
             &self.dmos,
             options.ci_method,
         ));
+        if let Some(screened) = &self.dmos_screened {
+            s.table(tables::mos_table(
+                "dmos_screened",
+                "DMOS per condition without rejected observers",
+                &data.conditions,
+                screened,
+                options.ci_method,
+            ));
+        }
         s.table(tables::findings_table(
             "dmos_findings",
             &format!(
-                "Highest CR whose upper CI bound stays < DMOS {}",
-                options.dmos_limit
+                "Highest CR whose upper CI bound stays < DMOS {}{}",
+                options.dmos_limit,
+                scale_unit(options)
             ),
             &self.dmos_findings,
         ));
@@ -522,27 +653,72 @@ impl StudyAnalysis {
     }
 }
 
+/// How the tables treat hidden repeats, in words.
+fn repeats_treatment(pooled: bool) -> &'static str {
+    if pooled {
+        "Repeats pooled (--pool-repeats): every rating counts as an observation, n = ratings."
+    } else {
+        "Each subject's repeats of a condition are averaged first: n = subjects."
+    }
+}
+
+/// The scale a limit is in, as a caption says it: ` (scale 1–5)`.
+fn scale_unit(options: &ReportOptions) -> String {
+    options
+        .scale
+        .map_or_else(String::new, |(lo, hi)| format!(" (scale {lo}–{hi})"))
+}
+
+/// Subject ids, comma-separated.
+fn names_of(data: &StudyData, subjects: &BTreeSet<u32>) -> String {
+    subjects
+        .iter()
+        .map(|&s| data.subject_name(s))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
 /// A confidence level as the report's text prints it: `95 %`.
 fn percent_label(confidence: Confidence) -> String {
     format!("{:.0} %", confidence.percent())
 }
 
-/// Every subject's scores in rating order, by subject id: the score-distribution figure.
-fn scores_per_subject(ratings: &[Rating]) -> Vec<(u32, Vec<f64>)> {
+/// Every subject's scores in rating order, by subject: the score-distribution figure.
+fn scores_per_subject(data: &StudyData) -> Vec<(String, Vec<f64>)> {
     let mut per: BTreeMap<u32, Vec<f64>> = BTreeMap::new();
-    for r in ratings {
+    for r in &data.ratings {
         per.entry(r.subject).or_default().push(r.score);
     }
-    per.into_iter().collect()
+    per.into_iter()
+        .map(|(s, v)| (data.subject_name(s), v))
+        .collect()
 }
 
-/// The comparisons section: the paired t-tests between codecs (thesis Tables 3.2, 3.3).
-fn comparisons_section(report: &mut Report, comparisons: &[ComparisonRow]) {
+/// The comparisons section: the paired t-tests between codecs (thesis Tables 3.2, 3.3), with
+/// their kind and tails in the caption and in every row.
+fn comparisons_section(
+    report: &mut Report,
+    comparisons: &[ComparisonRow],
+    data: &StudyData,
+    options: &ReportOptions,
+) {
+    let on = if data.dscqs.is_empty() {
+        "per-subject mean scores"
+    } else {
+        "per-subject mean differences (reference − test; DMOS, lower is better)"
+    };
+    let tails = match (&options.baseline_codec, data.dscqs.is_empty()) {
+        (Some(b), true) => format!("one-tailed against {b} (H1: A scores higher than B = {b})"),
+        (Some(b), false) => format!("one-tailed against {b} (H1: A has a lower DMOS than B = {b})"),
+        (None, _) => "two-tailed between every pair of methods (H1: the means differ)".to_owned(),
+    };
     let s = report.section("Comparisons");
-    s.text("Paired t-tests on per-subject mean scores at equal clip and ratio; p values Holm-corrected across the table (thesis Tables 3.2, 3.3).");
+    s.text(format!(
+        "Paired t-tests on {on} at equal clip and ratio, {tails}; only subjects who rated both enter a test; p values Holm-corrected across the table (thesis Tables 3.2, 3.3, which are one-tailed: pass --baseline for that design)."
+    ));
     s.table(tables::ttest_table(
         "ttests",
-        "Paired t-tests between codecs",
+        &format!("Paired t-tests between codecs, {tails}"),
         comparisons,
     ));
 }
@@ -552,35 +728,44 @@ fn screening_section(
     report: &mut Report,
     screening: &ScreeningReport,
     repeats: &[RepeatConsistency],
+    data: &StudyData,
 ) {
     let s = report.section("Observer screening");
     let rejected = screening.rejected();
+    let on = if data.dscqs.is_empty() {
+        "scores"
+    } else {
+        "reference − test differences"
+    };
+    let treatment = "Every presentation counts, a hidden repeat as repetition r of its condition, as BT.500 defines the screening.";
     s.text(if rejected.is_empty() {
-        "BT.500 Annex 2 §2.3.1: no observer rejected.".to_owned()
+        format!("BT.500 Annex 2 §2.3.1 on the {on}: no observer rejected. {treatment}")
     } else {
         format!(
-            "BT.500 Annex 2 §2.3.1: rejected {} ((P+Q)/JKR > 0.05 and |P−Q|/(P+Q) < 0.3); MOS is reported with and without them.",
-            rejected.iter().map(ToString::to_string).collect::<Vec<_>>().join(", ")
+            "BT.500 Annex 2 §2.3.1 on the {on}: rejected {} ((P+Q)/JKR > 0.05 and |P−Q|/(P+Q) < 0.3); {} reported with and without them. {treatment}",
+            names_of(data, &rejected),
+            if data.dscqs.is_empty() { "MOS is" } else { "DMOS is" }
         )
     });
     s.table(tables::screening_table(
         "screening",
         "BT.500 observer screening",
         screening,
+        &|id| data.subject_name(id),
     ));
-    if let Some(table) = repeats_table(repeats) {
+    if let Some(table) = repeats_table(repeats, data) {
         s.table(table);
     }
 }
 
 /// Hidden-repeat consistency of the subjects who met a repeat; `None` when nobody did.
-fn repeats_table(repeats: &[RepeatConsistency]) -> Option<tables::Table> {
+fn repeats_table(repeats: &[RepeatConsistency], data: &StudyData) -> Option<tables::Table> {
     let rows: Vec<Vec<String>> = repeats
         .iter()
         .filter(|r| r.pairs > 0)
         .map(|r| {
             vec![
-                r.subject.to_string(),
+                data.subject_name(r.subject),
                 r.pairs.to_string(),
                 fmt_opt(r.mean_abs_difference, 3),
             ]
@@ -667,7 +852,7 @@ fn psychometric_section(
 
 /// The JND section: thresholds over viewers, and at each level the share who would notice
 /// with the CR the codec reached there on each clip.
-fn jnd_section(report: &mut Report, j: &JndAnalysis, options: &ReportOptions) {
+fn jnd_section(report: &mut Report, j: &JndAnalysis, data: &StudyData, options: &ReportOptions) {
     let conf = percent_label(j.confidence);
     let label = &options.level_label;
     let s = report.section("Just-noticeable difference across viewers");
@@ -693,7 +878,7 @@ fn jnd_section(report: &mut Report, j: &JndAnalysis, options: &ReportOptions) {
         rows: j
             .thresholds
             .iter()
-            .map(|(subject, t)| vec![subject.to_string(), format!("{t:.4}")])
+            .map(|(subject, t)| vec![data.subject_name(*subject), format!("{t:.4}")])
             .collect(),
     });
     let mut columns = vec![

@@ -11,7 +11,7 @@ use crate::descriptive::{CiMethod, ConditionStats};
 use crate::findings::{ConditionInfo, RateFinding};
 use crate::screening::ScreeningReport;
 use crate::staircase::ThresholdSummary;
-use crate::ttest::TTestOutcome;
+use crate::ttest::{Alternative, TTestOutcome};
 
 /// Text printed for a statistic that is undefined for the data.
 pub const UNDEFINED: &str = "n/a";
@@ -37,12 +37,27 @@ pub fn fmt_opt(value: Option<f64>, decimals: usize) -> String {
     }
 }
 
-/// Formats a p value: fixed decimals down to 0.001, scientific below (Table 3.2 prints 1.07E-06).
+/// Formats a p value as papers print it (APA): two significant digits, `< 0.001` below
+/// 0.001 (`0.053`, `0.016`, `0.12`, `1.0`).
 pub fn fmt_p(p: Option<f64>) -> String {
     match p {
-        Some(v) if v.is_finite() && v >= 0.001 => format!("{v:.3}"),
-        Some(v) if v.is_finite() => format!("{v:.2e}"),
+        Some(v) if v.is_finite() && v < 0.001 => "< 0.001".to_owned(),
+        Some(v) if v.is_finite() => {
+            // Round to two significant digits first, so 0.0996 prints as 0.10, not 0.100.
+            let rounded: f64 = format!("{v:.1e}").parse().unwrap_or(v);
+            let decimals = (1 - rounded.log10().floor() as i32).max(1) as usize;
+            format!("{rounded:.decimals$}")
+        }
         _ => UNDEFINED.to_owned(),
+    }
+}
+
+/// What a paired t-test was, as its table says it: kind and tails.
+pub fn test_kind(alternative: Alternative) -> &'static str {
+    match alternative {
+        Alternative::TwoSided => "paired t, two-tailed",
+        Alternative::Greater => "paired t, one-tailed (A > B)",
+        Alternative::Less => "paired t, one-tailed (A < B)",
     }
 }
 
@@ -256,6 +271,8 @@ pub struct ComparisonRow {
     pub first: (String, f64),
     /// Label and mean of the second method.
     pub second: (String, f64),
+    /// The alternative hypothesis tested (also in `test` when it is defined).
+    pub alternative: Alternative,
     /// The test.
     pub test: TTestOutcome,
     /// Holm-adjusted p value within the table's family.
@@ -274,6 +291,7 @@ pub fn ttest_table(name: &str, caption: &str, rows: &[ComparisonRow]) -> Table {
             "Mean A",
             "Method B",
             "Mean B",
+            "Test",
             "t",
             "df",
             "p",
@@ -309,6 +327,7 @@ pub fn ttest_table(name: &str, caption: &str, rows: &[ComparisonRow]) -> Table {
                     format!("{:.3}", r.first.1),
                     r.second.0.clone(),
                     format!("{:.3}", r.second.1),
+                    test_kind(r.alternative).to_owned(),
                     t,
                     df,
                     p,
@@ -397,8 +416,13 @@ pub fn threshold_table(name: &str, caption: &str, t: &ThresholdSummary) -> Table
     }
 }
 
-/// BT.500 screening counts and decisions per observer.
-pub fn screening_table(name: &str, caption: &str, report: &ScreeningReport) -> Table {
+/// BT.500 screening counts and decisions per observer, subjects named by `subject`.
+pub fn screening_table(
+    name: &str,
+    caption: &str,
+    report: &ScreeningReport,
+    subject: &dyn Fn(u32) -> String,
+) -> Table {
     Table {
         name: name.to_owned(),
         caption: caption.to_owned(),
@@ -418,7 +442,7 @@ pub fn screening_table(name: &str, caption: &str, report: &ScreeningReport) -> T
             .iter()
             .map(|o| {
                 vec![
-                    o.subject.to_string(),
+                    subject(o.subject),
                     o.p.to_string(),
                     o.q.to_string(),
                     o.presentations.to_string(),

@@ -165,7 +165,7 @@ fn mos_sessions_become_ratings_with_conditions_and_hidden_reference() {
     ];
     let c = convert(&sessions, &manifest(), Some((1.0, 5.0))).unwrap();
     assert_eq!(c.protocol, Protocol::Mos);
-    assert_eq!(c.subjects, vec!["ann", "bob", "cy"]);
+    assert_eq!(c.data.subjects, vec!["ann", "bob", "cy"]);
     // Familiarization dropped, the hidden repeat kept.
     assert_eq!(c.data.ratings.len(), 12);
     let p = c.stimuli.iter().position(|s| s == "walk/p/cr20").unwrap() as u32;
@@ -482,7 +482,7 @@ fn two_variants_at_one_ratio_get_two_labels_in_every_table_test_and_curve() {
             && rows.contains(&"wavelet-perceptual/qp11 @ 20:1"),
         "{rows:?}"
     );
-    let csv = analysis::export::tidy_csv(&c.data.ratings, &c.data.conditions);
+    let csv = analysis::export::tidy_csv(&c.data.subjects, &c.data.ratings, &c.data.conditions);
     assert!(csv.contains(",wavelet-perceptual/qp9,walk,20,"), "{csv}");
 }
 

@@ -211,7 +211,7 @@ fn report_writes_every_table_and_figure() {
 #[test]
 fn exports_for_pandas_and_sureal() {
     let data = simulated();
-    let csv = export::tidy_csv(&data.ratings, &data.conditions);
+    let csv = export::tidy_csv(&data.subjects, &data.ratings, &data.conditions);
     let mut lines = csv.lines();
     assert_eq!(
         lines.next(),

@@ -5,8 +5,8 @@
 //! t-test and staircase-threshold tables, and the numbers behind them (n, MOS, SD, CI
 //! half-width and bounds, t, df, p, Holm p, effect size, thresholds) to 1e-12 relative.
 //!
-//! The data set has a hidden repeat (subject 1 rates A at 10:1 twice: it counts twice in the
-//! MOS, once, averaged, in the paired test), a missing rating (subject 6 never rated B at
+//! The data set has a hidden repeat (subject 1 rates A at 10:1 twice: averaged into one score
+//! of subject 1 in the MOS and in the paired test alike), a missing rating (subject 6 never rated B at
 //! 20:1: that test has 5 pairs), and a staircase short of 3 reversals (subject 3, `walk`:
 //! unconverged, and subject 3's threshold is its `run` track alone).
 
@@ -174,8 +174,10 @@ fn mos_table_matches_scipy() {
         close(ci.lower, f(&n["lower"]), &format!("{what}: lower"));
         close(ci.upper, f(&n["upper"]), &format!("{what}: upper"));
     }
-    // The hidden repeat counts twice in the MOS: 7 ratings of condition 1.
-    assert_eq!(t["mos"].rows[0][3], "7");
+    // The hidden repeat is averaged into its subject's score: 7 ratings of condition 1 by 6
+    // subjects, n = 6.
+    assert_eq!(data.ratings.iter().filter(|r| r.condition == 1).count(), 7);
+    assert_eq!(t["mos"].rows[0][3], "6");
 }
 
 fn check_ttests(baseline: Option<&str>, key: &str) {

@@ -6,10 +6,11 @@ hidden repeat (subject 1 rates A at 10:1 twice) and one missing rating (subject 
 B at 20:1), plus staircase tracks of three subjects, one of them short of reversals. The
 expected numbers come from SciPy / statsmodels / NumPy, independent of the Rust code, and
 the expected table cells are those numbers formatted as the report prints them (3 decimals
-for scores, 4 for staircase levels, p below 0.001 in Rust's `{:.2e}` form).
+for scores, 4 for staircase levels, p with two significant digits and "< 0.001" below).
 
 What the analysis must do, as this script does it:
-- MOS per condition over every rating (a hidden repeat counts twice), Student-t interval
+- MOS per condition over the subjects, each subject's repeats averaged first (the hidden
+  repeat counts once, averaged; n = subjects), Student-t interval
   mean +- t(0.975, n - 1) * SD / sqrt(n).
 - Codec comparisons at equal clip and ratio: paired t-test over the subjects who rated both,
   each subject's repeats averaged first; Holm over the table. Without a baseline every pair
@@ -65,11 +66,15 @@ def rust_fixed(x, decimals):
 
 
 def rust_p(p):
-    """analysis::tables::fmt_p: 3 decimals from 0.001, else Rust's `{:.2e}` (1.07e-6)."""
-    if p >= 0.001:
-        return f"{p:.3f}"
-    mantissa, exponent = f"{p:.2e}".split("e")
-    return f"{mantissa}e{int(exponent)}"
+    """A p value as papers print it (APA): two significant digits, "< 0.001" below."""
+    if p < 0.001:
+        return "< 0.001"
+    rounded = float(f"{p:.1e}")
+    decimals = max(1, 1 - math.floor(math.log10(rounded)))
+    return f"{rounded:.{decimals}f}"
+
+
+TEST_KIND = {"two-sided": "paired t, two-tailed", "greater": "paired t, one-tailed (A > B)"}
 
 
 def ratio(cr):
@@ -89,7 +94,7 @@ def interval(values):
 def mos_table():
     rows = []
     for cid, codec, clip, cr in sorted(CONDITIONS, key=lambda c: (c[1], c[2], c[3])):
-        s = interval([score for _, c, score in RATINGS if c == cid])
+        s = interval(list(subject_means(cid).values()))
         cells = [codec, clip, ratio(cr), str(s["n"]), rust_fixed(s["mean"], 3),
                  rust_fixed(s["sd"], 3), rust_fixed(s["half_width"], 3),
                  rust_fixed(s["lower"], 3), rust_fixed(s["upper"], 3)]
@@ -121,6 +126,7 @@ def ttest_table(baseline):
             r = stats.ttest_rel(a, b, alternative=alternative)
             d = a - b
             rows.append({"clip": "walk", "cr": cr, "first": first, "second": second,
+                         "alternative": alternative,
                          "n": len(common), "mean_first": float(a.mean()),
                          "mean_second": float(b.mean()), "t": float(r.statistic),
                          "df": float(r.df), "p": float(r.pvalue),
@@ -129,7 +135,8 @@ def ttest_table(baseline):
     for r, p in zip(rows, holm):
         r["p_holm"] = float(p)
         r["cells"] = ["walk", ratio(r["cr"]), r["first"], rust_fixed(r["mean_first"], 3),
-                      r["second"], rust_fixed(r["mean_second"], 3), rust_fixed(r["t"], 3),
+                      r["second"], rust_fixed(r["mean_second"], 3), TEST_KIND[r["alternative"]],
+                      rust_fixed(r["t"], 3),
                       rust_fixed(r["df"], 2), rust_p(r["p"]), rust_p(r["p_holm"]),
                       rust_fixed(r["effect_size"], 3)]
     return rows

@@ -29,6 +29,10 @@ pub enum ShapeArg {
 
 /// Arguments of `study report`.
 #[derive(Debug, Clone, clap::Args)]
+#[expect(
+    clippy::struct_excessive_bools,
+    reason = "command-line switches: each bool is one flag a user passes"
+)]
 pub struct ReportArgs {
     /// Results directory written by `study run` or `study simulate`.
     pub results: PathBuf,
@@ -49,12 +53,21 @@ pub struct ReportArgs {
     /// Interval used in tables and findings.
     #[arg(long, value_enum, default_value_t = CiArg::T)]
     pub ci: CiArg,
-    /// MOS a rate must keep (lower CI bound) to count as unnoticed (thesis §3.3: 4.5).
-    #[arg(long, default_value_t = 4.5)]
-    pub mos_limit: f64,
-    /// DMOS a rate must stay under (upper CI bound) (thesis §6.4.3: 0.2).
-    #[arg(long, default_value_t = 0.2)]
-    pub dmos_limit: f64,
+    /// MOS a rate must keep (lower CI bound) to count as unnoticed, on the study's scale
+    /// (default: 87.5 % of the way up the scale, thesis §3.3's 4.5 on 1-5).
+    #[arg(long, value_name = "SCORE")]
+    pub mos_limit: Option<f64>,
+    /// DMOS a rate must stay under (upper CI bound), in the study's scale units (default: 5 %
+    /// of the scale's range, thesis §6.4.3's 0.2 on 1-5).
+    #[arg(long, value_name = "SCORE")]
+    pub dmos_limit: Option<f64>,
+    /// Count every rating as an observation in the MOS tables (n = ratings), instead of each
+    /// subject's mean over its hidden repeats (n = subjects).
+    #[arg(long)]
+    pub pool_repeats: bool,
+    /// Share of dropped frames (percent) above which the display section flags a session.
+    #[arg(long, default_value_t = 1.0, value_name = "PERCENT")]
+    pub drop_limit: f64,
     /// Reversals averaged per staircase (default: the study's `threshold_reversals`, the
     /// number the sessions used for their own thresholds; thesis §5.4: 3).
     #[arg(long)]
@@ -122,16 +135,36 @@ fn last_reversals(args: &ReportArgs, study: &StudyDefinition) -> usize {
     })
 }
 
+/// `--mos-limit` and `--dmos-limit`, or their defaults from the study's scale (thesis §3.3's
+/// 4.5 and §6.4.3's 0.2 on a 1-5 scale, scaled to the study's); a limit outside the scale is
+/// refused, naming the option.
+fn limits(args: &ReportArgs, study: &StudyDefinition) -> Result<(f64, f64)> {
+    let (lo, hi) = (study.scale.min, study.scale.max);
+    let range = hi - lo;
+    let mos = args.mos_limit.unwrap_or(lo + 0.875 * range);
+    let dmos = args.dmos_limit.unwrap_or(0.05 * range);
+    if !(lo..=hi).contains(&mos) {
+        bail!("--mos-limit {mos}: outside the study's scale {lo}-{hi}");
+    }
+    if !(dmos > -range && dmos <= range) {
+        bail!(
+            "--dmos-limit {dmos}: a difference on the study's scale {lo}-{hi} lies within ±{range}"
+        );
+    }
+    Ok((mos, dmos))
+}
+
 /// The analysis options `args` ask for.
-fn report_options(args: &ReportArgs, study: &StudyDefinition) -> ReportOptions {
-    ReportOptions {
+fn report_options(args: &ReportArgs, study: &StudyDefinition) -> Result<ReportOptions> {
+    let (mos_limit, dmos_limit) = limits(args, study)?;
+    Ok(ReportOptions {
         confidence: args.confidence,
         ci_method: match args.ci {
             CiArg::T => CiMethod::StudentT,
             CiArg::Z => CiMethod::NormalZ,
         },
-        mos_limit: args.mos_limit,
-        dmos_limit: args.dmos_limit,
+        mos_limit,
+        dmos_limit,
         baseline_codec: args.baseline.clone(),
         last_reversals: last_reversals(args, study),
         percent_correct: args.percent_correct,
@@ -153,7 +186,9 @@ fn report_options(args: &ReportArgs, study: &StudyDefinition) -> ReportOptions {
         zscore: args.zscore,
         figures: true,
         level_label: level_label(study),
-    }
+        pool_repeats: args.pool_repeats,
+        scale: Some((study.scale.min, study.scale.max)),
+    })
 }
 
 /// The Weibull is fitted on the logarithm of the level: a level at or below 0 is refused here,
@@ -217,6 +252,54 @@ fn checked_logs(
     Ok(problems)
 }
 
+/// The "Incomplete sessions" section of a report made with `--allow-incomplete`.
+fn incomplete_section(
+    report: &mut analysis::report::Report,
+    incomplete: &[lab::integrity::Problem],
+) {
+    if !incomplete.is_empty() {
+        let section = report.section("Incomplete sessions");
+        section.text(
+            "Reported with --allow-incomplete: trials are missing at the end of these sessions; \
+             the trials they logged are in every table.",
+        );
+        for p in incomplete {
+            section.text(p.to_string());
+        }
+    }
+}
+
+/// The "Display" section: every session's display and frame record, sessions over
+/// `drop_limit` percent dropped frames flagged (and warned about).
+fn display_section(
+    report: &mut analysis::report::Report,
+    sessions: &[results::SessionResults],
+    drop_limit: f64,
+) {
+    let displays = analysis::display::session_displays(sessions, drop_limit);
+    let flagged: Vec<&str> = displays
+        .iter()
+        .filter(|d| d.flagged)
+        .map(|d| d.session.as_str())
+        .collect();
+    let display = report.section("Display");
+    display.text(if flagged.is_empty() {
+        format!(
+            "The display each session ran on, as it measured it; no session dropped more than {drop_limit} % of its frames."
+        )
+    } else {
+        format!(
+            "The display each session ran on, as it measured it. Over {} % of the frames dropped (--drop-limit): {}; their stimuli did not play as made.",
+            drop_limit,
+            flagged.join(", ")
+        )
+    });
+    display.table(analysis::display::display_table(&displays, drop_limit));
+    for f in &flagged {
+        eprintln!("warning: {f} dropped more than {drop_limit} % of its frames");
+    }
+}
+
 /// Runs `study report`.
 ///
 /// # Errors
@@ -241,7 +324,7 @@ pub fn run(args: &ReportArgs) -> Result<()> {
         &study.manifest,
         Some((study.scale.min, study.scale.max)),
     )?;
-    let options = report_options(args, &study);
+    let options = report_options(args, &study)?;
     if options.fit.shape == Shape::Weibull {
         check_weibull_levels(&sessions)?;
     }
@@ -255,27 +338,13 @@ pub fn run(args: &ReportArgs) -> Result<()> {
         sessions.len()
     );
     let mut report = analysis.to_report(&converted.data, &options, &title);
-    if !incomplete.is_empty() {
-        let section = report.section("Incomplete sessions");
-        section.text(format!(
-            "Reported with --allow-incomplete: {} of the sessions have trials missing at the end; \
-             their logged trials are in every table.",
-            incomplete.len()
-        ));
-        for p in &incomplete {
-            section.text(p.to_string());
-        }
-    }
+    incomplete_section(&mut report, &incomplete);
+    display_section(&mut report, &sessions, args.drop_limit);
     let names = report.section("Subjects and stimuli");
     names.text(format!(
-        "Subject ids in the tables: {}. Condition ids: {}.",
-        converted
-            .subjects
-            .iter()
-            .enumerate()
-            .map(|(i, s)| format!("{i} = {s}"))
-            .collect::<Vec<_>>()
-            .join(", "),
+        "Subjects ({}): {}. Condition ids: {}.",
+        converted.data.subjects.len(),
+        converted.data.subjects.join(", "),
         converted
             .stimuli
             .iter()
@@ -287,14 +356,18 @@ pub fn run(args: &ReportArgs) -> Result<()> {
     let written = report.write(&args.output, !args.no_png, mode)?;
     files::write(
         &args.output.join("ratings.csv"),
-        export::tidy_csv(&converted.data.ratings, &converted.data.conditions),
+        export::tidy_csv(
+            &converted.data.subjects,
+            &converted.data.ratings,
+            &converted.data.conditions,
+        ),
         mode,
     )?;
     files::write(
         &args.output.join("sureal_dataset.py"),
         export::SurealDataset {
             name: &run.study,
-            subjects: &converted.subjects,
+            subjects: &converted.data.subjects,
             ratings: &converted.data.ratings,
             dscqs: &converted.data.dscqs,
             conditions: &converted.data.conditions,

@@ -137,6 +137,10 @@ fn edit_rows(trials: &Path, edit: impl FnOnce(&mut Vec<String>)) {
     std::fs::write(trials, lines.join("\n") + "\n").unwrap();
 }
 
+/// A damaged copy: its name, the edit that damages it, what the error must say, and the line
+/// of `S001_s1/trials.csv` it must name.
+type Damage = (&'static str, fn(&Path), &'static str, Option<usize>);
+
 /// Issue 18: the logs are checked before any statistic. A duplicated, a truncated, a reordered
 /// and a foreign-row trials file, a torn row after the end, a session in the wrong folder and
 /// a session still running each give one error naming the file (and the row); trials
@@ -188,9 +192,7 @@ fn report_refuses_logs_it_cannot_trust_naming_file_and_row() {
     };
     let all_ratings = ratings("clean");
     let s1 = "S001_s1";
-    // (case, edit of a copy, what the error must say, line it must name)
-    type Edit = fn(&Path);
-    let cases: [(&str, Edit, &str, Option<usize>); 7] = [
+    let cases: [Damage; 7] = [
         (
             "duplicated",
             |res| {
@@ -287,7 +289,7 @@ fn report_refuses_logs_it_cannot_trust_naming_file_and_row() {
     let res = dir.join("truncated");
     copy_results(&clean, &res);
     edit_rows(&res.join(format!("{s1}/trials.csv")), |rows| {
-        rows.truncate(rows.len() - 4)
+        rows.truncate(rows.len() - 4);
     });
     let out = report(&res, "truncated", &[]);
     let err = String::from_utf8_lossy(&out.stderr).into_owned();
@@ -317,5 +319,221 @@ fn report_refuses_logs_it_cannot_trust_naming_file_and_row() {
         &["--allow-incomplete"],
     );
     assert!(!out.status.success());
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Splits one CSV line (RFC 4180 quoting, no line breaks inside fields).
+fn csv_fields(line: &str) -> Vec<String> {
+    let (mut fields, mut field, mut quoted) = (Vec::new(), String::new(), false);
+    let mut chars = line.chars().peekable();
+    while let Some(c) = chars.next() {
+        match (c, quoted) {
+            ('"', true) if chars.peek() == Some(&'"') => {
+                field.push('"');
+                chars.next();
+            }
+            ('"', _) => quoted = !quoted,
+            (',', false) => fields.push(std::mem::take(&mut field)),
+            _ => field.push(c),
+        }
+    }
+    fields.push(field);
+    fields
+}
+
+/// Reads a report table (`tables/NAME.csv`): header and rows.
+fn table(dir: &Path, name: &str) -> (Vec<String>, Vec<Vec<String>>) {
+    let text = std::fs::read_to_string(dir.join(format!("tables/{name}.csv"))).unwrap();
+    let mut lines = text.lines().map(csv_fields);
+    let header = lines.next().unwrap();
+    (header, lines.collect())
+}
+
+fn col(header: &[String], name: &str) -> usize {
+    header
+        .iter()
+        .position(|h| h == name)
+        .unwrap_or_else(|| panic!("no column {name:?} in {header:?}"))
+}
+
+/// Issue 18: one treatment of repeats everywhere (a condition's mean in `mos.csv` is the one
+/// `ttests.csv` tests, n = subjects), tests that say their kind and tails, subjects by their
+/// ids, DSCQS judged on differences with limits in the scale's units, a constant rater left
+/// out of the z-scores with a note instead of stopping the report, and the display section.
+#[test]
+#[expect(
+    clippy::too_many_lines,
+    reason = "one study per protocol, each table read"
+)]
+fn report_tables_agree_and_say_what_they_are() {
+    let examples = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples");
+    let dir = std::env::temp_dir().join(format!("study-report-agree-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let simulate = |name: &str, subjects: &str| {
+        let res = dir.join(format!("{name}-res"));
+        let out = study(&[
+            "simulate",
+            &examples.join(format!("{name}.toml")).display().to_string(),
+            "--subjects",
+            subjects,
+            "--seed",
+            "7",
+            "-o",
+            &res.display().to_string(),
+        ]);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        res
+    };
+    let report = |res: &Path, name: &str, extra: &[&str]| {
+        let rep = dir.join(name);
+        let mut args = vec![
+            "report".to_owned(),
+            res.display().to_string(),
+            "-o".to_owned(),
+            rep.display().to_string(),
+            "--no-png".to_owned(),
+        ];
+        args.extend(extra.iter().map(|s| (*s).to_owned()));
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let out = study(&args);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        rep
+    };
+    // MOS with 8 hidden repeats: the MOS table's mean of every tested condition is the mean
+    // its t-test row prints, and n is the number of subjects.
+    let mos_res = simulate("mos", "6");
+    let rep = report(&mos_res, "mos-report", &[]);
+    let (h, rows) = table(&rep, "mos");
+    let (codec, clip, cr, n, mean) = (
+        col(&h, "Codec"),
+        col(&h, "Clip"),
+        col(&h, "CR"),
+        col(&h, "n"),
+        col(&h, "Mean"),
+    );
+    let mos: std::collections::HashMap<(String, String, String), String> = rows
+        .iter()
+        .map(|r| {
+            (
+                (r[codec].clone(), r[clip].clone(), r[cr].clone()),
+                r[mean].clone(),
+            )
+        })
+        .collect();
+    assert!(rows.iter().all(|r| r[n] == "6"), "n = subjects: {rows:?}");
+    let (h, rows) = table(&rep, "ttests");
+    assert!(!rows.is_empty());
+    let (tclip, tcr, test) = (col(&h, "Clip"), col(&h, "CR"), col(&h, "Test"));
+    for r in &rows {
+        for (m, v) in [("Method A", "Mean A"), ("Method B", "Mean B")] {
+            let key = (r[col(&h, m)].clone(), r[tclip].clone(), r[tcr].clone());
+            assert_eq!(mos[&key], r[col(&h, v)], "{key:?}");
+        }
+        assert_eq!(r[test], "paired t, two-tailed");
+        let p = &r[col(&h, "p")];
+        assert!(p == "< 0.001" || p.parse::<f64>().is_ok(), "{p}");
+    }
+    let md = std::fs::read_to_string(rep.join("report.md")).unwrap();
+    assert!(md.contains("two-tailed"), "the caption says the tails");
+    assert!(md.contains("n = subjects"));
+    let (h, rows) = table(&rep, "screening");
+    assert!(
+        rows.iter().all(|r| r[col(&h, "Subject")].starts_with('S')),
+        "{rows:?}"
+    );
+    let (h, rows) = table(&rep, "display");
+    assert_eq!(rows.len(), 6);
+    assert!(rows.iter().all(|r| r[col(&h, "Session")].starts_with('S')));
+    // Pooled on request, and labelled so: n = ratings where a repeat fell.
+    let pooled = report(&mos_res, "mos-pooled", &["--pool-repeats"]);
+    let (h, rows) = table(&pooled, "mos");
+    assert!(
+        rows.iter()
+            .any(|r| r[col(&h, "n")].parse::<u32>().unwrap() > 6)
+    );
+    assert!(
+        std::fs::read_to_string(pooled.join("report.md"))
+            .unwrap()
+            .contains("Repeats pooled")
+    );
+    // A constant rater: every score of S002 set to 3. --zscore leaves S002 out with a note.
+    let trials = mos_res.join("S002_s1/trials.csv");
+    let text = std::fs::read_to_string(&trials).unwrap();
+    let mut lines: Vec<String> = text.lines().map(str::to_owned).collect();
+    let header: Vec<&str> = lines[0].split(',').collect();
+    let (response, score) = (
+        header.iter().position(|c| *c == "response").unwrap(),
+        header.iter().position(|c| *c == "score").unwrap(),
+    );
+    for line in &mut lines[1..] {
+        let mut f: Vec<String> = line.split(',').map(str::to_owned).collect();
+        f[response] = "3".into();
+        f[score] = "3".into();
+        *line = f.join(",");
+    }
+    std::fs::write(&trials, lines.join("\n") + "\n").unwrap();
+    let z = report(&mos_res, "mos-z", &["--zscore"]);
+    let md = std::fs::read_to_string(z.join("report.md")).unwrap();
+    assert!(
+        md.contains("Left out of the z-scores") && md.contains("S002"),
+        "{md}"
+    );
+    // DSCQS on 0-100: limits default to the scale (87.5 and 5), printed with it; the t-tests
+    // and the screening are on reference − test differences.
+    let dscqs_res = simulate("dscqs", "8");
+    let rep = report(&dscqs_res, "dscqs-report", &[]);
+    let md = std::fs::read_to_string(rep.join("report.md")).unwrap();
+    assert!(md.contains("DMOS 5 (scale 0–100)"), "{md}");
+    assert!(md.contains("MOS 87.5 (scale 0–100)"), "{md}");
+    assert!(md.contains("on the reference − test differences"), "{md}");
+    let (h, rows) = table(&rep, "ttests");
+    let (h_dmos, dmos_rows) = table(&rep, "dmos_ci");
+    let dmos: std::collections::HashMap<(String, String, String), String> = dmos_rows
+        .iter()
+        .map(|r| {
+            (
+                (
+                    r[col(&h_dmos, "Codec")].clone(),
+                    r[col(&h_dmos, "Clip")].clone(),
+                    r[col(&h_dmos, "CR")].clone(),
+                ),
+                r[col(&h_dmos, "Mean")].clone(),
+            )
+        })
+        .collect();
+    for r in &rows {
+        let key = (
+            r[col(&h, "Method A")].clone(),
+            r[col(&h, "Clip")].clone(),
+            r[col(&h, "CR")].clone(),
+        );
+        assert_eq!(
+            dmos[&key],
+            r[col(&h, "Mean A")],
+            "DSCQS tests the DMOS: {key:?}"
+        );
+    }
+    let out = study(&[
+        "report",
+        &dscqs_res.display().to_string(),
+        "-o",
+        &dir.join("dscqs-bad").display().to_string(),
+        "--mos-limit",
+        "150",
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("--mos-limit 150") && err.contains("0-100"),
+        "{err}"
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }
