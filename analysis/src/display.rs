@@ -31,44 +31,36 @@ pub struct SessionDisplay {
     pub flagged: bool,
 }
 
-/// The display figures of every session, flagging those that dropped more than
-/// `drop_limit_percent` of their frames.
+/// One session's display figures, flagged when it dropped more than `drop_limit_percent` of
+/// its frames.
 #[must_use]
-pub fn session_displays(
-    sessions: &[SessionResults],
-    drop_limit_percent: f64,
-) -> Vec<SessionDisplay> {
-    sessions
-        .iter()
-        .map(|s| {
-            let m = &s.manifest;
-            let (mut timed, mut shown, mut dropped, mut sd_sum) = (0usize, 0u64, 0u64, 0.0);
-            for r in &s.trials.records {
-                let Some(t) = r.timing else { continue };
-                timed += 1;
-                shown += u64::from(t.frames_shown);
-                dropped += u64::from(r.response.dropped_frames);
-                sd_sum += t.interval_sd_ms;
-            }
-            let total = shown + dropped;
-            let dropped_percent = (total > 0).then(|| 100.0 * dropped as f64 / total as f64);
-            SessionDisplay {
-                session: format!("{} session {}", m.subject, m.session),
-                description: m.display.as_ref().map(|d| d.description.clone()),
-                refresh_hz: m
-                    .display
-                    .as_ref()
-                    .map(|d| d.refresh_hz)
-                    .filter(|hz| *hz > 0.0),
-                timed_trials: timed,
-                frames_shown: shown,
-                dropped,
-                mean_interval_sd_ms: (timed > 0).then(|| sd_sum / timed as f64),
-                dropped_percent,
-                flagged: dropped_percent.is_some_and(|p| p > drop_limit_percent),
-            }
-        })
-        .collect()
+pub fn session_display(s: &SessionResults, drop_limit_percent: f64) -> SessionDisplay {
+    let m = &s.manifest;
+    let (mut timed, mut shown, mut dropped, mut sd_sum) = (0usize, 0u64, 0u64, 0.0);
+    for r in &s.trials.records {
+        let Some(t) = r.timing else { continue };
+        timed += 1;
+        shown += u64::from(t.frames_shown);
+        dropped += u64::from(r.response.dropped_frames);
+        sd_sum += t.interval_sd_ms;
+    }
+    let total = shown + dropped;
+    let dropped_percent = (total > 0).then(|| 100.0 * dropped as f64 / total as f64);
+    SessionDisplay {
+        session: format!("{} session {}", m.subject, m.session),
+        description: m.display.as_ref().map(|d| d.description.clone()),
+        refresh_hz: m
+            .display
+            .as_ref()
+            .map(|d| d.refresh_hz)
+            .filter(|hz| *hz > 0.0),
+        timed_trials: timed,
+        frames_shown: shown,
+        dropped,
+        mean_interval_sd_ms: (timed > 0).then(|| sd_sum / timed as f64),
+        dropped_percent,
+        flagged: dropped_percent.is_some_and(|p| p > drop_limit_percent),
+    }
 }
 
 /// The display table: one row per session.

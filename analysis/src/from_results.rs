@@ -111,19 +111,46 @@ pub fn convert(
     manifest: &StimulusManifest,
     scale: Option<(f64, f64)>,
 ) -> Result<ConvertedResults, AnalysisError> {
-    let Some(first) = sessions.first() else {
-        return Err(AnalysisError::TooFew {
-            what: "sessions in the results directory",
-            needed: 1,
-            got: 0,
-        });
-    };
-    let protocol = first.manifest.protocol;
-    let mut subjects = Interner::new();
-    let mut stimuli = Interner::new();
-    let mut data = StudyData::default();
-    let mut tracks: BTreeMap<(u32, u32, u32), StaircaseTrack> = BTreeMap::new();
+    let mut converter = Converter::new(manifest, scale);
     for session in sessions {
+        converter.add(session)?;
+    }
+    converter.finish()
+}
+
+/// [`convert`] one session at a time: a reader that reads, adds and drops each session holds
+/// the plain analysis inputs of all of them, but the trial records of one only.
+pub struct Converter<'a> {
+    manifest: &'a StimulusManifest,
+    scale: Option<(f64, f64)>,
+    protocol: Option<Protocol>,
+    subjects: Interner,
+    stimuli: Interner,
+    data: StudyData,
+    tracks: BTreeMap<(u32, u32, u32), StaircaseTrack>,
+}
+
+impl<'a> Converter<'a> {
+    /// A converter for sessions rated against `manifest` on `scale`.
+    #[must_use]
+    pub fn new(manifest: &'a StimulusManifest, scale: Option<(f64, f64)>) -> Self {
+        Self {
+            manifest,
+            scale,
+            protocol: None,
+            subjects: Interner::new(),
+            stimuli: Interner::new(),
+            data: StudyData::default(),
+            tracks: BTreeMap::new(),
+        }
+    }
+
+    /// Adds one session's records.
+    ///
+    /// # Errors
+    /// As [`convert`], for this session.
+    pub fn add(&mut self, session: &SessionResults) -> Result<(), AnalysisError> {
+        let protocol = *self.protocol.get_or_insert(session.manifest.protocol);
         if session.manifest.protocol != protocol {
             return Err(AnalysisError::MixedProtocols {
                 path: session.dir.join(SESSION_FILE),
@@ -132,7 +159,7 @@ pub fn convert(
             });
         }
         let path: PathBuf = session.dir.join(TRIALS_FILE);
-        let subject = subjects.id(&session.manifest.subject);
+        let subject = self.subjects.id(&session.manifest.subject);
         for (index, record) in session.trials.records.iter().enumerate() {
             if record.protocol != protocol {
                 return Err(bad(
@@ -150,55 +177,81 @@ pub fn convert(
                 &path,
                 index,
                 subject,
-                &mut stimuli,
-                &mut data,
-                &mut tracks,
-                scale,
+                &mut self.stimuli,
+                &mut self.data,
+                &mut self.tracks,
+                self.scale,
             )?;
-            if let Some(e) = encoded_level(record, manifest) {
-                data.encoded_levels.push(e);
+            if let Some(e) = encoded_level(record, self.manifest) {
+                self.data.encoded_levels.push(e);
             }
         }
+        Ok(())
     }
-    for (id, name) in stimuli.names.iter().enumerate() {
-        let Some(s) = manifest.get(name) else {
-            return Err(AnalysisError::BadRecord {
-                path: PathBuf::from("stimuli.json"),
-                line: 0,
-                column: "stimulus",
-                message: format!(
-                    "stimulus {name:?} rated in the results is not in the stimulus manifest"
-                ),
+
+    /// The analysis inputs of every session added.
+    ///
+    /// # Errors
+    /// No session added ([`AnalysisError::TooFew`]), or a rated stimulus missing from the
+    /// manifest.
+    pub fn finish(self) -> Result<ConvertedResults, AnalysisError> {
+        let Self {
+            manifest,
+            protocol,
+            subjects,
+            stimuli,
+            mut data,
+            tracks,
+            ..
+        } = self;
+        let Some(protocol) = protocol else {
+            return Err(AnalysisError::TooFew {
+                what: "sessions in the results directory",
+                needed: 1,
+                got: 0,
             });
         };
-        let reference = s.codec == REFERENCE_CODEC;
-        data.conditions.push(ConditionInfo {
-            id: id as u32,
-            codec: s.codec.clone(),
-            params: s.variant.clone(),
-            clip: s.clip.clone(),
-            // The nominal (target) ratio groups codecs made for the same rate, as the seeds'
-            // tables do ("20:1"); the achieved ratio stands in when there was no target.
-            compression_ratio: (!reference).then_some(s.target_cr.unwrap_or(s.achieved_cr)),
-        });
-    }
-    if protocol == Protocol::Mos {
-        for c in &data.conditions {
-            if c.compression_ratio.is_some()
-                && let Some(r) = manifest.reference_of(&c.clip)
-                && let Some(&rid) = stimuli.ids.get(&r.id)
-            {
-                data.reference_of.insert(c.id, rid);
+        for (id, name) in stimuli.names.iter().enumerate() {
+            let Some(s) = manifest.get(name) else {
+                return Err(AnalysisError::BadRecord {
+                    path: PathBuf::from("stimuli.json"),
+                    line: 0,
+                    column: "stimulus",
+                    message: format!(
+                        "stimulus {name:?} rated in the results is not in the stimulus manifest"
+                    ),
+                });
+            };
+            let reference = s.codec == REFERENCE_CODEC;
+            data.conditions.push(ConditionInfo {
+                id: id as u32,
+                codec: s.codec.clone(),
+                params: s.variant.clone(),
+                clip: s.clip.clone(),
+                // The nominal (target) ratio groups codecs made for the same rate, as the
+                // seeds' tables do ("20:1"); the achieved ratio stands in when there was no
+                // target.
+                compression_ratio: (!reference).then_some(s.target_cr.unwrap_or(s.achieved_cr)),
+            });
+        }
+        if protocol == Protocol::Mos {
+            for c in &data.conditions {
+                if c.compression_ratio.is_some()
+                    && let Some(r) = manifest.reference_of(&c.clip)
+                    && let Some(&rid) = stimuli.ids.get(&r.id)
+                {
+                    data.reference_of.insert(c.id, rid);
+                }
             }
         }
+        data.staircases = tracks.into_values().collect();
+        data.subjects = subjects.names;
+        Ok(ConvertedResults {
+            data,
+            protocol,
+            stimuli: stimuli.names,
+        })
     }
-    data.staircases = tracks.into_values().collect();
-    data.subjects = subjects.names;
-    Ok(ConvertedResults {
-        data,
-        protocol,
-        stimuli: stimuli.names,
-    })
 }
 
 #[expect(

@@ -58,25 +58,37 @@ impl fmt::Display for Problem {
     }
 }
 
-/// Checks every session of the results directory `results` (as
-/// [`results::read_results_dir`] read it) against `study`, the study file it ran (the copy
-/// archived in `results`, or the original); returns the problems, sessions in order, at most
-/// one replay problem per session (the rows after the first bad one follow from it).
-#[must_use]
-pub fn check(
-    results: &Path,
-    study: &StudyFile,
-    run: &RunManifest,
-    sessions: &[SessionResults],
-) -> Vec<Problem> {
-    // The archived copy points at absolute stimulus paths, so neither its own hash nor its
-    // manifest's is the original's: sessions are held to the run's hashes then.
-    let archived = same_file(&results.join(&run.study_file), &study.path);
-    let mut problems = Vec::new();
-    let mut seen: HashMap<(&str, u32), &Path> = HashMap::new();
-    for s in sessions {
+/// Checks the sessions of a results directory one at a time (as [`results::read_session`]
+/// reads them) against the study file they ran: at most one replay problem per session (the
+/// rows after the first bad one follow from it), and a session recorded twice.
+pub struct Checker<'a> {
+    study: &'a StudyFile,
+    run: &'a RunManifest,
+    archived: bool,
+    seen: HashMap<(String, u32), PathBuf>,
+}
+
+impl<'a> Checker<'a> {
+    /// A checker of the sessions of `results` against `study` and the run manifest `run`.
+    #[must_use]
+    pub fn new(results: &Path, study: &'a StudyFile, run: &'a RunManifest) -> Self {
+        Self {
+            study,
+            run,
+            // The archived copy points at absolute stimulus paths, so neither its own hash
+            // nor its manifest's is the original's: sessions are held to the run's hashes
+            // then.
+            archived: same_file(&results.join(&run.study_file), &study.path),
+            seen: HashMap::new(),
+        }
+    }
+
+    /// The problems of one session (and of it against the sessions checked before).
+    pub fn check(&mut self, s: &SessionResults) -> Vec<Problem> {
         let m = &s.manifest;
-        if let Some(first) = seen.insert((m.subject.as_str(), m.session), &s.dir) {
+        let mut problems = Vec::new();
+        let key = (m.subject.clone(), m.session);
+        if let Some(first) = self.seen.get(&key) {
             problems.push(Problem {
                 path: s.dir.join(SESSION_FILE),
                 line: None,
@@ -88,11 +100,12 @@ pub fn check(
                     first.display()
                 ),
             });
-            continue;
+            return problems;
         }
-        check_session(study, archived, run, s, &mut problems);
+        self.seen.insert(key, s.dir.clone());
+        check_session(self.study, self.archived, self.run, s, &mut problems);
+        problems
     }
-    problems
 }
 
 fn same_file(a: &Path, b: &Path) -> bool {

@@ -12,7 +12,10 @@ use std::path::PathBuf;
 pub mod store;
 pub mod trials;
 
-pub use store::{RunManifest, SessionLog, SessionManifest, SessionResults, read_results_dir};
+pub use store::{
+    RunManifest, SessionLog, SessionManifest, SessionResults, read_results_dir, read_session,
+    session_dirs,
+};
 pub use trials::{TornRow, TrialsFile, read_trials};
 
 /// Everything that can go wrong reading or writing results.

@@ -552,6 +552,22 @@ pub struct SessionResults {
 /// # Errors
 /// The first malformed file, named with line and column.
 pub fn read_results_dir(dir: &Path) -> Result<(RunManifest, Vec<SessionResults>), ResultsError> {
+    let (run, dirs) = session_dirs(dir)?;
+    let sessions = dirs
+        .iter()
+        .map(|d| read_session(d))
+        .collect::<Result<_, _>>()?;
+    Ok((run, sessions))
+}
+
+/// A results directory's run manifest and its session folders (sub-directories holding
+/// `session.json`), sorted by name, for a reader that takes one session at a time
+/// ([`read_session`]) and so holds one session's rows in memory, not every session's.
+///
+/// # Errors
+/// `run.json` unreadable or malformed; a sub-directory with `trials.csv` but no
+/// `session.json` ([`ResultsError::MissingManifest`]); more than [`MAX_SESSIONS`] sessions.
+pub fn session_dirs(dir: &Path) -> Result<(RunManifest, Vec<PathBuf>), ResultsError> {
     let run: RunManifest = read_manifest(&dir.join(RUN_FILE))?;
     let mut dirs = Vec::new();
     for entry in fs::read_dir(dir).map_err(io(dir, "list"))? {
@@ -574,17 +590,21 @@ pub fn read_results_dir(dir: &Path) -> Result<(RunManifest, Vec<SessionResults>)
         }
     }
     dirs.sort();
-    let mut out = Vec::with_capacity(dirs.len());
-    for d in dirs {
-        let manifest: SessionManifest = read_manifest(&d.join(SESSION_FILE))?;
-        let trials = read_trials(&d.join(TRIALS_FILE))?;
-        out.push(SessionResults {
-            dir: d,
-            manifest,
-            trials,
-        });
-    }
-    Ok((run, out))
+    Ok((run, dirs))
+}
+
+/// Reads one session folder: its manifest and its trials.
+///
+/// # Errors
+/// The first malformed file, named with line and column.
+pub fn read_session(dir: &Path) -> Result<SessionResults, ResultsError> {
+    let manifest: SessionManifest = read_manifest(&dir.join(SESSION_FILE))?;
+    let trials = read_trials(&dir.join(TRIALS_FILE))?;
+    Ok(SessionResults {
+        dir: dir.to_path_buf(),
+        manifest,
+        trials,
+    })
 }
 
 /// Parses `session.json` text (for tests and tools that hold the bytes).

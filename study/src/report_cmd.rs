@@ -193,33 +193,68 @@ fn report_options(args: &ReportArgs, study: &StudyDefinition) -> Result<ReportOp
 
 /// The Weibull is fitted on the logarithm of the level: a level at or below 0 is refused here,
 /// naming its file and line, rather than by the fit, which knows neither.
-fn check_weibull_levels(sessions: &[results::SessionResults]) -> Result<()> {
-    for s in sessions {
-        for (i, r) in s.trials.records.iter().enumerate() {
-            if let Some(level) = r.trial.level.filter(|l| *l <= 0.0) {
-                bail!(
-                    "{}: line {}: level {level}: the Weibull fit needs levels above 0 (use \
-                     --shape logistic for levels that can be 0 or negative)",
-                    s.dir.join(results::store::TRIALS_FILE).display(),
-                    i + 2
-                );
-            }
+fn check_weibull_levels(s: &results::SessionResults) -> Result<()> {
+    for (i, r) in s.trials.records.iter().enumerate() {
+        if let Some(level) = r.trial.level.filter(|l| *l <= 0.0) {
+            bail!(
+                "{}: line {}: level {level}: the Weibull fit needs levels above 0 (use \
+                 --shape logistic for levels that can be 0 or negative)",
+                s.dir.join(results::store::TRIALS_FILE).display(),
+                i + 2
+            );
         }
     }
     Ok(())
 }
 
-/// Checks the logs before any statistic ([`lab::integrity`]): damage is refused, every
-/// problem named once; sessions with trials missing at the end are refused unless
-/// `--allow-incomplete`, and then returned (and warned about) for the report to list.
-fn checked_logs(
+/// What reading a results directory gave: the analysis inputs, the sessions with trials
+/// missing (reported with `--allow-incomplete`) and every session's display record.
+struct Logs {
+    converted: from_results::ConvertedResults,
+    incomplete: Vec<lab::integrity::Problem>,
+    displays: Vec<analysis::display::SessionDisplay>,
+}
+
+/// Reads the sessions one at a time (one session's rows in memory, not every session's) and
+/// checks each before any statistic ([`lab::integrity`]): damage is refused, every problem
+/// named once; sessions with trials missing at the end are refused unless
+/// `--allow-incomplete`, and then warned about and returned for the report to list.
+fn read_logs(
     args: &ReportArgs,
     study: &lab::StudyFile,
     run: &results::RunManifest,
-    sessions: &[results::SessionResults],
-) -> Result<Vec<lab::integrity::Problem>> {
+    dirs: &[PathBuf],
+    weibull: bool,
+) -> Result<Logs> {
     use lab::integrity::Kind;
-    let problems = lab::integrity::check(&args.results, study, run, sessions);
+    let definition = &study.definition;
+    let mut checker = lab::integrity::Checker::new(&args.results, study, run);
+    let mut converter = from_results::Converter::new(
+        &definition.manifest,
+        Some((definition.scale.min, definition.scale.max)),
+    );
+    let (mut problems, mut displays) = (Vec::new(), Vec::with_capacity(dirs.len()));
+    // The first error converting a sound session; the log check's verdict comes first.
+    let mut failed: Option<anyhow::Error> = None;
+    for dir in dirs {
+        let session = results::read_session(dir)?;
+        let found = checker.check(&session);
+        let damaged = found.iter().any(|p| p.kind == Kind::Damage);
+        problems.extend(found);
+        displays.push(analysis::display::session_display(
+            &session,
+            args.drop_limit,
+        ));
+        if failed.is_none() && !damaged {
+            let added = if weibull {
+                check_weibull_levels(&session)
+            } else {
+                Ok(())
+            }
+            .and_then(|()| converter.add(&session).map_err(anyhow::Error::from));
+            failed = added.err();
+        }
+    }
     let refused: Vec<_> = problems
         .iter()
         .filter(|p| p.kind == Kind::Damage || !args.allow_incomplete)
@@ -246,10 +281,17 @@ fn checked_logs(
             }
         );
     }
+    if let Some(e) = failed {
+        return Err(e);
+    }
     for p in &problems {
         eprintln!("warning: {p}");
     }
-    Ok(problems)
+    Ok(Logs {
+        converted: converter.finish()?,
+        incomplete: problems,
+        displays,
+    })
 }
 
 /// The "Incomplete sessions" section of a report made with `--allow-incomplete`.
@@ -273,10 +315,9 @@ fn incomplete_section(
 /// `drop_limit` percent dropped frames flagged (and warned about).
 fn display_section(
     report: &mut analysis::report::Report,
-    sessions: &[results::SessionResults],
+    displays: &[analysis::display::SessionDisplay],
     drop_limit: f64,
 ) {
-    let displays = analysis::display::session_displays(sessions, drop_limit);
     let flagged: Vec<&str> = displays
         .iter()
         .filter(|d| d.flagged)
@@ -294,7 +335,7 @@ fn display_section(
             flagged.join(", ")
         )
     });
-    display.table(analysis::display::display_table(&displays, drop_limit));
+    display.table(analysis::display::display_table(displays, drop_limit));
     for f in &flagged {
         eprintln!("warning: {f} dropped more than {drop_limit} % of its frames");
     }
@@ -306,7 +347,7 @@ fn display_section(
 /// Unreadable or malformed results (named by file, line and column), a study file that does
 /// not load, or an output that cannot be written.
 pub fn run(args: &ReportArgs) -> Result<()> {
-    let (run, sessions) = results::read_results_dir(&args.results)?;
+    let (run, dirs) = results::session_dirs(&args.results)?;
     let study_path = args
         .study
         .clone()
@@ -317,17 +358,19 @@ pub fn run(args: &ReportArgs) -> Result<()> {
             study_path.display()
         )
     })?;
-    let incomplete = checked_logs(args, &study_file, &run, &sessions)?;
-    let study = study_file.definition;
-    let converted = from_results::convert(
-        &sessions,
-        &study.manifest,
-        Some((study.scale.min, study.scale.max)),
+    let options = report_options(args, &study_file.definition)?;
+    let Logs {
+        converted,
+        incomplete,
+        displays,
+    } = read_logs(
+        args,
+        &study_file,
+        &run,
+        &dirs,
+        options.fit.shape == Shape::Weibull,
     )?;
-    let options = report_options(args, &study)?;
-    if options.fit.shape == Shape::Weibull {
-        check_weibull_levels(&sessions)?;
-    }
+    let study = study_file.definition;
     let mode = files::Mode::from_force(args.force);
     files::prepare_dir(&args.output, mode)?;
     let analysis = analyze(&converted.data, &options)?;
@@ -335,11 +378,11 @@ pub fn run(args: &ReportArgs) -> Result<()> {
         "Study {} ({} protocol, {} sessions)",
         run.study,
         converted.protocol,
-        sessions.len()
+        dirs.len()
     );
     let mut report = analysis.to_report(&converted.data, &options, &title);
     incomplete_section(&mut report, &incomplete);
-    display_section(&mut report, &sessions, args.drop_limit);
+    display_section(&mut report, &displays, args.drop_limit);
     let names = report.section("Subjects and stimuli");
     names.text(format!(
         "Subjects ({}): {}. Condition ids: {}.",
