@@ -329,15 +329,26 @@ fn png_is_the_print_size_at_300_dpi() {
         let dims = info.pixel_dims.unwrap();
         assert_eq!((dims.xppu, dims.unit), (11811, png::Unit::Meter), "{name}");
         // The SVG is the same figure at 100 units per inch.
+        let start = Instant::now();
         let svg = fig.render_svg().unwrap();
+        let svg_time = start.elapsed();
         let root = &tags(&svg)[0];
         assert_eq!(root.num("width"), 650.0);
         assert_eq!(root.num("height"), (h_in * 100.0).round());
-        eprintln!("{name}: {}x{} px in {elapsed:?}", info.width, info.height);
+        eprintln!(
+            "{name}: {}x{} px in {elapsed:?}, SVG in {svg_time:?}",
+            info.width, info.height
+        );
         if let Ok(dir) = std::env::var("FIGURES_OUT") {
             std::fs::create_dir_all(&dir).unwrap();
             std::fs::write(format!("{dir}/{name}.png"), &png).unwrap();
             std::fs::write(format!("{dir}/{name}.svg"), &svg).unwrap();
+            // The figure's data, for scripts/compare/figures_matplotlib.py.
+            std::fs::write(
+                format!("{dir}/{name}.json"),
+                serde_json::to_string_pretty(&fig).unwrap(),
+            )
+            .unwrap();
         }
     }
 }
