@@ -529,40 +529,10 @@ pub fn bootstrap_threshold(
             value: percent_correct,
             reason: "outside (guess rate, 1 − lapse) of the fit",
         })?;
-    let param = Param {
-        shape: options.shape,
-        gamma: options.guess_rate,
-        lapse: options.lapse,
-    };
-    let start = param.encode(
-        fitted.alpha,
-        fitted.beta,
-        match options.lapse {
-            Lapse::Fixed(l) => l,
-            // Start inside the bounds so the simplex can move in both directions.
-            Lapse::Free { max } => fitted.lapse.clamp(0.05 * max, 0.95 * max),
-        },
-    );
-    let probabilities: Vec<f64> = data
-        .levels
-        .iter()
-        .map(|l| fitted.probability(l.0))
-        .collect();
-    let mut rng = ChaCha8Rng::seed_from_u64(boot.seed);
     let mut thresholds = Vec::with_capacity(boot.replicates);
     let mut failed = 0;
-    let mut sim = data.clone();
-    for _ in 0..boot.replicates {
-        for (level, p) in sim.levels.iter_mut().zip(&probabilities) {
-            level.2 = (0..level.1)
-                .map(|_| u32::from(rng.random::<f64>() < *p))
-                .sum();
-        }
-        let (point, value) = minimise(&sim, options, std::slice::from_ref(&start), 1e-9);
-        match finish_fit(&param, &point, value, &sim)
-            .ok()
-            .and_then(|f| f.threshold(percent_correct))
-        {
+    for replicate in replicate_fits(data, options, &fitted, boot) {
+        match replicate.and_then(|f| f.threshold(percent_correct)) {
             Some(t) if t.is_finite() => thresholds.push(t),
             _ => failed += 1,
         }
@@ -586,6 +556,112 @@ pub fn bootstrap_threshold(
         seed: boot.seed,
     };
     Ok((fitted, ci))
+}
+
+/// The parametric bootstrap's refits: `boot.replicates` binomial data sets simulated at the
+/// observed levels and trial counts from `fitted`, each refitted from `fitted`'s parameters
+/// (`None` where a refit failed). The same seed gives the same replicates, so the threshold
+/// interval and the curve band of one seed come from one set of fits.
+fn replicate_fits(
+    data: &GroupedTrials,
+    options: &FitOptions,
+    fitted: &PsychometricFit,
+    boot: &BootstrapOptions,
+) -> Vec<Option<PsychometricFit>> {
+    let param = Param {
+        shape: options.shape,
+        gamma: options.guess_rate,
+        lapse: options.lapse,
+    };
+    let start = param.encode(
+        fitted.alpha,
+        fitted.beta,
+        match options.lapse {
+            Lapse::Fixed(l) => l,
+            // Start inside the bounds so the simplex can move in both directions.
+            Lapse::Free { max } => fitted.lapse.clamp(0.05 * max, 0.95 * max),
+        },
+    );
+    let probabilities: Vec<f64> = data
+        .levels
+        .iter()
+        .map(|l| fitted.probability(l.0))
+        .collect();
+    let mut rng = ChaCha8Rng::seed_from_u64(boot.seed);
+    let mut sim = data.clone();
+    (0..boot.replicates)
+        .map(|_| {
+            for (level, p) in sim.levels.iter_mut().zip(&probabilities) {
+                level.2 = (0..level.1)
+                    .map(|_| u32::from(rng.random::<f64>() < *p))
+                    .sum();
+            }
+            let (point, value) = minimise(&sim, options, std::slice::from_ref(&start), 1e-9);
+            finish_fit(&param, &point, value, &sim).ok()
+        })
+        .collect()
+}
+
+/// A pointwise confidence band of the fitted psychometric function.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct CurveBand {
+    /// Confidence level of the band.
+    pub confidence: Confidence,
+    /// (level, lower ψ, upper ψ), in increasing level.
+    pub points: Vec<(f64, f64, f64)>,
+}
+
+/// Pointwise parametric-bootstrap band of ψ at each of `levels`: the percentiles (as
+/// [`bootstrap_threshold`]'s) of ψ(x) over the replicate fits. With the same `boot` it refits
+/// the very replicates that [`bootstrap_threshold`] does, so the band and the threshold
+/// interval agree.
+///
+/// # Errors
+/// As [`bootstrap_threshold`].
+pub fn bootstrap_band(
+    data: &GroupedTrials,
+    options: &FitOptions,
+    boot: &BootstrapOptions,
+    levels: &[f64],
+) -> Result<CurveBand, AnalysisError> {
+    if boot.replicates < 2 || boot.replicates > 1_000_000 {
+        return Err(AnalysisError::InvalidParameter {
+            name: "replicates",
+            value: boot.replicates as f64,
+            reason: "must lie in [2, 1e6]",
+        });
+    }
+    let fitted = fit_grouped(data, options)?;
+    let fits: Vec<PsychometricFit> = replicate_fits(data, options, &fitted, boot)
+        .into_iter()
+        .flatten()
+        .collect();
+    if fits.len() < 2 {
+        return Err(AnalysisError::TooFew {
+            what: "bootstrap replicates with a fit",
+            needed: 2,
+            got: fits.len(),
+        });
+    }
+    let tail = boot.confidence.alpha() / 2.0;
+    let mut column = Vec::with_capacity(fits.len());
+    let points = levels
+        .iter()
+        .map(|&x| {
+            column.clear();
+            column.extend(fits.iter().map(|f| f.probability(x)));
+            column.sort_by(f64::total_cmp);
+            (
+                x,
+                percentile(&column, tail),
+                percentile(&column, 1.0 - tail),
+            )
+        })
+        .collect();
+    Ok(CurveBand {
+        confidence: boot.confidence,
+        points,
+    })
 }
 
 /// numpy.percentile with linear interpolation on sorted data, q in [0, 1].

@@ -15,7 +15,7 @@ use crate::panel::Panel;
 use crate::plots::{Figure, RateSeries};
 use crate::psychometric::{
     BootstrapCi, BootstrapOptions, FitOptions, GroupedTrials, PsychometricFit, TwoAfcTrial,
-    bootstrap_threshold,
+    bootstrap_band, bootstrap_threshold,
 };
 use crate::report::Report;
 use crate::screening::{
@@ -460,11 +460,14 @@ fn holm_adjust(rows: &mut [ComparisonRow]) -> Result<(), AnalysisError> {
     Ok(())
 }
 
+/// One curve per method and clip: the figure draws a panel per clip, so a curve is labelled
+/// by its method alone.
 fn rate_series(findings: &[RateFinding], method: CiMethod) -> Vec<RateSeries> {
     findings
         .iter()
         .map(|f| RateSeries {
-            label: format!("{} / {}", f.codec, f.clip),
+            label: f.codec.clone(),
+            clip: f.clip.clone(),
             points: f
                 .points
                 .iter()
@@ -580,9 +583,10 @@ impl StudyAnalysis {
                 "mos_vs_cr",
                 Figure::RateCurves {
                     title: "MOS vs compression ratio".to_owned(),
-                    y_label: "MOS".to_owned(),
+                    y_label: format!("MOS (mean ± {conf} CI)"),
                     series: rate_series(&self.mos_findings, options.ci_method),
                     limit: Some(options.mos_limit),
+                    y_range: options.scale,
                 },
             );
             s.figure(
@@ -590,6 +594,7 @@ impl StudyAnalysis {
                 Figure::ScoreDistributions {
                     title: "Scores per subject".to_owned(),
                     per_subject: scores_per_subject(data),
+                    y_range: options.scale,
                 },
             );
         }
@@ -644,13 +649,20 @@ impl StudyAnalysis {
                 "dmos_vs_cr",
                 Figure::RateCurves {
                     title: "DMOS vs compression ratio".to_owned(),
-                    y_label: "DMOS".to_owned(),
+                    y_label: format!("DMOS (mean ± {} CI)", percent_label(options.confidence)),
                     series: rate_series(&self.dmos_findings, options.ci_method),
                     limit: Some(options.dmos_limit),
+                    y_range: dmos_range(options.scale, !data.dscqs.is_empty()),
                 },
             );
         }
     }
+}
+
+/// The span of the DMOS axis on `scale`: a DSCQS difference (reference − test) from 0 to the
+/// scale's range; an ACR-HR DMOS (test − reference + 5) on the scale itself.
+fn dmos_range(scale: Option<(f64, f64)>, dscqs: bool) -> Option<(f64, f64)> {
+    scale.map(|(lo, hi)| if dscqs { (0.0, hi - lo) } else { (lo, hi) })
 }
 
 /// How the tables treat hidden repeats, in words.
@@ -807,6 +819,8 @@ fn thresholds_section(
                 title: "Staircase tracks".to_owned(),
                 level_label: options.level_label.clone(),
                 tracks: data.staircases.clone(),
+                last_reversals: t.last_reversals,
+                subjects: data.subjects.clone(),
             },
         );
     }
@@ -837,14 +851,30 @@ fn psychometric_section(
         ci.seed
     ));
     if options.figures {
+        let grouped = GroupedTrials::from_trials(&data.two_afc);
+        // The curve's band refits the bootstrap's replicates (same seed): it agrees with the
+        // threshold interval. Where it cannot be had the figure goes without it.
+        let band = match (grouped.levels.first(), grouped.levels.last()) {
+            (Some(first), Some(last)) => {
+                let (lo, hi) = (first.0, last.0);
+                let pad = 0.1 * (hi - lo);
+                let levels: Vec<f64> = (0..=80)
+                    .map(|i| lo - pad + (hi - lo + 2.0 * pad) * f64::from(i) / 80.0)
+                    .filter(|x| *x > 0.0 || fit.shape != crate::psychometric::Shape::Weibull)
+                    .collect();
+                bootstrap_band(&grouped, &options.fit, &options.bootstrap, &levels).ok()
+            }
+            _ => None,
+        };
         s.figure(
             "psychometric",
             Figure::Psychometric {
                 title: "Psychometric function".to_owned(),
                 level_label: options.level_label.clone(),
-                data: GroupedTrials::from_trials(&data.two_afc),
+                data: grouped,
                 fit: *fit,
                 threshold: Some((options.percent_correct, ci.threshold, ci.lower, ci.upper)),
+                band,
             },
         );
     }

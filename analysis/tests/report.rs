@@ -181,7 +181,13 @@ fn report_writes_every_table_and_figure() {
             .unwrap()
             .info()
             .clone();
-        assert_eq!((info.width, info.height), (800, 520), "{fig}");
+        // 6.5 in wide at 300 dpi; as tall as the figure's panels need.
+        assert_eq!(info.width, 1950, "{fig}");
+        assert!(
+            info.height > 900 && info.height < 2400,
+            "{fig}: {}",
+            info.height
+        );
     }
     let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
     assert_eq!(html.matches("<svg").count(), 6, "every figure inlined");
