@@ -259,7 +259,7 @@ impl StudyUi {
     /// (trial timing is read from it).
     pub fn ui(&mut self, ui: &mut Ui, clock: &mut FrameClock) {
         let now = ui.input(|i| i.time);
-        let chord = ui.input(|i| i.modifiers.ctrl && i.modifiers.shift && i.key_pressed(Key::P));
+        let chord = ui.input(|i| super::window::ctrl_shift_pressed(i, Key::P));
         if chord && self.pause == Pause::None && self.exit.is_none() {
             self.pause = Pause::Paused;
         }
