@@ -444,7 +444,9 @@ impl StudyUi {
         let view = *self
             .views
             .entry(trial.reference.clone())
-            .or_insert_with(|| View::framing(&reference));
+            .or_insert_with(|| {
+                View::framing(&reference).with_shadow(self.study.rendering.ground_shadow)
+            });
         let at = |p: Position| {
             if stimulus_at(&trial, p) == trial.reference {
                 Arc::clone(&reference)
