@@ -174,6 +174,44 @@ impl Stage<'_> {
     }
 }
 
+/// The shadow's pipeline: the mesh vertex stage with `fs_shadow`, blended over the ground,
+/// tested against it, writing no depth (overlapping discs darken each other; the figure is
+/// drawn after them).
+fn shadow_pipeline(
+    stage: &Stage<'_>,
+    color: wgpu::TextureFormat,
+    buffers: &[Option<wgpu::VertexBufferLayout<'_>>],
+) -> wgpu::RenderPipeline {
+    let blended = [Some(wgpu::ColorTargetState {
+        format: color,
+        blend: Some(wgpu::BlendState::ALPHA_BLENDING),
+        write_mask: wgpu::ColorWrites::ALL,
+    })];
+    let shadow_stage = Stage {
+        device: stage.device,
+        layout: stage.layout,
+        shader: stage.shader,
+        depth_stencil: stage
+            .depth_stencil
+            .clone()
+            .map(|d| wgpu::DepthStencilState {
+                depth_write_enabled: Some(false),
+                ..d
+            }),
+        multisample: stage.multisample,
+        color: &blended,
+    };
+    shadow_stage.pipeline(
+        "ground shadow",
+        ("vs_mesh", "fs_shadow"),
+        buffers,
+        wgpu::PrimitiveState {
+            cull_mode: Some(wgpu::Face::Back),
+            ..wgpu::PrimitiveState::default()
+        },
+    )
+}
+
 impl SkeletonRenderer {
     /// Builds the pipelines for passes with `targets`.
     pub fn new(device: &wgpu::Device, targets: Targets) -> SkeletonRenderer {
@@ -254,33 +292,7 @@ impl SkeletonRenderer {
             &[],
             wgpu::PrimitiveState::default(),
         );
-        // Blended over the ground, tested against it, writing no depth (overlapping discs
-        // darken each other; the figure is drawn after them).
-        let blended = [Some(wgpu::ColorTargetState {
-            format: targets.color,
-            blend: Some(wgpu::BlendState::ALPHA_BLENDING),
-            write_mask: wgpu::ColorWrites::ALL,
-        })];
-        let shadow_stage = Stage {
-            depth_stencil: stage
-                .depth_stencil
-                .clone()
-                .map(|d| wgpu::DepthStencilState {
-                    depth_write_enabled: Some(false),
-                    ..d
-                }),
-            color: &blended,
-            ..stage
-        };
-        let shadow_pipeline = shadow_stage.pipeline(
-            "ground shadow",
-            ("vs_mesh", "fs_shadow"),
-            &buffers,
-            wgpu::PrimitiveState {
-                cull_mode: Some(wgpu::Face::Back),
-                ..wgpu::PrimitiveState::default()
-            },
-        );
+        let shadow_pipeline = shadow_pipeline(&stage, targets.color, &buffers);
         let (cv, ci) = cylinder_mesh(10);
         let (sv, si) = sphere_mesh(6, 10);
         SkeletonRenderer {

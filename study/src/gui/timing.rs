@@ -232,6 +232,7 @@ impl FrameClock {
     }
 
     /// Drifts seen on trial frames, in order.
+    #[cfg(test)]
     pub fn drifts(&self) -> &[Drift] {
         &self.drifts
     }
@@ -244,6 +245,7 @@ impl FrameClock {
 
     /// The running estimate of the period from the last [`RECHECK_FRAMES`] trial intervals,
     /// once that many were seen since the last re-basing.
+    #[cfg(test)]
     pub fn running_estimate(&self) -> Option<f64> {
         (self.recent.len() == RECHECK_FRAMES).then(|| median(&self.recent))
     }
