@@ -124,7 +124,9 @@ pub enum ClipCommand {
         force: bool,
     },
     /// Render stills of the clips side by side as the study window draws them (offscreen,
-    /// no display needed), e.g. a reference and its decoded stimulus for a figure.
+    /// no display needed), e.g. a reference and its decoded stimulus for a figure. An `.svg`
+    /// output labels each pane with its name and time as text (for papers); a `.png` output
+    /// is the bare pixels.
     Render {
         #[command(flatten)]
         input: ClipInput,
@@ -134,7 +136,14 @@ pub enum ClipCommand {
         /// Size of one pane, pixels.
         #[arg(long, default_value_t = 480)]
         pane: u32,
-        /// Output PNG.
+        /// Pane names, one per clip in order (default: each file's name without its folder
+        /// and extension, `demo-walk` for the demo).
+        #[arg(long, value_delimiter = ',')]
+        labels: Vec<String>,
+        /// Draw no ground shadow.
+        #[arg(long)]
+        no_shadow: bool,
+        /// Output image: `.svg` (labelled) or `.png`.
         #[arg(short, long, value_name = "OUT")]
         output: PathBuf,
         /// Replace output files that exist (atomically); without it an existing output is
@@ -210,28 +219,81 @@ pub fn run(cmd: ClipCommand) -> Result<()> {
             input,
             times,
             pane,
+            labels,
+            no_shadow,
             output,
             force,
         } => {
             let mode = files::Mode::from_force(force);
+            let svg = match output.extension().and_then(|e| e.to_str()) {
+                Some(e) if e.eq_ignore_ascii_case("svg") => true,
+                Some(e) if e.eq_ignore_ascii_case("png") => false,
+                _ => bail!(
+                    "{}: expected an .svg (labelled) or .png output",
+                    output.display()
+                ),
+            };
             // Refused before the (slow) offscreen render.
             files::check_new(&output, mode)?;
-            render(&input.load()?, &times, pane, &output, mode)
+            let clips = input.load()?;
+            let names = pane_names(&clips, &labels)?;
+            let still = Still {
+                times: &times,
+                pane,
+                shadow: !no_shadow,
+            };
+            let image = render(&clips, &still)?;
+            if svg {
+                files::write(&output, labelled_svg(&image, &names, &still)?, mode)?;
+            } else {
+                image.write_png(&output, mode)?;
+            }
+            eprintln!(
+                "wrote {} ({} × {} panes)",
+                output.display(),
+                clips.len(),
+                times.len()
+            );
+            Ok(())
         }
     }
 }
 
-/// Draws every clip (columns) at every time (rows) with the first clip's camera, so a
-/// reference and its stimuli are framed alike.
-fn render(
-    clips: &[Loaded],
-    times: &[f64],
+/// What `study clip render` draws: times (rows), pane size, shadow.
+struct Still<'a> {
+    times: &'a [f64],
     pane: u32,
-    output: &Path,
-    mode: files::Mode,
-) -> Result<()> {
+    shadow: bool,
+}
+
+/// The name of each pane column: `--labels` when given (one per clip), else the file's stem.
+fn pane_names(clips: &[Loaded], labels: &[String]) -> Result<Vec<String>> {
+    if labels.is_empty() {
+        return Ok(clips
+            .iter()
+            .map(|c| {
+                Path::new(&c.name)
+                    .file_stem()
+                    .map_or_else(|| c.name.clone(), |s| s.to_string_lossy().into_owned())
+            })
+            .collect());
+    }
+    if labels.len() != clips.len() {
+        bail!(
+            "--labels: {} names for {} clips (one per clip, in order)",
+            labels.len(),
+            clips.len()
+        );
+    }
+    Ok(labels.to_vec())
+}
+
+/// Draws every clip (columns) at every time (rows) with the first clip's camera at that time,
+/// so a reference and its stimuli are framed alike.
+fn render(clips: &[Loaded], still: &Still<'_>) -> Result<crate::gui::render::Image> {
     use crate::gui::render::{Offscreen, Pane};
     use crate::gui::scene::{Figure, FrameShapes, View};
+    let (times, pane) = (still.times, still.pane);
     let Some(first) = clips.first() else {
         bail!("no clip to render");
     };
@@ -245,7 +307,7 @@ fn render(
     if u64::from(cols * pane) * u64::from(rows * pane) > 1 << 26 {
         bail!("{cols}×{rows} panes of {pane} px is too large an image");
     }
-    let view = View::framing(&first.clip);
+    let view = View::framing(&first.clip).with_shadow(still.shadow);
     let mut shapes = Vec::new();
     for t in times {
         for c in clips {
@@ -268,15 +330,93 @@ fn render(
         .collect();
     let mut offscreen = Offscreen::new(4)?;
     let image = offscreen.render(cols * pane, rows * pane, &panes)?;
-    image.write_png(output, mode)?;
-    eprintln!(
-        "wrote {} ({} × {} panes, adapter {})",
-        output.display(),
-        cols,
-        rows,
-        offscreen.adapter().name
+    eprintln!("rendered with adapter {}", offscreen.adapter().name);
+    Ok(image)
+}
+
+/// An SVG of `image` (embedded as PNG) with each pane's name and time written over it as
+/// text, so a paper's figure keeps its labels sharp and editable.
+fn labelled_svg(
+    image: &crate::gui::render::Image,
+    names: &[String],
+    still: &Still<'_>,
+) -> Result<String> {
+    let png = image.png_bytes()?;
+    let (w, h, pane) = (image.width, image.height, still.pane);
+    let size = (f64::from(pane) / 16.0).clamp(10.0, 32.0);
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        r#"<svg xmlns="http://www.w3.org/2000/svg" xmlns:xlink="http://www.w3.org/1999/xlink" width="{w}" height="{h}" viewBox="0 0 {w} {h}">"#
     );
-    Ok(())
+    let _ = writeln!(
+        s,
+        r#"<image x="0" y="0" width="{w}" height="{h}" xlink:href="data:image/png;base64,{}"/>"#,
+        base64(&png)
+    );
+    let _ = writeln!(
+        s,
+        r##"<g font-family="Helvetica, Arial, sans-serif" font-size="{size:.0}" fill="#f2f2f2">"##
+    );
+    for (row, t) in still.times.iter().enumerate() {
+        for (col, name) in names.iter().enumerate() {
+            let (x, y) = (col as u32 * pane, row as u32 * pane);
+            let pad = size * 0.6;
+            let _ = writeln!(
+                s,
+                r#"<text class="pane" x="{:.1}" y="{:.1}">{}</text>"#,
+                f64::from(x) + pad,
+                f64::from(y) + pad + size,
+                xml_escape(name)
+            );
+            let _ = writeln!(
+                s,
+                r#"<text class="time" x="{:.1}" y="{:.1}" text-anchor="end">t = {t:.2} s</text>"#,
+                f64::from(x + pane) - pad,
+                f64::from(y) + pad + size
+            );
+        }
+    }
+    s.push_str("</g>\n</svg>\n");
+    Ok(s)
+}
+
+fn xml_escape(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    for c in text.chars() {
+        match c {
+            '&' => out.push_str("&amp;"),
+            '<' => out.push_str("&lt;"),
+            '>' => out.push_str("&gt;"),
+            '"' => out.push_str("&quot;"),
+            '\'' => out.push_str("&apos;"),
+            c if c.is_control() => out.push(' '),
+            c => out.push(c),
+        }
+    }
+    out
+}
+
+/// Standard base64 with padding (RFC 4648).
+fn base64(bytes: &[u8]) -> String {
+    const ALPHABET: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    let mut out = String::with_capacity(bytes.len().div_ceil(3) * 4);
+    for chunk in bytes.chunks(3) {
+        let b = [
+            chunk[0],
+            chunk.get(1).copied().unwrap_or(0),
+            chunk.get(2).copied().unwrap_or(0),
+        ];
+        let n = (u32::from(b[0]) << 16) | (u32::from(b[1]) << 8) | u32::from(b[2]);
+        for k in 0..4 {
+            if k <= chunk.len() {
+                out.push(char::from(ALPHABET[((n >> (18 - 6 * k)) & 63) as usize]));
+            } else {
+                out.push('=');
+            }
+        }
+    }
+    out
 }
 
 fn positions_csv(pos: &fk::Positions, scale: f64) -> String {
@@ -407,4 +547,29 @@ pub fn info_text(name: &str, clip: &Clip) -> String {
         }
     }
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{base64, xml_escape};
+
+    #[test]
+    fn base64_matches_rfc_4648_vectors() {
+        for (plain, coded) in [
+            ("", ""),
+            ("f", "Zg=="),
+            ("fo", "Zm8="),
+            ("foo", "Zm9v"),
+            ("foob", "Zm9vYg=="),
+            ("fooba", "Zm9vYmE="),
+            ("foobar", "Zm9vYmFy"),
+        ] {
+            assert_eq!(base64(plain.as_bytes()), coded, "{plain:?}");
+        }
+    }
+
+    #[test]
+    fn labels_are_escaped_for_xml() {
+        assert_eq!(xml_escape("a<b>&\"c'"), "a&lt;b&gt;&amp;&quot;c&apos;");
+    }
 }

@@ -250,15 +250,17 @@ fn run_screens(
     let signalled = Arc::clone(signalled);
     let exit = std::rc::Rc::new(std::cell::RefCell::new(None::<Exit>));
     let exit_seen = std::rc::Rc::clone(&exit);
-    let mut display_logged = false;
+    // The clock's revision the manifest's display information was written at (rewritten
+    // when a drift re-checked the period).
+    let mut display_logged = None;
     let mut end_shown_at: Option<f64> = None;
     let report = window::run_window(options, move |ui, ctx| {
         if ctx.close_requested {
             // Mid-session this opens the quit confirmation instead of closing.
             screens.close_requested();
         }
-        if !display_logged && ctx.clock.calibrated() {
-            display_logged = true;
+        if ctx.clock.calibrated() && display_logged != Some(ctx.clock.revision()) {
+            display_logged = Some(ctx.clock.revision());
             let info = display_info(ctx.facts, ctx.clock);
             if let Err(e) = screens
                 .recorder_mut()
@@ -303,7 +305,10 @@ fn run_screens(
 fn display_info(facts: &window::DisplayFacts, clock: &FrameClock) -> DisplayInfo {
     let period = clock.period();
     DisplayInfo {
-        description: facts.describe(period),
+        description: clock.drift_note().map_or_else(
+            || facts.describe(period),
+            |d| format!("{}; {d}", facts.describe(period)),
+        ),
         width_px: facts.width_px,
         height_px: facts.height_px,
         refresh_hz: period.map_or(0.0, |(p, _)| 1000.0 / p),

@@ -182,3 +182,71 @@ fn bad_input_prints_one_clear_message_and_fails() {
         "{err}"
     );
 }
+
+#[test]
+fn an_svg_still_carries_each_panes_name_and_time_as_text() {
+    // Renders offscreen: needs a Vulkan driver (lavapipe without a GPU).
+    let dir = tmp();
+    let bvh = dir.join("still-walk.bvh").display().to_string();
+    ok(&["clip", "convert", "--demo", "-o", &bvh, "--force"]);
+    let svg = dir.join("still.svg");
+    let o = svg.display().to_string();
+    ok(&[
+        "clip",
+        "render",
+        "--demo",
+        &bvh,
+        "--times",
+        "0.5,1.25",
+        "--pane",
+        "96",
+        "--labels",
+        "reference,wavelet <8:1>",
+        "-o",
+        &o,
+        "--force",
+    ]);
+    let text = std::fs::read_to_string(&svg).unwrap();
+    assert!(text.starts_with("<svg "), "{}", &text[..80.min(text.len())]);
+    assert!(
+        text.contains(r#"width="192" height="192""#),
+        "two panes across, two down"
+    );
+    assert!(
+        text.contains("data:image/png;base64,iVBORw0KGgo"),
+        "the pixels as PNG"
+    );
+    let labels: Vec<&str> = text
+        .lines()
+        .filter(|l| l.starts_with("<text"))
+        .filter_map(|l| l.split('>').nth(1)?.split('<').next())
+        .collect();
+    assert_eq!(
+        labels,
+        [
+            "reference",
+            "t = 0.50 s",
+            "wavelet &lt;8:1&gt;",
+            "t = 0.50 s",
+            "reference",
+            "t = 1.25 s",
+            "wavelet &lt;8:1&gt;",
+            "t = 1.25 s",
+        ]
+    );
+    // One name per clip, said once; an unknown output kind refused before rendering.
+    let out = study(&[
+        "clip", "render", "--demo", "--labels", "a,b", "-o", &o, "--force",
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("--labels: 2 names for 1 clips"),
+        "{err}"
+    );
+    let out = study(&["clip", "render", "--demo", "-o", "x.jpg"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("x.jpg: expected an .svg (labelled) or .png output"),
+        "{err}"
+    );
+}

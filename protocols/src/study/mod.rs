@@ -11,6 +11,7 @@ mod check;
 mod conditions;
 mod live;
 mod presentation;
+mod rendering;
 mod scale;
 mod session;
 mod simulation;
@@ -29,6 +30,7 @@ use crate::manifest::StimulusManifest;
 use crate::record::{Arrangement, Position, Protocol};
 use crate::staircase::StaircaseSettings;
 use check::Ctx;
+pub use rendering::RenderingSettings;
 
 /// Current version of the study file format.
 pub const STUDY_FORMAT_VERSION: u32 = 1;
@@ -416,6 +418,8 @@ pub struct StudyDefinition {
     pub staircase: Option<StaircaseStudy>,
     /// Simulated observers.
     pub simulation: SimulationSettings,
+    /// How the runner draws the figures (`[rendering]`).
+    pub rendering: RenderingSettings,
     /// The stimulus manifest.
     pub manifest: StimulusManifest,
 }

@@ -8,6 +8,7 @@ use toml::{Table, Value};
 use super::check::Ctx;
 use super::conditions::{parse_conditions, resolve_familiarization};
 use super::presentation::parse_presentation;
+use super::rendering::parse_rendering;
 use super::scale::parse_scale;
 use super::session::{FamSpec, parse_session};
 use super::simulation::parse_simulation;
@@ -46,6 +47,7 @@ const TOP_KEYS: &[&str] = &[
     "session",
     "staircase",
     "simulation",
+    "rendering",
 ];
 
 /// The whole study file: its header, the manifest, the sections every protocol has, then
@@ -74,6 +76,7 @@ pub(super) fn parse_table(
     let (session, familiarization_spec) = parse_session(session_t, cx);
     let sim_t = cx.table(t, "", "simulation").unwrap_or(&empty);
     let simulation = parse_simulation(sim_t, cx);
+    let rendering = parse_rendering(cx.table(t, "", "rendering").unwrap_or(&empty), cx);
 
     let mut conditions = Vec::new();
     let mut familiarization = Vec::new();
@@ -111,6 +114,7 @@ pub(super) fn parse_table(
         session,
         staircase,
         simulation,
+        rendering,
         manifest: manifest?,
     })
 }

@@ -3,10 +3,12 @@
 //! offscreen texture for tests and screenshots).
 //!
 //! Each viewport has a *slot* (uniforms + instance buffer): `prepare` uploads a viewport's
-//! camera and shapes, `paint` records three draw calls (ground, bones, joints). It knows
-//! nothing of trials.
+//! camera (the view at the shapes' presentation time, so it follows the figure) and shapes,
+//! `paint` records up to four draw calls (ground, shadow, bones, joints). The shadow is
+//! alpha-blended over the ground and writes no depth. It knows nothing of trials.
 
 use std::sync::Arc;
+use std::sync::atomic::{AtomicUsize, Ordering};
 
 use anyhow::Context as _;
 use egui_wgpu::wgpu;
@@ -18,6 +20,10 @@ use super::scene::{FrameShapes, Instance, View};
 pub const BACKGROUND: [f32; 3] = [0.20, 0.21, 0.24];
 
 const GLOBALS_BYTES: u64 = 112;
+
+/// First slot of the window's calibration load (two skeletons drawn while the refresh period
+/// is measured); viewports in slots below it are the screens' own and are counted.
+pub const LOAD_SLOT: usize = 8;
 const VERTEX_BYTES: u64 = 24;
 
 /// Formats of the pass the renderer draws into.
@@ -44,12 +50,15 @@ struct Slot {
     capacity: usize,
     bones: u32,
     joints: u32,
+    shadows: u32,
 }
 
 /// Pipelines, meshes and per-viewport slots.
 pub struct SkeletonRenderer {
     mesh_pipeline: wgpu::RenderPipeline,
     ground_pipeline: wgpu::RenderPipeline,
+    shadow_pipeline: wgpu::RenderPipeline,
+    drawn: Arc<AtomicUsize>,
     layout: wgpu::BindGroupLayout,
     cylinder: Mesh,
     sphere: Mesh,
@@ -165,6 +174,44 @@ impl Stage<'_> {
     }
 }
 
+/// The shadow's pipeline: the mesh vertex stage with `fs_shadow`, blended over the ground,
+/// tested against it, writing no depth (overlapping discs darken each other; the figure is
+/// drawn after them).
+fn shadow_pipeline(
+    stage: &Stage<'_>,
+    color: wgpu::TextureFormat,
+    buffers: &[Option<wgpu::VertexBufferLayout<'_>>],
+) -> wgpu::RenderPipeline {
+    let blended = [Some(wgpu::ColorTargetState {
+        format: color,
+        blend: Some(wgpu::BlendState::ALPHA_BLENDING),
+        write_mask: wgpu::ColorWrites::ALL,
+    })];
+    let shadow_stage = Stage {
+        device: stage.device,
+        layout: stage.layout,
+        shader: stage.shader,
+        depth_stencil: stage
+            .depth_stencil
+            .clone()
+            .map(|d| wgpu::DepthStencilState {
+                depth_write_enabled: Some(false),
+                ..d
+            }),
+        multisample: stage.multisample,
+        color: &blended,
+    };
+    shadow_stage.pipeline(
+        "ground shadow",
+        ("vs_mesh", "fs_shadow"),
+        buffers,
+        wgpu::PrimitiveState {
+            cull_mode: Some(wgpu::Face::Back),
+            ..wgpu::PrimitiveState::default()
+        },
+    )
+}
+
 impl SkeletonRenderer {
     /// Builds the pipelines for passes with `targets`.
     pub fn new(device: &wgpu::Device, targets: Targets) -> SkeletonRenderer {
@@ -245,11 +292,14 @@ impl SkeletonRenderer {
             &[],
             wgpu::PrimitiveState::default(),
         );
+        let shadow_pipeline = shadow_pipeline(&stage, targets.color, &buffers);
         let (cv, ci) = cylinder_mesh(10);
         let (sv, si) = sphere_mesh(6, 10);
         SkeletonRenderer {
             mesh_pipeline,
             ground_pipeline,
+            shadow_pipeline,
+            drawn: Arc::new(AtomicUsize::new(0)),
             layout,
             cylinder: mesh(device, "cylinder", &cv, &ci),
             sphere: mesh(device, "sphere", &sv, &si),
@@ -258,7 +308,14 @@ impl SkeletonRenderer {
         }
     }
 
-    /// Uploads viewport `slot`'s camera (for a viewport of aspect `aspect`) and shapes.
+    /// A counter of the viewports prepared in slots below [`LOAD_SLOT`]; the window reads and
+    /// resets it each frame.
+    pub fn drawn_counter(&self) -> Arc<AtomicUsize> {
+        Arc::clone(&self.drawn)
+    }
+
+    /// Uploads viewport `slot`'s camera (`view` at the shapes' presentation time, for a
+    /// viewport of aspect `aspect`) and shapes.
     pub fn prepare(
         &mut self,
         device: &wgpu::Device,
@@ -290,8 +347,13 @@ impl SkeletonRenderer {
                 capacity: 64,
                 bones: 0,
                 joints: 0,
+                shadows: 0,
             });
         }
+        if slot < LOAD_SLOT {
+            self.drawn.fetch_add(1, Ordering::Relaxed);
+        }
+        let view = view.at(shapes.time_s);
         let vp = view.view_proj(aspect);
         let mut g: Vec<f32> = vp.iter().flatten().copied().collect();
         let light = [0.35f32, 0.85, 0.4];
@@ -305,7 +367,7 @@ impl SkeletonRenderer {
             view.ground_y,
         ]);
         g.extend_from_slice(&[view.grid, 0.0, 0.0, 0.0]);
-        let count = shapes.bones.len() + shapes.joints.len();
+        let count = shapes.bones.len() + shapes.joints.len() + shapes.shadows.len();
         let Some(s) = self.slots.get_mut(slot) else {
             return;
         };
@@ -315,7 +377,12 @@ impl SkeletonRenderer {
             s.instances = instance_buffer(device, s.capacity);
         }
         self.bytes.clear();
-        for i in shapes.bones.iter().chain(&shapes.joints) {
+        for i in shapes
+            .bones
+            .iter()
+            .chain(&shapes.joints)
+            .chain(&shapes.shadows)
+        {
             i.write(&mut self.bytes);
         }
         if !self.bytes.is_empty() {
@@ -323,6 +390,7 @@ impl SkeletonRenderer {
         }
         s.bones = shapes.bones.len() as u32;
         s.joints = shapes.joints.len() as u32;
+        s.shadows = shapes.shadows.len() as u32;
     }
 
     /// Records slot `slot`'s draw calls into `pass` (viewport already set by the caller).
@@ -333,15 +401,21 @@ impl SkeletonRenderer {
         pass.set_bind_group(0, &s.bind_group, &[]);
         pass.set_pipeline(&self.ground_pipeline);
         pass.draw(0..6, 0..1);
-        pass.set_pipeline(&self.mesh_pipeline);
         pass.set_vertex_buffer(1, s.instances.slice(..));
-        for (mesh, range) in [
-            (&self.cylinder, 0..s.bones),
-            (&self.sphere, s.bones..s.bones + s.joints),
+        let figure = s.bones + s.joints;
+        for (pipeline, mesh, range) in [
+            (
+                &self.shadow_pipeline,
+                &self.sphere,
+                figure..figure + s.shadows,
+            ),
+            (&self.mesh_pipeline, &self.cylinder, 0..s.bones),
+            (&self.mesh_pipeline, &self.sphere, s.bones..figure),
         ] {
             if range.is_empty() {
                 continue;
             }
+            pass.set_pipeline(pipeline);
             pass.set_vertex_buffer(0, mesh.vertices.slice(..));
             pass.set_index_buffer(mesh.indices.slice(..), wgpu::IndexFormat::Uint16);
             pass.draw_indexed(0..mesh.count, 0, range);
@@ -425,6 +499,21 @@ impl Image {
             p.copy_from_slice(s);
         }
         p
+    }
+
+    /// The image encoded as PNG.
+    ///
+    /// # Errors
+    /// Encoder errors.
+    pub fn png_bytes(&self) -> anyhow::Result<Vec<u8>> {
+        let mut out = Vec::new();
+        let mut enc = png::Encoder::new(&mut out, self.width, self.height);
+        enc.set_color(png::ColorType::Rgba);
+        enc.set_depth(png::BitDepth::Eight);
+        let mut w = enc.write_header().context("encoding a PNG")?;
+        w.write_image_data(&self.rgba).context("encoding a PNG")?;
+        w.finish().context("encoding a PNG")?;
+        Ok(out)
     }
 
     /// Writes the image as PNG, whole or not at all ([`files::AtomicFile`]); an existing file

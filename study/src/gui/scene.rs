@@ -2,10 +2,16 @@
 //! posed skeleton, the camera that frames a clip, and the ground plane.
 //!
 //! A [`Figure`] turns a clip and a presentation time into instances (a unit cylinder per bone,
-//! a unit sphere per joint, each with a position, rotation and scale). A [`View`] is the fixed
-//! camera of one clip: it frames the bounding box of every pose of the clip, so the reference
-//! and the test stimulus of a trial, drawn with the reference's view, appear at the same size
-//! and place. The renderer knows nothing of trials; this module knows nothing of wgpu.
+//! a unit sphere per joint, each with a position, rotation and scale) and, when the view asks
+//! for it, a ground shadow (soft discs under the joints and bone midpoints, darker and tighter
+//! the nearer the ground, so a foot's contact and any sliding show against the grid).
+//!
+//! A [`View`] is the camera of one clip: it follows the clip's root along a smoothed path
+//! ([`View::at`]) and frames a window around the figure rather than the whole path, so a
+//! walking figure stays large. The reference and the test stimulus of a trial are drawn with
+//! the reference's view at their presentation time, so both panes move alike and appear at
+//! the same size and place. The renderer knows nothing of trials; this module knows nothing
+//! of wgpu.
 
 use motion::clip::Clip;
 use motion::math::Vec3;
@@ -51,13 +57,21 @@ pub const BONE_COLOR: [f32; 4] = [0.78, 0.80, 0.86, 1.0];
 /// Joint colour.
 pub const JOINT_COLOR: [f32; 4] = [0.93, 0.55, 0.22, 1.0];
 
-/// Instances of one posed skeleton: bones first, then joints.
+/// Shadow colour (black; the alpha is per disc).
+const SHADOW_RGB: [f32; 3] = [0.0, 0.0, 0.0];
+
+/// Instances of one posed skeleton: bones first, then joints, then the ground shadow.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct FrameShapes {
     /// Cylinders, one per bone of non-zero length.
     pub bones: Vec<Instance>,
     /// Spheres, one per joint.
     pub joints: Vec<Instance>,
+    /// Flattened spheres on the ground (alpha in the colour's last channel); empty when the
+    /// view's shadow is off.
+    pub shadows: Vec<Instance>,
+    /// Presentation time of the pose, s (the camera follows the clip to this time).
+    pub time_s: f64,
 }
 
 /// A clip ready to be posed at any presentation time.
@@ -67,6 +81,8 @@ pub struct Figure {
     parents: Vec<Option<usize>>,
     bone_radius: f32,
     points: Vec<Vec3>,
+    /// Ground height and figure height when the shadow is drawn.
+    shadow: Option<(f32, f32)>,
 }
 
 impl Figure {
@@ -78,6 +94,9 @@ impl Figure {
             parents: clip.skeleton.joints.iter().map(|j| j.parent).collect(),
             bone_radius: view.bone_radius,
             points: Vec::new(),
+            shadow: view
+                .shadow
+                .then_some((view.ground_y, view.figure_height.max(1e-6))),
         }
     }
 
@@ -91,6 +110,8 @@ impl Figure {
         self.sampler.pose_at(t_s, EndMode::Hold, &mut self.points);
         out.bones.clear();
         out.joints.clear();
+        out.shadows.clear();
+        out.time_s = t_s;
         let r = self.bone_radius;
         for (j, p) in self.points.iter().enumerate() {
             let pj = to_f32(*p);
@@ -117,14 +138,168 @@ impl Figure {
                 scale: [r, len, r],
                 color: BONE_COLOR,
             });
+            if let Some(ground) = self.shadow {
+                out.shadows
+                    .push(shadow_disc(scale3(add(pj, pp), 0.5), r, ground));
+            }
+        }
+        if let Some(ground) = self.shadow {
+            for p in &self.points {
+                out.shadows.push(shadow_disc(to_f32(*p), r, ground));
+            }
         }
     }
 }
 
-/// The fixed camera and ground of one clip.
+/// The shadow disc under point `p`: the nearer the ground (height `ground.0`), the smaller
+/// and darker, so contact reads as a dark spot; a point a figure height (`ground.1`) up
+/// leaves a faint wide one.
+fn shadow_disc(p: [f32; 3], bone_radius: f32, (ground_y, height): (f32, f32)) -> Instance {
+    let u = ((p[1] - ground_y) / height).clamp(0.0, 1.0);
+    let radius = bone_radius * (2.2 + 4.0 * u);
+    let alpha = 0.08 + 0.6 * (1.0 - u) * (1.0 - u);
+    Instance {
+        position: [p[0], ground_y + 0.05 * bone_radius, p[2]],
+        rotation: [0.0, 0.0, 0.0, 1.0],
+        scale: [radius, 0.01 * bone_radius, radius],
+        color: [SHADOW_RGB[0], SHADOW_RGB[1], SHADOW_RGB[2], alpha],
+    }
+}
+
+/// Knots of the camera's path over a clip.
+pub const TRACK_KNOTS: usize = 64;
+/// Width of the moving average that smooths the root's path (about a gait cycle), s.
+const TRACK_SMOOTHING_S: f64 = 1.0;
+
+/// The camera's path: the clip's root on the ground plane, smoothed by a moving average over
+/// about a gait cycle (so the sway of each step does not shake the view; past the clip's ends
+/// the path is continued by point reflection) and sampled at equal times.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Track {
+    knots: [[f32; 2]; TRACK_KNOTS],
+    count: usize,
+    /// Time of the last knot, s.
+    end_s: f32,
+}
+
+impl Track {
+    /// A path standing still at `xz`.
+    fn still(xz: [f32; 2]) -> Track {
+        Track {
+            knots: [xz; TRACK_KNOTS],
+            count: 1,
+            end_s: 0.0,
+        }
+    }
+
+    /// The path's point at `t_s` (held at its ends): Catmull-Rom through the knots, so the
+    /// camera's speed has no jumps.
+    pub fn at(&self, t_s: f64) -> [f32; 2] {
+        let n = self.count.clamp(1, TRACK_KNOTS);
+        if n == 1 || self.end_s <= 0.0 {
+            return self.knots[0];
+        }
+        let u = ((t_s as f32) / self.end_s).clamp(0.0, 1.0) * (n - 1) as f32;
+        let i = (u.floor() as usize).min(n - 2);
+        let f = u - i as f32;
+        // Phantom knots past the ends continue the path straight on (a clamped end would
+        // start and stop the camera with a jolt).
+        let last = n as isize - 1;
+        let k = |j: isize| {
+            let q = |i: isize| self.knots[i.clamp(0, last) as usize];
+            let (end, inner) = if j < 0 {
+                (0, 1)
+            } else if j > last {
+                (last, last - 1)
+            } else {
+                return q(j);
+            };
+            let (e, i) = (q(end), q(inner));
+            [2.0 * e[0] - i[0], 2.0 * e[1] - i[1]]
+        };
+        let (p0, p1, p2, p3) = (
+            k(i as isize - 1),
+            k(i as isize),
+            k(i as isize + 1),
+            k(i as isize + 2),
+        );
+        let mut out = [0.0; 2];
+        for c in 0..2 {
+            out[c] = 0.5
+                * (2.0 * p1[c]
+                    + (p2[c] - p0[c]) * f
+                    + (2.0 * p0[c] - 5.0 * p1[c] + 4.0 * p2[c] - p3[c]) * f * f
+                    + (3.0 * p1[c] - p0[c] - 3.0 * p2[c] + p3[c]) * f * f * f);
+        }
+        out
+    }
+}
+
+/// The root's ground-plane path of `positions`, smoothed and sampled into a [`Track`].
+fn track(positions: &motion::fk::Positions, rate_hz: f64) -> Option<Track> {
+    let frames = positions.frames();
+    let root: Vec<[f32; 2]> = (0..frames)
+        .filter_map(|f| positions.frame(f).first().map(|p| to_f32(*p)))
+        .map(|p| [p[0], p[2]])
+        .collect();
+    if root.len() != frames || frames == 0 || root.iter().flatten().any(|v| !v.is_finite()) {
+        return None;
+    }
+    let rate = if rate_hz.is_finite() && rate_hz > 0.0 {
+        rate_hz
+    } else {
+        120.0
+    };
+    let half = ((0.5 * TRACK_SMOOTHING_S * rate).round() as isize).max(1);
+    // Past its ends the path is continued by point reflection through the end point, which
+    // keeps its direction and speed there: a full window everywhere, no kink at the ends.
+    let last = frames as isize - 1;
+    let at = |i: isize| -> [f64; 2] {
+        let p = |k: isize| {
+            let q = root[k.clamp(0, last) as usize];
+            [f64::from(q[0]), f64::from(q[1])]
+        };
+        let (base, mirror) = if i < 0 {
+            (0, -i)
+        } else if i > last {
+            (last, 2 * last - i)
+        } else {
+            return p(i);
+        };
+        let (b, m) = (p(base), p(mirror));
+        [2.0 * b[0] - m[0], 2.0 * b[1] - m[1]]
+    };
+    let smooth = |f: usize| {
+        let f = f as isize;
+        let mut acc = [0.0f64; 2];
+        for i in f - half..=f + half {
+            let q = at(i);
+            acc = [acc[0] + q[0], acc[1] + q[1]];
+        }
+        let n = (2 * half + 1) as f64;
+        [(acc[0] / n) as f32, (acc[1] / n) as f32]
+    };
+    if frames == 1 {
+        return Some(Track::still(smooth(0)));
+    }
+    let mut t = Track::still(smooth(0));
+    t.count = TRACK_KNOTS.min(frames);
+    t.end_s = ((frames - 1) as f64 / rate) as f32;
+    for (k, knot) in t.knots.iter_mut().take(t.count).enumerate() {
+        let f = (k * (frames - 1)) as f64 / (t.count - 1) as f64;
+        let (a, b) = (f.floor() as usize, (f.ceil() as usize).min(frames - 1));
+        let (pa, pb) = (smooth(a), smooth(b));
+        let w = (f - a as f64) as f32;
+        *knot = [pa[0] + (pb[0] - pa[0]) * w, pa[1] + (pb[1] - pa[1]) * w];
+    }
+    Some(t)
+}
+
+/// The camera and ground of one clip. `target`, `eye` and the ground centre are those at time
+/// 0; [`View::at`] moves them along the clip's [`Track`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct View {
-    /// Point looked at (centre of the clip's bounding box).
+    /// Point looked at (the figure's centre at time 0).
     pub target: [f32; 3],
     /// Camera position.
     pub eye: [f32; 3],
@@ -142,14 +317,30 @@ pub struct View {
     pub grid: f32,
     /// Bone radius in clip units.
     pub bone_radius: f32,
+    /// Height of the tallest pose, clip units.
+    pub figure_height: f32,
+    /// Radius of the sphere around the moving target that holds every pose.
+    pub radius: f32,
+    /// Whether the figures cast a ground shadow (on by default; the study file's
+    /// `[rendering] ground_shadow`).
+    pub shadow: bool,
+    /// The path the camera follows.
+    pub track: Track,
 }
 
+/// Azimuth of the camera from +z towards +x, and its elevation, degrees.
+const AZIMUTH_DEG: f32 = 30.0;
+const ELEVATION_DEG: f32 = 18.0;
+
 impl View {
-    /// Frames every pose of `clip` (y up), seen from the front-right and a little above.
+    /// Follows the root of `clip` (y up), seen from the front-right and a little above, at a
+    /// distance that holds every pose within the viewport.
     pub fn framing(clip: &Clip) -> View {
         let positions = motion::fk::positions(clip);
-        let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+        let track = track(&positions, clip.frame_rate_hz);
+        let (mut lo_y, mut hi_y) = (f32::INFINITY, f32::NEG_INFINITY);
         let mut tallest = 0.0f32;
+        let frame_s = 1.0 / clip.frame_rate_hz.max(1e-9);
         for f in 0..positions.frames() {
             let (mut flo, mut fhi) = (f32::INFINITY, f32::NEG_INFINITY);
             for p in positions.frame(f) {
@@ -157,20 +348,14 @@ impl View {
                 if !p.iter().all(|v| v.is_finite()) {
                     continue;
                 }
-                for k in 0..3 {
-                    lo[k] = lo[k].min(p[k]);
-                    hi[k] = hi[k].max(p[k]);
-                }
                 flo = flo.min(p[1]);
                 fhi = fhi.max(p[1]);
             }
-            if fhi > flo {
+            if fhi >= flo {
+                lo_y = lo_y.min(flo);
+                hi_y = hi_y.max(fhi);
                 tallest = tallest.max(fhi - flo);
             }
-        }
-        if !lo.iter().chain(&hi).all(|v| v.is_finite()) {
-            lo = [-1.0; 3];
-            hi = [1.0; 3];
         }
         let cm = clip.skeleton.units.cm_per_unit as f32;
         let metre = if cm.is_finite() && cm > 0.0 {
@@ -178,18 +363,29 @@ impl View {
         } else {
             1.0
         };
+        if !(lo_y.is_finite() && hi_y.is_finite()) {
+            (lo_y, hi_y) = (0.0, metre * 1.7);
+        }
         let height = if tallest > 0.0 { tallest } else { metre * 1.7 };
-        let target = [
-            0.5 * (lo[0] + hi[0]),
-            0.5 * (lo[1] + hi[1]),
-            0.5 * (lo[2] + hi[2]),
-        ];
-        let half = scale3(sub(hi, lo), 0.5);
-        let radius = norm(half).max(height * 0.5) * 1.08;
+        let track = track.unwrap_or_else(|| Track::still([0.0, 0.0]));
+        let centre_y = 0.5 * (lo_y + hi_y);
+        // The smallest sphere about the moving centre that holds every pose.
+        let mut reach = 0.5 * (hi_y - lo_y).max(height);
+        for f in 0..positions.frames() {
+            let c = track.at(f as f64 * frame_s);
+            for p in positions.frame(f) {
+                let p = to_f32(*p);
+                if p.iter().all(|v| v.is_finite()) {
+                    reach = reach.max(norm(sub(p, [c[0], centre_y, c[1]])));
+                }
+            }
+        }
+        let radius = reach * 1.04;
+        let start = track.at(0.0);
+        let target = [start[0], centre_y, start[1]];
         let fov_y = 40f32.to_radians();
         let distance = radius / (0.5 * fov_y).sin();
-        // Azimuth 30 degrees from +z towards +x, elevation 12 degrees.
-        let (az, el) = (30f32.to_radians(), 12f32.to_radians());
+        let (az, el) = (AZIMUTH_DEG.to_radians(), ELEVATION_DEG.to_radians());
         let dir = [az.sin() * el.cos(), el.sin(), az.cos() * el.cos()];
         let eye = add(target, scale3(dir, distance));
         View {
@@ -198,23 +394,60 @@ impl View {
             fov_y,
             near: (distance - 2.5 * radius).max(distance * 0.02),
             far: distance + 4.0 * radius,
-            ground_y: lo[1],
+            ground_y: lo_y,
             ground_half: radius * 2.5,
             grid: metre,
             bone_radius: height * 0.022,
+            figure_height: height,
+            radius,
+            shadow: true,
+            track,
         }
     }
 
-    /// Projection × view for a viewport of aspect `width / height` (wgpu depth 0..1).
+    /// The same view with the ground shadow on or off.
+    #[must_use]
+    pub fn with_shadow(mut self, on: bool) -> View {
+        self.shadow = on;
+        self
+    }
+
+    /// The view at presentation time `t_s`: target, eye and ground moved along the track
+    /// (the offset from target to eye is kept, so only the position changes, smoothly).
+    #[must_use]
+    pub fn at(&self, t_s: f64) -> View {
+        let (a, b) = (self.track.at(0.0), self.track.at(t_s));
+        let shift = [b[0] - a[0], 0.0, b[1] - a[1]];
+        View {
+            target: add(self.target, shift),
+            eye: add(self.eye, shift),
+            ..*self
+        }
+    }
+
+    /// Projection × view for a viewport of aspect `width / height` (wgpu depth 0..1). A
+    /// viewport narrower than it is tall moves the camera back so that the sphere of every
+    /// pose still fits across it.
     pub fn view_proj(&self, aspect: f32) -> Mat4 {
         let aspect = if aspect.is_finite() && aspect > 0.0 {
             aspect
         } else {
             1.0
         };
+        let half_fov_x = (aspect * (0.5 * self.fov_y).tan()).atan();
+        let (mut eye, mut near, mut far) = (self.eye, self.near, self.far);
+        if half_fov_x < 0.5 * self.fov_y {
+            let d = norm(sub(self.eye, self.target));
+            let wanted = self.radius / half_fov_x.sin();
+            if d > 0.0 && wanted > d {
+                eye = add(self.target, scale3(sub(self.eye, self.target), wanted / d));
+                near = (wanted - 2.5 * self.radius).max(wanted * 0.02);
+                far = wanted + 4.0 * self.radius;
+            }
+        }
         mul(
-            &perspective(self.fov_y, aspect, self.near, self.far),
-            &look_at(self.eye, self.target, [0.0, 1.0, 0.0]),
+            &perspective(self.fov_y, aspect, near, far),
+            &look_at(eye, self.target, [0.0, 1.0, 0.0]),
         )
     }
 }
@@ -346,15 +579,62 @@ mod tests {
     fn every_pose_of_the_walk_projects_inside_the_view() {
         let clip = motion::synth::walking_clip(&motion::synth::WalkParams::default());
         let view = View::framing(&clip);
-        let vp = view.view_proj(16.0 / 9.0);
         let positions = motion::fk::positions(&clip);
-        for f in (0..positions.frames()).step_by(7) {
-            for p in positions.frame(f) {
-                let ndc = transform(&vp, to_f32(*p));
-                assert!(ndc[0].abs() < 1.0 && ndc[1].abs() < 1.0, "{ndc:?}");
-                assert!((0.0..1.0).contains(&ndc[2]), "depth {ndc:?}");
+        // A wide pane and one narrower than it is tall (two panes side by side).
+        for aspect in [16.0 / 9.0, 0.6] {
+            let mut tallest = 0.0f32;
+            for f in (0..positions.frames()).step_by(7) {
+                let vp = view.at(f as f64 / clip.frame_rate_hz).view_proj(aspect);
+                let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+                for p in positions.frame(f) {
+                    let ndc = transform(&vp, to_f32(*p));
+                    assert!(ndc[0].abs() < 1.0 && ndc[1].abs() < 1.0, "{ndc:?}");
+                    assert!((0.0..1.0).contains(&ndc[2]), "depth {ndc:?}");
+                    (lo, hi) = (lo.min(ndc[1]), hi.max(ndc[1]));
+                }
+                tallest = tallest.max(hi - lo);
+            }
+            // The joints span over half the height (NDC spans 2) in the wide pane.
+            if aspect > 1.0 {
+                assert!(tallest > 1.2, "figure spans {tallest} of 2 in NDC");
             }
         }
+    }
+
+    #[test]
+    fn the_camera_follows_the_walk_smoothly() {
+        let clip = motion::synth::walking_clip(&motion::synth::WalkParams::default());
+        let view = View::framing(&clip);
+        let frame_s = 1.0 / 60.0;
+        let mut last = view.at(0.0).target;
+        let mut prev_step: Option<f32> = None;
+        let mut worst_change = 0.0f32;
+        // Up to the last frame (past it the figure and the camera hold still).
+        let n = ((clip.duration_s() - 1.0 / clip.frame_rate_hz) / frame_s) as usize;
+        for k in 1..=n {
+            let t = view.at(k as f64 * frame_s).target;
+            let step = norm(sub(t, last));
+            if let Some(p) = prev_step {
+                worst_change = worst_change.max((step - p).abs());
+            }
+            prev_step = Some(step);
+            last = t;
+        }
+        let travelled = norm(sub(view.at(clip.duration_s()).target, view.at(0.0).target));
+        // 1.2 m/s for 4 s, less the smoothing at the ends; in clip units.
+        let metre = view.grid;
+        assert!(travelled > 3.0 * metre, "the camera moved {travelled}");
+        // Per 60 Hz frame the camera's step changes by under 1 mm: no jerks.
+        assert!(
+            worst_change < 0.001 * metre,
+            "step changed by {worst_change} in one frame"
+        );
+        // Shadows follow the view's switch.
+        let mut s = FrameShapes::default();
+        Figure::new(&clip, &view).shapes_at(1.0, &mut s);
+        assert_eq!(s.shadows.len(), s.joints.len() + s.bones.len());
+        Figure::new(&clip, &view.with_shadow(false)).shapes_at(1.0, &mut s);
+        assert!(s.shadows.is_empty());
     }
 
     #[test]

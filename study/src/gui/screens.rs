@@ -259,7 +259,7 @@ impl StudyUi {
     /// (trial timing is read from it).
     pub fn ui(&mut self, ui: &mut Ui, clock: &mut FrameClock) {
         let now = ui.input(|i| i.time);
-        let chord = ui.input(|i| i.modifiers.ctrl && i.modifiers.shift && i.key_pressed(Key::P));
+        let chord = ui.input(|i| super::window::ctrl_shift_pressed(i, Key::P));
         if chord && self.pause == Pause::None && self.exit.is_none() {
             self.pause = Pause::Paused;
         }
@@ -444,7 +444,9 @@ impl StudyUi {
         let view = *self
             .views
             .entry(trial.reference.clone())
-            .or_insert_with(|| View::framing(&reference));
+            .or_insert_with(|| {
+                View::framing(&reference).with_shadow(self.study.rendering.ground_shadow)
+            });
         let at = |p: Position| {
             if stimulus_at(&trial, p) == trial.reference {
                 Arc::clone(&reference)

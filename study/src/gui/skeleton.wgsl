@@ -1,4 +1,5 @@
-// Shaded skeletons (instanced unit cylinders and spheres) and a ground plane with a grid.
+// Shaded skeletons (instanced unit cylinders and spheres), a ground plane with a grid, and a
+// ground shadow (flattened spheres blended over the ground, soft at their rims).
 
 struct Globals {
     view_proj: mat4x4<f32>,
@@ -25,6 +26,8 @@ struct MeshOut {
     @builtin(position) clip: vec4<f32>,
     @location(0) normal: vec3<f32>,
     @location(1) color: vec4<f32>,
+    // The mesh vertex before placement (the shadow's radial falloff).
+    @location(2) local: vec3<f32>,
 };
 
 fn rotate(q: vec4<f32>, v: vec3<f32>) -> vec3<f32> {
@@ -40,7 +43,15 @@ fn vs_mesh(in: MeshIn) -> MeshOut {
     // Inverse-transpose of rotation × scale applied to the normal.
     out.normal = rotate(in.i_rotation, in.normal / in.i_scale);
     out.color = in.i_color;
+    out.local = in.position;
     return out;
+}
+
+@fragment
+fn fs_shadow(in: MeshOut) -> @location(0) vec4<f32> {
+    let r = length(in.local.xz);
+    let soft = 1.0 - smoothstep(0.35, 1.0, r);
+    return vec4<f32>(in.color.rgb, in.color.a * soft);
 }
 
 @fragment

@@ -5,6 +5,16 @@
 //! With FIFO presentation (vsync) and a frame latency of one, the event loop blocks in present
 //! until the previous frame reached the display, so the interval between successive ticks is
 //! the presentation interval. An interval over 1.5 refresh periods means a frame was missed.
+//!
+//! The period is first estimated over [`WARMUP_FRAMES`] frames drawn under a trial's load (the
+//! window draws two skeletons while the clock is not calibrated), then re-checked on trial
+//! frames: the median of the last [`RECHECK_FRAMES`] trial intervals is a running estimate,
+//! and when it departs from the period by more than [`DRIFT_SHARE`] a [`Drift`] is recorded.
+//! A measured period (software rendering, or a monitor whose report the intervals did not
+//! confirm) is then re-based to the running estimate, so a trial's frames are not all counted
+//! as drops against a period measured on a cheaper screen; a period the monitor confirmed is
+//! the display's own and is kept (steady misses of a real refresh are real drops), the drift
+//! is only reported.
 
 use std::time::Instant;
 
@@ -76,6 +86,24 @@ pub enum PeriodSource {
 
 /// Frames needed before the refresh period is estimated.
 pub const WARMUP_FRAMES: usize = 30;
+/// Trial intervals the running estimate is the median of.
+pub const RECHECK_FRAMES: usize = 15;
+/// Relative departure of the running estimate from the period that counts as a drift.
+pub const DRIFT_SHARE: f64 = 0.1;
+
+/// A departure of the running estimate (trial frames) from the refresh period.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Drift {
+    /// Frames since calibration when it was seen.
+    pub frame: u32,
+    /// The period drops were counted against until then, ms.
+    pub from_ms: f64,
+    /// The running estimate, ms.
+    pub to_ms: f64,
+    /// Whether drops are counted against `to_ms` from then on (a measured period), or the
+    /// period stays (a monitor-confirmed one).
+    pub rebased: bool,
+}
 
 /// Per-frame clock of the window.
 #[derive(Debug, Clone)]
@@ -88,6 +116,13 @@ pub struct FrameClock {
     segment: Accumulator,
     recording: bool,
     intervals: Vec<f64>,
+    software: bool,
+    recent: Vec<f64>,
+    next_recent: usize,
+    /// The last running estimate reported (starts at the period).
+    reported_ms: f64,
+    drifts: Vec<Drift>,
+    revision: u32,
 }
 
 impl FrameClock {
@@ -102,7 +137,21 @@ impl FrameClock {
             segment: Accumulator::default(),
             recording: false,
             intervals: Vec::new(),
+            software: false,
+            recent: Vec::with_capacity(RECHECK_FRAMES),
+            next_recent: 0,
+            reported_ms: 0.0,
+            drifts: Vec::new(),
+            revision: 0,
         }
+    }
+
+    /// Marks the adapter as a software rasteriser: its frames are paced by rasterisation, not
+    /// by a display's refresh, so the monitor's report is never taken as the period.
+    #[must_use]
+    pub fn software(mut self, software: bool) -> FrameClock {
+        self.software = software;
+        self
     }
 
     /// Records a frame starting at `now`; returns the interval since the previous frame, ms.
@@ -123,7 +172,11 @@ impl FrameClock {
             None => {
                 self.warmup.push(ms);
                 if self.warmup.len() >= WARMUP_FRAMES {
-                    self.period_ms = Some(estimate_period(&self.warmup, self.monitor_hz));
+                    let monitor = self.monitor_hz.filter(|_| !self.software);
+                    let estimate = estimate_period(&self.warmup, monitor);
+                    self.reported_ms = estimate.0;
+                    self.period_ms = Some(estimate);
+                    self.revision += 1;
                 }
             }
             Some((period, _)) => {
@@ -133,9 +186,87 @@ impl FrameClock {
                     self.segment.frame();
                     self.segment.interval(ms, period);
                     self.intervals.push(ms);
+                    self.recheck(ms);
                 }
             }
         }
+    }
+
+    /// Adds a trial interval to the running estimate and records a drift when the estimate
+    /// departs from the last one reported.
+    fn recheck(&mut self, ms: f64) {
+        if !(ms.is_finite() && ms > 0.0) {
+            return;
+        }
+        if self.recent.len() < RECHECK_FRAMES {
+            self.recent.push(ms);
+        } else if let Some(slot) = self.recent.get_mut(self.next_recent) {
+            *slot = ms;
+        }
+        self.next_recent = (self.next_recent + 1) % RECHECK_FRAMES;
+        if self.recent.len() < RECHECK_FRAMES {
+            return;
+        }
+        let Some((period, source)) = self.period_ms else {
+            return;
+        };
+        let estimate = median(&self.recent);
+        if (estimate - self.reported_ms).abs() <= DRIFT_SHARE * self.reported_ms {
+            return;
+        }
+        let rebased = source == PeriodSource::Measured;
+        self.drifts.push(Drift {
+            frame: self.session.frames,
+            from_ms: period,
+            to_ms: estimate,
+            rebased,
+        });
+        self.reported_ms = estimate;
+        self.revision += 1;
+        if rebased {
+            self.period_ms = Some((estimate, PeriodSource::Measured));
+            // The next estimate is made of frames counted against the new period.
+            self.recent.clear();
+            self.next_recent = 0;
+        }
+    }
+
+    /// Drifts seen on trial frames, in order.
+    #[cfg(test)]
+    pub fn drifts(&self) -> &[Drift] {
+        &self.drifts
+    }
+
+    /// Changes each time the period is estimated or a drift is recorded (a session manifest
+    /// written with an older revision is out of date).
+    pub fn revision(&self) -> u32 {
+        self.revision
+    }
+
+    /// The running estimate of the period from the last [`RECHECK_FRAMES`] trial intervals,
+    /// once that many were seen since the last re-basing.
+    #[cfg(test)]
+    pub fn running_estimate(&self) -> Option<f64> {
+        (self.recent.len() == RECHECK_FRAMES).then(|| median(&self.recent))
+    }
+
+    /// One line on the re-check for the session manifest: the drifts seen on trial frames,
+    /// or `None` while there were none.
+    pub fn drift_note(&self) -> Option<String> {
+        let last = self.drifts.last()?;
+        let what = if last.rebased {
+            "drops counted against it from then on"
+        } else {
+            "the monitor's period kept, so these are missed refreshes"
+        };
+        Some(format!(
+            "refresh re-checked on trial frames: {} drift(s), the last at frame {}: {:.2} ms → {:.2} ms \
+             ({what})",
+            self.drifts.len(),
+            last.frame,
+            last.from_ms,
+            last.to_ms
+        ))
     }
 
     /// The refresh period and where it came from, once estimated.
@@ -187,16 +318,15 @@ impl FrameClock {
 /// The refresh period: the monitor's report when the measured median agrees within 10 %,
 /// otherwise the median interval itself (software rendering, or a report that is wrong).
 pub fn estimate_period(intervals: &[f64], monitor_hz: Option<f64>) -> (f64, PeriodSource) {
-    let mut v: Vec<f64> = intervals
+    let v: Vec<f64> = intervals
         .iter()
         .copied()
         .filter(|x| x.is_finite() && *x > 0.0)
         .collect();
-    v.sort_by(f64::total_cmp);
-    let median = match v.len() {
-        0 => monitor_hz.map_or(1000.0 / 60.0, |h| 1000.0 / h),
-        n if n % 2 == 1 => v[n / 2],
-        n => 0.5 * (v[n / 2 - 1] + v[n / 2]),
+    let median = if v.is_empty() {
+        monitor_hz.map_or(1000.0 / 60.0, |h| 1000.0 / h)
+    } else {
+        median(&v)
     };
     if let Some(hz) = monitor_hz {
         let p = 1000.0 / hz;
@@ -205,6 +335,17 @@ pub fn estimate_period(intervals: &[f64], monitor_hz: Option<f64>) -> (f64, Peri
         }
     }
     (median, PeriodSource::Measured)
+}
+
+/// The median of a non-empty series (0 for an empty one).
+fn median(values: &[f64]) -> f64 {
+    let mut v = values.to_vec();
+    v.sort_by(f64::total_cmp);
+    match v.len() {
+        0 => 0.0,
+        n if n % 2 == 1 => v[n / 2],
+        n => 0.5 * (v[n / 2 - 1] + v[n / 2]),
+    }
 }
 
 #[cfg(test)]
@@ -266,5 +407,91 @@ mod tests {
         assert_eq!(c.segment().frames, 0);
         c.observe(40.0);
         assert_eq!(c.period(), Some((40.0, PeriodSource::Measured)));
+    }
+
+    /// Intervals of a calibration on the welcome screen at `welcome` ms, then one trial of
+    /// `trial` intervals at `trial_ms`; returns the trial's statistics.
+    fn welcome_then_trial(
+        clock: FrameClock,
+        welcome: f64,
+        trial_ms: f64,
+        trial: usize,
+    ) -> (FrameClock, IntervalStats) {
+        let mut c = clock;
+        for k in 0..WARMUP_FRAMES {
+            // A little jitter, as measured intervals have.
+            c.observe(welcome + 0.1 * (k % 3) as f64);
+        }
+        c.start_segment();
+        for k in 0..trial {
+            c.observe(trial_ms + 0.5 * (k % 4) as f64 - 0.75);
+        }
+        let s = c.end_segment();
+        (c, s)
+    }
+
+    #[test]
+    fn a_fast_welcome_screen_does_not_make_every_software_trial_frame_a_drop() {
+        // lavapipe: the welcome screen at 16.7 ms, a trial with two skeletons at 47 ms, for
+        // 5 s (106 frames). With no monitor report, and with a 60 Hz report on a software
+        // adapter, the period is measured and re-based once the trial's frames show it.
+        for clock in [
+            FrameClock::new(None),
+            FrameClock::new(Some(60.0)).software(true),
+        ] {
+            let (c, s) = welcome_then_trial(clock, 16.7, 47.0, 106);
+            assert_eq!(s.frames, 106);
+            assert!(
+                s.dropped <= RECHECK_FRAMES as u32,
+                "{} of 106 frames counted as dropped",
+                s.dropped
+            );
+            let (p, src) = c.period().unwrap();
+            assert_eq!(src, PeriodSource::Measured);
+            assert!((p - 47.0).abs() < 1.0, "re-based to {p}");
+            let d = c.drifts();
+            assert_eq!(d.len(), 1, "{d:?}");
+            assert!(d[0].rebased && (d[0].from_ms - 16.8).abs() < 0.2);
+            let note = c.drift_note().unwrap();
+            assert!(note.contains("16.80 ms → 4"), "{note:?}");
+            // A second trial at the same rate: nothing dropped, no new drift.
+            let mut c = c;
+            c.start_segment();
+            for _ in 0..50 {
+                c.observe(47.2);
+            }
+            assert_eq!(c.end_segment().dropped, 0);
+            assert_eq!(c.drifts().len(), 1);
+        }
+    }
+
+    #[test]
+    fn a_monitor_confirmed_period_is_kept_and_its_misses_are_drops_with_a_drift_reported() {
+        // A GPU on a 60 Hz monitor whose trial misses every other refresh: real drops.
+        let (c, s) = welcome_then_trial(FrameClock::new(Some(60.0)), 16.7, 33.4, 60);
+        assert_eq!(c.period().unwrap().1, PeriodSource::Monitor);
+        assert!((c.period().unwrap().0 - 1000.0 / 60.0).abs() < 1e-9);
+        assert_eq!(s.dropped, 60);
+        let d = c.drifts();
+        assert_eq!(d.len(), 1, "reported once, not once per window: {d:?}");
+        assert!(!d[0].rebased);
+        assert!(c.drift_note().unwrap().contains("missed refreshes"));
+    }
+
+    #[test]
+    fn a_steady_trial_at_the_calibrated_rate_reports_no_drift_and_isolated_drops_count() {
+        let (c, s) = welcome_then_trial(FrameClock::new(None), 47.0, 47.0, 100);
+        assert_eq!((s.dropped, c.drifts().len()), (0, 0));
+        assert!(c.drift_note().is_none());
+        let rev = c.revision();
+        let mut c = c;
+        c.start_segment();
+        for k in 0..60 {
+            c.observe(if k % 10 == 0 { 95.0 } else { 47.0 });
+        }
+        // One long interval in ten leaves the median, and the period, where they were.
+        assert_eq!(c.end_segment().dropped, 6);
+        assert_eq!((c.drifts().len(), c.revision()), (0, rev));
+        assert!((c.running_estimate().unwrap() - 47.0).abs() < 1e-9);
     }
 }

@@ -2,13 +2,15 @@
 //! present mode), the skeleton renderer registered as a paint-callback resource, frame
 //! timing and the adapter/display facts a session manifest records.
 
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Instant;
 
 use anyhow::Context as _;
 use eframe::egui_wgpu::{self, wgpu};
 
-use super::render::{SkeletonRenderer, Targets};
+use super::render::{LOAD_SLOT, SkeletonCallback, SkeletonRenderer, Targets};
+use super::scene::{Figure, FrameShapes, View};
 use super::timing::{FrameClock, IntervalStats, PeriodSource};
 
 /// Depth buffer bits asked of eframe (egui-wgpu makes it `Depth24Plus`).
@@ -117,6 +119,65 @@ pub enum Next {
     Close,
 }
 
+/// Whether `key` was pressed with Ctrl and Shift held, read from the key events of this frame
+/// with the modifiers each event carries. The frame's modifier state is not used: at a low
+/// frame rate a quick chord is pressed and released between two frames, and by the time the
+/// frame runs the modifiers are up again.
+pub fn ctrl_shift_pressed(input: &egui::InputState, key: egui::Key) -> bool {
+    input.events.iter().any(|e| {
+        matches!(e, egui::Event::Key { key: k, pressed: true, repeat: false, modifiers, .. }
+            if *k == key && modifiers.ctrl && modifiers.shift)
+    })
+}
+
+/// What the window draws while the refresh period is being estimated, when the screen itself
+/// draws fewer than two skeletons: two walking figures under the screen's own panels (hidden
+/// by them), so the period is measured under a trial's load.
+struct CalibrationLoad {
+    view: View,
+    figure: Figure,
+    duration_s: f64,
+}
+
+impl CalibrationLoad {
+    fn new() -> CalibrationLoad {
+        let clip = motion::synth::walking_clip(&motion::synth::WalkParams::default());
+        let view = View::framing(&clip);
+        let figure = Figure::new(&clip, &view);
+        let duration_s = figure.duration_s().max(0.1);
+        CalibrationLoad {
+            view,
+            figure,
+            duration_s,
+        }
+    }
+
+    /// Adds the two skeletons to `ui`'s painter, side by side over its whole area, before the
+    /// screen draws (so its panels cover them).
+    fn paint(&mut self, ui: &egui::Ui, now: f64) {
+        let full = ui.max_rect();
+        let w = (full.width() * 0.5).max(1.0);
+        for k in 0..2 {
+            let rect = egui::Rect::from_min_size(
+                egui::pos2(full.left() + k as f32 * w, full.top()),
+                egui::vec2(w, full.height()),
+            );
+            let mut shapes = FrameShapes::default();
+            self.figure
+                .shapes_at((now + 0.25 * k as f64) % self.duration_s, &mut shapes);
+            ui.painter().add(egui_wgpu::Callback::new_paint_callback(
+                rect,
+                SkeletonCallback {
+                    slot: LOAD_SLOT + k,
+                    view: self.view,
+                    aspect: rect.width() / rect.height().max(1.0),
+                    shapes: Arc::new(shapes),
+                },
+            ));
+        }
+    }
+}
+
 struct WindowApp<F> {
     draw: F,
     clock: FrameClock,
@@ -124,6 +185,10 @@ struct WindowApp<F> {
     report: Arc<Mutex<WindowReport>>,
     first: bool,
     closing: bool,
+    software: bool,
+    /// Skeleton viewports the screens drew (load excluded), counted by the renderer.
+    drawn: Arc<AtomicUsize>,
+    load: Option<CalibrationLoad>,
 }
 
 impl<F> WindowApp<F> {
@@ -137,7 +202,7 @@ impl<F> WindowApp<F> {
                 self.facts.monitor_hz = m.refresh_rate_millihertz().map(|mhz| f64::from(mhz) / 1e3);
             }
         }
-        self.clock = FrameClock::new(self.facts.monitor_hz);
+        self.clock = FrameClock::new(self.facts.monitor_hz).software(self.software);
     }
 
     fn publish(&self, cpu: Option<f32>) {
@@ -158,6 +223,17 @@ impl<F: FnMut(&mut egui::Ui, &mut FrameContext<'_>) -> Next> eframe::App for Win
             self.first_frame(frame);
         }
         self.clock.tick(Instant::now());
+        // The screens' skeletons of the previous frame: fewer than a trial's two while the
+        // period is estimated, and the window adds the rest of the load.
+        let drawn = self.drawn.swap(0, Ordering::Relaxed);
+        if self.clock.calibrated() {
+            self.load = None;
+        } else if drawn < 2 {
+            let now = ui.input(|i| i.time);
+            self.load
+                .get_or_insert_with(CalibrationLoad::new)
+                .paint(ui, now);
+        }
         let close_requested = ui.input(|i| i.viewport().close_requested());
         if close_requested && !self.closing {
             ui.ctx()
@@ -255,6 +331,7 @@ where
                     samples: msaa,
                 },
             );
+            let drawn = renderer.drawn_counter();
             rs.renderer.write().callback_resources.insert(renderer);
             let facts = DisplayFacts {
                 adapter: info.name.clone(),
@@ -274,6 +351,9 @@ where
                 report: shared,
                 first: true,
                 closing: false,
+                software,
+                drawn,
+                load: None,
             }) as Box<dyn eframe::App>)
         }),
     );
@@ -285,4 +365,75 @@ where
         .unwrap_or_else(PoisonError::into_inner)
         .clone();
     Ok(r)
+}
+
+#[cfg(test)]
+mod tests {
+    use egui::{Event, Key, Modifiers};
+
+    use super::ctrl_shift_pressed;
+
+    fn key(key: Key, pressed: bool, modifiers: Modifiers) -> Event {
+        Event::Key {
+            key,
+            physical_key: None,
+            pressed,
+            repeat: false,
+            modifiers,
+        }
+    }
+
+    /// Runs one frame over `events`; answers (the chord from the events, the chord as the
+    /// frame's modifier state tells it).
+    fn frame(events: Vec<Event>) -> (bool, bool) {
+        let ctx = egui::Context::default();
+        let mut seen = (false, false);
+        let mut out = ctx.run_ui(
+            egui::RawInput {
+                events,
+                ..egui::RawInput::default()
+            },
+            |ui| {
+                seen = ui.input(|i| {
+                    (
+                        ctrl_shift_pressed(i, Key::P),
+                        i.modifiers.ctrl && i.modifiers.shift && i.key_pressed(Key::P),
+                    )
+                });
+            },
+        );
+        out.textures_delta.clear();
+        seen
+    }
+
+    #[test]
+    fn a_quick_chord_is_taken_from_its_key_event_when_the_modifiers_are_up_by_the_frame() {
+        let both = Modifiers::CTRL | Modifiers::SHIFT;
+        // At 21 fps the whole chord falls between two frames: Ctrl+Shift down, P down and
+        // up, Ctrl+Shift up. The frame's modifier state says none are held.
+        let quick = vec![
+            Event::ModifiersChanged(both),
+            key(Key::P, true, both),
+            key(Key::P, false, both),
+            Event::ModifiersChanged(Modifiers::NONE),
+        ];
+        assert_eq!(frame(quick), (true, false));
+        // Held across the frame, both readings agree.
+        assert_eq!(
+            frame(vec![Event::ModifiersChanged(both), key(Key::P, true, both)]),
+            (true, true)
+        );
+        // P alone, or with Ctrl only, is no chord, whatever the modifiers do later in the
+        // frame.
+        assert_eq!(
+            frame(vec![
+                key(Key::P, true, Modifiers::CTRL),
+                Event::ModifiersChanged(both),
+            ]),
+            (false, true)
+        );
+        assert!(!frame(vec![key(Key::P, true, Modifiers::NONE)]).0);
+        // Another key with the chord's modifiers is not the chord.
+        assert!(!frame(vec![key(Key::O, true, both)]).0);
+    }
 }
