@@ -22,11 +22,11 @@ fn has(got: &[(String, String)], key: &str, words: &str) -> bool {
     got.iter().any(|(k, r)| k == key && r.contains(words))
 }
 
-fn labels(reference: &str, test: &str) -> Option<StimulusLabels> {
-    Some(StimulusLabels {
+fn labels(reference: &str, test: &str) -> StimulusLabels {
+    StimulusLabels {
         reference: reference.into(),
         test: test.into(),
-    })
+    }
 }
 
 #[test]
@@ -37,7 +37,10 @@ fn mos_labels_the_reference_by_default_and_the_file_can_rename_or_hide_them() {
         .replace("test_label = \"Compressed\"\n", "")
         .replace("title = \"Motion quality study\"\n", "");
     let s = parse(&plain).unwrap();
-    assert_eq!(s.presentation.labels, labels("Original", "Compressed"));
+    assert_eq!(
+        s.presentation.labels,
+        Some(labels("Original", "Compressed"))
+    );
     assert_eq!(
         s.title(),
         "mos-paper-000",
@@ -49,7 +52,7 @@ fn mos_labels_the_reference_by_default_and_the_file_can_rename_or_hide_them() {
         .replace("\"Original\"", "\"Reference\"")
         .replace("\"Compressed\"", "\"Coded\"");
     let s = parse(&renamed).unwrap();
-    assert_eq!(s.presentation.labels, labels("Reference", "Coded"));
+    assert_eq!(s.presentation.labels, Some(labels("Reference", "Coded")));
     let hidden = plain.replace("gap_ms = 500\n", "gap_ms = 500\nlabels = false\n");
     assert_eq!(parse(&hidden).unwrap().presentation.labels, None);
 }

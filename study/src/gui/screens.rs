@@ -883,12 +883,11 @@ fn scale_height(ui: &Ui) -> f32 {
 fn scale_value_at(scale: &RatingScale, y: f32, top: f32, bottom: f32) -> f64 {
     let f = f64::from(((bottom - y) / (bottom - top).max(1.0)).clamp(0.0, 1.0));
     let v = scale.min + f * (scale.max - scale.min);
-    match scale.step {
-        Some(_) => scale.snap(v),
-        None => {
-            let q = (scale.max - scale.min) / 100.0;
-            (scale.min + ((v - scale.min) / q).round() * q).clamp(scale.min, scale.max)
-        }
+    if scale.step.is_some() {
+        scale.snap(v)
+    } else {
+        let q = (scale.max - scale.min) / 100.0;
+        (scale.min + ((v - scale.min) / q).round() * q).clamp(scale.min, scale.max)
     }
 }
 

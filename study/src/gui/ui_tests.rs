@@ -415,7 +415,7 @@ fn a_mos_trial_says_which_motion_is_the_original() {
         h.query_by_label("ui-labels").is_none(),
         "not the internal name"
     );
-    let instructions = super::screens::default_instructions(&h.state().0.study_for_tests());
+    let instructions = super::screens::default_instructions(h.state().0.study_for_tests());
     assert!(
         instructions.contains("labelled “Original”") && instructions.contains("“Compressed”"),
         "{instructions}"
