@@ -452,23 +452,47 @@ impl Recorder {
     }
 
     /// Appends the presentation intervals of trial `index` to `frames.csv` beside the trial
-    /// log (`trial_index,interval_ms`, one row per presented frame), so every frame's timing
+    /// log (`trial_index,interval_ms,phase`, one row per presented frame, `phases[k]` what
+    /// frame `k` showed: `a`, `b`, `grey`, `both`, `answer`, ...), so every frame's timing
     /// is kept, not only the per-trial summary. Flushed, not fsynced: the answer itself is
     /// already on disk.
     ///
     /// # Errors
     /// The file cannot be written.
-    pub fn append_frame_intervals(&mut self, index: u32, intervals: &[f64]) -> Result<()> {
+    pub fn append_frame_intervals(
+        &mut self,
+        index: u32,
+        intervals: &[f64],
+        phases: &[&str],
+    ) -> Result<()> {
         use std::fmt::Write as _;
         use std::io::Write as _;
         let path = self.log.dir().join(FRAMES_FILE);
+        // A session begun before the phase column keeps its two columns when resumed.
+        let phased = match std::fs::File::open(&path) {
+            Ok(f) => {
+                use std::io::Read as _;
+                let mut head = Vec::with_capacity(64);
+                f.take(64).read_to_end(&mut head).map_err(io_error(&path))?;
+                head.split(|b| *b == b'\n')
+                    .next()
+                    .is_some_and(|h| h.ends_with(b",phase"))
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => true,
+            Err(e) => return Err(io_error(&path)(e)),
+        };
         let new = !path.exists();
-        let mut text = String::with_capacity(intervals.len() * 12 + 32);
+        let mut text = String::with_capacity(intervals.len() * 20 + 40);
         if new {
-            text.push_str("trial_index,interval_ms\n");
+            text.push_str("trial_index,interval_ms,phase\n");
         }
-        for ms in intervals {
-            let _ = writeln!(text, "{index},{ms:.3}");
+        for (k, ms) in intervals.iter().enumerate() {
+            if phased {
+                let phase = phases.get(k).copied().unwrap_or("");
+                let _ = writeln!(text, "{index},{ms:.3},{phase}");
+            } else {
+                let _ = writeln!(text, "{index},{ms:.3}");
+            }
         }
         let mut f = std::fs::OpenOptions::new()
             .create(true)

@@ -253,7 +253,6 @@ fn run_screens(
     // The clock's revision the manifest's display information was written at (rewritten
     // when a drift re-checked the period).
     let mut display_logged = None;
-    let mut end_shown_at: Option<f64> = None;
     let report = window::run_window(options, move |ui, ctx| {
         if ctx.close_requested {
             // Mid-session this opens the quit confirmation instead of closing.
@@ -279,16 +278,12 @@ fn run_screens(
         screens.ui(ui, ctx.clock);
         if let Some(e) = screens.exit() {
             *exit_seen.borrow_mut() = Some(e.clone());
-            if matches!(e, Exit::Signalled { .. }) {
-                return Next::Close;
-            }
-            // Leave the last screen up briefly so the subject sees it.
-            let now = ui.input(|i| i.time);
-            let since = *end_shown_at.get_or_insert(now);
-            return if now - since > 1.5 || ctx.close_requested {
+            // The end screen stays until the subject closes it (or the window is closed);
+            // a quit or a signal closes at once.
+            return if screens.may_close() || ctx.close_requested {
                 Next::Close
             } else {
-                Next::Animate
+                Next::Idle
             };
         }
         // Idle screens still need frames to measure the display before the first trial.

@@ -67,6 +67,20 @@ fn answer_until(env: &Env, wid: &str, keys: &[&str], rows: usize) {
     }
 }
 
+/// Presses Enter on the end screen (it stays until the subject closes it) until the runner
+/// exits; returns its output.
+fn close_end_screen(env: &Env, wid: &str, mut child: Child) -> std::process::Output {
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while child.try_wait().unwrap().is_none() {
+        assert!(Instant::now() < deadline, "the end screen did not close");
+        std::thread::sleep(Duration::from_millis(700));
+        if child.try_wait().unwrap().is_none() {
+            press(env, wid, &["Return"]);
+        }
+    }
+    child.wait_with_output().unwrap()
+}
+
 /// Pixels that are joint orange, in the left and in the right half of the screen.
 fn orange_per_half(png_path: &Path) -> [usize; 2] {
     let mut dec = png::Decoder::new(std::io::BufReader::new(
@@ -140,7 +154,7 @@ fn study_run_under_xvfb_logs_every_trial_and_resumes_after_a_kill() {
     let wid = find_window(&env, &mut child, "study: e2e");
     std::thread::sleep(Duration::from_millis(500));
     answer_until(&env, &wid, &["Return", "3", "Return"], 6);
-    let out = child.wait_with_output().unwrap();
+    let out = close_end_screen(&env, &wid, child);
     assert!(
         out.status.success(),
         "{}",
@@ -169,10 +183,11 @@ fn study_run_under_xvfb_logs_every_trial_and_resumes_after_a_kill() {
     // frames.csv keeps each of those frames' intervals.
     let frames = std::fs::read_to_string(session_dir(&env).join("frames.csv")).unwrap();
     let mut lines = frames.lines();
-    assert_eq!(lines.next(), Some("trial_index,interval_ms"));
+    assert_eq!(lines.next(), Some("trial_index,interval_ms,phase"));
     let per_trial: Vec<(u32, f64)> = lines
         .map(|l| {
-            let (t, ms) = l.split_once(',').unwrap();
+            let mut f = l.split(',');
+            let (t, ms) = (f.next().unwrap(), f.next().unwrap());
             (t.parse().unwrap(), ms.parse().unwrap())
         })
         .collect();
@@ -277,7 +292,7 @@ fn sigint_saves_the_session_and_resume_completes_it() {
     let wid = find_window(&env, &mut child, "study: e2e");
     std::thread::sleep(Duration::from_millis(500));
     answer_until(&env, &wid, &["Return", "3", "Return"], 6);
-    let out = child.wait_with_output().unwrap();
+    let out = close_end_screen(&env, &wid, child);
     assert!(
         out.status.success(),
         "{}",
@@ -311,4 +326,149 @@ fn a_window_that_cannot_open_leaves_no_session() {
     assert!(err.contains("no session was recorded"), "{err}");
     assert!(!dir.join("results/S01_s1").exists(), "{err}");
     std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// The phases of trial `index` in the session's `frames.csv`, runs of equal phases merged.
+fn phase_runs(env: &Env, index: u32) -> Vec<String> {
+    let frames = std::fs::read_to_string(session_dir(env).join("frames.csv")).unwrap();
+    let mut runs: Vec<String> = Vec::new();
+    for line in frames.lines().skip(1) {
+        let f: Vec<&str> = line.split(',').collect();
+        assert_eq!(f.len(), 3, "{line}");
+        if f[0].parse::<u32>().unwrap() != index {
+            continue;
+        }
+        if runs.last().is_none_or(|r| r != f[2]) {
+            runs.push(f[2].to_string());
+        }
+    }
+    runs
+}
+
+/// DSCQS as BT.500 gives it: the frame log shows A, grey, B, grey, A, grey, B (the grey
+/// between the second A and B included), then the vote; both marks are placed by keys on the
+/// continuous scale and recorded on 0-100.
+#[test]
+fn a_dscqs_trial_is_presented_as_bt500_says_in_the_frame_log() {
+    let Some(env) = setup("dscqs-e2e") else {
+        return;
+    };
+    common::write_walk_stimuli(&env.dir);
+    std::fs::write(
+        env.dir.join("study.toml"),
+        "format_version = 1\nname = \"e2e\"\nprotocol = \"dscqs\"\n\
+         stimuli = \"stimuli/stimuli.json\"\nseed = 5\n[conditions]\nclips = [\"walk\"]\n\
+         codecs = [\"spiht\"]\ntarget_cr = [10]\n[presentation]\ngrey_ms = 700\n",
+    )
+    .unwrap();
+    let mut child = spawn_run(&env, false);
+    let wid = find_window(&env, &mut child, "study: e2e");
+    // Begin, then (once the vote is open) Backspace to start at A, 4 (A: Good, 70), 2 (B:
+    // Poor, 30) and Enter. One key per frame (software rendering draws a few frames a
+    // second); a round cut short by the vote opening is completed by the next.
+    let deadline = Instant::now() + Duration::from_secs(240);
+    while logged_rows(&env) < 1 {
+        assert!(
+            Instant::now() < deadline,
+            "the DSCQS trial was not answered"
+        );
+        for key in ["Return", "BackSpace", "4", "2"] {
+            press(&env, &wid, &[key]);
+            std::thread::sleep(Duration::from_millis(450));
+        }
+    }
+    let out = close_end_screen(&env, &wid, child);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let trials = results::trials::read_trials(&session_dir(&env).join("trials.csv")).unwrap();
+    assert_eq!(
+        trials.records[0].response.answer,
+        protocols::Answer::Pair { a: 70.0, b: 30.0 }
+    );
+    assert_eq!(
+        phase_runs(&env, 0),
+        ["a", "grey", "b", "grey", "a", "grey", "b", "answer"],
+        "frames.csv phases"
+    );
+}
+
+/// Near-white pixels (label text) in the band just above the skeleton viewports, per half.
+fn label_pixels_per_half(png_path: &Path) -> [usize; 2] {
+    let mut dec = png::Decoder::new(std::io::BufReader::new(
+        std::fs::File::open(png_path).unwrap(),
+    ));
+    dec.set_transformations(png::Transformations::normalize_to_color8());
+    let mut reader = dec.read_info().unwrap();
+    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+    let info = reader.next_frame(&mut buf).unwrap();
+    let channels = info.line_size / info.width as usize;
+    let mut halves = [0; 2];
+    // The progress panel is the top ~30 px; the label band lies below it.
+    for y in 30..(info.height as usize / 5) {
+        for x in 0..info.width as usize {
+            let i = y * info.line_size + x * channels;
+            let white = (0..channels.min(3)).all(|c| buf[i + c] > 235);
+            if white {
+                halves[usize::from(x >= info.width as usize / 2)] += 1;
+            }
+        }
+    }
+    halves
+}
+
+/// A screenshot of a MOS trial shows "Original" and "Compressed" as text above the two
+/// motions (read by OCR where `tesseract` is installed; otherwise as white text on both
+/// sides of the band above the viewports).
+#[test]
+fn a_mos_trial_screenshot_shows_both_labels() {
+    let Some(env) = setup("labels-e2e") else {
+        return;
+    };
+    write_study(&env.dir);
+    let mut child = spawn_run(&env, false);
+    let wid = find_window(&env, &mut child, "study: e2e");
+    let shot = env.dir.join("labels.png");
+    let deadline = Instant::now() + Duration::from_secs(90);
+    loop {
+        assert!(Instant::now() < deadline, "no labelled trial appeared");
+        press(&env, &wid, &["Return"]);
+        std::thread::sleep(Duration::from_millis(700));
+        let ok = env
+            .cmd("import")
+            .args(["-window", "root"])
+            .arg(&shot)
+            .status()
+            .unwrap()
+            .success();
+        assert!(ok);
+        let joints = orange_per_half(&shot);
+        if joints[0] > 30 && joints[1] > 30 {
+            break;
+        }
+    }
+    let white = label_pixels_per_half(&shot);
+    eprintln!("label pixels per half {white:?}");
+    assert!(
+        white[0] > 40 && white[1] > 40,
+        "labels above both motions: {white:?}"
+    );
+    if common::have("tesseract") {
+        let out = std::process::Command::new("tesseract")
+            .arg(&shot)
+            .arg("-")
+            .output()
+            .unwrap();
+        let text = String::from_utf8_lossy(&out.stdout);
+        assert!(
+            text.contains("Original") && text.contains("Compressed"),
+            "OCR: {text}"
+        );
+    } else {
+        eprintln!("tesseract not installed: the labels were checked as pixels only");
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
 }

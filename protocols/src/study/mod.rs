@@ -129,10 +129,29 @@ pub struct PresentationSettings {
     pub max_replays: Option<u32>,
     /// Loop playback until the subject answers.
     pub loop_playback: bool,
-    /// Gap between sequential stimuli, ms.
+    /// Blank gap between trials, ms (shown after each answer, with its acknowledgement).
     pub gap_ms: u64,
+    /// Mid-grey field between the intervals of a sequential or DSCQS presentation, ms
+    /// (BT.500 DSCQS: about 3 s).
+    #[serde(default)]
+    pub grey_ms: u64,
+    /// The on-screen names of the reference and the test stimulus, where the design tells
+    /// the subject which is which (MOS); `None`: no labels (DSCQS and 2AFC by design, or a
+    /// MOS study with `labels = false`).
+    #[serde(default)]
+    pub labels: Option<StimulusLabels>,
     /// Duration of one playback, ms (session time estimates, simulation clock).
     pub stimulus_duration_ms: u64,
+}
+
+/// What the reference and the test stimulus are called on screen (`[presentation]
+/// reference_label`, `test_label`).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct StimulusLabels {
+    /// The reference's label (default "Original").
+    pub reference: String,
+    /// The test stimulus' label (default "Compressed").
+    pub test: String,
 }
 
 /// Kind of rating scale.
@@ -398,6 +417,8 @@ pub struct StudyDefinition {
     pub format_version: u32,
     /// Study name.
     pub name: String,
+    /// The title subjects see (`title`); `None`: the name.
+    pub title: Option<String>,
     /// Protocol.
     pub protocol: Protocol,
     /// Manifest path as written in the file (relative to the study file).
@@ -436,6 +457,11 @@ pub fn content_hash(bytes: &[u8]) -> String {
 }
 
 impl StudyDefinition {
+    /// The title shown to subjects: `title` from the study file, or else its name.
+    pub fn title(&self) -> &str {
+        self.title.as_deref().unwrap_or(&self.name)
+    }
+
     /// Reads and validates a study file and its stimulus manifest; a live staircase's codec
     /// settings are checked against `codecs` (see [`crate::catalog`]).
     ///

@@ -1,9 +1,10 @@
-//! `[presentation]`: layout, reference position, playbacks, replays, gaps.
+//! `[presentation]`: layout, reference position, playbacks, replays, the gap between trials,
+//! the grey between intervals, and the labels that say which stimulus is the reference.
 
 use toml::Table;
 
 use super::check::{Ctx, join};
-use super::{PresentationSettings, ReferencePlacement};
+use super::{PresentationSettings, ReferencePlacement, StimulusLabels};
 use crate::record::{Arrangement, Position, Protocol};
 
 pub(super) fn parse_presentation(
@@ -22,7 +23,11 @@ pub(super) fn parse_presentation(
             "max_replays",
             "loop",
             "gap_ms",
+            "grey_ms",
             "stimulus_duration_ms",
+            "labels",
+            "reference_label",
+            "test_label",
         ],
     );
     let arrangement = if protocol == Some(Protocol::Dscqs) {
@@ -69,7 +74,10 @@ pub(super) fn parse_presentation(
     }
     let max_replays = cx.uint(t, P, "max_replays", 1000);
     let loop_playback = cx.boolean(t, P, "loop").unwrap_or(false);
-    let gap_ms = cx.uint(t, P, "gap_ms", 600_000).unwrap_or(500);
+    let gap_given = cx.uint(t, P, "gap_ms", 600_000);
+    let gap_ms = gap_given.unwrap_or(500);
+    let grey_ms = parse_grey(t, arrangement, gap_given, cx);
+    let labels = parse_labels(t, protocol, cx);
     let stimulus_duration_ms = cx
         .uint(t, P, "stimulus_duration_ms", 3_600_000)
         .unwrap_or(5000);
@@ -80,6 +88,89 @@ pub(super) fn parse_presentation(
         max_replays,
         loop_playback,
         gap_ms: u64::from(gap_ms),
+        grey_ms: u64::from(grey_ms),
+        labels,
         stimulus_duration_ms: u64::from(stimulus_duration_ms),
     })
+}
+
+/// BT.500's mid-grey between the DSCQS intervals, about 3 s.
+const DSCQS_GREY_MS: u32 = 3000;
+
+/// Longest stimulus label, characters.
+const MAX_LABEL_CHARS: usize = 40;
+
+/// `grey_ms`: the grey between the intervals of a sequential or DSCQS presentation. Without
+/// it, `gap_ms` when the file gives one (before `grey_ms` existed, `gap_ms` was also this
+/// grey, so older study files keep their timing), else BT.500's 3 s for DSCQS and 500 ms for
+/// sequential. A side-by-side presentation has no such grey.
+fn parse_grey(t: &Table, arrangement: Arrangement, gap_given: Option<u32>, cx: &mut Ctx) -> u32 {
+    const P: &str = "presentation";
+    let grey = cx.uint(t, P, "grey_ms", 600_000);
+    if grey.is_some() && arrangement == Arrangement::SideBySide {
+        cx.err(
+            join(P, "grey_ms"),
+            "a side-by-side presentation has no grey field between stimuli (grey_ms is for \
+             sequential and DSCQS)",
+        );
+    }
+    grey.or(gap_given).unwrap_or(match arrangement {
+        Arrangement::Abab => DSCQS_GREY_MS,
+        Arrangement::Sequential | Arrangement::SideBySide => 500,
+    })
+}
+
+/// `labels`, `reference_label`, `test_label`: shown only where the design tells the subject
+/// which stimulus is the reference (MOS, paper 000: "compare side by side the original and
+/// compressed motions"). DSCQS (BT.500: the subject is not told which of A and B is the
+/// reference) and 2AFC (the reference's side is what the subject must find) refuse them.
+fn parse_labels(t: &Table, protocol: Option<Protocol>, cx: &mut Ctx) -> Option<StimulusLabels> {
+    const P: &str = "presentation";
+    let asked = cx.boolean(t, P, "labels");
+    let hidden_by_design = match protocol {
+        Some(Protocol::Dscqs) => {
+            Some("DSCQS does not tell the subject which of A and B is the reference (ITU-R BT.500)")
+        }
+        Some(Protocol::Staircase) => {
+            Some("in a 2AFC trial the reference's position is what the subject must find")
+        }
+        Some(Protocol::Mos) | None => None,
+    };
+    if let (Some(true), Some(why)) = (asked, hidden_by_design) {
+        cx.err(join(P, "labels"), format!("cannot be true: {why}"));
+    }
+    let shown = asked.unwrap_or(protocol == Some(Protocol::Mos)) && hidden_by_design.is_none();
+    let mut text = |key: &str, default: &str| -> String {
+        let Some(v) = cx.string(t, P, key) else {
+            return default.to_string();
+        };
+        let n = v.trim().chars().count();
+        if !shown {
+            cx.err(
+                join(P, key),
+                match hidden_by_design {
+                    Some(why) => format!("not shown: {why}"),
+                    None => "not shown with labels = false (remove it or the labels setting)"
+                        .to_string(),
+                },
+            );
+        } else if n == 0 || n > MAX_LABEL_CHARS || v.contains(['\n', '\r']) {
+            cx.err(
+                join(P, key),
+                format!("{v:?}: give one line of 1-{MAX_LABEL_CHARS} characters"),
+            );
+        }
+        v.trim().to_string()
+    };
+    let reference = text("reference_label", "Original");
+    let test = text("test_label", "Compressed");
+    if shown && !reference.is_empty() && reference == test {
+        cx.err(
+            join(P, "test_label"),
+            format!(
+                "{test:?} is also the reference's label: the subject could not tell them apart"
+            ),
+        );
+    }
+    shown.then_some(StimulusLabels { reference, test })
 }

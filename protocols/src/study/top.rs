@@ -21,6 +21,9 @@ use crate::catalog::CodecCatalog;
 use crate::manifest::StimulusManifest;
 use crate::record::Protocol;
 
+/// Longest title shown to subjects, characters.
+const MAX_TITLE_CHARS: usize = 120;
+
 /// Longest study name.
 const MAX_NAME_LEN: usize = 64;
 
@@ -38,6 +41,7 @@ fn is_safe_name(name: &str) -> bool {
 const TOP_KEYS: &[&str] = &[
     "format_version",
     "name",
+    "title",
     "protocol",
     "stimuli",
     "seed",
@@ -104,6 +108,7 @@ pub(super) fn parse_table(
     Some(StudyDefinition {
         format_version: header.version? as u32,
         name: header.name?,
+        title: header.title,
         protocol: protocol?,
         stimuli_path: header.stimuli_path?,
         seed: header.seed? as u64,
@@ -124,6 +129,7 @@ pub(super) fn parse_table(
 struct Header {
     version: Option<i64>,
     name: Option<String>,
+    title: Option<String>,
     protocol: Option<Protocol>,
     stimuli_path: Option<String>,
     seed: Option<i64>,
@@ -152,6 +158,18 @@ fn parse_header(t: &Table, cx: &mut Ctx) -> Header {
             ),
         );
     }
+    let title = cx.string(t, "", "title").and_then(|v| {
+        let n = v.trim().chars().count();
+        if n == 0 || n > MAX_TITLE_CHARS || v.contains(['\n', '\r']) {
+            cx.err(
+                "title",
+                format!("{v:?}: give one line of 1-{MAX_TITLE_CHARS} characters (omit it to show the name)"),
+            );
+            None
+        } else {
+            Some(v.trim().to_string())
+        }
+    });
     let protocol: Option<Protocol> = cx.parse_enum(t, "", "protocol");
     let protocol = cx.required(protocol, t, "", "protocol");
     let stimuli_path = cx.string(t, "", "stimuli");
@@ -161,6 +179,7 @@ fn parse_header(t: &Table, cx: &mut Ctx) -> Header {
     Header {
         version,
         name,
+        title,
         protocol,
         stimuli_path,
         seed,

@@ -3,7 +3,9 @@
 //! Pure (no drawing): the window asks [`Presentation::at`] what to show at the current
 //! presentation time and [`Presentation::accepts_response`] whether an answer counts yet.
 //! Side by side (MOS, 2AFC): both clips together, `playback_count` times. Sequential: first,
-//! grey, second. DSCQS (ITU-R BT.500): A, grey, B, grey, A, B, each labelled.
+//! grey, second. DSCQS (ITU-R BT.500): A, grey, B, grey, A, grey, B, each labelled "A" or
+//! "B", then the vote on grey. The grey lasts `grey_ms`. Each frame names its phase
+//! ([`Frame::phase`]), which the session's frame log records.
 
 use protocols::record::{Arrangement, Position, Trial};
 use protocols::study::PresentationSettings;
@@ -30,6 +32,25 @@ pub struct Step {
     pub duration_s: f64,
 }
 
+impl Show {
+    /// The phase name of a frame showing this (`frames.csv`).
+    pub fn phase(self) -> &'static str {
+        match self {
+            Show::Both => "both",
+            Show::One(Position::A) => "a",
+            Show::One(Position::B) => "b",
+            Show::One(Position::First) => "first",
+            Show::One(Position::Second) => "second",
+            Show::One(Position::Left) => "left",
+            Show::One(Position::Right) => "right",
+            Show::Grey => "grey",
+        }
+    }
+}
+
+/// The phase name of frames after the required presentation, while the subject answers.
+pub const ANSWER_PHASE: &str = "answer";
+
 /// What to draw at one instant.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Frame {
@@ -41,6 +62,20 @@ pub struct Frame {
     pub clip_time_s: f64,
     /// True once the whole required presentation has been shown.
     pub finished: bool,
+    /// True after the end of the schedule (not inside a replay).
+    pub past_end: bool,
+}
+
+impl Frame {
+    /// Which phase of the trial this frame belongs to: `a`, `b`, `first`, `second`, `both`,
+    /// `grey`, or `answer` once the presentation is over (replays show their stimuli again).
+    pub fn phase(&self) -> &'static str {
+        if self.finished && self.past_end {
+            ANSWER_PHASE
+        } else {
+            self.show.phase()
+        }
+    }
 }
 
 /// The schedule of one trial and where its playback stands.
@@ -78,7 +113,7 @@ impl Presentation {
         } else {
             1.0
         };
-        let gap = settings.gap_ms as f64 / 1e3;
+        let gap = settings.grey_ms as f64 / 1e3;
         let plays = settings.playback_count.max(1);
         let mut steps = Vec::new();
         let grey = |steps: &mut Vec<Step>| {
@@ -118,12 +153,12 @@ impl Presentation {
                 }
             }
             Arrangement::Abab => {
-                // BT.500 DSCQS: A, grey, B, grey, A, B (the second pair is when votes are cast).
+                // BT.500 DSCQS: A, grey, B, grey, A, grey, B, then the vote (on grey).
                 for (i, p) in [Position::A, Position::B, Position::A, Position::B]
                     .into_iter()
                     .enumerate()
                 {
-                    if i == 1 || i == 2 {
+                    if i > 0 {
                         grey(&mut steps);
                     }
                     steps.push(Step {
@@ -168,6 +203,7 @@ impl Presentation {
                     label: s.label,
                     clip_time_s: t,
                     finished: self.shown_once,
+                    past_end: false,
                 };
             }
             t -= s.duration_s;
@@ -190,6 +226,7 @@ impl Presentation {
                     last.duration_s
                 },
                 finished: true,
+                past_end: true,
             },
             // Sequential and DSCQS: a grey field with the voting question.
             Arrangement::Sequential | Arrangement::Abab => Frame {
@@ -197,6 +234,7 @@ impl Presentation {
                 label: None,
                 clip_time_s: 0.0,
                 finished: true,
+                past_end: true,
             },
         }
     }
@@ -261,13 +299,15 @@ mod tests {
             playback_count: plays,
             max_replays: Some(1),
             loop_playback: false,
-            gap_ms,
+            gap_ms: 700,
+            grey_ms: gap_ms,
+            labels: None,
             stimulus_duration_ms: 2000,
         }
     }
 
     #[test]
-    fn dscqs_shows_a_grey_b_grey_a_b_then_asks() {
+    fn dscqs_shows_a_grey_b_grey_a_grey_b_then_asks() {
         let t = trial(Arrangement::Abab, Position::B);
         let mut p = Presentation::new(&t, &settings(Arrangement::Abab, 500, 1), 2.0, 10.0);
         let shows: Vec<(Show, Option<&str>)> =
@@ -280,21 +320,34 @@ mod tests {
                 (Show::One(Position::B), Some("B")),
                 (Show::Grey, None),
                 (Show::One(Position::A), Some("A")),
+                (Show::Grey, None),
                 (Show::One(Position::B), Some("B")),
             ]
         );
-        assert!((p.duration_s() - 9.0).abs() < 1e-12);
+        assert!((p.duration_s() - 9.5).abs() < 1e-12);
         assert_eq!(stimulus_at(&t, Position::B), "ref");
         assert_eq!(stimulus_at(&t, Position::A), "test");
-        // A 10-12, grey 12-12.5, B 12.5-14.5, grey 14.5-15, A 15-17, B 17-19.
+        // A 10-12, grey 12-12.5, B 12.5-14.5, grey 14.5-15, A 15-17, grey 17-17.5, B 17.5-19.5.
         let f = p.at(10.0 + 3.25);
         assert_eq!(f.show, Show::One(Position::B));
         assert!((f.clip_time_s - 0.75).abs() < 1e-9 && !f.finished);
-        assert_eq!(p.at(14.75).show, Show::Grey);
-        assert_eq!(p.at(17.5).show, Show::One(Position::B));
-        assert!(!p.accepts_response());
-        let f = p.at(19.01);
+        assert_eq!(f.phase(), "b");
+        assert_eq!(p.at(14.75).phase(), "grey");
+        assert_eq!(
+            p.at(17.25).phase(),
+            "grey",
+            "grey between the second A and B"
+        );
+        let f = p.at(17.6);
+        assert_eq!((f.show, f.phase()), (Show::One(Position::B), "b"));
+        assert!((f.clip_time_s - 0.1).abs() < 1e-9);
+        assert!(!p.at(19.4).finished && !p.accepts_response());
+        let f = p.at(19.51);
         assert!(f.finished && f.show == Show::Grey && p.accepts_response());
+        assert_eq!(f.phase(), "answer");
+        // A replay shows the stimuli again under their own phases.
+        assert!(p.replay(30.0));
+        assert_eq!(p.at(30.5).phase(), "a");
     }
 
     #[test]

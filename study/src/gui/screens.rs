@@ -1,18 +1,20 @@
-//! The subject's screens: welcome (subject fields, consent, instructions), trials, breaks and
-//! the end, plus the experimenter's pause. Pure egui: the window wraps it in eframe and the
-//! UI tests drive it with `egui_kittest`.
+//! The subject's screens: welcome (title, subject fields, consent, instructions), trials, the
+//! blank gap after each answer, breaks and the end, plus the experimenter's pause. Pure egui:
+//! the window wraps it in eframe and the UI tests drive it with `egui_kittest`.
 //!
 //! A trial's answer widgets stay disabled, and its answer keys are ignored, until the stimuli
 //! have been shown as the protocol requires ([`Presentation::accepts_response`]), and while
 //! the experimenter pause is open. An answer is logged (fsynced) by the [`Recorder`] before
-//! the next trial is even asked for.
+//! the next trial is even asked for; then "Answer recorded" shows over the blank gap
+//! (`gap_ms`). Where the design tells the subject which motion is the reference (MOS), the
+//! study file's labels say it on screen; DSCQS and 2AFC never do.
 
 use std::collections::HashMap;
 use std::sync::Arc;
 
 use egui::{Align, Color32, Key, Layout, RichText, Ui, Vec2};
 use protocols::record::{Answer, Arrangement, Block, Position, Protocol, Response, Trial};
-use protocols::study::{RatingScale, ScaleKind};
+use protocols::study::{RatingScale, ScaleKind, StimulusLabels};
 use protocols::{FrameTiming, StimulusEncoding, StudyDefinition};
 
 use super::flow::{Frame, Presentation, Show, stimulus_at};
@@ -28,25 +30,81 @@ pub const QUALITY_LABELS: [&str; 5] = ["Excellent", "Good", "Fair", "Poor", "Bad
 /// The 2AFC question of thesis ch. 5.
 pub const AFC_QUESTION: &str = "Which motion looks more natural?";
 
-/// The protocol's default instructions.
-pub fn default_instructions(protocol: Protocol) -> &'static str {
-    match protocol {
+/// Shown after an answer was logged, over the blank gap before the next trial.
+pub const ANSWER_RECORDED: &str = "Answer recorded";
+
+/// How long the acknowledgement stays up at least, seconds (into the next trial when the
+/// gap is shorter).
+const ACK_S: f64 = 1.0;
+
+/// The end screen ignores Enter this long, seconds, so the Enter that confirmed the last
+/// answer cannot close it unseen.
+const END_KEY_DELAY_S: f64 = 0.7;
+
+/// How the rating is given, for the instructions.
+fn scale_instructions(scale: &RatingScale, what: &str) -> String {
+    match scale.kind {
+        ScaleKind::Categorical => format!(
+            "Rate {what} from {} (worst) to {} (best), with the mouse or the number keys \
+             (the Up and Down arrow keys move by one step), then press Continue (Enter).",
+            format_rating(scale.min),
+            format_rating(scale.max)
+        ),
+        ScaleKind::Continuous => format!(
+            "Rate {what} by placing a mark on the scale, from Bad at the bottom to Excellent at \
+             the top: click or drag, or press 1 (Bad) to 5 (Excellent) and move the mark with \
+             the Up and Down arrow keys (Page Up and Page Down for larger steps). Then press \
+             Continue (Enter)."
+        ),
+    }
+}
+
+/// The default instructions for `study` (used when `[session] instructions` is not given):
+/// they say which motion is the original where the screen labels it (MOS), and that nobody
+/// says so where the design hides it (DSCQS, 2AFC).
+pub fn default_instructions(study: &StudyDefinition) -> String {
+    let p = &study.presentation;
+    match study.protocol {
         Protocol::Mos => {
-            "You will see an original motion and a compressed version of it side by side. \
-             Rate the quality of the compressed motion from 1 (Bad) to 5 (Excellent) in half \
-             steps, with the mouse or the number keys, then press Continue (Enter). The first \
-             few trials show the range of qualities you will meet."
+            let how = if p.arrangement == Arrangement::Sequential {
+                "one after the other"
+            } else {
+                "side by side"
+            };
+            let which = match &p.labels {
+                Some(StimulusLabels { reference, test }) => format!(
+                    "the original motion, labelled “{reference}”, and a compressed version of it, \
+                     labelled “{test}”"
+                ),
+                None => "the original motion and a compressed version of it (they are not \
+                         labelled)"
+                    .to_string(),
+            };
+            format!(
+                "Each trial shows {which}, {how}. {} The first few trials show the range of \
+                 qualities you will meet.",
+                scale_instructions(&study.scale, "the quality of the compressed motion")
+            )
         }
         Protocol::Dscqs => {
-            "Each trial shows two motions, A and B, twice: A, B, A, B. One of them is the \
-             original, in random order. After the second showing, rate the quality of both A \
-             and B (with the mouse, or number keys: first A, then B), then press Continue \
-             (Enter)."
+            let keys = if study.scale.kind == ScaleKind::Continuous {
+                " The number keys mark A first, then B; the Left and Right \
+                 arrow keys choose which scale the keys move."
+            } else {
+                " The number keys rate A first, then B; the Left and Right \
+                 arrow keys choose which row the keys change."
+            };
+            format!(
+                "Each trial shows two motions, A and B, twice, with a grey screen between them: \
+                 A, B, A, B. One of them may be the original; you are not told which. After the \
+                 second B, rate both. {}{keys}",
+                scale_instructions(&study.scale, "the quality of A and of B")
+            )
         }
-        Protocol::Staircase => {
-            "Each trial shows two motions side by side. Choose the one that looks more natural \
-             with the Left or Right arrow key (or click). Answer even when you are unsure."
-        }
+        Protocol::Staircase => "Each trial shows two motions side by side. Choose the one that \
+                                looks more natural with the Left or Right arrow key (or click). \
+                                Answer even when you are unsure."
+            .to_string(),
     }
 }
 
@@ -54,6 +112,8 @@ enum Screen {
     Welcome,
     Break,
     Trial(Box<TrialScreen>),
+    /// The blank between an answer and the next trial, until this presentation time.
+    Gap(f64),
     End(String),
     Failed(String),
 }
@@ -96,20 +156,71 @@ struct TrialScreen {
     /// DSCQS keyboard: number keys now rate B.
     editing_b: bool,
     gate_open_s: Option<f64>,
+    /// The phase of every frame drawn since the trial's frame count started (`frames.csv`).
+    phases: Vec<&'static str>,
     shapes: [Arc<FrameShapes>; 2],
     /// How the test stimulus was encoded for this trial (live staircase).
     encoding: Option<StimulusEncoding>,
 }
 
-/// Total trials of a session, when the protocol plans them up front.
-fn planned_trials(study: &StudyDefinition) -> Option<u32> {
+/// How many trials a session has, as far as the subject can be told.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Planned {
+    /// Exactly this many (MOS, DSCQS: planned up front).
+    Exactly(u32),
+    /// At most this many (staircases capped by `max_trials`; they may stop earlier).
+    AtMost(u32),
+    /// Not known (a staircase that stops on reversals only).
+    Unknown,
+}
+
+impl Planned {
+    /// "Trial k of n", "Trial k of at most n" or "Trial k".
+    fn trial_text(self, k: u32) -> String {
+        match self {
+            Planned::Exactly(n) => format!("Trial {k} of {n}"),
+            Planned::AtMost(n) => format!("Trial {k} of at most {n}"),
+            Planned::Unknown => format!("Trial {k}"),
+        }
+    }
+
+    /// "k of n trials done", and so on.
+    fn done_text(self, done: u32) -> String {
+        match self {
+            Planned::Exactly(n) => format!("Trials done: {done} of {n}."),
+            Planned::AtMost(n) => format!("Trials done: {done} (at most {n})."),
+            Planned::Unknown => format!("Trials done: {done}."),
+        }
+    }
+
+    /// The number a progress bar runs to (exact plans only).
+    fn exact(self) -> Option<u32> {
+        match self {
+            Planned::Exactly(n) if n > 0 => Some(n),
+            _ => None,
+        }
+    }
+}
+
+/// Total trials of a session: exact when the protocol plans them up front, an upper bound
+/// when every interleaved staircase has `max_trials`.
+fn planned_trials(study: &StudyDefinition) -> Planned {
     match study.protocol {
-        Protocol::Mos | Protocol::Dscqs => Some(
+        Protocol::Mos | Protocol::Dscqs => Planned::Exactly(
             (study.familiarization.len()
                 + study.conditions.len()
                 + study.session.hidden_repeats as usize) as u32,
         ),
-        Protocol::Staircase => None,
+        Protocol::Staircase => study
+            .staircase
+            .as_ref()
+            .and_then(|s| {
+                s.tracks
+                    .iter()
+                    .map(|t| t.settings.max_trials)
+                    .sum::<Option<u32>>()
+            })
+            .map_or(Planned::Unknown, Planned::AtMost),
     }
 }
 
@@ -149,8 +260,14 @@ pub struct StudyUi {
     fields: Vec<(String, String)>,
     consent: bool,
     views: HashMap<String, View>,
-    planned: Option<u32>,
+    planned: Planned,
     gpu: bool,
+    /// Until when "Answer recorded" stays up.
+    ack_until: Option<f64>,
+    /// When the end screen first showed.
+    end_since: Option<f64>,
+    /// The subject (or experimenter) closed the end screen.
+    closed: bool,
 }
 
 impl StudyUi {
@@ -191,6 +308,9 @@ impl StudyUi {
             views: HashMap::new(),
             planned,
             gpu,
+            ack_until: None,
+            end_since: None,
+            closed: false,
         }
     }
 
@@ -198,6 +318,12 @@ impl StudyUi {
     #[cfg(test)]
     pub fn stimuli_mut(&mut self) -> &mut dyn StimulusSource {
         self.stimuli.as_mut()
+    }
+
+    /// The study (UI tests compare texts with it).
+    #[cfg(test)]
+    pub fn study_for_tests(&self) -> &StudyDefinition {
+        &self.study
     }
 
     /// Where the reference is in the trial on screen (UI tests answer right or wrong).
@@ -219,9 +345,21 @@ impl StudyUi {
         &mut self.recorder
     }
 
-    /// True while a trial presentation is running (the window repaints continuously then).
+    /// True while a trial presentation or the gap after it runs (the window repaints
+    /// continuously then).
     pub fn animating(&self) -> bool {
-        matches!(self.screen, Screen::Trial(_))
+        matches!(self.screen, Screen::Trial(_) | Screen::Gap(_))
+    }
+
+    /// Whether the window may close now: once the session has stopped and, when it finished
+    /// or failed, the end screen was closed (Close, or Enter). An experimenter's quit or a
+    /// signal closes at once. The window's close button always may, once stopped.
+    pub fn may_close(&self) -> bool {
+        match self.exit {
+            None => false,
+            Some(Exit::Quit { .. } | Exit::Signalled { .. }) => true,
+            Some(Exit::Finished(_) | Exit::Failed(_)) => self.closed,
+        }
     }
 
     /// Stops the session before its end (the experimenter quit, or a signal): the manifest
@@ -268,14 +406,10 @@ impl StudyUi {
             Screen::Welcome => self.welcome(ui, now, active, clock),
             Screen::Break => self.break_screen(ui, now, active, clock),
             Screen::Trial(_) => self.trial_screen(ui, now, active, clock),
+            &Screen::Gap(until) => self.gap_screen(ui, now, until, clock),
             Screen::End(text) | Screen::Failed(text) => {
                 let text = text.clone();
-                egui::CentralPanel::default().show(ui, |ui| {
-                    ui.vertical_centered(|ui| {
-                        ui.add_space(ui.available_height() * 0.35);
-                        ui.heading(text);
-                    });
-                });
+                self.end_screen(ui, now, &text, active);
             }
         }
         if self.pause != Pause::None {
@@ -288,7 +422,7 @@ impl StudyUi {
         egui::CentralPanel::default().show(ui, |ui| {
             ui.vertical_centered(|ui| {
                 ui.add_space(24.0);
-                ui.heading(&self.study.name);
+                ui.heading(self.study.title());
                 ui.add_space(12.0);
                 if self.recorder.answered() > 0 {
                     ui.label(format!(
@@ -303,7 +437,7 @@ impl StudyUi {
                 .session
                 .instructions
                 .clone()
-                .unwrap_or_else(|| default_instructions(self.study.protocol).to_string());
+                .unwrap_or_else(|| default_instructions(&self.study));
             ui.label(RichText::new(instructions).size(18.0));
             ui.add_space(16.0);
             if !self.fields.is_empty() {
@@ -327,8 +461,8 @@ impl StudyUi {
                 );
                 ui.add_space(12.0);
             }
-            let ready = self.fields.iter().all(|(_, v)| !v.trim().is_empty())
-                && (self.study.session.consent.is_none() || self.consent);
+            let missing = self.missing_to_begin();
+            let ready = missing.is_none();
             // Trials start once the refresh period is known, so every trial's drop count is
             // against the measured period.
             let measured = clock.calibrated() || !self.gpu;
@@ -341,8 +475,8 @@ impl StudyUi {
                 {
                     begin = true;
                 }
-                if !ready {
-                    ui.label("Fill in every field to begin.");
+                if let Some(missing) = missing {
+                    ui.label(missing);
                 } else if !measured {
                     ui.label("Measuring the display…");
                 }
@@ -368,12 +502,41 @@ impl StudyUi {
         }
     }
 
+    /// What the subject still has to do before Begin: the empty fields by name, and the
+    /// consent box; `None` when nothing.
+    fn missing_to_begin(&self) -> Option<String> {
+        let empty: Vec<String> = self
+            .fields
+            .iter()
+            .filter(|(_, v)| v.trim().is_empty())
+            .map(|(k, _)| k.replace('_', " "))
+            .collect();
+        let mut todo = Vec::new();
+        if !empty.is_empty() {
+            todo.push(format!("fill in {}", empty.join(", ")));
+        }
+        if self.study.session.consent.is_some() && !self.consent {
+            todo.push("tick “I agree to take part”".to_string());
+        }
+        (!todo.is_empty()).then(|| format!("To begin, {}.", todo.join(" and ")))
+    }
+
     fn break_screen(&mut self, ui: &mut Ui, now: f64, active: bool, clock: &mut FrameClock) {
         let mut go = false;
+        let done = self.recorder.answered();
+        let planned = self.planned;
         egui::CentralPanel::default().show(ui, |ui| {
             ui.vertical_centered(|ui| {
                 ui.add_space(ui.available_height() * 0.3);
                 ui.heading("Take a short break.");
+                ui.label(planned.done_text(done));
+                if let Some(n) = planned.exact() {
+                    ui.add(
+                        egui::ProgressBar::new(done as f32 / n as f32)
+                            .desired_width(320.0)
+                            .show_percentage(),
+                    );
+                }
                 ui.label("Continue when you are ready.");
                 ui.add_space(16.0);
                 go = ui
@@ -384,6 +547,50 @@ impl StudyUi {
         });
         if go {
             self.start_trial(now, false, clock);
+        }
+    }
+
+    /// The blank between trials: mid-grey where the stimuli were, the progress panel saying
+    /// the answer was recorded; then the next trial (or a break, or the end).
+    fn gap_screen(&mut self, ui: &mut Ui, now: f64, until: f64, clock: &mut FrameClock) {
+        let done = self.recorder.answered();
+        egui::Panel::top("progress").show(ui, |ui| {
+            ui.horizontal(|ui| {
+                ui.label(RichText::new(format!("{ANSWER_RECORDED}.")).strong());
+                ui.label(self.planned.done_text(done));
+            });
+        });
+        egui::CentralPanel::default()
+            .frame(egui::Frame::new().fill(Color32::from_gray(96)))
+            .show(ui, |_| {});
+        if now >= until {
+            self.start_trial(now, true, clock);
+        }
+    }
+
+    /// The end (or a stop): stays until the subject closes it (Close, or Enter once it has
+    /// been up a moment) or the window is closed.
+    fn end_screen(&mut self, ui: &mut Ui, now: f64, text: &str, active: bool) {
+        let since = *self.end_since.get_or_insert(now);
+        let closable = matches!(self.exit, Some(Exit::Finished(_) | Exit::Failed(_)));
+        let mut close = false;
+        egui::CentralPanel::default().show(ui, |ui| {
+            ui.vertical_centered(|ui| {
+                ui.add_space(ui.available_height() * 0.35);
+                ui.heading(text);
+                if closable {
+                    ui.add_space(16.0);
+                    close = ui
+                        .add_enabled(active, egui::Button::new(RichText::new("Close").size(18.0)))
+                        .clicked()
+                        || (active
+                            && now - since >= END_KEY_DELAY_S
+                            && ui.input(|i| i.key_pressed(Key::Enter)));
+                }
+            });
+        });
+        if close {
+            self.closed = true;
         }
     }
 
@@ -471,6 +678,7 @@ impl StudyUi {
             rating_b: None,
             editing_b: false,
             gate_open_s: None,
+            phases: Vec::new(),
             shapes: [Arc::default(), Arc::default()],
             encoding,
         })
@@ -487,14 +695,17 @@ impl StudyUi {
             t.gate_open_s = Some(now);
         }
         let open = active && t.presentation.accepts_response();
-        progress_panel(ui, t, self.recorder.answered(), self.planned);
+        let ack = self.ack_until.is_some_and(|u| now < u);
+        progress_panel(ui, t, self.recorder.answered(), self.planned, ack);
+        let labels = self.study.presentation.labels.as_ref();
         let (answer, replay) = egui::Panel::bottom("answer")
             .min_size(150.0)
+            .resizable(false)
             .show(ui, |ui| {
                 ui.add_space(8.0);
                 let answer = ui
                     .vertical_centered(|ui| match self.study.protocol {
-                        Protocol::Mos => mos_answer(ui, t, &self.study.scale, open),
+                        Protocol::Mos => mos_answer(ui, t, &self.study.scale, labels, open),
                         Protocol::Dscqs => dscqs_answer(ui, t, &self.study.scale, open),
                         Protocol::Staircase => afc_answer(ui, t, open),
                     })
@@ -502,7 +713,9 @@ impl StudyUi {
                 (answer, replay_row(ui, t, active))
             })
             .inner;
-        stimuli_panel(ui, t, &frame, self.gpu);
+        stimuli_panel(ui, t, &frame, labels, self.gpu);
+        // One phase per frame, as the clock keeps one interval per frame (frames.csv).
+        t.phases.push(frame.phase());
         if replay {
             t.presentation.replay(now);
         }
@@ -526,14 +739,26 @@ impl StudyUi {
             interval_sd_ms: stats.sd_ms,
         });
         let (trial, encoding) = (t.trial.clone(), t.encoding.take());
-        match self.log_answer(trial, response, encoding, timing, clock) {
-            Ok(()) => self.advance(now, clock),
+        let phases = std::mem::take(&mut t.phases);
+        match self.log_answer(trial, response, encoding, timing, clock, &phases) {
+            Ok(()) => {
+                // The documented gap between trials, as a blank with the acknowledgement;
+                // the acknowledgement stays a moment into the next trial when the gap is
+                // shorter.
+                let gap = self.study.presentation.gap_ms as f64 / 1e3;
+                self.ack_until = Some(now + gap.max(ACK_S));
+                if gap > 0.0 {
+                    self.screen = Screen::Gap(now + gap);
+                } else {
+                    self.advance(now, clock);
+                }
+            }
             Err(e) => self.fail(&e),
         }
     }
 
     /// Logs an answer (fsynced) and, when the display was measured, the trial's frame
-    /// intervals.
+    /// intervals with the phase each frame showed.
     fn log_answer(
         &mut self,
         trial: Trial,
@@ -541,6 +766,7 @@ impl StudyUi {
         encoding: Option<StimulusEncoding>,
         timing: Option<FrameTiming>,
         clock: &FrameClock,
+        phases: &[&str],
     ) -> lab::Result<()> {
         let elapsed = self.recorder.elapsed_ms();
         let index = trial.index;
@@ -548,7 +774,7 @@ impl StudyUi {
             .record(trial, response, elapsed, encoding, timing)?;
         if timing.is_some() {
             self.recorder
-                .append_frame_intervals(index, clock.segment_intervals())?;
+                .append_frame_intervals(index, clock.segment_intervals(), phases)?;
         }
         Ok(())
     }
@@ -599,6 +825,7 @@ impl StudyUi {
         if let Screen::Trial(t) = &mut self.screen {
             t.presentation.restart(now);
             t.gate_open_s = None;
+            t.phases.clear();
             clock.start_segment();
             clock.reset_last();
         }
@@ -642,19 +869,156 @@ fn rating_row(ui: &mut Ui, scale: &RatingScale, value: &mut Option<f64>, open: b
             });
         }
         ScaleKind::Continuous => {
-            ui.horizontal(|ui| {
-                ui.label(QUALITY_LABELS[4]);
-                let mut v = value.unwrap_or(0.5 * (scale.min + scale.max));
-                let slider = egui::Slider::new(&mut v, scale.min..=scale.max)
-                    .step_by(scale.step.unwrap_or(1.0))
-                    .text(id);
-                if ui.add_enabled(open, slider).changed() {
-                    *value = Some(scale.snap(v));
-                }
-                ui.label(QUALITY_LABELS[0]);
-            });
+            vertical_scale(ui, scale, value, open, false, id);
         }
     }
+}
+
+/// Height of a continuous scale, points: BT.500's scale is about 10 cm; on a small window
+/// it is what fits.
+fn scale_height(ui: &Ui) -> f32 {
+    (ui.ctx().content_rect().height() * 0.35).clamp(150.0, 380.0)
+}
+
+/// The value on a continuous scale at `y` in a bar spanning `top..bottom`, rounded to the
+/// scale's step, or to a hundredth of its range (whole numbers on BT.500's 0-100).
+fn scale_value_at(scale: &RatingScale, y: f32, top: f32, bottom: f32) -> f64 {
+    let f = f64::from(((bottom - y) / (bottom - top).max(1.0)).clamp(0.0, 1.0));
+    let v = scale.min + f * (scale.max - scale.min);
+    if scale.step.is_some() {
+        scale.snap(v)
+    } else {
+        let q = (scale.max - scale.min) / 100.0;
+        (scale.min + ((v - scale.min) / q).round() * q).clamp(scale.min, scale.max)
+    }
+}
+
+/// One BT.500 continuous quality scale: a vertical bar divided into five equal sections,
+/// Excellent at the top to Bad at the bottom, named `name` above it. It carries no mark
+/// until the subject places one (click or drag; keys in [`keyboard_continuous`]); `active`
+/// outlines it as the one the keys move. Screen readers see a slider named `name` whose
+/// value is absent until marked.
+fn vertical_scale(
+    ui: &mut Ui,
+    scale: &RatingScale,
+    value: &mut Option<f64>,
+    open: bool,
+    active: bool,
+    name: &str,
+) -> egui::Response {
+    let h = scale_height(ui);
+    ui.vertical(|ui| {
+        ui.label(RichText::new(name).strong().size(20.0));
+        let (rect, _) = ui.allocate_exact_size(Vec2::new(190.0, h + 16.0), egui::Sense::hover());
+        let bar = egui::Rect::from_min_size(
+            egui::pos2(rect.right() - 60.0, rect.top() + 8.0),
+            Vec2::new(44.0, h),
+        );
+        let id = ui.scope_id().with(("quality scale", name));
+        let sense = if open {
+            egui::Sense::click_and_drag()
+        } else {
+            egui::Sense::hover()
+        };
+        let response = ui.interact(bar.expand(8.0), id, sense);
+        if open
+            && (response.clicked() || response.dragged())
+            && let Some(pos) = response
+                .interact_pointer_pos()
+                .or_else(|| ui.input(|i| i.pointer.latest_pos()))
+        {
+            *value = Some(scale_value_at(scale, pos.y, bar.top(), bar.bottom()));
+        }
+        let visuals = ui.visuals();
+        let text = if open {
+            visuals.text_color()
+        } else {
+            visuals.weak_text_color()
+        };
+        let painter = ui.painter();
+        painter.rect_filled(bar, 2.0, visuals.extreme_bg_color);
+        let section = h / 5.0;
+        for (k, label) in QUALITY_LABELS.iter().enumerate() {
+            let y = bar.top() + section * k as f32;
+            if k > 0 {
+                painter.hline(bar.x_range(), y, egui::Stroke::new(1.0, text));
+            }
+            painter.text(
+                egui::pos2(bar.left() - 10.0, y + section * 0.5),
+                egui::Align2::RIGHT_CENTER,
+                *label,
+                egui::FontId::proportional(16.0),
+                text,
+            );
+        }
+        let outline = if active && open {
+            egui::Stroke::new(3.0, visuals.selection.stroke.color)
+        } else {
+            egui::Stroke::new(1.5, text)
+        };
+        painter.rect_stroke(bar, 2.0, outline, egui::StrokeKind::Outside);
+        if let Some(v) = *value {
+            let f = ((v - scale.min) / (scale.max - scale.min)).clamp(0.0, 1.0) as f32;
+            let y = bar.bottom() - f * h;
+            let mark = Color32::from_rgb(230, 80, 40);
+            painter.hline(
+                (bar.left() - 6.0)..=(bar.right() + 6.0),
+                y,
+                egui::Stroke::new(4.0, mark),
+            );
+            painter.add(egui::Shape::convex_polygon(
+                vec![
+                    egui::pos2(bar.right() + 6.0, y),
+                    egui::pos2(bar.right() + 16.0, y - 7.0),
+                    egui::pos2(bar.right() + 16.0, y + 7.0),
+                ],
+                mark,
+                egui::Stroke::NONE,
+            ));
+        }
+        let marked = *value;
+        response.widget_info(|| {
+            let mut info = egui::WidgetInfo::labeled(egui::accesskit::Role::Slider, open, name);
+            info.value = marked;
+            info
+        });
+        response
+    })
+    .inner
+}
+
+/// Keys of a continuous scale: 1-5 place the mark in the middle of Bad … Excellent, ↑/↓
+/// move it by one hundredth of the range (or the step), Page Up/Down by a tenth; true when a
+/// number key was used.
+fn keyboard_continuous(ui: &Ui, scale: &RatingScale, value: &mut Option<f64>) -> bool {
+    let range = scale.max - scale.min;
+    let fine = scale.step.unwrap_or(range / 100.0);
+    let mut digit = false;
+    ui.input(|i| {
+        for (k, key) in DIGITS.iter().take(5).enumerate() {
+            if i.key_pressed(*key) {
+                *value = Some(scale.snap(scale.min + (k as f64 + 0.5) / 5.0 * range));
+                digit = true;
+            }
+        }
+        let moves = [
+            (Key::ArrowUp, fine),
+            (Key::ArrowDown, -fine),
+            (Key::PageUp, range / 10.0),
+            (Key::PageDown, -range / 10.0),
+        ];
+        for (key, d) in moves {
+            for _ in 0..i.num_presses(key) {
+                let from = value.unwrap_or(scale.min + 0.5 * range);
+                let to = (from + d).clamp(scale.min, scale.max);
+                *value = Some(match scale.step {
+                    Some(_) => scale.snap(to),
+                    None => (to / fine).round() * fine,
+                });
+            }
+        }
+    });
+    digit
 }
 
 /// The number keys 1-9.
@@ -670,17 +1034,20 @@ const DIGITS: [Key; 9] = [
     Key::Num9,
 ];
 
-/// Number keys pick whole ratings; up/down move by the scale's step.
-fn keyboard_rating(ui: &Ui, scale: &RatingScale, value: &mut Option<f64>) {
-    if scale.kind != ScaleKind::Categorical {
-        return;
+/// Number keys pick whole ratings (on a continuous scale: a section); up/down move by the
+/// scale's step. True when a number key rated.
+fn keyboard_rating(ui: &Ui, scale: &RatingScale, value: &mut Option<f64>) -> bool {
+    if scale.kind == ScaleKind::Continuous {
+        return keyboard_continuous(ui, scale, value);
     }
     let cats = categories(scale);
+    let mut digit = false;
     ui.input(|i| {
         for (k, &key) in DIGITS.iter().enumerate() {
             let v = (k + 1) as f64;
             if i.key_pressed(key) && cats.iter().any(|c| (c - v).abs() < 1e-9) {
                 *value = Some(v);
+                digit = true;
             }
         }
         let step = |d: isize| {
@@ -697,21 +1064,22 @@ fn keyboard_rating(ui: &Ui, scale: &RatingScale, value: &mut Option<f64>) {
             *value = step(-1);
         }
     });
+    digit
 }
 
-/// "Trial k of n", a practice mark and a progress bar.
-fn progress_panel(ui: &mut Ui, t: &TrialScreen, done: u32, planned: Option<u32>) {
+/// "Trial k of n" (or "of at most n"), a practice mark, a progress bar, and the previous
+/// answer's acknowledgement while it lasts.
+fn progress_panel(ui: &mut Ui, t: &TrialScreen, done: u32, planned: Planned, ack: bool) {
     egui::Panel::top("progress").show(ui, |ui| {
         ui.horizontal(|ui| {
-            let text = match planned {
-                Some(n) => format!("Trial {} of {n}", done + 1),
-                None => format!("Trial {}", done + 1),
-            };
-            ui.label(text);
+            ui.label(planned.trial_text(done + 1));
             if t.trial.block == Block::Familiarization {
                 ui.label(RichText::new("(practice)").italics());
             }
-            if let Some(n) = planned.filter(|n| *n > 0) {
+            if ack {
+                ui.label(RichText::new(format!("{ANSWER_RECORDED}.")).strong());
+            }
+            if let Some(n) = planned.exact() {
                 ui.add(
                     egui::ProgressBar::new(done as f32 / n as f32)
                         .desired_width(240.0)
@@ -722,27 +1090,75 @@ fn progress_panel(ui: &mut Ui, t: &TrialScreen, done: u32, planned: Option<u32>)
     });
 }
 
-/// Whether Continue (or Enter) confirms an answer that is complete.
-fn confirmed(ui: &mut Ui, open: bool, complete: bool) -> bool {
-    ui.add_enabled(open && complete, egui::Button::new("Continue"))
-        .clicked()
-        || (open && complete && ui.input(|i| i.key_pressed(Key::Enter)))
+/// Whether Continue (or Enter) confirms an answer that is complete; while it is not, and
+/// answers are open, `missing` says beside the disabled button what is left to do.
+fn confirmed(ui: &mut Ui, open: bool, complete: bool, missing: &str) -> bool {
+    ui.horizontal(|ui| {
+        let w = 110.0;
+        ui.add_space(((ui.available_width() - w) * 0.5).max(0.0));
+        let go = ui
+            .add_enabled(
+                open && complete,
+                egui::Button::new("Continue").min_size(Vec2::new(w, 30.0)),
+            )
+            .clicked()
+            || (open && complete && ui.input(|i| i.key_pressed(Key::Enter)));
+        if open && !complete {
+            ui.label(RichText::new(missing).color(ui.visuals().warn_fg_color));
+        }
+        go
+    })
+    .inner
 }
 
-/// MOS: one rating of the compressed motion.
-fn mos_answer(ui: &mut Ui, t: &mut TrialScreen, scale: &RatingScale, open: bool) -> Option<Answer> {
-    ui.label(RichText::new("Rate the quality of the compressed motion").size(18.0));
-    rating_row(ui, scale, &mut t.rating, open, "rating");
+/// What a missing rating asks for.
+fn rate_hint(scale: &RatingScale, what: &str) -> String {
+    match scale.kind {
+        ScaleKind::Categorical => format!("Choose a rating for {what} to continue."),
+        ScaleKind::Continuous => format!("Mark the scale of {what} to continue."),
+    }
+}
+
+/// MOS: one rating of the compressed motion (named by its label where labels are shown).
+fn mos_answer(
+    ui: &mut Ui,
+    t: &mut TrialScreen,
+    scale: &RatingScale,
+    labels: Option<&StimulusLabels>,
+    open: bool,
+) -> Option<Answer> {
+    let (question, what) = match labels {
+        Some(l) => (
+            format!("Rate the quality of the motion labelled “{}”", l.test),
+            format!("“{}”", l.test),
+        ),
+        None => (
+            "Rate the quality of the compressed motion".to_string(),
+            "the compressed motion".to_string(),
+        ),
+    };
+    ui.label(RichText::new(question).size(18.0));
+    let name = labels.map_or("Quality", |l| l.test.as_str());
+    if scale.kind == ScaleKind::Continuous {
+        ui.horizontal(|ui| {
+            ui.add_space(((ui.available_width() - 190.0) * 0.5).max(0.0));
+            vertical_scale(ui, scale, &mut t.rating, open, true, name);
+        });
+    } else {
+        rating_row(ui, scale, &mut t.rating, open, name);
+    }
     if open {
         keyboard_rating(ui, scale, &mut t.rating);
     }
-    if confirmed(ui, open, t.rating.is_some()) {
+    if confirmed(ui, open, t.rating.is_some(), &rate_hint(scale, &what)) {
         return t.rating.map(Answer::Rating);
     }
     None
 }
 
-/// DSCQS: a rating of A and one of B.
+/// DSCQS: a rating of A and one of B. On a continuous scale, BT.500's pair of vertical
+/// scales, shown for the vote once the presentation is over; on a categorical one, a row of
+/// grades for each.
 fn dscqs_answer(
     ui: &mut Ui,
     t: &mut TrialScreen,
@@ -750,33 +1166,72 @@ fn dscqs_answer(
     open: bool,
 ) -> Option<Answer> {
     ui.label(RichText::new("Rate the quality of A and of B").size(18.0));
-    ui.horizontal(|ui| {
-        ui.label(RichText::new("A").strong().size(18.0));
-        rating_row(ui, scale, &mut t.rating, open, "rating A");
-    });
-    ui.horizontal(|ui| {
-        ui.label(RichText::new("B").strong().size(18.0));
-        rating_row(ui, scale, &mut t.rating_b, open, "rating B");
-    });
+    match scale.kind {
+        ScaleKind::Continuous => {
+            if t.presentation.accepts_response() {
+                let touched = ui
+                    .horizontal(|ui| {
+                        let w = 2.0 * 190.0 + 60.0;
+                        ui.add_space(((ui.available_width() - w) * 0.5).max(0.0));
+                        let a = vertical_scale(ui, scale, &mut t.rating, open, !t.editing_b, "A");
+                        ui.add_space(60.0);
+                        let b = vertical_scale(ui, scale, &mut t.rating_b, open, t.editing_b, "B");
+                        let used = |r: &egui::Response| r.clicked() || r.dragged();
+                        [used(&a), used(&b)]
+                    })
+                    .inner;
+                // The scale last used by mouse is the one the keys move.
+                if touched[0] {
+                    t.editing_b = false;
+                } else if touched[1] {
+                    t.editing_b = true;
+                }
+            }
+        }
+        ScaleKind::Categorical => {
+            for (name, row, editing) in [
+                ("A", &mut t.rating, !t.editing_b),
+                ("B", &mut t.rating_b, t.editing_b),
+            ] {
+                ui.horizontal(|ui| {
+                    let text = RichText::new(name).strong().size(18.0);
+                    ui.label(if editing && open {
+                        text.underline()
+                    } else {
+                        text
+                    });
+                    rating_row(ui, scale, row, open, name);
+                });
+            }
+        }
+    }
     if open {
-        // Keys: number keys rate A, then B; arrows adjust the row being rated; Backspace goes
-        // back to A.
+        // Keys: number keys rate A, then B; ↑/↓ (and Page Up/Down) adjust the one being
+        // rated; ←/→ choose A or B; Backspace goes back to A.
         let row = if t.editing_b {
             &mut t.rating_b
         } else {
             &mut t.rating
         };
-        keyboard_rating(ui, scale, row);
-        let digit = ui.input(|i| DIGITS.iter().any(|k| i.key_pressed(*k)));
+        let digit = keyboard_rating(ui, scale, row);
         if digit && !t.editing_b && t.rating.is_some() {
             t.editing_b = true;
         }
-        if ui.input(|i| i.key_pressed(Key::Backspace)) {
-            t.editing_b = false;
-        }
+        ui.input(|i| {
+            if i.key_pressed(Key::Backspace) || i.key_pressed(Key::ArrowLeft) {
+                t.editing_b = false;
+            } else if i.key_pressed(Key::ArrowRight) {
+                t.editing_b = true;
+            }
+        });
     }
     let both = t.rating.zip(t.rating_b);
-    if confirmed(ui, open, both.is_some()) {
+    let missing = match (t.rating, t.rating_b) {
+        (None, None) => "A and B",
+        (None, Some(_)) => "A",
+        _ => "B",
+    };
+    if confirmed(ui, open, both.is_some(), &rate_hint(scale, missing)) {
         return both.map(|(a, b)| Answer::Pair { a, b });
     }
     None
@@ -835,26 +1290,61 @@ fn replay_row(ui: &mut Ui, t: &TrialScreen, active: bool) -> bool {
     .inner
 }
 
+/// The label of the stimulus at `p` where the study labels the reference, else `None`.
+fn stimulus_label<'a>(
+    t: &TrialScreen,
+    p: Position,
+    labels: Option<&'a StimulusLabels>,
+) -> Option<&'a str> {
+    labels.map(|l| {
+        if p == t.trial.reference_position {
+            l.reference.as_str()
+        } else {
+            l.test.as_str()
+        }
+    })
+}
+
+/// Height of the band above side-by-side viewports that holds their labels, points.
+const LABEL_BAND: f32 = 44.0;
+
 /// The stimuli as the presentation schedule shows them now: both side by side, one of them,
-/// or the grey between, with the position's label.
-fn stimuli_panel(ui: &mut Ui, t: &mut TrialScreen, frame: &Frame, gpu: bool) {
+/// or the grey between, with the position's label; where the study labels the reference
+/// (MOS), "Original" and "Compressed" (its texts) above or before the motions instead.
+fn stimuli_panel(
+    ui: &mut Ui,
+    t: &mut TrialScreen,
+    frame: &Frame,
+    labels: Option<&StimulusLabels>,
+    gpu: bool,
+) {
     egui::CentralPanel::default()
         .frame(egui::Frame::new().fill(Color32::from_gray(96)))
         .show(ui, |ui| {
             let full = ui.available_rect_before_wrap();
-            let painter = ui.painter();
+            let painter = ui.painter().clone();
+            let mut names: Vec<(egui::Rect, &str)> = Vec::new();
             match frame.show {
                 Show::Grey => {}
                 Show::Both => {
                     let gap = 12.0;
+                    let band = if labels.is_some() { LABEL_BAND } else { 0.0 };
                     let w = (full.width() - gap) * 0.5;
-                    let h = w.min(full.height());
-                    let top = full.center().y - h * 0.5;
+                    let h = w.min(full.height() - band);
+                    let top = full.center().y - (h - band) * 0.5;
                     for k in 0..2 {
                         let left = full.left() + k as f32 * (w + gap);
                         let rect =
                             egui::Rect::from_min_size(egui::pos2(left, top), Vec2::new(w, h));
-                        draw_viewport(painter, gpu, t, k, rect, frame.clip_time_s);
+                        draw_viewport(&painter, gpu, t, k, rect, frame.clip_time_s);
+                        let p = if k == 0 { t.first } else { t.first.other() };
+                        if let Some(name) = stimulus_label(t, p, labels) {
+                            let above = egui::Rect::from_min_max(
+                                egui::pos2(rect.left(), top - band),
+                                egui::pos2(rect.right(), top),
+                            );
+                            names.push((above, name));
+                        }
                     }
                 }
                 Show::One(p) => {
@@ -865,10 +1355,27 @@ fn stimuli_panel(ui: &mut Ui, t: &mut TrialScreen, frame: &Frame, gpu: bool) {
                         full.center() + Vec2::new(0.0, 20.0),
                         Vec2::new(w, h),
                     );
-                    draw_viewport(painter, gpu, t, k, rect, frame.clip_time_s);
+                    draw_viewport(&painter, gpu, t, k, rect, frame.clip_time_s);
                 }
             }
-            if let Some(label) = frame.label {
+            for (rect, name) in names {
+                ui.put(
+                    rect,
+                    egui::Label::new(
+                        RichText::new(name)
+                            .size(28.0)
+                            .strong()
+                            .color(Color32::WHITE),
+                    ),
+                );
+            }
+            // One stimulus at a time: its label (MOS: which is the original), else the
+            // schedule's ("A", "B", "1", "2").
+            let label = match frame.show {
+                Show::One(p) => stimulus_label(t, p, labels).or(frame.label),
+                Show::Both | Show::Grey => frame.label,
+            };
+            if let Some(label) = label {
                 ui.with_layout(Layout::top_down(Align::Center), |ui| {
                     ui.label(
                         RichText::new(label)

@@ -5,6 +5,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use egui::Key;
+use egui::accesskit::Role;
 use egui_kittest::Harness;
 use egui_kittest::kittest::{NodeT as _, Queryable as _};
 use protocols::StudyDefinition;
@@ -171,8 +172,8 @@ fn a_mos_trial_is_rated_by_clicking_four_and_a_half() {
     let r = rows(&run.session_dir);
     assert_eq!(r.len(), 1);
     assert_eq!(r[0].response.answer, Answer::Rating(4.5));
-    // The second trial, by keyboard: 3, up (3.5), Enter.
-    watch(&mut h, 1.2);
+    // The second trial (after the 0.5 s gap), by keyboard: 3, up (3.5), Enter.
+    watch(&mut h, 1.7);
     h.key_press(Key::Num3);
     h.run_steps(1);
     h.key_press(Key::ArrowUp);
@@ -182,6 +183,7 @@ fn a_mos_trial_is_rated_by_clicking_four_and_a_half() {
     let r = rows(&run.session_dir);
     assert_eq!(r.len(), 2);
     assert_eq!(r[1].response.answer, Answer::Rating(3.5));
+    watch(&mut h, 0.5);
     assert!(matches!(h.state().0.exit(), Some(Exit::Finished(_))));
     let m: results::SessionManifest = read_json(&run.session_dir.join(SESSION_FILE)).unwrap();
     assert_eq!(m.status, SessionState::Complete);
@@ -199,6 +201,11 @@ fn the_study_files_instructions_and_consent_gate_the_session() {
             .is_some()
     );
     assert!(h.get_by_label("Begin").accesskit_node().is_disabled());
+    assert!(
+        h.query_by_label("To begin, tick “I agree to take part”.")
+            .is_some(),
+        "the hint says what is missing"
+    );
     h.key_press(Key::Enter);
     h.run_steps(2);
     assert!(
@@ -250,8 +257,8 @@ fn a_response_before_the_stimulus_finished_is_ignored() {
 fn a_dscqs_pair_is_rated_twice() {
     let (mut h, run) = harness(fixture("dscqs", DSCQS));
     begin(&mut h);
-    // A, grey, B, grey, A, B: 4 × 1 s + 2 × 0.2 s.
-    watch(&mut h, 4.6);
+    // A, grey, B, grey, A, grey, B: 4 × 1 s + 3 × 0.2 s.
+    watch(&mut h, 4.8);
     let fours: Vec<_> = h.get_all_by_label("4").collect();
     assert_eq!(fours.len(), 2, "one row of ratings for A and one for B");
     fours[0].click();
@@ -271,6 +278,7 @@ fn a_dscqs_pair_is_rated_twice() {
     };
     assert_eq!(r[0].outcome.score_reference, Some(reference));
     assert_eq!(r[0].outcome.score_test, Some(test));
+    watch(&mut h, 0.3);
     assert!(matches!(h.state().0.exit(), Some(Exit::Finished(_))));
     drop(run.fx);
 }
@@ -279,7 +287,7 @@ fn a_dscqs_pair_is_rated_twice() {
 fn a_dscqs_pair_can_be_rated_from_the_keyboard() {
     let (mut h, run) = harness(fixture("dscqs-keys", DSCQS));
     begin(&mut h);
-    watch(&mut h, 4.6);
+    watch(&mut h, 4.8);
     // 5 rates A, 3 then ↓ rate B (2), Enter records.
     for key in [Key::Num5, Key::Num3, Key::ArrowDown, Key::Enter] {
         h.key_press(key);
@@ -354,7 +362,7 @@ fn closing_the_window_mid_session_asks_first() {
 fn a_live_staircase_prefetches_the_next_levels_while_a_trial_runs() {
     let (mut h, run) = harness(fixture("live", LIVE));
     begin(&mut h);
-    assert!(h.query_by_label("Trial 1").is_some());
+    assert!(h.query_by_label("Trial 1 of at most 3").is_some());
     let live = h.state_mut().0.stimuli_mut();
     live.settle();
     // Level 20 shown; a correct answer keeps 20 (two-down), a wrong one goes up to 30.
@@ -378,9 +386,252 @@ fn a_live_staircase_prefetches_the_next_levels_while_a_trial_runs() {
     assert!((e.achieved_cr - 20.0).abs() < 0.5, "{}", e.achieved_cr);
     // Trial 2 at 30 came from the cache; its own lookahead adds 40 (wrong) only, since a
     // correct answer keeps 30.
-    assert!(h.query_by_label("Trial 2").is_some());
+    watch(&mut h, 0.5);
+    assert!(h.query_by_label("Trial 2 of at most 3").is_some());
     let live = h.state_mut().0.stimuli_mut();
     live.settle();
     assert_eq!(live.ready(), 3);
+    drop(run.fx);
+}
+
+/// A MOS study with a title, a 0.4 s gap and a break before every second trial.
+const MOS_LABELLED: &str = "protocol = \"mos\"\ntitle = \"Motion quality\"\n\
+    [conditions]\nclips = [\"walk\"]\ncodecs = [\"spiht\"]\ntarget_cr = [10, 20]\n\
+    [presentation]\nloop = true\ngap_ms = 400\n\
+    [session]\nbreak_every_trials = 1\nsubject_fields = [\"age\", \"normal_vision\"]\n";
+
+/// The label nodes reading `text`.
+fn label_rects(h: &Harness<'_, (StudyUi, FrameClock)>, text: &str) -> Vec<egui::Rect> {
+    h.get_all_by_label(text).map(|n| n.rect()).collect()
+}
+
+#[test]
+fn a_mos_trial_says_which_motion_is_the_original() {
+    let (mut h, run) = harness(fixture("labels", MOS_LABELLED));
+    h.run_steps(2);
+    // The subject sees the study's title, and the instructions say which is which.
+    assert!(h.query_by_label("Motion quality").is_some());
+    assert!(
+        h.query_by_label("ui-labels").is_none(),
+        "not the internal name"
+    );
+    let instructions = super::screens::default_instructions(h.state().0.study_for_tests());
+    assert!(
+        instructions.contains("labelled “Original”") && instructions.contains("“Compressed”"),
+        "{instructions}"
+    );
+    assert!(h.query_by_label(&instructions).is_some());
+    // Begin names what is missing.
+    assert!(
+        h.query_by_label("To begin, fill in age, normal vision.")
+            .is_some()
+    );
+    for (field, value) in [("age", "31"), ("normal vision", "yes")] {
+        let node = h.get_by_role_and_label(Role::TextInput, field);
+        node.focus();
+        h.run_steps(1);
+        h.get_by_role_and_label(Role::TextInput, field)
+            .type_text(value);
+        h.run_steps(1);
+        if field == "age" {
+            h.run_steps(1);
+            assert!(
+                h.query_by_label("To begin, fill in normal vision.")
+                    .is_some()
+            );
+        }
+    }
+    h.run_steps(1);
+    h.get_by_label("Begin").click();
+    h.run_steps(3);
+    // Both labels, each above its own motion: the reference's side is the plan's.
+    let original = label_rects(&h, "Original");
+    let compressed = label_rects(&h, "Compressed");
+    assert_eq!((original.len(), compressed.len()), (1, 1));
+    let reference = h.state().0.pending_reference().unwrap();
+    let left_is_original = original[0].center().x < compressed[0].center().x;
+    assert_eq!(left_is_original, reference == Position::Left);
+    assert!((original[0].center().y - compressed[0].center().y).abs() < 1.0);
+    assert!(
+        h.query_by_label("Rate the quality of the motion labelled “Compressed”")
+            .is_some()
+    );
+    // Continue is disabled, with a hint, until a rating is chosen.
+    watch(&mut h, 1.2);
+    assert!(h.get_by_label("Continue").accesskit_node().is_disabled());
+    assert!(
+        h.query_by_label("Choose a rating for “Compressed” to continue.")
+            .is_some()
+    );
+    h.get_by_label("4").click();
+    h.run_steps(1);
+    assert!(
+        h.query_by_label("Choose a rating for “Compressed” to continue.")
+            .is_none()
+    );
+    h.get_by_label("Continue").click();
+    h.run_steps(2);
+    assert_eq!(rows(&run.session_dir).len(), 1);
+    // The gap: a blank (no stimulus labels, no answer row) saying the answer was taken.
+    assert!(h.query_by_label("Answer recorded.").is_some());
+    assert!(h.query_by_label("Original").is_none());
+    assert!(h.query_by_label("Continue").is_none());
+    // Then the break, with the progress so far.
+    watch(&mut h, 0.4);
+    assert!(h.query_by_label("Take a short break.").is_some());
+    assert!(h.query_by_label("Trials done: 1 of 2.").is_some());
+    h.get_by_label("Continue").click();
+    h.run_steps(2);
+    assert!(h.query_by_label("Trial 2 of 2").is_some());
+    watch(&mut h, 1.2);
+    h.key_press(Key::Num2);
+    h.run_steps(1);
+    h.key_press(Key::Enter);
+    h.run_steps(1);
+    assert_eq!(rows(&run.session_dir).len(), 2);
+    // The end screen stays until the subject closes it; the Enter that answered, or one
+    // pressed at once, does not close it.
+    watch(&mut h, 0.5);
+    assert!(matches!(h.state().0.exit(), Some(Exit::Finished(_))));
+    assert!(
+        h.query_by_label("The session is complete. Thank you!")
+            .is_some()
+    );
+    h.key_press(Key::Enter);
+    h.run_steps(1);
+    assert!(!h.state().0.may_close());
+    watch(&mut h, 3.0);
+    assert!(
+        !h.state().0.may_close(),
+        "the end screen does not close by itself"
+    );
+    h.get_by_label("Close").click();
+    h.run_steps(1);
+    assert!(h.state().0.may_close());
+    drop(run.fx);
+}
+
+#[test]
+fn labels_can_be_hidden_and_are_never_shown_in_a_staircase() {
+    let hidden = MOS.replace("max_replays = 1\n", "max_replays = 1\nlabels = false\n");
+    let (mut h, run) = harness(fixture("nolabels", &hidden));
+    h.run_steps(2);
+    h.get_by_role_and_label(Role::TextInput, "age").focus();
+    h.run_steps(1);
+    h.get_by_role_and_label(Role::TextInput, "age")
+        .type_text("40");
+    h.run_steps(2);
+    h.get_by_label("Begin").click();
+    h.run_steps(3);
+    assert!(h.query_by_label("Trial 1 of 2").is_some());
+    assert!(h.query_by_label("Original").is_none());
+    assert!(
+        h.query_by_label("Rate the quality of the compressed motion")
+            .is_some()
+    );
+    drop(run.fx);
+    let (mut h, run) = harness(fixture("afc-labels", AFC));
+    begin(&mut h);
+    assert!(h.query_by_label("Trial 1 of at most 3").is_some());
+    assert!(h.query_by_label("Original").is_none() && h.query_by_label("Compressed").is_none());
+    drop(run.fx);
+}
+
+/// DSCQS on BT.500's continuous scale, with a short grey.
+const DSCQS_CONTINUOUS: &str = "protocol = \"dscqs\"\n\
+    [conditions]\nclips = [\"walk\"]\ncodecs = [\"spiht\"]\ntarget_cr = [10]\n\
+    [presentation]\ngrey_ms = 200\n\
+    [session]\nfamiliarization = 0\nhidden_repeats = 0\n";
+
+#[test]
+fn dscqs_votes_on_two_vertical_scales_by_mouse_and_keys() {
+    let (mut h, run) = harness(fixture("dscqs-cont", DSCQS_CONTINUOUS));
+    begin(&mut h);
+    // No scale while A, grey, B, grey, A, grey, B play (4 × 1 s + 3 × 0.2 s).
+    watch(&mut h, 4.3);
+    assert!(h.query_by_role_and_label(Role::Slider, "A").is_none());
+    watch(&mut h, 0.5);
+    // Two unmarked vertical scales (no value until the subject marks one), the five labels
+    // once each per scale, a disabled Continue and the hint saying what is missing.
+    for name in ["A", "B"] {
+        let node = h.get_by_role_and_label(Role::Slider, name);
+        assert_eq!(
+            node.accesskit_node().numeric_value(),
+            None,
+            "{name} unmarked"
+        );
+        assert!(!node.accesskit_node().is_disabled());
+        let r = node.rect();
+        assert!(r.height() > 2.0 * r.width(), "{name} is vertical: {r:?}");
+    }
+    assert!(h.get_by_label("Continue").accesskit_node().is_disabled());
+    assert!(
+        h.query_by_label("Mark the scale of A and B to continue.")
+            .is_some()
+    );
+    assert!(
+        h.query_by_label("rating A").is_none(),
+        "no internal ids on screen"
+    );
+    // A click in the middle of B marks it 50 and makes B the scale the keys move.
+    h.get_by_role_and_label(Role::Slider, "B").click();
+    h.run_steps(1);
+    assert_eq!(
+        h.get_by_role_and_label(Role::Slider, "B")
+            .accesskit_node()
+            .numeric_value(),
+        Some(50.0)
+    );
+    assert!(
+        h.query_by_label("Mark the scale of A to continue.")
+            .is_some()
+    );
+    // ← selects A, 4 puts its mark in "Good" (70) and moves on to B, ↑ raises B to 51,
+    // Page Down lowers it to 41.
+    for key in [Key::ArrowLeft, Key::Num4, Key::ArrowUp, Key::PageDown] {
+        h.key_press(key);
+        h.run_steps(1);
+    }
+    let value = |h: &Harness<'_, (StudyUi, FrameClock)>, name: &str| {
+        h.get_by_role_and_label(Role::Slider, name)
+            .accesskit_node()
+            .numeric_value()
+    };
+    assert_eq!((value(&h, "A"), value(&h, "B")), (Some(70.0), Some(41.0)));
+    assert!(!h.get_by_label("Continue").accesskit_node().is_disabled());
+    h.key_press(Key::Enter);
+    h.run_steps(2);
+    let r = rows(&run.session_dir);
+    assert_eq!(r.len(), 1);
+    assert_eq!(r[0].response.answer, Answer::Pair { a: 70.0, b: 41.0 });
+    drop(run.fx);
+}
+
+#[test]
+fn a_dscqs_scale_is_divided_into_the_five_bt500_grades() {
+    let (mut h, run) = harness(fixture("dscqs-grades", DSCQS_CONTINUOUS));
+    begin(&mut h);
+    watch(&mut h, 4.8);
+    let a = h.get_by_role_and_label(Role::Slider, "A").rect();
+    // Clicking in each fifth from the top gives a value in that grade's 20-point band.
+    for (k, grade) in ["Excellent", "Good", "Fair", "Poor", "Bad"]
+        .iter()
+        .enumerate()
+    {
+        let y = a.top() + 8.0 + (a.height() - 16.0) * (k as f32 + 0.5) / 5.0;
+        let at = egui::pos2(a.center().x, y);
+        h.hover_at(at);
+        h.run_steps(1);
+        h.drag_at(at);
+        h.drop_at(at);
+        h.run_steps(2);
+        let v = h
+            .get_by_role_and_label(Role::Slider, "A")
+            .accesskit_node()
+            .numeric_value()
+            .unwrap();
+        let band = (80.0 - 20.0 * k as f64)..=(100.0 - 20.0 * k as f64);
+        assert!(band.contains(&v), "{grade}: {v} outside {band:?}");
+    }
     drop(run.fx);
 }
