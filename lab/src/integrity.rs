@@ -85,11 +85,19 @@ impl<'a> Checker<'a> {
 
     /// The problems of one session (and of it against the sessions checked before).
     pub fn check(&mut self, s: &SessionResults) -> Vec<Problem> {
+        match self.check_repeat(s) {
+            Some(p) => vec![p],
+            None => self.check_alone(s),
+        }
+    }
+
+    /// A session recorded again (the same subject and session as one checked before); the
+    /// first time, notes it.
+    pub fn check_repeat(&mut self, s: &SessionResults) -> Option<Problem> {
         let m = &s.manifest;
-        let mut problems = Vec::new();
         let key = (m.subject.clone(), m.session);
         if let Some(first) = self.seen.get(&key) {
-            problems.push(Problem {
+            return Some(Problem {
                 path: s.dir.join(SESSION_FILE),
                 line: None,
                 kind: Kind::Damage,
@@ -100,9 +108,17 @@ impl<'a> Checker<'a> {
                     first.display()
                 ),
             });
-            return problems;
         }
         self.seen.insert(key, s.dir.clone());
+        None
+    }
+
+    /// The problems of one session on its own: its manifest against the run, the study and
+    /// its folder, its rows replayed. Needs no other session, so sessions can be checked on
+    /// several threads; [`Self::check_repeat`] then runs on them in order.
+    #[must_use]
+    pub fn check_alone(&self, s: &SessionResults) -> Vec<Problem> {
+        let mut problems = Vec::new();
         check_session(self.study, self.archived, self.run, s, &mut problems);
         problems
     }

@@ -215,7 +215,45 @@ struct Logs {
     displays: Vec<analysis::display::SessionDisplay>,
 }
 
-/// Reads the sessions one at a time (one session's rows in memory, not every session's) and
+/// Sessions read and checked together, on [`READERS`] threads.
+const READ_BATCH: usize = 256;
+/// Threads that read and check sessions.
+const READERS: usize = 2;
+
+/// Reads and checks the sessions of `batch` ([`lab::integrity::Checker::check_alone`]) on
+/// [`READERS`] threads; results in the batch's order.
+fn read_and_check(
+    checker: &lab::integrity::Checker<'_>,
+    batch: &[PathBuf],
+) -> Result<Vec<(results::SessionResults, Vec<lab::integrity::Problem>)>> {
+    let per = batch.len().div_ceil(READERS).max(1);
+    std::thread::scope(|scope| {
+        let workers: Vec<_> = batch
+            .chunks(per)
+            .map(|part| {
+                scope.spawn(move || {
+                    part.iter()
+                        .map(|dir| {
+                            let session = results::read_session(dir)?;
+                            let found = checker.check_alone(&session);
+                            Ok((session, found))
+                        })
+                        .collect::<Result<Vec<_>>>()
+                })
+            })
+            .collect();
+        let mut out = Vec::with_capacity(batch.len());
+        for w in workers {
+            out.extend(
+                w.join()
+                    .map_err(|_| anyhow::anyhow!("a session reader thread panicked"))??,
+            );
+        }
+        Ok(out)
+    })
+}
+
+/// Reads the sessions a batch at a time (a batch's rows in memory, not every session's) and
 /// checks each before any statistic ([`lab::integrity`]): damage is refused, every problem
 /// named once; sessions with trials missing at the end are refused unless
 /// `--allow-incomplete`, and then warned about and returned for the report to list.
@@ -236,23 +274,31 @@ fn read_logs(
     let (mut problems, mut displays) = (Vec::new(), Vec::with_capacity(dirs.len()));
     // The first error converting a sound session; the log check's verdict comes first.
     let mut failed: Option<anyhow::Error> = None;
-    for dir in dirs {
-        let session = results::read_session(dir)?;
-        let found = checker.check(&session);
-        let damaged = found.iter().any(|p| p.kind == Kind::Damage);
-        problems.extend(found);
-        displays.push(analysis::display::session_display(
-            &session,
-            args.drop_limit,
-        ));
-        if failed.is_none() && !damaged {
-            let added = if weibull {
-                check_weibull_levels(&session)
-            } else {
-                Ok(())
+    // Sessions are read and checked on two threads, a batch at a time (a batch's rows in
+    // memory, not every session's), then taken in order: repeats, display, conversion.
+    for batch in dirs.chunks(READ_BATCH) {
+        let checked = read_and_check(&checker, batch)?;
+        for (session, found) in checked {
+            let found: Vec<_> = checker
+                .check_repeat(&session)
+                .into_iter()
+                .chain(found)
+                .collect();
+            let damaged = found.iter().any(|p| p.kind == Kind::Damage);
+            problems.extend(found);
+            displays.push(analysis::display::session_display(
+                &session,
+                args.drop_limit,
+            ));
+            if failed.is_none() && !damaged {
+                let added = if weibull {
+                    check_weibull_levels(&session)
+                } else {
+                    Ok(())
+                }
+                .and_then(|()| converter.add(&session).map_err(anyhow::Error::from));
+                failed = added.err();
             }
-            .and_then(|()| converter.add(&session).map_err(anyhow::Error::from));
-            failed = added.err();
         }
     }
     let refused: Vec<_> = problems
