@@ -292,6 +292,47 @@ fn every_example_passes_check() {
     }
 }
 
+/// `study check` on a copy of the MOS example with one stimulus file deleted and one cut
+/// short fails, naming both files (and `study simulate` refuses the same way).
+#[test]
+fn check_names_a_missing_and_a_corrupt_stimulus() {
+    let dir = scratch("broken");
+    for (rel, bytes) in tree(&examples().join("stimuli")) {
+        let to = dir.join("stimuli").join(rel);
+        std::fs::create_dir_all(to.parent().unwrap()).unwrap();
+        std::fs::write(to, bytes).unwrap();
+    }
+    for f in ["stimuli.json", "mos.toml"] {
+        std::fs::copy(examples().join(f), dir.join(f)).unwrap();
+    }
+    let missing = "wavelet-standard-cr30.bvh";
+    let corrupt = "wavelet-perceptual-cr10.bvh";
+    std::fs::remove_file(dir.join("stimuli/march").join(missing)).unwrap();
+    let text = std::fs::read_to_string(dir.join("stimuli/walk").join(corrupt)).unwrap();
+    std::fs::write(
+        dir.join("stimuli/walk").join(corrupt),
+        &text[..text.len() - 500],
+    )
+    .unwrap();
+    for args in [vec!["check"], vec!["simulate", "-o", "res"]] {
+        let out = Command::new(env!("CARGO_BIN_EXE_study"))
+            .args(&args[..1])
+            .arg(dir.join("mos.toml"))
+            .args(&args[1..])
+            .current_dir(&dir)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{args:?}: {err}");
+        assert!(
+            err.contains(&format!("march/{missing}")) && err.contains(&format!("walk/{corrupt}")),
+            "{args:?}: {err}"
+        );
+        assert!(err.contains("2 stimulus problem(s)"), "{err}");
+    }
+    assert!(!dir.join("res").exists());
+}
+
 fn logged_rows(session: &Path) -> usize {
     std::fs::read_to_string(session.join("trials.csv"))
         .map_or(0, |s| s.lines().count().saturating_sub(1))
@@ -309,18 +350,10 @@ fn spawn_run(env: &Env, study: &Path, out: &Path) -> Child {
         .unwrap()
 }
 
-/// Clicks at screen pixel (`x`, `y`) of the window.
-fn click(env: &Env, wid: &str, x: u32, y: u32) {
-    env.xdotool(&["windowfocus", "--sync", wid]);
-    env.xdotool(&["mousemove", &x.to_string(), &y.to_string()]);
-    std::thread::sleep(Duration::from_millis(150));
-    env.xdotool(&["click", "1"]);
-}
-
 /// Under Xvfb + lavapipe, `study run` of each example reaches its first answer and records
 /// it: the subject form is filled in (Tab to each field, typed), Begin pressed, the first
-/// trial watched and answered with the keyboard (DSCQS's continuous sliders with the
-/// mouse); then the experimenter stops the session with SIGINT, which saves it.
+/// trial watched and answered with the keyboard (DSCQS's continuous sliders by Tab
+/// and arrow keys); then the experimenter stops the session with SIGINT, which saves it.
 #[test]
 fn each_example_records_its_first_answer_in_the_window() {
     let Some(env) = setup("examples") else { return };
@@ -342,36 +375,39 @@ fn each_example_records_its_first_answer_in_the_window() {
             .lines()
             .find(|l| l.starts_with("subject_fields"))
             .map_or(0, |l| l.matches('"').count() / 2);
-        let deadline = Instant::now() + Duration::from_secs(240);
-        // Welcome: type into each field, then Enter begins (once the stimuli are checked and
-        // the display measured; pressed until the session starts).
-        std::thread::sleep(Duration::from_millis(1500));
-        for _ in 0..fields {
-            press(&env, &wid, &["Tab"]);
-            env.xdotool(&["type", "--delay", "60", "30"]);
-        }
-        while !session.join("session.json").exists()
-            || !std::fs::read_to_string(session.join("session.json"))
-                .unwrap_or_default()
-                .contains("\"age\"")
-                && fields > 0
-        {
-            press(&env, &wid, &["Escape", "Return"]);
-            std::thread::sleep(Duration::from_millis(700));
+        let deadline = Instant::now() + Duration::from_secs(360);
+        // Welcome: Tab to each field and type into it, then Enter begins (once the stimuli
+        // are checked and the display measured). Keys sent before the first frames are lost,
+        // so the round is repeated until the session records the fields.
+        let begun = || {
+            std::fs::read_to_string(session.join("session.json"))
+                .is_ok_and(|m| fields == 0 || m.contains("\"age\""))
+        };
+        while !begun() {
             assert!(Instant::now() < deadline, "{name}: Begin never took");
+            press(&env, &wid, &["Escape"]);
+            for _ in 0..fields {
+                press(&env, &wid, &["Tab"]);
+                env.xdotool(&["type", "--delay", "60", "33"]);
+            }
+            press(&env, &wid, &["Escape", "Return"]);
+            std::thread::sleep(Duration::from_millis(1000));
         }
         while logged_rows(&session) == 0 {
             assert!(Instant::now() < deadline, "{name}: no answer was recorded");
             match name {
-                "dscqs.toml" => {
-                    // Two sliders (A above B) in the answer panel: click each, then Continue.
-                    for (x, y) in dscqs_targets(&env) {
-                        click(&env, &wid, x, y);
-                    }
-                    press(&env, &wid, &["Return"]);
-                }
+                // The continuous sliders of A and B, by keyboard focus: Tab to a slider,
+                // an arrow key moves it (and so rates), then on to the other one.
+                "dscqs.toml" => press(
+                    &env,
+                    &wid,
+                    &[
+                        "Escape", "Tab", "Right", "Tab", "Tab", "Right", "Escape", "Return",
+                    ],
+                ),
                 "mos.toml" => press(&env, &wid, &["4", "Return"]),
-                _ => press(&env, &wid, &["Left"]),
+                // 2AFC: the left one; Enter first begins a study without subject fields.
+                _ => press(&env, &wid, &["Return", "Left"]),
             }
             std::thread::sleep(Duration::from_millis(700));
         }
@@ -392,12 +428,4 @@ fn each_example_records_its_first_answer_in_the_window() {
         assert!(!trials.records.is_empty(), "{name}");
         assert_eq!(trials.records[0].trial.index, 0, "{name}");
     }
-}
-
-/// Where DSCQS's two sliders are on screen now: the middle of each row of light slider
-/// pixels in the lower part of the window (found in a screenshot; empty while the motions
-/// play and the answer panel is closed).
-fn dscqs_targets(env: &Env) -> Vec<(u32, u32)> {
-    let _ = env;
-    Vec::new()
 }
