@@ -352,8 +352,8 @@ fn spawn_run(env: &Env, study: &Path, out: &Path) -> Child {
 
 /// Under Xvfb + lavapipe, `study run` of each example reaches its first answer and records
 /// it: the subject form is filled in (Tab to each field, typed), Begin pressed, the first
-/// trial watched and answered with the keyboard (DSCQS's continuous sliders by Tab
-/// and arrow keys); then the experimenter stops the session with SIGINT, which saves it.
+/// trial watched and answered with the keyboard (DSCQS's continuous sliders by mouse,
+/// or Tab and arrow keys); then the experimenter stops the session with SIGINT, which saves it.
 #[test]
 fn each_example_records_its_first_answer_in_the_window() {
     let Some(env) = setup("examples") else { return };
@@ -396,15 +396,24 @@ fn each_example_records_its_first_answer_in_the_window() {
         while logged_rows(&session) == 0 {
             assert!(Instant::now() < deadline, "{name}: no answer was recorded");
             match name {
-                // The continuous sliders of A and B, by keyboard focus: Tab to a slider,
-                // an arrow key moves it (and so rates), then on to the other one.
-                "dscqs.toml" => press(
-                    &env,
-                    &wid,
-                    &[
-                        "Escape", "Tab", "Right", "Tab", "Tab", "Right", "Escape", "Return",
-                    ],
-                ),
+                // The continuous sliders of A and B (the answer panel's two rows at the
+                // bottom of the 1280x720 screen): clicked, then by keyboard focus (Tab to a
+                // slider, an arrow key moves it); then Enter continues.
+                "dscqs.toml" => {
+                    for (x, y) in [(130, 615), (80, 639)] {
+                        env.xdotool(&["mousemove", &x.to_string(), &y.to_string()]);
+                        std::thread::sleep(Duration::from_millis(200));
+                        env.xdotool(&["click", "1"]);
+                    }
+                    press(&env, &wid, &["Return"]);
+                    press(
+                        &env,
+                        &wid,
+                        &[
+                            "Escape", "Tab", "Right", "Tab", "Tab", "Right", "Escape", "Return",
+                        ],
+                    );
+                }
                 "mos.toml" => press(&env, &wid, &["4", "Return"]),
                 // 2AFC: the left one; Enter first begins a study without subject fields.
                 _ => press(&env, &wid, &["Return", "Left"]),
