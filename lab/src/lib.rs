@@ -15,6 +15,7 @@
 //! - [`session`]: one subject's session on disk ([`session::Recorder`]).
 //! - [`source`]: where a trial's stimuli come from ([`source::StimulusSource`]): the
 //!   manifest's files, or [`live`] encoding per trial with prefetch.
+//! - [`preflight`]: every stimulus a plan can show, checked before any subject sees anything.
 //! - [`simulate`]: whole sessions with simulated observers.
 //! - [`error`]: the crate's error type, [`LabError`].
 
@@ -25,6 +26,7 @@ pub mod error;
 pub mod generated;
 pub mod integrity;
 pub mod live;
+pub mod preflight;
 pub mod results_dir;
 pub mod session;
 pub mod simulate;

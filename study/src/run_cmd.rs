@@ -14,7 +14,7 @@ use results::store::DisplayInfo;
 
 use crate::gui::render::BACKGROUND;
 use crate::gui::scene::{Figure, FrameShapes, View};
-use crate::gui::screens::{Exit, StudyUi};
+use crate::gui::screens::{Exit, Preflight, StudyUi};
 use crate::gui::timing::FrameClock;
 use crate::gui::window::{self, Next, WindowOptions, WindowReport};
 
@@ -143,8 +143,13 @@ pub fn run(args: &RunArgs) -> anyhow::Result<()> {
     };
     let dir = session::session_dir(&out, &args.subject, args.session);
     let stimuli = lab::source::open(&file)?;
+    // Every stimulus the plan can show is checked while the welcome screen is up (Begin
+    // waits for it, with a progress bar when it takes a while).
+    let preflight = Preflight::start(file.clone());
+    let problems = preflight.failure();
     let study = Arc::new(file.definition);
-    let screens = StudyUi::new(Arc::clone(&study), stimuli, recorder, true);
+    let screens =
+        StudyUi::new(Arc::clone(&study), stimuli, recorder, true).with_preflight(preflight);
     let options = args.window.options(format!("study: {}", study.name));
     let (report, exit) = match run_screens(&options, screens, &signalled) {
         Ok(r) => r,
@@ -160,6 +165,13 @@ pub fn run(args: &RunArgs) -> anyhow::Result<()> {
         }
     };
     print_timing(&report);
+    if let Some(problems) = problems.get() {
+        // Nothing was shown: the session folder goes, as for a window that never opened.
+        if !args.resume {
+            let _ = session::discard_unstarted(&dir);
+        }
+        bail!("{problems}\nno trial was shown; fix the stimuli and run the session again");
+    }
     let resume = || {
         format!(
             "study run {} --subject {} --session {} --resume{}",
@@ -287,7 +299,7 @@ fn run_screens(
             };
         }
         // Idle screens still need frames to measure the display before the first trial.
-        if screens.animating() || !ctx.clock.calibrated() {
+        if screens.animating() || screens.checking() || !ctx.clock.calibrated() {
             Next::Animate
         } else {
             Next::Idle

@@ -49,6 +49,9 @@ pub fn check(args: &CheckArgs) -> anyhow::Result<()> {
     // A live staircase's decoder context and source clips are read now: their problems are
     // the study file's too.
     let live = LiveStimuli::from_study(&file)?;
+    // Every stimulus the plan can show, read now: a missing or broken file is the study's
+    // problem before any subject sees anything.
+    let checked = preflight(&file)?;
     let study = &file.definition;
     let mut text = String::new();
     writeln!(text, "{}: ok", args.study.display())?;
@@ -65,8 +68,28 @@ pub fn check(args: &CheckArgs) -> anyhow::Result<()> {
     if let Some(ms) = study.session.time_limit_ms {
         writeln!(text, "  time limit: {:.1} min", ms as f64 / 60_000.0)?;
     }
+    writeln!(text, "  stimuli: {checked}")?;
     std::io::Write::write_all(&mut std::io::stdout(), text.as_bytes())?;
     Ok(())
+}
+
+/// [`lab::preflight::verify`] with a progress line on stderr when it takes over a second.
+///
+/// # Errors
+/// Every stimulus problem, each naming its file.
+pub fn preflight(file: &StudyFile) -> anyhow::Result<lab::preflight::Checked> {
+    let start = std::time::Instant::now();
+    let shown = std::cell::Cell::new(false);
+    let checked = lab::preflight::verify(file, &|done, total| {
+        if start.elapsed() > Duration::from_secs(1) {
+            shown.set(true);
+            eprint!("\rchecking stimuli: {done}/{total}");
+        }
+    });
+    if shown.get() {
+        eprintln!();
+    }
+    Ok(checked?)
 }
 
 /// A MOS or DSCQS study's trials and presentation time.
@@ -171,6 +194,7 @@ fn describe_live(
 /// Study file problems, an existing output without `--resume`, a resume whose logged trials
 /// the study no longer regenerates, I/O errors.
 pub fn simulate(args: &SimulateArgs) -> anyhow::Result<()> {
+    preflight(&StudyFile::load(&args.study)?)?;
     let options = SimulateOptions {
         study: args.study.clone(),
         subjects: args.subjects,

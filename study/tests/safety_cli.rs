@@ -17,10 +17,12 @@ fn scratch(name: &str) -> PathBuf {
     d
 }
 
-/// `examples/<name>` and the stimulus manifest it names, copied into `dir`.
+/// `examples/<name>` and the stimulus manifest it names, copied into `dir` (its files linked).
 fn copy_example(dir: &Path, name: &str) -> PathBuf {
     let examples = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples");
     std::fs::copy(examples.join("stimuli.json"), dir.join("stimuli.json")).unwrap();
+    // The manifest's files (a second example in the same folder finds the link there).
+    let _ = std::os::unix::fs::symlink(examples.join("stimuli"), dir.join("stimuli"));
     let to = dir.join(name);
     std::fs::copy(examples.join(name), &to).unwrap();
     to

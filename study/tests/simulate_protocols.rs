@@ -26,8 +26,8 @@ fn study() -> Command {
 #[test]
 fn simulate_writes_complete_results_for_every_protocol() {
     for (file, protocol, per_session) in [
-        ("mos.toml", Protocol::Mos, Some(54)),
-        ("dscqs.toml", Protocol::Dscqs, Some(18)),
+        ("mos.toml", Protocol::Mos, Some(14)),
+        ("dscqs.toml", Protocol::Dscqs, Some(10)),
         ("staircase.toml", Protocol::Staircase, None),
     ] {
         let out = scratch(file);
@@ -61,7 +61,7 @@ fn simulate_writes_complete_results_for_every_protocol() {
             }
             match protocol {
                 Protocol::Mos => {
-                    // Simulated ratings follow quality: compression ratio 10 beats 70 on average.
+                    // Simulated ratings follow quality: compression ratio 10 beats 30 on average.
                     let mean = |suffix: &str| {
                         let v: Vec<f64> = s
                             .trials
@@ -76,10 +76,10 @@ fn simulate_writes_complete_results_for_every_protocol() {
                         v.iter().sum::<f64>() / v.len() as f64
                     };
                     assert!(
-                        mean("cr10") > mean("cr70") + 0.5,
+                        mean("cr10") > mean("cr30") + 0.5,
                         "{} vs {}",
                         mean("cr10"),
-                        mean("cr70")
+                        mean("cr30")
                     );
                 }
                 Protocol::Dscqs => assert!(
@@ -139,7 +139,7 @@ fn check_lists_every_problem_and_fails() {
         .output()
         .unwrap();
     assert!(ok.status.success());
-    assert!(String::from_utf8_lossy(&ok.stdout).contains("trials per session: 54"));
+    assert!(String::from_utf8_lossy(&ok.stdout).contains("trials per session: 14"));
 }
 
 #[test]
@@ -147,6 +147,7 @@ fn resume_with_a_changed_study_is_a_clear_error() {
     let dir = scratch("changed");
     std::fs::create_dir_all(&dir).unwrap();
     std::fs::copy(examples().join("stimuli.json"), dir.join("stimuli.json")).unwrap();
+    std::os::unix::fs::symlink(examples().join("stimuli"), dir.join("stimuli")).unwrap();
     let original = std::fs::read_to_string(examples().join("mos.toml")).unwrap();
     std::fs::write(dir.join("s.toml"), &original).unwrap();
     let out = dir.join("out");

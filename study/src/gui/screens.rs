@@ -268,6 +268,8 @@ pub struct StudyUi {
     end_since: Option<f64>,
     /// The subject (or experimenter) closed the end screen.
     closed: bool,
+    /// The stimulus check Begin waits for (`None`: nothing to wait for).
+    preflight: Option<Preflight>,
 }
 
 impl StudyUi {
@@ -311,7 +313,20 @@ impl StudyUi {
             ack_until: None,
             end_since: None,
             closed: false,
+            preflight: None,
         }
+    }
+
+    /// Begin waits for `preflight` (every stimulus of the plan checked), with a progress bar
+    /// once it takes over a second; problems end the session before its first trial.
+    pub fn with_preflight(mut self, preflight: Preflight) -> StudyUi {
+        self.preflight = Some(preflight);
+        self
+    }
+
+    /// True while the stimulus check runs (the window repaints to show its progress).
+    pub fn checking(&self) -> bool {
+        self.preflight.as_ref().is_some_and(|p| p.outcome.is_none())
     }
 
     /// The session's stimulus source (UI tests wait for what it prepares).
@@ -466,10 +481,11 @@ impl StudyUi {
             // Trials start once the refresh period is known, so every trial's drop count is
             // against the measured period.
             let measured = clock.calibrated() || !self.gpu;
+            let checked = self.preflight.as_mut().is_none_or(|p| p.ui(ui));
             ui.vertical_centered(|ui| {
                 let button = egui::Button::new(RichText::new("Begin").size(20.0))
                     .min_size(Vec2::new(160.0, 44.0));
-                let can = active && ready && measured;
+                let can = active && ready && measured && checked;
                 if ui.add_enabled(can, button).clicked()
                     || (can && ui.input(|i| i.key_pressed(Key::Enter)))
                 {
@@ -482,6 +498,14 @@ impl StudyUi {
                 }
             });
         });
+        if let Some(Some(Err(problems))) = self.preflight.as_ref().map(|p| &p.outcome) {
+            let problems = problems.clone();
+            self.screen = Screen::Failed(format!(
+                "The stimuli have problems; the session cannot start.\n\n{problems}"
+            ));
+            self.exit = Some(Exit::Failed(problems));
+            return;
+        }
         if begin {
             let fields: Vec<(String, String)> = self
                 .fields
@@ -1424,5 +1448,89 @@ fn draw_viewport(
                 shapes: Arc::clone(&t.shapes[k]),
             },
         ));
+    }
+}
+
+/// The stimulus preflight ([`lab::preflight`]) on a background thread, so the window stays
+/// responsive while a large stimulus set is read: the welcome screen shows its progress
+/// after a second, Begin waits for it, and its problems end the session before any trial.
+pub struct Preflight {
+    started: std::time::Instant,
+    /// (done, total).
+    progress: Arc<(
+        std::sync::atomic::AtomicUsize,
+        std::sync::atomic::AtomicUsize,
+    )>,
+    worker: Option<std::thread::JoinHandle<Result<(), String>>>,
+    /// The problems, set when the check found any (the runner reads it after the window).
+    failed: Arc<std::sync::OnceLock<String>>,
+    /// `Some` once the check has ended: `Err` holds every problem, one per line.
+    pub outcome: Option<Result<(), String>>,
+}
+
+impl Preflight {
+    /// Starts checking every stimulus `study`'s plan can show.
+    pub fn start(study: lab::StudyFile) -> Preflight {
+        use std::sync::atomic::{AtomicUsize, Ordering};
+        let progress = Arc::new((AtomicUsize::new(0), AtomicUsize::new(0)));
+        let shared = Arc::clone(&progress);
+        let failed = Arc::new(std::sync::OnceLock::new());
+        let failure = Arc::clone(&failed);
+        let worker = std::thread::spawn(move || {
+            let (_, problems) = lab::preflight::check(&study, &|done, total| {
+                shared.0.store(done, Ordering::Relaxed);
+                shared.1.store(total, Ordering::Relaxed);
+            });
+            if problems.is_empty() {
+                Ok(())
+            } else {
+                let text = lab::preflight::describe(&study, &problems);
+                let _ = failure.set(text.clone());
+                Err(text)
+            }
+        });
+        Preflight {
+            started: std::time::Instant::now(),
+            progress,
+            worker: Some(worker),
+            failed,
+            outcome: None,
+        }
+    }
+
+    /// Where the problems appear if the check finds any.
+    pub fn failure(&self) -> Arc<std::sync::OnceLock<String>> {
+        Arc::clone(&self.failed)
+    }
+
+    /// Shows the progress while the check runs; true once it has ended without problems.
+    fn ui(&mut self, ui: &mut Ui) -> bool {
+        use std::sync::atomic::Ordering;
+        if self
+            .worker
+            .as_ref()
+            .is_some_and(std::thread::JoinHandle::is_finished)
+            && let Some(w) = self.worker.take()
+        {
+            self.outcome = Some(
+                w.join()
+                    .unwrap_or_else(|_| Err("the stimulus check stopped unexpectedly".into())),
+            );
+        }
+        if let Some(r) = &self.outcome {
+            return r.is_ok();
+        }
+        if self.started.elapsed() > std::time::Duration::from_secs(1) {
+            let done = self.progress.0.load(Ordering::Relaxed);
+            let total = self.progress.1.load(Ordering::Relaxed).max(1);
+            ui.vertical_centered(|ui| {
+                ui.add(
+                    egui::ProgressBar::new(done as f32 / total as f32)
+                        .desired_width(320.0)
+                        .text(format!("Checking the stimuli: {done} of {total}")),
+                );
+            });
+        }
+        false
     }
 }

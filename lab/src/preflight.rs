@@ -1,0 +1,411 @@
+//! Preflight: every stimulus a study's plan can show, checked before any subject sees
+//! anything (`study check`, `study simulate`, and the study window before Begin).
+//!
+//! A stimulus file deleted from a sweep folder, or cut short, would otherwise be found only
+//! when its trial comes up, in the middle of a session. For each stimulus the plan can show
+//! (MOS / DSCQS: every condition and familiarization stimulus and its reference; a staircase:
+//! every track's reference and every level's stimulus), the checks are:
+//! - its files exist (motion file, ASF skeleton, bitstream), and the motion file parses;
+//! - a test stimulus matches its reference: the same skeleton (joints, parents, channels,
+//!   rest geometry), frame count and frame rate;
+//! - its bitstream, when the manifest names one, is a valid container for that skeleton,
+//!   frame count and rate, and decodes (with the codec its header names) to as many frames as
+//!   the file holds. A `primitive` stream needs its database, which a stimulus manifest does
+//!   not name: its container is checked, and it is counted as not decoded.
+//!
+//! A live staircase encodes per trial: its decoder context and reference clips are read
+//! ([`LiveStimuli::from_study`]), and every clip is encoded and decoded once at the first
+//! track's start level, which proves the codec takes the settings.
+//!
+//! Every problem is returned at once, each naming its file; nothing here draws or writes.
+
+use std::collections::{HashMap, HashSet};
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+use codecs::bitstream::Bitstream;
+use codecs::codec::{self, CodecContext, CodecError};
+use motion::{Clip, Skeleton};
+use protocols::StudyError;
+use protocols::manifest::Stimulus;
+
+use crate::error::{LabError, Result, chain, refused};
+use crate::live::LiveStimuli;
+use crate::study::StudyFile;
+
+/// One problem of one stimulus.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Problem {
+    /// The file at fault (a live staircase's problems name the study file).
+    pub file: PathBuf,
+    /// Which stimulus (`stimulus "walk/spiht/cr20"`) or, for a live staircase, which key of
+    /// the study file (`staircase.live.clips[0]`).
+    pub about: String,
+    /// What is wrong, starting with the file.
+    pub message: String,
+}
+
+impl fmt::Display for Problem {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{} ({})", self.message, self.about)
+    }
+}
+
+/// What a preflight checked.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Checked {
+    /// Stimuli checked (references included; live: the source clips).
+    pub stimuli: usize,
+    /// Bitstreams decoded.
+    pub decoded: usize,
+    /// Bitstreams whose container was checked but that could not be decoded without a
+    /// decoder context the manifest does not name (a `primitive` database).
+    pub not_decoded: usize,
+    /// Live levels encoded and decoded (one per clip of a live staircase).
+    pub encoded: usize,
+}
+
+impl fmt::Display for Checked {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.encoded > 0 {
+            return write!(
+                f,
+                "{} source clips read, each encoded and decoded at the start level",
+                self.stimuli
+            );
+        }
+        write!(
+            f,
+            "{} stimuli read and matched to their references, {} bitstreams decoded",
+            self.stimuli, self.decoded
+        )?;
+        if self.not_decoded > 0 {
+            write!(
+                f,
+                ", {} checked without decoding (no primitive database)",
+                self.not_decoded
+            )?;
+        }
+        Ok(())
+    }
+}
+
+/// The stimulus ids the plan of `study` can show, each with the reference it is shown
+/// against (`None` for a reference), in plan order, each once. Empty for a live staircase.
+pub fn shown(study: &StudyFile) -> Vec<(String, Option<String>)> {
+    let def = &study.definition;
+    let mut out: Vec<(String, Option<String>)> = Vec::new();
+    let mut seen = HashSet::new();
+    let mut add = |id: &str, reference: Option<&str>| {
+        if seen.insert(id.to_string()) {
+            out.push((id.to_string(), reference.map(str::to_string)));
+        }
+    };
+    for c in def.familiarization.iter().chain(&def.conditions) {
+        add(&c.reference, None);
+        add(&c.stimulus, Some(&c.reference));
+    }
+    if let Some(sc) = def.staircase.as_ref().filter(|s| s.live.is_none()) {
+        for t in &sc.tracks {
+            add(&t.reference, None);
+            for (_, id) in &t.levels {
+                add(id, Some(&t.reference));
+            }
+        }
+    }
+    out
+}
+
+/// How many steps [`check`] reports progress over for `study`.
+pub fn steps(study: &StudyFile) -> usize {
+    match study
+        .definition
+        .staircase
+        .as_ref()
+        .and_then(|s| s.live.as_ref())
+    {
+        Some(live) => live.clips.len() + 1,
+        None => shown(study).len(),
+    }
+}
+
+/// Checks every stimulus the plan of `study` can show; `progress(done, total)` is called
+/// after each. Returns what was checked and every problem found.
+pub fn check(study: &StudyFile, progress: &dyn Fn(usize, usize)) -> (Checked, Vec<Problem>) {
+    if study
+        .definition
+        .staircase
+        .as_ref()
+        .is_some_and(|s| s.live.is_some())
+    {
+        return check_live(study, progress);
+    }
+    let base = study.manifest_dir();
+    let ids = shown(study);
+    let total = ids.len();
+    let mut checked = Checked::default();
+    let mut problems = Vec::new();
+    // Clips read so far (None: could not be read, already reported).
+    let mut clips: HashMap<String, Option<Clip>> = HashMap::new();
+    let ctx = CodecContext::default();
+    for (done, (id, reference)) in ids.iter().enumerate() {
+        let Some(st) = study.definition.manifest.get(id) else {
+            // The study loader checks every id against the manifest.
+            continue;
+        };
+        checked.stimuli += 1;
+        let clip = read(&base, st, &mut problems);
+        if let (Some(clip), Some(r)) = (&clip, reference)
+            && let Some(Some(reference)) = clips.get(r)
+        {
+            let file = base.join(&st.file);
+            for message in mismatch(clip, reference, r) {
+                problems.push(problem(&file, id, message));
+            }
+        }
+        if let (Some(clip), Some(stream)) = (&clip, &st.bitstream) {
+            let path = base.join(stream);
+            match bitstream(&path, clip, &ctx) {
+                Ok(true) => checked.decoded += 1,
+                Ok(false) => checked.not_decoded += 1,
+                Err(message) => problems.push(problem(&path, id, message)),
+            }
+        } else if clip.is_none()
+            && let Some(stream) = &st.bitstream
+        {
+            let path = base.join(stream);
+            if !path.is_file() {
+                problems.push(problem(&path, id, missing("bitstream")));
+            }
+        }
+        clips.insert(id.clone(), clip);
+        progress(done + 1, total);
+    }
+    (checked, problems)
+}
+
+/// [`check`] as one result: what was checked, or every problem in one error that names the
+/// manifest and lists each problem with its file.
+///
+/// # Errors
+/// [`LabError::Refused`] listing every problem.
+pub fn verify(study: &StudyFile, progress: &dyn Fn(usize, usize)) -> Result<Checked> {
+    let (checked, problems) = check(study, progress);
+    if problems.is_empty() {
+        return Ok(checked);
+    }
+    Err(refused(describe(study, &problems)))
+}
+
+/// The problems as one message: the manifest, how many, one line each.
+pub fn describe(study: &StudyFile, problems: &[Problem]) -> String {
+    let manifest = study.dir().join(&study.definition.stimuli_path);
+    let mut text = format!(
+        "{}: {} stimulus problem(s), found before any trial:",
+        manifest.display(),
+        problems.len()
+    );
+    for p in problems {
+        text.push_str("\n  ");
+        text.push_str(&p.to_string());
+    }
+    text
+}
+
+fn problem(file: &Path, id: &str, message: String) -> Problem {
+    let shown = file.display().to_string();
+    Problem {
+        file: file.to_path_buf(),
+        about: format!("stimulus {id:?}"),
+        message: if message.starts_with(&shown) {
+            message
+        } else {
+            format!("{shown}: {message}")
+        },
+    }
+}
+
+fn missing(what: &str) -> String {
+    format!("missing (the manifest's {what})")
+}
+
+/// Reads a stimulus' clip, reporting missing and unreadable files.
+fn read(base: &Path, st: &Stimulus, problems: &mut Vec<Problem>) -> Option<Clip> {
+    let file = base.join(&st.file);
+    let skeleton = st.skeleton.as_ref().map(|s| base.join(s));
+    let mut ok = true;
+    if !file.is_file() {
+        problems.push(problem(&file, &st.id, missing("file")));
+        ok = false;
+    }
+    if let Some(s) = &skeleton
+        && !s.is_file()
+    {
+        problems.push(problem(s, &st.id, missing("skeleton")));
+        ok = false;
+    }
+    if !ok {
+        return None;
+    }
+    match motion::io::read_clip(skeleton.as_deref(), &file) {
+        Ok(clip) => Some(clip),
+        Err(e) => {
+            problems.push(problem(&file, &st.id, chain(&e)));
+            None
+        }
+    }
+}
+
+/// How `clip` differs from its reference: skeleton, frame count, frame rate.
+fn mismatch(clip: &Clip, reference: &Clip, reference_id: &str) -> Vec<String> {
+    let mut out = Vec::new();
+    if let Some(why) = skeleton_difference(&clip.skeleton, &reference.skeleton) {
+        out.push(format!(
+            "its skeleton is not its reference's ({reference_id}): {why}"
+        ));
+    }
+    if clip.frames() != reference.frames() {
+        out.push(format!(
+            "{} frames, its reference ({reference_id}) has {}",
+            clip.frames(),
+            reference.frames()
+        ));
+    }
+    if !same_number(clip.frame_rate_hz, reference.frame_rate_hz) {
+        out.push(format!(
+            "{} Hz, its reference ({reference_id}) is {} Hz",
+            clip.frame_rate_hz, reference.frame_rate_hz
+        ));
+    }
+    out
+}
+
+fn same_number(a: f64, b: f64) -> bool {
+    (a - b).abs() <= 1e-9 * a.abs().max(b.abs()).max(1.0)
+}
+
+/// Why two skeletons are not the same one (a file written with limited precision reads back
+/// within 1e-4 of its rest geometry), if they are not.
+fn skeleton_difference(a: &Skeleton, b: &Skeleton) -> Option<String> {
+    if a.joints.len() != b.joints.len() {
+        return Some(format!("{} joints, not {}", a.joints.len(), b.joints.len()));
+    }
+    for (ja, jb) in a.joints.iter().zip(&b.joints) {
+        if ja.name != jb.name || ja.parent != jb.parent {
+            return Some(format!("joint `{}` where it has `{}`", ja.name, jb.name));
+        }
+        if ja.dofs != jb.dofs {
+            return Some(format!("joint `{}` has other channels", ja.name));
+        }
+        let (va, vb) = (ja.rest.vector(), jb.rest.vector());
+        let scale = va.iter().chain(&vb).fold(1.0_f64, |m, v| m.max(v.abs()));
+        if va
+            .iter()
+            .zip(&vb)
+            .any(|(x, y)| (x - y).abs() > 1e-4 * scale)
+        {
+            return Some(format!("joint `{}` has another rest pose", ja.name));
+        }
+    }
+    None
+}
+
+/// Checks the stream at `path` against the clip its stimulus shows; `Ok(true)` when it was
+/// decoded, `Ok(false)` when it needs a decoder context (a primitive database) not given.
+fn bitstream(path: &Path, clip: &Clip, ctx: &CodecContext) -> std::result::Result<bool, String> {
+    if !path.is_file() {
+        return Err(missing("bitstream"));
+    }
+    let bytes = std::fs::read(path).map_err(|e| format!("cannot read: {e}"))?;
+    let stream = Bitstream::from_bytes(&bytes).map_err(|e| chain(&e))?;
+    if stream.frames as usize != clip.frames() || stream.channels as usize != clip.channel_count() {
+        return Err(format!(
+            "the stream holds {} channels × {} frames, its decoded file {} × {}",
+            stream.channels,
+            stream.frames,
+            clip.channel_count(),
+            clip.frames()
+        ));
+    }
+    if !same_number(stream.frame_rate_hz, clip.frame_rate_hz) {
+        return Err(format!(
+            "the stream is {} Hz, its decoded file {} Hz",
+            stream.frame_rate_hz, clip.frame_rate_hz
+        ));
+    }
+    match codec::decode_any_in(&stream, &clip.skeleton, ctx) {
+        Ok(decoded) if decoded.frames() == clip.frames() => Ok(true),
+        Ok(decoded) => Err(format!(
+            "decodes to {} frames, its decoded file has {}",
+            decoded.frames(),
+            clip.frames()
+        )),
+        Err(CodecError::NoDatabase { .. }) => Ok(false),
+        Err(e) => Err(format!("does not decode: {}", chain(&e))),
+    }
+}
+
+/// A live staircase: the decoder context and source clips read, each clip encoded and
+/// decoded once at the first track's start level.
+fn check_live(study: &StudyFile, progress: &dyn Fn(usize, usize)) -> (Checked, Vec<Problem>) {
+    let total = steps(study);
+    let mut checked = Checked::default();
+    let live = match LiveStimuli::from_study(study) {
+        Ok(Some(live)) => live,
+        Ok(None) => return (checked, Vec::new()),
+        Err(e) => return (checked, live_problems(study, &e)),
+    };
+    progress(1, total);
+    let level = study
+        .definition
+        .staircase
+        .as_ref()
+        .and_then(|s| s.tracks.first())
+        .map_or(f64::NAN, |t| t.settings.start);
+    let names: Vec<(String, String)> = live
+        .clips()
+        .map(|(c, r)| (c.to_string(), r.to_string()))
+        .collect();
+    let mut problems = Vec::new();
+    for (i, (clip, reference)) in names.iter().enumerate() {
+        checked.stimuli += 1;
+        match live.at_level(i, level) {
+            Ok(_) => checked.encoded += 1,
+            Err(e) => problems.push(Problem {
+                file: study.path.clone(),
+                about: format!("stimulus {reference:?}"),
+                message: format!(
+                    "{}: clip {clip:?} at the start level {level}: {}",
+                    study.path.display(),
+                    chain(&e)
+                ),
+            }),
+        }
+        progress(i + 2, total);
+    }
+    (checked, problems)
+}
+
+/// A live staircase's loading errors, one problem per study file key.
+fn live_problems(study: &StudyFile, e: &LabError) -> Vec<Problem> {
+    let file = study.path.clone();
+    if let LabError::Study(StudyError::Invalid { issues, .. }) = e {
+        return issues
+            .iter()
+            .map(|issue| Problem {
+                file: file.clone(),
+                about: if issue.key.is_empty() {
+                    "the study file".into()
+                } else {
+                    format!("key {}", issue.key)
+                },
+                message: format!("{}: {}", file.display(), issue.reason),
+            })
+            .collect();
+    }
+    vec![Problem {
+        file: file.clone(),
+        about: "the study file".into(),
+        message: format!("{}: {}", file.display(), chain(e)),
+    }]
+}
