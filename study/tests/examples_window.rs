@@ -392,7 +392,7 @@ fn each_example_records_its_first_answer_in_the_window() {
                 env.xdotool(&["type", "--delay", "60", "33"]);
             }
             press(&env, &wid, &["Escape", "Return"]);
-            std::thread::sleep(Duration::from_millis(1000));
+            std::thread::sleep(Duration::from_secs(1));
         }
         while logged_rows(&session) == 0 {
             assert!(Instant::now() < deadline, "{name}: no answer was recorded");
