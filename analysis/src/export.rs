@@ -71,7 +71,7 @@ pub struct SurealDataset<'a> {
     /// `dataset_name`.
     pub name: &'a str,
     /// Subject names (ids such as `S005`), indexed by the numeric subject id of the ratings
-    /// ([`crate::from_results::ConvertedResults::subjects`]); an id past the end, or with an
+    /// ([`crate::study::StudyData::subjects`]); an id past the end, or with an
     /// empty name, is written `s<id>`.
     pub subjects: &'a [String],
     /// Absolute ratings (MOS studies, hidden references and hidden repeats included).
