@@ -1,4 +1,4 @@
-// Shared by the integration tests: the example study files, their manifest, and a codec
+// Shared by the integration tests: the test study files, their manifest, and a codec
 // catalog standing in for the binary's codec registry.
 #![allow(
     dead_code,
@@ -45,8 +45,12 @@ impl CodecCatalog for TestCodecs {
     }
 }
 
+/// The study files these tests read: paper 000's MOS design (42 conditions), BT.500 DSCQS,
+/// the thesis's staircases and a live staircase, over a hand-made manifest of clips `walk` and
+/// `dance` (the protocols never read the clip files). Kept here, not in `examples/`, whose
+/// studies are smaller so that their generated stimuli fit in the repository.
 pub fn examples() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples")
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/studies")
 }
 
 pub fn manifest() -> StimulusManifest {
