@@ -92,7 +92,8 @@ fn staircase_tables_list_each_level_once() {
     }
     for bits in &logged {
         let v = f64::from_bits(*bits);
-        let k = (v - 0.002) / 0.002;
+        // examples/staircase.toml: 0.004 to 0.040 in steps of 0.006.
+        let k = (v - 0.004) / 0.006;
         assert!((k - k.round()).abs() < 1e-9, "{v} is off the grid");
         assert!(format!("{v}").len() <= 6, "{v} is not a short decimal");
     }
@@ -103,7 +104,7 @@ fn staircase_tables_list_each_level_once() {
         .map(|l| l.split(',').next().unwrap())
         .collect();
     let unique: std::collections::BTreeSet<&&str> = levels.iter().collect();
-    assert!(levels.len() >= 10, "{table}");
+    assert!(levels.len() >= 5, "{table}");
     assert_eq!(unique.len(), levels.len(), "a level listed twice:\n{table}");
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -119,7 +119,7 @@ fn check_lists_every_problem_and_fails() {
     std::fs::copy(examples().join("stimuli.json"), dir.join("stimuli.json")).unwrap();
     let text = std::fs::read_to_string(examples().join("staircase.toml"))
         .unwrap()
-        .replace("step = 0.002", "step = 0")
+        .replace("step = 0.006", "step = 0")
         .replace("n_up = 1", "n_up = 1\nn_upp = 1");
     std::fs::write(dir.join("bad.toml"), text).unwrap();
     let out = study()
@@ -169,7 +169,7 @@ fn resume_with_a_changed_study_is_a_clear_error() {
     std::fs::write(&m, text).unwrap();
     std::fs::write(
         dir.join("s.toml"),
-        original.replace("familiarization = 4", "familiarization = 3"),
+        original.replace("familiarization = 2", "familiarization = 1"),
     )
     .unwrap();
     let r = study()

@@ -44,8 +44,12 @@ impl Drop for Xvfb {
     reason = "the server is returned inside `Xvfb`, whose Drop kills and waits for it"
 )]
 pub fn start_xvfb() -> Xvfb {
-    // A display number no other test or session uses: from the process id.
-    for k in 0..20 {
+    // A display number no other test or session uses: from the process id, and a counter
+    // shared by the tests of this process (which run on parallel threads: two that checked
+    // the same free number before either server made its socket would share one screen).
+    static NEXT: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
+    for _ in 0..20 {
+        let k = NEXT.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
         let n = 90 + (std::process::id() % 400) + k * 7;
         if Path::new(&format!("/tmp/.X11-unix/X{n}")).exists() {
             continue;
