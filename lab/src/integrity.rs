@@ -236,10 +236,13 @@ fn check_session(
             ),
         );
     }
-    if let Some((line, message)) = replay_problem(&study.definition, s) {
-        push(&trials, Some(line), Kind::Damage, message);
-        return;
-    }
+    let mut engine = match replayed(&study.definition, s) {
+        Ok(engine) => engine,
+        Err((line, message)) => {
+            push(&trials, Some(line), Kind::Damage, message);
+            return;
+        }
+    };
     let logged = m.trials_logged as usize;
     // A running session writes its manifest after each row: a crash between the two leaves
     // one row more than the manifest counts.
@@ -267,7 +270,7 @@ fn check_session(
     }
     match m.status {
         SessionState::Running | SessionState::Interrupted => {
-            let left = remaining(&study.definition, s);
+            let left = remaining(&study.definition, s, &engine);
             push(
                 &manifest,
                 None,
@@ -279,7 +282,7 @@ fn check_session(
             );
         }
         SessionState::Complete => {
-            if let Some(left) = unfinished_plan(&study.definition, s) {
+            if let Some(left) = unfinished_plan(&study.definition, &mut engine) {
                 push(
                     &trials,
                     Some(rows + 2),
@@ -303,23 +306,24 @@ fn state_name(state: SessionState) -> &'static str {
     }
 }
 
-/// The first row that does not follow from the plan and the answers before it, with why.
-fn replay_problem(study: &StudyDefinition, s: &SessionResults) -> Option<(usize, String)> {
+/// The engine after replaying a session's rows, or the first row that does not follow from the
+/// plan and the answers before it, with why.
+fn replayed(study: &StudyDefinition, s: &SessionResults) -> Result<Session, (usize, String)> {
     let m = &s.manifest;
     let mut engine = match Session::new(study, m.subject_index) {
         Ok(e) => e,
-        Err(e) => return Some((1, format!("the study cannot plan this session: {e}"))),
+        Err(e) => return Err((1, format!("the study cannot plan this session: {e}"))),
     };
     let mut first_line: HashMap<u32, usize> = HashMap::new();
     for (i, rec) in s.trials.records.iter().enumerate() {
         // Line 1 is the header.
         let line = i + 2;
         if let Err(e) = check_row_identity(rec, m) {
-            return Some((line, format!("{e} (a row of another log?)")));
+            return Err((line, format!("{e} (a row of another log?)")));
         }
         let index = rec.trial.index;
         if let Some(first) = first_line.get(&index) {
-            return Some((
+            return Err((
                 line,
                 format!("trial {index} is logged twice (first at line {first})"),
             ));
@@ -331,7 +335,7 @@ fn replay_problem(study: &StudyDefinition, s: &SessionResults) -> Option<(usize,
                 .iter()
                 .position(|r| r.trial.index == due)
         {
-            return Some((
+            return Err((
                 line,
                 format!(
                     "rows out of order: trial {index} is logged before trial {due} (line {})",
@@ -340,7 +344,7 @@ fn replay_problem(study: &StudyDefinition, s: &SessionResults) -> Option<(usize,
             ));
         }
         if index > due {
-            return Some((
+            return Err((
                 line,
                 if index == due + 1 {
                     format!("trial {due} is missing: this row is trial {index}")
@@ -353,7 +357,7 @@ fn replay_problem(study: &StudyDefinition, s: &SessionResults) -> Option<(usize,
             ));
         }
         if index < due {
-            return Some((
+            return Err((
                 line,
                 format!(
                     "trial {index} comes after trial {} (rows out of order)",
@@ -362,27 +366,24 @@ fn replay_problem(study: &StudyDefinition, s: &SessionResults) -> Option<(usize,
             ));
         }
         if let Err(e) = check_live_params(study, rec) {
-            return Some((line, e));
+            return Err((line, e));
         }
         if let Err(e) = engine.replay(&rec.trial, &rec.response, &rec.outcome) {
-            return Some((
+            return Err((
                 line,
                 format!("the row is not what the study plans for this subject here: {e}"),
             ));
         }
     }
-    None
+    Ok(engine)
 }
 
 /// How many trials the plan still holds after the logged rows, as words (" of N planned"),
 /// or "" when the plan has no fixed length (a staircase).
-fn remaining(study: &StudyDefinition, s: &SessionResults) -> String {
+fn remaining(study: &StudyDefinition, s: &SessionResults, engine: &Session) -> String {
     if study.protocol == Protocol::Staircase {
         return String::new();
     }
-    let Some(engine) = replayed(study, s) else {
-        return String::new();
-    };
     let left = engine.not_shown().len();
     format!(
         " of {} planned ({left} not shown)",
@@ -391,8 +392,7 @@ fn remaining(study: &StudyDefinition, s: &SessionResults) -> String {
 }
 
 /// What the plan still holds after the rows of a session marked complete, if anything.
-fn unfinished_plan(study: &StudyDefinition, s: &SessionResults) -> Option<String> {
-    let mut engine = replayed(study, s)?;
+fn unfinished_plan(study: &StudyDefinition, engine: &mut Session) -> Option<String> {
     match engine.next_trial(0) {
         Ok(Some(t)) => Some(if study.protocol == Protocol::Staircase {
             format!("more staircase trials (trial {} is due)", t.index)
@@ -401,15 +401,4 @@ fn unfinished_plan(study: &StudyDefinition, s: &SessionResults) -> Option<String
         }),
         _ => (engine.status() == SessionStatus::Running).then(|| "more trials".to_owned()),
     }
-}
-
-/// The engine after replaying a session's rows (which [`replay_problem`] found sound).
-fn replayed(study: &StudyDefinition, s: &SessionResults) -> Option<Session> {
-    let mut engine = Session::new(study, s.manifest.subject_index).ok()?;
-    for rec in &s.trials.records {
-        engine
-            .replay(&rec.trial, &rec.response, &rec.outcome)
-            .ok()?;
-    }
-    Some(engine)
 }
