@@ -9,6 +9,7 @@
 //! session resumed into a version 1 file keeps appending version 1 rows. Documented in
 //! `docs/results-format.md`.
 
+use std::borrow::Cow;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -319,63 +320,81 @@ pub fn encode_row_as(r: &TrialRecord, version: u32) -> Result<String, ResultsErr
 }
 
 /// Splits one CSV line into at most `max` fields; `Err((column, message))` with a 1-based
-/// column.
-fn split_line(line: &str, max: usize) -> Result<Vec<String>, (usize, String)> {
-    let mut fields = Vec::with_capacity(max);
-    let mut cur = String::new();
-    let mut chars = line.chars().peekable();
-    let mut quoted = false;
-    let mut at_start = true;
+/// column. Fields borrow from `line` unless a doubled quote had to be undone.
+fn split_line(line: &str, max: usize) -> Result<Vec<Cow<'_, str>>, (usize, String)> {
+    let mut fields: Vec<Cow<'_, str>> = Vec::with_capacity(max);
+    let bytes = line.as_bytes();
+    let mut start = 0;
     loop {
         let col = fields.len() + 1;
-        match chars.next() {
-            None => {
-                if quoted {
-                    return Err((col, "unterminated quoted field".into()));
-                }
-                fields.push(std::mem::take(&mut cur));
-                return Ok(fields);
+        if fields.len() == max {
+            return Err((col, format!("more than {max} fields")));
+        }
+        let (field, next) = if bytes.get(start) == Some(&b'"') {
+            quoted_field(line, start + 1).map_err(|m| (col, m.into()))?
+        } else {
+            let rest = &line[start..];
+            let end = rest.find([',', '"']).unwrap_or(rest.len());
+            if rest.as_bytes().get(end) == Some(&b'"') {
+                return Err((col, "quote inside an unquoted field".into()));
             }
-            Some('"') if at_start && !quoted => {
-                quoted = true;
-                at_start = false;
+            (Cow::Borrowed(&rest[..end]), start + end)
+        };
+        fields.push(field);
+        if next >= line.len() {
+            return Ok(fields);
+        }
+        // `next` is at the comma that ends the field.
+        start = next + 1;
+        if start == line.len() {
+            if fields.len() == max {
+                return Err((fields.len() + 1, format!("more than {max} fields")));
             }
-            Some('"') if quoted => {
-                if chars.peek() == Some(&'"') {
-                    chars.next();
-                    cur.push('"');
-                } else {
-                    quoted = false;
-                    if !matches!(chars.peek(), None | Some(',')) {
-                        return Err((col, "text after a closing quote".into()));
-                    }
-                }
-            }
-            Some('"') => return Err((col, "quote inside an unquoted field".into())),
-            Some(',') if !quoted => {
-                fields.push(std::mem::take(&mut cur));
-                at_start = true;
-                if fields.len() > max {
-                    return Err((fields.len(), format!("more than {max} fields")));
-                }
-            }
-            Some(c) => {
-                cur.push(c);
-                at_start = false;
-            }
+            fields.push(Cow::Borrowed(""));
+            return Ok(fields);
         }
     }
 }
 
+/// The quoted field whose text starts at byte `from` (just after its opening quote), and the
+/// index just past its closing quote (the end of the line or a comma).
+fn quoted_field(line: &str, from: usize) -> Result<(Cow<'_, str>, usize), &'static str> {
+    let mut owned: Option<String> = None;
+    let mut pos = from;
+    loop {
+        let Some(q) = line[pos..].find('"').map(|i| pos + i) else {
+            return Err("unterminated quoted field");
+        };
+        if line.as_bytes().get(q + 1) == Some(&b'"') {
+            owned
+                .get_or_insert_with(String::new)
+                .push_str(&line[pos..=q]);
+            pos = q + 2;
+            continue;
+        }
+        if !matches!(line.as_bytes().get(q + 1), None | Some(b',')) {
+            return Err("text after a closing quote");
+        }
+        let field = match owned {
+            Some(mut s) => {
+                s.push_str(&line[pos..q]);
+                Cow::Owned(s)
+            }
+            None => Cow::Borrowed(&line[from..q]),
+        };
+        return Ok((field, q + 1));
+    }
+}
+
 struct Row<'a> {
-    fields: &'a [String],
+    fields: &'a [Cow<'a, str>],
 }
 
 type FieldResult<T> = Result<T, (usize, String)>;
 
 impl Row<'_> {
     fn text(&self, i: usize) -> &str {
-        self.fields.get(i).map_or("", String::as_str)
+        self.fields.get(i).map_or("", |f| f)
     }
     fn nonempty(&self, i: usize) -> FieldResult<&str> {
         let s = self.text(i);
@@ -704,5 +723,40 @@ pub fn torn_path(trials: &Path) -> PathBuf {
             return p;
         }
         n += 1;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::split_line;
+
+    fn split(line: &str, max: usize) -> Result<Vec<String>, (usize, String)> {
+        split_line(line, max).map(|f| f.into_iter().map(std::borrow::Cow::into_owned).collect())
+    }
+
+    #[test]
+    fn splits_plain_quoted_and_empty_fields() {
+        assert_eq!(split("", 3).unwrap(), [""]);
+        assert_eq!(split("a,,b", 3).unwrap(), ["a", "", "b"]);
+        assert_eq!(split("a,", 3).unwrap(), ["a", ""]);
+        assert_eq!(split(",", 3).unwrap(), ["", ""]);
+        assert_eq!(
+            split(r#""x, ""y""",z,"""""#, 3).unwrap(),
+            [r#"x, "y""#, "z", "\""]
+        );
+        assert_eq!(split(r#""",a"#, 3).unwrap(), ["", "a"]);
+        assert_eq!(split("é,ü", 2).unwrap(), ["é", "ü"]);
+    }
+
+    #[test]
+    fn refuses_bad_quotes_and_extra_fields_naming_the_column() {
+        assert_eq!(split("a,b,c", 2).unwrap_err().0, 3);
+        assert_eq!(split("a,b,", 2).unwrap_err().0, 3);
+        let (col, msg) = split(r#"a,b"c"#, 3).unwrap_err();
+        assert_eq!((col, msg.as_str()), (2, "quote inside an unquoted field"));
+        let (col, msg) = split(r#"a,"b"c"#, 3).unwrap_err();
+        assert_eq!((col, msg.as_str()), (2, "text after a closing quote"));
+        let (col, msg) = split(r#"a,"b,c"#, 3).unwrap_err();
+        assert_eq!((col, msg.as_str()), (2, "unterminated quoted field"));
     }
 }

@@ -8,8 +8,9 @@ whole process, at most 200 MiB peak memory, both measured in one run.
   python3 scripts/bench/report_million.py peer  DIR   # the pandas + SciPy report of DIR
   python3 scripts/bench/report_million.py time  DIR   # both, timed with /usr/bin/time -v
 
-`make` runs `study simulate examples/mos.toml` for 2,000 subjects (54 trials each, 50 of them
-rated tests or hidden repeats: 100,000 ratings) under `eatmydata` (no fsync: generation is
+`make` sweeps the examples' two generated motions through the paper-000 design (2 clips x 3
+codecs x 7 ratios, into DIR-stimuli, the clips in DIR-clips) and runs `study simulate` on it for 2,000 subjects (54
+trials each, 50 of them rated tests or hidden repeats: 100,000 ratings) under `eatmydata` (no fsync: generation is
 not what is measured), then copies every session nine times under new subject ids
 (`S0001` -> `S0001-c1` ...). A copy keeps its `subject_index`, so it replays to the same
 plan and passes `study report`'s log check; 20,000 sessions, 10^6 ratings.
@@ -35,13 +36,65 @@ ROOT = Path(__file__).resolve().parents[2]
 STUDY = os.environ.get("STUDY_BIN", str(ROOT / "target/release/study"))
 
 
+# The paper-000 design the ratings come from: 2 clips x 3 codecs x 7 ratios = 42 stimuli, 8
+# hidden repeats, 4 familiarization trials (54 trials, 50 rated). The examples' study is smaller.
+PAPER_STUDY = """format_version = 1
+name = "mos-million"
+title = "Motion quality study"
+protocol = "mos"
+stimuli = "stimuli.json"
+seed = 20110512
+
+[conditions]
+clips = ["walk", "march"]
+codecs = ["wavelet-perceptual", "wavelet-bone", "wavelet-standard"]
+target_cr = [10, 20, 30, 40, 50, 60, 70]
+
+[presentation]
+arrangement = "side_by_side"
+reference_position = "random"
+stimulus_duration_ms = 6000
+
+[scale]
+kind = "categorical"
+min = 1.0
+max = 5.0
+step = 0.5
+
+[session]
+time_limit_min = 40
+familiarization = 4
+hidden_repeats = 8
+
+[simulation]
+metric = "rms_cm"
+quality_scale = 4.0
+bias_sd = 0.3
+noise_sd = 0.4
+response_time_ms = 4000
+"""
+
+
 def make(out: Path) -> None:
     if out.exists():
         sys.exit(f"{out} exists")
+    # Stimuli of the paper's design from the examples' generated motions, beside `out`.
+    stim, clips = (out.parent / (out.name + tail) for tail in ("-stimuli", "-clips"))
+    for d in (stim, clips):
+        if d.exists():
+            sys.exit(f"{d} exists")
+    clips.mkdir()
+    for clip in ("walk", "march"):
+        shutil.copy(ROOT / "examples/stimuli" / clip / "reference.bvh", clips / f"{clip}.bvh")
+    quiet = {"check": True, "stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
     subprocess.run(
-        ["eatmydata", STUDY, "simulate", str(ROOT / "examples/mos.toml"), "--subjects", "2000",
-         "--seed", "1", "-o", str(out)],
-        check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        [STUDY, "sweep", "--clips", str(clips / "walk.bvh"), str(clips / "march.bvh"),
+         "--codecs", "wavelet-perceptual,wavelet-bone,wavelet-standard",
+         "--cr", "10,20,30,40,50,60,70", "--quiet", "-o", str(stim)], **quiet)
+    (stim / "mos.toml").write_text(PAPER_STUDY)
+    subprocess.run(
+        ["eatmydata", STUDY, "simulate", str(stim / "mos.toml"), "--subjects", "2000",
+         "--seed", "1", "-o", str(out)], **quiet)
     originals = sorted(p for p in out.iterdir() if (p / "session.json").is_file())
     for copy in range(1, 10):
         for src in originals:
