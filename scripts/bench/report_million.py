@@ -9,9 +9,9 @@ whole process, at most 200 MiB peak memory, both measured in one run.
   python3 scripts/bench/report_million.py time  DIR   # both, timed with /usr/bin/time -v
 
 `make` sweeps the examples' two generated motions through the paper-000 design (2 clips x 3
-codecs x 7 ratios, into DIR-stimuli, the clips in DIR-clips) and runs `study simulate` on it for 2,000 subjects (54
-trials each, 50 of them rated tests or hidden repeats: 100,000 ratings) under `eatmydata` (no fsync: generation is
-not what is measured), then copies every session nine times under new subject ids
+codecs x 7 ratios, into DIR-stimuli, the clips in DIR-clips) and runs `study simulate` on it
+for 2,000 subjects (54 trials each, 50 of them rated tests or hidden repeats: 100,000 ratings)
+under `eatmydata` (no fsync: generation is not what is measured), then copies every session nine times under new subject ids
 (`S0001` -> `S0001-c1` ...). A copy keeps its `subject_index`, so it replays to the same
 plan and passes `study report`'s log check; 20,000 sessions, 10^6 ratings.
 
