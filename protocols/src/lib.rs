@@ -23,6 +23,7 @@ pub mod catalog;
 pub mod engine;
 pub mod manifest;
 pub mod observer;
+pub mod quest;
 pub mod record;
 pub mod rng;
 pub mod staircase;
@@ -34,6 +35,7 @@ pub use record::{
     Answer, Arrangement, Block, FrameTiming, Outcome, Position, Protocol, Response,
     StimulusEncoding, Trial, TrialRecord,
 };
+pub use quest::{QuestMethod, QuestPlus, QuestSettings};
 pub use staircase::{Staircase, StaircaseSettings, StepType};
 pub use study::{
     ClipOrder, Detection, LiveClip, LiveStaircase, StaircaseStudy, StudyDefinition, StudyError,
