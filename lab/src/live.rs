@@ -474,6 +474,70 @@ mod tests {
         assert_eq!(trials, 12);
     }
 
+    /// A live QUEST+ track: a correct and a wrong answer lead to two levels, both encoded in
+    /// the background while the trial runs, so every next trial is a cache hit and equals a
+    /// foreground encoding.
+    #[test]
+    fn a_live_quest_track_prefetches_both_next_levels() {
+        use protocols::{Answer, Response, Session};
+        let dir = std::env::temp_dir().join(format!("live-quest-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let manifest = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/live/stimuli.json");
+        let text = std::fs::read_to_string(
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/live-staircase.toml"),
+        )
+        .unwrap()
+        .replace("live/stimuli.json", &manifest.display().to_string())
+        .replace(
+            "start = 64\nstep = 2\n",
+            "method = \"quest_plus\"\nstep = 8\n",
+        )
+        .replace(
+            "n_up = 1\nn_down = 2\nstop_reversals = 12\nmax_trials = 90\nthreshold_reversals = 6\n",
+            "max_trials = 8\n\n[staircase.quest]\nthreshold = { min = 5, max = 120, count = 24, spacing = \"log\" }\nslope = [1, 2, 4]\nlapse = [0, 0.02]\n",
+        );
+        let file = dir.join("live-quest.toml");
+        std::fs::write(&file, text).unwrap();
+        let study = StudyFile::load(&file).unwrap();
+        assert!(study.definition.staircase.as_ref().unwrap().quest.is_some());
+        let mut live = LiveStimuli::from_study(&study).unwrap().unwrap();
+        let fresh = LiveStimuli::from_study(&study).unwrap().unwrap();
+        let mut session = Session::new(&study.definition, 0).unwrap();
+        let mut trials = 0;
+        while let Some(t) = session.next_trial(0).unwrap() {
+            if trials > 0 {
+                let before = live.cached();
+                let got = live.resolve(&t).unwrap();
+                assert_eq!(live.cached(), before, "trial {} was prefetched", t.index);
+                same(&got, &fresh.resolve(&t).unwrap());
+            } else {
+                live.resolve(&t).unwrap();
+            }
+            let ahead = session.lookahead(0);
+            if trials + 1 < 8 {
+                assert_eq!(ahead.len(), 2, "trial {}: {ahead:?}", t.index);
+            }
+            live.prefetch(&ahead);
+            live.wait_prefetch();
+            let answer = if t.index % 3 == 1 {
+                t.reference_position.other()
+            } else {
+                t.reference_position
+            };
+            session
+                .respond(&Response {
+                    answer: Answer::Choice(answer),
+                    response_time_ms: 500,
+                    replays: 0,
+                    dropped_frames: 0,
+                })
+                .unwrap();
+            trials += 1;
+        }
+        assert_eq!(trials, 8);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
     /// A trial that asks for a level while it is being prefetched waits for that encoding;
     /// trials that are not live trials of the study are not prefetched.
     #[test]
