@@ -23,6 +23,7 @@
 //! # Ok::<(), analysis::AnalysisError>(())
 //! ```
 
+pub mod bayesian;
 mod confidence;
 pub mod descriptive;
 pub mod display;

@@ -5,6 +5,7 @@ use std::collections::{BTreeMap, BTreeSet, HashMap};
 
 use serde::Serialize;
 
+use crate::bayesian::{self, BayesFit, Sigmoid};
 use crate::confidence::Confidence;
 use crate::descriptive::{CiMethod, ConditionStats, Rating, condition_stats};
 use crate::dmos::{DscqsPair, acr_hr_dmos, dscqs_dmos, zscore_screened};
@@ -158,6 +159,98 @@ pub struct StudyAnalysis {
     pub psychometric: Option<(PsychometricFit, BootstrapCi)>,
     /// Share of viewers who would notice each level, and the CR reached there (staircases).
     pub jnd: Option<JndAnalysis>,
+    /// Bayesian psychometric fits of every adaptive track, every subject and all subjects
+    /// pooled (staircase and QUEST+ / Psi studies).
+    pub bayes: Option<BayesianFits>,
+}
+
+/// One adaptive track's thresholds.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct TrackFit {
+    /// Subject.
+    pub subject: u32,
+    /// Track name.
+    pub label: String,
+    /// A QUEST+ or Psi track (else an up-down staircase).
+    pub bayesian: bool,
+    /// Trials.
+    pub trials: usize,
+    /// Mean of the last reversals (up-down tracks with enough reversals).
+    pub reversal_threshold: Option<f64>,
+    /// The session's own threshold (`session.json`).
+    pub logged_threshold: Option<f64>,
+    /// The Bayesian fit of the track's trials (`None` where it has fewer than two levels).
+    pub fit: Option<BayesFit>,
+}
+
+/// Bayesian psychometric fits ([`crate::bayesian`]) of 2AFC data.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct BayesianFits {
+    /// The sigmoid (from [`ReportOptions::fit`]'s shape).
+    pub sigmoid: Sigmoid,
+    /// Every track of every subject, in subject order.
+    pub per_track: Vec<TrackFit>,
+    /// Every subject's trials of all tracks together.
+    pub per_subject: Vec<(u32, Option<BayesFit>)>,
+    /// All subjects' trials pooled.
+    pub pooled: Option<BayesFit>,
+}
+
+/// The Bayesian fits of every track, every subject and all trials pooled.
+fn bayesian_fits(data: &StudyData, options: &ReportOptions) -> BayesianFits {
+    use crate::psychometric::Shape;
+    let sigmoid = match options.fit.shape {
+        Shape::Weibull => Sigmoid::Weibull,
+        Shape::Logistic => Sigmoid::Logistic,
+    };
+    let fit_of = |trials: &[TwoAfcTrial]| {
+        bayesian::fit(
+            &GroupedTrials::from_trials(trials),
+            sigmoid,
+            options.confidence,
+        )
+        .ok()
+    };
+    let trials_of = |t: &StaircaseTrack| -> Vec<TwoAfcTrial> {
+        t.steps
+            .iter()
+            .map(|s| TwoAfcTrial {
+                level: s.level,
+                correct: s.correct,
+            })
+            .collect()
+    };
+    let mut per_track: Vec<TrackFit> = data
+        .staircases
+        .iter()
+        .map(|t| TrackFit {
+            subject: t.subject,
+            label: t.label.clone(),
+            bayesian: t.bayesian,
+            trials: t.steps.len(),
+            reversal_threshold: (!t.bayesian)
+                .then(|| t.threshold(options.last_reversals))
+                .flatten(),
+            logged_threshold: t.logged_threshold,
+            fit: fit_of(&trials_of(t)),
+        })
+        .collect();
+    per_track.sort_by(|a, b| a.subject.cmp(&b.subject).then_with(|| a.label.cmp(&b.label)));
+    let mut by_subject: BTreeMap<u32, Vec<TwoAfcTrial>> = BTreeMap::new();
+    for t in &data.staircases {
+        by_subject.entry(t.subject).or_default().extend(trials_of(t));
+    }
+    let per_subject = by_subject
+        .iter()
+        .map(|(s, trials)| (*s, fit_of(trials)))
+        .collect();
+    let pooled = fit_of(&data.two_afc);
+    BayesianFits {
+        sigmoid,
+        per_track,
+        per_subject,
+        pooled,
+    }
 }
 
 /// Computes every statistic the data allow.
@@ -254,6 +347,7 @@ pub fn analyze(data: &StudyData, options: &ReportOptions) -> Result<StudyAnalysi
         options.ci_method,
     );
     let (thresholds, jnd, psychometric) = adaptive_statistics(data, options)?;
+    let bayes = (!data.staircases.is_empty()).then(|| bayesian_fits(data, options));
     Ok(StudyAnalysis {
         mos,
         screening,
@@ -269,6 +363,7 @@ pub fn analyze(data: &StudyData, options: &ReportOptions) -> Result<StudyAnalysi
         thresholds,
         psychometric,
         jnd,
+        bayes,
     })
 }
 
@@ -511,6 +606,9 @@ impl StudyAnalysis {
         }
         if let Some((fit, ci)) = &self.psychometric {
             psychometric_section(&mut report, fit, ci, data, options);
+        }
+        if let Some(b) = &self.bayes {
+            bayes_section(&mut report, b, data, options);
         }
         report
     }
@@ -878,6 +976,105 @@ fn psychometric_section(
             },
         );
     }
+}
+
+/// The Bayesian section: every adaptive track's thresholds (reversals, the session's own,
+/// the Bayesian fit with its credible interval), then the fit per subject and pooled.
+fn bayes_section(report: &mut Report, b: &BayesianFits, data: &StudyData, options: &ReportOptions) {
+    let conf = percent_label(options.confidence);
+    let label = &options.level_label;
+    let s = report.section("Bayesian psychometric fits");
+    s.text(format!(
+        "Beta-binomial fits of ψ(x) = 0.5 + (0.5 − λ)·S(x) with a {} sigmoid S{}, by psignifit 4's procedure (posterior on a grid, posterior means, equal-tailed {conf} credible intervals). Threshold: S = 0.5 (75 % correct without lapses); width: S from 0.05 to 0.95{}. Priors: {}. The up-down threshold is the mean of the last {} reversals; a QUEST+ / Psi track's own estimate is its posterior mean of α (session.json).",
+        match b.sigmoid {
+            Sigmoid::Weibull => "Weibull (Gumbel in ln level)",
+            Sigmoid::Logistic => "logistic",
+            Sigmoid::Normal => "normal",
+        },
+        "",
+        if b.sigmoid == Sigmoid::Weibull { ", in ln units" } else { "" },
+        bayesian::PRIORS,
+        options.last_reversals
+    ));
+    let ci = |f: &Option<BayesFit>| {
+        f.map_or_else(
+            || ("n/a".to_owned(), String::new()),
+            |f| {
+                (
+                    format!("{:.5}", f.threshold.mean),
+                    format!("{:.5} – {:.5}", f.threshold.lower, f.threshold.upper),
+                )
+            },
+        )
+    };
+    s.table(tables::Table {
+        name: "adaptive_tracks".to_owned(),
+        caption: format!("Threshold ({label}) of every adaptive track"),
+        columns: vec![
+            "Subject".to_owned(),
+            "Track".to_owned(),
+            "Procedure".to_owned(),
+            "Trials".to_owned(),
+            "Reversal mean".to_owned(),
+            "Session estimate".to_owned(),
+            "Bayesian threshold".to_owned(),
+            format!("{conf} credible interval"),
+        ],
+        rows: b
+            .per_track
+            .iter()
+            .map(|t| {
+                let (m, i) = ci(&t.fit);
+                vec![
+                    data.subject_name(t.subject),
+                    t.label.clone(),
+                    if t.bayesian { "QUEST+/Psi" } else { "up-down" }.to_owned(),
+                    t.trials.to_string(),
+                    fmt_opt(t.reversal_threshold, 5),
+                    fmt_opt(t.logged_threshold, 5),
+                    m,
+                    i,
+                ]
+            })
+            .collect(),
+    });
+    let row = |who: String, f: &Option<BayesFit>| {
+        let (m, i) = ci(f);
+        let est = |e: Option<bayesian::Estimate>| {
+            e.map_or_else(String::new, |e| {
+                format!("{:.4} ({:.4} – {:.4})", e.mean, e.lower, e.upper)
+            })
+        };
+        vec![
+            who,
+            f.map_or_else(String::new, |f| f.trials.to_string()),
+            m,
+            i,
+            est(f.map(|f| f.width)),
+            est(f.map(|f| f.lapse)),
+            est(f.map(|f| f.eta)),
+        ]
+    };
+    let mut rows: Vec<Vec<String>> = b
+        .per_subject
+        .iter()
+        .map(|(subject, f)| row(data.subject_name(*subject), f))
+        .collect();
+    rows.push(row("pooled".to_owned(), &b.pooled));
+    s.table(tables::Table {
+        name: "bayes_fits".to_owned(),
+        caption: format!("Bayesian psychometric fit per subject and pooled ({label})"),
+        columns: vec![
+            "Subject".to_owned(),
+            "Trials".to_owned(),
+            "Threshold".to_owned(),
+            format!("{conf} credible interval"),
+            "Width (interval)".to_owned(),
+            "Lapse λ (interval)".to_owned(),
+            "Overdispersion η (interval)".to_owned(),
+        ],
+        rows,
+    });
 }
 
 /// The JND section: thresholds over viewers, and at each level the share who would notice
