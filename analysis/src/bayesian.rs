@@ -117,12 +117,21 @@ impl Sigmoid {
     }
 }
 
-/// ln Γ(a + k) − ln Γ(a) = Σ_{i<k} ln(a + i), products taken 16 at a time.
+/// ln Γ(a + k) − ln Γ(a) = Σ_{i<k} ln(a + i), as the logarithm of products of as many terms
+/// as stay below 10³⁰⁰ (64 while a + k < 10³, 32 while < 10⁹, else 16).
 fn ln_rising(a: f64, k: u32) -> f64 {
+    let top = a + f64::from(k);
+    let chunk = if top < 1e3 {
+        64
+    } else if top < 1e9 {
+        32
+    } else {
+        16
+    };
     let mut total = 0.0;
     let mut i = 0;
     while i < k {
-        let end = (i + 16).min(k);
+        let end = (i + chunk).min(k);
         let mut prod = 1.0;
         for j in i..end {
             prod *= a + f64::from(j);
@@ -240,26 +249,32 @@ fn posterior(
         .map(|&v| width_prior(v, wmin, range.1 - range.0).ln())
         .collect();
     let ln_prior_l: Vec<f64> = lambda.iter().map(|&v| beta1(v, 10.0).ln()).collect();
+    // Per η: whether it is binomial, ν = 1/η² − 1, its log prior and −Σ ln Γ(n + ν) − ln Γ(ν).
+    let etas: Vec<(bool, f64, f64, f64)> = eta
+        .iter()
+        .map(|&eta_std| {
+            let variance = eta_std * eta_std;
+            let binomial = variance <= 1e-9;
+            let nu = 1.0 / variance - 1.0;
+            let norm = if binomial {
+                0.0
+            } else {
+                data.n.iter().map(|&n| -ln_rising(nu, n)).sum()
+            };
+            (binomial, nu, beta1(eta_std, ETA_BETA).ln(), norm)
+        })
+        .collect();
     let mut lp = vec![f64::NEG_INFINITY; eta.len() * nl * nm * nw];
     let mut psi = vec![0.0; levels];
-    for (e, &eta_std) in eta.iter().enumerate() {
-        let variance = eta_std * eta_std;
-        let binomial = variance <= 1e-9;
-        let nu = 1.0 / variance - 1.0;
-        let ln_prior_e = beta1(eta_std, ETA_BETA).ln();
-        // −ln Γ(n + ν) + ln Γ(ν) per block.
-        let norm: f64 = if binomial {
-            0.0
-        } else {
-            data.n.iter().map(|&n| -ln_rising(nu, n)).sum()
-        };
-        for (l, &lam) in lambda.iter().enumerate() {
-            for i in 0..nm {
-                for j in 0..nw {
-                    let cell = (i * nw + j) * levels;
-                    for b in 0..levels {
-                        psi[b] = GUESS + (1.0 - lam - GUESS) * s[cell + b];
-                    }
+    for (l, &lam) in lambda.iter().enumerate() {
+        for i in 0..nm {
+            for j in 0..nw {
+                let cell = (i * nw + j) * levels;
+                for b in 0..levels {
+                    psi[b] = GUESS + (1.0 - lam - GUESS) * s[cell + b];
+                }
+                let prior = ln_prior_l[l] + ln_prior_m[i] + ln_prior_w[j];
+                for (e, &(binomial, nu, ln_prior_e, norm)) in etas.iter().enumerate() {
                     let mut ll = norm;
                     for b in 0..levels {
                         let (n, k, p) = (data.n[b], data.k[b], psi[b]);
@@ -274,7 +289,7 @@ fn posterior(
                             ll += ln_rising(p * nu, k) + ln_rising((1.0 - p) * nu, n - k);
                         }
                     }
-                    let v = ll + ln_prior_e + ln_prior_l[l] + ln_prior_m[i] + ln_prior_w[j];
+                    let v = ll + ln_prior_e + prior;
                     lp[((e * nl + l) * nm + i) * nw + j] = if v.is_nan() {
                         f64::NEG_INFINITY
                     } else {

@@ -179,7 +179,8 @@ pub struct TrackFit {
     pub reversal_threshold: Option<f64>,
     /// The session's own threshold (`session.json`).
     pub logged_threshold: Option<f64>,
-    /// The Bayesian fit of the track's trials (`None` where it has fewer than two levels).
+    /// The Bayesian fit of a QUEST+ / Psi track's trials (`None` for an up-down track, whose
+    /// threshold is its reversal mean, or where the track has fewer than two levels).
     pub fit: Option<BayesFit>,
 }
 
@@ -211,6 +212,20 @@ fn bayesian_fits(data: &StudyData, options: &ReportOptions) -> BayesianFits {
         )
         .ok()
     };
+    // Each fit evaluates a posterior on some 10⁶ grid points: they run on two threads.
+    let fit_all = |sets: &[Vec<TwoAfcTrial>]| -> Vec<Option<BayesFit>> {
+        let half = sets.len().div_ceil(2).max(1);
+        std::thread::scope(|scope| {
+            let workers: Vec<_> = sets
+                .chunks(half)
+                .map(|part| scope.spawn(move || part.iter().map(|t| fit_of(t)).collect::<Vec<_>>()))
+                .collect();
+            workers
+                .into_iter()
+                .flat_map(|w| w.join().unwrap_or_default())
+                .collect()
+        })
+    };
     let trials_of = |t: &StaircaseTrack| -> Vec<TwoAfcTrial> {
         t.steps
             .iter()
@@ -220,6 +235,21 @@ fn bayesian_fits(data: &StudyData, options: &ReportOptions) -> BayesianFits {
             })
             .collect()
     };
+    let mut by_subject: BTreeMap<u32, Vec<TwoAfcTrial>> = BTreeMap::new();
+    for t in &data.staircases {
+        by_subject.entry(t.subject).or_default().extend(trials_of(t));
+    }
+    // One list of fits: the Bayesian tracks', every subject's, the pool's.
+    let mut sets: Vec<Vec<TwoAfcTrial>> = data
+        .staircases
+        .iter()
+        .filter(|t| t.bayesian)
+        .map(trials_of)
+        .collect();
+    let tracks = sets.len();
+    sets.extend(by_subject.values().cloned());
+    sets.push(data.two_afc.clone());
+    let mut fits = fit_all(&sets).into_iter();
     let mut per_track: Vec<TrackFit> = data
         .staircases
         .iter()
@@ -232,19 +262,16 @@ fn bayesian_fits(data: &StudyData, options: &ReportOptions) -> BayesianFits {
                 .then(|| t.threshold(options.last_reversals))
                 .flatten(),
             logged_threshold: t.logged_threshold,
-            fit: fit_of(&trials_of(t)),
+            fit: if t.bayesian { fits.next().flatten() } else { None },
         })
         .collect();
+    debug_assert_eq!(per_track.iter().filter(|t| t.bayesian).count(), tracks);
     per_track.sort_by(|a, b| a.subject.cmp(&b.subject).then_with(|| a.label.cmp(&b.label)));
-    let mut by_subject: BTreeMap<u32, Vec<TwoAfcTrial>> = BTreeMap::new();
-    for t in &data.staircases {
-        by_subject.entry(t.subject).or_default().extend(trials_of(t));
-    }
     let per_subject = by_subject
-        .iter()
-        .map(|(s, trials)| (*s, fit_of(trials)))
+        .keys()
+        .map(|s| (*s, fits.next().flatten()))
         .collect();
-    let pooled = fit_of(&data.two_afc);
+    let pooled = fits.next().flatten();
     BayesianFits {
         sigmoid,
         per_track,
@@ -380,7 +407,8 @@ fn adaptive_statistics(
     data: &StudyData,
     options: &ReportOptions,
 ) -> Result<Adaptive, AnalysisError> {
-    let thresholds = if data.staircases.is_empty() {
+    // Only up-down tracks have reversals (QUEST+ / Psi tracks get Bayesian fits instead).
+    let thresholds = if data.staircases.iter().all(|t| t.bayesian) {
         None
     } else {
         Some(staircase_thresholds(
@@ -608,7 +636,7 @@ impl StudyAnalysis {
             psychometric_section(&mut report, fit, ci, data, options);
         }
         if let Some(b) = &self.bayes {
-            bayes_section(&mut report, b, data, options);
+            bayes_section(&mut report, b, data, options, self.thresholds.is_none());
         }
         report
     }
@@ -980,12 +1008,18 @@ fn psychometric_section(
 
 /// The Bayesian section: every adaptive track's thresholds (reversals, the session's own,
 /// the Bayesian fit with its credible interval), then the fit per subject and pooled.
-fn bayes_section(report: &mut Report, b: &BayesianFits, data: &StudyData, options: &ReportOptions) {
+fn bayes_section(
+    report: &mut Report,
+    b: &BayesianFits,
+    data: &StudyData,
+    options: &ReportOptions,
+    track_figure: bool,
+) {
     let conf = percent_label(options.confidence);
     let label = &options.level_label;
     let s = report.section("Bayesian psychometric fits");
     s.text(format!(
-        "Beta-binomial fits of ψ(x) = 0.5 + (0.5 − λ)·S(x) with a {} sigmoid S{}, by psignifit 4's procedure (posterior on a grid, posterior means, equal-tailed {conf} credible intervals). Threshold: S = 0.5 (75 % correct without lapses); width: S from 0.05 to 0.95{}. Priors: {}. The up-down threshold is the mean of the last {} reversals; a QUEST+ / Psi track's own estimate is its posterior mean of α (session.json).",
+        "Beta-binomial fits of ψ(x) = 0.5 + (0.5 − λ)·S(x) with a {} sigmoid S{}, by psignifit 4's procedure (posterior on a grid, posterior means, equal-tailed {conf} credible intervals). Threshold: S = 0.5 (75 % correct without lapses); width: S from 0.05 to 0.95{}. Priors: {}. Every track's threshold: an up-down staircase's is the mean of its last {} reversals; a QUEST+ / Psi track's own estimate is the posterior mean of its Weibull or logistic α (session.json; the Weibull's α is its 80 % point, not the 75 % point the fit reports), and it is also fitted here.",
         match b.sigmoid {
             Sigmoid::Weibull => "Weibull (Gumbel in ln level)",
             Sigmoid::Logistic => "logistic",
@@ -1075,6 +1109,18 @@ fn bayes_section(report: &mut Report, b: &BayesianFits, data: &StudyData, option
         ],
         rows,
     });
+    if track_figure && options.figures {
+        s.figure(
+            "staircases",
+            Figure::Staircases {
+                title: "Adaptive tracks".to_owned(),
+                level_label: options.level_label.clone(),
+                tracks: data.staircases.clone(),
+                last_reversals: options.last_reversals,
+                subjects: data.subjects.clone(),
+            },
+        );
+    }
 }
 
 /// The JND section: thresholds over viewers, and at each level the share who would notice
