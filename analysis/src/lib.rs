@@ -34,6 +34,7 @@ pub mod export;
 pub mod findings;
 pub mod from_results;
 pub mod jnd;
+pub mod mle;
 mod panel;
 pub mod plots;
 pub mod power;

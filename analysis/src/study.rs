@@ -162,7 +162,15 @@ pub struct StudyAnalysis {
     /// Bayesian psychometric fits of every adaptive track, every subject and all subjects
     /// pooled (staircase and QUEST+ / Psi studies).
     pub bayes: Option<BayesianFits>,
+    /// Subject bias and inconsistency by maximum likelihood (sureal's MLE model), for rating
+    /// studies (not DSCQS) of at most [`MLE_MAX_RATINGS`] ratings.
+    pub subject_model: Option<crate::mle::SubjectModel>,
 }
+
+/// Most ratings the report fits the subject model to: sureal's iteration passes over every
+/// rating about a thousand times (a lab study's thousands of ratings take well under a second;
+/// 10⁶ would take minutes), so larger sets are left to sureal itself (`sureal_dataset.py`).
+pub const MLE_MAX_RATINGS: usize = 50_000;
 
 /// One adaptive track's thresholds.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -375,6 +383,14 @@ pub fn analyze(data: &StudyData, options: &ReportOptions) -> Result<StudyAnalysi
     );
     let (thresholds, jnd, psychometric) = adaptive_statistics(data, options)?;
     let bayes = (!data.staircases.is_empty()).then(|| bayesian_fits(data, options));
+    let subject_model = if data.dscqs.is_empty()
+        && !data.ratings.is_empty()
+        && data.ratings.len() <= MLE_MAX_RATINGS
+    {
+        Some(crate::mle::fit(&data.ratings, &data.conditions)?)
+    } else {
+        None
+    };
     Ok(StudyAnalysis {
         mos,
         screening,
@@ -391,6 +407,7 @@ pub fn analyze(data: &StudyData, options: &ReportOptions) -> Result<StudyAnalysi
         psychometric,
         jnd,
         bayes,
+        subject_model,
     })
 }
 
@@ -622,6 +639,9 @@ impl StudyAnalysis {
         }
         if let Some(screening) = &self.screening {
             screening_section(&mut report, screening, &self.repeats, data);
+        }
+        if let Some(m) = &self.subject_model {
+            subject_model_section(&mut report, m, data);
         }
         if !self.dmos.is_empty() {
             self.dmos_section(&mut report, data, options);
@@ -1004,6 +1024,78 @@ fn psychometric_section(
             },
         );
     }
+}
+
+/// The subject-model section: each subject's bias and inconsistency and each condition's
+/// quality by maximum likelihood (sureal's MLE model).
+fn subject_model_section(report: &mut Report, m: &crate::mle::SubjectModel, data: &StudyData) {
+    let s = report.section("Subject bias and inconsistency");
+    s.text(format!(
+        "Maximum-likelihood subject model (Li & Bampis 2017; sureal's MaximumLikelihoodEstimationModel, its iteration, {} passes): every rating = quality of the stimulus + the subject's bias + noise with the subject's inconsistency (SD) and the clip's ambiguity (SD). Biases have mean 0; intervals 95 % (bias and quality ±1.96 standard errors, inconsistency χ² on the subject's ratings). Content ambiguity: {}.",
+        m.passes,
+        m.contents
+            .iter()
+            .map(|(c, a)| format!("{c} {a:.3}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    ));
+    s.table(tables::Table {
+        name: "subject_model".to_owned(),
+        caption: "Subject bias and inconsistency (maximum likelihood)".to_owned(),
+        columns: vec![
+            "Subject".to_owned(),
+            "Ratings".to_owned(),
+            "Bias".to_owned(),
+            "Bias 95 % interval".to_owned(),
+            "Inconsistency".to_owned(),
+            "Inconsistency 95 % interval".to_owned(),
+        ],
+        rows: m
+            .subjects
+            .iter()
+            .map(|e| {
+                vec![
+                    data.subject_name(e.subject),
+                    e.ratings.to_string(),
+                    format!("{:.3}", e.bias),
+                    format!("{:.3} – {:.3}", e.bias - e.bias_ci, e.bias + e.bias_ci),
+                    format!("{:.3}", e.inconsistency),
+                    format!("{:.3} – {:.3}", e.inconsistency_ci.0, e.inconsistency_ci.1),
+                ]
+            })
+            .collect(),
+    });
+    let name = |id: u32| {
+        data.conditions
+            .iter()
+            .find(|c| c.id == id)
+            .map_or_else(|| id.to_string(), |c| {
+                c.compression_ratio.map_or_else(
+                    || format!("{} reference", c.clip),
+                    |cr| format!("{} {} {cr}:1", c.clip, c.method()),
+                )
+            })
+    };
+    s.table(tables::Table {
+        name: "mle_quality".to_owned(),
+        caption: "Quality per condition by maximum likelihood".to_owned(),
+        columns: vec![
+            "Condition".to_owned(),
+            "Quality".to_owned(),
+            "95 % interval".to_owned(),
+        ],
+        rows: m
+            .quality
+            .iter()
+            .map(|&(c, q, ci)| {
+                vec![
+                    name(c),
+                    format!("{q:.3}"),
+                    format!("{:.3} – {:.3}", q - ci, q + ci),
+                ]
+            })
+            .collect(),
+    });
 }
 
 /// The Bayesian section: every adaptive track's thresholds (reversals, the session's own,
