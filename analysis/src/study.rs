@@ -1039,6 +1039,19 @@ fn subject_model_section(report: &mut Report, m: &crate::mle::SubjectModel, data
             .collect::<Vec<_>>()
             .join(", ")
     ));
+    let degenerate: Vec<String> = m
+        .subjects
+        .iter()
+        .filter(|e| e.inconsistency < 1e-6)
+        .map(|e| data.subject_name(e.subject))
+        .chain(m.contents.iter().filter(|c| c.1 < 1e-6).map(|c| c.0.clone()))
+        .collect();
+    if !degenerate.is_empty() {
+        s.text(format!(
+            "Warning: the fit reached a standard deviation of 0 for {}: the likelihood grows without bound there, so those ratings are fitted exactly and the intervals that depend on them collapse. Too few ratings for this model; the MOS tables do not depend on it.",
+            degenerate.join(", ")
+        ));
+    }
     s.table(tables::Table {
         name: "subject_model".to_owned(),
         caption: "Subject bias and inconsistency (maximum likelihood)".to_owned(),

@@ -4,8 +4,8 @@
 //! A [`Session`] is built from a validated [`StudyDefinition`] and a subject index. MOS and DSCQS
 //! sessions plan every trial up front from the study seed and the subject index (familiarization
 //! block spanning the quality range, shuffled test trials, hidden repeats, reference positions);
-//! staircase sessions decide each trial from the staircases' state and a per-trial random
-//! stream. Nothing depends on the wall clock except the time limit, whose clock the caller
+//! staircase sessions decide each trial from the tracks' state (an up-down staircase, or a
+//! QUEST+ / Psi posterior, [`crate::quest`]) and a per-trial random stream. Nothing depends on the wall clock except the time limit, whose clock the caller
 //! passes in, so replaying logged responses regenerates the logged trials exactly (resume).
 
 use serde::{Deserialize, Serialize};

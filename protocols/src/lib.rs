@@ -1,7 +1,8 @@
 //! Study definitions and the protocol engines that decide what a subject sees next.
 //!
 //! Holds: the versioned study file ([`study`], TOML), the trial and record types ([`record`]),
-//! the MOS, DSCQS and 2AFC-staircase engines as deterministic state machines ([`engine`]: the
+//! the MOS, DSCQS and 2AFC engines (up-down staircases, QUEST+ and Psi, [`quest`]) as
+//! deterministic state machines ([`engine`]: the
 //! study, its seed and the responses so far fix the next trial), the PsychoPy-compatible
 //! [`staircase`], and
 //! simulated observers for dry runs ([`observer`]). It knows stimuli only as ids and parameters
