@@ -184,7 +184,7 @@ pub(super) fn parse_quest(
     let problems = check_settings(&s);
     for e in &problems {
         if let crate::quest::QuestError::BadSetting { key, reason } = e
-            && !cx.issues.iter().any(|i| i.key == *key)
+            && !cx.issues.iter().any(|i| i.key == *key && i.reason == *reason)
         {
             cx.err(*key, reason.clone());
         }

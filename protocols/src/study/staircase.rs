@@ -8,7 +8,7 @@ use toml::{Table, Value};
 
 use super::check::{Ctx, join, type_name};
 use super::live::parse_live;
-use super::quest::{check_domain, parse_method, parse_quest};
+use super::quest::{check_domain, domain, parse_method, parse_quest};
 use super::{MAX_TRACKS, StaircaseStudy, Track};
 use crate::catalog::{CodecCatalog, TARGET_CR_PARAM};
 use crate::manifest::StimulusManifest;
@@ -211,8 +211,10 @@ pub(super) fn parse_staircase(
         let Some(mut track) = manifest_track(head, &shared, m, &tp, cx) else {
             continue;
         };
-        if let Some(q) = &quest {
-            check_domain(&mut track, &q.levels, tolerance, &tp, cx);
+        if method.is_some() {
+            // The domain even where the procedure's own settings have problems: those are
+            // reported beside any level without a stimulus.
+            check_domain(&mut track, &domain(&shared.settings), tolerance, &tp, cx);
         } else if check_settings(&track.settings).is_empty() {
             check_levels(&track, tolerance, &tp, cx);
         }
