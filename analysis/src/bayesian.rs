@@ -108,8 +108,7 @@ impl Sigmoid {
             }
             Self::Weibull => {
                 // scipy's gumbel_l: cdf 1 − exp(−exp((x − loc)/scale)), ppf(½) = ln ln 2.
-                let scale =
-                    w / ((-WIDTH_ALPHA.ln()).ln() - (-(1.0 - WIDTH_ALPHA).ln()).ln());
+                let scale = w / ((-WIDTH_ALPHA.ln()).ln() - (-(1.0 - WIDTH_ALPHA).ln()).ln());
                 let loc = m - 2_f64.ln().ln() * scale;
                 -(-((x - loc) / scale).exp()).exp_m1()
             }
@@ -149,9 +148,9 @@ fn threshold_prior(m: f64, lo: f64, hi: f64) -> f64 {
     if lo < m && m < hi {
         1.0
     } else if lo - sp / 2.0 <= m && m <= lo {
-        (1.0 + (2.0 * std::f64::consts::PI * (lo - m) / sp).cos()) / 2.0
+        0.5 + 0.5 * (2.0 * std::f64::consts::PI * (lo - m) / sp).cos()
     } else if hi <= m && m <= hi + sp / 2.0 {
-        (1.0 + (2.0 * std::f64::consts::PI * (m - hi) / sp).cos()) / 2.0
+        0.5 + 0.5 * (2.0 * std::f64::consts::PI * (m - hi) / sp).cos()
     } else {
         0.0
     }
@@ -165,7 +164,7 @@ fn width_prior(w: f64, wmin: f64, wmax: f64) -> f64 {
     } else if wmin <= w && w <= 2.0 * wmin {
         (1.0 - (PI * (w - wmin) / wmin).cos()) / 2.0
     } else if wmax <= w && w <= 3.0 * wmax {
-        (1.0 + (PI / 2.0 * (w - wmax) / wmax).cos()) / 2.0
+        0.5 + 0.5 * (PI / 2.0 * (w - wmax) / wmax).cos()
     } else {
         0.0
     }
@@ -270,14 +269,13 @@ fn posterior(
         for i in 0..nm {
             for j in 0..nw {
                 let cell = (i * nw + j) * levels;
-                for b in 0..levels {
-                    psi[b] = GUESS + (1.0 - lam - GUESS) * s[cell + b];
+                for (b, p) in psi.iter_mut().enumerate() {
+                    *p = GUESS + (1.0 - lam - GUESS) * s[cell + b];
                 }
                 let prior = ln_prior_l[l] + ln_prior_m[i] + ln_prior_w[j];
                 for (e, &(binomial, nu, ln_prior_e, norm)) in etas.iter().enumerate() {
                     let mut ll = norm;
-                    for b in 0..levels {
-                        let (n, k, p) = (data.n[b], data.k[b], psi[b]);
+                    for ((&n, &k), &p) in data.n.iter().zip(&data.k).zip(&psi) {
                         if binomial {
                             if k > 0 {
                                 ll += f64::from(k) * p.ln();
@@ -290,11 +288,8 @@ fn posterior(
                         }
                     }
                     let v = ll + ln_prior_e + prior;
-                    lp[((e * nl + l) * nm + i) * nw + j] = if v.is_nan() {
-                        f64::NEG_INFINITY
-                    } else {
-                        v
-                    };
+                    lp[((e * nl + l) * nm + i) * nw + j] =
+                        if v.is_nan() { f64::NEG_INFINITY } else { v };
                 }
             }
         }
@@ -394,7 +389,7 @@ fn interp(x: f64, xp: &[f64], fp: &[f64]) -> f64 {
     }
     // numpy finds the last xp[j] <= x.
     let j = xp.partition_point(|v| *v <= x) - 1;
-    if xp[j + 1] == xp[j] {
+    if xp[j + 1] <= xp[j] {
         return fp[j];
     }
     fp[j] + (x - xp[j]) * (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j])
@@ -433,9 +428,11 @@ pub fn fit(
             });
         }
         if n > 0 {
-            blocks
-                .x
-                .push(if sigmoid == Sigmoid::Weibull { level.ln() } else { level });
+            blocks.x.push(if sigmoid == Sigmoid::Weibull {
+                level.ln()
+            } else {
+                level
+            });
             blocks.n.push(n);
             blocks.k.push(k);
         }
@@ -458,7 +455,8 @@ pub fn fit(
         .map(|w| w[1] - w[0])
         .fold(f64::INFINITY, f64::min);
     let spread = range.1 - range.0;
-    let width_spread = spread / ((phi_inv(0.95) - phi_inv(0.05)) / (phi_inv(1.0 - WIDTH_ALPHA) - phi_inv(WIDTH_ALPHA)));
+    let width_spread = spread
+        / ((phi_inv(0.95) - phi_inv(0.05)) / (phi_inv(1.0 - WIDTH_ALPHA) - phi_inv(WIDTH_ALPHA)));
     let bounds = [
         (0.0, 1.0 - 1e-10),
         (0.0, 0.5),
@@ -510,7 +508,10 @@ mod tests {
         for (a, k) in [(0.3, 0_u32), (0.3, 1), (2.5, 7), (361.0, 40), (4.0e4, 100)] {
             let want = statrs::function::gamma::ln_gamma(a + f64::from(k))
                 - statrs::function::gamma::ln_gamma(a);
-            assert!((ln_rising(a, k) - want).abs() < 1e-9 * want.abs().max(1.0), "{a} {k}");
+            assert!(
+                (ln_rising(a, k) - want).abs() < 1e-9 * want.abs().max(1.0),
+                "{a} {k}"
+            );
         }
     }
 

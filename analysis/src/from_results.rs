@@ -187,7 +187,10 @@ impl<'a> Converter<'a> {
             }
         }
         // The session's own threshold of each of its tracks, by name.
-        for ((s, n, _), track) in self.tracks.range_mut((subject, session.manifest.session, 0)..) {
+        for ((s, n, _), track) in self
+            .tracks
+            .range_mut((subject, session.manifest.session, 0)..)
+        {
             if (*s, *n) != (subject, session.manifest.session) {
                 break;
             }

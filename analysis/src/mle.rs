@@ -84,7 +84,10 @@ fn population_sd(v: &[f64]) -> f64 {
 /// [`AnalysisError::TooFew`] without ratings; [`AnalysisError::NonFinite`] for a score that is
 /// not finite; [`AnalysisError::InvalidParameter`] for a rating of a condition not in
 /// `conditions`.
-pub fn fit(ratings: &[Rating], conditions: &[ConditionInfo]) -> Result<SubjectModel, AnalysisError> {
+pub fn fit(
+    ratings: &[Rating],
+    conditions: &[ConditionInfo],
+) -> Result<SubjectModel, AnalysisError> {
     if ratings.is_empty() {
         return Err(AnalysisError::TooFew {
             what: "ratings for the subject model",
@@ -92,53 +95,7 @@ pub fn fit(ratings: &[Rating], conditions: &[ConditionInfo]) -> Result<SubjectMo
             got: 0,
         });
     }
-    let mut content_names: Vec<String> = Vec::new();
-    let mut content_of: BTreeMap<u32, usize> = BTreeMap::new();
-    for c in conditions {
-        let idx = match content_names.iter().position(|n| *n == c.clip) {
-            Some(i) => i,
-            None => {
-                content_names.push(c.clip.clone());
-                content_names.len() - 1
-            }
-        };
-        content_of.insert(c.id, idx);
-    }
-    let stimuli: Vec<u32> = {
-        let mut v: Vec<u32> = ratings.iter().map(|r| r.condition).collect();
-        v.sort_unstable();
-        v.dedup();
-        v
-    };
-    let subjects: Vec<u32> = {
-        let mut v: Vec<u32> = ratings.iter().map(|r| r.subject).collect();
-        v.sort_unstable();
-        v.dedup();
-        v
-    };
-    let mut obs = Vec::with_capacity(ratings.len());
-    for (index, r) in ratings.iter().enumerate() {
-        if !r.score.is_finite() {
-            return Err(AnalysisError::NonFinite {
-                what: "rating",
-                index,
-                value: r.score,
-            });
-        }
-        let c = *content_of
-            .get(&r.condition)
-            .ok_or(AnalysisError::InvalidParameter {
-                name: "condition",
-                value: f64::from(r.condition),
-                reason: "rated but not among the conditions",
-            })?;
-        obs.push(Obs {
-            e: stimuli.binary_search(&r.condition).unwrap_or(0),
-            s: subjects.binary_search(&r.subject).unwrap_or(0),
-            c,
-            x: r.score,
-        });
-    }
+    let (obs, stimuli, subjects, content_names) = index(ratings, conditions)?;
     let (ne, ns, nc) = (stimuli.len(), subjects.len(), content_names.len());
     // Initial values: the pooled MOS, residual SDs per subject and per content.
     let mut sum = vec![0.0; ne];
@@ -163,74 +120,7 @@ pub fn fit(ratings: &[Rating], conditions: &[ConditionInfo]) -> Result<SubjectMo
         }
     }
     let mut b_s = vec![0.0; ns];
-    let (mut x_std, mut b_std) = (vec![0.0; ne], vec![0.0; ns]);
-    let mut passes = 0;
-    loop {
-        let x_prev = x_e.clone();
-        // Δ_s.
-        let (mut num, mut den) = (vec![0.0; ns], vec![0.0; ns]);
-        for o in &obs {
-            let w = v_s[o.s].powi(2) + a_c[o.c].powi(2);
-            num[o.s] += (o.x - x_e[o.e]) / w;
-            den[o.s] += 1.0 / w;
-        }
-        for s in 0..ns {
-            b_s[s] = b_s[s] * (1.0 - REFRESH) + num[s] / den[s] * REFRESH;
-            b_std[s] = 1.0 / den[s].max(0.0).sqrt();
-        }
-        // ν_s.
-        let (mut num, mut den) = (vec![0.0; ns], vec![0.0; ns]);
-        for o in &obs {
-            let (v, a) = (v_s[o.s], a_c[o.c]);
-            let r = o.x - x_e[o.e] - b_s[o.s];
-            let add = v * v + a * a;
-            let sub = v * v - a * a;
-            num[o.s] += -v / add + v * r * r / (add * add);
-            let poly = a.powi(4) - 3.0 * v.powi(4) - 2.0 * v * v * a * a;
-            den[o.s] += sub / (add * add) + r * r * poly / add.powi(4);
-        }
-        for s in 0..ns {
-            let new = v_s[s] - num[s] / den[s];
-            v_s[s] = (v_s[s] * (1.0 - REFRESH) + new * REFRESH).max(0.0);
-        }
-        // a_c.
-        let (mut num, mut den) = (vec![0.0; nc], vec![0.0; nc]);
-        for o in &obs {
-            let (v, a) = (v_s[o.s], a_c[o.c]);
-            let r = o.x - x_e[o.e] - b_s[o.s];
-            let add = v * v + a * a;
-            let sub = v * v - a * a;
-            num[o.c] += -a / add + a * r * r / (add * add);
-            let poly = v.powi(4) - 3.0 * a.powi(4) - 2.0 * v * v * a * a;
-            den[o.c] += -sub / (add * add) + r * r * poly / add.powi(4);
-        }
-        for c in 0..nc {
-            let new = a_c[c] - num[c] / den[c];
-            a_c[c] = (a_c[c] * (1.0 - REFRESH) + new * REFRESH).max(0.0);
-        }
-        // ψ_e.
-        let (mut num, mut den) = (vec![0.0; ne], vec![0.0; ne]);
-        for o in &obs {
-            let w = v_s[o.s].powi(2) + a_c[o.c].powi(2);
-            num[o.e] += (o.x - b_s[o.s]) / w;
-            den[o.e] += 1.0 / w;
-        }
-        for e in 0..ne {
-            x_e[e] = x_e[e] * (1.0 - REFRESH) + num[e] / den[e] * REFRESH;
-            x_std[e] = 1.0 / den[e].max(0.0).sqrt();
-        }
-        passes += 1;
-        let delta = x_prev
-            .iter()
-            .zip(&x_e)
-            .map(|(a, b)| (a - b).powi(2))
-            .sum::<f64>()
-            .sqrt();
-        // A NaN (a zero variance somewhere) ends the loop as sureal's comparison would not.
-        if !(delta >= DELTA) || passes >= MAX_PASSES {
-            break;
-        }
-    }
+    let (x_std, b_std, passes) = iterate(&obs, &mut x_e, &mut b_s, &mut v_s, &mut a_c);
     let mean_b = b_s.iter().sum::<f64>() / ns as f64;
     for b in &mut b_s {
         *b -= mean_b;
@@ -270,4 +160,139 @@ pub fn fit(ratings: &[Rating], conditions: &[ConditionInfo]) -> Result<SubjectMo
         contents: content_names.into_iter().zip(a_c).collect(),
         passes,
     })
+}
+
+/// sureal's passes from the initial values in `x_e`, `b_s`, `v_s`, `a_c` until ψ settles:
+/// the standard errors of ψ and Δ of the last pass, and the passes run.
+fn iterate(
+    obs: &[Obs],
+    x_e: &mut [f64],
+    b_s: &mut [f64],
+    v_s: &mut [f64],
+    a_c: &mut [f64],
+) -> (Vec<f64>, Vec<f64>, usize) {
+    let (ne, ns, nc) = (x_e.len(), b_s.len(), a_c.len());
+    let (mut x_std, mut b_std) = (vec![0.0; ne], vec![0.0; ns]);
+    let mut passes = 0;
+    loop {
+        let x_prev = x_e.to_vec();
+        // Δ_s.
+        let (mut num, mut den) = (vec![0.0; ns], vec![0.0; ns]);
+        for o in obs {
+            let w = v_s[o.s].powi(2) + a_c[o.c].powi(2);
+            num[o.s] += (o.x - x_e[o.e]) / w;
+            den[o.s] += 1.0 / w;
+        }
+        for s in 0..ns {
+            b_s[s] = b_s[s] * (1.0 - REFRESH) + num[s] / den[s] * REFRESH;
+            b_std[s] = 1.0 / den[s].max(0.0).sqrt();
+        }
+        // ν_s.
+        let (mut num, mut den) = (vec![0.0; ns], vec![0.0; ns]);
+        for o in obs {
+            let (v, a) = (v_s[o.s], a_c[o.c]);
+            let r = o.x - x_e[o.e] - b_s[o.s];
+            let add = v * v + a * a;
+            let sub = v * v - a * a;
+            num[o.s] += -v / add + v * r * r / (add * add);
+            let poly = a.powi(4) - 3.0 * v.powi(4) - 2.0 * v * v * a * a;
+            den[o.s] += sub / (add * add) + r * r * poly / add.powi(4);
+        }
+        for s in 0..ns {
+            let new = v_s[s] - num[s] / den[s];
+            v_s[s] = (v_s[s] * (1.0 - REFRESH) + new * REFRESH).max(0.0);
+        }
+        // a_c.
+        let (mut num, mut den) = (vec![0.0; nc], vec![0.0; nc]);
+        for o in obs {
+            let (v, a) = (v_s[o.s], a_c[o.c]);
+            let r = o.x - x_e[o.e] - b_s[o.s];
+            let add = v * v + a * a;
+            let sub = v * v - a * a;
+            num[o.c] += -a / add + a * r * r / (add * add);
+            let poly = v.powi(4) - 3.0 * a.powi(4) - 2.0 * v * v * a * a;
+            den[o.c] += -sub / (add * add) + r * r * poly / add.powi(4);
+        }
+        for c in 0..nc {
+            let new = a_c[c] - num[c] / den[c];
+            a_c[c] = (a_c[c] * (1.0 - REFRESH) + new * REFRESH).max(0.0);
+        }
+        // ψ_e.
+        let (mut num, mut den) = (vec![0.0; ne], vec![0.0; ne]);
+        for o in obs {
+            let w = v_s[o.s].powi(2) + a_c[o.c].powi(2);
+            num[o.e] += (o.x - b_s[o.s]) / w;
+            den[o.e] += 1.0 / w;
+        }
+        for e in 0..ne {
+            x_e[e] = x_e[e] * (1.0 - REFRESH) + num[e] / den[e] * REFRESH;
+            x_std[e] = 1.0 / den[e].max(0.0).sqrt();
+        }
+        passes += 1;
+        let delta = x_prev
+            .iter()
+            .zip(x_e.iter())
+            .map(|(a, b)| (a - b).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        // A NaN (a zero variance somewhere) ends the loop as sureal's comparison would not.
+        if delta.is_nan() || delta < DELTA || passes >= MAX_PASSES {
+            break;
+        }
+    }
+    (x_std, b_std, passes)
+}
+
+/// The ratings as observations indexed by stimulus, subject and content; the stimuli's and
+/// subjects' ids in index order, and the contents' names.
+type Indexed = (Vec<Obs>, Vec<u32>, Vec<u32>, Vec<String>);
+
+fn index(ratings: &[Rating], conditions: &[ConditionInfo]) -> Result<Indexed, AnalysisError> {
+    let mut content_names: Vec<String> = Vec::new();
+    let mut content_of: BTreeMap<u32, usize> = BTreeMap::new();
+    for c in conditions {
+        let idx = if let Some(i) = content_names.iter().position(|n| *n == c.clip) {
+            i
+        } else {
+            content_names.push(c.clip.clone());
+            content_names.len() - 1
+        };
+        content_of.insert(c.id, idx);
+    }
+    let stimuli: Vec<u32> = {
+        let mut v: Vec<u32> = ratings.iter().map(|r| r.condition).collect();
+        v.sort_unstable();
+        v.dedup();
+        v
+    };
+    let subjects: Vec<u32> = {
+        let mut v: Vec<u32> = ratings.iter().map(|r| r.subject).collect();
+        v.sort_unstable();
+        v.dedup();
+        v
+    };
+    let mut obs = Vec::with_capacity(ratings.len());
+    for (index, r) in ratings.iter().enumerate() {
+        if !r.score.is_finite() {
+            return Err(AnalysisError::NonFinite {
+                what: "rating",
+                index,
+                value: r.score,
+            });
+        }
+        let c = *content_of
+            .get(&r.condition)
+            .ok_or(AnalysisError::InvalidParameter {
+                name: "condition",
+                value: f64::from(r.condition),
+                reason: "rated but not among the conditions",
+            })?;
+        obs.push(Obs {
+            e: stimuli.binary_search(&r.condition).unwrap_or(0),
+            s: subjects.binary_search(&r.subject).unwrap_or(0),
+            c,
+            x: r.score,
+        });
+    }
+    Ok((obs, stimuli, subjects, content_names))
 }

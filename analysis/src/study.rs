@@ -245,7 +245,10 @@ fn bayesian_fits(data: &StudyData, options: &ReportOptions) -> BayesianFits {
     };
     let mut by_subject: BTreeMap<u32, Vec<TwoAfcTrial>> = BTreeMap::new();
     for t in &data.staircases {
-        by_subject.entry(t.subject).or_default().extend(trials_of(t));
+        by_subject
+            .entry(t.subject)
+            .or_default()
+            .extend(trials_of(t));
     }
     // One list of fits: the Bayesian tracks', every subject's, the pool's.
     let mut sets: Vec<Vec<TwoAfcTrial>> = data
@@ -270,11 +273,19 @@ fn bayesian_fits(data: &StudyData, options: &ReportOptions) -> BayesianFits {
                 .then(|| t.threshold(options.last_reversals))
                 .flatten(),
             logged_threshold: t.logged_threshold,
-            fit: if t.bayesian { fits.next().flatten() } else { None },
+            fit: if t.bayesian {
+                fits.next().flatten()
+            } else {
+                None
+            },
         })
         .collect();
     debug_assert_eq!(per_track.iter().filter(|t| t.bayesian).count(), tracks);
-    per_track.sort_by(|a, b| a.subject.cmp(&b.subject).then_with(|| a.label.cmp(&b.label)));
+    per_track.sort_by(|a, b| {
+        a.subject
+            .cmp(&b.subject)
+            .then_with(|| a.label.cmp(&b.label))
+    });
     let per_subject = by_subject
         .keys()
         .map(|s| (*s, fits.next().flatten()))
@@ -382,15 +393,6 @@ pub fn analyze(data: &StudyData, options: &ReportOptions) -> Result<StudyAnalysi
         options.ci_method,
     );
     let (thresholds, jnd, psychometric) = adaptive_statistics(data, options)?;
-    let bayes = (!data.staircases.is_empty()).then(|| bayesian_fits(data, options));
-    let subject_model = if data.dscqs.is_empty()
-        && !data.ratings.is_empty()
-        && data.ratings.len() <= MLE_MAX_RATINGS
-    {
-        Some(crate::mle::fit(&data.ratings, &data.conditions)?)
-    } else {
-        None
-    };
     Ok(StudyAnalysis {
         mos,
         screening,
@@ -406,9 +408,19 @@ pub fn analyze(data: &StudyData, options: &ReportOptions) -> Result<StudyAnalysi
         thresholds,
         psychometric,
         jnd,
-        bayes,
-        subject_model,
+        bayes: (!data.staircases.is_empty()).then(|| bayesian_fits(data, options)),
+        subject_model: subject_model(data)?,
     })
+}
+
+/// The maximum-likelihood subject model of a rating study (not DSCQS) of at most
+/// [`MLE_MAX_RATINGS`] ratings.
+fn subject_model(data: &StudyData) -> Result<Option<crate::mle::SubjectModel>, AnalysisError> {
+    if data.dscqs.is_empty() && !data.ratings.is_empty() && data.ratings.len() <= MLE_MAX_RATINGS {
+        Ok(Some(crate::mle::fit(&data.ratings, &data.conditions)?))
+    } else {
+        Ok(None)
+    }
 }
 
 /// Optional outputs of the staircase and 2AFC data.
@@ -1044,7 +1056,12 @@ fn subject_model_section(report: &mut Report, m: &crate::mle::SubjectModel, data
         .iter()
         .filter(|e| e.inconsistency < 1e-6)
         .map(|e| data.subject_name(e.subject))
-        .chain(m.contents.iter().filter(|c| c.1 < 1e-6).map(|c| c.0.clone()))
+        .chain(
+            m.contents
+                .iter()
+                .filter(|c| c.1 < 1e-6)
+                .map(|c| c.0.clone()),
+        )
         .collect();
     if !degenerate.is_empty() {
         s.text(format!(
@@ -1079,15 +1096,15 @@ fn subject_model_section(report: &mut Report, m: &crate::mle::SubjectModel, data
             .collect(),
     });
     let name = |id: u32| {
-        data.conditions
-            .iter()
-            .find(|c| c.id == id)
-            .map_or_else(|| id.to_string(), |c| {
+        data.conditions.iter().find(|c| c.id == id).map_or_else(
+            || id.to_string(),
+            |c| {
                 c.compression_ratio.map_or_else(
                     || format!("{} reference", c.clip),
                     |cr| format!("{} {} {cr}:1", c.clip, c.method()),
                 )
-            })
+            },
+        )
     };
     s.table(tables::Table {
         name: "mle_quality".to_owned(),
@@ -1135,50 +1152,9 @@ fn bayes_section(
         bayesian::PRIORS,
         options.last_reversals
     ));
-    let ci = |f: &Option<BayesFit>| {
-        f.map_or_else(
-            || ("n/a".to_owned(), String::new()),
-            |f| {
-                (
-                    format!("{:.5}", f.threshold.mean),
-                    format!("{:.5} – {:.5}", f.threshold.lower, f.threshold.upper),
-                )
-            },
-        )
-    };
-    s.table(tables::Table {
-        name: "adaptive_tracks".to_owned(),
-        caption: format!("Threshold ({label}) of every adaptive track"),
-        columns: vec![
-            "Subject".to_owned(),
-            "Track".to_owned(),
-            "Procedure".to_owned(),
-            "Trials".to_owned(),
-            "Reversal mean".to_owned(),
-            "Session estimate".to_owned(),
-            "Bayesian threshold".to_owned(),
-            format!("{conf} credible interval"),
-        ],
-        rows: b
-            .per_track
-            .iter()
-            .map(|t| {
-                let (m, i) = ci(&t.fit);
-                vec![
-                    data.subject_name(t.subject),
-                    t.label.clone(),
-                    if t.bayesian { "QUEST+/Psi" } else { "up-down" }.to_owned(),
-                    t.trials.to_string(),
-                    fmt_opt(t.reversal_threshold, 5),
-                    fmt_opt(t.logged_threshold, 5),
-                    m,
-                    i,
-                ]
-            })
-            .collect(),
-    });
+    s.table(tracks_table(b, data, &conf, label));
     let row = |who: String, f: &Option<BayesFit>| {
-        let (m, i) = ci(f);
+        let (m, i) = threshold_cells(f.as_ref());
         let est = |e: Option<bayesian::Estimate>| {
             e.map_or_else(String::new, |e| {
                 format!("{:.4} ({:.4} – {:.4})", e.mean, e.lower, e.upper)
@@ -1225,6 +1201,54 @@ fn bayes_section(
                 subjects: data.subjects.clone(),
             },
         );
+    }
+}
+
+/// A fit's threshold and its credible interval as table cells (`n/a` without a fit).
+fn threshold_cells(f: Option<&BayesFit>) -> (String, String) {
+    f.map_or_else(
+        || ("n/a".to_owned(), String::new()),
+        |f| {
+            (
+                format!("{:.5}", f.threshold.mean),
+                format!("{:.5} – {:.5}", f.threshold.lower, f.threshold.upper),
+            )
+        },
+    )
+}
+
+/// The threshold of every adaptive track: reversal mean, session estimate, Bayesian fit.
+fn tracks_table(b: &BayesianFits, data: &StudyData, conf: &str, label: &str) -> tables::Table {
+    tables::Table {
+        name: "adaptive_tracks".to_owned(),
+        caption: format!("Threshold ({label}) of every adaptive track"),
+        columns: vec![
+            "Subject".to_owned(),
+            "Track".to_owned(),
+            "Procedure".to_owned(),
+            "Trials".to_owned(),
+            "Reversal mean".to_owned(),
+            "Session estimate".to_owned(),
+            "Bayesian threshold".to_owned(),
+            format!("{conf} credible interval"),
+        ],
+        rows: b
+            .per_track
+            .iter()
+            .map(|t| {
+                let (m, i) = threshold_cells(t.fit.as_ref());
+                vec![
+                    data.subject_name(t.subject),
+                    t.label.clone(),
+                    if t.bayesian { "QUEST+/Psi" } else { "up-down" }.to_owned(),
+                    t.trials.to_string(),
+                    fmt_opt(t.reversal_threshold, 5),
+                    fmt_opt(t.logged_threshold, 5),
+                    m,
+                    i,
+                ]
+            })
+            .collect(),
     }
 }
 

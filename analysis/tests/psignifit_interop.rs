@@ -41,7 +41,10 @@ fn python() -> Option<PathBuf> {
             return None;
         }
     };
-    match Command::new(&python).args(["-c", "import psignifit"]).output() {
+    match Command::new(&python)
+        .args(["-c", "import psignifit"])
+        .output()
+    {
         Ok(o) if o.status.success() => Some(python),
         Ok(o) if ci => panic!(
             "{} cannot import psignifit:\n{}",
@@ -50,7 +53,10 @@ fn python() -> Option<PathBuf> {
         ),
         Err(e) if ci => panic!("cannot run {}: {e}", python.display()),
         _ => {
-            eprintln!("psignifit interop skipped: {} lacks psignifit", python.display());
+            eprintln!(
+                "psignifit interop skipped: {} lacks psignifit",
+                python.display()
+            );
             None
         }
     }
@@ -64,10 +70,11 @@ fn close(name: &str, what: &str, mine: f64, theirs: f64, scale: f64) {
     );
 }
 
-#[test]
-fn posterior_means_and_intervals_equal_psignifit() {
-    let Some(python) = python() else { return };
-    let cases: Vec<(&str, Sigmoid, Vec<(f64, u32, u32)>)> = vec![
+/// (name, sigmoid, blocks of (level, trials, correct)).
+type Case = (&'static str, Sigmoid, Vec<(f64, u32, u32)>);
+
+fn cases() -> Vec<Case> {
+    vec![
         (
             "constant stimuli, logistic",
             Sigmoid::Logistic,
@@ -84,7 +91,12 @@ fn posterior_means_and_intervals_equal_psignifit() {
         (
             "sparse adaptive, Weibull",
             Sigmoid::Weibull,
-            vec![(0.004, 5, 3), (0.01, 20, 12), (0.016, 11, 10), (0.022, 3, 3)],
+            vec![
+                (0.004, 5, 3),
+                (0.01, 20, 12),
+                (0.016, 11, 10),
+                (0.022, 3, 3),
+            ],
         ),
         (
             "a QUEST+ track, Weibull",
@@ -109,7 +121,13 @@ fn posterior_means_and_intervals_equal_psignifit() {
                 (6.0, 30, 30),
             ],
         ),
-    ];
+    ]
+}
+
+#[test]
+fn posterior_means_and_intervals_equal_psignifit() {
+    let Some(python) = python() else { return };
+    let cases = cases();
     let input: Vec<Value> = cases
         .iter()
         .map(|(_, s, d)| {
@@ -130,7 +148,11 @@ fn posterior_means_and_intervals_equal_psignifit() {
     std::fs::write(&file, serde_json::to_string(&input).unwrap()).unwrap();
     let script =
         Path::new(env!("CARGO_MANIFEST_DIR")).join("../scripts/golden/psignifit_golden.py");
-    let out = Command::new(&python).arg(&script).arg(&file).output().unwrap();
+    let out = Command::new(&python)
+        .arg(&script)
+        .arg(&file)
+        .output()
+        .unwrap();
     assert!(
         out.status.success(),
         "psignifit_golden.py failed:\n{}",
@@ -147,7 +169,13 @@ fn posterior_means_and_intervals_equal_psignifit() {
             Confidence::default(),
         )
         .unwrap();
-        let ln = |v: f64| if *sigmoid == Sigmoid::Weibull { v.ln() } else { v };
+        let ln = |v: f64| {
+            if *sigmoid == Sigmoid::Weibull {
+                v.ln()
+            } else {
+                v
+            }
+        };
         let xs: Vec<f64> = data.iter().map(|d| ln(d.0)).collect();
         let range = xs.iter().copied().fold(f64::NEG_INFINITY, f64::max)
             - xs.iter().copied().fold(f64::INFINITY, f64::min);
@@ -160,9 +188,27 @@ fn posterior_means_and_intervals_equal_psignifit() {
             ("eta", f.eta, "eta", 1.0, false),
         ] {
             let back = |v: f64| if log { ln(v) } else { v };
-            close(name, &format!("{what} mean"), back(est.mean), m[key].as_f64().unwrap(), scale);
-            close(name, &format!("{what} lower"), back(est.lower), iv(key, 0), scale);
-            close(name, &format!("{what} upper"), back(est.upper), iv(key, 1), scale);
+            close(
+                name,
+                &format!("{what} mean"),
+                back(est.mean),
+                m[key].as_f64().unwrap(),
+                scale,
+            );
+            close(
+                name,
+                &format!("{what} lower"),
+                back(est.lower),
+                iv(key, 0),
+                scale,
+            );
+            close(
+                name,
+                &format!("{what} upper"),
+                back(est.upper),
+                iv(key, 1),
+                scale,
+            );
         }
     }
 }

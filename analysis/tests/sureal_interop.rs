@@ -533,7 +533,10 @@ const MLE_TOL: f64 = 1e-6;
 /// stimulus's quality and every clip's ambiguity.
 fn check_report_mle(v: &Value, names: &[String], assets: &[u32], report: &StudyAnalysis) {
     let mle = &v["models"]["MaximumLikelihoodEstimationModel"];
-    let model = report.subject_model.as_ref().expect("the report fits the subject model");
+    let model = report
+        .subject_model
+        .as_ref()
+        .expect("the report fits the subject model");
     let observers = strings(&mle["observers"]);
     let (bias, inconsistency) = (
         floats(&mle["observer_bias"]),

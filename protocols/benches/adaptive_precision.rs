@@ -26,7 +26,8 @@ use protocols::{Staircase, StaircaseSettings, StepType};
 
 const RUNS: u32 = 1000;
 const CHECKPOINTS: [usize; 8] = [10, 15, 20, 30, 40, 60, 80, 120];
-const TARGET_P: f64 = 0.7071;
+/// The point a two-down-one-up staircase converges on: 0.5^(1/2) correct (Levitt 1971).
+const TARGET_P: f64 = std::f64::consts::FRAC_1_SQRT_2;
 
 fn observer() -> PsychometricFunction {
     PsychometricFunction {
@@ -82,7 +83,9 @@ fn staircase_settings() -> StaircaseSettings {
 fn staircase_estimate(s: &Staircase) -> f64 {
     let rev = s.reversal_levels();
     if rev.is_empty() {
-        return s.next_level().unwrap_or_else(|| *s.levels().last().unwrap());
+        return s
+            .next_level()
+            .unwrap_or_else(|| *s.levels().last().unwrap());
     }
     let k = rev.len().min(6);
     rev[rev.len() - k..].iter().sum::<f64>() / k as f64
@@ -131,9 +134,7 @@ fn main() {
     let truth = observer().level_for(TARGET_P).unwrap();
     let started = std::time::Instant::now();
     let (se_s, se_q) = simulate(truth);
-    let rms = |v: &[f64]| -> Vec<f64> {
-        v.iter().map(|s| (s / f64::from(RUNS)).sqrt()).collect()
-    };
+    let rms = |v: &[f64]| -> Vec<f64> { v.iter().map(|s| (s / f64::from(RUNS)).sqrt()).collect() };
     let (rs, rq) = (rms(&se_s), rms(&se_q));
     println!(
         "level at {:.2} % correct: {truth:.5}; {RUNS} runs each ({:.1} s)",

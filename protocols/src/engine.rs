@@ -109,7 +109,7 @@ pub enum EngineError {
 #[derive(Debug, Clone)]
 enum Procedure {
     UpDown(Staircase),
-    Bayesian(Box<QuestPlus>),
+    Bayesian(QuestPlus),
 }
 
 impl Procedure {
@@ -218,9 +218,7 @@ impl Session {
                         .iter()
                         .map(|t| match &sc.quest {
                             None => Ok(Procedure::UpDown(Staircase::new(t.settings.clone())?)),
-                            Some(q) => Ok(Procedure::Bayesian(Box::new(QuestPlus::new(
-                                q.clone(),
-                            )?))),
+                            Some(q) => Ok(Procedure::Bayesian(QuestPlus::new(q.clone())?)),
                         })
                         .collect::<Result<Vec<_>, EngineError>>()?;
                     let live = sc.live.as_ref().map(|l| {

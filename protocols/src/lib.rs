@@ -32,11 +32,11 @@ pub mod study;
 
 pub use catalog::{CodecCatalog, CodecInfo};
 pub use engine::{EngineError, Session, SessionStatus};
+pub use quest::{QuestMethod, QuestPlus, QuestSettings};
 pub use record::{
     Answer, Arrangement, Block, FrameTiming, Outcome, Position, Protocol, Response,
     StimulusEncoding, Trial, TrialRecord,
 };
-pub use quest::{QuestMethod, QuestPlus, QuestSettings};
 pub use staircase::{Staircase, StaircaseSettings, StepType};
 pub use study::{
     ClipOrder, Detection, LiveClip, LiveStaircase, StaircaseStudy, StudyDefinition, StudyError,

@@ -112,34 +112,11 @@ pub enum QuestError {
 
 /// Checks QUEST+ settings, returning every problem.
 pub fn check_settings(s: &QuestSettings) -> Vec<QuestError> {
-    let mut errs = Vec::new();
-    let mut bad = |key: &'static str, reason: String| errs.push(QuestError::BadSetting { key, reason });
+    let mut errs = check_grids(s);
+    let mut bad =
+        |key: &'static str, reason: String| errs.push(QuestError::BadSetting { key, reason });
     let weibull = s.family == Psychometric::Weibull;
     let ascending = |v: &[f64]| v.windows(2).all(|w| w[0] < w[1]);
-    for (key, values, prior) in [
-        ("staircase.quest.threshold", &s.thresholds, &s.threshold_prior),
-        ("staircase.quest.slope", &s.slopes, &s.slope_prior),
-        ("staircase.quest.lapse", &s.lapses, &s.lapse_prior),
-    ] {
-        if values.is_empty() {
-            bad(key, "needs at least one value".into());
-        } else if !values.iter().all(|v| v.is_finite()) || !ascending(values) {
-            bad(key, "values must be finite and strictly ascending".into());
-        }
-        if prior.len() != values.len() {
-            bad(
-                key,
-                format!("{} prior weights for {} values", prior.len(), values.len()),
-            );
-        } else if !prior.iter().all(|w| w.is_finite() && *w >= 0.0)
-            || !prior.iter().any(|w| *w > 0.0)
-        {
-            bad(
-                key,
-                "prior weights must be finite, >= 0 and not all 0".into(),
-            );
-        }
-    }
     if weibull && s.thresholds.iter().any(|t| *t <= 0.0) {
         bad(
             "staircase.quest.threshold",
@@ -150,7 +127,10 @@ pub fn check_settings(s: &QuestSettings) -> Vec<QuestError> {
         bad("staircase.quest.slope", "slopes must be > 0".into());
     }
     if s.lapses.iter().any(|l| !(0.0..0.5).contains(l)) {
-        bad("staircase.quest.lapse", "lapse rates lie in [0, 0.5)".into());
+        bad(
+            "staircase.quest.lapse",
+            "lapse rates lie in [0, 0.5)".into(),
+        );
     }
     if s.method == QuestMethod::Psi && s.lapses.len() != 1 {
         bad(
@@ -169,7 +149,10 @@ pub fn check_settings(s: &QuestSettings) -> Vec<QuestError> {
             format!("{} levels, limit {MAX_LEVELS}", s.levels.len()),
         );
     } else if !ascending(&s.levels) || !s.levels.iter().all(|x| x.is_finite()) {
-        bad("staircase.step", "levels must be finite and ascending".into());
+        bad(
+            "staircase.step",
+            "levels must be finite and ascending".into(),
+        );
     }
     if weibull && s.levels.iter().any(|x| *x <= 0.0) {
         bad("staircase.min", "a Weibull needs levels > 0".into());
@@ -209,6 +192,39 @@ pub fn check_settings(s: &QuestSettings) -> Vec<QuestError> {
             "staircase.quest.stop_interval",
             format!("must be a positive width, got {w}"),
         );
+    }
+    errs
+}
+
+/// Each parameter grid: values finite and ascending, one non-negative prior weight per value.
+fn check_grids(s: &QuestSettings) -> Vec<QuestError> {
+    let mut errs = Vec::new();
+    for (key, values, prior) in [
+        (
+            "staircase.quest.threshold",
+            &s.thresholds,
+            &s.threshold_prior,
+        ),
+        ("staircase.quest.slope", &s.slopes, &s.slope_prior),
+        ("staircase.quest.lapse", &s.lapses, &s.lapse_prior),
+    ] {
+        let mut bad = |reason: String| errs.push(QuestError::BadSetting { key, reason });
+        if values.is_empty() {
+            bad("needs at least one value".into());
+        } else if !values.iter().all(|v| v.is_finite()) || !values.windows(2).all(|w| w[0] < w[1]) {
+            bad("values must be finite and strictly ascending".into());
+        }
+        if prior.len() != values.len() {
+            bad(format!(
+                "{} prior weights for {} values",
+                prior.len(),
+                values.len()
+            ));
+        } else if !prior.iter().all(|w| w.is_finite() && *w >= 0.0)
+            || !prior.iter().any(|w| *w > 0.0)
+        {
+            bad("prior weights must be finite, >= 0 and not all 0".into());
+        }
     }
     errs
 }
@@ -524,15 +540,14 @@ pub fn credible_interval(grid: &[f64], weights: &[f64], credible: f64) -> (f64, 
         } else if i == n {
             grid[n - 1] + (grid[n - 1] - grid[n - 2]) / 2.0
         } else {
-            (grid[i - 1] + grid[i]) / 2.0
+            f64::midpoint(grid[i - 1], grid[i])
         }
     };
     let total: f64 = weights[..n].iter().sum();
     let quantile = |q: f64| -> f64 {
         let target = q * total;
         let mut below = 0.0;
-        for i in 0..n {
-            let w = weights[i];
+        for (i, &w) in weights[..n].iter().enumerate() {
             if below + w >= target && w > 0.0 {
                 let frac = ((target - below) / w).clamp(0.0, 1.0);
                 return edge(i) + frac * (edge(i + 1) - edge(i));
@@ -600,7 +615,7 @@ mod tests {
             n += 1;
         }
         let t = q.threshold();
-        assert!(n < 30 && n >= 5, "{n}");
+        assert!((5..30).contains(&n), "{n}");
         assert!(t.upper - t.lower <= 0.03);
     }
 
@@ -609,7 +624,10 @@ mod tests {
         let grid: Vec<f64> = (0..10).map(f64::from).collect();
         let (lo, hi) = credible_interval(&grid, &[1.0; 10], 0.8);
         // Cells [-0.5, 9.5]: the 10 % and 90 % points.
-        assert!((lo - 0.5).abs() < 1e-12 && (hi - 8.5).abs() < 1e-12, "{lo} {hi}");
+        assert!(
+            (lo - 0.5).abs() < 1e-12 && (hi - 8.5).abs() < 1e-12,
+            "{lo} {hi}"
+        );
         assert_eq!(credible_interval(&[3.0], &[1.0], 0.95), (3.0, 3.0));
     }
 

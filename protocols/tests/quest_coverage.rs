@@ -66,7 +66,9 @@ fn assert_nominal(what: &str, covered: u32, width: f64) {
     let n = f64::from(RUNS);
     let sd = (n * NOMINAL * (1.0 - NOMINAL)).sqrt();
     let rate = f64::from(covered) / n;
-    eprintln!("{what}: {covered}/{RUNS} intervals cover the truth ({rate:.3}), mean width {width:.5}");
+    eprintln!(
+        "{what}: {covered}/{RUNS} intervals cover the truth ({rate:.3}), mean width {width:.5}"
+    );
     assert!(
         (f64::from(covered) - n * NOMINAL).abs() <= 4.0 * sd,
         "{what}: {covered} of {RUNS} 95 % intervals cover the true threshold ({rate:.3}); \

@@ -95,8 +95,10 @@ fn a_quest_session_replays_exactly_and_logs_no_reversals() {
     assert_eq!(rows.len(), 48, "two tracks of 24 trials");
     assert!(rows.iter().all(|r| r.outcome.reversal.is_none()));
     assert!(rows.iter().all(|r| r.trial.stimulus.contains("primitive")));
-    let levels: std::collections::BTreeSet<u64> =
-        rows.iter().map(|r| r.trial.level.unwrap().to_bits()).collect();
+    let levels: std::collections::BTreeSet<u64> = rows
+        .iter()
+        .map(|r| r.trial.level.unwrap().to_bits())
+        .collect();
     assert!(levels.len() > 2, "the track moves: {levels:?}");
     let mut again = Session::new(&study, 3).unwrap();
     for r in &rows {
@@ -104,7 +106,11 @@ fn a_quest_session_replays_exactly_and_logs_no_reversals() {
     }
     assert_eq!(again.next_trial(0).unwrap(), None);
     let thresholds = again.thresholds();
-    assert!(thresholds.iter().all(|(_, t)| t.is_some_and(|t| t > 0.002 && t < 0.06)));
+    assert!(
+        thresholds
+            .iter()
+            .all(|(_, t)| t.is_some_and(|t| t > 0.002 && t < 0.06))
+    );
     // A level edited in the log is named.
     let mut edited = rows[5].clone();
     edited.trial.level = Some(edited.trial.level.unwrap() + 0.002);
@@ -112,9 +118,18 @@ fn a_quest_session_replays_exactly_and_logs_no_reversals() {
     for r in &rows[..5] {
         s.replay(&r.trial, &r.response, &r.outcome).unwrap();
     }
-    let err = s.replay(&edited.trial, &edited.response, &edited.outcome).unwrap_err();
+    let err = s
+        .replay(&edited.trial, &edited.response, &edited.outcome)
+        .unwrap_err();
     assert!(
-        matches!(err, EngineError::ReplayMismatch { field: "level", .. } | EngineError::ReplayMismatch { field: "stimulus", .. }),
+        matches!(
+            err,
+            EngineError::ReplayMismatch { field: "level", .. }
+                | EngineError::ReplayMismatch {
+                    field: "stimulus",
+                    ..
+                }
+        ),
         "{err}"
     );
 }
@@ -132,7 +147,10 @@ fn the_lookahead_is_the_trial_after_each_answer() {
             branch.next_trial(0).unwrap().unwrap()
         };
         let (right, wrong) = (after(true), after(false));
-        assert!(ahead.contains(&right) && ahead.contains(&wrong), "trial {i}");
+        assert!(
+            ahead.contains(&right) && ahead.contains(&wrong),
+            "trial {i}"
+        );
         assert_eq!(ahead.len(), if right == wrong { 1 } else { 2 });
         s.respond(&answer(&t, i % 3 != 0)).unwrap();
     }
@@ -141,16 +159,25 @@ fn the_lookahead_is_the_trial_after_each_answer() {
 #[test]
 fn every_quest_mistake_is_reported_at_once() {
     let text = QUEST
-        .replace("method = \"quest_plus\"", "method = \"psi\"\nstart = 0.02\nn_down = 3")
+        .replace(
+            "method = \"quest_plus\"",
+            "method = \"psi\"\nstart = 0.02\nn_down = 3",
+        )
         .replace("max = 0.040\n", "max = 0.050\n")
-        .replace("slope = [1.5, 2.5, 3.5, 5]", "slope = [1.5, 0, 3.5]\ncolour = 1")
+        .replace(
+            "slope = [1.5, 2.5, 3.5, 5]",
+            "slope = [1.5, 0, 3.5]\ncolour = 1",
+        )
         .replace("clip = \"dance\"", "clip = \"dance\"\nstart = 0.01");
     let got = issues(&text);
     let has = |key: &str, part: &str| got.iter().any(|(k, r)| k == key && r.contains(part));
     assert!(has("staircase.start", "up-down"), "{got:?}");
     assert!(has("staircase.n_down", "up-down"), "{got:?}");
     assert!(has("staircase.quest.colour", "unknown key"), "{got:?}");
-    assert!(has("staircase.quest.slope", "slopes must be > 0"), "{got:?}");
+    assert!(
+        has("staircase.quest.slope", "slopes must be > 0"),
+        "{got:?}"
+    );
     assert!(has("staircase.quest.lapse", "Psi"), "{got:?}");
     assert!(has("staircase.tracks[1].start", "unknown key"), "{got:?}");
     assert!(has("staircase.tracks[0].clip", "0.042"), "{got:?}");
@@ -160,5 +187,9 @@ fn every_quest_mistake_is_reported_at_once() {
     assert!(got.iter().any(|(k, _)| k == "staircase.quest"), "{got:?}");
     let up_down_with_table = QUEST.replace("method = \"quest_plus\"", "method = \"up_down\"");
     let got = issues(&up_down_with_table);
-    assert!(got.iter().any(|(k, r)| k == "staircase.quest" && r.contains("only method")), "{got:?}");
+    assert!(
+        got.iter()
+            .any(|(k, r)| k == "staircase.quest" && r.contains("only method")),
+        "{got:?}"
+    );
 }

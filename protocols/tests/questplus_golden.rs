@@ -56,7 +56,10 @@ fn python() -> Option<PathBuf> {
         ),
         Err(e) if ci => panic!("cannot run {}: {e}", python.display()),
         _ => {
-            eprintln!("questplus golden test skipped: {} lacks questplus", python.display());
+            eprintln!(
+                "questplus golden test skipped: {} lacks questplus",
+                python.display()
+            );
             None
         }
     }
@@ -107,9 +110,8 @@ fn run(s: &QuestSettings, observer: Option<(PsychometricFunction, u64)>) -> Run 
     };
     let mut i = 0;
     while let Some(x) = q.next_level() {
-        let correct = observer.is_none_or(|(f, seed)| {
-            StudyRng::new(seed, &[i]).unit_f64() < f.p_correct(x)
-        });
+        let correct =
+            observer.is_none_or(|(f, seed)| StudyRng::new(seed, &[i]).unit_f64() < f.p_correct(x));
         q.add_response(correct).unwrap();
         out.levels.push(x);
         out.answers.push(correct);
@@ -136,9 +138,15 @@ fn floats(v: &Value) -> Vec<f64> {
         .collect()
 }
 
-#[test]
-fn levels_and_posteriors_equal_questplus() {
-    let Some(python) = python() else { return };
+/// (name, settings, the observer answering and its seed; `None`: always right).
+type Case = (
+    &'static str,
+    QuestSettings,
+    Option<(PsychometricFunction, u64)>,
+);
+
+/// Uniform priors, `examples/quest.toml`'s priors, Psi, and a subject who is always right.
+fn cases() -> Vec<Case> {
     let observer = PsychometricFunction {
         family: Psychometric::Weibull,
         threshold: 0.012,
@@ -165,10 +173,15 @@ fn levels_and_posteriors_equal_questplus() {
         .iter()
         .map(|l: &f64| (1.0 - l).powi(9))
         .collect();
-    let cases: Vec<(&str, QuestSettings, Option<(PsychometricFunction, u64)>)> = vec![
+    vec![
         (
             "uniform priors",
-            settings(QuestMethod::QuestPlus, fine.clone(), vec![0.0, 0.02, 0.04], 30),
+            settings(
+                QuestMethod::QuestPlus,
+                fine.clone(),
+                vec![0.0, 0.02, 0.04],
+                30,
+            ),
             Some((observer, 1)),
         ),
         ("example priors", informed, Some((observer, 2))),
@@ -182,7 +195,13 @@ fn levels_and_posteriors_equal_questplus() {
             settings(QuestMethod::QuestPlus, fine, vec![0.0, 0.02, 0.04], 12),
             None,
         ),
-    ];
+    ]
+}
+
+#[test]
+fn levels_and_posteriors_equal_questplus() {
+    let Some(python) = python() else { return };
+    let cases = cases();
     let runs: Vec<Run> = cases.iter().map(|(_, s, o)| run(s, *o)).collect();
     let input: Vec<Value> = cases
         .iter()
@@ -193,8 +212,13 @@ fn levels_and_posteriors_equal_questplus() {
     std::fs::create_dir_all(&dir).unwrap();
     let file = dir.join("cases.json");
     std::fs::write(&file, serde_json::to_string(&input).unwrap()).unwrap();
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scripts/golden/questplus_golden.py");
-    let out = Command::new(&python).arg(&script).arg(&file).output().unwrap();
+    let script =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../scripts/golden/questplus_golden.py");
+    let out = Command::new(&python)
+        .arg(&script)
+        .arg(&file)
+        .output()
+        .unwrap();
     assert!(
         out.status.success(),
         "questplus_golden.py failed:\n{}",
@@ -202,7 +226,11 @@ fn levels_and_posteriors_equal_questplus() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
     let golden: Value = serde_json::from_slice(&out.stdout).unwrap();
-    for (((name, s, _), r), g) in cases.iter().zip(&runs).zip(golden["cases"].as_array().unwrap()) {
+    for (((name, s, _), r), g) in cases
+        .iter()
+        .zip(&runs)
+        .zip(golden["cases"].as_array().unwrap())
+    {
         let levels = floats(&g["levels"]);
         assert_eq!(levels.len(), r.levels.len(), "{name}");
         for (i, (a, b)) in r.levels.iter().zip(&levels).enumerate() {
@@ -224,14 +252,25 @@ fn levels_and_posteriors_equal_questplus() {
                 .zip(&theirs)
                 .map(|(a, b)| (a - b).abs())
                 .fold(0.0, f64::max);
-            assert!(worst <= POSTERIOR_TOL, "{name}: trial {i}: posteriors differ by {worst}");
+            assert!(
+                worst <= POSTERIOR_TOL,
+                "{name}: trial {i}: posteriors differ by {worst}"
+            );
         }
         let t = r.engine.threshold();
         let est = &g["estimate"];
         for (what, mine, theirs) in [
             ("threshold", t.mean, est["threshold"].as_f64().unwrap()),
-            ("slope", r.engine.slope().mean, est["slope"].as_f64().unwrap()),
-            ("lapse", r.engine.lapse().mean, est["lapse_rate"].as_f64().unwrap()),
+            (
+                "slope",
+                r.engine.slope().mean,
+                est["slope"].as_f64().unwrap(),
+            ),
+            (
+                "lapse",
+                r.engine.lapse().mean,
+                est["lapse_rate"].as_f64().unwrap(),
+            ),
         ] {
             assert!(
                 (mine - theirs).abs() <= 1e-9 * theirs.abs().max(1e-3),

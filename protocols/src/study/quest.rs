@@ -59,7 +59,10 @@ pub(super) fn parse_method(t: &Table, cx: &mut Ctx) -> Option<QuestMethod> {
         if !t.contains_key("max_trials") {
             cx.err(
                 "staircase.max_trials",
-                format!("missing: method = {:?} runs a fixed number of trials", m.as_str()),
+                format!(
+                    "missing: method = {:?} runs a fixed number of trials",
+                    m.as_str()
+                ),
             );
         }
     }
@@ -105,15 +108,14 @@ pub(super) fn parse_quest(
     cx: &mut Ctx,
 ) -> Option<QuestSettings> {
     let empty = Table::new();
-    let q = match t {
-        Some(q) => q,
-        None => {
-            cx.err(
-                P,
-                "missing: a QUEST+ or Psi study needs [staircase.quest] with at least `threshold`",
-            );
-            &empty
-        }
+    let q = if let Some(q) = t {
+        q
+    } else {
+        cx.err(
+            P,
+            "missing: a QUEST+ or Psi study needs [staircase.quest] with at least `threshold`",
+        );
+        &empty
     };
     cx.known(
         q,
@@ -138,14 +140,13 @@ pub(super) fn parse_quest(
             ],
         )
         .unwrap_or(Psychometric::Weibull);
-    let threshold = match q.get("threshold") {
-        Some(v) => grid(v, "threshold", cx),
-        None => {
-            if t.is_some() {
-                cx.err(join(P, "threshold"), "missing");
-            }
-            None
+    let threshold = if let Some(v) = q.get("threshold") {
+        grid(v, "threshold", cx)
+    } else {
+        if t.is_some() {
+            cx.err(join(P, "threshold"), "missing");
         }
+        None
     };
     let slope = match q.get("slope") {
         Some(v) => grid(v, "slope", cx),
@@ -184,7 +185,10 @@ pub(super) fn parse_quest(
     let problems = check_settings(&s);
     for e in &problems {
         if let crate::quest::QuestError::BadSetting { key, reason } = e
-            && !cx.issues.iter().any(|i| i.key == *key && i.reason == *reason)
+            && !cx
+                .issues
+                .iter()
+                .any(|i| i.key == *key && i.reason == *reason)
         {
             cx.err(*key, reason.clone());
         }
@@ -238,7 +242,9 @@ fn grid_table(t: &Table, path: &str, cx: &mut Ctx) -> Option<Grid> {
     cx.known(
         t,
         path,
-        &["values", "min", "max", "count", "spacing", "prior", "weights"],
+        &[
+            "values", "min", "max", "count", "spacing", "prior", "weights",
+        ],
     );
     let values = if t.contains_key("values") {
         for k in ["min", "max", "count", "spacing"] {
@@ -266,7 +272,7 @@ fn grid_table(t: &Table, path: &str, cx: &mut Ctx) -> Option<Grid> {
             .pick(t, path, "spacing", &[("linear", false), ("log", true)])
             .unwrap_or(false);
         let (lo, hi, n) = (lo?, hi?, n? as usize);
-        if n == 0 || (n == 1 && lo != hi) || lo > hi {
+        if n == 0 || (n == 1 && (lo - hi).abs() > 0.0) || lo > hi {
             cx.err(
                 path,
                 format!("min {lo}, max {hi}, count {n}: need min < max and count ≥ 2 (or min = max and count 1)"),
@@ -279,7 +285,11 @@ fn grid_table(t: &Table, path: &str, cx: &mut Ctx) -> Option<Grid> {
         }
         (0..n)
             .map(|i| {
-                let f = if n == 1 { 0.0 } else { i as f64 / (n - 1) as f64 };
+                let f = if n == 1 {
+                    0.0
+                } else {
+                    i as f64 / (n - 1) as f64
+                };
                 if i + 1 == n {
                     hi
                 } else if log {
@@ -361,7 +371,9 @@ fn prior(v: Option<&Value>, values: &[f64], path: &str, cx: &mut Ctx) -> Option<
     if !(b > 0.0 && (kind != 3 || a > 0.0)) {
         cx.err(
             path,
-            format!("{ka} = {a}, {kb} = {b}: the parameters must be > 0 (the mean may be any number)"),
+            format!(
+                "{ka} = {a}, {kb} = {b}: the parameters must be > 0 (the mean may be any number)"
+            ),
         );
         return None;
     }
@@ -371,7 +383,7 @@ fn prior(v: Option<&Value>, values: &[f64], path: &str, cx: &mut Ctx) -> Option<
             1 => (-0.5 * ((x - a) / b).powi(2)).exp(),
             2 if x > 0.0 => (-0.5 * ((x.log10() - a) / b).powi(2)).exp() / x,
             3 if x > 0.0 && x < 1.0 => x.powf(a - 1.0) * (1.0 - x).powf(b - 1.0),
-            3 if x == 0.0 && a == 1.0 => 1.0,
+            3 if x <= 0.0 && (a - 1.0).abs() < 1e-12 => 1.0,
             _ => 0.0,
         })
         .collect();
