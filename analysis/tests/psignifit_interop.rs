@@ -15,7 +15,7 @@
 //! skips.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 
 use analysis::Confidence;
@@ -25,41 +25,11 @@ use serde_json::{Value, json};
 
 const TOL: f64 = 1e-6;
 
-fn python() -> Option<PathBuf> {
-    let ci = std::env::var_os("CI").is_some();
-    let venv = Path::new(env!("CARGO_MANIFEST_DIR")).join("../target/bayes-env/bin/python");
-    let python = match std::env::var_os("BAYES_PYTHON") {
-        Some(p) => PathBuf::from(p),
-        None if venv.exists() => venv,
-        None if ci => panic!(
-            "neither BAYES_PYTHON nor {} is there: under CI the psignifit test needs the venv \
-             scripts/test makes",
-            venv.display()
-        ),
-        None => {
-            eprintln!("psignifit interop skipped: no BAYES_PYTHON and no target/bayes-env");
-            return None;
-        }
-    };
-    match Command::new(&python)
-        .args(["-c", "import psignifit"])
-        .output()
-    {
-        Ok(o) if o.status.success() => Some(python),
-        Ok(o) if ci => panic!(
-            "{} cannot import psignifit:\n{}",
-            python.display(),
-            String::from_utf8_lossy(&o.stderr)
-        ),
-        Err(e) if ci => panic!("cannot run {}: {e}", python.display()),
-        _ => {
-            eprintln!(
-                "psignifit interop skipped: {} lacks psignifit",
-                python.display()
-            );
-            None
-        }
-    }
+#[path = "../../scripts/golden/bayes_python.rs"]
+mod bayes_python;
+
+fn python() -> Option<std::path::PathBuf> {
+    bayes_python::python("psignifit", "psignifit interop test")
 }
 
 fn close(name: &str, what: &str, mine: f64, theirs: f64, scale: f64) {

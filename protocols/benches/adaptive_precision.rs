@@ -42,23 +42,15 @@ fn quest_settings() -> QuestSettings {
     let thresholds: Vec<f64> = (0..40)
         .map(|i| 0.002 * 30_f64.powf(f64::from(i) / 39.0))
         .collect();
-    let slopes = vec![1.5, 2.0, 2.5, 3.0, 3.5, 4.0, 5.0, 6.0, 8.0];
-    let lapses = vec![0.0, 0.01, 0.02, 0.03, 0.04];
-    QuestSettings {
-        method: QuestMethod::QuestPlus,
-        family: Psychometric::Weibull,
-        levels: (1..=20).map(|k| f64::from(k) * 0.002).collect(),
-        threshold_prior: vec![1.0; thresholds.len()],
+    QuestSettings::uniform(
+        QuestMethod::QuestPlus,
+        Psychometric::Weibull,
+        (1..=20).map(|k| f64::from(k) * 0.002).collect(),
         thresholds,
-        slope_prior: vec![1.0; slopes.len()],
-        slopes,
-        lapse_prior: vec![1.0; lapses.len()],
-        lapses,
-        max_trials: *CHECKPOINTS.last().unwrap() as u32,
-        min_trials: 0,
-        stop_interval: None,
-        credible: 0.95,
-    }
+        vec![1.5, 2.0, 2.5, 3.0, 3.5, 4.0, 5.0, 6.0, 8.0],
+        vec![0.0, 0.01, 0.02, 0.03, 0.04],
+        *CHECKPOINTS.last().unwrap() as u32,
+    )
 }
 
 fn staircase_settings() -> StaircaseSettings {

@@ -83,6 +83,36 @@ pub struct QuestSettings {
     pub credible: f64,
 }
 
+impl QuestSettings {
+    /// Settings with uniform priors over the grids `thresholds`, `slopes` and `lapses`,
+    /// `max_trials` trials and no interval stop, 95 % intervals.
+    pub fn uniform(
+        method: QuestMethod,
+        family: Psychometric,
+        levels: Vec<f64>,
+        thresholds: Vec<f64>,
+        slopes: Vec<f64>,
+        lapses: Vec<f64>,
+        max_trials: u32,
+    ) -> Self {
+        Self {
+            method,
+            family,
+            levels,
+            threshold_prior: vec![1.0; thresholds.len()],
+            thresholds,
+            slope_prior: vec![1.0; slopes.len()],
+            slopes,
+            lapse_prior: vec![1.0; lapses.len()],
+            lapses,
+            max_trials,
+            min_trials: 0,
+            stop_interval: None,
+            credible: 0.95,
+        }
+    }
+}
+
 /// Most parameter combinations of a grid.
 pub const MAX_PARAMETER_POINTS: usize = 200_000;
 /// Most (level, parameter combination) pairs, the size of the likelihood table.
@@ -565,22 +595,15 @@ mod tests {
     use super::*;
 
     fn settings() -> QuestSettings {
-        let thresholds: Vec<f64> = (1..=20).map(|i| f64::from(i) * 0.002).collect();
-        QuestSettings {
-            method: QuestMethod::QuestPlus,
-            family: Psychometric::Weibull,
-            levels: (1..=10).map(|i| f64::from(i) * 0.004).collect(),
-            threshold_prior: vec![1.0; thresholds.len()],
-            thresholds,
-            slopes: vec![2.0, 3.5, 5.0],
-            slope_prior: vec![1.0; 3],
-            lapses: vec![0.0, 0.02],
-            lapse_prior: vec![1.0; 2],
-            max_trials: 30,
-            min_trials: 0,
-            stop_interval: None,
-            credible: 0.95,
-        }
+        QuestSettings::uniform(
+            QuestMethod::QuestPlus,
+            Psychometric::Weibull,
+            (1..=10).map(|i| f64::from(i) * 0.004).collect(),
+            (1..=20).map(|i| f64::from(i) * 0.002).collect(),
+            vec![2.0, 3.5, 5.0],
+            vec![0.0, 0.02],
+            30,
+        )
     }
 
     #[test]

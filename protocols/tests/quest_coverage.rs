@@ -26,21 +26,18 @@ fn settings(method: QuestMethod, lapses: Vec<f64>) -> QuestSettings {
         .map(|i| 0.002 * 30_f64.powf(f64::from(i) / f64::from(n - 1)))
         .collect();
     let slopes = vec![1.5, 2.0, 2.5, 3.0, 3.5, 4.0, 5.0, 6.0, 8.0];
-    QuestSettings {
+    let levels = (1..=10).map(|k| f64::from(k) * 0.004).collect();
+    let mut s = QuestSettings::uniform(
         method,
-        family: Psychometric::Weibull,
-        levels: (1..=10).map(|k| f64::from(k) * 0.004).collect(),
-        threshold_prior: vec![1.0; thresholds.len()],
+        Psychometric::Weibull,
+        levels,
         thresholds,
-        slope_prior: vec![1.0; slopes.len()],
         slopes,
-        lapse_prior: vec![1.0; lapses.len()],
         lapses,
-        max_trials: TRIALS,
-        min_trials: 0,
-        stop_interval: None,
-        credible: NOMINAL,
-    }
+        TRIALS,
+    );
+    s.credible = NOMINAL;
+    s
 }
 
 /// Runs that covered the truth, and the mean interval width.

@@ -15,7 +15,7 @@
 //! elsewhere it skips with a message.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 
 use protocols::observer::PsychometricFunction;
@@ -28,41 +28,11 @@ use serde_json::{Value, json};
 /// with the same formula in a different order of floating-point operations.
 const POSTERIOR_TOL: f64 = 1e-10;
 
-fn python() -> Option<PathBuf> {
-    let ci = std::env::var_os("CI").is_some();
-    let venv = Path::new(env!("CARGO_MANIFEST_DIR")).join("../target/bayes-env/bin/python");
-    let python = match std::env::var_os("BAYES_PYTHON") {
-        Some(p) => PathBuf::from(p),
-        None if venv.exists() => venv,
-        None if ci => panic!(
-            "neither BAYES_PYTHON nor {} is there: under CI the questplus golden test needs the \
-             venv scripts/test makes",
-            venv.display()
-        ),
-        None => {
-            eprintln!("questplus golden test skipped: no BAYES_PYTHON and no target/bayes-env");
-            return None;
-        }
-    };
-    let probe = Command::new(&python)
-        .args(["-c", "import questplus"])
-        .output();
-    match probe {
-        Ok(o) if o.status.success() => Some(python),
-        Ok(o) if ci => panic!(
-            "{} cannot import questplus:\n{}",
-            python.display(),
-            String::from_utf8_lossy(&o.stderr)
-        ),
-        Err(e) if ci => panic!("cannot run {}: {e}", python.display()),
-        _ => {
-            eprintln!(
-                "questplus golden test skipped: {} lacks questplus",
-                python.display()
-            );
-            None
-        }
-    }
+#[path = "../../scripts/golden/bayes_python.rs"]
+mod bayes_python;
+
+fn python() -> Option<std::path::PathBuf> {
+    bayes_python::python("questplus", "questplus golden test")
 }
 
 fn log_grid(lo: f64, hi: f64, n: usize) -> Vec<f64> {
@@ -72,23 +42,15 @@ fn log_grid(lo: f64, hi: f64, n: usize) -> Vec<f64> {
 }
 
 fn settings(method: QuestMethod, levels: Vec<f64>, lapses: Vec<f64>, trials: u32) -> QuestSettings {
-    let thresholds = log_grid(0.002, 0.06, 30);
-    let slopes = vec![1.5, 2.0, 3.0, 4.0, 6.0];
-    QuestSettings {
+    QuestSettings::uniform(
         method,
-        family: Psychometric::Weibull,
+        Psychometric::Weibull,
         levels,
-        threshold_prior: vec![1.0; thresholds.len()],
-        thresholds,
-        slope_prior: vec![1.0; slopes.len()],
-        slopes,
-        lapse_prior: vec![1.0; lapses.len()],
+        log_grid(0.002, 0.06, 30),
+        vec![1.5, 2.0, 3.0, 4.0, 6.0],
         lapses,
-        max_trials: trials,
-        min_trials: 0,
-        stop_interval: None,
-        credible: 0.95,
-    }
+        trials,
+    )
 }
 
 /// The engine's run: its levels, its posteriors after every trial, and the answers a
