@@ -15,9 +15,6 @@
 //! skips.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
 
-use std::path::Path;
-use std::process::Command;
-
 use analysis::Confidence;
 use analysis::bayesian::{BayesFit, Sigmoid, fit};
 use analysis::psychometric::GroupedTrials;
@@ -112,24 +109,12 @@ fn posterior_means_and_intervals_equal_psignifit() {
             })
         })
         .collect();
-    let dir = std::env::temp_dir().join(format!("psignifit_interop_{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let file = dir.join("cases.json");
-    std::fs::write(&file, serde_json::to_string(&input).unwrap()).unwrap();
-    let script =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../scripts/golden/psignifit_golden.py");
-    let out = Command::new(&python)
-        .arg(&script)
-        .arg(&file)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "psignifit_golden.py failed:\n{}",
-        String::from_utf8_lossy(&out.stderr)
+    let golden = bayes_python::run_script(
+        &python,
+        "psignifit_golden.py",
+        "psignifit_interop",
+        &Value::from(input),
     );
-    std::fs::remove_dir_all(&dir).unwrap();
-    let golden: Value = serde_json::from_slice(&out.stdout).unwrap();
     for ((name, sigmoid, data), g) in cases.iter().zip(golden["cases"].as_array().unwrap()) {
         let f: BayesFit = fit(
             &GroupedTrials {

@@ -15,9 +15,6 @@
 //! elsewhere it skips with a message.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
 
-use std::path::Path;
-use std::process::Command;
-
 use protocols::observer::PsychometricFunction;
 use protocols::quest::{QuestMethod, QuestPlus, QuestSettings};
 use protocols::rng::StudyRng;
@@ -170,24 +167,12 @@ fn levels_and_posteriors_equal_questplus() {
         .zip(&runs)
         .map(|((_, s, _), r)| case_json(s, &r.answers))
         .collect();
-    let dir = std::env::temp_dir().join(format!("questplus_golden_{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let file = dir.join("cases.json");
-    std::fs::write(&file, serde_json::to_string(&input).unwrap()).unwrap();
-    let script =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../scripts/golden/questplus_golden.py");
-    let out = Command::new(&python)
-        .arg(&script)
-        .arg(&file)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "questplus_golden.py failed:\n{}",
-        String::from_utf8_lossy(&out.stderr)
+    let golden = bayes_python::run_script(
+        &python,
+        "questplus_golden.py",
+        "questplus_golden",
+        &Value::from(input),
     );
-    std::fs::remove_dir_all(&dir).unwrap();
-    let golden: Value = serde_json::from_slice(&out.stdout).unwrap();
     for (((name, s, _), r), g) in cases
         .iter()
         .zip(&runs)

@@ -41,3 +41,29 @@ pub fn python(module: &str, what: &str) -> Option<PathBuf> {
         }
     }
 }
+
+/// Runs `scripts/golden/<script>` with `python` on `cases` (written to a fresh temporary
+/// file named after `tag`) and returns the JSON it prints; a failing script fails the test
+/// with its stderr.
+pub fn run_script(
+    python: &Path,
+    script: &str,
+    tag: &str,
+    cases: &serde_json::Value,
+) -> serde_json::Value {
+    let dir = std::env::temp_dir().join(format!("{tag}_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("cases.json");
+    std::fs::write(&file, serde_json::to_string(cases).unwrap()).unwrap();
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../scripts/golden")
+        .join(script);
+    let out = Command::new(python).arg(&path).arg(&file).output().unwrap();
+    assert!(
+        out.status.success(),
+        "{script} failed:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+    serde_json::from_slice(&out.stdout).unwrap()
+}
