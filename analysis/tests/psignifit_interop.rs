@@ -6,9 +6,9 @@
 //! Both evaluate the same posterior on the same two grids, so they differ only by floating-
 //! point rounding (and scipy's special functions against statrs'): the tolerance is 1e-6 of
 //! the fitted quantity's scale (the stimulus range for threshold and width, 1 for λ and η).
-//! Cases: a full method-of-constant-stimuli data set (logistic), a sparse adaptive one
-//! (Weibull, psignifit on ln level), one subject's QUEST+ track from `examples/quest.toml`'s
-//! levels (Weibull) and a normal fit of data with more scatter than a binomial's.
+//! Cases: a full method-of-constant-stimuli data set (logistic), one subject's QUEST+ track on
+//! `examples/quest.toml`'s levels (Weibull, psignifit on ln level) and a normal fit of data
+//! with more scatter than a binomial's.
 //!
 //! The Python is `$BAYES_PYTHON` (`scripts/test` points it at `target/bayes-env`), or that
 //! venv itself; under `CI` a missing interpreter or package fails the test, elsewhere it
@@ -53,16 +53,6 @@ fn cases() -> Vec<Case> {
                 (0.5, 40, 33),
                 (1.0, 40, 36),
                 (2.0, 40, 39),
-            ],
-        ),
-        (
-            "sparse adaptive, Weibull",
-            Sigmoid::Weibull,
-            vec![
-                (0.004, 5, 3),
-                (0.01, 20, 12),
-                (0.016, 11, 10),
-                (0.022, 3, 3),
             ],
         ),
         (
