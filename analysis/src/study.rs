@@ -1141,13 +1141,17 @@ fn bayes_section(
     let label = &options.level_label;
     let s = report.section("Bayesian psychometric fits");
     s.text(format!(
-        "Beta-binomial fits of ψ(x) = 0.5 + (0.5 − λ)·S(x) with a {} sigmoid S{}, by psignifit 4's procedure (posterior on a grid, posterior means, equal-tailed {conf} credible intervals). Threshold: S = 0.5 (75 % correct without lapses); width: S from 0.05 to 0.95{}. Priors: {}. Every track's threshold: an up-down staircase's is the mean of its last {} reversals; a QUEST+ / Psi track's own estimate is the posterior mean of its Weibull or logistic α (session.json; the Weibull's α is its 80 % point, not the 75 % point the fit reports), and it is also fitted here.",
+        "Beta-binomial fits of ψ(x) = 0.5 + (0.5 − λ)·S(x) with a {} sigmoid S, by psignifit 4's procedure (posterior on a grid, posterior means, equal-tailed {conf} credible intervals). Threshold: S = 0.5 (75 % correct without lapses){}; width: S from 0.05 to 0.95{}. Priors: {}. Every track's threshold: an up-down staircase's is the mean of its last {} reversals; a QUEST+ / Psi track's own estimate is the posterior mean of its Weibull or logistic α (session.json; a Weibull's α is its point of about 80 % correct, not the 75 % point the fit reports), and it is also fitted here.",
         match b.sigmoid {
             Sigmoid::Weibull => "Weibull (Gumbel in ln level)",
             Sigmoid::Logistic => "logistic",
             Sigmoid::Normal => "normal",
         },
-        "",
+        if b.sigmoid == Sigmoid::Weibull {
+            ", fitted on ln level (its mean is exp of the posterior mean of ln threshold)"
+        } else {
+            ""
+        },
         if b.sigmoid == Sigmoid::Weibull { ", in ln units" } else { "" },
         bayesian::PRIORS,
         options.last_reversals
