@@ -186,6 +186,21 @@ impl<'a> Converter<'a> {
                 self.data.encoded_levels.push(e);
             }
         }
+        // The session's own threshold of each of its tracks, by name.
+        for ((s, n, _), track) in self
+            .tracks
+            .range_mut((subject, session.manifest.session, 0)..)
+        {
+            if (*s, *n) != (subject, session.manifest.session) {
+                break;
+            }
+            track.logged_threshold = session
+                .manifest
+                .thresholds
+                .iter()
+                .find(|(name, _)| *name == track.label)
+                .and_then(|(_, t)| *t);
+        }
         Ok(())
     }
 
@@ -330,20 +345,23 @@ fn convert_record(
                 .outcome
                 .correct
                 .ok_or_else(|| bad(path, index, "correct", "missing"))?;
-            let reversal = record.outcome.reversal.unwrap_or(false);
-            tracks
+            // A QUEST+ or Psi trial logs no reversal flag (an up-down staircase's always
+            // does).
+            let track = tracks
                 .entry((subject, record.session, staircase))
                 .or_insert_with(|| StaircaseTrack {
                     subject,
                     label: record.trial.condition.clone(),
                     steps: Vec::new(),
-                })
-                .steps
-                .push(StaircaseStep {
-                    level,
-                    correct,
-                    reversal,
+                    bayesian: record.outcome.reversal.is_none(),
+                    logged_threshold: None,
                 });
+            track.bayesian &= record.outcome.reversal.is_none();
+            track.steps.push(StaircaseStep {
+                level,
+                correct,
+                reversal: record.outcome.reversal.unwrap_or(false),
+            });
             data.two_afc.push(TwoAfcTrial { level, correct });
         }
     }

@@ -23,6 +23,7 @@
 //! # Ok::<(), analysis::AnalysisError>(())
 //! ```
 
+pub mod bayesian;
 mod confidence;
 pub mod descriptive;
 pub mod display;
@@ -33,6 +34,7 @@ pub mod export;
 pub mod findings;
 pub mod from_results;
 pub mod jnd;
+pub mod mle;
 mod panel;
 pub mod plots;
 pub mod power;

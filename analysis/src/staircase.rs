@@ -30,6 +30,12 @@ pub struct StaircaseTrack {
     pub label: String,
     /// Trials in presentation order.
     pub steps: Vec<StaircaseStep>,
+    /// A QUEST+ or Psi track (logged without reversals): it has no reversal threshold and is
+    /// left out of [`staircase_thresholds`]; the Bayesian fit gives its threshold.
+    pub bayesian: bool,
+    /// The threshold the session itself computed for this track (`session.json`): the mean
+    /// of the last reversals, or a Bayesian track's posterior mean; `None` if not recorded.
+    pub logged_threshold: Option<f64>,
 }
 
 impl StaircaseTrack {
@@ -98,8 +104,9 @@ pub struct ThresholdSummary {
     pub last_reversals: usize,
 }
 
-/// Thresholds from the last `k` reversals of every track, averaged per subject, then summarised
-/// across subjects at `confidence`.
+/// Thresholds from the last `k` reversals of every up-down track (QUEST+ and Psi tracks have
+/// none and are skipped), averaged per subject, then summarised across subjects at
+/// `confidence`.
 ///
 /// # Errors
 /// [`AnalysisError::InvalidParameter`] for k = 0;
@@ -118,7 +125,7 @@ pub fn staircase_thresholds(
     }
     let mut per: BTreeMap<u32, Vec<f64>> = BTreeMap::new();
     let mut unconverged = Vec::new();
-    for track in tracks {
+    for track in tracks.iter().filter(|t| !t.bayesian) {
         for (index, s) in track.steps.iter().enumerate() {
             if !s.level.is_finite() {
                 return Err(AnalysisError::NonFinite {

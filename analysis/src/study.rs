@@ -5,6 +5,7 @@ use std::collections::{BTreeMap, BTreeSet, HashMap};
 
 use serde::Serialize;
 
+use crate::bayesian::{self, BayesFit, Sigmoid};
 use crate::confidence::Confidence;
 use crate::descriptive::{CiMethod, ConditionStats, Rating, condition_stats};
 use crate::dmos::{DscqsPair, acr_hr_dmos, dscqs_dmos, zscore_screened};
@@ -158,6 +159,144 @@ pub struct StudyAnalysis {
     pub psychometric: Option<(PsychometricFit, BootstrapCi)>,
     /// Share of viewers who would notice each level, and the CR reached there (staircases).
     pub jnd: Option<JndAnalysis>,
+    /// Bayesian psychometric fits of every adaptive track, every subject and all subjects
+    /// pooled (staircase and QUEST+ / Psi studies).
+    pub bayes: Option<BayesianFits>,
+    /// Subject bias and inconsistency by maximum likelihood (sureal's MLE model), for rating
+    /// studies (not DSCQS) of at most [`MLE_MAX_RATINGS`] ratings.
+    pub subject_model: Option<crate::mle::SubjectModel>,
+}
+
+/// Most ratings the report fits the subject model to: sureal's iteration passes over every
+/// rating about a thousand times (a lab study's thousands of ratings take well under a second;
+/// 10⁶ would take minutes), so larger sets are left to sureal itself (`sureal_dataset.py`).
+pub const MLE_MAX_RATINGS: usize = 50_000;
+
+/// One adaptive track's thresholds.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct TrackFit {
+    /// Subject.
+    pub subject: u32,
+    /// Track name.
+    pub label: String,
+    /// A QUEST+ or Psi track (else an up-down staircase).
+    pub bayesian: bool,
+    /// Trials.
+    pub trials: usize,
+    /// Mean of the last reversals (up-down tracks with enough reversals).
+    pub reversal_threshold: Option<f64>,
+    /// The session's own threshold (`session.json`).
+    pub logged_threshold: Option<f64>,
+    /// The Bayesian fit of a QUEST+ / Psi track's trials (`None` for an up-down track, whose
+    /// threshold is its reversal mean, or where the track has fewer than two levels).
+    pub fit: Option<BayesFit>,
+}
+
+/// Bayesian psychometric fits ([`crate::bayesian`]) of 2AFC data.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct BayesianFits {
+    /// The sigmoid (from [`ReportOptions::fit`]'s shape).
+    pub sigmoid: Sigmoid,
+    /// Every track of every subject, in subject order.
+    pub per_track: Vec<TrackFit>,
+    /// Every subject's trials of all tracks together.
+    pub per_subject: Vec<(u32, Option<BayesFit>)>,
+    /// All subjects' trials pooled.
+    pub pooled: Option<BayesFit>,
+}
+
+/// The Bayesian fits of every track, every subject and all trials pooled.
+fn bayesian_fits(data: &StudyData, options: &ReportOptions) -> BayesianFits {
+    use crate::psychometric::Shape;
+    let sigmoid = match options.fit.shape {
+        Shape::Weibull => Sigmoid::Weibull,
+        Shape::Logistic => Sigmoid::Logistic,
+    };
+    let fit_of = |trials: &[TwoAfcTrial]| {
+        bayesian::fit(
+            &GroupedTrials::from_trials(trials),
+            sigmoid,
+            options.confidence,
+        )
+        .ok()
+    };
+    // Each fit evaluates a posterior on some 10⁶ grid points: they run on two threads.
+    let fit_all = |sets: &[Vec<TwoAfcTrial>]| -> Vec<Option<BayesFit>> {
+        let half = sets.len().div_ceil(2).max(1);
+        std::thread::scope(|scope| {
+            let workers: Vec<_> = sets
+                .chunks(half)
+                .map(|part| scope.spawn(move || part.iter().map(|t| fit_of(t)).collect::<Vec<_>>()))
+                .collect();
+            workers
+                .into_iter()
+                .flat_map(|w| w.join().unwrap_or_default())
+                .collect()
+        })
+    };
+    let trials_of = |t: &StaircaseTrack| -> Vec<TwoAfcTrial> {
+        t.steps
+            .iter()
+            .map(|s| TwoAfcTrial {
+                level: s.level,
+                correct: s.correct,
+            })
+            .collect()
+    };
+    let mut by_subject: BTreeMap<u32, Vec<TwoAfcTrial>> = BTreeMap::new();
+    for t in &data.staircases {
+        by_subject
+            .entry(t.subject)
+            .or_default()
+            .extend(trials_of(t));
+    }
+    // One list of fits: the Bayesian tracks', every subject's, the pool's.
+    let mut sets: Vec<Vec<TwoAfcTrial>> = data
+        .staircases
+        .iter()
+        .filter(|t| t.bayesian)
+        .map(trials_of)
+        .collect();
+    let tracks = sets.len();
+    sets.extend(by_subject.values().cloned());
+    sets.push(data.two_afc.clone());
+    let mut fits = fit_all(&sets).into_iter();
+    let mut per_track: Vec<TrackFit> = data
+        .staircases
+        .iter()
+        .map(|t| TrackFit {
+            subject: t.subject,
+            label: t.label.clone(),
+            bayesian: t.bayesian,
+            trials: t.steps.len(),
+            reversal_threshold: (!t.bayesian)
+                .then(|| t.threshold(options.last_reversals))
+                .flatten(),
+            logged_threshold: t.logged_threshold,
+            fit: if t.bayesian {
+                fits.next().flatten()
+            } else {
+                None
+            },
+        })
+        .collect();
+    debug_assert_eq!(per_track.iter().filter(|t| t.bayesian).count(), tracks);
+    per_track.sort_by(|a, b| {
+        a.subject
+            .cmp(&b.subject)
+            .then_with(|| a.label.cmp(&b.label))
+    });
+    let per_subject = by_subject
+        .keys()
+        .map(|s| (*s, fits.next().flatten()))
+        .collect();
+    let pooled = fits.next().flatten();
+    BayesianFits {
+        sigmoid,
+        per_track,
+        per_subject,
+        pooled,
+    }
 }
 
 /// Computes every statistic the data allow.
@@ -269,7 +408,19 @@ pub fn analyze(data: &StudyData, options: &ReportOptions) -> Result<StudyAnalysi
         thresholds,
         psychometric,
         jnd,
+        bayes: (!data.staircases.is_empty()).then(|| bayesian_fits(data, options)),
+        subject_model: subject_model(data)?,
     })
+}
+
+/// The maximum-likelihood subject model of a rating study (not DSCQS) of at most
+/// [`MLE_MAX_RATINGS`] ratings.
+fn subject_model(data: &StudyData) -> Result<Option<crate::mle::SubjectModel>, AnalysisError> {
+    if data.dscqs.is_empty() && !data.ratings.is_empty() && data.ratings.len() <= MLE_MAX_RATINGS {
+        Ok(Some(crate::mle::fit(&data.ratings, &data.conditions)?))
+    } else {
+        Ok(None)
+    }
 }
 
 /// Optional outputs of the staircase and 2AFC data.
@@ -285,7 +436,8 @@ fn adaptive_statistics(
     data: &StudyData,
     options: &ReportOptions,
 ) -> Result<Adaptive, AnalysisError> {
-    let thresholds = if data.staircases.is_empty() {
+    // Only up-down tracks have reversals (QUEST+ / Psi tracks get Bayesian fits instead).
+    let thresholds = if data.staircases.iter().all(|t| t.bayesian) {
         None
     } else {
         Some(staircase_thresholds(
@@ -500,6 +652,9 @@ impl StudyAnalysis {
         if let Some(screening) = &self.screening {
             screening_section(&mut report, screening, &self.repeats, data);
         }
+        if let Some(m) = &self.subject_model {
+            subject_model_section(&mut report, m, data);
+        }
         if !self.dmos.is_empty() {
             self.dmos_section(&mut report, data, options);
         }
@@ -511,6 +666,9 @@ impl StudyAnalysis {
         }
         if let Some((fit, ci)) = &self.psychometric {
             psychometric_section(&mut report, fit, ci, data, options);
+        }
+        if let Some(b) = &self.bayes {
+            bayes_section(&mut report, b, data, options, self.thresholds.is_none());
         }
         report
     }
@@ -877,6 +1035,224 @@ fn psychometric_section(
                 band,
             },
         );
+    }
+}
+
+/// The subject-model section: each subject's bias and inconsistency and each condition's
+/// quality by maximum likelihood (sureal's MLE model).
+fn subject_model_section(report: &mut Report, m: &crate::mle::SubjectModel, data: &StudyData) {
+    let s = report.section("Subject bias and inconsistency");
+    s.text(format!(
+        "Maximum-likelihood subject model (Li & Bampis 2017; sureal's MaximumLikelihoodEstimationModel, its iteration, {} passes): every rating = quality of the stimulus + the subject's bias + noise with the subject's inconsistency (SD) and the clip's ambiguity (SD). Biases have mean 0; intervals 95 % (bias and quality ±1.96 standard errors, inconsistency χ² on the subject's ratings). Content ambiguity: {}.",
+        m.passes,
+        m.contents
+            .iter()
+            .map(|(c, a)| format!("{c} {a:.3}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    ));
+    let degenerate: Vec<String> = m
+        .subjects
+        .iter()
+        .filter(|e| e.inconsistency < 1e-6)
+        .map(|e| data.subject_name(e.subject))
+        .chain(
+            m.contents
+                .iter()
+                .filter(|c| c.1 < 1e-6)
+                .map(|c| c.0.clone()),
+        )
+        .collect();
+    if !degenerate.is_empty() {
+        s.text(format!(
+            "Warning: the fit reached a standard deviation of 0 for {}: the likelihood grows without bound there, so those ratings are fitted exactly and the intervals that depend on them collapse. Too few ratings for this model; the MOS tables do not depend on it.",
+            degenerate.join(", ")
+        ));
+    }
+    s.table(tables::Table {
+        name: "subject_model".to_owned(),
+        caption: "Subject bias and inconsistency (maximum likelihood)".to_owned(),
+        columns: vec![
+            "Subject".to_owned(),
+            "Ratings".to_owned(),
+            "Bias".to_owned(),
+            "Bias 95 % interval".to_owned(),
+            "Inconsistency".to_owned(),
+            "Inconsistency 95 % interval".to_owned(),
+        ],
+        rows: m
+            .subjects
+            .iter()
+            .map(|e| {
+                vec![
+                    data.subject_name(e.subject),
+                    e.ratings.to_string(),
+                    format!("{:.3}", e.bias),
+                    format!("{:.3} – {:.3}", e.bias - e.bias_ci, e.bias + e.bias_ci),
+                    format!("{:.3}", e.inconsistency),
+                    format!("{:.3} – {:.3}", e.inconsistency_ci.0, e.inconsistency_ci.1),
+                ]
+            })
+            .collect(),
+    });
+    let name = |id: u32| {
+        data.conditions.iter().find(|c| c.id == id).map_or_else(
+            || id.to_string(),
+            |c| {
+                c.compression_ratio.map_or_else(
+                    || format!("{} reference", c.clip),
+                    |cr| format!("{} {} {cr}:1", c.clip, c.method()),
+                )
+            },
+        )
+    };
+    s.table(tables::Table {
+        name: "mle_quality".to_owned(),
+        caption: "Quality per condition by maximum likelihood".to_owned(),
+        columns: vec![
+            "Condition".to_owned(),
+            "Quality".to_owned(),
+            "95 % interval".to_owned(),
+        ],
+        rows: m
+            .quality
+            .iter()
+            .map(|&(c, q, ci)| {
+                vec![
+                    name(c),
+                    format!("{q:.3}"),
+                    format!("{:.3} – {:.3}", q - ci, q + ci),
+                ]
+            })
+            .collect(),
+    });
+}
+
+/// The Bayesian section: every adaptive track's thresholds (reversals, the session's own,
+/// the Bayesian fit with its credible interval), then the fit per subject and pooled.
+fn bayes_section(
+    report: &mut Report,
+    b: &BayesianFits,
+    data: &StudyData,
+    options: &ReportOptions,
+    track_figure: bool,
+) {
+    let conf = percent_label(options.confidence);
+    let label = &options.level_label;
+    let s = report.section("Bayesian psychometric fits");
+    s.text(format!(
+        "Beta-binomial fits of ψ(x) = 0.5 + (0.5 − λ)·S(x) with a {} sigmoid S, by psignifit 4's procedure (posterior on a grid, posterior means, equal-tailed {conf} credible intervals). Threshold: S = 0.5 (75 % correct without lapses){}; width: S from 0.05 to 0.95{}. Priors: {}. Every track's threshold: an up-down staircase's is the mean of its last {} reversals; a QUEST+ / Psi track's own estimate is the posterior mean of its Weibull or logistic α (session.json; a Weibull's α is its point of about 80 % correct, not the 75 % point the fit reports), and it is also fitted here.",
+        match b.sigmoid {
+            Sigmoid::Weibull => "Weibull (Gumbel in ln level)",
+            Sigmoid::Logistic => "logistic",
+            Sigmoid::Normal => "normal",
+        },
+        if b.sigmoid == Sigmoid::Weibull {
+            ", fitted on ln level (its mean is exp of the posterior mean of ln threshold)"
+        } else {
+            ""
+        },
+        if b.sigmoid == Sigmoid::Weibull { ", in ln units" } else { "" },
+        bayesian::PRIORS,
+        options.last_reversals
+    ));
+    s.table(tracks_table(b, data, &conf, label));
+    let row = |who: String, f: &Option<BayesFit>| {
+        let (m, i) = threshold_cells(f.as_ref());
+        let est = |e: Option<bayesian::Estimate>| {
+            e.map_or_else(String::new, |e| {
+                format!("{:.4} ({:.4} – {:.4})", e.mean, e.lower, e.upper)
+            })
+        };
+        vec![
+            who,
+            f.map_or_else(String::new, |f| f.trials.to_string()),
+            m,
+            i,
+            est(f.map(|f| f.width)),
+            est(f.map(|f| f.lapse)),
+            est(f.map(|f| f.eta)),
+        ]
+    };
+    let mut rows: Vec<Vec<String>> = b
+        .per_subject
+        .iter()
+        .map(|(subject, f)| row(data.subject_name(*subject), f))
+        .collect();
+    rows.push(row("pooled".to_owned(), &b.pooled));
+    s.table(tables::Table {
+        name: "bayes_fits".to_owned(),
+        caption: format!("Bayesian psychometric fit per subject and pooled ({label})"),
+        columns: vec![
+            "Subject".to_owned(),
+            "Trials".to_owned(),
+            "Threshold".to_owned(),
+            format!("{conf} credible interval"),
+            "Width (interval)".to_owned(),
+            "Lapse λ (interval)".to_owned(),
+            "Overdispersion η (interval)".to_owned(),
+        ],
+        rows,
+    });
+    if track_figure && options.figures {
+        s.figure(
+            "staircases",
+            Figure::Staircases {
+                title: "Adaptive tracks".to_owned(),
+                level_label: options.level_label.clone(),
+                tracks: data.staircases.clone(),
+                last_reversals: options.last_reversals,
+                subjects: data.subjects.clone(),
+            },
+        );
+    }
+}
+
+/// A fit's threshold and its credible interval as table cells (`n/a` without a fit).
+fn threshold_cells(f: Option<&BayesFit>) -> (String, String) {
+    f.map_or_else(
+        || ("n/a".to_owned(), String::new()),
+        |f| {
+            (
+                format!("{:.5}", f.threshold.mean),
+                format!("{:.5} – {:.5}", f.threshold.lower, f.threshold.upper),
+            )
+        },
+    )
+}
+
+/// The threshold of every adaptive track: reversal mean, session estimate, Bayesian fit.
+fn tracks_table(b: &BayesianFits, data: &StudyData, conf: &str, label: &str) -> tables::Table {
+    tables::Table {
+        name: "adaptive_tracks".to_owned(),
+        caption: format!("Threshold ({label}) of every adaptive track"),
+        columns: vec![
+            "Subject".to_owned(),
+            "Track".to_owned(),
+            "Procedure".to_owned(),
+            "Trials".to_owned(),
+            "Reversal mean".to_owned(),
+            "Session estimate".to_owned(),
+            "Bayesian threshold".to_owned(),
+            format!("{conf} credible interval"),
+        ],
+        rows: b
+            .per_track
+            .iter()
+            .map(|t| {
+                let (m, i) = threshold_cells(t.fit.as_ref());
+                vec![
+                    data.subject_name(t.subject),
+                    t.label.clone(),
+                    if t.bayesian { "QUEST+/Psi" } else { "up-down" }.to_owned(),
+                    t.trials.to_string(),
+                    fmt_opt(t.reversal_threshold, 5),
+                    fmt_opt(t.logged_threshold, 5),
+                    m,
+                    i,
+                ]
+            })
+            .collect(),
     }
 }
 

@@ -157,6 +157,8 @@ pub fn staircase<R: Rng>(
         }
     }
     let track = StaircaseTrack {
+        bayesian: false,
+        logged_threshold: None,
         subject,
         label: "t_L".to_owned(),
         steps,

@@ -505,3 +505,47 @@ fn a_baseline_names_one_variant() {
     );
     assert!(against("wavelet-perceptual").is_empty());
 }
+
+/// A QUEST+ / Psi session's rows carry no reversal flag: its track is marked Bayesian, and
+/// the session's own threshold (`session.json`) is attached to the track of that name; an
+/// up-down track stays an up-down track.
+#[test]
+fn bayesian_tracks_are_told_apart_and_keep_their_session_threshold() {
+    let make = |reversal: Option<bool>| -> Vec<TrialRecord> {
+        [0.010, 0.016, 0.010, 0.004]
+            .iter()
+            .enumerate()
+            .map(|(i, &level)| {
+                let mut r = record(
+                    Protocol::Staircase,
+                    "ann",
+                    i as u32,
+                    Block::Test,
+                    "walk/p/cr20",
+                    Answer::Choice(Position::Left),
+                    Outcome {
+                        score: 1.0,
+                        score_reference: None,
+                        score_test: None,
+                        correct: Some(i != 2),
+                        reversal,
+                    },
+                );
+                r.trial.staircase = Some(0);
+                r.trial.level = Some(level);
+                r.trial.condition = "walk".into();
+                r
+            })
+            .collect()
+    };
+    let mut quest = session("ann", Protocol::Staircase, make(None));
+    quest.manifest.thresholds = vec![("walk".into(), Some(0.0117))];
+    let c = convert(&[quest], &manifest(), None).unwrap();
+    let t = &c.data.staircases[0];
+    assert!(t.bayesian);
+    assert_eq!(t.logged_threshold, Some(0.0117));
+    let up_down = session("bob", Protocol::Staircase, make(Some(false)));
+    let c = convert(&[up_down], &manifest(), None).unwrap();
+    assert!(!c.data.staircases[0].bayesian);
+    assert_eq!(c.data.staircases[0].logged_threshold, None);
+}

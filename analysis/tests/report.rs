@@ -237,3 +237,64 @@ fn exports_for_pandas_and_sureal() {
     assert_eq!(py.matches("'asset_id'").count(), data.conditions.len());
     assert!(py.contains("'content_name': '2_2'"));
 }
+
+/// QUEST+ / Psi tracks (logged without reversals) leave the reversal table and get a Bayesian
+/// fit each, beside the session's own estimate; every subject and the pool are fitted too.
+#[test]
+fn bayesian_tracks_get_their_own_fits() {
+    let observer = PsychometricFit {
+        shape: Shape::Weibull,
+        alpha: 0.012,
+        beta: 3.0,
+        guess_rate: 0.5,
+        lapse: 0.01,
+        log_likelihood: 0.0,
+        trials: 0,
+    };
+    let mut rng = ChaCha8Rng::seed_from_u64(9);
+    let mut data = StudyData::default();
+    for s in 0..3 {
+        // A staircase's trials stand in for a Bayesian track's: the analysis only sees levels
+        // and answers, and the missing reversal flags.
+        let (mut track, trials) = staircase(&mut rng, &observer, s, 0.024, 0.002, 40);
+        track.bayesian = true;
+        track.logged_threshold = Some(0.0125);
+        for step in &mut track.steps {
+            step.reversal = false;
+        }
+        data.staircases.push(track);
+        data.two_afc.extend(trials);
+    }
+    let a = analyze(&data, &options()).unwrap();
+    assert!(
+        a.thresholds.is_none(),
+        "no up-down track, no reversal table"
+    );
+    let b = a.bayes.as_ref().unwrap();
+    assert_eq!(b.per_track.len(), 3);
+    for t in &b.per_track {
+        assert!(t.bayesian && t.reversal_threshold.is_none());
+        assert_eq!(t.logged_threshold, Some(0.0125));
+        let f = t.fit.unwrap();
+        assert!(f.threshold.lower < f.threshold.mean && f.threshold.mean < f.threshold.upper);
+        assert!(f.threshold.mean > 0.004 && f.threshold.mean < 0.03, "{f:?}");
+    }
+    assert_eq!(b.per_subject.len(), 3);
+    assert_eq!(b.pooled.unwrap().trials, 120);
+    let report = a.to_report(&data, &options(), "QUEST+");
+    let names: Vec<&str> = report.tables().map(|t| t.name.as_str()).collect();
+    assert!(
+        names.contains(&"adaptive_tracks") && names.contains(&"bayes_fits"),
+        "{names:?}"
+    );
+    assert!(!names.contains(&"thresholds"), "{names:?}");
+    let tracks = report
+        .tables()
+        .find(|t| t.name == "adaptive_tracks")
+        .unwrap();
+    assert!(
+        tracks.rows.iter().all(|r| r[2] == "QUEST+/Psi"),
+        "{:?}",
+        tracks.rows
+    );
+}

@@ -67,6 +67,8 @@ fn data(g: &Value) -> StudyData {
         .map(|t| {
             let levels: Vec<f64> = t["levels"].as_array().unwrap().iter().map(f).collect();
             StaircaseTrack {
+                bayesian: false,
+                logged_threshold: None,
                 subject: t["subject"].as_u64().unwrap() as u32,
                 label: t["label"].as_str().unwrap().to_owned(),
                 steps: levels

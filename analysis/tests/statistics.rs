@@ -238,6 +238,8 @@ fn acr_hr_needs_the_reference_of_the_same_subject() {
 
 fn track(subject: u32, levels: &[f64]) -> StaircaseTrack {
     StaircaseTrack {
+        bayesian: false,
+        logged_threshold: None,
         subject,
         label: "t_L".into(),
         steps: levels

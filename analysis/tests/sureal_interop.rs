@@ -521,6 +521,63 @@ fn sureal_reads_a_mos_study_with_hidden_repeats_and_references() {
     let q = check_mle(&v, &names, assets.len());
     let r = pearson(&q, &mos);
     assert!(r > 0.9, "MLE quality vs MOS: r = {r}");
+    check_report_mle(&v, &names, &assets, &report);
+}
+
+/// Agreement asked of the report's subject model with sureal's MLE: both run sureal's
+/// iteration to the same stopping rule, so they differ by floating-point rounding.
+const MLE_TOL: f64 = 1e-6;
+
+/// The report's own maximum-likelihood subject model (`analysis::mle`) equals sureal's
+/// `MaximumLikelihoodEstimationModel`: every subject's bias and inconsistency, every
+/// stimulus's quality and every clip's ambiguity.
+fn check_report_mle(v: &Value, names: &[String], assets: &[u32], report: &StudyAnalysis) {
+    let mle = &v["models"]["MaximumLikelihoodEstimationModel"];
+    let model = report
+        .subject_model
+        .as_ref()
+        .expect("the report fits the subject model");
+    let observers = strings(&mle["observers"]);
+    let (bias, inconsistency) = (
+        floats(&mle["observer_bias"]),
+        floats(&mle["observer_inconsistency"]),
+    );
+    assert_eq!(model.subjects.len(), observers.len());
+    let mut worst = 0.0_f64;
+    for e in &model.subjects {
+        let name = &names[e.subject as usize];
+        let i = observers.iter().position(|o| o == name).unwrap();
+        for (what, mine, theirs) in [
+            ("bias", e.bias, bias[i]),
+            ("inconsistency", e.inconsistency, inconsistency[i]),
+        ] {
+            assert!(
+                (mine - theirs).abs() < MLE_TOL,
+                "{name}: {what} {mine} in the report, {theirs} in sureal"
+            );
+            worst = worst.max((mine - theirs).abs());
+        }
+    }
+    let quality = floats(&mle["quality_scores"]);
+    for (asset, theirs) in assets.iter().zip(&quality) {
+        let (_, mine, _) = model.quality.iter().find(|q| q.0 == *asset).unwrap();
+        assert!(
+            (mine - theirs).abs() < MLE_TOL,
+            "condition {asset}: quality {mine} in the report, {theirs} in sureal"
+        );
+        worst = worst.max((mine - theirs).abs());
+    }
+    let ambiguity = floats(&mle["content_ambiguity"]);
+    for ((clip, mine), theirs) in model.contents.iter().zip(&ambiguity) {
+        assert!(
+            (mine - theirs).abs() < MLE_TOL,
+            "{clip}: ambiguity {mine} in the report, {theirs} in sureal"
+        );
+    }
+    eprintln!(
+        "subject model: report vs sureal max |diff| {worst:.3e} ({} passes)",
+        model.passes
+    );
 }
 
 #[test]

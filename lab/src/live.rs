@@ -431,32 +431,37 @@ mod tests {
         assert_eq!(a.test.data(), b.test.data());
     }
 
-    /// Over a whole session answered at random, every trial after the first was prefetched
-    /// while the previous one ran, and equals what a fresh cache encodes in the foreground.
-    #[test]
-    fn every_next_trial_is_prefetched_and_equals_a_foreground_encoding() {
+    /// Runs subject `subject`'s session of `study` for at most `limit` trials, answering
+    /// wrong where `wrong(index)`, preparing after each trial start the trials its answers
+    /// lead to (waited for): every trial after the first must be a cache hit equal to a fresh
+    /// foreground encoding. Returns how many trials each lookahead gave.
+    fn prefetched_session(
+        study: &StudyFile,
+        subject: u32,
+        limit: usize,
+        wrong: fn(u32) -> bool,
+    ) -> Vec<usize> {
         use protocols::{Answer, Response, Session};
-        let study = example();
-        let mut live = LiveStimuli::from_study(&study).unwrap().unwrap();
-        let fresh = LiveStimuli::from_study(&study).unwrap().unwrap();
-        let mut session = Session::new(&study.definition, 1).unwrap();
-        let mut trials = 0;
+        let mut live = LiveStimuli::from_study(study).unwrap().unwrap();
+        let fresh = LiveStimuli::from_study(study).unwrap().unwrap();
+        let mut session = Session::new(&study.definition, subject).unwrap();
+        let mut ahead_counts = Vec::new();
         while let Some(t) = session.next_trial(0).unwrap()
-            && trials < 12
+            && ahead_counts.len() < limit
         {
-            if trials > 0 {
+            if ahead_counts.is_empty() {
+                live.resolve(&t).unwrap();
+            } else {
                 let before = live.cached();
                 let got = live.resolve(&t).unwrap();
                 assert_eq!(live.cached(), before, "trial {} was prefetched", t.index);
                 same(&got, &fresh.resolve(&t).unwrap());
-            } else {
-                live.resolve(&t).unwrap();
             }
             let ahead = session.lookahead(0);
-            assert!(!ahead.is_empty());
+            ahead_counts.push(ahead.len());
             live.prefetch(&ahead);
             live.wait_prefetch();
-            let answer = if t.index % 3 == 0 {
+            let answer = if wrong(t.index) {
                 t.reference_position.other()
             } else {
                 t.reference_position
@@ -469,9 +474,49 @@ mod tests {
                     dropped_frames: 0,
                 })
                 .unwrap();
-            trials += 1;
         }
-        assert_eq!(trials, 12);
+        ahead_counts
+    }
+
+    /// Over a whole session answered at random, every trial after the first was prefetched
+    /// while the previous one ran, and equals what a fresh cache encodes in the foreground.
+    #[test]
+    fn every_next_trial_is_prefetched_and_equals_a_foreground_encoding() {
+        let study = example();
+        let ahead = prefetched_session(&study, 1, 12, |i| i % 3 == 0);
+        assert_eq!(ahead.len(), 12);
+        assert!(ahead.iter().all(|n| *n > 0));
+    }
+
+    /// A live QUEST+ track: a correct and a wrong answer lead to two levels, both encoded in
+    /// the background while the trial runs, so every next trial is a cache hit and equals a
+    /// foreground encoding.
+    #[test]
+    fn a_live_quest_track_prefetches_both_next_levels() {
+        let dir = std::env::temp_dir().join(format!("live-quest-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let manifest = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/live/stimuli.json");
+        let text = std::fs::read_to_string(
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/live-staircase.toml"),
+        )
+        .unwrap()
+        .replace("live/stimuli.json", &manifest.display().to_string())
+        .replace(
+            "start = 64\nstep = 2\n",
+            "method = \"quest_plus\"\nstep = 8\n",
+        )
+        .replace(
+            "n_up = 1\nn_down = 2\nstop_reversals = 12\nmax_trials = 90\nthreshold_reversals = 6\n",
+            "max_trials = 8\n\n[staircase.quest]\nthreshold = { min = 5, max = 120, count = 24, spacing = \"log\" }\nslope = [1, 2, 4]\nlapse = [0, 0.02]\n",
+        );
+        let file = dir.join("live-quest.toml");
+        std::fs::write(&file, text).unwrap();
+        let study = StudyFile::load(&file).unwrap();
+        assert!(study.definition.staircase.as_ref().unwrap().quest.is_some());
+        let ahead = prefetched_session(&study, 0, usize::MAX, |i| i % 3 == 1);
+        assert_eq!(ahead.len(), 8);
+        assert!(ahead[..7].iter().all(|n| *n == 2), "{ahead:?}");
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     /// A trial that asks for a level while it is being prefetched waits for that encoding;

@@ -4,12 +4,13 @@
 //! A [`Session`] is built from a validated [`StudyDefinition`] and a subject index. MOS and DSCQS
 //! sessions plan every trial up front from the study seed and the subject index (familiarization
 //! block spanning the quality range, shuffled test trials, hidden repeats, reference positions);
-//! staircase sessions decide each trial from the staircases' state and a per-trial random
-//! stream. Nothing depends on the wall clock except the time limit, whose clock the caller
+//! staircase sessions decide each trial from the tracks' state (an up-down staircase, or a
+//! QUEST+ / Psi posterior, [`crate::quest`]) and a per-trial random stream. Nothing depends on the wall clock except the time limit, whose clock the caller
 //! passes in, so replaying logged responses regenerates the logged trials exactly (resume).
 
 use serde::{Deserialize, Serialize};
 
+use crate::quest::{QuestError, QuestPlus};
 use crate::record::{Answer, Arrangement, Block, Outcome, Position, Protocol, Response, Trial};
 use crate::rng::{StudyRng, purpose};
 use crate::staircase::{Staircase, StaircaseError};
@@ -84,6 +85,9 @@ pub enum EngineError {
     /// Staircase state error.
     #[error(transparent)]
     Staircase(#[from] StaircaseError),
+    /// QUEST+ / Psi state error.
+    #[error(transparent)]
+    Quest(#[from] QuestError),
     /// Replay regenerated a trial different from the logged one.
     #[error(
         "trial {trial}: logged {field} {logged:?} but the study gives {regenerated:?}; the row \
@@ -101,10 +105,53 @@ pub enum EngineError {
     },
 }
 
+/// One adaptive track: an up-down staircase or a QUEST+ / Psi procedure.
+#[derive(Debug, Clone)]
+enum Procedure {
+    UpDown(Staircase),
+    Bayesian(QuestPlus),
+}
+
+impl Procedure {
+    fn next_level(&self) -> Option<f64> {
+        match self {
+            Self::UpDown(s) => s.next_level(),
+            Self::Bayesian(q) => q.next_level(),
+        }
+    }
+
+    fn is_finished(&self) -> bool {
+        match self {
+            Self::UpDown(s) => s.is_finished(),
+            Self::Bayesian(q) => q.is_finished(),
+        }
+    }
+
+    /// Records an answer; the reversal flag an up-down staircase logs (`None`: no such thing
+    /// in a Bayesian track).
+    fn add_response(&mut self, correct: bool) -> Result<Option<bool>, EngineError> {
+        Ok(match self {
+            Self::UpDown(s) => Some(s.add_response(correct)?.reversal),
+            Self::Bayesian(q) => {
+                q.add_response(correct)?;
+                None
+            }
+        })
+    }
+
+    /// The staircase's mean of its last reversals, or the posterior mean threshold.
+    fn threshold(&self) -> Option<f64> {
+        match self {
+            Self::UpDown(s) => s.threshold(),
+            Self::Bayesian(q) => (!q.levels().is_empty()).then(|| q.threshold().mean),
+        }
+    }
+}
+
 #[derive(Debug, Clone)]
 struct Stairs {
     tracks: Vec<Track>,
-    staircases: Vec<Staircase>,
+    staircases: Vec<Procedure>,
     tolerance: f64,
     live: Option<LiveRun>,
 }
@@ -169,8 +216,11 @@ impl Session {
                     let staircases = sc
                         .tracks
                         .iter()
-                        .map(|t| Staircase::new(t.settings.clone()))
-                        .collect::<Result<Vec<_>, _>>()?;
+                        .map(|t| match &sc.quest {
+                            None => Ok(Procedure::UpDown(Staircase::new(t.settings.clone())?)),
+                            Some(q) => Ok(Procedure::Bayesian(QuestPlus::new(q.clone())?)),
+                        })
+                        .collect::<Result<Vec<_>, EngineError>>()?;
                     let live = sc.live.as_ref().map(|l| {
                         let mut clips = l.clips.clone();
                         if l.order == ClipOrder::Shuffled {
@@ -390,7 +440,7 @@ impl Session {
                 // Thesis ch. 5: picking the original motion is the correct answer.
                 let correct = p == trial.reference_position;
                 let k = trial.staircase.unwrap_or(0) as usize;
-                let step = match self.stairs.as_mut().and_then(|s| s.staircases.get_mut(k)) {
+                let reversal = match self.stairs.as_mut().and_then(|s| s.staircases.get_mut(k)) {
                     Some(sc) => sc.add_response(correct)?,
                     None => return Err(EngineError::NoPendingTrial),
                 };
@@ -399,7 +449,7 @@ impl Session {
                     score_reference: None,
                     score_test: None,
                     correct: Some(correct),
-                    reversal: Some(step.reversal),
+                    reversal,
                 }
             }
             (Protocol::Staircase, _) => {
@@ -542,7 +592,8 @@ impl Session {
             .unwrap_or_default()
     }
 
-    /// Staircase name and threshold (mean of the last reversals) for each interleaved staircase.
+    /// Track name and threshold for each interleaved track: the mean of the last reversals of
+    /// an up-down staircase, the posterior mean of a QUEST+ or Psi track.
     pub fn thresholds(&self) -> Vec<(String, Option<f64>)> {
         self.stairs
             .as_ref()

@@ -1,7 +1,8 @@
 //! Study definitions and the protocol engines that decide what a subject sees next.
 //!
 //! Holds: the versioned study file ([`study`], TOML), the trial and record types ([`record`]),
-//! the MOS, DSCQS and 2AFC-staircase engines as deterministic state machines ([`engine`]: the
+//! the MOS, DSCQS and 2AFC engines (up-down staircases, QUEST+ and Psi, [`quest`]) as
+//! deterministic state machines ([`engine`]: the
 //! study, its seed and the responses so far fix the next trial), the PsychoPy-compatible
 //! [`staircase`], and
 //! simulated observers for dry runs ([`observer`]). It knows stimuli only as ids and parameters
@@ -23,6 +24,7 @@ pub mod catalog;
 pub mod engine;
 pub mod manifest;
 pub mod observer;
+pub mod quest;
 pub mod record;
 pub mod rng;
 pub mod staircase;
@@ -30,6 +32,7 @@ pub mod study;
 
 pub use catalog::{CodecCatalog, CodecInfo};
 pub use engine::{EngineError, Session, SessionStatus};
+pub use quest::{QuestMethod, QuestPlus, QuestSettings};
 pub use record::{
     Answer, Arrangement, Block, FrameTiming, Outcome, Position, Protocol, Response,
     StimulusEncoding, Trial, TrialRecord,

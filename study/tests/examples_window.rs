@@ -266,11 +266,12 @@ fn example_stimuli_are_the_generated_ones() {
     std::fs::remove_dir_all(&root).unwrap();
 }
 
-const EXAMPLES: [&str; 4] = [
+const EXAMPLES: [&str; 5] = [
     "mos.toml",
     "dscqs.toml",
     "staircase.toml",
     "live-staircase.toml",
+    "quest.toml",
 ];
 
 /// `study check` of every example passes, its stimuli read.

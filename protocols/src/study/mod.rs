@@ -11,6 +11,7 @@ mod check;
 mod conditions;
 mod live;
 mod presentation;
+mod quest;
 mod rendering;
 mod scale;
 mod session;
@@ -30,6 +31,7 @@ use crate::manifest::StimulusManifest;
 use crate::record::{Arrangement, Position, Protocol};
 use crate::staircase::StaircaseSettings;
 use check::Ctx;
+pub use quest::domain as quest_domain;
 pub use rendering::RenderingSettings;
 
 /// Current version of the study file format.
@@ -282,6 +284,10 @@ pub struct StaircaseStudy {
     /// Set when the level is a codec parameter and the runner encodes each trial's stimulus
     /// on the fly (`[staircase.live]`); `None` for stimuli from the manifest.
     pub live: Option<LiveStaircase>,
+    /// Set when every track is a QUEST+ or Psi procedure (`method`, `[staircase.quest]`),
+    /// shared by the tracks; `None` for up-down staircases.
+    #[serde(default)]
+    pub quest: Option<crate::quest::QuestSettings>,
 }
 
 /// Prefix of every stimulus id a live staircase derives.

@@ -8,6 +8,7 @@ use toml::{Table, Value};
 
 use super::check::{Ctx, join, type_name};
 use super::live::parse_live;
+use super::quest::{check_domain, domain, parse_method, parse_quest};
 use super::{MAX_TRACKS, StaircaseStudy, Track};
 use crate::catalog::{CodecCatalog, TARGET_CR_PARAM};
 use crate::manifest::StimulusManifest;
@@ -35,6 +36,8 @@ const STAIR_KEYS: &[&str] = &[
     "threshold_reversals",
     "tracks",
     "live",
+    "method",
+    "quest",
 ];
 
 const P: &str = "staircase";
@@ -49,6 +52,9 @@ struct Shared {
     start: Option<f64>,
     /// The settings every track starts from (the default start where none is written).
     settings: StaircaseSettings,
+    /// A QUEST+ or Psi study (`method`): tracks take no start and the up-down rules are
+    /// unused.
+    bayesian: bool,
 }
 
 /// The settings shared by every track: `param`, `codec` and the staircase rules.
@@ -96,6 +102,7 @@ fn parse_shared(t: &Table, cx: &mut Ctx) -> Shared {
         codec,
         start,
         settings,
+        bayesian: false,
     }
 }
 
@@ -127,7 +134,17 @@ pub(super) fn parse_staircase(
     cx: &mut Ctx,
 ) -> Option<StaircaseStudy> {
     cx.known(t, P, STAIR_KEYS);
-    let shared = parse_shared(t, cx);
+    let method = parse_method(t, cx);
+    let mut shared = parse_shared(t, cx);
+    let quest_t = cx.table(t, P, "quest");
+    let quest = method.and_then(|m| parse_quest(quest_t, m, &shared.settings, cx));
+    if method.is_some() {
+        // A Bayesian track's first level is its own choice; the grid's lowest stands in
+        // where a start is shown (`study check`, the live preflight).
+        shared.bayesian = true;
+        shared.start = shared.settings.min;
+        shared.settings.start = shared.settings.min.unwrap_or(shared.settings.start);
+    }
     let live_t = cx.table(t, P, "live");
     let live_asked = t.contains_key("live");
     let (codec, param) = (shared.codec.as_deref(), shared.param.as_deref());
@@ -191,15 +208,22 @@ pub(super) fn parse_staircase(
             continue;
         }
         let Some(m) = m else { continue };
-        let Some(track) = manifest_track(head, &shared, m, &tp, cx) else {
+        let Some(mut track) = manifest_track(head, &shared, m, &tp, cx) else {
             continue;
         };
-        if check_settings(&track.settings).is_empty() {
+        if method.is_some() {
+            // The domain even where the procedure's own settings have problems: those are
+            // reported beside any level without a stimulus.
+            check_domain(&mut track, &domain(&shared.settings), tolerance, &tp, cx);
+        } else if check_settings(&track.settings).is_empty() {
             check_levels(&track, tolerance, &tp, cx);
         }
         tracks.push(track);
     }
     if live_asked && live.is_none() {
+        return None;
+    }
+    if method.is_some() && quest.is_none() {
         return None;
     }
     Some(StaircaseStudy {
@@ -208,7 +232,17 @@ pub(super) fn parse_staircase(
         level_tolerance: tolerance,
         tracks,
         live,
+        quest,
     })
+}
+
+/// The keys a track table may have: `keys`, less `start` in a QUEST+ or Psi study.
+fn track_keys<'a>(shared: &Shared, keys: &'a [&'a str]) -> &'a [&'a str] {
+    if shared.bayesian {
+        &keys[..keys.len() - 1]
+    } else {
+        keys
+    }
 }
 
 /// A track as its `[[staircase.tracks]]` table gives it, before its levels are looked up.
@@ -238,10 +272,10 @@ fn parse_track(
                 "a live staircase takes its clips from staircase.live.clips",
             );
         }
-        cx.known(&others, tp, &["name", "start"]);
+        cx.known(&others, tp, track_keys(shared, &["name", "start"]));
         None
     } else {
-        cx.known(tt, tp, &["name", "clip", "start"]);
+        cx.known(tt, tp, track_keys(shared, &["name", "clip", "start"]));
         let clip = cx.string(tt, tp, "clip");
         cx.required(clip, tt, tp, "clip")
     };
@@ -256,6 +290,13 @@ fn parse_track(
         );
     }
     let mut s = shared.settings.clone();
+    if shared.bayesian {
+        return TrackHead {
+            name,
+            clip,
+            settings: s,
+        };
+    }
     if let Some(st) = cx.float(tt, tp, "start") {
         s.start = st;
     } else if shared.start.is_none() {
