@@ -19,6 +19,8 @@ const state = {
 };
 
 function show(name) {
+  // Answers open only once a trial's frame loop says so.
+  document.body.dataset.open = '0';
   for (const s of SCREENS) $(`screen-${s}`).hidden = s !== name;
   $('progress').hidden = !(name === 'trial' || name === 'gap');
   document.body.dataset.screen = name;
@@ -437,6 +439,7 @@ function widgets(info, t, onChange) {
 /** Plays trial `t` until the participant answers; resolves with the request to post. */
 function runTrial(info, t, clips) {
   return new Promise((resolve) => {
+    document.body.dataset.trial = String(t.index);
     show('trial');
     $('trial-error').textContent = '';
     const stage = state.stage;
