@@ -13,7 +13,7 @@ use lab::session::{self, Opened, Recorder, SessionOf};
 use lab::source::StimulusSource;
 use lab::{LabError, StudyFile};
 use protocols::record::{Answer, Arrangement, Block, Position, Protocol, Response, Trial};
-use protocols::study::{ScaleKind, StudyDefinition};
+use protocols::study::{CrowdSettings, HiddenRule, ScaleKind, StudyDefinition};
 use protocols::{FrameTiming, StimulusEncoding, texts};
 use results::SessionManifest;
 use results::store::{BrowserInfo, DisplayInfo, SessionState};
@@ -126,17 +126,16 @@ pub struct Requirements {
     pub fullscreen: bool,
 }
 
-impl Default for Requirements {
-    fn default() -> Self {
+impl Requirements {
+    /// What a study's `[crowd]` settings ask of the browser.
+    pub fn of(crowd: &CrowdSettings) -> Requirements {
         Requirements {
-            min_window_px: [800, 500],
-            min_refresh_hz: 50.0,
-            fullscreen: false,
+            min_window_px: crowd.min_window_px,
+            min_refresh_hz: crowd.min_refresh_hz,
+            fullscreen: crowd.fullscreen,
         }
     }
-}
 
-impl Requirements {
     /// What `env` lacks, one sentence each; empty when it will do.
     pub fn unmet(&self, env: &Environment) -> Vec<String> {
         let mut out = Vec::new();
@@ -295,7 +294,6 @@ impl App {
         let registry = Registry::open(&options.output)?;
         let stimuli = lab::source::open(&study)?;
         Ok(App {
-            study,
             out: options.output.clone(),
             page,
             stimuli: Mutex::new(stimuli),
@@ -304,7 +302,8 @@ impl App {
             limits: options.limits,
             dashboard: options.dashboard_token.clone(),
             joins: Mutex::new(Bucket::new(options.limits.join_burst)),
-            requirements: Requirements::default(),
+            requirements: Requirements::of(&study.definition.crowd),
+            study,
         })
     }
 
@@ -368,10 +367,40 @@ impl App {
         }
         let who = identity(params).map_err(|e| ApiError::new(400, e.to_string()))?;
         let mut reg = lock(&self.registry);
+        let crowd = &self.definition().crowd;
+        let full = || ApiError::new(503, "the study has all the participants it needs; thank you for your interest");
         if reg.all().len() >= self.limits.max_participants {
-            return Err(ApiError::new(503, "the study has all the participants it needs"));
+            return Err(full());
         }
-        let (p, token) = reg.join(&who)?;
+        // Quotas: the group with the fewest participants so far takes the next one, so
+        // every group gets its share; a group (or, without groups, the study) at its quota
+        // takes no more.
+        let group = match crowd.groups {
+            Some(n) => {
+                let mut counts = vec![0u32; n as usize];
+                for p in reg.all() {
+                    if let Some(c) = p.group.and_then(|g| counts.get_mut(g as usize)) {
+                        *c += 1;
+                    }
+                }
+                let (g, count) = counts
+                    .iter()
+                    .enumerate()
+                    .min_by_key(|(_, c)| **c)
+                    .map_or((0, 0), |(g, c)| (g as u32, *c));
+                if crowd.quota.is_some_and(|q| count >= q) {
+                    return Err(full());
+                }
+                Some(g)
+            }
+            None => {
+                if crowd.quota.is_some_and(|q| reg.all().len() >= q as usize) {
+                    return Err(full());
+                }
+                None
+            }
+        };
+        let (p, token) = reg.join(&who, group)?;
         Ok((p.subject.clone(), token))
     }
 
@@ -400,6 +429,12 @@ impl App {
         session::session_dir(&self.out, &p.subject, 1)
     }
 
+    /// The participant's subject index: their plan group, or else from their id as
+    /// `study run` derives it.
+    fn subject_index(p: &Participant) -> u32 {
+        p.group.unwrap_or_else(|| session::subject_index(&p.subject, 1))
+    }
+
     fn fresh_manifest(&self, p: &Participant) -> SessionManifest {
         session::new_manifest(
             &self.study.definition,
@@ -407,7 +442,7 @@ impl App {
                 study_hash: &self.study.hash,
                 manifest_hash: &self.study.manifest_hash,
                 subject: p.subject.clone(),
-                subject_index: session::subject_index(&p.subject, 1),
+                subject_index: Self::subject_index(p),
                 session: 1,
                 observer_seed: None,
             },
@@ -428,7 +463,7 @@ impl App {
 
     fn open_session(&self, p: &Participant, fresh: SessionManifest) -> ApiResult<Slot> {
         let dir = self.session_dir(p);
-        let index = session::subject_index(&p.subject, 1);
+        let index = Self::subject_index(p);
         Ok(match Recorder::open(&self.study.definition, index, &dir, true, fresh)? {
             Opened::Finished(m) => Slot::Finished(m),
             Opened::Ready { recorder, resumed } => {
@@ -510,6 +545,8 @@ impl App {
             "state": state,
             "answered": answered,
             "requirements": self.requirements,
+            "hidden_rule": def.crowd.hidden,
+            "completion": (state == "finished").then(|| self.completion()).flatten(),
         }))
     }
 
@@ -674,6 +711,14 @@ impl App {
         Ok(true)
     }
 
+    /// The completion code and where the end screen sends the participant.
+    fn completion(&self) -> Option<serde_json::Value> {
+        let c = &self.definition().crowd;
+        (c.completion_code.is_some() || c.completion_url.is_some()).then(|| {
+            serde_json::json!({ "code": c.completion_code, "url": c.completion_url })
+        })
+    }
+
     fn done_info(&self, m: &SessionManifest) -> serde_json::Value {
         serde_json::json!({
             "done": true,
@@ -780,8 +825,7 @@ impl App {
         if req.phases.iter().any(|p| p.len() > 16 || !p.chars().all(|c| c.is_ascii_lowercase())) {
             return Err(ApiError::new(422, "unknown frame phase"));
         }
-        let hidden_rule_repeats = true;
-        if req.hidden && hidden_rule_repeats {
+        if req.hidden && def.crowd.hidden == HiddenRule::Repeat {
             return Err(ApiError::new(422, "the page was hidden while the stimuli played; the trial is shown again"));
         }
         let browser = live.rec.manifest().browser.clone();

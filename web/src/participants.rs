@@ -20,7 +20,7 @@ use crate::limits::Bucket;
 use crate::{Result, WebError, io};
 
 /// Header of `participants.csv` (version 1).
-pub const HEADER: &str = "subject,token_sha256,source,created_ms,ids";
+pub const HEADER: &str = "subject,token_sha256,source,created_ms,group,ids";
 
 /// Largest `participants.csv` read, bytes.
 const MAX_FILE_BYTES: u64 = 256 << 20;
@@ -44,6 +44,9 @@ pub struct Participant {
     pub source: String,
     /// The platform's other ids, as session manifest fields (`prolific_study_id`, ...).
     pub ids: BTreeMap<String, String>,
+    /// The plan group the participant was given (`[crowd] groups`), which is their subject
+    /// index; `None`: the index derives from the subject id.
+    pub group: Option<u32>,
     /// The session.
     pub(crate) slot: Mutex<Slot>,
     /// Requests allowed.
@@ -264,7 +267,7 @@ impl Registry {
     ///
     /// # Errors
     /// The id already took part (one session per participant), or the row cannot be written.
-    pub fn join(&mut self, who: &Identity) -> Result<(Arc<Participant>, String)> {
+    pub fn join(&mut self, who: &Identity, group: Option<u32>) -> Result<(Arc<Participant>, String)> {
         let subject = match &who.subject {
             Some(s) => {
                 if self.by_subject.contains_key(s) {
@@ -286,26 +289,33 @@ impl Registry {
         let hash = token_hash(&token);
         let ids: Vec<String> = who.ids.iter().map(|(k, v)| format!("{k}={v}")).collect();
         self.append(&format!(
-            "{subject},{},{},{},{}\n",
+            "{subject},{},{},{},{},{}\n",
             hex(&hash),
             who.source,
             lab::session::now_ms(),
+            group.map(|g| g.to_string()).unwrap_or_default(),
             ids.join(";")
         ))?;
         let p = self.insert(
             hash,
-            Participant::new(subject, who.source.clone(), who.ids.clone()),
+            Participant::new(subject, who.source.clone(), who.ids.clone(), group),
         );
         Ok((p, token))
     }
 }
 
 impl Participant {
-    fn new(subject: String, source: String, ids: BTreeMap<String, String>) -> Participant {
+    fn new(
+        subject: String,
+        source: String,
+        ids: BTreeMap<String, String>,
+        group: Option<u32>,
+    ) -> Participant {
         Participant {
             subject,
             source,
             ids,
+            group,
             slot: Mutex::new(Slot::NotStarted),
             bucket: Mutex::new(Bucket::new(f64::MAX)),
         }
@@ -314,8 +324,17 @@ impl Participant {
 
 fn parse_row(line: &str) -> std::result::Result<(Participant, [u8; 32]), String> {
     let f: Vec<&str> = line.split(',').collect();
-    let [subject, hash, source, created, ids] = f[..] else {
-        return Err(format!("expected 5 fields, found {}", f.len()));
+    let [subject, hash, source, created, group, ids] = f[..] else {
+        return Err(format!("expected 6 fields, found {}", f.len()));
+    };
+    let group = if group.is_empty() {
+        None
+    } else {
+        Some(
+            group
+                .parse::<u32>()
+                .map_err(|_| format!("group {group:?} is not a number"))?,
+        )
     };
     if !id_ok(subject) {
         return Err(format!("subject {subject:?} is not an id"));
@@ -338,7 +357,7 @@ fn parse_row(line: &str) -> std::result::Result<(Participant, [u8; 32]), String>
         map.insert(k.to_string(), v.to_string());
     }
     Ok((
-        Participant::new(subject.into(), source.into(), map),
+        Participant::new(subject.into(), source.into(), map, group),
         hash,
     ))
 }
@@ -382,9 +401,9 @@ mod tests {
             .unwrap_or_else(|e| panic!("{e}"));
         let token = {
             let mut reg = Registry::open(&dir).unwrap_or_else(|e| panic!("{e}"));
-            let (_, token) = reg.join(&who).unwrap_or_else(|e| panic!("{e}"));
+            let (_, token) = reg.join(&who, Some(3)).unwrap_or_else(|e| panic!("{e}"));
             // One session per participant.
-            assert!(reg.join(&who).is_err());
+            assert!(reg.join(&who, Some(1)).is_err());
             token
         };
         // A crash in the middle of the next row.
@@ -397,8 +416,8 @@ mod tests {
         drop(f);
         let reg = Registry::open(&dir).unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(reg.all().len(), 1);
-        let p = reg.by_token(&token).map(|p| p.subject.clone());
-        assert_eq!(p.as_deref(), Some("A1"));
+        let p = reg.by_token(&token).map(|p| (p.subject.clone(), p.group));
+        assert_eq!(p, Some(("A1".to_string(), Some(3))));
         assert!(reg.by_token(&new_token().unwrap_or_default()).is_none());
         let text = std::fs::read_to_string(&path).unwrap_or_default();
         assert!(text.ends_with('\n') && !text.contains(&token), "{text}");

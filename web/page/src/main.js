@@ -575,10 +575,14 @@ async function main() {
     $('end-text').textContent = 'The session is complete. Thank you!';
     if (end.completion) {
       $('completion').hidden = false;
-      $('completion-code').textContent = end.completion.code;
+      $('completion-code').textContent = end.completion.code || '';
+      $('completion-code').parentElement.hidden = !end.completion.code;
       const link = $('completion-link');
-      if (end.completion.url) link.href = end.completion.url;
-      else link.hidden = true;
+      if (end.completion.url) {
+        link.href = end.completion.url;
+        // Back to the platform, which records the completion.
+        setTimeout(() => { location.href = end.completion.url; }, 5000);
+      } else link.parentElement.hidden = true;
     }
   } catch (e) {
     if (e.status === 401 || e.status === 403) message('This link is not valid', e.message);
