@@ -4,7 +4,6 @@
 //! the study says so (`hidden = "exclude"`). The report lists each exclusion and why (ITU-T
 //! P.808 and the P.910 crowd procedures ask for both the rules and who they removed).
 
-use protocols::record::{Answer, Block};
 use protocols::study::{CrowdSettings, HiddenRule};
 use results::SessionResults;
 
@@ -43,29 +42,17 @@ impl SessionExclusion {
     }
 }
 
-/// The rating of a trial's test stimulus: MOS's rating, DSCQS's test score.
-fn test_rating(r: &protocols::TrialRecord) -> Option<f64> {
-    match r.response.answer {
-        Answer::Rating(v) => Some(v),
-        Answer::Pair { .. } => r.outcome.score_test,
-        Answer::Choice(_) => None,
-    }
-}
-
 /// Applies `crowd`'s rules to session `s`.
 #[must_use]
 pub fn session_exclusion(s: &SessionResults, crowd: &CrowdSettings) -> SessionExclusion {
     let mut gold_trials = 0;
     let mut gold_failed = Vec::new();
     for r in &s.trials.records {
-        if r.trial.block == Block::Familiarization {
-            continue;
-        }
-        let (Some(g), Some(rating)) = (crowd.gold_of(&r.trial.stimulus), test_rating(r)) else {
+        let Some((rating, passed)) = crowd.gold_verdict(r) else {
             continue;
         };
         gold_trials += 1;
-        if !g.passes(rating) {
+        if !passed {
             gold_failed.push(GoldFailure {
                 trial: r.trial.index,
                 stimulus: r.trial.stimulus.clone(),
@@ -113,9 +100,15 @@ pub fn exclusions_table(rows: &[SessionExclusion], crowd: &CrowdSettings) -> Tab
                 HiddenRule::Repeat => "shown again (none reach the log)",
             }
         ),
-        columns: ["Session", "Gold trials", "Gold failed", "Hidden trials left out", "Excluded"]
-            .map(String::from)
-            .to_vec(),
+        columns: [
+            "Session",
+            "Gold trials",
+            "Gold failed",
+            "Hidden trials left out",
+            "Excluded",
+        ]
+        .map(String::from)
+        .to_vec(),
         rows: rows
             .iter()
             .filter(|e| e.any())

@@ -75,7 +75,12 @@ pub fn browser_table(rows: &[SessionDisplay]) -> Option<Table> {
         .iter()
         .filter_map(|r| r.browser.as_ref().map(|b| (r, b)))
         .map(|(r, b)| {
-            let list = |v: &[u32]| v.iter().map(ToString::to_string).collect::<Vec<_>>().join(" ");
+            let list = |v: &[u32]| {
+                v.iter()
+                    .map(ToString::to_string)
+                    .collect::<Vec<_>>()
+                    .join(" ")
+            };
             vec![
                 r.session.clone(),
                 b.user_agent.clone(),

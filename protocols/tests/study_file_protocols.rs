@@ -571,14 +571,23 @@ fn crowd_settings_are_read_and_every_mistake_is_listed() {
     ))
     .unwrap();
     let c = &study.crowd;
-    assert_eq!((c.min_window_px, c.min_refresh_hz, c.fullscreen), ([1024, 600], 59.0, true));
+    assert_eq!(
+        (c.min_window_px, c.min_refresh_hz, c.fullscreen),
+        ([1024, 600], 59.0, true)
+    );
     assert_eq!(c.hidden, HiddenRule::Exclude);
-    assert_eq!((c.groups, c.quota, c.max_gold_failures), (Some(4), Some(25), 1));
+    assert_eq!(
+        (c.groups, c.quota, c.max_gold_failures),
+        (Some(4), Some(25), 1)
+    );
     let gold = c.gold_of(&first).unwrap();
     assert!(gold.passes(1.5) && gold.passes(2.0) && !gold.passes(2.5));
     // Without the table: the defaults (a 50 Hz display, 800 x 500, repeat a hidden trial).
     let d = example("mos.toml").crowd;
-    assert_eq!((d.min_refresh_hz, d.min_window_px, d.hidden), (50.0, [800, 500], HiddenRule::Repeat));
+    assert_eq!(
+        (d.min_refresh_hz, d.min_window_px, d.hidden),
+        (50.0, [800, 500], HiddenRule::Repeat)
+    );
 
     let got = issues(&format!(
         "{base}\n[crowd]\nmin_window = [10]\nhidden = \"skip\"\ncompletion_code = \"a b\"\n\
@@ -593,6 +602,12 @@ fn crowd_settings_are_read_and_every_mistake_is_listed() {
     assert!(has("crowd.groups", "at least 1"), "{got:#?}");
     assert!(has("crowd.colour", "unknown key"), "{got:#?}");
     assert!(has("crowd.gold[0]", "give min"), "{got:#?}");
-    assert!(has("crowd.gold[0].stimulus", "not one of the study's conditions"), "{got:#?}");
+    assert!(
+        has(
+            "crowd.gold[0].stimulus",
+            "not one of the study's conditions"
+        ),
+        "{got:#?}"
+    );
     assert_eq!(got.len(), 8, "{got:#?}");
 }

@@ -400,6 +400,39 @@ fn display_section(
     }
 }
 
+/// The "Exclusions" section of a crowd study (gold trials, or trials left out because the
+/// page was hidden): who the `[crowd]` rules left out of the statistics, and why.
+fn exclusions_section(
+    report: &mut analysis::report::Report,
+    exclusions: &[analysis::crowd::SessionExclusion],
+    crowd: &protocols::study::CrowdSettings,
+) {
+    if crowd.gold.is_empty()
+        && !exclusions
+            .iter()
+            .any(analysis::crowd::SessionExclusion::any)
+    {
+        return;
+    }
+    let left_out: Vec<&str> = exclusions
+        .iter()
+        .filter(|e| e.excluded)
+        .map(|e| e.session.as_str())
+        .collect();
+    let section = report.section("Exclusions");
+    section.text(format!(
+        "The study's crowd rules ([crowd] in the study file) left out {} of {} sessions{}.",
+        left_out.len(),
+        exclusions.len(),
+        if left_out.is_empty() {
+            String::new()
+        } else {
+            format!(" ({})", left_out.join(", "))
+        }
+    ));
+    section.table(analysis::crowd::exclusions_table(exclusions, crowd));
+}
+
 /// Runs `study report`.
 ///
 /// # Errors
@@ -443,25 +476,7 @@ pub fn run(args: &ReportArgs) -> Result<()> {
     let mut report = analysis.to_report(&converted.data, &options, &title);
     incomplete_section(&mut report, &incomplete);
     display_section(&mut report, &displays, args.drop_limit);
-    if !study.crowd.gold.is_empty() || exclusions.iter().any(analysis::crowd::SessionExclusion::any) {
-        let left_out: Vec<&str> = exclusions
-            .iter()
-            .filter(|e| e.excluded)
-            .map(|e| e.session.as_str())
-            .collect();
-        let section = report.section("Exclusions");
-        section.text(format!(
-            "The study's crowd rules ([crowd] in the study file) left out {} of {} sessions{}.",
-            left_out.len(),
-            exclusions.len(),
-            if left_out.is_empty() {
-                String::new()
-            } else {
-                format!(" ({})", left_out.join(", "))
-            }
-        ));
-        section.table(analysis::crowd::exclusions_table(&exclusions, &study.crowd));
-    }
+    exclusions_section(&mut report, &exclusions, &study.crowd);
     let names = report.section("Subjects and stimuli");
     names.text(format!(
         "Subjects ({}): {}. Condition ids: {}.",

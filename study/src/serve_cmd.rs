@@ -36,7 +36,9 @@ pub struct ServeArgs {
 /// address that cannot be bound.
 pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
     if args.dashboard_token.as_ref().is_some_and(|t| t.len() < 16) {
-        anyhow::bail!("--dashboard-token: use at least 16 characters (it guards every participant's data)");
+        anyhow::bail!(
+            "--dashboard-token: use at least 16 characters (it guards every participant's data)"
+        );
     }
     let file = StudyFile::load(&args.study)?;
     let output = args
@@ -48,8 +50,7 @@ pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
         None => std::env::current_exe()?
             .parent()
             .and_then(std::path::Path::parent)
-            .map(|d| d.join("page"))
-            .unwrap_or_else(|| PathBuf::from("target/page")),
+            .map_or_else(|| PathBuf::from("target/page"), |d| d.join("page")),
     };
     let options = web::ServeOptions {
         study: args.study.clone(),
@@ -67,7 +68,9 @@ pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
             output.display()
         );
         if !addr.ip().is_loopback() {
-            println!("note: listening beyond this machine; serve participants through a TLS reverse proxy (docs/serve.md)");
+            println!(
+                "note: listening beyond this machine; serve participants through a TLS reverse proxy (docs/serve.md)"
+            );
         }
     })?;
     println!("stopped; open sessions are saved and continue when the server runs again");

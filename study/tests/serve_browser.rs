@@ -9,7 +9,13 @@
 //! Needs `chromium`, `chromedriver` and the built page (`scripts/build-page`, which needs
 //! npm); `scripts/test` installs and builds them. Without them the test fails under `CI` and
 //! is skipped elsewhere.
-#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::too_many_lines,
+    missing_docs
+)]
 
 use std::collections::BTreeMap;
 use std::io::{BufRead as _, BufReader};
@@ -141,7 +147,12 @@ struct Browser {
 
 impl Drop for Browser {
     fn drop(&mut self) {
-        let _ = http(self.port, "DELETE", &format!("/session/{}", self.session), None);
+        let _ = http(
+            self.port,
+            "DELETE",
+            &format!("/session/{}", self.session),
+            None,
+        );
     }
 }
 
@@ -314,7 +325,7 @@ fn scripted(protocol: &str, k: u32) -> Answer {
             Answer::Pair { a: 70.0, b: 30.0 },
             Answer::Pair { a: 90.0, b: 70.0 },
         ][k as usize % 2],
-        _ => Answer::Choice(if k % 2 == 0 {
+        _ => Answer::Choice(if k.is_multiple_of(2) {
             Position::Left
         } else {
             Position::Right
@@ -363,7 +374,10 @@ fn welcome(b: &Browser) {
             b.click("#check-continue");
         }
     }
-    b.wait("['welcome', 'trial'].includes(document.body.dataset.screen)", 30);
+    b.wait(
+        "['welcome', 'trial'].includes(document.body.dataset.screen)",
+        30,
+    );
     if b.screen() == "welcome" {
         if b.js("return !!document.querySelector('input[name=age]');") == Value::Bool(true) {
             b.type_into("input[name=age]", "31");
@@ -383,7 +397,10 @@ fn answer_trials(
     given: &mut BTreeMap<u32, Answer>,
 ) {
     loop {
-        b.wait("['trial', 'break', 'end'].includes(document.body.dataset.screen)", 60);
+        b.wait(
+            "['trial', 'break', 'end'].includes(document.body.dataset.screen)",
+            60,
+        );
         match b.screen().as_str() {
             "end" => return,
             "break" => {
@@ -393,7 +410,10 @@ fn answer_trials(
             _ => {}
         }
         b.wait("document.body.dataset.open === '1'", 60);
-        let k: u32 = b.js("return Number(document.body.dataset.trial);").as_u64().unwrap() as u32;
+        let k: u32 = b
+            .js("return Number(document.body.dataset.trial);")
+            .as_u64()
+            .unwrap() as u32;
         if given.contains_key(&k) && b.screen() == "trial" {
             // Still showing a trial answered already (the acknowledgement is on its way).
             std::thread::sleep(Duration::from_millis(50));
@@ -401,7 +421,12 @@ fn answer_trials(
         }
         given.insert(k, scripted(protocol, k));
         give(b, protocol, k);
-        b.wait(&format!("document.body.dataset.screen !== 'trial' || document.body.dataset.trial !== '{k}'"), 60);
+        b.wait(
+            &format!(
+                "document.body.dataset.screen !== 'trial' || document.body.dataset.trial !== '{k}'"
+            ),
+            60,
+        );
         if stop_after.is_some_and(|n| given.len() as u32 >= n) {
             return;
         }
@@ -424,14 +449,17 @@ fn check_rows(study: &Path, out: &Path, subject: &str, given: &BTreeMap<u32, Ans
             observer_seed: None,
         },
     );
-    let lab::session::Opened::Ready { recorder: mut rec, .. } = lab::session::Recorder::open(
+    let lab::session::Opened::Ready {
+        recorder: mut rec, ..
+    } = lab::session::Recorder::open(
         &file.definition,
         lab::session::subject_index(subject, 1),
         &dir.join("s"),
         false,
         fresh,
     )
-    .unwrap() else {
+    .unwrap()
+    else {
         panic!("new session finished")
     };
     let source = lab::source::open(&file).unwrap();
@@ -451,7 +479,11 @@ fn check_rows(study: &Path, out: &Path, subject: &str, given: &BTreeMap<u32, Ans
     let replayed = results::read_trials(&dir.join("s/trials.csv")).unwrap();
     want.extend(replayed.records);
     assert_eq!(served.records.len(), want.len(), "rows of {subject}");
-    assert_eq!(served.records.len(), given.len(), "one row per answer given");
+    assert_eq!(
+        served.records.len(),
+        given.len(),
+        "one row per answer given"
+    );
     for (got, want) in served.records.iter().zip(&want) {
         // Timing columns aside, every column equal.
         assert_eq!(got.study, want.study);
@@ -463,7 +495,11 @@ fn check_rows(study: &Path, out: &Path, subject: &str, given: &BTreeMap<u32, Ans
         assert_eq!(got.outcome, want.outcome);
         assert_eq!(got.encoding, want.encoding);
         // The page measured its frames: every trial has timing from the browser.
-        assert!(got.timing.is_some_and(|t| t.frames_shown > 2), "{:?}", got.timing);
+        assert!(
+            got.timing.is_some_and(|t| t.frames_shown > 2),
+            "{:?}",
+            got.timing
+        );
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
@@ -498,10 +534,22 @@ fn a_browser_completes_mos_through_a_server_kill_and_a_foreign_token_is_refused(
     check_rows(&study, &out, "pidA", &given);
     let m = manifest(&out, "pidA");
     assert_eq!(m.status, results::store::SessionState::Complete);
-    assert_eq!(m.subject_fields.get("prolific_session_id").map(String::as_str), Some("se1"));
-    assert_eq!(m.subject_fields.get("consent").map(String::as_str), Some("given"));
+    assert_eq!(
+        m.subject_fields
+            .get("prolific_session_id")
+            .map(String::as_str),
+        Some("se1")
+    );
+    assert_eq!(
+        m.subject_fields.get("consent").map(String::as_str),
+        Some("given")
+    );
     let browser = m.browser.expect("the browser's measurements");
-    assert!(browser.user_agent.contains("Chrome"), "{}", browser.user_agent);
+    assert!(
+        browser.user_agent.contains("Chrome"),
+        "{}",
+        browser.user_agent
+    );
     assert!(browser.refresh_hz > 20.0, "{}", browser.refresh_hz);
     assert!(m.resumes >= 1, "the session was resumed after the kill");
 
@@ -521,7 +569,10 @@ fn a_browser_completes_mos_through_a_server_kill_and_a_foreign_token_is_refused(
         text.as_str().unwrap().contains("This link is not valid"),
         "{text}"
     );
-    assert_eq!(std::fs::read(out.join("pidA_s1/trials.csv")).unwrap(), rows_a);
+    assert_eq!(
+        std::fs::read(out.join("pidA_s1/trials.csv")).unwrap(),
+        rows_a
+    );
     drop(server);
     let _ = std::fs::remove_dir_all(&dir);
 }
@@ -532,7 +583,10 @@ fn a_browser_completes_dscqs_and_a_live_staircase() {
         return;
     }
     let driver = Driver::start();
-    for (name, body, protocol) in [("dscqs", DSCQS, "dscqs"), ("stairs", STAIRCASE, "staircase")] {
+    for (name, body, protocol) in [
+        ("dscqs", DSCQS, "dscqs"),
+        ("stairs", STAIRCASE, "staircase"),
+    ] {
         let dir = temp_dir(name);
         let study = write_study(&dir, body);
         let out = dir.join("results");
@@ -542,7 +596,9 @@ fn a_browser_completes_dscqs_and_a_live_staircase() {
         let mut given = BTreeMap::new();
         take_part(
             &b,
-            Some(&format!("http://127.0.0.1:{port}/?workerId=W{name}&assignmentId=A1&hitId=H1")),
+            Some(&format!(
+                "http://127.0.0.1:{port}/?workerId=W{name}&assignmentId=A1&hitId=H1"
+            )),
             protocol,
             None,
             &mut given,

@@ -3,7 +3,13 @@
 //! the end, a gold trial failed (the session is excluded) and a page hidden during the
 //! stimuli under `hidden = "exclude"` (the trial is left out), both applied and listed by
 //! `study report`, whose display section lists the browsers.
-#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::too_many_lines,
+    missing_docs
+)]
 
 use std::collections::BTreeMap;
 use std::io::{BufRead as _, BufReader};
@@ -32,7 +38,11 @@ fn setup(dir: &Path) -> PathBuf {
     };
     lab::generated::walk_stimuli(dir, &walk, &["spiht"], &[10.0, 20.0]).unwrap();
     std::fs::create_dir_all(dir.join("page")).unwrap();
-    std::fs::write(dir.join("page/index.html"), "<!doctype html><title>t</title>").unwrap();
+    std::fs::write(
+        dir.join("page/index.html"),
+        "<!doctype html><title>t</title>",
+    )
+    .unwrap();
     let study = dir.join("study.toml");
     std::fs::write(
         &study,
@@ -49,13 +59,27 @@ fn setup(dir: &Path) -> PathBuf {
 /// hidden when `hide_first`.
 fn take_part(addr: std::net::SocketAddr, pid: &str, rating: f64, hide_first: bool) -> Client {
     let mut c = Client::new(addr);
-    let r = c.join(&BTreeMap::from([("PROLIFIC_PID".to_string(), pid.to_string())])).unwrap();
+    let r = c
+        .join(&BTreeMap::from([(
+            "PROLIFIC_PID".to_string(),
+            pid.to_string(),
+        )]))
+        .unwrap();
     assert_eq!(r.status, 200, "{:?}", r.json());
-    let begin = json!({ "fields": {}, "consent": false, "environment": web::client::environment() });
-    assert_eq!(c.request("POST", &c.session_path("begin"), Some(&begin)).unwrap().status, 200);
+    let begin =
+        json!({ "fields": {}, "consent": false, "environment": web::client::environment() });
+    assert_eq!(
+        c.request("POST", &c.session_path("begin"), Some(&begin))
+            .unwrap()
+            .status,
+        200
+    );
     let mut first = true;
     loop {
-        let t = c.request("GET", &c.session_path("trial"), None).unwrap().json();
+        let t = c
+            .request("GET", &c.session_path("trial"), None)
+            .unwrap()
+            .json();
         if t["done"] == json!(true) {
             return c;
         }
@@ -67,7 +91,9 @@ fn take_part(addr: std::net::SocketAddr, pid: &str, rating: f64, hide_first: boo
             "intervals": [16.7, 16.7, 16.7], "phases": ["both", "both", "answer"],
             "hidden": hide_first && first, "fullscreen": false,
         });
-        let r = c.request("POST", &c.session_path("answer"), Some(&body)).unwrap();
+        let r = c
+            .request("POST", &c.session_path("answer"), Some(&body))
+            .unwrap();
         assert_eq!(r.status, 200, "{:?}", r.json());
         first = false;
     }
@@ -80,7 +106,11 @@ fn quotas_completion_gold_and_hidden_pages_reach_the_report() {
     std::fs::create_dir_all(&dir).unwrap();
     let study = setup(&dir);
     let out = dir.join("results");
-    let port = TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+    let port = TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
     let mut child = Command::new(env!("CARGO_BIN_EXE_study"))
         .arg("serve")
         .arg(&study)
@@ -93,19 +123,27 @@ fn quotas_completion_gold_and_hidden_pages_reach_the_report() {
         .spawn()
         .unwrap();
     let mut line = String::new();
-    BufReader::new(child.stdout.take().unwrap()).read_line(&mut line).unwrap();
+    BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
     let server = Serve(child);
     let addr = ([127, 0, 0, 1], port).into();
 
     // pA rates everything 5: the obvious degradation (cr20, at most 2) fails.
     let mut a = take_part(addr, "pA", 5.0, false);
-    let info = a.request("GET", &a.session_path("session"), None).unwrap().json();
+    let info = a
+        .request("GET", &a.session_path("session"), None)
+        .unwrap()
+        .json();
     assert_eq!(info["completion"]["code"], json!("DONE-1"), "{info}");
     take_part(addr, "pB", 1.0, true);
     take_part(addr, "pC", 2.0, false);
     // Three groups of one: the fourth is turned away.
     let r = Client::new(addr)
-        .join(&BTreeMap::from([("PROLIFIC_PID".to_string(), "pD".to_string())]))
+        .join(&BTreeMap::from([(
+            "PROLIFIC_PID".to_string(),
+            "pD".to_string(),
+        )]))
         .unwrap();
     assert_eq!(r.status, 503);
     let mut groups: Vec<u32> = ["pA", "pB", "pC"]
@@ -130,13 +168,28 @@ fn quotas_completion_gold_and_hidden_pages_reach_the_report() {
         .unwrap();
     assert!(status.success());
     let md = std::fs::read_to_string(report.join("report.md")).unwrap();
-    let exclusions = md.split("## Exclusions").nth(1).expect("an Exclusions section");
-    assert!(exclusions.contains("left out 1 of 3 sessions (pA session 1)"), "{exclusions}");
+    let exclusions = md
+        .split("## Exclusions")
+        .nth(1)
+        .expect("an Exclusions section");
+    assert!(
+        exclusions.contains("left out 1 of 3 sessions (pA session 1)"),
+        "{exclusions}"
+    );
     assert!(exclusions.contains("walk/spiht/cr20: 5"), "{exclusions}");
     // pB's first trial was hidden: left out of the statistics, listed.
-    let pb = exclusions.lines().find(|l| l.contains("pB session 1")).expect("pB listed");
+    let pb = exclusions
+        .lines()
+        .find(|l| l.contains("pB session 1"))
+        .expect("pB listed");
     assert!(pb.contains("| 0 |"), "{pb}");
-    assert!(md.contains("Browser per session"), "the display section lists the browsers");
-    assert!(!md.contains("Subjects (3)"), "pA's session is not in the statistics");
+    assert!(
+        md.contains("Browser per session"),
+        "the display section lists the browsers"
+    );
+    assert!(
+        !md.contains("Subjects (3)"),
+        "pA's session is not in the statistics"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -9,7 +9,13 @@
 //!
 //! `cargo bench -p web --bench load` (participants with `LOAD_PARTICIPANTS`, the clip length
 //! in seconds with `LOAD_CLIP_S`).
-#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::too_many_lines,
+    missing_docs
+)]
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -75,27 +81,51 @@ struct Timings {
 
 /// One participant: join, begin, then each trial: ask for it and its clips (timed), wait
 /// out the presentation, answer (timed).
-fn participant(addr: std::net::SocketAddr, k: usize, start: &Barrier, out: &Mutex<Timings>, t0: Instant) {
+fn participant(
+    addr: std::net::SocketAddr,
+    k: usize,
+    start: &Barrier,
+    out: &Mutex<Timings>,
+    t0: Instant,
+) {
     let mut c = Client::new(addr);
     let mut local = Timings::default();
     start.wait();
-    let r = c.join(&BTreeMap::from([("PROLIFIC_PID".to_string(), format!("p{k:04}"))]));
+    let r = c.join(&BTreeMap::from([(
+        "PROLIFIC_PID".to_string(),
+        format!("p{k:04}"),
+    )]));
     if !r.as_ref().is_ok_and(|r| r.status == 200) {
-        out.lock().unwrap().errors.push(format!("join {k}: {:?}", r.map(|r| r.json())));
+        out.lock()
+            .unwrap()
+            .errors
+            .push(format!("join {k}: {:?}", r.map(|r| r.json())));
         return;
     }
-    let begin = json!({ "fields": {}, "consent": false, "environment": web::client::environment() });
-    let r = c.request("POST", &c.session_path("begin"), Some(&begin)).unwrap();
+    let begin =
+        json!({ "fields": {}, "consent": false, "environment": web::client::environment() });
+    let r = c
+        .request("POST", &c.session_path("begin"), Some(&begin))
+        .unwrap();
     assert_eq!(r.status, 200);
     while t0.elapsed() < DEADLINE {
         let asked = Instant::now();
-        let t = c.request("GET", &c.session_path("trial"), None).unwrap().json();
+        let t = c
+            .request("GET", &c.session_path("trial"), None)
+            .unwrap()
+            .json();
         if t["done"] == json!(true) {
             break;
         }
         let index = t["index"].as_u64().unwrap();
         for slot in 0..2 {
-            let r = c.request("GET", &c.session_path(&format!("clip/{index}/{slot}")), None).unwrap();
+            let r = c
+                .request(
+                    "GET",
+                    &c.session_path(&format!("clip/{index}/{slot}")),
+                    None,
+                )
+                .unwrap();
             assert_eq!(r.status, 200);
         }
         local.next_ms.push(asked.elapsed().as_secs_f64() * 1e3);
@@ -111,12 +141,18 @@ fn participant(addr: std::net::SocketAddr, k: usize, start: &Barrier, out: &Mute
             "hidden": false, "fullscreen": false,
         });
         let sent = Instant::now();
-        let r = c.request("POST", &c.session_path("answer"), Some(&body)).unwrap();
+        let r = c
+            .request("POST", &c.session_path("answer"), Some(&body))
+            .unwrap();
         local.ack_ms.push(sent.elapsed().as_secs_f64() * 1e3);
         if r.status == 200 {
             local.acked += 1;
         } else {
-            local.errors.push(format!("p{k:04} trial {index}: {} {:?}", r.status, r.json()));
+            local.errors.push(format!(
+                "p{k:04} trial {index}: {} {:?}",
+                r.status,
+                r.json()
+            ));
         }
     }
     let mut o = out.lock().unwrap();
@@ -158,7 +194,9 @@ fn main() {
     let (mut rows, mut lost, mut duplicated) = (0usize, 0usize, 0usize);
     for k in 0..n {
         let path = dir.join(format!("results/p{k:04}_s1/trials.csv"));
-        let records = results::read_trials(&path).map(|t| t.records).unwrap_or_default();
+        let records = results::read_trials(&path)
+            .map(|t| t.records)
+            .unwrap_or_default();
         let mut seen = std::collections::BTreeSet::new();
         for r in &records {
             if !seen.insert(r.trial.index) {
@@ -202,5 +240,8 @@ fn main() {
         && o.acked == n * TRIALS
         && percentile(&ack, 99.0) <= 50.0
         && percentile(&next, 99.0) <= 100.0;
-    println!("  targets (0 lost or duplicated, p99 ack <= 50 ms, p99 next <= 100 ms): {}", if ok { "met" } else { "NOT met" });
+    println!(
+        "  targets (0 lost or duplicated, p99 ack <= 50 ms, p99 next <= 100 ms): {}",
+        if ok { "met" } else { "NOT met" }
+    );
 }

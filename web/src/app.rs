@@ -149,7 +149,9 @@ impl Requirements {
                 env.window_px[0], env.window_px[1]
             ));
         }
-        if !(env.refresh_hz >= self.min_refresh_hz) {
+        if !env.refresh_hz.is_finite() || env.refresh_hz > 1000.0 {
+            out.push("the page measured no refresh rate".to_string());
+        } else if env.refresh_hz < self.min_refresh_hz {
             out.push(format!(
                 "the display refreshes at {:.0} Hz; the study needs at least {:.0} Hz",
                 env.refresh_hz, self.min_refresh_hz
@@ -211,7 +213,7 @@ pub struct AnswerReply {
 pub struct App {
     study: StudyFile,
     out: PathBuf,
-    page: HashMap<String, (&'static str, Arc<Vec<u8>>)>,
+    page: Page,
     stimuli: Mutex<Box<dyn StimulusSource>>,
     clips: Mutex<HashMap<String, Arc<Vec<u8>>>>,
     registry: Mutex<Registry>,
@@ -226,7 +228,10 @@ fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
 }
 
 /// Reads the built page: every file of `dir` (not below it).
-fn read_page(dir: &Path) -> Result<HashMap<String, (&'static str, Arc<Vec<u8>>)>> {
+/// The built page: file name → content type and bytes.
+type Page = HashMap<String, (&'static str, Arc<Vec<u8>>)>;
+
+fn read_page(dir: &Path) -> Result<Page> {
     if !dir.join("index.html").is_file() {
         return Err(WebError::Refused(format!(
             "{}: the study page is not built (no index.html); run scripts/build-page",
@@ -359,46 +364,53 @@ impl App {
         env: &Environment,
     ) -> ApiResult<(String, String)> {
         if !lock(&self.joins).take(self.limits.join_rate, self.limits.join_burst) {
-            return Err(ApiError::new(429, "too many new participants at once; try again in a moment"));
+            return Err(ApiError::new(
+                429,
+                "too many new participants at once; try again in a moment",
+            ));
         }
         let unmet = self.requirements.unmet(env);
         if !unmet.is_empty() {
-            return Err(ApiError::new(400, format!("this browser cannot run the study: {}", unmet.join("; "))));
+            return Err(ApiError::new(
+                400,
+                format!("this browser cannot run the study: {}", unmet.join("; ")),
+            ));
         }
         let who = identity(params).map_err(|e| ApiError::new(400, e.to_string()))?;
         let mut reg = lock(&self.registry);
         let crowd = &self.definition().crowd;
-        let full = || ApiError::new(503, "the study has all the participants it needs; thank you for your interest");
+        let full = || {
+            ApiError::new(
+                503,
+                "the study has all the participants it needs; thank you for your interest",
+            )
+        };
         if reg.all().len() >= self.limits.max_participants {
             return Err(full());
         }
         // Quotas: the group with the fewest participants so far takes the next one, so
         // every group gets its share; a group (or, without groups, the study) at its quota
         // takes no more.
-        let group = match crowd.groups {
-            Some(n) => {
-                let mut counts = vec![0u32; n as usize];
-                for p in reg.all() {
-                    if let Some(c) = p.group.and_then(|g| counts.get_mut(g as usize)) {
-                        *c += 1;
-                    }
+        let group = if let Some(n) = crowd.groups {
+            let mut counts = vec![0u32; n as usize];
+            for p in reg.all() {
+                if let Some(c) = p.group.and_then(|g| counts.get_mut(g as usize)) {
+                    *c += 1;
                 }
-                let (g, count) = counts
-                    .iter()
-                    .enumerate()
-                    .min_by_key(|(_, c)| **c)
-                    .map_or((0, 0), |(g, c)| (g as u32, *c));
-                if crowd.quota.is_some_and(|q| count >= q) {
-                    return Err(full());
-                }
-                Some(g)
             }
-            None => {
-                if crowd.quota.is_some_and(|q| reg.all().len() >= q as usize) {
-                    return Err(full());
-                }
-                None
+            let (g, count) = counts
+                .iter()
+                .enumerate()
+                .min_by_key(|(_, c)| **c)
+                .map_or((0, 0), |(g, c)| (g as u32, *c));
+            if crowd.quota.is_some_and(|q| count >= q) {
+                return Err(full());
             }
+            Some(g)
+        } else if crowd.quota.is_some_and(|q| reg.all().len() >= q as usize) {
+            return Err(full());
+        } else {
+            None
         };
         let (p, token) = reg.join(&who, group)?;
         Ok((p.subject.clone(), token))
@@ -414,7 +426,10 @@ impl App {
             match reg.by_token(token) {
                 Some(p) if p.subject == subject => Arc::clone(p),
                 Some(_) => {
-                    return Err(ApiError::new(403, "this link belongs to another participant"));
+                    return Err(ApiError::new(
+                        403,
+                        "this link belongs to another participant",
+                    ));
                 }
                 None => return Err(ApiError::new(401, "unknown session link")),
             }
@@ -432,7 +447,8 @@ impl App {
     /// The participant's subject index: their plan group, or else from their id as
     /// `study run` derives it.
     fn subject_index(p: &Participant) -> u32 {
-        p.group.unwrap_or_else(|| session::subject_index(&p.subject, 1))
+        p.group
+            .unwrap_or_else(|| session::subject_index(&p.subject, 1))
     }
 
     fn fresh_manifest(&self, p: &Participant) -> SessionManifest {
@@ -464,24 +480,26 @@ impl App {
     fn open_session(&self, p: &Participant, fresh: SessionManifest) -> ApiResult<Slot> {
         let dir = self.session_dir(p);
         let index = Self::subject_index(p);
-        Ok(match Recorder::open(&self.study.definition, index, &dir, true, fresh)? {
-            Opened::Finished(m) => Slot::Finished(m),
-            Opened::Ready { recorder, resumed } => {
-                let last = if resumed > 0 {
-                    let path = dir.join(results::store::TRIALS_FILE);
-                    let t = results::read_trials(&path)
-                        .map_err(|e| ApiError::new(500, e.to_string()))?;
-                    t.records.last().map(|r| (r.trial.index, r.response.answer))
-                } else {
-                    None
-                };
-                Slot::Live(Box::new(Live {
-                    rec: recorder,
-                    pending: None,
-                    last,
-                }))
-            }
-        })
+        Ok(
+            match Recorder::open(&self.study.definition, index, &dir, true, fresh)? {
+                Opened::Finished(m) => Slot::Finished(m),
+                Opened::Ready { recorder, resumed } => {
+                    let last = if resumed > 0 {
+                        let path = dir.join(results::store::TRIALS_FILE);
+                        let t = results::read_trials(&path)
+                            .map_err(|e| ApiError::new(500, e.to_string()))?;
+                        t.records.last().map(|r| (r.trial.index, r.response.answer))
+                    } else {
+                        None
+                    };
+                    Slot::Live(Box::new(Live {
+                        rec: recorder,
+                        pending: None,
+                        last,
+                    }))
+                }
+            },
+        )
     }
 
     /// What the page needs for the welcome, trial and end screens of `p`'s session.
@@ -567,12 +585,25 @@ impl App {
         for name in &def.session.subject_fields {
             let v = req.fields.get(name).map_or("", |v| v.trim());
             if v.is_empty() || v.len() > 200 || v.chars().any(char::is_control) {
-                return Err(ApiError::new(400, format!("fill in {} (at most 200 characters)", name.replace('_', " "))));
+                return Err(ApiError::new(
+                    400,
+                    format!(
+                        "fill in {} (at most 200 characters)",
+                        name.replace('_', " ")
+                    ),
+                ));
             }
             fields.insert(name.clone(), v.to_string());
         }
-        if let Some(unknown) = req.fields.keys().find(|k| !def.session.subject_fields.contains(k)) {
-            return Err(ApiError::new(400, format!("{unknown:?} is not a field of this study")));
+        if let Some(unknown) = req
+            .fields
+            .keys()
+            .find(|k| !def.session.subject_fields.contains(k))
+        {
+            return Err(ApiError::new(
+                400,
+                format!("{unknown:?} is not a field of this study"),
+            ));
         }
         if def.session.consent.is_some() {
             if !req.consent {
@@ -583,7 +614,10 @@ impl App {
         let env = &req.environment;
         let unmet = self.requirements.unmet(env);
         if !unmet.is_empty() {
-            return Err(ApiError::new(400, format!("this browser cannot run the study: {}", unmet.join("; "))));
+            return Err(ApiError::new(
+                400,
+                format!("this browser cannot run the study: {}", unmet.join("; ")),
+            ));
         }
         fields.insert("source".into(), p.source.clone());
         fields.extend(p.ids.clone());
@@ -635,13 +669,13 @@ impl App {
         self.ensure_open(p, &mut slot)?;
         let live = match &mut *slot {
             Slot::NotStarted => return Err(ApiError::new(409, "the session has not begun")),
-            Slot::Finished(m) => return Ok(self.done_info(m)),
+            Slot::Finished(m) => return Ok(Self::done_info(m)),
             Slot::Live(l) => l,
         };
         if !self.ensure_pending(live)? {
             live.rec.finish()?;
             let m = Box::new(live.rec.manifest().clone());
-            let info = self.done_info(&m);
+            let info = Self::done_info(&m);
             *slot = Slot::Finished(m);
             return Ok(info);
         }
@@ -714,12 +748,11 @@ impl App {
     /// The completion code and where the end screen sends the participant.
     fn completion(&self) -> Option<serde_json::Value> {
         let c = &self.definition().crowd;
-        (c.completion_code.is_some() || c.completion_url.is_some()).then(|| {
-            serde_json::json!({ "code": c.completion_code, "url": c.completion_url })
-        })
+        (c.completion_code.is_some() || c.completion_url.is_some())
+            .then(|| serde_json::json!({ "code": c.completion_code, "url": c.completion_url }))
     }
 
-    fn done_info(&self, m: &SessionManifest) -> serde_json::Value {
+    fn done_info(m: &SessionManifest) -> serde_json::Value {
         serde_json::json!({
             "done": true,
             "status": match m.status {
@@ -763,31 +796,23 @@ impl App {
         self.ensure_open(p, &mut slot)?;
         let live = match &mut *slot {
             Slot::NotStarted => return Err(ApiError::new(409, "the session has not begun")),
-            Slot::Finished(m) => {
-                // Only a repeat of a logged answer can come after the end.
-                let path = self.session_dir(p).join(results::store::TRIALS_FILE);
-                let t = results::read_trials(&path).map_err(|e| ApiError::new(500, e.to_string()))?;
-                return match t.records.iter().find(|r| r.trial.index == req.index) {
-                    Some(r) if r.response.answer == req.answer => Ok(AnswerReply {
-                        duplicate: true,
-                        answered: m.trials_logged,
-                    }),
-                    _ => Err(ApiError::new(409, "the session is over")),
-                };
-            }
+            Slot::Finished(m) => return self.repeat_after_end(p, m, req),
             Slot::Live(l) => l,
         };
-        if let Some((i, a)) = &live.last {
-            if *i == req.index {
-                return if *a == req.answer {
-                    Ok(AnswerReply {
-                        duplicate: true,
-                        answered: live.rec.answered(),
-                    })
-                } else {
-                    Err(ApiError::new(409, format!("trial {i} was answered otherwise already")))
-                };
-            }
+        if let Some((i, a)) = &live.last
+            && *i == req.index
+        {
+            return if *a == req.answer {
+                Ok(AnswerReply {
+                    duplicate: true,
+                    answered: live.rec.answered(),
+                })
+            } else {
+                Err(ApiError::new(
+                    409,
+                    format!("trial {i} was answered otherwise already"),
+                ))
+            };
         }
         // After a restart the trial on the page is the engine's next one again.
         self.ensure_pending(live)?;
@@ -795,43 +820,23 @@ impl App {
             return Err(ApiError::new(409, "the session has no trial left"));
         };
         if pending.trial.index != req.index {
-            return Err(ApiError::new(409, format!(
-                "trial {} is not pending (trial {} is)",
-                req.index, pending.trial.index
-            )));
+            return Err(ApiError::new(
+                409,
+                format!(
+                    "trial {} is not pending (trial {} is)",
+                    req.index, pending.trial.index
+                ),
+            ));
         }
-        let def = &self.study.definition;
-        let need_ms = presentation_ms(def, pending.trial.arrangement, pending.clip_s);
-        let since_served = pending
-            .served
-            .map_or(f64::INFINITY, |t| t.elapsed().as_secs_f64() * 1e3);
-        // The page cannot have played longer than since it asked for the trial; a little
-        // slack for clocks that tick at slightly different rates.
-        if req.played_ms + 50.0 < need_ms || since_served + 50.0 < need_ms {
-            return Err(ApiError::new(422, format!(
-                "answered before the stimuli had played ({:.0} ms of {need_ms:.0} ms)",
-                req.played_ms.min(since_served)
-            )));
-        }
-        if def.presentation.max_replays.is_some_and(|m| req.replays > m) {
-            return Err(ApiError::new(422, "more replays than the study allows"));
-        }
-        if req.intervals.len() > MAX_INTERVALS || req.phases.len() > MAX_INTERVALS {
-            return Err(ApiError::new(413, "too many frame intervals"));
-        }
-        if req.intervals.iter().any(|v| !v.is_finite() || *v < 0.0) {
-            return Err(ApiError::new(422, "frame intervals must be finite and not negative"));
-        }
-        if req.phases.iter().any(|p| p.len() > 16 || !p.chars().all(|c| c.is_ascii_lowercase())) {
-            return Err(ApiError::new(422, "unknown frame phase"));
-        }
-        if req.hidden && def.crowd.hidden == HiddenRule::Repeat {
-            return Err(ApiError::new(422, "the page was hidden while the stimuli played; the trial is shown again"));
-        }
+        self.check_answer(pending, req)?;
         let browser = live.rec.manifest().browser.clone();
-        let period_ms = browser
-            .as_ref()
-            .map_or(0.0, |b| if b.refresh_hz > 0.0 { 1e3 / b.refresh_hz } else { 0.0 });
+        let period_ms = browser.as_ref().map_or(0.0, |b| {
+            if b.refresh_hz > 0.0 {
+                1e3 / b.refresh_hz
+            } else {
+                0.0
+            }
+        });
         let stats = timing::stats(&req.intervals, period_ms);
         let response = Response {
             answer: req.answer,
@@ -846,7 +851,10 @@ impl App {
         let (trial, encoding) = (pending.trial.clone(), pending.encoding.clone());
         let index = trial.index;
         let elapsed = live.rec.elapsed_ms();
-        match live.rec.record(trial, response, elapsed, encoding, frame_timing) {
+        match live
+            .rec
+            .record(trial, response, elapsed, encoding, frame_timing)
+        {
             Ok(_) => {}
             Err(e @ LabError::Engine(_)) => return Err(e.into()),
             Err(e) => {
@@ -861,7 +869,9 @@ impl App {
         let mut note = Ok(());
         if frame_timing.is_some() {
             let phases: Vec<&str> = req.phases.iter().map(String::as_str).collect();
-            note = live.rec.append_frame_intervals(index, &req.intervals, &phases);
+            note = live
+                .rec
+                .append_frame_intervals(index, &req.intervals, &phases);
         }
         let windowed = self.requirements.fullscreen && !req.fullscreen;
         if (req.hidden || windowed) && browser.is_some() {
@@ -884,6 +894,77 @@ impl App {
             duplicate: false,
             answered,
         })
+    }
+
+    /// After the end only a repeat of a logged answer can come (acknowledged as a
+    /// duplicate); anything else is refused.
+    fn repeat_after_end(
+        &self,
+        p: &Participant,
+        m: &SessionManifest,
+        req: &AnswerRequest,
+    ) -> ApiResult<AnswerReply> {
+        let path = self.session_dir(p).join(results::store::TRIALS_FILE);
+        let t = results::read_trials(&path).map_err(|e| ApiError::new(500, e.to_string()))?;
+        match t.records.iter().find(|r| r.trial.index == req.index) {
+            Some(r) if r.response.answer == req.answer => Ok(AnswerReply {
+                duplicate: true,
+                answered: m.trials_logged,
+            }),
+            _ => Err(ApiError::new(409, "the session is over")),
+        }
+    }
+
+    /// Refuses an answer the pending trial cannot take: before its stimuli played (by the
+    /// server's clock and the page's), more replays than allowed, malformed frame records,
+    /// or a hidden page where the study shows the trial again.
+    fn check_answer(&self, pending: &Pending, req: &AnswerRequest) -> ApiResult<()> {
+        let def = &self.study.definition;
+        let need_ms = presentation_ms(def, pending.trial.arrangement, pending.clip_s);
+        let since_served = pending
+            .served
+            .map_or(f64::INFINITY, |t| t.elapsed().as_secs_f64() * 1e3);
+        // The page cannot have played longer than since it asked for the trial; a little
+        // slack for clocks that tick at slightly different rates.
+        if req.played_ms + 50.0 < need_ms || since_served + 50.0 < need_ms {
+            return Err(ApiError::new(
+                422,
+                format!(
+                    "answered before the stimuli had played ({:.0} ms of {need_ms:.0} ms)",
+                    req.played_ms.min(since_served)
+                ),
+            ));
+        }
+        if def
+            .presentation
+            .max_replays
+            .is_some_and(|m| req.replays > m)
+        {
+            return Err(ApiError::new(422, "more replays than the study allows"));
+        }
+        if req.intervals.len() > MAX_INTERVALS || req.phases.len() > MAX_INTERVALS {
+            return Err(ApiError::new(413, "too many frame intervals"));
+        }
+        if req.intervals.iter().any(|v| !v.is_finite() || *v < 0.0) {
+            return Err(ApiError::new(
+                422,
+                "frame intervals must be finite and not negative",
+            ));
+        }
+        if req
+            .phases
+            .iter()
+            .any(|p| p.len() > 16 || !p.chars().all(|c| c.is_ascii_lowercase()))
+        {
+            return Err(ApiError::new(422, "unknown frame phase"));
+        }
+        if req.hidden && def.crowd.hidden == HiddenRule::Repeat {
+            return Err(ApiError::new(
+                422,
+                "the page was hidden while the stimuli played; the trial is shown again",
+            ));
+        }
+        Ok(())
     }
 
     /// Progress per participant and the running mean score per condition, for the
@@ -911,7 +992,12 @@ impl App {
             } else {
                 Vec::new()
             };
+            let crowd = &self.definition().crowd;
+            let mut gold_failed = 0u32;
             for r in &records {
+                if crowd.gold_verdict(r).is_some_and(|(_, passed)| !passed) {
+                    gold_failed += 1;
+                }
                 if r.trial.block != Block::Familiarization && r.protocol != Protocol::Staircase {
                     let e = scores.entry(r.trial.condition.clone()).or_insert((0.0, 0));
                     e.0 += r.outcome.score;
@@ -924,6 +1010,8 @@ impl App {
                 "source": p.source,
                 "state": state,
                 "answered": records.len(),
+                "gold_failed": gold_failed,
+                "excluded": gold_failed > crowd.max_gold_failures,
                 "hidden_trials": browser.as_ref().map_or(0, |b| b.hidden_trials.len()),
                 "windowed_trials": browser.as_ref().map_or(0, |b| b.windowed_trials.len()),
                 "refresh_hz": browser.as_ref().map(|b| b.refresh_hz),
@@ -950,12 +1038,11 @@ impl App {
         let participants: Vec<Arc<Participant>> = lock(&self.registry).all().to_vec();
         let mut first = Ok(());
         for p in participants {
-            if let Slot::Live(l) = &mut *lock(&p.slot) {
-                if let Err(e) = l.rec.interrupt() {
-                    if first.is_ok() {
-                        first = Err(e.into());
-                    }
-                }
+            if let Slot::Live(l) = &mut *lock(&p.slot)
+                && let Err(e) = l.rec.interrupt()
+                && first.is_ok()
+            {
+                first = Err(e.into());
             }
         }
         first
@@ -981,7 +1068,12 @@ fn planned(study: &StudyDefinition) -> (&'static str, Option<u32>) {
         Protocol::Staircase => study
             .staircase
             .as_ref()
-            .and_then(|s| s.tracks.iter().map(|t| t.settings.max_trials).sum::<Option<u32>>())
+            .and_then(|s| {
+                s.tracks
+                    .iter()
+                    .map(|t| t.settings.max_trials)
+                    .sum::<Option<u32>>()
+            })
             .map_or(("unknown", None), |n| ("at_most", Some(n))),
     }
 }

@@ -48,17 +48,25 @@ impl Client {
     ///
     /// # Errors
     /// The server cannot be reached or sent no valid reply.
-    pub fn request(&mut self, method: &str, path: &str, body: Option<&Value>) -> std::io::Result<Reply> {
-        match self.try_request(method, path, body) {
-            Ok(r) => Ok(r),
-            Err(_) => {
-                self.conn = None;
-                self.try_request(method, path, body)
-            }
+    pub fn request(
+        &mut self,
+        method: &str,
+        path: &str,
+        body: Option<&Value>,
+    ) -> std::io::Result<Reply> {
+        if let Ok(r) = self.try_request(method, path, body) {
+            return Ok(r);
         }
+        self.conn = None;
+        self.try_request(method, path, body)
     }
 
-    fn try_request(&mut self, method: &str, path: &str, body: Option<&Value>) -> std::io::Result<Reply> {
+    fn try_request(
+        &mut self,
+        method: &str,
+        path: &str,
+        body: Option<&Value>,
+    ) -> std::io::Result<Reply> {
         if self.conn.is_none() {
             let s = TcpStream::connect(self.addr)?;
             s.set_nodelay(true)?;

@@ -74,7 +74,10 @@ mod tests {
         let at = bytes.len() - 4;
         let z = f32::from_le_bytes([bytes[at], bytes[at + 1], bytes[at + 2], bytes[at + 3]]);
         let want = pos.point(f - 1, j - 1)[2] * pos.cm_per_unit;
-        assert!((f64::from(z) - want).abs() < 1e-3 * want.abs().max(1.0), "{z} vs {want}");
+        assert!(
+            (f64::from(z) - want).abs() < 1e-3 * want.abs().max(1.0),
+            "{z} vs {want}"
+        );
         // A parent of -1 only for the root.
         let parent0 = i16::from_le_bytes([bytes[16], bytes[17]]);
         assert_eq!(parent0, -1);

@@ -135,10 +135,11 @@ pub fn token_hash(token: &str) -> [u8; 32] {
 
 fn hex(b: &[u8]) -> String {
     use std::fmt::Write as _;
-    b.iter().fold(String::with_capacity(b.len() * 2), |mut s, x| {
-        let _ = write!(s, "{x:02x}");
-        s
-    })
+    b.iter()
+        .fold(String::with_capacity(b.len() * 2), |mut s, x| {
+            let _ = write!(s, "{x:02x}");
+            s
+        })
 }
 
 fn unhex(s: &str) -> Option<[u8; 32]> {
@@ -226,7 +227,8 @@ impl Registry {
                 }
                 continue;
             }
-            let (p, hash) = parse_row(line).map_err(|e| WebError::Refused(format!("{}: {e}", at())))?;
+            let (p, hash) =
+                parse_row(line).map_err(|e| WebError::Refused(format!("{}: {e}", at())))?;
             reg.insert(hash, p);
         }
         Ok(reg)
@@ -267,7 +269,11 @@ impl Registry {
     ///
     /// # Errors
     /// The id already took part (one session per participant), or the row cannot be written.
-    pub fn join(&mut self, who: &Identity, group: Option<u32>) -> Result<(Arc<Participant>, String)> {
+    pub fn join(
+        &mut self,
+        who: &Identity,
+        group: Option<u32>,
+    ) -> Result<(Arc<Participant>, String)> {
         let subject = match &who.subject {
             Some(s) => {
                 if self.by_subject.contains_key(s) {
@@ -380,12 +386,21 @@ mod tests {
         .unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(p.subject.as_deref(), Some("5f3a9c"));
         assert_eq!(p.source, "prolific");
-        assert_eq!(p.ids.get("prolific_session_id").map(String::as_str), Some("se1"));
-        assert_eq!(identity(&params(&[])).map(|i| i.source).ok().as_deref(), Some("generated"));
+        assert_eq!(
+            p.ids.get("prolific_session_id").map(String::as_str),
+            Some("se1")
+        );
+        assert_eq!(
+            identity(&params(&[])).map(|i| i.source).ok().as_deref(),
+            Some("generated")
+        );
         for bad in [
             params(&[("PROLIFIC_PID", "../x")]),
             params(&[("PROLIFIC_PID", "a"), ("workerId", "b")]),
-            params(&[("workerId", "A1"), ("assignmentId", "ASSIGNMENT_ID_NOT_AVAILABLE")]),
+            params(&[
+                ("workerId", "A1"),
+                ("assignmentId", "ASSIGNMENT_ID_NOT_AVAILABLE"),
+            ]),
             params(&[("STUDY_ID", "s")]),
         ] {
             assert!(identity(&bad).is_err(), "{bad:?}");

@@ -21,7 +21,11 @@ pub fn stats(intervals: &[f64], period_ms: f64) -> Option<Stats> {
     }
     let n = intervals.len() as f64;
     let mean = intervals.iter().sum::<f64>() / n;
-    let var = intervals.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / (n - 1.0);
+    let var = intervals
+        .iter()
+        .map(|v| (v - mean) * (v - mean))
+        .sum::<f64>()
+        / (n - 1.0);
     let dropped = if period_ms > 0.0 {
         intervals.iter().filter(|v| **v > 1.5 * period_ms).count() as u32
     } else {

@@ -7,9 +7,9 @@
 use serde::{Deserialize, Serialize};
 use toml::{Table, Value};
 
-use super::check::{Ctx, join};
 use super::Condition;
-use crate::record::Protocol;
+use super::check::{Ctx, join};
+use crate::record::{Answer, Block, Protocol, TrialRecord};
 
 /// What happens to a trial during whose stimuli the page was hidden.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -89,6 +89,22 @@ impl CrowdSettings {
     pub fn gold_of(&self, id: &str) -> Option<&GoldTrial> {
         self.gold.iter().find(|g| g.stimulus == id)
     }
+
+    /// For a logged trial of a gold condition (familiarization aside): the rating of its test
+    /// stimulus (MOS's rating, DSCQS's test score) and whether it passes; `None` for any
+    /// other trial.
+    pub fn gold_verdict(&self, r: &TrialRecord) -> Option<(f64, bool)> {
+        if r.trial.block == Block::Familiarization {
+            return None;
+        }
+        let g = self.gold_of(&r.trial.stimulus)?;
+        let rating = match r.response.answer {
+            Answer::Rating(v) => v,
+            Answer::Pair { .. } => r.outcome.score_test?,
+            Answer::Choice(_) => return None,
+        };
+        Some((rating, g.passes(rating)))
+    }
 }
 
 const C: &str = "crowd";
@@ -124,11 +140,18 @@ pub(super) fn parse_crowd(
     );
     let d = CrowdSettings::default();
     let min_window_px = match cx.floats(t, C, "min_window") {
-        Some(v) if v.len() == 2 && v.iter().all(|x| *x >= 0.0 && *x <= 16384.0 && x.fract() == 0.0) => {
+        Some(v)
+            if v.len() == 2
+                && v.iter()
+                    .all(|x| *x >= 0.0 && *x <= 16384.0 && x.fract() == 0.0) =>
+        {
             [v[0] as u32, v[1] as u32]
         }
         Some(_) => {
-            cx.err(join(C, "min_window"), "expected [width, height] in whole pixels, at most 16384");
+            cx.err(
+                join(C, "min_window"),
+                "expected [width, height] in whole pixels, at most 16384",
+            );
             d.min_window_px
         }
         None => d.min_window_px,
@@ -136,7 +159,10 @@ pub(super) fn parse_crowd(
     let min_refresh_hz = match cx.float(t, C, "min_refresh_hz") {
         Some(v) if (0.0..=1000.0).contains(&v) => v,
         Some(v) => {
-            cx.err(join(C, "min_refresh_hz"), format!("{v} is outside 0..=1000"));
+            cx.err(
+                join(C, "min_refresh_hz"),
+                format!("{v} is outside 0..=1000"),
+            );
             d.min_refresh_hz
         }
         None => d.min_refresh_hz,
@@ -145,19 +171,30 @@ pub(super) fn parse_crowd(
         None | Some("repeat") => HiddenRule::Repeat,
         Some("exclude") => HiddenRule::Exclude,
         Some(other) => {
-            cx.err(join(C, "hidden"), format!("expected \"repeat\" or \"exclude\", got {other:?}"));
+            cx.err(
+                join(C, "hidden"),
+                format!("expected \"repeat\" or \"exclude\", got {other:?}"),
+            );
             HiddenRule::Repeat
         }
     };
     let completion_code = cx.string(t, C, "completion_code");
     if completion_code.as_deref().is_some_and(|c| !code_ok(c)) {
-        cx.err(join(C, "completion_code"), "use 1-64 letters, digits, '-' or '_'");
+        cx.err(
+            join(C, "completion_code"),
+            "use 1-64 letters, digits, '-' or '_'",
+        );
     }
     let completion_url = cx.string(t, C, "completion_url");
-    if let Some(u) = &completion_url {
-        if !u.starts_with("https://") || u.len() > 2000 || u.chars().any(|c| c.is_whitespace() || c.is_control()) {
-            cx.err(join(C, "completion_url"), "expected an https:// address without spaces");
-        }
+    if completion_url.as_deref().is_some_and(|u| {
+        !u.starts_with("https://")
+            || u.len() > 2000
+            || u.chars().any(|c| c.is_whitespace() || c.is_control())
+    }) {
+        cx.err(
+            join(C, "completion_url"),
+            "expected an https:// address without spaces",
+        );
     }
     let gold = parse_gold(t, protocol, conditions, cx);
     let groups = cx.uint(t, C, "groups", 1 << 20);
@@ -196,7 +233,10 @@ fn parse_gold(
         return Vec::new();
     };
     if protocol == Some(Protocol::Staircase) {
-        cx.err(join(C, "gold"), "gold trials are rated conditions: MOS and DSCQS only");
+        cx.err(
+            join(C, "gold"),
+            "gold trials are rated conditions: MOS and DSCQS only",
+        );
         return Vec::new();
     }
     let mut out = Vec::new();
@@ -210,12 +250,15 @@ fn parse_gold(
         let stimulus = cx.string(g, &path, "stimulus");
         let (min, max) = (cx.float(g, &path, "min"), cx.float(g, &path, "max"));
         if min.is_none() && max.is_none() {
-            cx.err(path.clone(), "give min (an identical pair) or max (an obvious degradation)");
+            cx.err(
+                path.clone(),
+                "give min (an identical pair) or max (an obvious degradation)",
+            );
         }
-        if let (Some(lo), Some(hi)) = (min, max) {
-            if lo > hi {
-                cx.err(path.clone(), format!("min {lo} is above max {hi}"));
-            }
+        if let (Some(lo), Some(hi)) = (min, max)
+            && lo > hi
+        {
+            cx.err(path.clone(), format!("min {lo} is above max {hi}"));
         }
         let Some(stimulus) = stimulus else {
             cx.err(join(&path, "stimulus"), "required");
@@ -228,7 +271,10 @@ fn parse_gold(
             );
         }
         if out.iter().any(|g: &GoldTrial| g.stimulus == stimulus) {
-            cx.err(join(&path, "stimulus"), format!("{stimulus:?} is a gold trial twice"));
+            cx.err(
+                join(&path, "stimulus"),
+                format!("{stimulus:?} is a gold trial twice"),
+            );
         }
         out.push(GoldTrial { stimulus, min, max });
     }
