@@ -193,9 +193,35 @@ impl Browser {
             .to_string()
     }
 
+    /// Clicks the element `css` names; tried again (up to five times) while the page is
+    /// re-laying out under it (an intercepted click or a replaced element).
     fn click(&self, css: &str) {
-        let id = self.element(css);
-        self.cmd("POST", &format!("element/{id}/click"), Some(&json!({})));
+        for attempt in 0.. {
+            let found = http(
+                self.port,
+                "POST",
+                &format!("/session/{}/element", self.session),
+                Some(&json!({ "using": "css selector", "value": css })),
+            );
+            let id = found.1["value"]
+                .as_object()
+                .and_then(|o| o.values().next())
+                .and_then(Value::as_str)
+                .map(str::to_string);
+            let clicked = id.map(|id| {
+                http(
+                    self.port,
+                    "POST",
+                    &format!("/session/{}/element/{id}/click", self.session),
+                    Some(&json!({})),
+                )
+            });
+            match clicked {
+                Some((200, _)) => return,
+                other if attempt >= 4 => panic!("click {css}: {found:?} {other:?}"),
+                _ => std::thread::sleep(Duration::from_millis(100)),
+            }
+        }
     }
 
     fn type_into(&self, css: &str, text: &str) {
