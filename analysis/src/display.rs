@@ -29,6 +29,8 @@ pub struct SessionDisplay {
     pub dropped_percent: Option<f64>,
     /// Over the drop limit.
     pub flagged: bool,
+    /// What the participant's browser measured (`study serve` sessions).
+    pub browser: Option<results::store::BrowserInfo>,
 }
 
 /// One session's display figures, flagged when it dropped more than `drop_limit_percent` of
@@ -60,7 +62,56 @@ pub fn session_display(s: &SessionResults, drop_limit_percent: f64) -> SessionDi
         mean_interval_sd_ms: (timed > 0).then(|| sd_sum / timed as f64),
         dropped_percent,
         flagged: dropped_percent.is_some_and(|p| p > drop_limit_percent),
+        browser: m.browser.clone(),
     }
+}
+
+/// The browsers of sessions served to browsers (`study serve`): user agent, screen and
+/// window, device pixel ratio, measured refresh, fullscreen, and the trials during whose
+/// stimuli the page was hidden or not fullscreen; `None` when no session ran in a browser.
+#[must_use]
+pub fn browser_table(rows: &[SessionDisplay]) -> Option<Table> {
+    let rows: Vec<Vec<String>> = rows
+        .iter()
+        .filter_map(|r| r.browser.as_ref().map(|b| (r, b)))
+        .map(|(r, b)| {
+            let list = |v: &[u32]| {
+                v.iter()
+                    .map(ToString::to_string)
+                    .collect::<Vec<_>>()
+                    .join(" ")
+            };
+            vec![
+                r.session.clone(),
+                b.user_agent.clone(),
+                format!("{}×{}", b.screen_px[0], b.screen_px[1]),
+                format!("{}×{}", b.window_px[0], b.window_px[1]),
+                format!("{:.2}", b.device_pixel_ratio),
+                format!("{:.1}", b.refresh_hz),
+                if b.fullscreen { "yes" } else { "no" }.to_owned(),
+                list(&b.hidden_trials),
+                list(&b.windowed_trials),
+            ]
+        })
+        .collect();
+    (!rows.is_empty()).then(|| Table {
+        name: "browsers".to_owned(),
+        caption: "Browser per session (study serve): screen and window in CSS pixels, refresh measured from requestAnimationFrame".to_owned(),
+        columns: [
+            "Session",
+            "User agent",
+            "Screen",
+            "Window",
+            "Pixel ratio",
+            "Refresh (Hz)",
+            "Fullscreen",
+            "Hidden during stimuli (trials)",
+            "Not fullscreen (trials)",
+        ]
+        .map(String::from)
+        .to_vec(),
+        rows,
+    })
 }
 
 /// The display table: one row per session.

@@ -25,6 +25,7 @@
 
 pub mod bayesian;
 mod confidence;
+pub mod crowd;
 pub mod descriptive;
 pub mod display;
 mod dist;

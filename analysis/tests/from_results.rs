@@ -121,6 +121,7 @@ fn session(subject: &str, protocol: Protocol, records: Vec<TrialRecord>) -> Sess
             resumes: 0,
             torn_rows: vec![],
             display: None,
+            browser: None,
         },
         trials: TrialsFile {
             format_version: 2,

@@ -31,16 +31,22 @@ fn run_manifest(study: &StudyFile, observer_seed: Option<u64>, subjects: u32) ->
     }
 }
 
+/// The participants of a study served to browsers (`study serve`): one row per participant,
+/// appended and fsynced before the participant gets their session link.
+pub const PARTICIPANTS_FILE: &str = "participants.csv";
+
 /// Whether `name` is one of the files a results directory holds beside its sessions, or a
 /// temporary file one of its writers left behind.
 fn is_results_file(name: &str) -> bool {
-    [RUN_FILE, STUDY_COPY, MANIFEST_COPY].iter().any(|f| {
-        name == *f
-            || name
-                .strip_prefix('.')
-                .and_then(|n| n.strip_prefix(*f))
-                .is_some_and(|rest| rest.starts_with('.'))
-    })
+    [RUN_FILE, STUDY_COPY, MANIFEST_COPY, PARTICIPANTS_FILE]
+        .iter()
+        .any(|f| {
+            name == *f
+                || name
+                    .strip_prefix('.')
+                    .and_then(|n| n.strip_prefix(*f))
+                    .is_some_and(|rest| rest.starts_with('.'))
+        })
 }
 
 /// Whether `dir` looks like a session folder: `<subject>_s<n>`, holding nothing but a

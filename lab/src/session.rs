@@ -123,6 +123,7 @@ pub fn new_manifest(study: &StudyDefinition, of: SessionOf<'_>) -> SessionManife
         resumes: 0,
         torn_rows: Vec::new(),
         display: None,
+        browser: None,
     }
 }
 

@@ -29,6 +29,7 @@ pub mod record;
 pub mod rng;
 pub mod staircase;
 pub mod study;
+pub mod texts;
 
 pub use catalog::{CodecCatalog, CodecInfo};
 pub use engine::{EngineError, Session, SessionStatus};

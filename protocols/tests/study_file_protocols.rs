@@ -556,3 +556,58 @@ fn codec_problems_are_listed_with_every_other_problem() {
             .starts_with("codec \"wavelet-perceptual\" has no such parameter")
     );
 }
+
+#[test]
+fn crowd_settings_are_read_and_every_mistake_is_listed() {
+    use protocols::study::HiddenRule;
+    let base = example_text("mos.toml");
+    let first = example("mos.toml").conditions[0].stimulus.clone();
+    let study = parse(&format!(
+        "{base}\n[crowd]\nmin_window = [1024, 600]\nmin_refresh_hz = 59\nfullscreen = true\n\
+         hidden = \"exclude\"\ncompletion_code = \"C0DE-1\"\n\
+         completion_url = \"https://app.prolific.com/submissions/complete?cc=C0DE-1\"\n\
+         max_gold_failures = 1\ngroups = 4\nquota = 25\n\
+         [[crowd.gold]]\nstimulus = \"{first}\"\nmax = 2\n"
+    ))
+    .unwrap();
+    let c = &study.crowd;
+    assert_eq!(
+        (c.min_window_px, c.min_refresh_hz, c.fullscreen),
+        ([1024, 600], 59.0, true)
+    );
+    assert_eq!(c.hidden, HiddenRule::Exclude);
+    assert_eq!(
+        (c.groups, c.quota, c.max_gold_failures),
+        (Some(4), Some(25), 1)
+    );
+    let gold = c.gold_of(&first).unwrap();
+    assert!(gold.passes(1.5) && gold.passes(2.0) && !gold.passes(2.5));
+    // Without the table: the defaults (a 50 Hz display, 800 x 500, repeat a hidden trial).
+    let d = example("mos.toml").crowd;
+    assert_eq!(
+        (d.min_refresh_hz, d.min_window_px, d.hidden),
+        (50.0, [800, 500], HiddenRule::Repeat)
+    );
+
+    let got = issues(&format!(
+        "{base}\n[crowd]\nmin_window = [10]\nhidden = \"skip\"\ncompletion_code = \"a b\"\n\
+         completion_url = \"http://x\"\ngroups = 0\ncolour = 1\n\
+         [[crowd.gold]]\nstimulus = \"nope\"\n"
+    ));
+    let has = |k: &str, r: &str| got.iter().any(|(gk, gr)| gk == k && gr.contains(r));
+    assert!(has("crowd.min_window", "[width, height]"), "{got:#?}");
+    assert!(has("crowd.hidden", "\"repeat\" or \"exclude\""), "{got:#?}");
+    assert!(has("crowd.completion_code", "letters, digits"), "{got:#?}");
+    assert!(has("crowd.completion_url", "https://"), "{got:#?}");
+    assert!(has("crowd.groups", "at least 1"), "{got:#?}");
+    assert!(has("crowd.colour", "unknown key"), "{got:#?}");
+    assert!(has("crowd.gold[0]", "give min"), "{got:#?}");
+    assert!(
+        has(
+            "crowd.gold[0].stimulus",
+            "not one of the study's conditions"
+        ),
+        "{got:#?}"
+    );
+    assert_eq!(got.len(), 8, "{got:#?}");
+}

@@ -22,7 +22,7 @@ use crate::trials::{
 
 /// Version of `session.json` and `run.json` written by this build. Version 2 added
 /// `manifest_hash`; version 1 files are still read.
-pub const MANIFEST_FORMAT_VERSION: u32 = 2;
+pub const MANIFEST_FORMAT_VERSION: u32 = 3;
 /// Largest manifest accepted by the readers, bytes.
 pub const MAX_MANIFEST_BYTES: u64 = 16 << 20;
 /// Most session directories read from one results directory.
@@ -285,6 +285,37 @@ pub struct SessionManifest {
     pub torn_rows: Vec<String>,
     /// Display.
     pub display: Option<DisplayInfo>,
+    /// What the participant's browser measured (`study serve`, version 3); `None` for a
+    /// window or simulated session, and absent from their files.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub browser: Option<BrowserInfo>,
+}
+
+/// What a participant's browser reported and measured (`study serve`): the environment the
+/// page ran in, and the trials during whose stimuli the page was hidden or not fullscreen.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BrowserInfo {
+    /// `navigator.userAgent`.
+    pub user_agent: String,
+    /// The WebGL renderer string (`UNMASKED_RENDERER_WEBGL` where the browser tells it).
+    pub webgl_renderer: String,
+    /// `screen.width` × `screen.height`, CSS pixels.
+    pub screen_px: [u32; 2],
+    /// The window's inner size when the session began, CSS pixels.
+    pub window_px: [u32; 2],
+    /// `devicePixelRatio`.
+    pub device_pixel_ratio: f64,
+    /// Refresh rate estimated from `requestAnimationFrame` intervals before the session, Hz.
+    pub refresh_hz: f64,
+    /// Fullscreen when the session began.
+    pub fullscreen: bool,
+    /// Trials during whose stimuli the page was hidden (another tab, a minimised window).
+    #[serde(default)]
+    pub hidden_trials: Vec<u32>,
+    /// Trials answered outside fullscreen in a study that asks for it.
+    #[serde(default)]
+    pub windowed_trials: Vec<u32>,
 }
 
 /// `run.json` (format version 1): what a results directory is a run of.

@@ -155,6 +155,7 @@ fn manifest(trials: u32) -> SessionManifest {
             height_px: 900,
             refresh_hz: 60.0,
         }),
+        browser: None,
     }
 }
 

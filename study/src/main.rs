@@ -15,6 +15,7 @@ mod markers_cmd;
 mod primitives_cmd;
 mod report_cmd;
 mod run_cmd;
+mod serve_cmd;
 mod study_cmd;
 
 /// Perceptual user studies of motion-capture compression.
@@ -32,6 +33,8 @@ enum Command {
     Demo(demo_cmd::DemoArgs),
     /// Run one subject's session in the study window (MOS, DSCQS or 2AFC staircase).
     Run(run_cmd::RunArgs),
+    /// Serve a study to participants' browsers (HTTP; the engine and results stay here).
+    Serve(serve_cmd::ServeArgs),
     /// Measure the display: refresh rate, frame-interval mean/SD/max and dropped frames.
     DisplayTest(run_cmd::DisplayTestArgs),
     /// Inspect, convert and evaluate motion clips (ASF/AMC, BVH).
@@ -66,6 +69,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Demo(args) => demo_cmd::run(&args),
         Command::Run(args) => run_cmd::run(&args),
+        Command::Serve(args) => serve_cmd::run(&args),
         Command::DisplayTest(args) => run_cmd::display_test(&args),
         Command::Clip(cmd) => clip_cmd::run(cmd),
         Command::Markers(cmd) => markers_cmd::run(cmd),

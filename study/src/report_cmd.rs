@@ -213,6 +213,8 @@ struct Logs {
     converted: from_results::ConvertedResults,
     incomplete: Vec<lab::integrity::Problem>,
     displays: Vec<analysis::display::SessionDisplay>,
+    /// What the study's `[crowd]` rules left out of the statistics.
+    exclusions: Vec<analysis::crowd::SessionExclusion>,
 }
 
 /// Sessions read and checked together, on [`READERS`] threads.
@@ -272,6 +274,7 @@ fn read_logs(
         Some((definition.scale.min, definition.scale.max)),
     );
     let (mut problems, mut displays) = (Vec::new(), Vec::with_capacity(dirs.len()));
+    let mut exclusions = Vec::new();
     // The first error converting a sound session; the log check's verdict comes first.
     let mut failed: Option<anyhow::Error> = None;
     // Sessions are read and checked on two threads, a batch at a time (a batch's rows in
@@ -290,6 +293,12 @@ fn read_logs(
                 &session,
                 args.drop_limit,
             ));
+            // The crowd rules (gold trials, hidden pages) apply to sound logs only; the
+            // integrity check saw every row.
+            let exclusion = analysis::crowd::session_exclusion(&session, &definition.crowd);
+            let kept = analysis::crowd::apply(&session, &exclusion);
+            exclusions.push(exclusion);
+            let Some(session) = kept else { continue };
             if failed.is_none() && !damaged {
                 let added = if weibull {
                     check_weibull_levels(&session)
@@ -337,6 +346,7 @@ fn read_logs(
         converted: converter.finish()?,
         incomplete: problems,
         displays,
+        exclusions,
     })
 }
 
@@ -382,9 +392,45 @@ fn display_section(
         )
     });
     display.table(analysis::display::display_table(displays, drop_limit));
+    if let Some(t) = analysis::display::browser_table(displays) {
+        display.table(t);
+    }
     for f in &flagged {
         eprintln!("warning: {f} dropped more than {drop_limit} % of its frames");
     }
+}
+
+/// The "Exclusions" section of a crowd study (gold trials, or trials left out because the
+/// page was hidden): who the `[crowd]` rules left out of the statistics, and why.
+fn exclusions_section(
+    report: &mut analysis::report::Report,
+    exclusions: &[analysis::crowd::SessionExclusion],
+    crowd: &protocols::study::CrowdSettings,
+) {
+    if crowd.gold.is_empty()
+        && !exclusions
+            .iter()
+            .any(analysis::crowd::SessionExclusion::any)
+    {
+        return;
+    }
+    let left_out: Vec<&str> = exclusions
+        .iter()
+        .filter(|e| e.excluded)
+        .map(|e| e.session.as_str())
+        .collect();
+    let section = report.section("Exclusions");
+    section.text(format!(
+        "The study's crowd rules ([crowd] in the study file) left out {} of {} sessions{}.",
+        left_out.len(),
+        exclusions.len(),
+        if left_out.is_empty() {
+            String::new()
+        } else {
+            format!(" ({})", left_out.join(", "))
+        }
+    ));
+    section.table(analysis::crowd::exclusions_table(exclusions, crowd));
 }
 
 /// Runs `study report`.
@@ -409,6 +455,7 @@ pub fn run(args: &ReportArgs) -> Result<()> {
         converted,
         incomplete,
         displays,
+        exclusions,
     } = read_logs(
         args,
         &study_file,
@@ -429,6 +476,7 @@ pub fn run(args: &ReportArgs) -> Result<()> {
     let mut report = analysis.to_report(&converted.data, &options, &title);
     incomplete_section(&mut report, &incomplete);
     display_section(&mut report, &displays, args.drop_limit);
+    exclusions_section(&mut report, &exclusions, &study.crowd);
     let names = report.section("Subjects and stimuli");
     names.text(format!(
         "Subjects ({}): {}. Condition ids: {}.",

@@ -9,6 +9,7 @@
 
 mod check;
 mod conditions;
+mod crowd;
 mod live;
 mod presentation;
 mod quest;
@@ -31,6 +32,7 @@ use crate::manifest::StimulusManifest;
 use crate::record::{Arrangement, Position, Protocol};
 use crate::staircase::StaircaseSettings;
 use check::Ctx;
+pub use crowd::{CrowdSettings, GoldTrial, HiddenRule};
 pub use quest::domain as quest_domain;
 pub use rendering::RenderingSettings;
 
@@ -447,6 +449,8 @@ pub struct StudyDefinition {
     pub simulation: SimulationSettings,
     /// How the runner draws the figures (`[rendering]`).
     pub rendering: RenderingSettings,
+    /// What a study served to browsers needs (`[crowd]`).
+    pub crowd: CrowdSettings,
     /// The stimulus manifest.
     pub manifest: StimulusManifest,
 }

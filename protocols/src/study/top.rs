@@ -7,6 +7,7 @@ use toml::{Table, Value};
 
 use super::check::Ctx;
 use super::conditions::{parse_conditions, resolve_familiarization};
+use super::crowd::parse_crowd;
 use super::presentation::parse_presentation;
 use super::rendering::parse_rendering;
 use super::scale::parse_scale;
@@ -52,6 +53,7 @@ const TOP_KEYS: &[&str] = &[
     "staircase",
     "simulation",
     "rendering",
+    "crowd",
 ];
 
 /// The whole study file: its header, the manifest, the sections every protocol has, then
@@ -105,6 +107,12 @@ pub(super) fn parse_table(
         None => {}
     }
 
+    let crowd = parse_crowd(
+        cx.table(t, "", "crowd").unwrap_or(&empty),
+        protocol,
+        &conditions,
+        cx,
+    );
     Some(StudyDefinition {
         format_version: header.version? as u32,
         name: header.name?,
@@ -120,6 +128,7 @@ pub(super) fn parse_table(
         staircase,
         simulation,
         rendering,
+        crowd,
         manifest: manifest?,
     })
 }

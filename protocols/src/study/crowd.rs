@@ -1,0 +1,282 @@
+//! `[crowd]`: what a study served to participants' browsers (`study serve`) needs beyond a
+//! lab session: the environment check, the completion code and redirect, the rule for a page
+//! hidden during the stimuli, gold (catch) trials with their exclusion rule, and quotas of
+//! participants per plan group. Every key has a default, so a study without the table serves
+//! as it is; the window and simulation ignore it.
+
+use serde::{Deserialize, Serialize};
+use toml::{Table, Value};
+
+use super::Condition;
+use super::check::{Ctx, join};
+use crate::record::{Answer, Block, Protocol, TrialRecord};
+
+/// What happens to a trial during whose stimuli the page was hidden.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum HiddenRule {
+    /// The page shows the trial again from the start; an answer is taken only after an
+    /// unbroken presentation.
+    Repeat,
+    /// The answer is taken and the trial is flagged; `study report` leaves it out.
+    Exclude,
+}
+
+/// A gold (catch) trial: a condition whose answer is known, e.g. an identical pair (a
+/// lossless stimulus, rated at least `min`) or an obvious degradation (rated at most `max`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct GoldTrial {
+    /// The condition's test stimulus id.
+    pub stimulus: String,
+    /// Lowest rating of the test stimulus that passes.
+    pub min: Option<f64>,
+    /// Highest rating of the test stimulus that passes.
+    pub max: Option<f64>,
+}
+
+impl GoldTrial {
+    /// Whether `rating` (of the test stimulus: MOS's rating, DSCQS's test score) passes.
+    pub fn passes(&self, rating: f64) -> bool {
+        self.min.is_none_or(|m| rating >= m) && self.max.is_none_or(|m| rating <= m)
+    }
+}
+
+/// Crowd settings (`[crowd]`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CrowdSettings {
+    /// Smallest browser window, CSS pixels.
+    pub min_window_px: [u32; 2],
+    /// Lowest display refresh rate, Hz (measured by the page).
+    pub min_refresh_hz: f64,
+    /// The study runs in fullscreen.
+    pub fullscreen: bool,
+    /// A page hidden during the stimuli.
+    pub hidden: HiddenRule,
+    /// Completion code shown at the end (Prolific, MTurk).
+    pub completion_code: Option<String>,
+    /// Where the end screen sends the participant (`https://...`).
+    pub completion_url: Option<String>,
+    /// Gold trials.
+    pub gold: Vec<GoldTrial>,
+    /// A session that fails more gold trials than this is excluded by `study report`.
+    pub max_gold_failures: u32,
+    /// Plan groups: participants take subject indices 0..groups in turn (each group one
+    /// counterbalanced plan); `None`: each participant's own plan, as `study run` gives.
+    pub groups: Option<u32>,
+    /// Participants per group (or in all, without groups); the server refuses more.
+    pub quota: Option<u32>,
+}
+
+impl Default for CrowdSettings {
+    fn default() -> Self {
+        CrowdSettings {
+            min_window_px: [800, 500],
+            min_refresh_hz: 50.0,
+            fullscreen: false,
+            hidden: HiddenRule::Repeat,
+            completion_code: None,
+            completion_url: None,
+            gold: Vec::new(),
+            max_gold_failures: 0,
+            groups: None,
+            quota: None,
+        }
+    }
+}
+
+impl CrowdSettings {
+    /// The gold trial of test stimulus `id`, if it is one.
+    pub fn gold_of(&self, id: &str) -> Option<&GoldTrial> {
+        self.gold.iter().find(|g| g.stimulus == id)
+    }
+
+    /// For a logged trial of a gold condition (familiarization aside): the rating of its test
+    /// stimulus (MOS's rating, DSCQS's test score) and whether it passes; `None` for any
+    /// other trial.
+    pub fn gold_verdict(&self, r: &TrialRecord) -> Option<(f64, bool)> {
+        if r.trial.block == Block::Familiarization {
+            return None;
+        }
+        let g = self.gold_of(&r.trial.stimulus)?;
+        let rating = match r.response.answer {
+            Answer::Rating(v) => v,
+            Answer::Pair { .. } => r.outcome.score_test?,
+            Answer::Choice(_) => return None,
+        };
+        Some((rating, g.passes(rating)))
+    }
+}
+
+const C: &str = "crowd";
+
+fn code_ok(s: &str) -> bool {
+    !s.is_empty()
+        && s.len() <= 64
+        && s.chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
+}
+
+pub(super) fn parse_crowd(
+    t: &Table,
+    protocol: Option<Protocol>,
+    conditions: &[Condition],
+    cx: &mut Ctx,
+) -> CrowdSettings {
+    cx.known(
+        t,
+        C,
+        &[
+            "min_window",
+            "min_refresh_hz",
+            "fullscreen",
+            "hidden",
+            "completion_code",
+            "completion_url",
+            "gold",
+            "max_gold_failures",
+            "groups",
+            "quota",
+        ],
+    );
+    let d = CrowdSettings::default();
+    let min_window_px = match cx.floats(t, C, "min_window") {
+        Some(v)
+            if v.len() == 2
+                && v.iter()
+                    .all(|x| *x >= 0.0 && *x <= 16384.0 && x.fract() == 0.0) =>
+        {
+            [v[0] as u32, v[1] as u32]
+        }
+        Some(_) => {
+            cx.err(
+                join(C, "min_window"),
+                "expected [width, height] in whole pixels, at most 16384",
+            );
+            d.min_window_px
+        }
+        None => d.min_window_px,
+    };
+    let min_refresh_hz = match cx.float(t, C, "min_refresh_hz") {
+        Some(v) if (0.0..=1000.0).contains(&v) => v,
+        Some(v) => {
+            cx.err(
+                join(C, "min_refresh_hz"),
+                format!("{v} is outside 0..=1000"),
+            );
+            d.min_refresh_hz
+        }
+        None => d.min_refresh_hz,
+    };
+    let hidden = match cx.string(t, C, "hidden").as_deref() {
+        None | Some("repeat") => HiddenRule::Repeat,
+        Some("exclude") => HiddenRule::Exclude,
+        Some(other) => {
+            cx.err(
+                join(C, "hidden"),
+                format!("expected \"repeat\" or \"exclude\", got {other:?}"),
+            );
+            HiddenRule::Repeat
+        }
+    };
+    let completion_code = cx.string(t, C, "completion_code");
+    if completion_code.as_deref().is_some_and(|c| !code_ok(c)) {
+        cx.err(
+            join(C, "completion_code"),
+            "use 1-64 letters, digits, '-' or '_'",
+        );
+    }
+    let completion_url = cx.string(t, C, "completion_url");
+    if completion_url.as_deref().is_some_and(|u| {
+        !u.starts_with("https://")
+            || u.len() > 2000
+            || u.chars().any(|c| c.is_whitespace() || c.is_control())
+    }) {
+        cx.err(
+            join(C, "completion_url"),
+            "expected an https:// address without spaces",
+        );
+    }
+    let gold = parse_gold(t, protocol, conditions, cx);
+    let groups = cx.uint(t, C, "groups", 1 << 20);
+    if groups == Some(0) {
+        cx.err(join(C, "groups"), "must be at least 1");
+    }
+    let quota = cx.uint(t, C, "quota", 1 << 24);
+    if quota == Some(0) {
+        cx.err(join(C, "quota"), "must be at least 1");
+    }
+    CrowdSettings {
+        min_window_px,
+        min_refresh_hz,
+        fullscreen: cx.boolean(t, C, "fullscreen").unwrap_or(d.fullscreen),
+        hidden,
+        completion_code,
+        completion_url,
+        gold,
+        max_gold_failures: cx.uint(t, C, "max_gold_failures", 1 << 20).unwrap_or(0),
+        groups: groups.filter(|g| *g > 0),
+        quota: quota.filter(|q| *q > 0),
+    }
+}
+
+fn parse_gold(
+    t: &Table,
+    protocol: Option<Protocol>,
+    conditions: &[Condition],
+    cx: &mut Ctx,
+) -> Vec<GoldTrial> {
+    let Some(v) = t.get("gold") else {
+        return Vec::new();
+    };
+    let Value::Array(items) = v else {
+        cx.wrong(C, "gold", "an array of tables ([[crowd.gold]])", v);
+        return Vec::new();
+    };
+    if protocol == Some(Protocol::Staircase) {
+        cx.err(
+            join(C, "gold"),
+            "gold trials are rated conditions: MOS and DSCQS only",
+        );
+        return Vec::new();
+    }
+    let mut out = Vec::new();
+    for (i, item) in items.iter().enumerate() {
+        let path = format!("{C}.gold[{i}]");
+        let Value::Table(g) = item else {
+            cx.err(path, "expected a table with stimulus and min or max");
+            continue;
+        };
+        cx.known(g, &path, &["stimulus", "min", "max"]);
+        let stimulus = cx.string(g, &path, "stimulus");
+        let (min, max) = (cx.float(g, &path, "min"), cx.float(g, &path, "max"));
+        if min.is_none() && max.is_none() {
+            cx.err(
+                path.clone(),
+                "give min (an identical pair) or max (an obvious degradation)",
+            );
+        }
+        if let (Some(lo), Some(hi)) = (min, max)
+            && lo > hi
+        {
+            cx.err(path.clone(), format!("min {lo} is above max {hi}"));
+        }
+        let Some(stimulus) = stimulus else {
+            cx.err(join(&path, "stimulus"), "required");
+            continue;
+        };
+        if !conditions.iter().any(|c| c.stimulus == stimulus) {
+            cx.err(
+                join(&path, "stimulus"),
+                format!("{stimulus:?} is not one of the study's conditions (a gold trial is a condition whose answer is known)"),
+            );
+        }
+        if out.iter().any(|g: &GoldTrial| g.stimulus == stimulus) {
+            cx.err(
+                join(&path, "stimulus"),
+                format!("{stimulus:?} is a gold trial twice"),
+            );
+        }
+        out.push(GoldTrial { stimulus, min, max });
+    }
+    out
+}

@@ -1,0 +1,108 @@
+//! The words a subject reads, shared by every front end (the study window, the browser page
+//! of `study serve`): the BT.500 grade labels, the 2AFC question, the acknowledgement, and
+//! the default instructions of each protocol as the study's presentation settings make them.
+
+use crate::record::{Arrangement, Protocol};
+use crate::study::{RatingScale, ScaleKind, StimulusLabels, StudyDefinition};
+
+/// The BT.500 five-grade quality labels, best first.
+pub const QUALITY_LABELS: [&str; 5] = ["Excellent", "Good", "Fair", "Poor", "Bad"];
+
+/// The 2AFC question of thesis ch. 5.
+pub const AFC_QUESTION: &str = "Which motion looks more natural?";
+
+/// Shown after an answer was logged, over the blank gap before the next trial.
+pub const ANSWER_RECORDED: &str = "Answer recorded";
+
+/// A rating as a subject reads it: `3`, `3.5`.
+pub fn format_rating(v: f64) -> String {
+    if v.fract().abs() < 1e-9 {
+        format!("{v:.0}")
+    } else {
+        format!("{v}")
+    }
+}
+
+/// BT.500 label of an integer rating on a five-grade scale.
+pub fn quality_label(scale: &RatingScale, v: f64) -> Option<&'static str> {
+    if (scale.max - scale.min - 4.0).abs() > 1e-9 || v.fract().abs() > 1e-9 {
+        return None;
+    }
+    QUALITY_LABELS
+        .get((scale.max - v).round() as usize)
+        .copied()
+}
+
+/// The rating values of a categorical scale, low to high.
+pub fn categories(scale: &RatingScale) -> Vec<f64> {
+    let step = scale.step.filter(|s| *s > 0.0).unwrap_or(1.0);
+    let n = ((scale.max - scale.min) / step).round().clamp(0.0, 200.0) as usize;
+    (0..=n).map(|k| scale.min + k as f64 * step).collect()
+}
+
+/// How the rating is given, for the instructions.
+fn scale_instructions(scale: &RatingScale, what: &str) -> String {
+    match scale.kind {
+        ScaleKind::Categorical => format!(
+            "Rate {what} from {} (worst) to {} (best), with the mouse or the number keys \
+             (the Up and Down arrow keys move by one step), then press Continue (Enter).",
+            format_rating(scale.min),
+            format_rating(scale.max)
+        ),
+        ScaleKind::Continuous => format!(
+            "Rate {what} by placing a mark on the scale, from Bad at the bottom to Excellent at \
+             the top: click or drag, or press 1 (Bad) to 5 (Excellent) and move the mark with \
+             the Up and Down arrow keys (Page Up and Page Down for larger steps). Then press \
+             Continue (Enter)."
+        ),
+    }
+}
+
+/// The default instructions for `study` (used when `[session] instructions` is not given):
+/// they say which motion is the original where the screen labels it (MOS), and that nobody
+/// says so where the design hides it (DSCQS, 2AFC).
+pub fn default_instructions(study: &StudyDefinition) -> String {
+    let p = &study.presentation;
+    match study.protocol {
+        Protocol::Mos => {
+            let how = if p.arrangement == Arrangement::Sequential {
+                "one after the other"
+            } else {
+                "side by side"
+            };
+            let which = match &p.labels {
+                Some(StimulusLabels { reference, test }) => format!(
+                    "the original motion, labelled “{reference}”, and a compressed version of it, \
+                     labelled “{test}”"
+                ),
+                None => "the original motion and a compressed version of it (they are not \
+                         labelled)"
+                    .to_string(),
+            };
+            format!(
+                "Each trial shows {which}, {how}. {} The first few trials show the range of \
+                 qualities you will meet.",
+                scale_instructions(&study.scale, "the quality of the compressed motion")
+            )
+        }
+        Protocol::Dscqs => {
+            let keys = if study.scale.kind == ScaleKind::Continuous {
+                " The number keys mark A first, then B; the Left and Right \
+                 arrow keys choose which scale the keys move."
+            } else {
+                " The number keys rate A first, then B; the Left and Right \
+                 arrow keys choose which row the keys change."
+            };
+            format!(
+                "Each trial shows two motions, A and B, twice, with a grey screen between them: \
+                 A, B, A, B. One of them may be the original; you are not told which. After the \
+                 second B, rate both. {}{keys}",
+                scale_instructions(&study.scale, "the quality of A and of B")
+            )
+        }
+        Protocol::Staircase => "Each trial shows two motions side by side. Choose the one that \
+                                looks more natural with the Left or Right arrow key (or click). \
+                                Answer even when you are unsure."
+            .to_string(),
+    }
+}

@@ -1,0 +1,636 @@
+//! `study serve` end to end in a real headless Chromium (Debian's `chromium`, driven over
+//! WebDriver by `chromedriver`): a participant completes a MOS, a DSCQS and a live-staircase
+//! study on the page, with WebGL drawn by SwiftShader; each session's rows equal those of a
+//! session recorder given the same answers (what `study simulate` runs), timing columns
+//! aside. The MOS server is SIGKILLed mid-study and restarted: the page carries on and no
+//! answer is lost or logged twice. A second browser holding another participant's token is
+//! refused A's session.
+//!
+//! Needs `chromium`, `chromedriver` and the built page (`scripts/build-page`, which needs
+//! npm); `scripts/test` installs and builds them. Without them the test fails under `CI` and
+//! is skipped elsewhere.
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::too_many_lines,
+    missing_docs
+)]
+
+use std::collections::BTreeMap;
+use std::io::{BufRead as _, BufReader};
+use std::net::{TcpListener, TcpStream};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use protocols::record::{Answer, Position};
+use serde_json::{Value, json};
+
+fn have(tool: &str) -> bool {
+    Command::new("sh")
+        .args(["-c", &format!("command -v {tool}")])
+        .stdout(Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success())
+}
+
+/// The built page beside the binary's folder, built now if missing.
+fn page_ready() -> bool {
+    let exe = PathBuf::from(env!("CARGO_BIN_EXE_study"));
+    let page = exe.parent().unwrap().parent().unwrap().join("page");
+    if page.join("index.html").is_file() {
+        return true;
+    }
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap();
+    have("npm")
+        && Command::new(root.join("scripts/build-page"))
+            .status()
+            .is_ok_and(|s| s.success())
+}
+
+fn ready() -> bool {
+    let ok = have("chromium") && have("chromedriver") && page_ready();
+    if !ok {
+        assert!(
+            std::env::var_os("CI").is_none(),
+            "chromium, chromedriver and the built page (scripts/build-page) are needed under CI"
+        );
+        eprintln!("skipped: chromium, chromedriver or the built page is missing");
+    }
+    ok
+}
+
+fn free_port() -> u16 {
+    TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+fn temp_dir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("serve-browser-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+// ---- a minimal WebDriver client (HTTP/1.1, JSON) ---------------------------------------
+
+fn http(port: u16, method: &str, path: &str, body: Option<&Value>) -> (u16, Value) {
+    // chromedriver keeps connections open: the client reads by Content-Length.
+    let mut c = web::client::Client::new(([127, 0, 0, 1], port).into());
+    let r = c.request(method, path, body).unwrap();
+    (r.status, r.json())
+}
+
+struct Driver {
+    child: Child,
+    port: u16,
+}
+
+impl Drop for Driver {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+impl Driver {
+    fn start() -> Driver {
+        let port = free_port();
+        let child = Command::new("chromedriver")
+            .arg(format!("--port={port}"))
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        let d = Driver { child, port };
+        let deadline = Instant::now() + Duration::from_secs(20);
+        while TcpStream::connect(("127.0.0.1", port)).is_err() {
+            assert!(Instant::now() < deadline, "chromedriver did not start");
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        d
+    }
+
+    fn browser(&self, profile: &Path) -> Browser {
+        let caps = json!({ "capabilities": { "alwaysMatch": {
+            "browserName": "chrome",
+            "goog:chromeOptions": {
+                "binary": "/usr/bin/chromium",
+                "args": [
+                    "--headless=new", "--no-sandbox", "--disable-dev-shm-usage",
+                    // WebGL without a GPU: ANGLE on SwiftShader.
+                    "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
+                    "--disable-background-networking", "--disable-component-update",
+                    "--disable-sync", "--no-first-run", "--disable-quic",
+                    "--window-size=1024,720",
+                    format!("--user-data-dir={}", profile.display()),
+                ],
+            },
+        }}});
+        let (status, v) = http(self.port, "POST", "/session", Some(&caps));
+        assert_eq!(status, 200, "new session: {v}");
+        Browser {
+            port: self.port,
+            session: v["value"]["sessionId"].as_str().unwrap().to_string(),
+        }
+    }
+}
+
+struct Browser {
+    port: u16,
+    session: String,
+}
+
+impl Drop for Browser {
+    fn drop(&mut self) {
+        let _ = http(
+            self.port,
+            "DELETE",
+            &format!("/session/{}", self.session),
+            None,
+        );
+    }
+}
+
+impl Browser {
+    fn cmd(&self, method: &str, path: &str, body: Option<&Value>) -> Value {
+        let (status, v) = http(
+            self.port,
+            method,
+            &format!("/session/{}/{path}", self.session),
+            body,
+        );
+        assert_eq!(status, 200, "{method} {path}: {v}");
+        v["value"].clone()
+    }
+
+    fn go(&self, url: &str) {
+        self.cmd("POST", "url", Some(&json!({ "url": url })));
+    }
+
+    fn js(&self, script: &str) -> Value {
+        self.cmd(
+            "POST",
+            "execute/sync",
+            Some(&json!({ "script": script, "args": [] })),
+        )
+    }
+
+    fn element(&self, css: &str) -> String {
+        let v = self.cmd(
+            "POST",
+            "element",
+            Some(&json!({ "using": "css selector", "value": css })),
+        );
+        v.as_object()
+            .and_then(|o| o.values().next())
+            .and_then(Value::as_str)
+            .unwrap()
+            .to_string()
+    }
+
+    /// Clicks the element `css` names; tried again (up to five times) while the page is
+    /// re-laying out under it (an intercepted click or a replaced element).
+    fn click(&self, css: &str) {
+        for attempt in 0.. {
+            let found = http(
+                self.port,
+                "POST",
+                &format!("/session/{}/element", self.session),
+                Some(&json!({ "using": "css selector", "value": css })),
+            );
+            let id = found.1["value"]
+                .as_object()
+                .and_then(|o| o.values().next())
+                .and_then(Value::as_str)
+                .map(str::to_string);
+            let clicked = id.map(|id| {
+                http(
+                    self.port,
+                    "POST",
+                    &format!("/session/{}/element/{id}/click", self.session),
+                    Some(&json!({})),
+                )
+            });
+            match clicked {
+                Some((200, _)) => return,
+                other if attempt >= 4 => panic!("click {css}: {found:?} {other:?}"),
+                _ => std::thread::sleep(Duration::from_millis(100)),
+            }
+        }
+    }
+
+    fn type_into(&self, css: &str, text: &str) {
+        let id = self.element(css);
+        self.cmd(
+            "POST",
+            &format!("element/{id}/value"),
+            Some(&json!({ "text": text })),
+        );
+    }
+
+    /// Presses keys (WebDriver key codes: `\u{E007}` Enter, `\u{E012}` left, `\u{E014}`
+    /// right) as the keyboard does.
+    fn keys(&self, keys: &[&str]) {
+        let mut actions = Vec::new();
+        for k in keys {
+            actions.push(json!({ "type": "keyDown", "value": k }));
+            actions.push(json!({ "type": "keyUp", "value": k }));
+        }
+        self.cmd(
+            "POST",
+            "actions",
+            Some(&json!({ "actions": [{ "type": "key", "id": "kb", "actions": actions }] })),
+        );
+        self.cmd("DELETE", "actions", None);
+    }
+
+    /// Waits until `cond` (a JS expression) is true.
+    fn wait(&self, cond: &str, secs: u64) {
+        let deadline = Instant::now() + Duration::from_secs(secs);
+        loop {
+            if self.js(&format!("return !!({cond});")) == Value::Bool(true) {
+                return;
+            }
+            assert!(
+                Instant::now() < deadline,
+                "timed out waiting for {cond}; screen {}, text: {}",
+                self.js("return document.body.dataset.screen;"),
+                self.js("return document.body.innerText.slice(0, 600);")
+            );
+            std::thread::sleep(Duration::from_millis(40));
+        }
+    }
+
+    fn screen(&self) -> String {
+        self.js("return document.body.dataset.screen;")
+            .as_str()
+            .unwrap_or("")
+            .to_string()
+    }
+}
+
+// ---- the server ------------------------------------------------------------------------
+
+struct Serve {
+    child: Child,
+}
+
+impl Drop for Serve {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+fn serve(study: &Path, out: &Path, port: u16) -> Serve {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_study"))
+        .arg("serve")
+        .arg(study)
+        .arg("-o")
+        .arg(out)
+        .args(["--bind", &format!("127.0.0.1:{port}")])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    assert!(line.starts_with("serving "), "study serve said {line:?}");
+    Serve { child }
+}
+
+/// Generated walk stimuli of half a second (clip `walk`, `spiht` at 10:1 and
+/// 20:1) and a study file of `protocol` over them.
+fn write_study(dir: &Path, body: &str) -> PathBuf {
+    let walk = motion::synth::WalkParams {
+        duration_s: 0.5,
+        frame_rate_hz: 120.0,
+        ..motion::synth::WalkParams::default()
+    };
+    lab::generated::walk_stimuli(dir, &walk, &["spiht"], &[10.0, 20.0]).unwrap();
+    let path = dir.join("study.toml");
+    std::fs::write(
+        &path,
+        format!("format_version = 1\nstimuli = \"stimuli/stimuli.json\"\nseed = 9\n{body}"),
+    )
+    .unwrap();
+    path
+}
+
+const MOS: &str = "name = \"web-mos\"\nprotocol = \"mos\"\n\
+    [conditions]\nclips = [\"walk\"]\ncodecs = [\"spiht\"]\ntarget_cr = [10, 20]\n\
+    [presentation]\nloop = true\ngap_ms = 100\nstimulus_duration_ms = 500\n\
+    [session]\nfamiliarization = 1\nhidden_repeats = 1\nbreak_every_trials = 2\n\
+    subject_fields = [\"age\"]\nconsent = \"You agree to watch four short motions.\"\n";
+
+const DSCQS: &str = "name = \"web-dscqs\"\nprotocol = \"dscqs\"\n\
+    [conditions]\nclips = [\"walk\"]\ncodecs = [\"spiht\"]\ntarget_cr = [10, 20]\n\
+    [presentation]\narrangement = \"abab\"\ngrey_ms = 150\ngap_ms = 100\nmax_replays = 0\n\
+    stimulus_duration_ms = 500\n";
+
+const STAIRCASE: &str = "name = \"web-stairs\"\nprotocol = \"staircase\"\n\
+    [presentation]\nloop = true\ngap_ms = 100\nstimulus_duration_ms = 500\n\
+    [staircase]\nparam = \"cr\"\ncodec = \"spiht\"\nstart = 20\nstep = 5\nmin = 10\nmax = 30\n\
+    max_trials = 4\n[[staircase.tracks]]\nname = \"walk\"\n\
+    [staircase.live]\nclips = [\"walk\"]\n";
+
+/// How the test answers trial `k` of each protocol, and the keys or clicks that give it.
+fn scripted(protocol: &str, k: u32) -> Answer {
+    match protocol {
+        "mos" => Answer::Rating([4.0, 2.5, 5.0, 1.5][k as usize % 4]),
+        // Number keys on BT.500's continuous 0-100 scale mark the middle of a grade:
+        // 4 -> 70, 2 -> 30, 5 -> 90.
+        "dscqs" => [
+            Answer::Pair { a: 70.0, b: 30.0 },
+            Answer::Pair { a: 90.0, b: 70.0 },
+        ][k as usize % 2],
+        _ => Answer::Choice(if k.is_multiple_of(2) {
+            Position::Left
+        } else {
+            Position::Right
+        }),
+    }
+}
+
+fn give(b: &Browser, protocol: &str, k: u32) {
+    match (protocol, scripted(protocol, k)) {
+        ("mos", Answer::Rating(v)) => {
+            // The mouse: the grade, then Continue.
+            b.click(&format!(".rating[data-value=\"{v}\"]"));
+            b.click("#continue");
+        }
+        ("dscqs", Answer::Pair { a, b: bv }) => {
+            let digit = |v: f64| ((v - 10.0) / 20.0 + 1.0).round().to_string();
+            b.keys(&[&digit(a), &digit(bv), "\u{E007}"]);
+        }
+        (_, Answer::Choice(Position::Left)) => b.keys(&["\u{E012}"]),
+        (_, Answer::Choice(_)) => b.click("#choice-right"),
+        _ => unreachable!(),
+    }
+}
+
+/// Joins from a Prolific link, passes the welcome screen and answers trials until the
+/// session ends (or `stop_after` trials, then returns). Returns the answers given by index.
+fn take_part(
+    b: &Browser,
+    url: Option<&str>,
+    protocol: &str,
+    stop_after: Option<u32>,
+    given: &mut BTreeMap<u32, Answer>,
+) {
+    if let Some(url) = url {
+        b.go(url);
+        welcome(b);
+    }
+    answer_trials(b, protocol, stop_after, given);
+}
+
+/// From the environment check through the welcome screen.
+fn welcome(b: &Browser) {
+    if b.screen() != "welcome" {
+        b.wait("document.body.dataset.checked === 'ok' || document.body.dataset.screen === 'welcome' || document.body.dataset.screen === 'trial'", 30);
+        if b.screen() == "check" {
+            b.click("#check-continue");
+        }
+    }
+    b.wait(
+        "['welcome', 'trial'].includes(document.body.dataset.screen)",
+        30,
+    );
+    if b.screen() == "welcome" {
+        if b.js("return !!document.querySelector('input[name=age]');") == Value::Bool(true) {
+            b.type_into("input[name=age]", "31");
+        }
+        if b.js("return !document.getElementById('welcome-consent').hidden;") == Value::Bool(true) {
+            b.click("#consent");
+        }
+        b.click("#begin");
+    }
+}
+
+/// Answers trials (and breaks) until the end, or until `stop_after` answers in all.
+fn answer_trials(
+    b: &Browser,
+    protocol: &str,
+    stop_after: Option<u32>,
+    given: &mut BTreeMap<u32, Answer>,
+) {
+    loop {
+        b.wait(
+            "['trial', 'break', 'end'].includes(document.body.dataset.screen)",
+            60,
+        );
+        match b.screen().as_str() {
+            "end" => return,
+            "break" => {
+                b.click("#break-continue");
+                continue;
+            }
+            _ => {}
+        }
+        b.wait("document.body.dataset.open === '1'", 60);
+        let k: u32 = b
+            .js("return Number(document.body.dataset.trial);")
+            .as_u64()
+            .unwrap() as u32;
+        if given.contains_key(&k) && b.screen() == "trial" {
+            // Still showing a trial answered already (the acknowledgement is on its way).
+            std::thread::sleep(Duration::from_millis(50));
+            continue;
+        }
+        given.insert(k, scripted(protocol, k));
+        give(b, protocol, k);
+        b.wait(
+            &format!(
+                "document.body.dataset.screen !== 'trial' || document.body.dataset.trial !== '{k}'"
+            ),
+            60,
+        );
+        if stop_after.is_some_and(|n| given.len() as u32 >= n) {
+            return;
+        }
+    }
+}
+
+/// The rows of the served session against a recorder given the same answers.
+fn check_rows(study: &Path, out: &Path, subject: &str, given: &BTreeMap<u32, Answer>) {
+    let served = results::read_trials(&out.join(format!("{subject}_s1/trials.csv"))).unwrap();
+    let file = lab::StudyFile::load(study).unwrap();
+    let dir = temp_dir(&format!("replay-{subject}"));
+    let fresh = lab::session::new_manifest(
+        &file.definition,
+        lab::session::SessionOf {
+            study_hash: &file.hash,
+            manifest_hash: &file.manifest_hash,
+            subject: subject.to_string(),
+            subject_index: lab::session::subject_index(subject, 1),
+            session: 1,
+            observer_seed: None,
+        },
+    );
+    let lab::session::Opened::Ready {
+        recorder: mut rec, ..
+    } = lab::session::Recorder::open(
+        &file.definition,
+        lab::session::subject_index(subject, 1),
+        &dir.join("s"),
+        false,
+        fresh,
+    )
+    .unwrap()
+    else {
+        panic!("new session finished")
+    };
+    let source = lab::source::open(&file).unwrap();
+    let mut want = Vec::new();
+    while let Some(trial) = rec.next_trial(0).unwrap() {
+        let answer = given[&trial.index];
+        let encoding = source.encoding(&trial).unwrap();
+        let response = protocols::Response {
+            answer,
+            response_time_ms: 0,
+            replays: 0,
+            dropped_frames: 0,
+        };
+        rec.record(trial, response, 0, encoding, None).unwrap();
+    }
+    rec.finish().unwrap();
+    let replayed = results::read_trials(&dir.join("s/trials.csv")).unwrap();
+    want.extend(replayed.records);
+    assert_eq!(served.records.len(), want.len(), "rows of {subject}");
+    assert_eq!(
+        served.records.len(),
+        given.len(),
+        "one row per answer given"
+    );
+    for (got, want) in served.records.iter().zip(&want) {
+        // Timing columns aside, every column equal.
+        assert_eq!(got.study, want.study);
+        assert_eq!(got.subject, want.subject);
+        assert_eq!(got.protocol, want.protocol);
+        assert_eq!(got.trial, want.trial);
+        assert_eq!(got.response.answer, want.response.answer);
+        assert_eq!(got.response.replays, 0);
+        assert_eq!(got.outcome, want.outcome);
+        assert_eq!(got.encoding, want.encoding);
+        // The page measured its frames: every trial has timing from the browser.
+        assert!(
+            got.timing.is_some_and(|t| t.frames_shown > 2),
+            "{:?}",
+            got.timing
+        );
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+fn manifest(out: &Path, subject: &str) -> results::SessionManifest {
+    results::store::read_manifest(&out.join(format!("{subject}_s1/session.json"))).unwrap()
+}
+
+#[test]
+fn a_browser_completes_mos_through_a_server_kill_and_a_foreign_token_is_refused() {
+    if !ready() {
+        return;
+    }
+    let dir = temp_dir("mos");
+    let study = write_study(&dir, MOS);
+    let out = dir.join("results");
+    let port = free_port();
+    let mut server = serve(&study, &out, port);
+    let driver = Driver::start();
+    let b = driver.browser(&dir.join("profile-a"));
+    let url = format!("http://127.0.0.1:{port}/?PROLIFIC_PID=pidA&STUDY_ID=st1&SESSION_ID=se1");
+    let mut given = BTreeMap::new();
+    take_part(&b, Some(&url), "mos", Some(2), &mut given);
+    // Mid-study: the server dies without a word, and comes back.
+    server.child.kill().unwrap();
+    server.child.wait().unwrap();
+    std::thread::sleep(Duration::from_millis(300));
+    server = serve(&study, &out, port);
+    // The page carries on from where it was (it retries what it was sending).
+    take_part(&b, None, "mos", None, &mut given);
+    assert_eq!(b.screen(), "end");
+    check_rows(&study, &out, "pidA", &given);
+    let m = manifest(&out, "pidA");
+    assert_eq!(m.status, results::store::SessionState::Complete);
+    assert_eq!(
+        m.subject_fields
+            .get("prolific_session_id")
+            .map(String::as_str),
+        Some("se1")
+    );
+    assert_eq!(
+        m.subject_fields.get("consent").map(String::as_str),
+        Some("given")
+    );
+    let browser = m.browser.expect("the browser's measurements");
+    assert!(
+        browser.user_agent.contains("Chrome"),
+        "{}",
+        browser.user_agent
+    );
+    assert!(browser.refresh_hz > 20.0, "{}", browser.refresh_hz);
+    assert!(m.resumes >= 1, "the session was resumed after the kill");
+
+    // A second browser joins as B, then opens A's link with B's token: refused.
+    let b2 = driver.browser(&dir.join("profile-b"));
+    b2.go(&format!("http://127.0.0.1:{port}/?PROLIFIC_PID=pidB"));
+    b2.wait("document.body.dataset.checked === 'ok'", 30);
+    b2.click("#check-continue");
+    b2.wait("document.body.dataset.screen === 'welcome'", 30);
+    let token_b = b2.js("return new URLSearchParams(location.hash.slice(1)).get('t');");
+    let token_b = token_b.as_str().unwrap();
+    let rows_a = std::fs::read(out.join("pidA_s1/trials.csv")).unwrap();
+    b2.go(&format!("http://127.0.0.1:{port}/?s=pidA#t={token_b}"));
+    b2.wait("document.body.dataset.screen === 'message'", 30);
+    let text = b2.js("return document.body.innerText;");
+    assert!(
+        text.as_str().unwrap().contains("This link is not valid"),
+        "{text}"
+    );
+    assert_eq!(
+        std::fs::read(out.join("pidA_s1/trials.csv")).unwrap(),
+        rows_a
+    );
+    drop(server);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_browser_completes_dscqs_and_a_live_staircase() {
+    if !ready() {
+        return;
+    }
+    let driver = Driver::start();
+    for (name, body, protocol) in [
+        ("dscqs", DSCQS, "dscqs"),
+        ("stairs", STAIRCASE, "staircase"),
+    ] {
+        let dir = temp_dir(name);
+        let study = write_study(&dir, body);
+        let out = dir.join("results");
+        let port = free_port();
+        let _server = serve(&study, &out, port);
+        let b = driver.browser(&dir.join("profile"));
+        let mut given = BTreeMap::new();
+        take_part(
+            &b,
+            Some(&format!(
+                "http://127.0.0.1:{port}/?workerId=W{name}&assignmentId=A1&hitId=H1"
+            )),
+            protocol,
+            None,
+            &mut given,
+        );
+        assert_eq!(b.screen(), "end");
+        check_rows(&study, &out, &format!("W{name}"), &given);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}

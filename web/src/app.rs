@@ -1,0 +1,1079 @@
+//! The server's state and what each request does to it, without HTTP: the study, its
+//! stimulus source, the participants and their sessions. Every call that touches a session
+//! holds that participant's lock and may block on disk (the handlers run them on tokio's
+//! blocking pool), so one participant's requests are served one at a time, in order, and
+//! different participants' in parallel.
+
+use std::collections::{BTreeMap, HashMap};
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
+use std::time::Instant;
+
+use lab::session::{self, Opened, Recorder, SessionOf};
+use lab::source::StimulusSource;
+use lab::{LabError, StudyFile};
+use protocols::record::{Answer, Arrangement, Block, Position, Protocol, Response, Trial};
+use protocols::study::{CrowdSettings, HiddenRule, ScaleKind, StudyDefinition};
+use protocols::{FrameTiming, StimulusEncoding, texts};
+use results::SessionManifest;
+use results::store::{BrowserInfo, DisplayInfo, SessionState};
+use serde::{Deserialize, Serialize};
+
+use crate::limits::{Bucket, Limits, MAX_INTERVALS};
+use crate::participants::{Participant, Registry, identity};
+use crate::{Result, ServeOptions, WebError, clipdata, io, timing};
+
+/// A refused request: the HTTP status and the reason the page shows.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ApiError {
+    /// HTTP status.
+    pub status: u16,
+    /// Why.
+    pub message: String,
+}
+
+impl ApiError {
+    /// A refusal with `status`.
+    pub fn new(status: u16, message: impl Into<String>) -> ApiError {
+        ApiError {
+            status,
+            message: message.into(),
+        }
+    }
+}
+
+impl From<WebError> for ApiError {
+    fn from(e: WebError) -> ApiError {
+        match e {
+            WebError::Refused(m) => ApiError::new(409, m),
+            e => ApiError::new(500, lab::error::chain(&e)),
+        }
+    }
+}
+
+impl From<LabError> for ApiError {
+    fn from(e: LabError) -> ApiError {
+        match e {
+            LabError::Engine(_) => ApiError::new(422, lab::error::chain(&e)),
+            e => ApiError::new(500, lab::error::chain(&e)),
+        }
+    }
+}
+
+type ApiResult<T> = std::result::Result<T, ApiError>;
+
+/// A participant's session.
+pub(crate) enum Slot {
+    /// Joined, not begun (welcome and consent not done yet).
+    NotStarted,
+    /// Open: the recorder and the trial on the page.
+    Live(Box<Live>),
+    /// Complete or out of time.
+    Finished(Box<SessionManifest>),
+}
+
+pub(crate) struct Live {
+    rec: Box<Recorder>,
+    pending: Option<Pending>,
+    /// The last logged trial's index and answer (a repeated post of it is acknowledged).
+    last: Option<(u32, Answer)>,
+}
+
+struct Pending {
+    trial: Trial,
+    /// When the page last asked for it: it cannot have played the stimuli for longer.
+    /// `None` for a trial this process never served (the page had it from a server that
+    /// was restarted since): then only the page's own account of the time counts.
+    served: Option<Instant>,
+    /// The clips at the arrangement's first and second position.
+    clips: [Arc<Vec<u8>>; 2],
+    encoding: Option<StimulusEncoding>,
+    clip_s: f64,
+}
+
+/// What the page checked before the participant could join, and reports when the session
+/// begins.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Environment {
+    /// WebGL2 is available.
+    pub webgl2: bool,
+    /// The WebGL renderer string.
+    pub webgl_renderer: String,
+    /// `navigator.userAgent`.
+    pub user_agent: String,
+    /// `screen.width`, `screen.height`.
+    pub screen_px: [u32; 2],
+    /// `innerWidth`, `innerHeight`.
+    pub window_px: [u32; 2],
+    /// `devicePixelRatio`.
+    pub device_pixel_ratio: f64,
+    /// Refresh rate measured from `requestAnimationFrame`, Hz.
+    pub refresh_hz: f64,
+    /// In fullscreen.
+    pub fullscreen: bool,
+}
+
+/// What the browser must offer before a participant may join (an environment check before
+/// consent).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Requirements {
+    /// Smallest window, CSS pixels.
+    pub min_window_px: [u32; 2],
+    /// Lowest refresh rate, Hz.
+    pub min_refresh_hz: f64,
+    /// The study is shown in fullscreen.
+    pub fullscreen: bool,
+}
+
+impl Requirements {
+    /// What a study's `[crowd]` settings ask of the browser.
+    pub fn of(crowd: &CrowdSettings) -> Requirements {
+        Requirements {
+            min_window_px: crowd.min_window_px,
+            min_refresh_hz: crowd.min_refresh_hz,
+            fullscreen: crowd.fullscreen,
+        }
+    }
+
+    /// What `env` lacks, one sentence each; empty when it will do.
+    pub fn unmet(&self, env: &Environment) -> Vec<String> {
+        let mut out = Vec::new();
+        if !env.webgl2 {
+            out.push("the browser offers no WebGL2 (3-D graphics)".to_string());
+        }
+        let [w, h] = self.min_window_px;
+        if env.window_px[0] < w || env.window_px[1] < h {
+            out.push(format!(
+                "the window is {}×{}; the study needs at least {w}×{h}",
+                env.window_px[0], env.window_px[1]
+            ));
+        }
+        if !env.refresh_hz.is_finite() || env.refresh_hz > 1000.0 {
+            out.push("the page measured no refresh rate".to_string());
+        } else if env.refresh_hz < self.min_refresh_hz {
+            out.push(format!(
+                "the display refreshes at {:.0} Hz; the study needs at least {:.0} Hz",
+                env.refresh_hz, self.min_refresh_hz
+            ));
+        }
+        if self.fullscreen && !env.fullscreen {
+            out.push("the study runs in fullscreen".to_string());
+        }
+        out
+    }
+}
+
+/// `POST .../begin`: the welcome screen's fields, consent and the measured environment.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BeginRequest {
+    /// The study's subject fields.
+    pub fields: BTreeMap<String, String>,
+    /// "I agree to take part" ticked.
+    pub consent: bool,
+    /// The browser.
+    pub environment: Environment,
+}
+
+/// `POST .../answer`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AnswerRequest {
+    /// The trial's index.
+    pub index: u32,
+    /// The answer.
+    pub answer: Answer,
+    /// Replays used.
+    pub replays: u32,
+    /// From the end of the presentation to the answer, ms.
+    pub response_time_ms: u64,
+    /// How long the page showed the stimuli before the answer, ms.
+    pub played_ms: f64,
+    /// The `requestAnimationFrame` intervals of the trial, ms.
+    pub intervals: Vec<f64>,
+    /// What each frame showed (`both`, `a`, `grey`, `answer`, ...).
+    pub phases: Vec<String>,
+    /// The page was hidden while the stimuli played.
+    pub hidden: bool,
+    /// The page was in fullscreen when answered.
+    pub fullscreen: bool,
+}
+
+/// The acknowledgement of an answer.
+#[derive(Debug, Clone, Serialize, PartialEq, Eq)]
+pub struct AnswerReply {
+    /// The same answer to the same trial was already logged; nothing was written.
+    pub duplicate: bool,
+    /// Trials answered so far.
+    pub answered: u32,
+}
+
+/// The study, its stimuli, participants and sessions.
+pub struct App {
+    study: StudyFile,
+    out: PathBuf,
+    page: Page,
+    stimuli: Mutex<Box<dyn StimulusSource>>,
+    clips: Mutex<HashMap<String, Arc<Vec<u8>>>>,
+    registry: Mutex<Registry>,
+    limits: Limits,
+    dashboard: Option<String>,
+    joins: Mutex<Bucket>,
+    requirements: Requirements,
+}
+
+fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(PoisonError::into_inner)
+}
+
+/// Reads the built page: every file of `dir` (not below it).
+/// The built page: file name → content type and bytes.
+type Page = HashMap<String, (&'static str, Arc<Vec<u8>>)>;
+
+fn read_page(dir: &Path) -> Result<Page> {
+    if !dir.join("index.html").is_file() {
+        return Err(WebError::Refused(format!(
+            "{}: the study page is not built (no index.html); run scripts/build-page",
+            dir.display()
+        )));
+    }
+    let mut page = HashMap::new();
+    for entry in std::fs::read_dir(dir).map_err(io(dir.display().to_string()))? {
+        let entry = entry.map_err(io(dir.display().to_string()))?;
+        let path = entry.path();
+        if !path.is_file() {
+            continue;
+        }
+        let name = entry.file_name().to_string_lossy().into_owned();
+        let kind = match path.extension().and_then(|e| e.to_str()) {
+            Some("html") => "text/html; charset=utf-8",
+            Some("js") => "text/javascript; charset=utf-8",
+            Some("css") => "text/css; charset=utf-8",
+            Some("map" | "json") => "application/json",
+            _ => continue,
+        };
+        let bytes = std::fs::read(&path).map_err(io(path.display().to_string()))?;
+        page.insert(name, (kind, Arc::new(bytes)));
+    }
+    Ok(page)
+}
+
+/// The presentation of one trial as the window schedules it (`study/src/gui/flow.rs`), ms:
+/// side by side `playback_count` plays; sequential first, grey, second per play; DSCQS A,
+/// grey, B, grey, A, grey, B.
+pub fn presentation_ms(study: &StudyDefinition, arrangement: Arrangement, clip_s: f64) -> f64 {
+    let p = &study.presentation;
+    let clip = clip_s * 1e3;
+    let grey = p.grey_ms as f64;
+    let plays = f64::from(p.playback_count.max(1));
+    match arrangement {
+        Arrangement::SideBySide => plays * clip,
+        Arrangement::Sequential => plays * 2.0 * clip + (2.0 * plays - 1.0) * grey,
+        Arrangement::Abab => 4.0 * clip + 3.0 * grey,
+    }
+}
+
+/// The first position of an arrangement (left, first, A).
+fn first_position(a: Arrangement) -> Position {
+    match a {
+        Arrangement::SideBySide => Position::Left,
+        Arrangement::Sequential => Position::First,
+        Arrangement::Abab => Position::A,
+    }
+}
+
+impl App {
+    /// Loads the study, checks every stimulus its plan can show, opens the results
+    /// directory (created on first use; a later run continues it) and the participants.
+    ///
+    /// # Errors
+    /// As [`crate::start`].
+    pub fn open(options: &ServeOptions) -> Result<App> {
+        let page = read_page(&options.page)?;
+        let study = StudyFile::load(&options.study)?;
+        lab::preflight::verify(&study, &|_, _| {})?;
+        for note in lab::results_dir::open_for_subjects(&options.output, &study, false)? {
+            eprintln!("{note}");
+        }
+        let registry = Registry::open(&options.output)?;
+        let stimuli = lab::source::open(&study)?;
+        Ok(App {
+            out: options.output.clone(),
+            page,
+            stimuli: Mutex::new(stimuli),
+            clips: Mutex::default(),
+            registry: Mutex::new(registry),
+            limits: options.limits,
+            dashboard: options.dashboard_token.clone(),
+            joins: Mutex::new(Bucket::new(options.limits.join_burst)),
+            requirements: Requirements::of(&study.definition.crowd),
+            study,
+        })
+    }
+
+    /// The study.
+    pub fn definition(&self) -> &StudyDefinition {
+        &self.study.definition
+    }
+
+    /// The results directory.
+    pub fn output(&self) -> &Path {
+        &self.out
+    }
+
+    /// The limits.
+    pub fn limits(&self) -> &Limits {
+        &self.limits
+    }
+
+    /// A file of the built page: content type and bytes.
+    pub fn page_file(&self, name: &str) -> Option<(&'static str, Arc<Vec<u8>>)> {
+        self.page.get(name).map(|(k, b)| (*k, Arc::clone(b)))
+    }
+
+    /// Whether `token` is the dashboard's (compared in constant time).
+    pub fn dashboard_allows(&self, token: &str) -> bool {
+        self.dashboard.as_ref().is_some_and(|want| {
+            want.len() == token.len()
+                && want
+                    .bytes()
+                    .zip(token.bytes())
+                    .fold(0u8, |acc, (a, b)| acc | (a ^ b))
+                    == 0
+        })
+    }
+
+    /// What the page shows before anyone joins: the title and what the browser must offer.
+    pub fn public_info(&self) -> serde_json::Value {
+        serde_json::json!({
+            "title": self.definition().title(),
+            "requirements": self.requirements,
+        })
+    }
+
+    /// A new participant from the page's URL parameters, once the environment check passed;
+    /// returns the subject id and the token.
+    ///
+    /// # Errors
+    /// 429 over the join rate, 400 bad ids or an environment that fails the check, 409 an id
+    /// that already took part, 503 when the study is full.
+    pub fn join(
+        &self,
+        params: &BTreeMap<String, String>,
+        env: &Environment,
+    ) -> ApiResult<(String, String)> {
+        if !lock(&self.joins).take(self.limits.join_rate, self.limits.join_burst) {
+            return Err(ApiError::new(
+                429,
+                "too many new participants at once; try again in a moment",
+            ));
+        }
+        let unmet = self.requirements.unmet(env);
+        if !unmet.is_empty() {
+            return Err(ApiError::new(
+                400,
+                format!("this browser cannot run the study: {}", unmet.join("; ")),
+            ));
+        }
+        let who = identity(params).map_err(|e| ApiError::new(400, e.to_string()))?;
+        let mut reg = lock(&self.registry);
+        let crowd = &self.definition().crowd;
+        let full = || {
+            ApiError::new(
+                503,
+                "the study has all the participants it needs; thank you for your interest",
+            )
+        };
+        if reg.all().len() >= self.limits.max_participants {
+            return Err(full());
+        }
+        // Quotas: the group with the fewest participants so far takes the next one, so
+        // every group gets its share; a group (or, without groups, the study) at its quota
+        // takes no more.
+        let group = if let Some(n) = crowd.groups {
+            let mut counts = vec![0u32; n as usize];
+            for p in reg.all() {
+                if let Some(c) = p.group.and_then(|g| counts.get_mut(g as usize)) {
+                    *c += 1;
+                }
+            }
+            let (g, count) = counts
+                .iter()
+                .enumerate()
+                .min_by_key(|(_, c)| **c)
+                .map_or((0, 0), |(g, c)| (g as u32, *c));
+            if crowd.quota.is_some_and(|q| count >= q) {
+                return Err(full());
+            }
+            Some(g)
+        } else if crowd.quota.is_some_and(|q| reg.all().len() >= q as usize) {
+            return Err(full());
+        } else {
+            None
+        };
+        let (p, token) = reg.join(&who, group)?;
+        Ok((p.subject.clone(), token))
+    }
+
+    /// The participant `subject` if `token` is theirs, within their request rate.
+    ///
+    /// # Errors
+    /// 401 unknown token, 403 a token of another participant, 429 over the rate.
+    pub fn authorize(&self, subject: &str, token: &str) -> ApiResult<Arc<Participant>> {
+        let p = {
+            let reg = lock(&self.registry);
+            match reg.by_token(token) {
+                Some(p) if p.subject == subject => Arc::clone(p),
+                Some(_) => {
+                    return Err(ApiError::new(
+                        403,
+                        "this link belongs to another participant",
+                    ));
+                }
+                None => return Err(ApiError::new(401, "unknown session link")),
+            }
+        };
+        if !lock(&p.bucket).take(self.limits.participant_rate, self.limits.participant_burst) {
+            return Err(ApiError::new(429, "too many requests; slow down"));
+        }
+        Ok(p)
+    }
+
+    fn session_dir(&self, p: &Participant) -> PathBuf {
+        session::session_dir(&self.out, &p.subject, 1)
+    }
+
+    /// The participant's subject index: their plan group, or else from their id as
+    /// `study run` derives it.
+    fn subject_index(p: &Participant) -> u32 {
+        p.group
+            .unwrap_or_else(|| session::subject_index(&p.subject, 1))
+    }
+
+    fn fresh_manifest(&self, p: &Participant) -> SessionManifest {
+        session::new_manifest(
+            &self.study.definition,
+            SessionOf {
+                study_hash: &self.study.hash,
+                manifest_hash: &self.study.manifest_hash,
+                subject: p.subject.clone(),
+                subject_index: Self::subject_index(p),
+                session: 1,
+                observer_seed: None,
+            },
+        )
+    }
+
+    /// Opens (resuming from disk) the session of `p` if it was begun and is not open.
+    fn ensure_open(&self, p: &Participant, slot: &mut Slot) -> ApiResult<()> {
+        if !matches!(slot, Slot::NotStarted) {
+            return Ok(());
+        }
+        let dir = self.session_dir(p);
+        if dir.exists() {
+            *slot = self.open_session(p, self.fresh_manifest(p))?;
+        }
+        Ok(())
+    }
+
+    fn open_session(&self, p: &Participant, fresh: SessionManifest) -> ApiResult<Slot> {
+        let dir = self.session_dir(p);
+        let index = Self::subject_index(p);
+        Ok(
+            match Recorder::open(&self.study.definition, index, &dir, true, fresh)? {
+                Opened::Finished(m) => Slot::Finished(m),
+                Opened::Ready { recorder, resumed } => {
+                    let last = if resumed > 0 {
+                        let path = dir.join(results::store::TRIALS_FILE);
+                        let t = results::read_trials(&path)
+                            .map_err(|e| ApiError::new(500, e.to_string()))?;
+                        t.records.last().map(|r| (r.trial.index, r.response.answer))
+                    } else {
+                        None
+                    };
+                    Slot::Live(Box::new(Live {
+                        rec: recorder,
+                        pending: None,
+                        last,
+                    }))
+                }
+            },
+        )
+    }
+
+    /// What the page needs for the welcome, trial and end screens of `p`'s session.
+    ///
+    /// # Errors
+    /// The session cannot be resumed from disk.
+    pub fn session_info(&self, p: &Participant) -> ApiResult<serde_json::Value> {
+        let mut slot = lock(&p.slot);
+        self.ensure_open(p, &mut slot)?;
+        let (state, answered) = match &*slot {
+            Slot::NotStarted => ("welcome", 0),
+            Slot::Live(l) => ("running", l.rec.answered()),
+            Slot::Finished(m) => ("finished", m.trials_logged),
+        };
+        drop(slot);
+        let def = self.definition();
+        let scale = &def.scale;
+        let categories: Vec<serde_json::Value> = if scale.kind == ScaleKind::Categorical {
+            texts::categories(scale)
+                .into_iter()
+                .map(|v| {
+                    serde_json::json!({
+                        "value": v,
+                        "text": texts::format_rating(v),
+                        "label": texts::quality_label(scale, v),
+                    })
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
+        let p_settings = &def.presentation;
+        let (planned_kind, planned_n) = planned(def);
+        Ok(serde_json::json!({
+            "subject": p.subject,
+            "title": def.title(),
+            "protocol": def.protocol,
+            "instructions": def.session.instructions.clone()
+                .unwrap_or_else(|| texts::default_instructions(def)),
+            "consent": def.session.consent,
+            "fields": def.session.subject_fields,
+            "scale": {
+                "kind": scale.kind,
+                "min": scale.min,
+                "max": scale.max,
+                "step": scale.step,
+                "categories": categories,
+                "bt500": texts::QUALITY_LABELS,
+            },
+            "presentation": {
+                "playback_count": p_settings.playback_count,
+                "max_replays": p_settings.max_replays,
+                "loop": p_settings.loop_playback,
+                "gap_ms": p_settings.gap_ms,
+                "grey_ms": p_settings.grey_ms,
+                "labels": p_settings.labels,
+            },
+            "afc_question": texts::AFC_QUESTION,
+            "answer_recorded": texts::ANSWER_RECORDED,
+            "planned": { "kind": planned_kind, "n": planned_n },
+            "state": state,
+            "answered": answered,
+            "requirements": self.requirements,
+            "hidden_rule": def.crowd.hidden,
+            "completion": (state == "finished").then(|| self.completion()).flatten(),
+        }))
+    }
+
+    /// Begins `p`'s session: the subject fields, consent and the browser's measurements go
+    /// into its manifest. A session already begun is left as it is.
+    ///
+    /// # Errors
+    /// 400 a missing field or consent, an environment that fails the check; the session
+    /// cannot be created.
+    pub fn begin(&self, p: &Participant, req: &BeginRequest) -> ApiResult<()> {
+        let mut slot = lock(&p.slot);
+        self.ensure_open(p, &mut slot)?;
+        if !matches!(*slot, Slot::NotStarted) {
+            return Ok(());
+        }
+        let def = self.definition();
+        let mut fields = BTreeMap::new();
+        for name in &def.session.subject_fields {
+            let v = req.fields.get(name).map_or("", |v| v.trim());
+            if v.is_empty() || v.len() > 200 || v.chars().any(char::is_control) {
+                return Err(ApiError::new(
+                    400,
+                    format!(
+                        "fill in {} (at most 200 characters)",
+                        name.replace('_', " ")
+                    ),
+                ));
+            }
+            fields.insert(name.clone(), v.to_string());
+        }
+        if let Some(unknown) = req
+            .fields
+            .keys()
+            .find(|k| !def.session.subject_fields.contains(k))
+        {
+            return Err(ApiError::new(
+                400,
+                format!("{unknown:?} is not a field of this study"),
+            ));
+        }
+        if def.session.consent.is_some() {
+            if !req.consent {
+                return Err(ApiError::new(400, "tick “I agree to take part” to begin"));
+            }
+            fields.insert("consent".into(), "given".into());
+        }
+        let env = &req.environment;
+        let unmet = self.requirements.unmet(env);
+        if !unmet.is_empty() {
+            return Err(ApiError::new(
+                400,
+                format!("this browser cannot run the study: {}", unmet.join("; ")),
+            ));
+        }
+        fields.insert("source".into(), p.source.clone());
+        fields.extend(p.ids.clone());
+        let mut fresh = self.fresh_manifest(p);
+        fresh.subject_fields = fields;
+        let dpr = if env.device_pixel_ratio.is_finite() && env.device_pixel_ratio > 0.0 {
+            env.device_pixel_ratio.min(16.0)
+        } else {
+            1.0
+        };
+        fresh.display = Some(DisplayInfo {
+            description: format!("browser: {}", clip_text(&env.webgl_renderer, 200)),
+            width_px: (f64::from(env.window_px[0]) * dpr) as u32,
+            height_px: (f64::from(env.window_px[1]) * dpr) as u32,
+            refresh_hz: env.refresh_hz,
+        });
+        fresh.browser = Some(BrowserInfo {
+            user_agent: clip_text(&env.user_agent, 400),
+            webgl_renderer: clip_text(&env.webgl_renderer, 200),
+            screen_px: env.screen_px,
+            window_px: env.window_px,
+            device_pixel_ratio: dpr,
+            refresh_hz: env.refresh_hz,
+            fullscreen: env.fullscreen,
+            hidden_trials: Vec::new(),
+            windowed_trials: Vec::new(),
+        });
+        *slot = self.open_session(p, fresh)?;
+        Ok(())
+    }
+
+    /// The clip bytes of stimulus `id` (decoded joint positions), made once.
+    fn clip_bytes(&self, id: &str, clip: &motion::Clip) -> Arc<Vec<u8>> {
+        if let Some(b) = lock(&self.clips).get(id) {
+            return Arc::clone(b);
+        }
+        let bytes = Arc::new(clipdata::encode(clip));
+        lock(&self.clips).insert(id.to_string(), Arc::clone(&bytes));
+        bytes
+    }
+
+    /// The pending trial of `p` (asked for again after a reload: the same trial, played from
+    /// the start), or the next one; `{"done": true}` once the session is over.
+    ///
+    /// # Errors
+    /// 409 before the session began; a stimulus or engine error.
+    pub fn trial(&self, p: &Participant) -> ApiResult<serde_json::Value> {
+        let mut slot = lock(&p.slot);
+        self.ensure_open(p, &mut slot)?;
+        let live = match &mut *slot {
+            Slot::NotStarted => return Err(ApiError::new(409, "the session has not begun")),
+            Slot::Finished(m) => return Ok(Self::done_info(m)),
+            Slot::Live(l) => l,
+        };
+        if !self.ensure_pending(live)? {
+            live.rec.finish()?;
+            let m = Box::new(live.rec.manifest().clone());
+            let info = Self::done_info(&m);
+            *slot = Slot::Finished(m);
+            return Ok(info);
+        }
+        let answered = live.rec.answered();
+        let Some(pending) = live.pending.as_mut() else {
+            return Err(ApiError::new(500, "no pending trial"));
+        };
+        pending.served = Some(Instant::now());
+        let t = &pending.trial;
+        let first = first_position(t.arrangement);
+        let labels = self.definition().presentation.labels.as_ref();
+        let slots: Vec<serde_json::Value> = [first, first.other()]
+            .into_iter()
+            .map(|pos| {
+                let label = labels.map(|l| {
+                    if pos == t.reference_position {
+                        l.reference.clone()
+                    } else {
+                        l.test.clone()
+                    }
+                });
+                serde_json::json!({ "position": pos, "label": label })
+            })
+            .collect();
+        Ok(serde_json::json!({
+            "done": false,
+            "index": t.index,
+            "practice": t.block == Block::Familiarization,
+            "arrangement": t.arrangement,
+            "break_before": t.break_before,
+            "slots": slots,
+            "clip_s": pending.clip_s,
+            "presentation_ms": presentation_ms(self.definition(), t.arrangement, pending.clip_s),
+            "answered": answered,
+        }))
+    }
+
+    /// Makes the engine's next trial the pending one, with its clips, unless one is pending;
+    /// false when the session has no next trial.
+    fn ensure_pending(&self, live: &mut Live) -> ApiResult<bool> {
+        if live.pending.is_some() {
+            return Ok(true);
+        }
+        let elapsed = live.rec.elapsed_ms();
+        let Some(trial) = live.rec.next_trial(elapsed)? else {
+            return Ok(false);
+        };
+        let shown = lock(&self.stimuli).stimuli(&trial)?;
+        let lookahead = live.rec.lookahead(live.rec.elapsed_ms());
+        lock(&self.stimuli).prepare(&lookahead);
+        let first = first_position(trial.arrangement);
+        let clip_at = |pos: Position| {
+            if pos == trial.reference_position {
+                self.clip_bytes(&trial.reference, &shown.reference)
+            } else {
+                self.clip_bytes(&trial.stimulus, &shown.test)
+            }
+        };
+        let clips = [clip_at(first), clip_at(first.other())];
+        live.pending = Some(Pending {
+            clip_s: shown.reference.duration_s(),
+            trial,
+            served: None,
+            clips,
+            encoding: shown.encoding,
+        });
+        Ok(true)
+    }
+
+    /// The completion code and where the end screen sends the participant.
+    fn completion(&self) -> Option<serde_json::Value> {
+        let c = &self.definition().crowd;
+        (c.completion_code.is_some() || c.completion_url.is_some())
+            .then(|| serde_json::json!({ "code": c.completion_code, "url": c.completion_url }))
+    }
+
+    fn done_info(m: &SessionManifest) -> serde_json::Value {
+        serde_json::json!({
+            "done": true,
+            "status": match m.status {
+                SessionState::TimeLimit => "time_limit",
+                _ => "complete",
+            },
+            "answered": m.trials_logged,
+        })
+    }
+
+    /// The clip at `slot` (0: left, first or A; 1: the other) of `p`'s pending trial `index`.
+    ///
+    /// # Errors
+    /// 404 when that trial is not pending or the slot is not 0 or 1.
+    pub fn clip(&self, p: &Participant, index: u32, slot_no: usize) -> ApiResult<Arc<Vec<u8>>> {
+        let mut slot = lock(&p.slot);
+        self.ensure_open(p, &mut slot)?;
+        let Slot::Live(live) = &mut *slot else {
+            return Err(ApiError::new(404, "no trial is pending"));
+        };
+        self.ensure_pending(live)?;
+        match &live.pending {
+            Some(pd) if pd.trial.index == index => pd
+                .clips
+                .get(slot_no)
+                .cloned()
+                .ok_or_else(|| ApiError::new(404, "a trial has two clips, 0 and 1")),
+            _ => Err(ApiError::new(404, format!("trial {index} is not pending"))),
+        }
+    }
+
+    /// Logs `req` (fsynced) as the answer to `p`'s pending trial. The same answer posted
+    /// again for the trial last logged is acknowledged as a duplicate and not logged twice.
+    ///
+    /// # Errors
+    /// 409 another trial is pending, or another answer was logged for that index; 422 the
+    /// stimuli have not played yet, the answer does not fit the protocol or scale, or too
+    /// many replays; 500 the row could not be written (the session is reopened from disk).
+    pub fn answer(&self, p: &Participant, req: &AnswerRequest) -> ApiResult<AnswerReply> {
+        let mut slot = lock(&p.slot);
+        self.ensure_open(p, &mut slot)?;
+        let live = match &mut *slot {
+            Slot::NotStarted => return Err(ApiError::new(409, "the session has not begun")),
+            Slot::Finished(m) => return self.repeat_after_end(p, m, req),
+            Slot::Live(l) => l,
+        };
+        if let Some((i, a)) = &live.last
+            && *i == req.index
+        {
+            return if *a == req.answer {
+                Ok(AnswerReply {
+                    duplicate: true,
+                    answered: live.rec.answered(),
+                })
+            } else {
+                Err(ApiError::new(
+                    409,
+                    format!("trial {i} was answered otherwise already"),
+                ))
+            };
+        }
+        // After a restart the trial on the page is the engine's next one again.
+        self.ensure_pending(live)?;
+        let Some(pending) = &live.pending else {
+            return Err(ApiError::new(409, "the session has no trial left"));
+        };
+        if pending.trial.index != req.index {
+            return Err(ApiError::new(
+                409,
+                format!(
+                    "trial {} is not pending (trial {} is)",
+                    req.index, pending.trial.index
+                ),
+            ));
+        }
+        self.check_answer(pending, req)?;
+        let browser = live.rec.manifest().browser.clone();
+        let period_ms = browser.as_ref().map_or(0.0, |b| {
+            if b.refresh_hz > 0.0 {
+                1e3 / b.refresh_hz
+            } else {
+                0.0
+            }
+        });
+        let stats = timing::stats(&req.intervals, period_ms);
+        let response = Response {
+            answer: req.answer,
+            response_time_ms: req.response_time_ms,
+            replays: req.replays,
+            dropped_frames: stats.map_or(0, |s| s.dropped),
+        };
+        let frame_timing = stats.map(|s| FrameTiming {
+            frames_shown: s.frames,
+            interval_sd_ms: s.sd_ms,
+        });
+        let (trial, encoding) = (pending.trial.clone(), pending.encoding.clone());
+        let index = trial.index;
+        let elapsed = live.rec.elapsed_ms();
+        match live
+            .rec
+            .record(trial, response, elapsed, encoding, frame_timing)
+        {
+            Ok(_) => {}
+            Err(e @ LabError::Engine(_)) => return Err(e.into()),
+            Err(e) => {
+                // The engine moved on but the row may not be on disk: reopen from the log.
+                *slot = Slot::NotStarted;
+                return Err(e.into());
+            }
+        }
+        live.pending = None;
+        live.last = Some((index, req.answer));
+        let answered = live.rec.answered();
+        let mut note = Ok(());
+        if frame_timing.is_some() {
+            let phases: Vec<&str> = req.phases.iter().map(String::as_str).collect();
+            note = live
+                .rec
+                .append_frame_intervals(index, &req.intervals, &phases);
+        }
+        let windowed = self.requirements.fullscreen && !req.fullscreen;
+        if (req.hidden || windowed) && browser.is_some() {
+            note = note.and(live.rec.update_manifest(|m| {
+                if let Some(b) = &mut m.browser {
+                    if req.hidden {
+                        b.hidden_trials.push(index);
+                    }
+                    if windowed {
+                        b.windowed_trials.push(index);
+                    }
+                }
+            }));
+        }
+        // The answer is on disk; a frame log or manifest that failed is said, not fatal.
+        if let Err(e) = note {
+            eprintln!("warning: {}: {}", p.subject, lab::error::chain(&e));
+        }
+        Ok(AnswerReply {
+            duplicate: false,
+            answered,
+        })
+    }
+
+    /// After the end only a repeat of a logged answer can come (acknowledged as a
+    /// duplicate); anything else is refused.
+    fn repeat_after_end(
+        &self,
+        p: &Participant,
+        m: &SessionManifest,
+        req: &AnswerRequest,
+    ) -> ApiResult<AnswerReply> {
+        let path = self.session_dir(p).join(results::store::TRIALS_FILE);
+        let t = results::read_trials(&path).map_err(|e| ApiError::new(500, e.to_string()))?;
+        match t.records.iter().find(|r| r.trial.index == req.index) {
+            Some(r) if r.response.answer == req.answer => Ok(AnswerReply {
+                duplicate: true,
+                answered: m.trials_logged,
+            }),
+            _ => Err(ApiError::new(409, "the session is over")),
+        }
+    }
+
+    /// Refuses an answer the pending trial cannot take: before its stimuli played (by the
+    /// server's clock and the page's), more replays than allowed, malformed frame records,
+    /// or a hidden page where the study shows the trial again.
+    fn check_answer(&self, pending: &Pending, req: &AnswerRequest) -> ApiResult<()> {
+        let def = &self.study.definition;
+        let need_ms = presentation_ms(def, pending.trial.arrangement, pending.clip_s);
+        let since_served = pending
+            .served
+            .map_or(f64::INFINITY, |t| t.elapsed().as_secs_f64() * 1e3);
+        // The page cannot have played longer than since it asked for the trial; a little
+        // slack for clocks that tick at slightly different rates.
+        if req.played_ms + 50.0 < need_ms || since_served + 50.0 < need_ms {
+            return Err(ApiError::new(
+                422,
+                format!(
+                    "answered before the stimuli had played ({:.0} ms of {need_ms:.0} ms)",
+                    req.played_ms.min(since_served)
+                ),
+            ));
+        }
+        if def
+            .presentation
+            .max_replays
+            .is_some_and(|m| req.replays > m)
+        {
+            return Err(ApiError::new(422, "more replays than the study allows"));
+        }
+        if req.intervals.len() > MAX_INTERVALS || req.phases.len() > MAX_INTERVALS {
+            return Err(ApiError::new(413, "too many frame intervals"));
+        }
+        if req.intervals.iter().any(|v| !v.is_finite() || *v < 0.0) {
+            return Err(ApiError::new(
+                422,
+                "frame intervals must be finite and not negative",
+            ));
+        }
+        if req
+            .phases
+            .iter()
+            .any(|p| p.len() > 16 || !p.chars().all(|c| c.is_ascii_lowercase()))
+        {
+            return Err(ApiError::new(422, "unknown frame phase"));
+        }
+        if req.hidden && def.crowd.hidden == HiddenRule::Repeat {
+            return Err(ApiError::new(
+                422,
+                "the page was hidden while the stimuli played; the trial is shown again",
+            ));
+        }
+        Ok(())
+    }
+
+    /// Progress per participant and the running mean score per condition, for the
+    /// experimenter.
+    ///
+    /// # Errors
+    /// A session log that cannot be read.
+    pub fn dashboard(&self) -> ApiResult<serde_json::Value> {
+        let participants: Vec<Arc<Participant>> = lock(&self.registry).all().to_vec();
+        let mut rows = Vec::new();
+        let mut scores: BTreeMap<String, (f64, u32)> = BTreeMap::new();
+        for p in &participants {
+            let dir = self.session_dir(p);
+            let (state, manifest) = match &*lock(&p.slot) {
+                Slot::NotStarted if !dir.exists() => ("joined", None),
+                Slot::Live(l) => ("running", Some(l.rec.manifest().clone())),
+                Slot::Finished(m) => ("finished", Some((**m).clone())),
+                Slot::NotStarted => ("begun", None),
+            };
+            let trials = dir.join(results::store::TRIALS_FILE);
+            let records = if trials.exists() {
+                results::read_trials(&trials)
+                    .map_err(|e| ApiError::new(500, e.to_string()))?
+                    .records
+            } else {
+                Vec::new()
+            };
+            let crowd = &self.definition().crowd;
+            let mut gold_failed = 0u32;
+            for r in &records {
+                if crowd.gold_verdict(r).is_some_and(|(_, passed)| !passed) {
+                    gold_failed += 1;
+                }
+                if r.trial.block != Block::Familiarization && r.protocol != Protocol::Staircase {
+                    let e = scores.entry(r.trial.condition.clone()).or_insert((0.0, 0));
+                    e.0 += r.outcome.score;
+                    e.1 += 1;
+                }
+            }
+            let browser = manifest.as_ref().and_then(|m| m.browser.clone());
+            rows.push(serde_json::json!({
+                "subject": p.subject,
+                "source": p.source,
+                "state": state,
+                "answered": records.len(),
+                "gold_failed": gold_failed,
+                "excluded": gold_failed > crowd.max_gold_failures,
+                "hidden_trials": browser.as_ref().map_or(0, |b| b.hidden_trials.len()),
+                "windowed_trials": browser.as_ref().map_or(0, |b| b.windowed_trials.len()),
+                "refresh_hz": browser.as_ref().map(|b| b.refresh_hz),
+            }));
+        }
+        let conditions: Vec<serde_json::Value> = scores
+            .into_iter()
+            .map(|(c, (sum, n))| serde_json::json!({ "condition": c, "n": n, "mean": sum / f64::from(n) }))
+            .collect();
+        Ok(serde_json::json!({
+            "study": self.definition().name,
+            "protocol": self.definition().protocol,
+            "participants": rows,
+            "conditions": conditions,
+        }))
+    }
+
+    /// Marks every open session interrupted (a stop on purpose; each resumes on the next
+    /// request after a restart).
+    ///
+    /// # Errors
+    /// A manifest that cannot be written (the others are still marked).
+    pub fn interrupt_all(&self) -> Result<()> {
+        let participants: Vec<Arc<Participant>> = lock(&self.registry).all().to_vec();
+        let mut first = Ok(());
+        for p in participants {
+            if let Slot::Live(l) = &mut *lock(&p.slot)
+                && let Err(e) = l.rec.interrupt()
+                && first.is_ok()
+            {
+                first = Err(e.into());
+            }
+        }
+        first
+    }
+}
+
+/// At most `n` characters of `s`, without control characters.
+fn clip_text(s: &str, n: usize) -> String {
+    s.chars().filter(|c| !c.is_control()).take(n).collect()
+}
+
+/// How many trials the session has, as the subject can be told (as the window says it).
+fn planned(study: &StudyDefinition) -> (&'static str, Option<u32>) {
+    match study.protocol {
+        Protocol::Mos | Protocol::Dscqs => (
+            "exactly",
+            Some(
+                (study.familiarization.len()
+                    + study.conditions.len()
+                    + study.session.hidden_repeats as usize) as u32,
+            ),
+        ),
+        Protocol::Staircase => study
+            .staircase
+            .as_ref()
+            .and_then(|s| {
+                s.tracks
+                    .iter()
+                    .map(|t| t.settings.max_trials)
+                    .sum::<Option<u32>>()
+            })
+            .map_or(("unknown", None), |n| ("at_most", Some(n))),
+    }
+}

@@ -1,0 +1,160 @@
+//! A participant without a browser: a blocking HTTP/1.1 client of the page's API over one
+//! kept-alive connection, for the load benchmark and the API tests (loopback only).
+
+use std::collections::BTreeMap;
+use std::io::{BufRead as _, BufReader, Read as _, Write as _};
+use std::net::{SocketAddr, TcpStream};
+
+use serde_json::Value;
+
+/// One HTTP reply.
+#[derive(Debug, Clone)]
+pub struct Reply {
+    /// Status code.
+    pub status: u16,
+    /// Body.
+    pub body: Vec<u8>,
+}
+
+impl Reply {
+    /// The body as JSON (`Null` when it is not).
+    pub fn json(&self) -> Value {
+        serde_json::from_slice(&self.body).unwrap_or(Value::Null)
+    }
+}
+
+/// A connection to a server, with the participant's subject and token once joined.
+pub struct Client {
+    addr: SocketAddr,
+    conn: Option<BufReader<TcpStream>>,
+    /// Subject id.
+    pub subject: String,
+    /// Session token.
+    pub token: String,
+}
+
+impl Client {
+    /// A client of the server at `addr` (connects on the first request).
+    pub fn new(addr: SocketAddr) -> Client {
+        Client {
+            addr,
+            conn: None,
+            subject: String::new(),
+            token: String::new(),
+        }
+    }
+
+    /// Sends one request (reconnecting once if the kept-alive connection was closed).
+    ///
+    /// # Errors
+    /// The server cannot be reached or sent no valid reply.
+    pub fn request(
+        &mut self,
+        method: &str,
+        path: &str,
+        body: Option<&Value>,
+    ) -> std::io::Result<Reply> {
+        if let Ok(r) = self.try_request(method, path, body) {
+            return Ok(r);
+        }
+        self.conn = None;
+        self.try_request(method, path, body)
+    }
+
+    fn try_request(
+        &mut self,
+        method: &str,
+        path: &str,
+        body: Option<&Value>,
+    ) -> std::io::Result<Reply> {
+        if self.conn.is_none() {
+            let s = TcpStream::connect(self.addr)?;
+            s.set_nodelay(true)?;
+            self.conn = Some(BufReader::new(s));
+        }
+        let Some(conn) = self.conn.as_mut() else {
+            return Err(std::io::Error::other("no connection"));
+        };
+        let body = body.map(Value::to_string).unwrap_or_default();
+        let auth = if self.token.is_empty() {
+            String::new()
+        } else {
+            format!("Authorization: Bearer {}\r\n", self.token)
+        };
+        let head = format!(
+            "{method} {path} HTTP/1.1\r\nHost: {}\r\n{auth}Content-Type: application/json\r\nContent-Length: {}\r\n\r\n",
+            self.addr,
+            body.len()
+        );
+        let s = conn.get_mut();
+        s.write_all(head.as_bytes())?;
+        s.write_all(body.as_bytes())?;
+        let mut line = String::new();
+        if conn.read_line(&mut line)? == 0 {
+            return Err(std::io::Error::other("connection closed"));
+        }
+        let status: u16 = line
+            .split(' ')
+            .nth(1)
+            .and_then(|c| c.parse().ok())
+            .ok_or_else(|| std::io::Error::other(format!("bad status line {line:?}")))?;
+        let mut len = 0usize;
+        let mut close = false;
+        loop {
+            line.clear();
+            conn.read_line(&mut line)?;
+            let l = line.trim_end();
+            if l.is_empty() {
+                break;
+            }
+            if let Some((k, v)) = l.split_once(':') {
+                let k = k.to_ascii_lowercase();
+                if k == "content-length" {
+                    len = v.trim().parse().unwrap_or(0);
+                } else if k == "connection" && v.trim().eq_ignore_ascii_case("close") {
+                    close = true;
+                }
+            }
+        }
+        let mut body = vec![0u8; len];
+        conn.read_exact(&mut body)?;
+        if close {
+            self.conn = None;
+        }
+        Ok(Reply { status, body })
+    }
+
+    /// Joins with URL parameters `params` and a browser that passes the default check.
+    ///
+    /// # Errors
+    /// The request failed; the reply is returned whatever its status.
+    pub fn join(&mut self, params: &BTreeMap<String, String>) -> std::io::Result<Reply> {
+        let body = serde_json::json!({ "params": params, "environment": environment() });
+        let r = self.request("POST", "/api/join", Some(&body))?;
+        if r.status == 200 {
+            let v = r.json();
+            self.subject = v["subject"].as_str().unwrap_or_default().to_string();
+            self.token = v["token"].as_str().unwrap_or_default().to_string();
+        }
+        Ok(r)
+    }
+
+    /// `path` under this participant's API (`/api/s/{subject}/{path}`).
+    pub fn session_path(&self, path: &str) -> String {
+        format!("/api/s/{}/{path}", self.subject)
+    }
+}
+
+/// The environment of a 60 Hz desktop browser, as a page reports it.
+pub fn environment() -> Value {
+    serde_json::json!({
+        "webgl2": true,
+        "webgl_renderer": "test",
+        "user_agent": "web::client",
+        "screen_px": [1920, 1080],
+        "window_px": [1280, 800],
+        "device_pixel_ratio": 1.0,
+        "refresh_hz": 60.0,
+        "fullscreen": false,
+    })
+}

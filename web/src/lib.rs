@@ -1,0 +1,178 @@
+//! `study serve`: a study run in participants' browsers.
+//!
+//! The protocol engine and the session recorder stay on the server, exactly as the study
+//! window uses them ([`lab::session::Recorder`], [`lab::source::StimulusSource`]): the page
+//! asks for the next trial, downloads its two clips as joint positions, plays them, and posts
+//! the answer; the answer is appended to the session's `trials.csv` and fsynced before the
+//! server acknowledges it. No rule of any protocol runs in the browser.
+//!
+//! - [`ServeOptions`], [`serve`] (blocking, until SIGINT/SIGTERM) and [`start`] (in-process,
+//!   for tests and the load benchmark).
+//! - Participants ([`participants`]): ids from the crowd platform's URL (Prolific, MTurk) or
+//!   generated, one session each, an unguessable token (32 bytes from the OS) whose SHA-256
+//!   is appended to `participants.csv` and fsynced before the participant gets the link.
+//! - Sessions ([`app`]): opened on first use with `resume`, so a server killed at any point
+//!   continues every session as `study run --resume` does; a repeated answer to the same
+//!   trial index is acknowledged once and logged once.
+//! - Stimuli ([`clipdata`]): decoded joint positions of the pending trial's two clips, by slot;
+//!   the server resolves the manifest id, so no request names a path (or, in a blind design,
+//!   which slot holds the reference).
+//! - Limits ([`limits`]): request body size, requests per second per participant and joins
+//!   per second; the experimenter's dashboard needs the token given on the command line.
+//!
+//! The page itself (`web/page/`, three.js built by `scripts/build-page`) is read from
+//! [`ServeOptions::page`] at start-up. Running behind a TLS reverse proxy: `docs/serve.md`.
+
+pub mod app;
+pub mod client;
+pub mod clipdata;
+mod http;
+pub mod limits;
+pub mod participants;
+pub mod timing;
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::sync::Arc;
+
+pub use app::App;
+pub use limits::Limits;
+
+/// Why the server could not start or stopped.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum WebError {
+    /// The study, its stimuli or its results folder.
+    #[error(transparent)]
+    Lab(#[from] lab::LabError),
+    /// A file or socket.
+    #[error("{what}: {cause}")]
+    Io {
+        /// What was being done.
+        what: String,
+        /// The OS error.
+        cause: std::io::Error,
+    },
+    /// A request that cannot be carried out as asked, with the reason.
+    #[error("{0}")]
+    Refused(String),
+}
+
+/// The crate's result type.
+pub type Result<T, E = WebError> = std::result::Result<T, E>;
+
+fn io(what: impl Into<String>) -> impl FnOnce(std::io::Error) -> WebError {
+    let what = what.into();
+    move |cause| WebError::Io { what, cause }
+}
+
+/// What `study serve` runs.
+#[derive(Debug, Clone)]
+pub struct ServeOptions {
+    /// The study file.
+    pub study: PathBuf,
+    /// The results directory (created on first use; later runs continue its sessions).
+    pub output: PathBuf,
+    /// Address to listen on (`127.0.0.1:8080` unless told otherwise).
+    pub bind: SocketAddr,
+    /// The built page (`target/page`, made by `scripts/build-page`).
+    pub page: PathBuf,
+    /// Token of the experimenter's dashboard; `None`: no dashboard.
+    pub dashboard_token: Option<String>,
+    /// Request limits.
+    pub limits: Limits,
+}
+
+/// A running server (from [`start`]).
+pub struct Server {
+    /// The address it listens on.
+    pub addr: SocketAddr,
+    app: Arc<App>,
+    shutdown: Option<tokio::sync::oneshot::Sender<()>>,
+    task: tokio::task::JoinHandle<std::io::Result<()>>,
+}
+
+impl Server {
+    /// The shared state (sessions, participants).
+    pub fn app(&self) -> &Arc<App> {
+        &self.app
+    }
+
+    /// Stops accepting requests, lets those in flight finish, and marks every open session
+    /// interrupted (resumable).
+    ///
+    /// # Errors
+    /// The listener failed, or a manifest could not be written.
+    pub async fn stop(mut self) -> Result<()> {
+        if let Some(tx) = self.shutdown.take() {
+            let _ = tx.send(());
+        }
+        match self.task.await {
+            Ok(r) => r.map_err(io("serving"))?,
+            Err(e) => return Err(WebError::Refused(format!("the server task failed: {e}"))),
+        }
+        let app = Arc::clone(&self.app);
+        tokio::task::spawn_blocking(move || app.interrupt_all())
+            .await
+            .map_err(|e| WebError::Refused(format!("the server task failed: {e}")))?
+    }
+}
+
+/// Loads the study, checks every stimulus, opens the results directory and listens on
+/// `options.bind` (port 0: any free port, see [`Server::addr`]).
+///
+/// # Errors
+/// A bad study file, a stimulus problem, a results folder of another study, a missing page,
+/// or an address that cannot be bound.
+pub async fn start(options: ServeOptions) -> Result<Server> {
+    let opts = options.clone();
+    let app = tokio::task::spawn_blocking(move || App::open(&opts))
+        .await
+        .map_err(|e| WebError::Refused(format!("loading the study failed: {e}")))??;
+    let app = Arc::new(app);
+    let listener = tokio::net::TcpListener::bind(options.bind)
+        .await
+        .map_err(io(format!("listening on {}", options.bind)))?;
+    let addr = listener.local_addr().map_err(io("listening"))?;
+    let (tx, rx) = tokio::sync::oneshot::channel::<()>();
+    let router = http::router(Arc::clone(&app));
+    let task = tokio::spawn(async move {
+        axum::serve(
+            listener,
+            router.into_make_service_with_connect_info::<SocketAddr>(),
+        )
+        .with_graceful_shutdown(async move {
+            let _ = rx.await;
+        })
+        .await
+    });
+    Ok(Server {
+        addr,
+        app,
+        shutdown: Some(tx),
+        task,
+    })
+}
+
+/// Runs the server until SIGINT or SIGTERM, then marks the open sessions interrupted.
+/// `ready` is told the address once it listens.
+///
+/// # Errors
+/// As [`start`]; a runtime that cannot be built.
+pub fn serve(options: ServeOptions, ready: impl FnOnce(&App, SocketAddr)) -> Result<()> {
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .map_err(io("starting the async runtime"))?;
+    runtime.block_on(async move {
+        let server = start(options).await?;
+        ready(&server.app, server.addr);
+        let mut term = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
+            .map_err(io("installing the SIGTERM handler"))?;
+        tokio::select! {
+            r = tokio::signal::ctrl_c() => r.map_err(io("waiting for SIGINT"))?,
+            _ = term.recv() => {}
+        }
+        server.stop().await
+    })
+}

@@ -1,0 +1,441 @@
+//! Who takes part: one session per participant, found by an unguessable token.
+//!
+//! A participant's id comes from the crowd platform's URL (Prolific's `PROLIFIC_PID`, with
+//! `STUDY_ID` and `SESSION_ID`; MTurk's `workerId`, with `assignmentId` and `hitId`) or is
+//! generated. Each new participant gets a token of 32 bytes from the OS random source; only
+//! its SHA-256 is kept, in `participants.csv` (one row per participant, appended and fsynced
+//! before the token leaves the server), so a restarted server knows every link it gave out
+//! and the results folder holds no usable token.
+
+use std::collections::{BTreeMap, HashMap};
+use std::fs::{File, OpenOptions};
+use std::io::{Read as _, Seek as _, Write as _};
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+
+use sha2::{Digest as _, Sha256};
+
+use crate::app::Slot;
+use crate::limits::Bucket;
+use crate::{Result, WebError, io};
+
+/// Header of `participants.csv` (version 1).
+pub const HEADER: &str = "subject,token_sha256,source,created_ms,group,ids";
+
+/// Largest `participants.csv` read, bytes.
+const MAX_FILE_BYTES: u64 = 256 << 20;
+
+/// The URL parameters that name a participant, and the manifest field each is kept as.
+/// The first of each platform names the subject.
+const PLATFORM_IDS: &[(&str, &str, &str)] = &[
+    ("prolific", "PROLIFIC_PID", ""),
+    ("prolific", "STUDY_ID", "prolific_study_id"),
+    ("prolific", "SESSION_ID", "prolific_session_id"),
+    ("mturk", "workerId", ""),
+    ("mturk", "assignmentId", "mturk_assignment_id"),
+    ("mturk", "hitId", "mturk_hit_id"),
+];
+
+/// One participant.
+pub struct Participant {
+    /// Subject id (the platform's id, or generated).
+    pub subject: String,
+    /// Where the id came from: `prolific`, `mturk` or `generated`.
+    pub source: String,
+    /// The platform's other ids, as session manifest fields (`prolific_study_id`, ...).
+    pub ids: BTreeMap<String, String>,
+    /// The plan group the participant was given (`[crowd] groups`), which is their subject
+    /// index; `None`: the index derives from the subject id.
+    pub group: Option<u32>,
+    /// The session.
+    pub(crate) slot: Mutex<Slot>,
+    /// Requests allowed.
+    pub(crate) bucket: Mutex<Bucket>,
+}
+
+/// Who a join request says the participant is.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Identity {
+    /// Subject id, when a platform names one.
+    pub subject: Option<String>,
+    /// `prolific`, `mturk` or `generated`.
+    pub source: String,
+    /// Other ids to keep.
+    pub ids: BTreeMap<String, String>,
+}
+
+/// Whether `v` can be an id: 1-64 letters, digits, `-` or `_`.
+fn id_ok(v: &str) -> bool {
+    !v.is_empty()
+        && v.len() <= 64
+        && v.chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
+}
+
+/// The identity a page's URL parameters give.
+///
+/// # Errors
+/// An id that is not 1-64 letters, digits, `-` or `_`; ids of two platforms at once; an
+/// MTurk preview (`assignmentId=ASSIGNMENT_ID_NOT_AVAILABLE`: the HIT is not accepted yet).
+pub fn identity(params: &BTreeMap<String, String>) -> Result<Identity> {
+    let mut source: Option<&str> = None;
+    let mut subject = None;
+    let mut ids = BTreeMap::new();
+    for (platform, key, field) in PLATFORM_IDS {
+        let Some(v) = params.get(*key) else { continue };
+        if *key == "assignmentId" && v == "ASSIGNMENT_ID_NOT_AVAILABLE" {
+            return Err(WebError::Refused(
+                "this is a preview of the task: accept the HIT to take part".into(),
+            ));
+        }
+        if !id_ok(v) {
+            return Err(WebError::Refused(format!(
+                "URL parameter {key}: expected 1-64 letters, digits, '-' or '_'"
+            )));
+        }
+        if source.is_some_and(|s| s != *platform) {
+            return Err(WebError::Refused(
+                "the URL names participants of two platforms".into(),
+            ));
+        }
+        source = Some(platform);
+        if field.is_empty() {
+            subject = Some(v.clone());
+        } else {
+            ids.insert((*field).to_string(), v.clone());
+        }
+    }
+    if source.is_some() && subject.is_none() {
+        return Err(WebError::Refused(
+            "the URL gives a platform's study ids without the participant's id".into(),
+        ));
+    }
+    Ok(Identity {
+        subject,
+        source: source.unwrap_or("generated").to_string(),
+        ids,
+    })
+}
+
+/// A new token: 32 bytes from the OS random source, as 64 hex digits.
+///
+/// # Errors
+/// The OS random source failed.
+pub fn new_token() -> Result<String> {
+    let mut b = [0u8; 32];
+    getrandom::fill(&mut b)
+        .map_err(|e| WebError::Refused(format!("the OS random source failed: {e}")))?;
+    Ok(hex(&b))
+}
+
+/// A token's SHA-256.
+pub fn token_hash(token: &str) -> [u8; 32] {
+    Sha256::digest(token.as_bytes()).into()
+}
+
+fn hex(b: &[u8]) -> String {
+    use std::fmt::Write as _;
+    b.iter()
+        .fold(String::with_capacity(b.len() * 2), |mut s, x| {
+            let _ = write!(s, "{x:02x}");
+            s
+        })
+}
+
+fn unhex(s: &str) -> Option<[u8; 32]> {
+    if s.len() != 64 {
+        return None;
+    }
+    let mut out = [0u8; 32];
+    for (i, o) in out.iter_mut().enumerate() {
+        *o = u8::from_str_radix(s.get(2 * i..2 * i + 2)?, 16).ok()?;
+    }
+    Some(out)
+}
+
+/// Every participant, by token hash and by subject, with the file they are appended to.
+pub struct Registry {
+    by_hash: HashMap<[u8; 32], Arc<Participant>>,
+    by_subject: HashMap<String, Arc<Participant>>,
+    order: Vec<Arc<Participant>>,
+    file: File,
+    path: PathBuf,
+}
+
+impl Registry {
+    /// Opens (or creates) `participants.csv` in `dir`, reading every participant in it. A
+    /// torn last row (a crash during its write: that participant never got a link) is cut
+    /// off.
+    ///
+    /// # Errors
+    /// The file cannot be read or written, or a complete row is malformed (named by line).
+    pub fn open(dir: &Path) -> Result<Registry> {
+        let path = dir.join(lab::results_dir::PARTICIPANTS_FILE);
+        let mut file = OpenOptions::new()
+            .read(true)
+            .append(true)
+            .create(true)
+            .open(&path)
+            .map_err(io(path.display().to_string()))?;
+        let len = file
+            .metadata()
+            .map_err(io(path.display().to_string()))?
+            .len();
+        if len > MAX_FILE_BYTES {
+            return Err(WebError::Refused(format!(
+                "{}: {len} bytes is over the {MAX_FILE_BYTES}-byte limit",
+                path.display()
+            )));
+        }
+        let mut text = String::new();
+        file.read_to_string(&mut text)
+            .map_err(io(path.display().to_string()))?;
+        let mut reg = Registry {
+            by_hash: HashMap::new(),
+            by_subject: HashMap::new(),
+            order: Vec::new(),
+            file,
+            path,
+        };
+        if text.is_empty() {
+            reg.append(&format!("{HEADER}\n"))?;
+            return Ok(reg);
+        }
+        let complete = text.rfind('\n').map_or(0, |i| i + 1);
+        if complete < text.len() {
+            eprintln!(
+                "warning: {}: a torn last row ({} bytes) was cut off; that participant never got a link",
+                reg.path.display(),
+                text.len() - complete
+            );
+            reg.file
+                .set_len(complete as u64)
+                .and_then(|()| reg.file.sync_all())
+                .map_err(io(reg.path.display().to_string()))?;
+            reg.file
+                .seek(std::io::SeekFrom::End(0))
+                .map_err(io(reg.path.display().to_string()))?;
+        }
+        for (i, line) in text[..complete].lines().enumerate() {
+            let at = || format!("{} line {}", reg.path.display(), i + 1);
+            if i == 0 {
+                if line != HEADER {
+                    return Err(WebError::Refused(format!(
+                        "{}: expected the header {HEADER:?}",
+                        at()
+                    )));
+                }
+                continue;
+            }
+            let (p, hash) =
+                parse_row(line).map_err(|e| WebError::Refused(format!("{}: {e}", at())))?;
+            reg.insert(hash, p);
+        }
+        Ok(reg)
+    }
+
+    fn insert(&mut self, hash: [u8; 32], p: Participant) -> Arc<Participant> {
+        let p = Arc::new(p);
+        self.by_hash.insert(hash, Arc::clone(&p));
+        self.by_subject.insert(p.subject.clone(), Arc::clone(&p));
+        self.order.push(Arc::clone(&p));
+        p
+    }
+
+    fn append(&mut self, text: &str) -> Result<()> {
+        self.file
+            .write_all(text.as_bytes())
+            .and_then(|()| self.file.sync_data())
+            .map_err(io(self.path.display().to_string()))
+    }
+
+    /// The participant a token belongs to.
+    pub fn by_token(&self, token: &str) -> Option<&Arc<Participant>> {
+        self.by_hash.get(&token_hash(token))
+    }
+
+    /// The participant of a subject id.
+    pub fn by_subject(&self, subject: &str) -> Option<&Arc<Participant>> {
+        self.by_subject.get(subject)
+    }
+
+    /// Every participant, in the order they joined.
+    pub fn all(&self) -> &[Arc<Participant>] {
+        &self.order
+    }
+
+    /// Adds a participant of identity `who` (a generated id when no platform names one)
+    /// and returns it with its token, after its row is on disk.
+    ///
+    /// # Errors
+    /// The id already took part (one session per participant), or the row cannot be written.
+    pub fn join(
+        &mut self,
+        who: &Identity,
+        group: Option<u32>,
+    ) -> Result<(Arc<Participant>, String)> {
+        let subject = match &who.subject {
+            Some(s) => {
+                if self.by_subject.contains_key(s) {
+                    return Err(WebError::Refused(format!(
+                        "participant {s} already has a session: continue it from its link"
+                    )));
+                }
+                s.clone()
+            }
+            None => loop {
+                let t = new_token()?;
+                let s = format!("W{}", &t[..12]);
+                if !self.by_subject.contains_key(&s) {
+                    break s;
+                }
+            },
+        };
+        let token = new_token()?;
+        let hash = token_hash(&token);
+        let ids: Vec<String> = who.ids.iter().map(|(k, v)| format!("{k}={v}")).collect();
+        self.append(&format!(
+            "{subject},{},{},{},{},{}\n",
+            hex(&hash),
+            who.source,
+            lab::session::now_ms(),
+            group.map(|g| g.to_string()).unwrap_or_default(),
+            ids.join(";")
+        ))?;
+        let p = self.insert(
+            hash,
+            Participant::new(subject, who.source.clone(), who.ids.clone(), group),
+        );
+        Ok((p, token))
+    }
+}
+
+impl Participant {
+    fn new(
+        subject: String,
+        source: String,
+        ids: BTreeMap<String, String>,
+        group: Option<u32>,
+    ) -> Participant {
+        Participant {
+            subject,
+            source,
+            ids,
+            group,
+            slot: Mutex::new(Slot::NotStarted),
+            bucket: Mutex::new(Bucket::new(f64::MAX)),
+        }
+    }
+}
+
+fn parse_row(line: &str) -> std::result::Result<(Participant, [u8; 32]), String> {
+    let f: Vec<&str> = line.split(',').collect();
+    let [subject, hash, source, created, group, ids] = f[..] else {
+        return Err(format!("expected 6 fields, found {}", f.len()));
+    };
+    let group = if group.is_empty() {
+        None
+    } else {
+        Some(
+            group
+                .parse::<u32>()
+                .map_err(|_| format!("group {group:?} is not a number"))?,
+        )
+    };
+    if !id_ok(subject) {
+        return Err(format!("subject {subject:?} is not an id"));
+    }
+    let hash = unhex(hash).ok_or("token_sha256 is not 64 hex digits")?;
+    if !matches!(source, "prolific" | "mturk" | "generated") {
+        return Err(format!("unknown source {source:?}"));
+    }
+    created
+        .parse::<u64>()
+        .map_err(|_| format!("created_ms {created:?} is not a number"))?;
+    let mut map = BTreeMap::new();
+    for kv in ids.split(';').filter(|s| !s.is_empty()) {
+        let (k, v) = kv
+            .split_once('=')
+            .ok_or_else(|| format!("id {kv:?} is not key=value"))?;
+        if !PLATFORM_IDS.iter().any(|(_, _, f)| *f == k) || !id_ok(v) {
+            return Err(format!("id {kv:?} is not one of the platforms' ids"));
+        }
+        map.insert(k.to_string(), v.to_string());
+    }
+    Ok((
+        Participant::new(subject.into(), source.into(), map, group),
+        hash,
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn params(kv: &[(&str, &str)]) -> BTreeMap<String, String> {
+        kv.iter().map(|(k, v)| ((*k).into(), (*v).into())).collect()
+    }
+
+    #[test]
+    fn platform_ids_name_the_subject_and_bad_ones_are_refused() {
+        let p = identity(&params(&[
+            ("PROLIFIC_PID", "5f3a9c"),
+            ("STUDY_ID", "st1"),
+            ("SESSION_ID", "se1"),
+        ]))
+        .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(p.subject.as_deref(), Some("5f3a9c"));
+        assert_eq!(p.source, "prolific");
+        assert_eq!(
+            p.ids.get("prolific_session_id").map(String::as_str),
+            Some("se1")
+        );
+        assert_eq!(
+            identity(&params(&[])).map(|i| i.source).ok().as_deref(),
+            Some("generated")
+        );
+        for bad in [
+            params(&[("PROLIFIC_PID", "../x")]),
+            params(&[("PROLIFIC_PID", "a"), ("workerId", "b")]),
+            params(&[
+                ("workerId", "A1"),
+                ("assignmentId", "ASSIGNMENT_ID_NOT_AVAILABLE"),
+            ]),
+            params(&[("STUDY_ID", "s")]),
+        ] {
+            assert!(identity(&bad).is_err(), "{bad:?}");
+        }
+    }
+
+    #[test]
+    fn the_registry_survives_a_restart_and_a_torn_row() {
+        let dir = std::env::temp_dir().join(format!("web-reg-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap_or_else(|e| panic!("{e}"));
+        let who = identity(&params(&[("workerId", "A1"), ("hitId", "H")]))
+            .unwrap_or_else(|e| panic!("{e}"));
+        let token = {
+            let mut reg = Registry::open(&dir).unwrap_or_else(|e| panic!("{e}"));
+            let (_, token) = reg.join(&who, Some(3)).unwrap_or_else(|e| panic!("{e}"));
+            // One session per participant.
+            assert!(reg.join(&who, Some(1)).is_err());
+            token
+        };
+        // A crash in the middle of the next row.
+        let path = dir.join(lab::results_dir::PARTICIPANTS_FILE);
+        let mut f = OpenOptions::new()
+            .append(true)
+            .open(&path)
+            .unwrap_or_else(|e| panic!("{e}"));
+        f.write_all(b"W12,abc").unwrap_or_else(|e| panic!("{e}"));
+        drop(f);
+        let reg = Registry::open(&dir).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(reg.all().len(), 1);
+        let p = reg.by_token(&token).map(|p| (p.subject.clone(), p.group));
+        assert_eq!(p, Some(("A1".to_string(), Some(3))));
+        assert!(reg.by_token(&new_token().unwrap_or_default()).is_none());
+        let text = std::fs::read_to_string(&path).unwrap_or_default();
+        assert!(text.ends_with('\n') && !text.contains(&token), "{text}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}
