@@ -187,6 +187,7 @@ fn primitive_stimuli(out: &Path, clips: &[(String, motion::Clip)]) -> Vec<Stimul
                 }),
                 encode_ms: None,
                 decode_ms: None,
+                scene: None,
             });
         }
     }

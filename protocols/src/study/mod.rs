@@ -13,6 +13,7 @@ mod live;
 mod presentation;
 mod rendering;
 mod scale;
+mod scene;
 mod session;
 mod simulation;
 mod staircase;
@@ -31,6 +32,9 @@ use crate::record::{Arrangement, Position, Protocol};
 use crate::staircase::StaircaseSettings;
 use check::Ctx;
 pub use rendering::RenderingSettings;
+pub use scene::{
+    MAX_CHARACTERS, MAX_LEVELS, Placement, SceneCamera, SceneCharacter, SceneLight, SceneSettings,
+};
 
 /// Current version of the study file format.
 pub const STUDY_FORMAT_VERSION: u32 = 1;
@@ -391,6 +395,12 @@ pub struct SimulationSettings {
     pub lapse: f64,
     /// Mean response time, ms.
     pub response_time_ms: u64,
+    /// Crowd scenes: how much the simulated observer attends to each group (or character) of
+    /// the `[scene]`, by name; 1 for those not named. A scene's error is the
+    /// attention-weighted mean of its characters' errors, each scaled by its apparent size
+    /// (the nearest character's distance over its own), see [`crate::observer`].
+    #[serde(default)]
+    pub attention: BTreeMap<String, f64>,
 }
 
 impl Default for SimulationSettings {
@@ -406,6 +416,7 @@ impl Default for SimulationSettings {
             slope: 3.5,
             lapse: 0.02,
             response_time_ms: 1500,
+            attention: BTreeMap::new(),
         }
     }
 }
@@ -441,6 +452,9 @@ pub struct StudyDefinition {
     pub simulation: SimulationSettings,
     /// How the runner draws the figures (`[rendering]`).
     pub rendering: RenderingSettings,
+    /// Several characters per pane (`[scene]`, thesis 6.5): the conditions are crowd scenes
+    /// of the manifest, drawn with this camera and light; `None` for one figure per pane.
+    pub scene: Option<SceneSettings>,
     /// The stimulus manifest.
     pub manifest: StimulusManifest,
 }
@@ -538,7 +552,7 @@ impl StudyDefinition {
     }
 }
 
-fn read_limited(path: &Path, limit: u64) -> Result<String, StudyError> {
+pub(super) fn read_limited(path: &Path, limit: u64) -> Result<String, StudyError> {
     let meta = std::fs::metadata(path).map_err(|cause| StudyError::Io {
         path: path.to_path_buf(),
         cause,
