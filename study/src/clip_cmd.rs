@@ -4,7 +4,7 @@ use std::fmt::Write as _;
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
-use anyhow::{Result, bail};
+use anyhow::{Context as _, Result, bail};
 use lab::clips::ClipOptions;
 use motion::{Clip, SkeletonFormat, fk, io, synth};
 
@@ -124,12 +124,20 @@ pub enum ClipCommand {
         force: bool,
     },
     /// Render stills of the clips side by side as the study window draws them (offscreen,
-    /// no display needed), e.g. a reference and its decoded stimulus for a figure. An `.svg`
-    /// output labels each pane with its name and time as text (for papers); a `.png` output
-    /// is the bare pixels.
+    /// no display needed), e.g. a reference and its decoded stimulus for a figure; or, with
+    /// `--study` and `--scenes`, crowd scenes of a study with its `[scene]` camera and light.
+    /// An `.svg` output labels each pane with its name and time as text (for papers); a
+    /// `.png` output is the bare pixels.
     Render {
         #[command(flatten)]
         input: ClipInput,
+        /// A study file with a `[scene]`: draw its crowd scenes (`--scenes`) instead of clips.
+        #[arg(long, value_name = "TOML", requires = "scenes")]
+        study: Option<PathBuf>,
+        /// Crowd scene ids of the study's manifest, comma separated (e.g.
+        /// `far/reference,far/spiht/front40-back80`), one pane each.
+        #[arg(long, value_delimiter = ',', requires = "study")]
+        scenes: Vec<String>,
         /// Clip times to draw, seconds (one row of panes per time).
         #[arg(long, value_delimiter = ',', default_value = "0")]
         times: Vec<f64>,
@@ -217,6 +225,8 @@ pub fn run(cmd: ClipCommand) -> Result<()> {
         }
         ClipCommand::Render {
             input,
+            study,
+            scenes,
             times,
             pane,
             labels,
@@ -235,14 +245,26 @@ pub fn run(cmd: ClipCommand) -> Result<()> {
             };
             // Refused before the (slow) offscreen render.
             files::check_new(&output, mode)?;
-            let clips = input.load()?;
-            let names = pane_names(&clips, &labels)?;
             let still = Still {
                 times: &times,
                 pane,
                 shadow: !no_shadow,
             };
-            let image = render(&clips, &still)?;
+            let (image, names) = if let Some(study) = study {
+                if !input.files.is_empty() || !input.amc.is_empty() || input.demo {
+                    bail!("--study draws its crowd scenes: give no clip files or --demo");
+                }
+                let names = if labels.is_empty() {
+                    scenes.clone()
+                } else {
+                    pane_names_given(&labels, scenes.len())?
+                };
+                (render_scenes(&study, &scenes, &still)?, names)
+            } else {
+                let clips = input.load()?;
+                let names = pane_names(&clips, &labels)?;
+                (render(&clips, &still)?, names)
+            };
             if svg {
                 files::write(&output, labelled_svg(&image, &names, &still)?, mode)?;
             } else {
@@ -251,7 +273,7 @@ pub fn run(cmd: ClipCommand) -> Result<()> {
             eprintln!(
                 "wrote {} ({} × {} panes)",
                 output.display(),
-                clips.len(),
+                names.len(),
                 times.len()
             );
             Ok(())
@@ -278,41 +300,109 @@ fn pane_names(clips: &[Loaded], labels: &[String]) -> Result<Vec<String>> {
             })
             .collect());
     }
-    if labels.len() != clips.len() {
+    pane_names_given(labels, clips.len())
+}
+
+/// `--labels`, one per pane.
+fn pane_names_given(labels: &[String], panes: usize) -> Result<Vec<String>> {
+    if labels.len() != panes {
         bail!(
-            "--labels: {} names for {} clips (one per clip, in order)",
-            labels.len(),
-            clips.len()
+            "--labels: {} names for {panes} panes (one per pane, in order)",
+            labels.len()
         );
     }
     Ok(labels.to_vec())
 }
 
+/// Draws crowd scenes of `study` (columns) at every time (rows), each with the study's
+/// `[scene]` camera and light, each character framed by its clip in the level's reference
+/// scene, as the study window draws them.
+fn render_scenes(
+    study: &Path,
+    scenes: &[String],
+    still: &Still<'_>,
+) -> Result<crate::gui::render::Image> {
+    use crate::gui::scene::{Stage, View};
+    let file = lab::StudyFile::load(study)?;
+    let Some(settings) = file.definition.scene.as_ref() else {
+        bail!("{}: has no [scene] to draw", study.display());
+    };
+    let source = lab::source::ManifestStimuli::new(&file);
+    let mut crowds = Vec::new();
+    for id in scenes {
+        let st = source
+            .manifest()
+            .get(id)
+            .filter(|s| s.scene.is_some())
+            .with_context(|| format!("--scenes: {id:?} is not a crowd scene of the study"))?;
+        let reference = source
+            .manifest()
+            .reference_of(&st.clip)
+            .with_context(|| format!("--scenes: {id:?} has no reference scene"))?;
+        crowds.push(source.crowd_pair(id, &reference.id)?);
+    }
+    let far = crowds
+        .iter()
+        .flatten()
+        .map(|c| c.placement.distance_cm)
+        .fold(0.0, f64::max);
+    let view = View::crowd(&settings.camera, &settings.light, far).with_shadow(still.shadow);
+    let stages: Vec<Stage> = crowds
+        .iter()
+        .map(|crowd| {
+            Stage::crowd(
+                crowd
+                    .iter()
+                    .map(|c| (c.test.as_ref(), c.reference.as_ref(), c.placement)),
+                still.shadow,
+            )
+        })
+        .collect();
+    draw_panes(stages, &view, still)
+}
+
 /// Draws every clip (columns) at every time (rows) with the first clip's camera at that time,
 /// so a reference and its stimuli are framed alike.
 fn render(clips: &[Loaded], still: &Still<'_>) -> Result<crate::gui::render::Image> {
-    use crate::gui::render::{Offscreen, Pane};
-    use crate::gui::scene::{Figure, FrameShapes, View};
-    let (times, pane) = (still.times, still.pane);
+    use crate::gui::scene::{Figure, Stage, View};
     let Some(first) = clips.first() else {
         bail!("no clip to render");
     };
+    let view = View::framing(&first.clip).with_shadow(still.shadow);
+    let stages = clips
+        .iter()
+        .map(|c| Stage::single(Figure::new(&c.clip, &view)))
+        .collect();
+    draw_panes(stages, &view, still)
+}
+
+/// Draws `stages` (columns) at every time of `still` (rows) with `view`, offscreen.
+fn draw_panes(
+    mut stages: Vec<crate::gui::scene::Stage>,
+    view: &crate::gui::scene::View,
+    still: &Still<'_>,
+) -> Result<crate::gui::render::Image> {
+    use crate::gui::render::{Offscreen, Pane};
+    use crate::gui::scene::FrameShapes;
+    let (times, pane) = (still.times, still.pane);
+    if stages.is_empty() {
+        bail!("nothing to render");
+    }
     if !(64..=4096).contains(&pane) {
         bail!("--pane {pane}: expected 64..=4096 pixels");
     }
     if let Some(t) = times.iter().find(|t| !t.is_finite() || **t < 0.0) {
         bail!("--times: {t} is not a time in seconds");
     }
-    let (cols, rows) = (clips.len() as u32, times.len() as u32);
+    let (cols, rows) = (stages.len() as u32, times.len() as u32);
     if u64::from(cols * pane) * u64::from(rows * pane) > 1 << 26 {
         bail!("{cols}×{rows} panes of {pane} px is too large an image");
     }
-    let view = View::framing(&first.clip).with_shadow(still.shadow);
     let mut shapes = Vec::new();
     for t in times {
-        for c in clips {
+        for stage in &mut stages {
             let mut s = FrameShapes::default();
-            Figure::new(&c.clip, &view).shapes_at(*t, &mut s);
+            stage.shapes_at(*t, &mut s);
             shapes.push(s);
         }
     }
@@ -324,7 +414,7 @@ fn render(clips: &[Loaded], still: &Still<'_>) -> Result<crate::gui::render::Ima
             y: (k as u32 / cols) * pane,
             width: pane,
             height: pane,
-            view: &view,
+            view,
             shapes: s,
         })
         .collect();
