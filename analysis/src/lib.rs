@@ -24,6 +24,7 @@
 //! ```
 
 mod confidence;
+pub mod crowd;
 pub mod descriptive;
 pub mod display;
 mod dist;
