@@ -820,6 +820,75 @@ mod tests {
         assert!(s.shadows.is_empty());
     }
 
+    /// A crowd pane: each figure stands on the ground (y = 0 cm) at its place, as tall as it
+    /// is in centimetres, turned as asked; with the camera of the crowd example every joint
+    /// of every level projects inside a 16:9 pane, nearer figures taller.
+    #[test]
+    fn crowd_figures_stand_at_their_places_in_view() {
+        let clip = motion::synth::walking_clip(&motion::synth::WalkParams {
+            speed_cm_s: 0.0,
+            ..motion::synth::WalkParams::default()
+        });
+        let camera = SceneCamera {
+            height_cm: 250.0,
+            pitch_deg: 19.0,
+            fov_deg: 40.0,
+        };
+        let view = View::crowd(&camera, &SceneLight::default(), 1300.0);
+        let place = |x_cm, distance_cm, facing_deg| Placement {
+            x_cm,
+            distance_cm,
+            facing_deg,
+        };
+        let mut heights = Vec::new();
+        for (x, d) in [(0.0, 350.0), (-150.0, 600.0), (150.0, 1300.0)] {
+            for facing in [0.0, 180.0] {
+                let mut stage = Stage::crowd([(&clip, &clip, place(x, d, facing))], true);
+                let mut s = FrameShapes::default();
+                stage.shapes_at(0.0, &mut s);
+                let ys: Vec<f32> = s.joints.iter().map(|j| j.position[1]).collect();
+                let (lo, hi) = ys
+                    .iter()
+                    .fold((f32::MAX, f32::MIN), |(a, b), y| (a.min(*y), b.max(*y)));
+                // The lowest point of the whole clip is the ground: a foot at time 0 is on it.
+                assert!(lo > -0.5 && lo < 8.0, "feet at {lo} cm");
+                assert!((150.0..200.0).contains(&(hi - lo)), "{} cm tall", hi - lo);
+                let root = s.joints[0].position;
+                assert!(
+                    (root[0] - x as f32).abs() < 1.0 && (root[2] + d as f32).abs() < 1.0,
+                    "{root:?}"
+                );
+                // Turning half round puts the left hip on the other side of the root.
+                let hip = s.joints[1].position[0] - root[0];
+                if facing == 0.0 {
+                    assert!(hip > 0.0, "{hip}");
+                } else {
+                    assert!(hip < 0.0, "{hip}");
+                }
+                let vp = view.view_proj(16.0 / 9.0);
+                let ndc: Vec<[f32; 3]> = s
+                    .joints
+                    .iter()
+                    .map(|j| transform(&vp, j.position))
+                    .collect();
+                for p in &ndc {
+                    assert!(
+                        p[0].abs() < 1.0 && p[1].abs() < 1.0 && (0.0..1.0).contains(&p[2]),
+                        "{p:?}"
+                    );
+                }
+                let (nlo, nhi) = ndc
+                    .iter()
+                    .fold((f32::MAX, f32::MIN), |(a, b), p| (a.min(p[1]), b.max(p[1])));
+                heights.push(nhi - nlo);
+            }
+        }
+        assert!(
+            heights[0] > heights[2] && heights[2] > heights[4],
+            "{heights:?}"
+        );
+    }
+
     #[test]
     fn bones_join_parent_and_child_joints() {
         let clip = motion::synth::walking_clip(&motion::synth::WalkParams::default());
