@@ -159,6 +159,21 @@ fn four_digits(v: f64) -> f64 {
     (v * scale).round() / scale
 }
 
+/// A clip a character performs, read, with its ASF in the output (AMC clips) and its output
+/// folder.
+struct ClipFiles {
+    clip: Clip,
+    skeleton: Option<PathBuf>,
+    dir: PathBuf,
+}
+
+impl ClipFiles {
+    /// Its raw size, 4 bytes × channels × frames.
+    fn raw(&self) -> f64 {
+        4.0 * (self.clip.channel_count() * self.clip.frames()) as f64
+    }
+}
+
 /// Makes the crowd set `options` asks for.
 ///
 /// # Errors
@@ -183,6 +198,82 @@ pub fn crowd(
     }
     check_plan(&options.plan, &scene)?;
     let sources = clips::sources(&options.clips, &options.clip_options)?;
+    check_clips(options, &scene, &sources)?;
+    let out = &options.output;
+    let mode = files::Mode::from_force(options.force);
+    files::prepare_dir(out, mode)?;
+    let mut manifest = StimulusManifest {
+        version: MANIFEST_VERSION,
+        stimuli: Vec::new(),
+    };
+    // The clips the scene uses, read and copied as references.
+    let mut read: BTreeMap<String, ClipFiles> = BTreeMap::new();
+    for source in sources
+        .iter()
+        .filter(|s| scene.characters.iter().any(|c| c.clip == s.name))
+    {
+        let clip = clips::read(source, options.clip_options.bvh_unit_cm)?;
+        let dir = out.join(&source.name);
+        std::fs::create_dir_all(&dir).map_err(io_error(&dir))?;
+        let (file, skeleton) = stimulus::write_clip_as(&clip, &dir, "reference", None, mode)?;
+        manifest.stimuli.push(reference_stimulus(
+            out,
+            &source.name,
+            &file,
+            skeleton.as_deref(),
+        ));
+        read.insert(
+            source.name.clone(),
+            ClipFiles {
+                clip,
+                skeleton,
+                dir,
+            },
+        );
+    }
+    let raw = |clip: &str| read.get(clip).map_or(0.0, ClipFiles::raw);
+    let specs = match &options.plan {
+        Plan::Fixed(groups) => fixed_specs(options, &scene, groups),
+        Plan::Budget { totals, share } => budget_specs(options, &scene, totals, *share, &raw)?,
+    };
+    let (members, encoded) =
+        encode_members(options, codec.as_ref(), &scene, &specs, &read, progress)?;
+    manifest.stimuli.extend(members.values().cloned());
+    manifest.stimuli.extend(reference_scenes(&scene));
+    let mut csv = String::from(RD_HEADER);
+    let mut worst: Option<(String, f64, u64)> = None;
+    for spec in &specs {
+        let st = assemble(options, &scene, spec, &members, &raw, &mut csv)?;
+        if let Some(b) = spec.budget_bytes {
+            let off = |bytes: u64, budget: f64| (bytes as f64 - budget).abs() / budget;
+            if worst
+                .as_ref()
+                .is_none_or(|(_, wb, wy)| off(st.bytes, b) > off(*wy, *wb))
+            {
+                worst = Some((spec.id.clone(), b, st.bytes));
+            }
+        }
+        manifest.stimuli.push(st);
+    }
+    // The table, then the manifest: a stimuli.json on disk means every file it names is
+    // complete.
+    files::write(&out.join(RD_FILE), csv, mode)?;
+    let json = serde_json::to_string_pretty(&manifest)?;
+    files::write(&out.join(MANIFEST_FILE), json, mode)?;
+    Ok(CrowdSummary {
+        manifest,
+        scenes: specs.len(),
+        encoded,
+        worst_budget: worst,
+    })
+}
+
+/// Every clip a character performs is given, and no level is named like a clip.
+fn check_clips(
+    options: &CrowdOptions,
+    scene: &SceneSettings,
+    sources: &[motion::pairing::ClipSource],
+) -> Result<()> {
     let names: BTreeSet<&str> = sources.iter().map(|s| s.name.as_str()).collect();
     for c in &scene.characters {
         if !names.contains(c.clip.as_str()) {
@@ -203,43 +294,21 @@ pub fn crowd(
             options.scene.display()
         )));
     }
-    let out = &options.output;
-    let mode = files::Mode::from_force(options.force);
-    files::prepare_dir(out, mode)?;
+    Ok(())
+}
 
-    // The clips the scene uses, read and copied as references.
-    let used: Vec<_> = sources
-        .into_iter()
-        .filter(|s| scene.characters.iter().any(|c| c.clip == s.name))
-        .collect();
-    let mut manifest = StimulusManifest {
-        version: MANIFEST_VERSION,
-        stimuli: Vec::new(),
-    };
-    let mut read: BTreeMap<String, (Clip, Option<PathBuf>, PathBuf)> = BTreeMap::new();
-    for source in &used {
-        let clip = clips::read(source, options.clip_options.bvh_unit_cm)?;
-        let dir = out.join(&source.name);
-        std::fs::create_dir_all(&dir).map_err(io_error(&dir))?;
-        let (file, skeleton) = stimulus::write_clip_as(&clip, &dir, "reference", None, mode)?;
-        manifest.stimuli.push(reference_stimulus(
-            out,
-            &source.name,
-            &file,
-            skeleton.as_deref(),
-        ));
-        read.insert(source.name.clone(), (clip, skeleton, dir));
-    }
-    let raw = |clip: &str| {
-        read.get(clip).map_or(0.0, |(c, _, _)| {
-            4.0 * (c.channel_count() * c.frames()) as f64
-        })
-    };
-
-    let specs = scene_specs(options, &scene, &raw)?;
-    // Every character stimulus once, however many scenes show it.
+/// Every character stimulus the scenes show, encoded once on the worker threads and written;
+/// by id, with how many were encoded.
+fn encode_members(
+    options: &CrowdOptions,
+    codec: &dyn codecs::codec::Codec,
+    scene: &SceneSettings,
+    specs: &[SceneSpec],
+    read: &BTreeMap<String, ClipFiles>,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Result<(BTreeMap<String, Stimulus>, usize)> {
     let mut jobs: Vec<Job> = Vec::new();
-    for spec in &specs {
+    for spec in specs {
         for (c, (target, _, _)) in scene.characters.iter().zip(&spec.members) {
             let job = Job {
                 clip: c.clip.clone(),
@@ -250,195 +319,194 @@ pub fn crowd(
             }
         }
     }
+    let out = &options.output;
+    let mode = files::Mode::from_force(options.force);
     let done = AtomicUsize::new(0);
     let made = parallel(
         &jobs,
         options.jobs,
-        |j| read.get(&j.clip).map_or(0, |(c, _, _)| c.frames()),
+        |j| read.get(&j.clip).map_or(0, |f| f.clip.frames()),
         |j| {
-            let (clip, skeleton, dir) = &read[&j.clip];
+            let f = &read[&j.clip];
             let id = stimulus_id(
                 &j.clip,
                 &options.codec,
                 &options.params,
                 Target::Cr(j.target),
             );
-            let r = stimulus::make(
-                codec.as_ref(),
-                clip,
-                &Request {
-                    params: options.params.clone(),
-                    target_cr: Some(j.target),
-                },
-            )
-            .context(|| format!("{id} (a character of the crowd)"))
-            .and_then(|m| {
-                write_made(
-                    &m,
-                    Member {
+            let request = Request {
+                params: options.params.clone(),
+                target_cr: Some(j.target),
+            };
+            let r = stimulus::make(codec, &f.clip, &request)
+                .context(|| format!("{id} (a character of the crowd)"))
+                .and_then(|m| {
+                    let member = Member {
                         id,
                         clip: &j.clip,
                         codec: &options.codec,
                         variant: &options.params,
                         target: Target::Cr(j.target),
-                        dir,
-                        skeleton: skeleton.as_deref(),
-                    },
-                    out,
-                    mode,
-                )
-            });
+                        dir: &f.dir,
+                        skeleton: f.skeleton.as_deref(),
+                    };
+                    write_made(&m, member, out, mode)
+                });
             progress(done.fetch_add(1, Ordering::Relaxed) + 1, jobs.len());
             r
         },
     )?;
-    let mut members: BTreeMap<String, Stimulus> = BTreeMap::new();
+    let mut members = BTreeMap::new();
     for m in made {
         let m = m?;
         members.insert(m.id.clone(), m);
     }
-    manifest.stimuli.extend(members.values().cloned());
+    Ok((members, jobs.len()))
+}
 
-    // A reference scene per level, then the compressed scenes.
-    for (level, name) in scene.levels.iter().enumerate() {
-        let characters = scene
-            .characters
-            .iter()
-            .map(|c| SceneMember {
-                name: c.name.clone(),
-                group: c.group.clone(),
-                stimulus: format!("{}/{REFERENCE_CODEC}", c.clip),
-                distance_cm: scene.placement(c, level).distance_cm,
-                score: None,
-                budget_bytes: None,
-            })
-            .collect();
-        manifest.stimuli.push(Stimulus {
-            id: format!("{name}/{REFERENCE_CODEC}"),
-            clip: name.clone(),
-            codec: REFERENCE_CODEC.into(),
-            params: BTreeMap::new(),
-            variant: BTreeMap::new(),
-            target_cr: None,
-            target_max_error_cm: None,
-            achieved_cr: 1.0,
-            bytes: 0,
-            file: String::new(),
-            skeleton: None,
-            bitstream: None,
-            metrics: None,
-            encode_ms: None,
-            decode_ms: None,
-            scene: Some(SceneStimulus {
+/// A scene stimulus of the manifest (no file of its own).
+fn scene_stimulus(
+    id: String,
+    codec: &str,
+    scene: SceneStimulus,
+    cr: (Option<f64>, f64),
+    bytes: u64,
+) -> Stimulus {
+    Stimulus {
+        id,
+        clip: scene.level.clone(),
+        codec: codec.to_string(),
+        params: BTreeMap::new(),
+        variant: BTreeMap::new(),
+        target_cr: cr.0,
+        target_max_error_cm: None,
+        achieved_cr: cr.1,
+        bytes,
+        file: String::new(),
+        skeleton: None,
+        bitstream: None,
+        metrics: None,
+        encode_ms: None,
+        decode_ms: None,
+        scene: Some(scene),
+    }
+}
+
+/// The reference scene of every level: each character's reference clip.
+fn reference_scenes(scene: &SceneSettings) -> Vec<Stimulus> {
+    (0..scene.levels.len())
+        .map(|level| {
+            let name = &scene.levels[level];
+            let characters = scene
+                .characters
+                .iter()
+                .map(|c| SceneMember {
+                    name: c.name.clone(),
+                    group: c.group.clone(),
+                    stimulus: format!("{}/{REFERENCE_CODEC}", c.clip),
+                    distance_cm: scene.placement(c, level).distance_cm,
+                    score: None,
+                    budget_bytes: None,
+                })
+                .collect();
+            let sc = SceneStimulus {
                 level: name.clone(),
                 allocation: REFERENCE_CODEC.into(),
                 budget_bytes: None,
                 characters,
-            }),
-        });
-    }
-    let mut csv = String::from(RD_HEADER);
-    let mut worst: Option<(String, f64, u64)> = None;
-    for spec in &specs {
-        let level = &scene.levels[spec.level];
-        let mut characters = Vec::new();
-        let (mut bytes, mut raw_total) = (0u64, 0.0);
-        let mut rows = Vec::new();
-        for (c, (target, score, budget)) in scene.characters.iter().zip(&spec.members) {
-            let id = stimulus_id(
-                &c.clip,
-                &options.codec,
-                &options.params,
-                Target::Cr(*target),
-            );
-            let m = members
-                .get(&id)
-                .context(|| format!("{id}: the character's stimulus was not made"))?;
-            bytes += m.bytes;
-            raw_total += raw(&c.clip);
-            let distance_cm = scene.placement(c, spec.level).distance_cm;
-            rows.push((c, m, distance_cm, *score, *budget, *target));
-            characters.push(SceneMember {
-                name: c.name.clone(),
-                group: c.group.clone(),
-                stimulus: id,
-                distance_cm,
-                score: *score,
-                budget_bytes: *budget,
-            });
-        }
-        let scene_cr = raw_total / (bytes.max(1)) as f64;
-        for (c, m, distance_cm, score, budget, target) in rows {
-            let metric = |f: fn(&protocols::manifest::StimulusMetrics) -> Option<f64>| {
-                m.metrics
-                    .as_ref()
-                    .and_then(f)
-                    .map_or_else(String::new, |v| format!("{v:.5}"))
             };
-            let opt = |v: Option<f64>| v.map_or_else(String::new, |v| format!("{v}"));
-            let _ = writeln!(
-                csv,
-                "{},{},{},{},{},{},{distance_cm},{},{},{target},{:.4},{},{},{},{},{},{},{},{bytes},{scene_cr:.4}",
-                csv_field(&spec.id),
-                csv_field(level),
-                spec.allocation,
-                csv_field(&c.name),
-                csv_field(&c.group),
-                csv_field(&c.clip),
-                opt(score),
-                opt(budget.map(|b| (b * 100.0).round() / 100.0)),
-                m.achieved_cr,
-                m.bytes,
-                metric(|x| Some(x.rms_cm)),
-                metric(|x| Some(x.max_cm)),
-                metric(|x| x.worst_window_rms_cm),
-                metric(|x| Some(x.mean_angle_deg)),
-                csv_field(&m.id),
-                opt(spec.budget_bytes.map(|b| (b * 100.0).round() / 100.0)),
-            );
-        }
-        if let Some(b) = spec.budget_bytes {
-            let off = (bytes as f64 - b).abs() / b;
-            if worst
-                .as_ref()
-                .is_none_or(|(_, wb, wy)| off > (*wy as f64 - wb).abs() / wb)
-            {
-                worst = Some((spec.id.clone(), b, bytes));
-            }
-        }
-        manifest.stimuli.push(Stimulus {
-            id: spec.id.clone(),
-            clip: level.clone(),
-            codec: options.codec.clone(),
-            params: BTreeMap::new(),
-            variant: BTreeMap::new(),
-            target_cr: spec.scene_cr,
-            target_max_error_cm: None,
-            achieved_cr: scene_cr,
-            bytes,
-            file: String::new(),
-            skeleton: None,
-            bitstream: None,
-            metrics: None,
-            encode_ms: None,
-            decode_ms: None,
-            scene: Some(SceneStimulus {
-                level: level.clone(),
-                allocation: spec.allocation.to_string(),
-                budget_bytes: spec.budget_bytes,
-                characters,
-            }),
+            scene_stimulus(
+                format!("{name}/{REFERENCE_CODEC}"),
+                REFERENCE_CODEC,
+                sc,
+                (None, 1.0),
+                0,
+            )
+        })
+        .collect()
+}
+
+/// One compressed scene's manifest entry from its characters' stimuli, and its `rd.csv` rows
+/// appended to `csv`.
+fn assemble(
+    options: &CrowdOptions,
+    scene: &SceneSettings,
+    spec: &SceneSpec,
+    members: &BTreeMap<String, Stimulus>,
+    raw: &dyn Fn(&str) -> f64,
+    csv: &mut String,
+) -> Result<Stimulus> {
+    let level = &scene.levels[spec.level];
+    let mut characters = Vec::new();
+    let (mut bytes, mut raw_total) = (0u64, 0.0);
+    let mut shown = Vec::new();
+    for (c, (target, score, budget)) in scene.characters.iter().zip(&spec.members) {
+        let id = stimulus_id(
+            &c.clip,
+            &options.codec,
+            &options.params,
+            Target::Cr(*target),
+        );
+        let m = members
+            .get(&id)
+            .context(|| format!("{id}: the character's stimulus was not made"))?;
+        bytes += m.bytes;
+        raw_total += raw(&c.clip);
+        shown.push((c, m, *target));
+        characters.push(SceneMember {
+            name: c.name.clone(),
+            group: c.group.clone(),
+            stimulus: id,
+            distance_cm: scene.placement(c, spec.level).distance_cm,
+            score: *score,
+            budget_bytes: *budget,
         });
     }
-    files::write(&out.join(RD_FILE), csv, mode)?;
-    let json = serde_json::to_string_pretty(&manifest)?;
-    files::write(&out.join(MANIFEST_FILE), json, mode)?;
-    Ok(CrowdSummary {
-        manifest,
-        scenes: specs.len(),
-        encoded: jobs.len(),
-        worst_budget: worst,
-    })
+    let scene_cr = raw_total / (bytes.max(1)) as f64;
+    let opt = |v: Option<f64>| v.map_or_else(String::new, |v| format!("{v}"));
+    let cents = |v: Option<f64>| opt(v.map(|b| (b * 100.0).round() / 100.0));
+    for ((c, m, target), member) in shown.into_iter().zip(&characters) {
+        let metric = |f: fn(&protocols::manifest::StimulusMetrics) -> Option<f64>| {
+            m.metrics
+                .as_ref()
+                .and_then(f)
+                .map_or_else(String::new, |v| format!("{v:.5}"))
+        };
+        let _ = writeln!(
+            csv,
+            "{},{},{},{},{},{},{},{},{},{target},{:.4},{},{},{},{},{},{},{},{bytes},{scene_cr:.4}",
+            csv_field(&spec.id),
+            csv_field(level),
+            spec.allocation,
+            csv_field(&c.name),
+            csv_field(&c.group),
+            csv_field(&c.clip),
+            member.distance_cm,
+            opt(member.score),
+            cents(member.budget_bytes),
+            m.achieved_cr,
+            m.bytes,
+            metric(|x| Some(x.rms_cm)),
+            metric(|x| Some(x.max_cm)),
+            metric(|x| x.worst_window_rms_cm),
+            metric(|x| Some(x.mean_angle_deg)),
+            csv_field(&m.id),
+            cents(spec.budget_bytes),
+        );
+    }
+    let sc = SceneStimulus {
+        level: level.clone(),
+        allocation: spec.allocation.to_string(),
+        budget_bytes: spec.budget_bytes,
+        characters,
+    };
+    Ok(scene_stimulus(
+        spec.id.clone(),
+        &options.codec,
+        sc,
+        (spec.scene_cr, scene_cr),
+        bytes,
+    ))
 }
 
 /// The plan against the scene: fixed ratios name every group once, with positive ratios,
@@ -501,122 +569,127 @@ fn check_plan(plan: &Plan, scene: &SceneSettings) -> Result<()> {
     Ok(())
 }
 
-/// Every compressed scene of the plan, each with its characters' targets.
-fn scene_specs(
+/// The scenes of fixed ratios: every combination of the groups' ratios (in the scene's group
+/// order, the first slowest) at every level.
+fn fixed_specs(
     options: &CrowdOptions,
     scene: &SceneSettings,
+    groups: &[(String, Vec<f64>)],
+) -> Vec<SceneSpec> {
+    let mut combos: Vec<Vec<(&str, f64)>> = vec![Vec::new()];
+    for g in scene.groups() {
+        let values = groups
+            .iter()
+            .find(|(h, _)| h == g)
+            .map(|(_, v)| v.as_slice())
+            .unwrap_or_default();
+        combos = combos
+            .iter()
+            .flat_map(|c| {
+                values.iter().map(move |v| {
+                    let mut c = c.clone();
+                    c.push((g, *v));
+                    c
+                })
+            })
+            .collect();
+    }
+    let mut out = Vec::new();
+    for level in 0..scene.levels.len() {
+        for combo in &combos {
+            let label: Vec<String> = combo.iter().map(|(g, v)| format!("{g}{v}")).collect();
+            let ratio = |group: &str| {
+                combo
+                    .iter()
+                    .find(|(g, _)| *g == group)
+                    .map_or(f64::NAN, |(_, v)| *v)
+            };
+            out.push(SceneSpec {
+                id: format!(
+                    "{}/{}/{}",
+                    scene.levels[level],
+                    options.codec,
+                    label.join("-")
+                ),
+                level,
+                allocation: "fixed",
+                budget_bytes: None,
+                scene_cr: None,
+                members: scene
+                    .characters
+                    .iter()
+                    .map(|c| (ratio(&c.group), None, None))
+                    .collect(),
+            });
+        }
+    }
+    out
+}
+
+/// The scenes of shared budgets: one per budget and level, each character's share by eq. 6.5
+/// of the scores `share` gives.
+fn budget_specs(
+    options: &CrowdOptions,
+    scene: &SceneSettings,
+    totals: &[Budget],
+    share: Share,
     raw: &dyn Fn(&str) -> f64,
 ) -> Result<Vec<SceneSpec>> {
+    let raws: Vec<f64> = scene.characters.iter().map(|c| raw(&c.clip)).collect();
+    let raw_total: f64 = raws.iter().sum();
     let mut out = Vec::new();
-    match &options.plan {
-        Plan::Fixed(groups) => {
-            // Every combination of the groups' ratios, in the scene's group order.
-            let order = scene.groups();
-            let mut combos: Vec<Vec<(&str, f64)>> = vec![Vec::new()];
-            for g in &order {
-                let values = groups
+    for level in 0..scene.levels.len() {
+        let scores: Vec<f64> = match share {
+            Share::Uniform => vec![1.0; scene.characters.len()],
+            Share::Importance => scene
+                .characters
+                .iter()
+                .map(|c| c.importance.unwrap_or(f64::NAN))
+                .collect(),
+            Share::Distance => {
+                let d: Vec<f64> = scene
+                    .characters
                     .iter()
-                    .find(|(h, _)| h == g)
-                    .map(|(_, v)| v.as_slice())
-                    .unwrap_or_default();
-                combos = combos
-                    .iter()
-                    .flat_map(|c| {
-                        values.iter().map(move |v| {
-                            let mut c = c.clone();
-                            c.push((*g, *v));
-                            c
-                        })
-                    })
+                    .map(|c| scene.placement(c, level).distance_cm)
                     .collect();
+                crowd_scores(&d).context(|| {
+                    format!(
+                        "level {:?}: a distance is not positive",
+                        scene.levels[level]
+                    )
+                })?
             }
-            for level in 0..scene.levels.len() {
-                for combo in &combos {
-                    let label: Vec<String> = combo.iter().map(|(g, v)| format!("{g}{v}")).collect();
-                    let ratio = |group: &str| {
-                        combo
-                            .iter()
-                            .find(|(g, _)| *g == group)
-                            .map_or(f64::NAN, |(_, v)| *v)
-                    };
-                    out.push(SceneSpec {
-                        id: format!(
-                            "{}/{}/{}",
-                            scene.levels[level],
-                            options.codec,
-                            label.join("-")
-                        ),
-                        level,
-                        allocation: "fixed",
-                        budget_bytes: None,
-                        scene_cr: None,
-                        members: scene
-                            .characters
-                            .iter()
-                            .map(|c| (ratio(&c.group), None, None))
-                            .collect(),
-                    });
-                }
-            }
-        }
-        Plan::Budget { totals, share } => {
-            for level in 0..scene.levels.len() {
-                let raws: Vec<f64> = scene.characters.iter().map(|c| raw(&c.clip)).collect();
-                let raw_total: f64 = raws.iter().sum();
-                let scores: Vec<f64> = match share {
-                    Share::Uniform => vec![1.0; scene.characters.len()],
-                    Share::Importance => scene
-                        .characters
-                        .iter()
-                        .map(|c| c.importance.unwrap_or(f64::NAN))
-                        .collect(),
-                    Share::Distance => {
-                        let d: Vec<f64> = scene
-                            .characters
-                            .iter()
-                            .map(|c| scene.placement(c, level).distance_cm)
-                            .collect();
-                        crowd_scores(&d).context(|| {
-                            format!(
-                                "level {:?}: a distance is not positive",
-                                scene.levels[level]
-                            )
-                        })?
-                    }
-                };
-                for total in totals {
-                    let bytes = match total {
-                        Budget::Cr(c) => raw_total / c,
-                        Budget::Bytes(b) => *b,
-                    };
-                    let shares = share_budget(&scores, bytes).context(|| {
-                        format!("budget {bytes} bytes: a share score is not positive")
-                    })?;
-                    let members = scores
-                        .iter()
-                        .zip(&shares)
-                        .zip(&raws)
-                        .map(|((s, b), r)| (four_digits(r / b), Some(*s), Some(*b)))
-                        .collect();
-                    out.push(SceneSpec {
-                        id: format!(
-                            "{}/{}/{}-{}",
-                            scene.levels[level],
-                            options.codec,
-                            total.label(),
-                            share.as_str()
-                        ),
-                        level,
-                        allocation: share.as_str(),
-                        budget_bytes: Some(bytes),
-                        scene_cr: match total {
-                            Budget::Cr(c) => Some(*c),
-                            Budget::Bytes(_) => None,
-                        },
-                        members,
-                    });
-                }
-            }
+        };
+        for total in totals {
+            let bytes = match total {
+                Budget::Cr(c) => raw_total / c,
+                Budget::Bytes(b) => *b,
+            };
+            let shares = share_budget(&scores, bytes)
+                .context(|| format!("budget {bytes} bytes: a share score is not positive"))?;
+            let members = scores
+                .iter()
+                .zip(&shares)
+                .zip(&raws)
+                .map(|((s, b), r)| (four_digits(r / b), Some(*s), Some(*b)))
+                .collect();
+            out.push(SceneSpec {
+                id: format!(
+                    "{}/{}/{}-{}",
+                    scene.levels[level],
+                    options.codec,
+                    total.label(),
+                    share.as_str()
+                ),
+                level,
+                allocation: share.as_str(),
+                budget_bytes: Some(bytes),
+                scene_cr: match total {
+                    Budget::Cr(c) => Some(*c),
+                    Budget::Bytes(_) => None,
+                },
+                members,
+            });
         }
     }
     Ok(out)

@@ -592,8 +592,20 @@ fn the_crowd_example_is_a_sequential_dscqs_over_twelve_scenes() {
     let names: Vec<&str> = scene.characters.iter().map(|c| c.name.as_str()).collect();
     assert_eq!(names, ["front", "back_left", "back_right"]);
     assert_eq!(scene.groups(), ["front", "back"]);
-    assert_eq!(scene.placement(&scene.characters[1], 2).distance_cm, 1300.0);
-    assert_eq!(scene.placement(&scene.characters[0], 2).distance_cm, 350.0);
+    assert_eq!(
+        scene
+            .placement(&scene.characters[1], 2)
+            .distance_cm
+            .to_bits(),
+        1300f64.to_bits()
+    );
+    assert_eq!(
+        scene
+            .placement(&scene.characters[0], 2)
+            .distance_cm
+            .to_bits(),
+        350f64.to_bits()
+    );
     assert_eq!(s.conditions.len(), 12);
     let mut session = protocols::Session::new(&s, 3).unwrap();
     let mut shown = std::collections::BTreeSet::new();
@@ -709,5 +721,5 @@ fn a_simulated_observer_sees_a_crowd_by_size_and_attention() {
         assert!((error(&run1, &id) - want1).abs() < 1e-12, "{id}");
         assert!((error(&run2, &id) - want2).abs() < 1e-12, "{id}");
     }
-    assert_eq!(error(&run1, "far/reference"), 0.0);
+    assert_eq!(error(&run1, "far/reference").to_bits(), 0f64.to_bits());
 }

@@ -128,37 +128,41 @@ pub enum ClipCommand {
     /// `--study` and `--scenes`, crowd scenes of a study with its `[scene]` camera and light.
     /// An `.svg` output labels each pane with its name and time as text (for papers); a
     /// `.png` output is the bare pixels.
-    Render {
-        #[command(flatten)]
-        input: ClipInput,
-        /// A study file with a `[scene]`: draw its crowd scenes (`--scenes`) instead of clips.
-        #[arg(long, value_name = "TOML", requires = "scenes")]
-        study: Option<PathBuf>,
-        /// Crowd scene ids of the study's manifest, comma separated (e.g.
-        /// `far/reference,far/spiht/front40-back80`), one pane each.
-        #[arg(long, value_delimiter = ',', requires = "study")]
-        scenes: Vec<String>,
-        /// Clip times to draw, seconds (one row of panes per time).
-        #[arg(long, value_delimiter = ',', default_value = "0")]
-        times: Vec<f64>,
-        /// Size of one pane, pixels.
-        #[arg(long, default_value_t = 480)]
-        pane: u32,
-        /// Pane names, one per clip in order (default: each file's name without its folder
-        /// and extension, `demo-walk` for the demo).
-        #[arg(long, value_delimiter = ',')]
-        labels: Vec<String>,
-        /// Draw no ground shadow.
-        #[arg(long)]
-        no_shadow: bool,
-        /// Output image: `.svg` (labelled) or `.png`.
-        #[arg(short, long, value_name = "OUT")]
-        output: PathBuf,
-        /// Replace output files that exist (atomically); without it an existing output is
-        /// refused.
-        #[arg(long)]
-        force: bool,
-    },
+    Render(RenderArgs),
+}
+
+/// Arguments of `study clip render`.
+#[derive(Debug, clap::Args)]
+pub struct RenderArgs {
+    #[command(flatten)]
+    input: ClipInput,
+    /// A study file with a `[scene]`: draw its crowd scenes (`--scenes`) instead of clips.
+    #[arg(long, value_name = "TOML", requires = "scenes")]
+    study: Option<PathBuf>,
+    /// Crowd scene ids of the study's manifest, comma separated (e.g.
+    /// `far/reference,far/spiht/front40-back80`), one pane each.
+    #[arg(long, value_delimiter = ',', requires = "study")]
+    scenes: Vec<String>,
+    /// Clip times to draw, seconds (one row of panes per time).
+    #[arg(long, value_delimiter = ',', default_value = "0")]
+    times: Vec<f64>,
+    /// Size of one pane, pixels.
+    #[arg(long, default_value_t = 480)]
+    pane: u32,
+    /// Pane names, one per clip (or scene) in order (default: each file's name without its
+    /// folder and extension, `demo-walk` for the demo; the scene ids).
+    #[arg(long, value_delimiter = ',')]
+    labels: Vec<String>,
+    /// Draw no ground shadow.
+    #[arg(long)]
+    no_shadow: bool,
+    /// Output image: `.svg` (labelled) or `.png`.
+    #[arg(short, long, value_name = "OUT")]
+    output: PathBuf,
+    /// Replace output files that exist (atomically); without it an existing output is
+    /// refused.
+    #[arg(long)]
+    force: bool,
 }
 
 /// Runs a clip subcommand.
@@ -223,62 +227,66 @@ pub fn run(cmd: ClipCommand) -> Result<()> {
             eprintln!("wrote {}", output.display());
             Ok(())
         }
-        ClipCommand::Render {
-            input,
-            study,
-            scenes,
-            times,
-            pane,
-            labels,
-            no_shadow,
-            output,
-            force,
-        } => {
-            let mode = files::Mode::from_force(force);
-            let svg = match output.extension().and_then(|e| e.to_str()) {
-                Some(e) if e.eq_ignore_ascii_case("svg") => true,
-                Some(e) if e.eq_ignore_ascii_case("png") => false,
-                _ => bail!(
-                    "{}: expected an .svg (labelled) or .png output",
-                    output.display()
-                ),
-            };
-            // Refused before the (slow) offscreen render.
-            files::check_new(&output, mode)?;
-            let still = Still {
-                times: &times,
-                pane,
-                shadow: !no_shadow,
-            };
-            let (image, names) = if let Some(study) = study {
-                if !input.files.is_empty() || !input.amc.is_empty() || input.demo {
-                    bail!("--study draws its crowd scenes: give no clip files or --demo");
-                }
-                let names = if labels.is_empty() {
-                    scenes.clone()
-                } else {
-                    pane_names_given(&labels, scenes.len())?
-                };
-                (render_scenes(&study, &scenes, &still)?, names)
-            } else {
-                let clips = input.load()?;
-                let names = pane_names(&clips, &labels)?;
-                (render(&clips, &still)?, names)
-            };
-            if svg {
-                files::write(&output, labelled_svg(&image, &names, &still)?, mode)?;
-            } else {
-                image.write_png(&output, mode)?;
-            }
-            eprintln!(
-                "wrote {} ({} × {} panes)",
-                output.display(),
-                names.len(),
-                times.len()
-            );
-            Ok(())
-        }
+        ClipCommand::Render(args) => render_command(args),
     }
+}
+
+/// `study clip render`.
+fn render_command(args: RenderArgs) -> Result<()> {
+    let RenderArgs {
+        input,
+        study,
+        scenes,
+        times,
+        pane,
+        labels,
+        no_shadow,
+        output,
+        force,
+    } = args;
+    let mode = files::Mode::from_force(force);
+    let svg = match output.extension().and_then(|e| e.to_str()) {
+        Some(e) if e.eq_ignore_ascii_case("svg") => true,
+        Some(e) if e.eq_ignore_ascii_case("png") => false,
+        _ => bail!(
+            "{}: expected an .svg (labelled) or .png output",
+            output.display()
+        ),
+    };
+    // Refused before the (slow) offscreen render.
+    files::check_new(&output, mode)?;
+    let still = Still {
+        times: &times,
+        pane,
+        shadow: !no_shadow,
+    };
+    let (image, names) = if let Some(study) = study {
+        if !input.files.is_empty() || !input.amc.is_empty() || input.demo {
+            bail!("--study draws its crowd scenes: give no clip files or --demo");
+        }
+        let names = if labels.is_empty() {
+            scenes.clone()
+        } else {
+            pane_names_given(&labels, scenes.len())?
+        };
+        (render_scenes(&study, &scenes, &still)?, names)
+    } else {
+        let clips = input.load()?;
+        let names = pane_names(&clips, &labels)?;
+        (render(&clips, &still)?, names)
+    };
+    if svg {
+        files::write(&output, labelled_svg(&image, &names, &still)?, mode)?;
+    } else {
+        image.write_png(&output, mode)?;
+    }
+    eprintln!(
+        "wrote {} ({} × {} panes)",
+        output.display(),
+        names.len(),
+        times.len()
+    );
+    Ok(())
 }
 
 /// What `study clip render` draws: times (rows), pane size, shadow.

@@ -183,15 +183,12 @@ impl SceneSettings {
             }
         })?;
         let mut cx = Ctx::default();
-        let scene = match cx.table(&table, "", "scene") {
-            Some(t) => parse_scene(t, &mut cx),
-            None => {
-                if !table.contains_key("scene") {
-                    cx.err("scene", "missing: a crowd needs a [scene] table");
-                }
-                None
-            }
-        };
+        if !table.contains_key("scene") {
+            cx.err("scene", "missing: a crowd needs a [scene] table");
+        }
+        let scene = cx
+            .table(&table, "", "scene")
+            .and_then(|t| parse_scene(t, &mut cx));
         match scene {
             Some(s) if cx.issues.is_empty() => Ok(s),
             _ => Err(StudyError::Invalid {
@@ -371,7 +368,7 @@ fn parse_characters(t: &Table, levels: usize, cx: &mut Ctx) -> Option<Vec<SceneC
         let x_cm = ranged(cx, c, &p, "x_cm", (-1e6, 1e6), 0.0);
         let facing_deg = ranged(cx, c, &p, "facing_deg", (-360.0, 360.0), 0.0);
         let importance = cx.float(c, &p, "importance");
-        if let Some(v) = importance.filter(|v| !(*v > 0.0)) {
+        if let Some(v) = importance.filter(|v| v.is_nan() || *v <= 0.0) {
             cx.err(join(&p, "importance"), format!("must be positive, got {v}"));
         }
         let distance = parse_distances(c, &p, levels, cx);

@@ -700,46 +700,43 @@ impl StudyUi {
         let (reference, test, encoding) = (shown.reference, shown.test, shown.encoding);
         let shadow = self.study.rendering.ground_shadow;
         let is_reference = |p: Position| stimulus_at(&trial, p) == trial.reference;
-        let (view, stages) = match self
+        let crowd = self
             .study
             .scene
             .as_ref()
-            .filter(|_| !shown.crowd.is_empty())
-        {
+            .filter(|_| !shown.crowd.is_empty());
+        let (view, stages) = if let Some(scene) = crowd {
             // A crowd scene: every character placed on one ground, the study's camera.
-            Some(scene) => {
-                let far = shown
-                    .crowd
-                    .iter()
-                    .map(|c| c.placement.distance_cm)
-                    .fold(0.0, f64::max);
-                let stage = |p: Position| {
-                    Stage::crowd(
-                        shown.crowd.iter().map(|c| {
-                            let clip = if is_reference(p) {
-                                &c.reference
-                            } else {
-                                &c.test
-                            };
-                            (clip.as_ref(), c.reference.as_ref(), c.placement)
-                        }),
-                        shadow,
-                    )
-                };
-                let view = View::crowd(&scene.camera, &scene.light, far).with_shadow(shadow);
-                (view, [stage(first), stage(first.other())])
-            }
-            None => {
-                let view = *self
-                    .views
-                    .entry(trial.reference.clone())
-                    .or_insert_with(|| View::framing(&reference).with_shadow(shadow));
-                let stage = |p: Position| {
-                    let clip = if is_reference(p) { &reference } else { &test };
-                    Stage::single(Figure::new(clip, &view))
-                };
-                (view, [stage(first), stage(first.other())])
-            }
+            let far = shown
+                .crowd
+                .iter()
+                .map(|c| c.placement.distance_cm)
+                .fold(0.0, f64::max);
+            let stage = |p: Position| {
+                Stage::crowd(
+                    shown.crowd.iter().map(|c| {
+                        let clip = if is_reference(p) {
+                            &c.reference
+                        } else {
+                            &c.test
+                        };
+                        (clip.as_ref(), c.reference.as_ref(), c.placement)
+                    }),
+                    shadow,
+                )
+            };
+            let view = View::crowd(&scene.camera, &scene.light, far).with_shadow(shadow);
+            (view, [stage(first), stage(first.other())])
+        } else {
+            let view = *self
+                .views
+                .entry(trial.reference.clone())
+                .or_insert_with(|| View::framing(&reference).with_shadow(shadow));
+            let stage = |p: Position| {
+                let clip = if is_reference(p) { &reference } else { &test };
+                Stage::single(Figure::new(clip, &view))
+            };
+            (view, [stage(first), stage(first.other())])
         };
         let presentation = Presentation::new(
             &trial,
