@@ -146,7 +146,8 @@ pub struct RenderArgs {
     /// Clip times to draw, seconds (one row of panes per time).
     #[arg(long, value_delimiter = ',', default_value = "0")]
     times: Vec<f64>,
-    /// Size of one pane, pixels.
+    /// Size of one pane, pixels (its height and width; crowd scenes are 16:9 wide, as the
+    /// window shows them).
     #[arg(long, default_value_t = 480)]
     pane: u32,
     /// Pane names, one per clip (or scene) in order (default: each file's name without its
@@ -258,6 +259,7 @@ fn render_command(args: RenderArgs) -> Result<()> {
     let still = Still {
         times: &times,
         pane,
+        wide: study.is_some(),
         shadow: !no_shadow,
     };
     let (image, names) = if let Some(study) = study {
@@ -267,7 +269,7 @@ fn render_command(args: RenderArgs) -> Result<()> {
         let names = if labels.is_empty() {
             scenes.clone()
         } else {
-            pane_names_given(&labels, scenes.len())?
+            pane_names_given(&labels, scenes.len(), "scene")?
         };
         (render_scenes(&study, &scenes, &still)?, names)
     } else {
@@ -292,8 +294,22 @@ fn render_command(args: RenderArgs) -> Result<()> {
 /// What `study clip render` draws: times (rows), pane size, shadow.
 struct Still<'a> {
     times: &'a [f64],
+    /// Pane height, pixels (`--pane`).
     pane: u32,
+    /// Wide panes (16:9, the window's stimulus pane: crowd scenes), else square.
+    wide: bool,
     shadow: bool,
+}
+
+impl Still<'_> {
+    /// Pane width, pixels.
+    fn width(&self) -> u32 {
+        if self.wide {
+            self.pane * 16 / 9
+        } else {
+            self.pane
+        }
+    }
 }
 
 /// The name of each pane column: `--labels` when given (one per clip), else the file's stem.
@@ -308,14 +324,14 @@ fn pane_names(clips: &[Loaded], labels: &[String]) -> Result<Vec<String>> {
             })
             .collect());
     }
-    pane_names_given(labels, clips.len())
+    pane_names_given(labels, clips.len(), "clip")
 }
 
-/// `--labels`, one per pane.
-fn pane_names_given(labels: &[String], panes: usize) -> Result<Vec<String>> {
+/// `--labels`, one per pane: per clip, or per scene (`what` is `clip` or `scene`).
+fn pane_names_given(labels: &[String], panes: usize, what: &str) -> Result<Vec<String>> {
     if labels.len() != panes {
         bail!(
-            "--labels: {} names for {panes} panes (one per pane, in order)",
+            "--labels: {} names for {panes} {what}s (one per {what}, in order)",
             labels.len()
         );
     }
@@ -402,8 +418,8 @@ fn draw_panes(
     if let Some(t) = times.iter().find(|t| !t.is_finite() || **t < 0.0) {
         bail!("--times: {t} is not a time in seconds");
     }
-    let (cols, rows) = (stages.len() as u32, times.len() as u32);
-    if u64::from(cols * pane) * u64::from(rows * pane) > 1 << 26 {
+    let (cols, rows, width) = (stages.len() as u32, times.len() as u32, still.width());
+    if u64::from(cols * width) * u64::from(rows * pane) > 1 << 26 {
         bail!("{cols}×{rows} panes of {pane} px is too large an image");
     }
     let mut shapes = Vec::new();
@@ -418,16 +434,16 @@ fn draw_panes(
         .iter()
         .enumerate()
         .map(|(k, s)| Pane {
-            x: (k as u32 % cols) * pane,
+            x: (k as u32 % cols) * width,
             y: (k as u32 / cols) * pane,
-            width: pane,
+            width,
             height: pane,
             view,
             shapes: s,
         })
         .collect();
     let mut offscreen = Offscreen::new(4)?;
-    let image = offscreen.render(cols * pane, rows * pane, &panes)?;
+    let image = offscreen.render(cols * width, rows * pane, &panes)?;
     eprintln!("rendered with adapter {}", offscreen.adapter().name);
     Ok(image)
 }
@@ -440,7 +456,7 @@ fn labelled_svg(
     still: &Still<'_>,
 ) -> Result<String> {
     let png = image.png_bytes()?;
-    let (w, h, pane) = (image.width, image.height, still.pane);
+    let (w, h, pane, width) = (image.width, image.height, still.pane, still.width());
     let size = (f64::from(pane) / 16.0).clamp(10.0, 32.0);
     let mut s = String::new();
     let _ = writeln!(
@@ -458,7 +474,7 @@ fn labelled_svg(
     );
     for (row, t) in still.times.iter().enumerate() {
         for (col, name) in names.iter().enumerate() {
-            let (x, y) = (col as u32 * pane, row as u32 * pane);
+            let (x, y) = (col as u32 * width, row as u32 * pane);
             let pad = size * 0.6;
             let _ = writeln!(
                 s,
@@ -470,7 +486,7 @@ fn labelled_svg(
             let _ = writeln!(
                 s,
                 r#"<text class="time" x="{:.1}" y="{:.1}" text-anchor="end">t = {t:.2} s</text>"#,
-                f64::from(x + pane) - pad,
+                f64::from(x + width) - pad,
                 f64::from(y) + pad + size
             );
         }

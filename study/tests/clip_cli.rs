@@ -250,3 +250,83 @@ fn an_svg_still_carries_each_panes_name_and_time_as_text() {
         "{err}"
     );
 }
+
+/// `study clip render --study --scenes` draws crowd scenes of a study with its camera: a 16:9
+/// pane per scene (as the window shows them), each holding three figures (joint-orange pixels
+/// in three groups of columns), at the nearest and the farthest level; a scene id the
+/// manifest lacks is refused, naming it.
+#[test]
+fn crowd_scenes_of_a_study_render_as_the_window_draws_them() {
+    let dir = tmp();
+    let png = dir.join("crowd.png");
+    let o = png.display().to_string();
+    let study_file = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../examples/crowd-run1.toml")
+        .display()
+        .to_string();
+    let args = |scenes: &str| {
+        [
+            "clip",
+            "render",
+            "--study",
+            &study_file,
+            "--scenes",
+            scenes,
+            "--times",
+            "1",
+            "--pane",
+            "240",
+            "-o",
+            &o,
+            "--force",
+        ]
+        .map(str::to_string)
+    };
+    let run = |scenes: &str| {
+        let a = args(scenes);
+        study(&a.iter().map(String::as_str).collect::<Vec<_>>())
+    };
+    let out = run("near/reference,far/spiht/front40-back80");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let mut dec = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&png).unwrap()));
+    dec.set_transformations(png::Transformations::normalize_to_color8());
+    let mut reader = dec.read_info().unwrap();
+    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+    let info = reader.next_frame(&mut buf).unwrap();
+    assert_eq!((info.width, info.height), (2 * 426, 240));
+    let channels = info.line_size / info.width as usize;
+    for pane in 0..2 {
+        // Columns of this pane holding joint orange, grouped by gaps of 4 or more pixels.
+        let orange: Vec<bool> = (pane * 426..(pane + 1) * 426)
+            .map(|x| {
+                (0..240).any(|y| {
+                    let i = y * info.line_size + x * channels;
+                    i32::from(buf[i]) - i32::from(buf[i + 2]) > 60
+                })
+            })
+            .collect();
+        let mut figures = 0;
+        let mut gap = usize::MAX;
+        for o in orange {
+            if o {
+                if gap >= 4 {
+                    figures += 1;
+                }
+                gap = 0;
+            } else {
+                gap = gap.saturating_add(1);
+            }
+        }
+        assert_eq!(figures, 3, "pane {pane}");
+    }
+    let out = run("far/spiht/front40-back90");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("\"far/spiht/front40-back90\" is not a crowd scene"),
+        "{err}"
+    );
+}
