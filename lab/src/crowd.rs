@@ -27,11 +27,11 @@ use protocols::study::SceneSettings;
 
 use crate::catalog::Codecs;
 use crate::clips::{self, ClipOptions};
-use crate::error::{Context as _, Result, io_error, refused};
+use crate::error::{Context as _, Result, refused};
 use crate::stimulus::{self, Request};
 use crate::sweep::{
-    MANIFEST_FILE, Member, RD_FILE, Target, csv_field, parallel, reference_stimulus, stimulus_id,
-    write_made,
+    Member, SweepClip, Target, csv_field, parallel, read_references, stimulus_id, write_made,
+    write_set,
 };
 
 /// How the bytes of a scene are shared.
@@ -159,19 +159,9 @@ fn four_digits(v: f64) -> f64 {
     (v * scale).round() / scale
 }
 
-/// A clip a character performs, read, with its ASF in the output (AMC clips) and its output
-/// folder.
-struct ClipFiles {
-    clip: Clip,
-    skeleton: Option<PathBuf>,
-    dir: PathBuf,
-}
-
-impl ClipFiles {
-    /// Its raw size, 4 bytes × channels × frames.
-    fn raw(&self) -> f64 {
-        4.0 * (self.clip.channel_count() * self.clip.frames()) as f64
-    }
+/// A clip's raw size, 4 bytes × channels × frames.
+fn raw_size(clip: &Clip) -> f64 {
+    4.0 * (clip.channel_count() * clip.frames()) as f64
 }
 
 /// Makes the crowd set `options` asks for.
@@ -202,36 +192,24 @@ pub fn crowd(
     let out = &options.output;
     let mode = files::Mode::from_force(options.force);
     files::prepare_dir(out, mode)?;
+    // The clips the scene uses, read and copied as references.
+    let used: Vec<_> = sources
+        .into_iter()
+        .filter(|s| scene.characters.iter().any(|c| c.clip == s.name))
+        .collect();
+    let (read, references) = read_references(
+        &used,
+        options.clip_options.bvh_unit_cm,
+        out,
+        options.jobs,
+        mode,
+    )?;
+    let read: BTreeMap<String, SweepClip> = read.into_iter().map(|c| (c.name.clone(), c)).collect();
     let mut manifest = StimulusManifest {
         version: MANIFEST_VERSION,
-        stimuli: Vec::new(),
+        stimuli: references,
     };
-    // The clips the scene uses, read and copied as references.
-    let mut read: BTreeMap<String, ClipFiles> = BTreeMap::new();
-    for source in sources
-        .iter()
-        .filter(|s| scene.characters.iter().any(|c| c.clip == s.name))
-    {
-        let clip = clips::read(source, options.clip_options.bvh_unit_cm)?;
-        let dir = out.join(&source.name);
-        std::fs::create_dir_all(&dir).map_err(io_error(&dir))?;
-        let (file, skeleton) = stimulus::write_clip_as(&clip, &dir, "reference", None, mode)?;
-        manifest.stimuli.push(reference_stimulus(
-            out,
-            &source.name,
-            &file,
-            skeleton.as_deref(),
-        ));
-        read.insert(
-            source.name.clone(),
-            ClipFiles {
-                clip,
-                skeleton,
-                dir,
-            },
-        );
-    }
-    let raw = |clip: &str| read.get(clip).map_or(0.0, ClipFiles::raw);
+    let raw = |clip: &str| read.get(clip).map_or(0.0, |c| raw_size(&c.clip));
     let specs = match &options.plan {
         Plan::Fixed(groups) => fixed_specs(options, &scene, groups),
         Plan::Budget { totals, share } => budget_specs(options, &scene, totals, *share, &raw)?,
@@ -255,11 +233,7 @@ pub fn crowd(
         }
         manifest.stimuli.push(st);
     }
-    // The table, then the manifest: a stimuli.json on disk means every file it names is
-    // complete.
-    files::write(&out.join(RD_FILE), csv, mode)?;
-    let json = serde_json::to_string_pretty(&manifest)?;
-    files::write(&out.join(MANIFEST_FILE), json, mode)?;
+    write_set(out, &csv, &manifest, mode)?;
     Ok(CrowdSummary {
         manifest,
         scenes: specs.len(),
@@ -304,7 +278,7 @@ fn encode_members(
     codec: &dyn codecs::codec::Codec,
     scene: &SceneSettings,
     specs: &[SceneSpec],
-    read: &BTreeMap<String, ClipFiles>,
+    read: &BTreeMap<String, SweepClip>,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<(BTreeMap<String, Stimulus>, usize)> {
     let mut jobs: Vec<Job> = Vec::new();

@@ -114,11 +114,11 @@ pub struct Unreachable {
 }
 
 /// A sweep's clip: name, clip, its ASF in the output (for AMC), its output folder.
-struct SweepClip {
-    name: String,
-    clip: Clip,
-    skeleton: Option<PathBuf>,
-    dir: PathBuf,
+pub(crate) struct SweepClip {
+    pub name: String,
+    pub clip: Clip,
+    pub skeleton: Option<PathBuf>,
+    pub dir: PathBuf,
 }
 
 struct Job {
@@ -170,41 +170,17 @@ pub fn sweep(
     let out = &options.output;
     let mode = files::Mode::from_force(options.force);
     files::prepare_dir(out, mode)?;
+    let (sweep_clips, references) = read_references(
+        &inputs,
+        options.clip_options.bvh_unit_cm,
+        out,
+        options.jobs,
+        mode,
+    )?;
     let mut manifest = StimulusManifest {
         version: MANIFEST_VERSION,
-        stimuli: Vec::new(),
+        stimuli: references,
     };
-    // Reading a clip and writing its reference copy are a parse and a format of every
-    // value: on the worker threads too, one clip each.
-    let read = parallel(
-        &inputs,
-        options.jobs,
-        |_| 0,
-        |source| -> Result<(SweepClip, PathBuf)> {
-            let clip = clips::read(source, options.clip_options.bvh_unit_cm)?;
-            let dir = out.join(&source.name);
-            std::fs::create_dir_all(&dir).map_err(io_error(&dir))?;
-            let (file, skeleton) = stimulus::write_clip_as(&clip, &dir, "reference", None, mode)?;
-            let c = SweepClip {
-                name: source.name.clone(),
-                clip,
-                skeleton,
-                dir,
-            };
-            Ok((c, file))
-        },
-    )?;
-    let mut sweep_clips = Vec::with_capacity(read.len());
-    for r in read {
-        let (c, file) = r?;
-        manifest.stimuli.push(reference_stimulus(
-            out,
-            &c.name,
-            &file,
-            c.skeleton.as_deref(),
-        ));
-        sweep_clips.push(c);
-    }
     let mut jobs = Vec::new();
     for clip in 0..sweep_clips.len() {
         for codec in &options.codecs {
@@ -246,16 +222,69 @@ pub fn sweep(
             }
         }
     }
-    // The table, then the manifest: a stimuli.json on disk means every file it names is
-    // complete.
-    files::write(&out.join(RD_FILE), csv, mode)?;
-    let json = serde_json::to_string_pretty(&manifest)?;
-    files::write(&out.join(MANIFEST_FILE), json, mode)?;
+    write_set(out, &csv, &manifest, mode)?;
     Ok(SweepSummary {
         manifest,
         references: sweep_clips.len(),
         unreachable,
     })
+}
+
+/// Reads every clip of `inputs` and writes its reference copy into `out/<clip>/` (on `jobs`
+/// worker threads: a parse and a format of every value), in input order, with their manifest
+/// entries.
+pub(crate) fn read_references(
+    inputs: &[motion::pairing::ClipSource],
+    bvh_unit_cm: Option<f64>,
+    out: &Path,
+    jobs: usize,
+    mode: files::Mode,
+) -> Result<(Vec<SweepClip>, Vec<Stimulus>)> {
+    let read = parallel(
+        inputs,
+        jobs,
+        |_| 0,
+        |source| -> Result<(SweepClip, PathBuf)> {
+            let clip = clips::read(source, bvh_unit_cm)?;
+            let dir = out.join(&source.name);
+            std::fs::create_dir_all(&dir).map_err(io_error(&dir))?;
+            let (file, skeleton) = stimulus::write_clip_as(&clip, &dir, "reference", None, mode)?;
+            let c = SweepClip {
+                name: source.name.clone(),
+                clip,
+                skeleton,
+                dir,
+            };
+            Ok((c, file))
+        },
+    )?;
+    let mut clips = Vec::with_capacity(read.len());
+    let mut references = Vec::with_capacity(read.len());
+    for r in read {
+        let (c, file) = r?;
+        references.push(reference_stimulus(
+            out,
+            &c.name,
+            &file,
+            c.skeleton.as_deref(),
+        ));
+        clips.push(c);
+    }
+    Ok((clips, references))
+}
+
+/// Writes a set's `rd.csv`, then its manifest: a `stimuli.json` on disk means every file it
+/// names is complete.
+pub(crate) fn write_set(
+    out: &Path,
+    csv: &str,
+    manifest: &StimulusManifest,
+    mode: files::Mode,
+) -> Result<()> {
+    files::write(&out.join(RD_FILE), csv, mode)?;
+    let json = serde_json::to_string_pretty(manifest)?;
+    files::write(&out.join(MANIFEST_FILE), json, mode)?;
+    Ok(())
 }
 
 /// The sweep's targets, ratios first: each positive, none twice (they would make one id

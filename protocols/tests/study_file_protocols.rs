@@ -14,7 +14,12 @@ use protocols::{
 };
 
 fn issues(text: &str) -> Vec<(String, String)> {
-    match parse(text) {
+    invalid(parse(text))
+}
+
+/// The (key, reason) of every problem of a study file that must be invalid.
+fn invalid(parsed: Result<StudyDefinition, StudyError>) -> Vec<(String, String)> {
+    match parsed {
         Err(StudyError::Invalid { issues, .. }) => {
             issues.into_iter().map(|i| (i.key, i.reason)).collect()
         }
@@ -573,12 +578,7 @@ fn crowd(edit: impl Fn(String) -> String) -> Result<StudyDefinition, StudyError>
 }
 
 fn crowd_issues(edit: impl Fn(String) -> String) -> Vec<(String, String)> {
-    match crowd(edit) {
-        Err(StudyError::Invalid { issues, .. }) => {
-            issues.into_iter().map(|i| (i.key, i.reason)).collect()
-        }
-        other => panic!("expected Invalid, got {other:?}"),
-    }
+    invalid(crowd(edit))
 }
 
 /// Thesis 6.5 as a study file: three levels, three characters, twelve crowd scenes rated one

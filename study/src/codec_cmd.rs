@@ -95,22 +95,37 @@ pub struct SweepArgs {
     /// in its id (`walk/wavelet-perceptual/qp9-window128/cr20`).
     #[arg(long = "param", value_name = "KEY=V1,V2,...")]
     pub params: Vec<String>,
-    /// Output folder (gets `stimuli.json`, `rd.csv` and one folder per clip).
-    #[arg(short, long)]
-    pub output: PathBuf,
-    /// Parallel jobs (default: available cores).
-    #[arg(long)]
-    pub jobs: Option<usize>,
+    #[command(flatten)]
+    pub set: SetOutput,
     /// Hide the progress bar.
     #[arg(long)]
     pub quiet: bool,
     /// Primitive database for the `primitive` codec.
     #[arg(long, value_name = "FILE")]
     pub db: Option<PathBuf>,
+}
+
+/// Where a stimulus set goes (`study sweep`, `study crowd`).
+#[derive(Debug, clap::Args)]
+pub struct SetOutput {
+    /// Output folder (gets `stimuli.json`, `rd.csv` and one folder per clip).
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Parallel jobs (default: available cores).
+    #[arg(long)]
+    pub jobs: Option<usize>,
     /// Write into an output folder that holds files, replacing those of the same names (each
     /// atomically); without it such a folder is refused before anything is made.
     #[arg(long)]
     pub force: bool,
+}
+
+impl SetOutput {
+    /// `--jobs`, else the available cores.
+    fn jobs(&self) -> usize {
+        self.jobs
+            .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, usize::from))
+    }
 }
 
 /// Arguments of `study crowd`.
@@ -146,15 +161,8 @@ pub struct CrowdArgs {
     /// Fixed codec parameter `key=value` (repeatable).
     #[arg(long = "param", value_name = "KEY=VALUE")]
     pub params: Vec<String>,
-    /// Output folder (gets `stimuli.json`, `rd.csv` and one folder per clip).
-    #[arg(short, long)]
-    pub output: PathBuf,
-    /// Parallel jobs (default: available cores).
-    #[arg(long)]
-    pub jobs: Option<usize>,
-    /// Write into an output folder that holds files, replacing those of the same names.
-    #[arg(long)]
-    pub force: bool,
+    #[command(flatten)]
+    pub set: SetOutput,
 }
 
 /// How `study crowd` shares a budget.
@@ -457,11 +465,9 @@ pub fn crowd(args: &CrowdArgs) -> Result<()> {
         codec: args.codec.clone(),
         params: parse_params(&args.params)?,
         plan,
-        output: args.output.clone(),
-        jobs: args
-            .jobs
-            .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, usize::from)),
-        force: args.force,
+        output: args.set.output.clone(),
+        jobs: args.set.jobs(),
+        force: args.set.force,
     };
     let summary = lab::crowd::crowd(&options, &|_, _| {})?;
     println!(
@@ -469,7 +475,7 @@ pub fn crowd(args: &CrowdArgs) -> Result<()> {
          manifest stimuli.json, per-character rd.csv",
         summary.scenes,
         summary.encoded,
-        args.output.display()
+        args.set.output.display()
     );
     if let Some((id, budget, bytes)) = summary.worst_budget {
         println!(
@@ -497,12 +503,10 @@ pub fn sweep(args: &SweepArgs) -> Result<()> {
         targets: args.cr.clone(),
         max_errors_cm: args.max_error_cm.clone(),
         params: parse_grid("--param", &args.params)?,
-        output: args.output.clone(),
-        jobs: args
-            .jobs
-            .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, usize::from)),
+        output: args.set.output.clone(),
+        jobs: args.set.jobs(),
         database: args.db.clone(),
-        force: args.force,
+        force: args.set.force,
     };
     let bar = if args.quiet {
         indicatif::ProgressBar::hidden()
@@ -523,7 +527,7 @@ pub fn sweep(args: &SweepArgs) -> Result<()> {
         "{} stimuli ({} references) in {}; manifest stimuli.json, rate–distortion rd.csv",
         summary.manifest.stimuli.len(),
         summary.references,
-        args.output.display()
+        args.set.output.display()
     );
     // Not reached is not a failure of the sweep: the rest is written, and rd.csv says why.
     if !summary.unreachable.is_empty() {

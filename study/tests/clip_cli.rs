@@ -1,6 +1,8 @@
 //! `study clip ...` end to end, as a user runs it.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -292,22 +294,12 @@ fn crowd_scenes_of_a_study_render_as_the_window_draws_them() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let mut dec = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&png).unwrap()));
-    dec.set_transformations(png::Transformations::normalize_to_color8());
-    let mut reader = dec.read_info().unwrap();
-    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
-    let info = reader.next_frame(&mut buf).unwrap();
-    assert_eq!((info.width, info.height), (2 * 426, 240));
-    let channels = info.line_size / info.width as usize;
+    let image = common::Rgb::read(&png);
+    assert_eq!((image.width, image.height), (2 * 426, 240));
     for pane in 0..2 {
         // Columns of this pane holding joint orange, grouped by gaps of 4 or more pixels.
         let orange: Vec<bool> = (pane * 426..(pane + 1) * 426)
-            .map(|x| {
-                (0..240).any(|y| {
-                    let i = y * info.line_size + x * channels;
-                    i32::from(buf[i]) - i32::from(buf[i + 2]) > 60
-                })
-            })
+            .map(|x| (0..240).any(|y| image.is_orange(x, y)))
             .collect();
         let mut figures = 0;
         let mut gap = usize::MAX;

@@ -275,6 +275,23 @@ fn tree(dir: &Path) -> BTreeMap<String, Vec<u8>> {
     out
 }
 
+/// The files under `made` are the files under `committed` (named `name` in messages), byte
+/// for byte.
+fn same_files(made: &Path, committed: &Path, name: &str) {
+    let (made, committed) = (tree(made), tree(committed));
+    assert_eq!(
+        made.keys().collect::<Vec<_>>(),
+        committed.keys().collect::<Vec<_>>(),
+        "{name}/ holds other files than the generator makes (REGENERATE_EXAMPLES=1)"
+    );
+    for (rel, bytes) in &made {
+        assert!(
+            committed[rel] == *bytes,
+            "{name}/{rel} differs from the generator (REGENERATE_EXAMPLES=1)"
+        );
+    }
+}
+
 fn scratch(name: &str) -> PathBuf {
     let d = Path::new(env!("CARGO_TARGET_TMPDIR"))
         .join(format!("examples-{}-{name}", std::process::id()));
@@ -304,19 +321,11 @@ fn example_stimuli_are_the_generated_ones() {
             == std::fs::read(ex.join("stimuli.json")).unwrap(),
         "examples/stimuli.json differs from the generator (REGENERATE_EXAMPLES=1 rewrites it)"
     );
-    let made = tree(&root.join("stimuli"));
-    let committed = tree(&ex.join("stimuli"));
-    assert_eq!(
-        made.keys().collect::<Vec<_>>(),
-        committed.keys().collect::<Vec<_>>(),
-        "examples/stimuli/ holds other files than the generator makes"
+    same_files(
+        &root.join("stimuli"),
+        &ex.join("stimuli"),
+        "examples/stimuli",
     );
-    for (rel, bytes) in &made {
-        assert!(
-            committed[rel] == *bytes,
-            "examples/stimuli/{rel} differs from the generator (REGENERATE_EXAMPLES=1)"
-        );
-    }
     let manifest: StimulusManifest =
         serde_json::from_slice(&std::fs::read(ex.join("stimuli.json")).unwrap()).unwrap();
     for s in &manifest.stimuli {
@@ -345,18 +354,7 @@ fn crowd_example_stimuli_are_the_generated_ones() {
             std::fs::write(to, bytes).unwrap();
         }
     }
-    let (made, committed) = (tree(&made), tree(&committed));
-    assert_eq!(
-        made.keys().collect::<Vec<_>>(),
-        committed.keys().collect::<Vec<_>>(),
-        "examples/crowd/ holds other files than `study crowd` makes (REGENERATE_EXAMPLES=1)"
-    );
-    for (rel, bytes) in &made {
-        assert!(
-            committed[rel] == *bytes,
-            "examples/crowd/{rel} differs from the generator (REGENERATE_EXAMPLES=1)"
-        );
-    }
+    same_files(&made, &committed, "examples/crowd");
     std::fs::remove_dir_all(&root).unwrap();
 }
 
@@ -529,6 +527,19 @@ fn each_example_records_its_first_answer_in_the_window() {
     }
 }
 
+/// Runs `study` with `args`, which must succeed.
+fn study_ok(args: &[&std::ffi::OsStr]) {
+    let out = Command::new(env!("CARGO_BIN_EXE_study"))
+        .args(args)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
 /// The crowd examples simulate (both runs, ten subjects each) and their reports draw thesis
 /// Fig. 6.9: a curve per distance level of the MOS against the back characters' ratio, and a
 /// table of every scene with each character's ratio.
@@ -537,18 +548,16 @@ fn the_crowd_examples_simulate_and_report_fig_6_9() {
     let dir = scratch("crowd-report");
     for run in CROWD_EXAMPLES {
         let results = dir.join(format!("results-{run}"));
-        let out = Command::new(env!("CARGO_BIN_EXE_study"))
-            .arg("simulate")
-            .arg(examples().join(run))
-            .args(["--subjects", "10", "--seed", "3", "-o"])
-            .arg(&results)
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{run}: {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
+        study_ok(&[
+            "simulate".as_ref(),
+            examples().join(run).as_os_str(),
+            "--subjects".as_ref(),
+            "10".as_ref(),
+            "--seed".as_ref(),
+            "3".as_ref(),
+            "-o".as_ref(),
+            results.as_os_str(),
+        ]);
         // Every row carries the characters' ratios and the level.
         let trials = results::trials::read_trials(&results.join("S001_s1/trials.csv")).unwrap();
         assert_eq!(trials.records.len(), 12, "{run}");
@@ -569,18 +578,13 @@ fn the_crowd_examples_simulate_and_report_fig_6_9() {
             );
         }
         let report = dir.join(format!("report-{run}"));
-        let out = Command::new(env!("CARGO_BIN_EXE_study"))
-            .arg("report")
-            .arg(&results)
-            .args(["--no-png", "-o"])
-            .arg(&report)
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{run}: {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
+        study_ok(&[
+            "report".as_ref(),
+            results.as_os_str(),
+            "--no-png".as_ref(),
+            "-o".as_ref(),
+            report.as_os_str(),
+        ]);
         let table = std::fs::read_to_string(report.join("tables/crowd.csv")).unwrap();
         let mut lines = table.lines();
         let header = lines.next().unwrap();
@@ -609,23 +613,12 @@ fn the_crowd_examples_simulate_and_report_fig_6_9() {
 /// columns separated by at least 12 empty pixel columns; each group's (left, right, height)
 /// in pixels, left to right.
 fn figures_in(png_path: &Path, within: f64) -> Vec<(usize, usize, usize)> {
-    let mut dec = png::Decoder::new(std::io::BufReader::new(
-        std::fs::File::open(png_path).unwrap(),
-    ));
-    dec.set_transformations(png::Transformations::normalize_to_color8());
-    let mut reader = dec.read_info().unwrap();
-    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
-    let info = reader.next_frame(&mut buf).unwrap();
-    let channels = info.line_size / info.width as usize;
-    if channels < 3 {
-        return Vec::new();
-    }
-    let rows = (f64::from(info.height) * within) as usize;
+    let image = common::Rgb::read(png_path);
+    let rows = (image.height as f64 * within) as usize;
     let mut columns: BTreeMap<usize, (usize, usize)> = BTreeMap::new();
     for y in 0..rows {
-        for x in 0..info.width as usize {
-            let i = y * info.line_size + x * channels;
-            if i32::from(buf[i]) - i32::from(buf[i + 2]) > 60 {
+        for x in 0..image.width {
+            if image.is_orange(x, y) {
                 let e = columns.entry(x).or_insert((y, y));
                 e.1 = y;
             }
@@ -663,14 +656,7 @@ fn a_crowd_trial_shows_three_figures_at_their_distances_in_the_window() {
         assert!(Instant::now() < deadline, "no crowd scene appeared");
         press(&env, &wid, &["Return"]);
         std::thread::sleep(Duration::from_millis(600));
-        let ok = env
-            .cmd("import")
-            .args(["-window", "root"])
-            .arg(&shot)
-            .status()
-            .unwrap()
-            .success();
-        assert!(ok);
+        common::screenshot(&env, &shot);
         // The stimulus area (the answer panel below it has no orange).
         let found = figures_in(&shot, 0.74);
         eprintln!("screenshot: figures (left, right, height) {found:?}");

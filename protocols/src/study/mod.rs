@@ -514,29 +514,10 @@ impl StudyDefinition {
         manifest: impl FnOnce(&str) -> Result<StimulusManifest, String>,
         codecs: &dyn CodecCatalog,
     ) -> Result<Self, StudyError> {
-        let table: Table = text.parse().map_err(|e: toml::de::Error| {
-            let (line, column) = e.span().map_or((0, 0), |s| line_col(text, s.start));
-            StudyError::Syntax {
-                path: path.to_path_buf(),
-                line,
-                column,
-                message: e.message().to_string(),
-            }
-        })?;
+        let table = parse_toml(text, path)?;
         let mut cx = Ctx::default();
         let def = top::parse_table(&table, &mut cx, manifest, codecs);
-        match def {
-            Some(d) if cx.issues.is_empty() => Ok(d),
-            _ => {
-                if cx.issues.is_empty() {
-                    cx.err("", "study file is invalid");
-                }
-                Err(StudyError::Invalid {
-                    path: path.to_path_buf(),
-                    issues: cx.issues,
-                })
-            }
-        }
+        finish(def, cx, path, "study file is invalid")
     }
 
     /// Sessions' time estimate per trial, ms (playbacks, gaps).
@@ -552,7 +533,37 @@ impl StudyDefinition {
     }
 }
 
-pub(super) fn read_limited(path: &Path, limit: u64) -> Result<String, StudyError> {
+/// `text` as a TOML table, or its syntax error with line and column (the file named `path`).
+fn parse_toml(text: &str, path: &Path) -> Result<Table, StudyError> {
+    text.parse().map_err(|e: toml::de::Error| {
+        let (line, column) = e.span().map_or((0, 0), |s| line_col(text, s.start));
+        StudyError::Syntax {
+            path: path.to_path_buf(),
+            line,
+            column,
+            message: e.message().to_string(),
+        }
+    })
+}
+
+/// What a parse of the file at `path` gave: the value when no problem was found, else every
+/// problem (`fallback` when the parse gave nothing and said nothing).
+fn finish<T>(value: Option<T>, mut cx: Ctx, path: &Path, fallback: &str) -> Result<T, StudyError> {
+    match value {
+        Some(v) if cx.issues.is_empty() => Ok(v),
+        _ => {
+            if cx.issues.is_empty() {
+                cx.err("", fallback);
+            }
+            Err(StudyError::Invalid {
+                path: path.to_path_buf(),
+                issues: cx.issues,
+            })
+        }
+    }
+}
+
+fn read_limited(path: &Path, limit: u64) -> Result<String, StudyError> {
     let meta = std::fs::metadata(path).map_err(|cause| StudyError::Io {
         path: path.to_path_buf(),
         cause,

@@ -17,7 +17,7 @@ use serde::{Deserialize, Serialize};
 use toml::{Table, Value};
 
 use super::check::{Ctx, join, type_name};
-use super::{StudyError, StudyIssue, line_col, read_limited};
+use super::{StudyError, finish, parse_toml, read_limited};
 use crate::manifest::{REFERENCE_CODEC, Stimulus, StimulusManifest};
 
 /// Most characters in a scene.
@@ -173,15 +173,7 @@ impl SceneSettings {
     /// the table (keys as in a study file).
     pub fn read(path: &Path) -> Result<SceneSettings, StudyError> {
         let text = read_limited(path, super::MAX_STUDY_BYTES)?;
-        let table: Table = text.parse().map_err(|e: toml::de::Error| {
-            let (line, column) = e.span().map_or((0, 0), |s| line_col(&text, s.start));
-            StudyError::Syntax {
-                path: path.to_path_buf(),
-                line,
-                column,
-                message: e.message().to_string(),
-            }
-        })?;
+        let table = parse_toml(&text, path)?;
         let mut cx = Ctx::default();
         if !table.contains_key("scene") {
             cx.err("scene", "missing: a crowd needs a [scene] table");
@@ -189,20 +181,7 @@ impl SceneSettings {
         let scene = cx
             .table(&table, "", "scene")
             .and_then(|t| parse_scene(t, &mut cx));
-        match scene {
-            Some(s) if cx.issues.is_empty() => Ok(s),
-            _ => Err(StudyError::Invalid {
-                path: path.to_path_buf(),
-                issues: if cx.issues.is_empty() {
-                    vec![StudyIssue {
-                        key: "scene".into(),
-                        reason: "invalid".into(),
-                    }]
-                } else {
-                    cx.issues
-                },
-            }),
-        }
+        finish(scene, cx, path, "the [scene] is invalid")
     }
 }
 
