@@ -301,7 +301,6 @@ fn encode_members(
         options.jobs,
         |j| read.get(&j.clip).map_or(0, |f| f.clip.frames()),
         |j| {
-            let f = &read[&j.clip];
             let id = stimulus_id(
                 &j.clip,
                 &options.codec,
@@ -312,9 +311,12 @@ fn encode_members(
                 params: options.params.clone(),
                 target_cr: Some(j.target),
             };
-            let r = stimulus::make(codec, &f.clip, &request)
-                .context(|| format!("{id} (a character of the crowd)"))
-                .and_then(|m| {
+            let r = read
+                .get(&j.clip)
+                .context(|| format!("{id}: clip {:?} was not read", j.clip))
+                .and_then(|f| {
+                    let m = stimulus::make(codec, &f.clip, &request)
+                        .context(|| format!("{id} (a character of the crowd)"))?;
                     let member = Member {
                         id,
                         clip: &j.clip,
