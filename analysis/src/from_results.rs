@@ -10,6 +10,7 @@ use protocols::{Answer, Block, Protocol, TrialRecord};
 use results::SessionResults;
 use results::store::{SESSION_FILE, TRIALS_FILE};
 
+use crate::crowd::CrowdDesign;
 use crate::descriptive::Rating;
 use crate::dmos::DscqsPair;
 use crate::error::AnalysisError;
@@ -248,6 +249,22 @@ impl<'a> Converter<'a> {
                 // target.
                 compression_ratio: (!reference).then_some(s.target_cr.unwrap_or(s.achieved_cr)),
             });
+        }
+        // Crowd scenes (thesis 6.5): a scene's ratio on the rate curves is that of the
+        // characters the study varies (the back ones).
+        let rated: Vec<(u32, &str)> = stimuli
+            .names
+            .iter()
+            .enumerate()
+            .map(|(id, s)| (id as u32, s.as_str()))
+            .collect();
+        data.crowd = CrowdDesign::from_manifest(&rated, manifest);
+        if let Some(crowd) = &data.crowd {
+            for c in &crowd.conditions {
+                if let Some(info) = data.conditions.iter_mut().find(|i| i.id == c.condition) {
+                    info.compression_ratio = Some(c.x);
+                }
+            }
         }
         if protocol == Protocol::Mos {
             for c in &data.conditions {

@@ -31,6 +31,7 @@ pub mod display;
 mod dist;
 pub mod dmos;
 mod error;
+pub mod exclusions;
 pub mod export;
 pub mod findings;
 pub mod from_results;

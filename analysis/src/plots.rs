@@ -116,6 +116,22 @@ pub enum Figure {
         /// `None`: the data's range.
         y_range: Option<(f64, f64)>,
     },
+    /// Crowd scenes (thesis Fig. 6.9): MOS against the compression ratio of the characters
+    /// that vary, one curve per distance level, in one panel, with CI error bars.
+    CrowdCurves {
+        /// Title.
+        title: String,
+        /// Y axis label.
+        y_label: String,
+        /// X axis label (whose ratio: "Compression ratio of the back characters (x:1)").
+        x_label: String,
+        /// The panel's name (what the subjects were asked to judge).
+        panel: String,
+        /// The curves: one per level (label), all with [`RateSeries::clip`] = `panel`.
+        series: Vec<RateSeries>,
+        /// The y axis' span (the rating scale), if known.
+        y_range: Option<(f64, f64)>,
+    },
     /// Staircase tracks, one panel each (the first [`MAX_STAIRCASE_PANELS`]): the level held
     /// until the next trial, correct and wrong answers, reversals and the threshold.
     Staircases {
@@ -911,7 +927,25 @@ fn rate_legend(methods: &[String], limit: Option<f64>) -> Vec<(Key, String)> {
     entries
 }
 
+/// The texts of a rate plot's axes: the x axis' title and what a panel's name says before
+/// its clip.
+#[derive(Clone, Copy)]
+struct RateAxes<'a> {
+    x_label: &'a str,
+    panel_prefix: &'a str,
+}
+
+/// The axes of MOS/DMOS against CR, a panel per clip.
+const RATE_AXES: RateAxes<'static> = RateAxes {
+    x_label: "Compression ratio (x:1)",
+    panel_prefix: "clip ",
+};
+
 /// Draws MOS/DMOS against CR: a panel per clip, a curve per method.
+#[expect(
+    clippy::too_many_arguments,
+    reason = "the figure's fields, passed as the match arm unpacks them"
+)]
 fn draw_rate<DB: DrawingBackend>(
     root: &DrawingArea<DB, Shift>,
     c: Ctx,
@@ -920,6 +954,7 @@ fn draw_rate<DB: DrawingBackend>(
     series: &[RateSeries],
     limit: Option<f64>,
     y_range: Option<(f64, f64)>,
+    axes: RateAxes<'_>,
 ) -> DrawResult<DB> {
     let layout = RateLayout::new(series, limit);
     let (y_span, y_ticks) = rate_y_range(y_range, series, limit);
@@ -970,7 +1005,7 @@ fn draw_rate<DB: DrawingBackend>(
         let _ = bottom_row;
         let clip = layout.clips.get(i).cloned().unwrap_or_default();
         root.draw_text(
-            &format!("clip {clip}"),
+            &format!("{}{clip}", axes.panel_prefix),
             &c.font(10.0).pos(Pos::new(HPos::Center, VPos::Bottom)),
             (c.p(f64::midpoint(l, r)), c.p(t - 3.0)),
         )?;
@@ -993,11 +1028,7 @@ fn draw_rate<DB: DrawingBackend>(
         root,
         c,
         title,
-        (
-            "Compression ratio (x:1)",
-            bottom + 1.0,
-            (plot_left, plot_right),
-        ),
+        (axes.x_label, bottom + 1.0, (plot_left, plot_right)),
         (y_label, 6.0, (TITLE_H + PANEL_TITLE_H, bottom - TICKS_H)),
     )?;
     let entries = rate_legend(&layout.methods, limit);
@@ -1685,6 +1716,7 @@ impl Figure {
     pub fn title(&self) -> &str {
         match self {
             Self::RateCurves { title, .. }
+            | Self::CrowdCurves { title, .. }
             | Self::Staircases { title, .. }
             | Self::Psychometric { title, .. }
             | Self::Jnd { title, .. }
@@ -1696,6 +1728,7 @@ impl Figure {
     pub fn size_in(&self) -> (f64, f64) {
         let h = match self {
             Self::RateCurves { series, limit, .. } => RateLayout::new(series, *limit).height(),
+            Self::CrowdCurves { series, .. } => RateLayout::new(series, None).height(),
             Self::Staircases {
                 tracks,
                 last_reversals,
@@ -1818,7 +1851,27 @@ impl Figure {
                 series,
                 limit,
                 y_range,
-            } => draw_rate(root, c, title, y_label, series, *limit, *y_range),
+            } => draw_rate(root, c, title, y_label, series, *limit, *y_range, RATE_AXES),
+            Self::CrowdCurves {
+                title,
+                y_label,
+                x_label,
+                panel: _,
+                series,
+                y_range,
+            } => draw_rate(
+                root,
+                c,
+                title,
+                y_label,
+                series,
+                None,
+                *y_range,
+                RateAxes {
+                    x_label,
+                    panel_prefix: "",
+                },
+            ),
             Self::Staircases {
                 title,
                 level_label,

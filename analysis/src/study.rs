@@ -7,6 +7,7 @@ use serde::Serialize;
 
 use crate::bayesian::{self, BayesFit, Sigmoid};
 use crate::confidence::Confidence;
+use crate::crowd::CrowdDesign;
 use crate::descriptive::{CiMethod, ConditionStats, Rating, condition_stats};
 use crate::dmos::{DscqsPair, acr_hr_dmos, dscqs_dmos, zscore_screened};
 use crate::error::AnalysisError;
@@ -47,6 +48,8 @@ pub struct StudyData {
     /// Subject ids (`S005`) indexed by the numeric subject of the ratings, pairs and tracks;
     /// tables and figures name subjects by them (by number where a name is missing).
     pub subjects: Vec<String>,
+    /// The crowd scenes among the conditions (thesis 6.5), when the study rated any.
+    pub crowd: Option<CrowdDesign>,
 }
 
 impl StudyData {
@@ -658,6 +661,9 @@ impl StudyAnalysis {
         if !self.dmos.is_empty() {
             self.dmos_section(&mut report, data, options);
         }
+        if let Some(crowd) = &data.crowd {
+            self.crowd_section(&mut report, crowd, data, options, title);
+        }
         if let Some(t) = &self.thresholds {
             thresholds_section(&mut report, t, data, options);
         }
@@ -752,6 +758,48 @@ impl StudyAnalysis {
                 Figure::ScoreDistributions {
                     title: "Scores per subject".to_owned(),
                     per_subject: scores_per_subject(data),
+                    y_range: options.scale,
+                },
+            );
+        }
+    }
+
+    /// The crowd section (thesis 6.5): every scene's characters' ratios with its MOS and
+    /// DMOS, and the MOS against the varied characters' ratio, one curve per distance level
+    /// (thesis Fig. 6.9; a study file per run, so a report per panel).
+    fn crowd_section(
+        &self,
+        report: &mut Report,
+        crowd: &CrowdDesign,
+        data: &StudyData,
+        options: &ReportOptions,
+        title: &str,
+    ) {
+        let conf = percent_label(options.confidence);
+        let s = report.section("Crowd scenes");
+        s.text(format!(
+            "{} crowd scenes rated at {} distance level(s). x is the {}. MOS of the compressed \
+             scene (mean ± {conf} CI); Reference is the mean rating of the reference scene shown \
+             before it; DMOS = reference − compressed, averaged per subject, then over subjects.",
+            crowd.conditions.len(),
+            crowd
+                .conditions
+                .iter()
+                .map(|c| c.level.as_str())
+                .collect::<BTreeSet<_>>()
+                .len(),
+            crowd.x_label().to_lowercase(),
+        ));
+        s.table(crowd.table(&self.mos, &self.dmos, &data.dscqs, options.ci_method));
+        if options.figures {
+            s.figure(
+                "crowd_mos",
+                Figure::CrowdCurves {
+                    title: "Crowd scenes: MOS vs compression ratio per distance level".to_owned(),
+                    y_label: format!("MOS (mean ± {conf} CI)"),
+                    x_label: crowd.x_label(),
+                    panel: title.to_owned(),
+                    series: crowd.series(&self.mos, options.ci_method, title),
                     y_range: options.scale,
                 },
             );

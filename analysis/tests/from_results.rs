@@ -31,6 +31,7 @@ fn stimulus(id: &str, clip: &str, codec: &str, cr: f64) -> Stimulus {
         metrics: None,
         encode_ms: None,
         decode_ms: None,
+        scene: None,
     }
 }
 

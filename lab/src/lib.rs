@@ -6,6 +6,8 @@
 //! - [`clips`]: clip sets, paired by the one rule of [`motion::pairing`] and read.
 //! - [`stimulus`]: one stimulus made (encode, decode, measure, timings, worst window).
 //! - [`bounded`]: the smallest stream within a max joint error (`--max-error-cm`).
+//! - [`crowd`]: crowd scenes (thesis 6.5) compressed per character, at a ratio per group
+//!   or under one budget shared uniformly, by distance (eq. 6.4-6.5) or by importance.
 //! - [`sweep`]: a stimulus set (clips × codecs × parameter variants × rates or error bounds)
 //!   with `stimuli.json` and `rd.csv`;
 //!   [`generated`] makes one from the generated walk.
@@ -22,6 +24,7 @@
 pub mod bounded;
 pub mod catalog;
 pub mod clips;
+pub mod crowd;
 pub mod error;
 pub mod generated;
 pub mod integrity;
@@ -37,5 +40,5 @@ pub mod sweep;
 
 pub use catalog::Codecs;
 pub use error::{LabError, Result};
-pub use source::{StimulusSource, TrialStimuli};
+pub use source::{CrowdCharacter, StimulusSource, TrialStimuli};
 pub use study::StudyFile;

@@ -387,6 +387,7 @@ impl StimulusSource for LiveStimuli {
             encoding: Some(made.encoding()),
             reference: made.reference,
             test: made.test,
+            crowd: Vec::new(),
         })
     }
 

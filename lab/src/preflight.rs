@@ -3,7 +3,8 @@
 //!
 //! A stimulus file deleted from a sweep folder, or cut short, would otherwise be found only
 //! when its trial comes up, in the middle of a session. For each stimulus the plan can show
-//! (MOS / DSCQS: every condition and familiarization stimulus and its reference; a staircase:
+//! (MOS / DSCQS: every condition and familiarization stimulus and its reference, every
+//! character of a crowd scene against the same character of the reference scene; a staircase:
 //! every track's reference and every level's stimulus), the checks are:
 //! - its files exist (motion file, ASF skeleton, bitstream), and the motion file parses;
 //! - a test stimulus matches its reference: the same skeleton (joints, parents, channels,
@@ -91,7 +92,8 @@ impl fmt::Display for Checked {
 }
 
 /// The stimulus ids the plan of `study` can show, each with the reference it is shown
-/// against (`None` for a reference), in plan order, each once. Empty for a live staircase.
+/// against (`None` for a reference), in plan order, each once; a crowd scene stands for its
+/// characters' stimuli. Empty for a live staircase.
 pub fn shown(study: &StudyFile) -> Vec<(String, Option<String>)> {
     let def = &study.definition;
     let mut out: Vec<(String, Option<String>)> = Vec::new();
@@ -102,6 +104,24 @@ pub fn shown(study: &StudyFile) -> Vec<(String, Option<String>)> {
         }
     };
     for c in def.familiarization.iter().chain(&def.conditions) {
+        // A crowd scene is its characters' stimuli, each against the same character's
+        // stimulus in the reference scene.
+        let scenes = def
+            .manifest
+            .get(&c.stimulus)
+            .and_then(|s| s.scene.as_ref())
+            .zip(
+                def.manifest
+                    .get(&c.reference)
+                    .and_then(|s| s.scene.as_ref()),
+            );
+        if let Some((test, reference)) = scenes {
+            for (t, r) in test.characters.iter().zip(&reference.characters) {
+                add(&r.stimulus, None);
+                add(&t.stimulus, Some(&r.stimulus));
+            }
+            continue;
+        }
         add(&c.reference, None);
         add(&c.stimulus, Some(&c.reference));
     }

@@ -113,9 +113,16 @@ fn run_subject(
     let per_trial_ms = def.trial_presentation_ms();
     while let Some(trial) = rec.next_trial(clock_ms)? {
         // A stimulus made for this trial (live staircase) is made now; the observer sees its
-        // measured error. Prepared stimuli carry theirs in the manifest.
+        // measured error. Prepared stimuli carry theirs in the manifest (a crowd scene's row
+        // logs its characters' ratios).
         let encoding = stimuli.encoding(&trial)?;
-        let response = observer.respond_measured(&trial, encoding.as_ref().map(|e| e.rms_cm))?;
+        // A crowd scene's row logs its characters' pooled RMS; the observer weighs each
+        // character itself (by size and attention) from the manifest.
+        let measured = encoding
+            .as_ref()
+            .filter(|_| def.scene.is_none())
+            .map(|e| e.rms_cm);
+        let response = observer.respond_measured(&trial, measured)?;
         if !options.trial_delay.is_zero() {
             std::thread::sleep(options.trial_delay);
         }

@@ -114,11 +114,11 @@ pub struct Unreachable {
 }
 
 /// A sweep's clip: name, clip, its ASF in the output (for AMC), its output folder.
-struct SweepClip {
-    name: String,
-    clip: Clip,
-    skeleton: Option<PathBuf>,
-    dir: PathBuf,
+pub(crate) struct SweepClip {
+    pub name: String,
+    pub clip: Clip,
+    pub skeleton: Option<PathBuf>,
+    pub dir: PathBuf,
 }
 
 struct Job {
@@ -170,41 +170,17 @@ pub fn sweep(
     let out = &options.output;
     let mode = files::Mode::from_force(options.force);
     files::prepare_dir(out, mode)?;
+    let (sweep_clips, references) = read_references(
+        &inputs,
+        options.clip_options.bvh_unit_cm,
+        out,
+        options.jobs,
+        mode,
+    )?;
     let mut manifest = StimulusManifest {
         version: MANIFEST_VERSION,
-        stimuli: Vec::new(),
+        stimuli: references,
     };
-    // Reading a clip and writing its reference copy are a parse and a format of every
-    // value: on the worker threads too, one clip each.
-    let read = parallel(
-        &inputs,
-        options.jobs,
-        |_| 0,
-        |source| -> Result<(SweepClip, PathBuf)> {
-            let clip = clips::read(source, options.clip_options.bvh_unit_cm)?;
-            let dir = out.join(&source.name);
-            std::fs::create_dir_all(&dir).map_err(io_error(&dir))?;
-            let (file, skeleton) = stimulus::write_clip_as(&clip, &dir, "reference", None, mode)?;
-            let c = SweepClip {
-                name: source.name.clone(),
-                clip,
-                skeleton,
-                dir,
-            };
-            Ok((c, file))
-        },
-    )?;
-    let mut sweep_clips = Vec::with_capacity(read.len());
-    for r in read {
-        let (c, file) = r?;
-        manifest.stimuli.push(reference_stimulus(
-            out,
-            &c.name,
-            &file,
-            c.skeleton.as_deref(),
-        ));
-        sweep_clips.push(c);
-    }
     let mut jobs = Vec::new();
     for clip in 0..sweep_clips.len() {
         for codec in &options.codecs {
@@ -246,16 +222,69 @@ pub fn sweep(
             }
         }
     }
-    // The table, then the manifest: a stimuli.json on disk means every file it names is
-    // complete.
-    files::write(&out.join(RD_FILE), csv, mode)?;
-    let json = serde_json::to_string_pretty(&manifest)?;
-    files::write(&out.join(MANIFEST_FILE), json, mode)?;
+    write_set(out, &csv, &manifest, mode)?;
     Ok(SweepSummary {
         manifest,
         references: sweep_clips.len(),
         unreachable,
     })
+}
+
+/// Reads every clip of `inputs` and writes its reference copy into `out/<clip>/` (on `jobs`
+/// worker threads: a parse and a format of every value), in input order, with their manifest
+/// entries.
+pub(crate) fn read_references(
+    inputs: &[motion::pairing::ClipSource],
+    bvh_unit_cm: Option<f64>,
+    out: &Path,
+    jobs: usize,
+    mode: files::Mode,
+) -> Result<(Vec<SweepClip>, Vec<Stimulus>)> {
+    let read = parallel(
+        inputs,
+        jobs,
+        |_| 0,
+        |source| -> Result<(SweepClip, PathBuf)> {
+            let clip = clips::read(source, bvh_unit_cm)?;
+            let dir = out.join(&source.name);
+            std::fs::create_dir_all(&dir).map_err(io_error(&dir))?;
+            let (file, skeleton) = stimulus::write_clip_as(&clip, &dir, "reference", None, mode)?;
+            let c = SweepClip {
+                name: source.name.clone(),
+                clip,
+                skeleton,
+                dir,
+            };
+            Ok((c, file))
+        },
+    )?;
+    let mut clips = Vec::with_capacity(read.len());
+    let mut references = Vec::with_capacity(read.len());
+    for r in read {
+        let (c, file) = r?;
+        references.push(reference_stimulus(
+            out,
+            &c.name,
+            &file,
+            c.skeleton.as_deref(),
+        ));
+        clips.push(c);
+    }
+    Ok((clips, references))
+}
+
+/// Writes a set's `rd.csv`, then its manifest: a `stimuli.json` on disk means every file it
+/// names is complete.
+pub(crate) fn write_set(
+    out: &Path,
+    csv: &str,
+    manifest: &StimulusManifest,
+    mode: files::Mode,
+) -> Result<()> {
+    files::write(&out.join(RD_FILE), csv, mode)?;
+    let json = serde_json::to_string_pretty(manifest)?;
+    files::write(&out.join(MANIFEST_FILE), json, mode)?;
+    Ok(())
 }
 
 /// The sweep's targets, ratios first: each positive, none twice (they would make one id
@@ -337,7 +366,7 @@ fn variants(params: &[(String, Vec<f64>)]) -> Result<Vec<Params>> {
 /// `make` of every item on `threads` workers, results in item order. Items are handed out
 /// largest `size` first (ties in item order), so the output does not depend on the number of
 /// threads or on which finishes first.
-fn parallel<I: Sync, T: Send>(
+pub(crate) fn parallel<I: Sync, T: Send>(
     items: &[I],
     threads: usize,
     size: impl Fn(&I) -> usize,
@@ -372,14 +401,19 @@ fn parallel<I: Sync, T: Send>(
 }
 
 /// `p` relative to the manifest folder `dir`, with `/` separators.
-fn rel(dir: &Path, p: &Path) -> String {
+pub(crate) fn rel(dir: &Path, p: &Path) -> String {
     p.strip_prefix(dir)
         .unwrap_or(p)
         .to_string_lossy()
         .replace('\\', "/")
 }
 
-fn reference_stimulus(out: &Path, name: &str, file: &Path, skeleton: Option<&Path>) -> Stimulus {
+pub(crate) fn reference_stimulus(
+    out: &Path,
+    name: &str,
+    file: &Path,
+    skeleton: Option<&Path>,
+) -> Stimulus {
     Stimulus {
         id: format!("{name}/{REFERENCE_CODEC}"),
         clip: name.to_string(),
@@ -396,6 +430,7 @@ fn reference_stimulus(out: &Path, name: &str, file: &Path, skeleton: Option<&Pat
         metrics: None,
         encode_ms: None,
         decode_ms: None,
+        scene: None,
     }
 }
 
@@ -465,53 +500,95 @@ fn make_job(
     if let Some(reason) = off_variant(&made, &job.variant, job.target) {
         return Ok(unreachable(reason));
     }
-    let stem = if job.variant.is_empty() {
-        format!("{}-{}", job.codec, job.target.label())
+    let row = RdRow::made(c, job, &id, &made);
+    let stimulus = write_made(
+        &made,
+        Member {
+            id,
+            clip: &c.name,
+            codec: &job.codec,
+            variant: &job.variant,
+            target: job.target,
+            dir: &c.dir,
+            skeleton: c.skeleton.as_deref(),
+        },
+        out,
+        mode,
+    )?;
+    Ok(Outcome::Made(Box::new(stimulus), row))
+}
+
+/// What a made stimulus is and where its files go ([`write_made`]).
+pub(crate) struct Member<'a> {
+    /// Its id ([`stimulus_id`]).
+    pub id: String,
+    /// Clip name.
+    pub clip: &'a str,
+    /// Codec name.
+    pub codec: &'a str,
+    /// The parameters asked for (its variant).
+    pub variant: &'a Params,
+    /// Its target.
+    pub target: Target,
+    /// The clip's output folder.
+    pub dir: &'a Path,
+    /// The clip's ASF in the output (AMC clips).
+    pub skeleton: Option<&'a Path>,
+}
+
+/// Writes `made`'s bitstream and decoded clip into `m.dir` (`<codec>[-<variant>]-<target>`,
+/// `.mcz` and the clip's format) and returns its manifest entry, paths relative to `out`.
+pub(crate) fn write_made(
+    made: &Made,
+    m: Member<'_>,
+    out: &Path,
+    mode: files::Mode,
+) -> Result<Stimulus> {
+    let stem = if m.variant.is_empty() {
+        format!("{}-{}", m.codec, m.target.label())
     } else {
         format!(
             "{}-{}-{}",
-            job.codec,
-            variant_label(&job.variant),
-            job.target.label()
+            m.codec,
+            variant_label(m.variant),
+            m.target.label()
         )
     };
-    let mcz = c.dir.join(format!("{stem}.mcz"));
+    let mcz = m.dir.join(format!("{stem}.mcz"));
     files::write(&mcz, &made.bytes, mode)?;
-    let (file, _) =
-        stimulus::write_clip_as(&made.decoded, &c.dir, &stem, c.skeleton.as_deref(), mode)?;
-    let row = RdRow::made(c, job, &id, &made);
-    let m = &made.metrics;
+    let (file, _) = stimulus::write_clip_as(&made.decoded, m.dir, &stem, m.skeleton, mode)?;
+    let metrics = &made.metrics;
     let w = made.worst_window;
-    let (target_cr, target_max_error_cm) = match job.target {
+    let (target_cr, target_max_error_cm) = match m.target {
         Target::Cr(t) => (Some(t), None),
         Target::MaxErrorCm(e) => (None, Some(e)),
     };
-    let stimulus = Stimulus {
-        id,
-        clip: c.name.clone(),
-        codec: job.codec.clone(),
+    Ok(Stimulus {
+        id: m.id,
+        clip: m.clip.to_string(),
+        codec: m.codec.to_string(),
         params: made.stream.params.clone(),
-        variant: job.variant.clone(),
+        variant: m.variant.clone(),
         target_cr,
         target_max_error_cm,
         achieved_cr: made.achieved_cr(),
         bytes: made.bytes.len() as u64,
         file: rel(out, &file),
-        skeleton: c.skeleton.as_deref().map(|s| rel(out, s)),
+        skeleton: m.skeleton.map(|s| rel(out, s)),
         bitstream: Some(rel(out, &mcz)),
         metrics: Some(StimulusMetrics {
-            rms_cm: m.rms_cm,
-            max_cm: m.max_cm,
-            mean_angle_deg: m.mean_angle_deg,
-            foot_slide_cm_s: m.foot_slide_cm_s,
+            rms_cm: metrics.rms_cm,
+            max_cm: metrics.max_cm,
+            mean_angle_deg: metrics.mean_angle_deg,
+            foot_slide_cm_s: metrics.foot_slide_cm_s,
             worst_window_rms_cm: w.map(|w| w.rms_cm),
             worst_window_start_frame: w.map(|w| w.start_frame as u64),
             worst_window_frames: w.map(|w| w.frames as u64),
         }),
         encode_ms: Some(made.encode_ms),
         decode_ms: Some(made.decode_ms),
-    };
-    Ok(Outcome::Made(Box::new(stimulus), row))
+        scene: None,
+    })
 }
 
 /// Why `made` is not the variant asked for: a varied parameter the stream records with
@@ -647,7 +724,7 @@ impl RdRow {
 }
 
 /// `s` as one CSV cell (RFC 4180: quoted when it holds a comma, quote or line break).
-fn csv_field(s: &str) -> String {
+pub(crate) fn csv_field(s: &str) -> String {
     if s.contains([',', '"', '\n', '\r']) {
         format!("\"{}\"", s.replace('"', "\"\""))
     } else {

@@ -265,3 +265,222 @@ fn one_and_two_workers_write_the_same_sweep() {
     assert_eq!(one.2, two.2);
     std::fs::remove_dir_all(&base).unwrap();
 }
+
+/// Two generated clips of different lengths (so the characters' raw sizes differ) in `dir`,
+/// and a scene of three characters at two levels (`a` at 3 m; `b` at 6 then 4.5 m; `c` at 9
+/// then 12 m) with importance 3, 1, 2.
+fn crowd_scene(dir: &Path, importance: bool) -> (PathBuf, Vec<PathBuf>) {
+    std::fs::create_dir_all(dir).unwrap();
+    let mut clips = Vec::new();
+    for (name, seconds) in [("walk", 2.0), ("march", 1.5)] {
+        let p = dir.join(format!("{name}.bvh"));
+        let clip = motion::synth::walking_clip(&motion::synth::WalkParams {
+            duration_s: seconds,
+            ..motion::synth::WalkParams::default()
+        });
+        motion::io::write_clip(&clip, &p, None, files::Mode::Replace).unwrap();
+        clips.push(p);
+    }
+    let imp = |v: f64| {
+        if importance {
+            format!("importance = {v}\n")
+        } else {
+            String::new()
+        }
+    };
+    let scene = dir.join("scene.toml");
+    std::fs::write(
+        &scene,
+        format!(
+            "[scene]\nlevels = [\"one\", \"two\"]\n\
+             [[scene.characters]]\nname = \"a\"\nclip = \"walk\"\ndistance_cm = 300\n{}\
+             [[scene.characters]]\nname = \"b\"\ngroup = \"back\"\nclip = \"march\"\nx_cm = -100\n\
+             distance_cm = [600, 450]\n{}\
+             [[scene.characters]]\nname = \"c\"\ngroup = \"back\"\nclip = \"walk\"\nx_cm = 100\n\
+             distance_cm = [900, 1200]\n{}",
+            imp(3.0),
+            imp(1.0),
+            imp(2.0)
+        ),
+    )
+    .unwrap();
+    (scene, clips)
+}
+
+fn crowd_options(
+    scene: &Path,
+    clips: &[PathBuf],
+    plan: lab::crowd::Plan,
+    out: &Path,
+) -> lab::crowd::CrowdOptions {
+    lab::crowd::CrowdOptions {
+        scene: scene.to_path_buf(),
+        clips: clips.to_vec(),
+        clip_options: ClipOptions::default(),
+        codec: "spiht".into(),
+        params: std::collections::BTreeMap::new(),
+        plan,
+        output: out.to_path_buf(),
+        jobs: 2,
+        force: false,
+    }
+}
+
+/// A crowd under one budget (thesis eq. 6.4-6.5), shared by distance, uniformly and by
+/// importance: every character's budget is the hand-computed share of the scene's, its stream
+/// is within 1 % of it, and the scene's streams add up to the budget within 1 %.
+#[test]
+fn a_crowd_budget_is_shared_as_eq_6_5_says_and_met_within_one_percent() {
+    use lab::crowd::{Budget, Plan, Share};
+    let dir = std::env::temp_dir().join(format!("lab-crowd-budget-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let (scene, clips) = crowd_scene(&dir, true);
+    // Shares by hand. Level one: d = 3, 6, 9 m, S = 1, 1/2, 1/3 (sum 11/6), so B·6/11, B·3/11,
+    // B·2/11. Level two: d = 3, 4.5, 12 m, S = 1, 2/3, 1/4 (sum 23/12): B·12/23, B·8/23, B·3/23.
+    // Uniform: B/3 each. Importance 3, 1, 2: B/2, B/6, B/3.
+    let cases: [(Share, [[f64; 3]; 2]); 3] = [
+        (
+            Share::Distance,
+            [
+                [6.0 / 11.0, 3.0 / 11.0, 2.0 / 11.0],
+                [12.0 / 23.0, 8.0 / 23.0, 3.0 / 23.0],
+            ],
+        ),
+        (Share::Uniform, [[1.0 / 3.0; 3]; 2]),
+        (Share::Importance, [[0.5, 1.0 / 6.0, 1.0 / 3.0]; 2]),
+    ];
+    for (share, fractions) in cases {
+        let out = dir.join(share.as_str());
+        let plan = Plan::Budget {
+            totals: vec![Budget::Cr(25.0), Budget::Bytes(4000.0)],
+            share,
+        };
+        let summary =
+            lab::crowd::crowd(&crowd_options(&scene, &clips, plan, &out), &|_, _| {}).unwrap();
+        assert_eq!(summary.scenes, 4, "{share:?}");
+        let m: StimulusManifest =
+            serde_json::from_slice(&std::fs::read(out.join("stimuli.json")).unwrap()).unwrap();
+        let scenes: Vec<_> = m
+            .stimuli
+            .iter()
+            .filter(|s| s.scene.is_some() && s.codec != REFERENCE_CODEC)
+            .collect();
+        assert_eq!(scenes.len(), 4);
+        for s in scenes {
+            let sc = s.scene.as_ref().unwrap();
+            let level = usize::from(sc.level == "two");
+            let budget = sc.budget_bytes.unwrap();
+            if s.id.contains("/b4000-") {
+                assert!((budget - 4000.0).abs() < 1e-9, "{}", s.id);
+            }
+            let mut sum = 0;
+            for (c, f) in sc.characters.iter().zip(fractions[level]) {
+                let b = c.budget_bytes.unwrap();
+                assert!(
+                    (b - f * budget).abs() <= 1e-9 * budget,
+                    "{} {}: {b}",
+                    s.id,
+                    c.name
+                );
+                let member = m.get(&c.stimulus).unwrap();
+                assert!(
+                    (member.bytes as f64 / b - 1.0).abs() <= 0.01,
+                    "{} {}: {} bytes for a budget of {b}",
+                    s.id,
+                    c.name,
+                    member.bytes
+                );
+                sum += member.bytes;
+            }
+            assert_eq!(s.bytes, sum);
+            assert!(
+                (sum as f64 / budget - 1.0).abs() <= 0.01,
+                "{}: {sum} bytes for a budget of {budget}",
+                s.id
+            );
+        }
+        // rd.csv: one row per character of every compressed scene.
+        let rd = std::fs::read_to_string(out.join("rd.csv")).unwrap();
+        assert_eq!(rd.lines().count(), 1 + 4 * 3);
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Fixed ratios per group make a scene per combination and level, each character's stimulus
+/// made once however many scenes show it; plans that do not fit the scene are refused before
+/// anything is written.
+#[test]
+fn a_crowd_at_fixed_ratios_and_the_plans_refused() {
+    use lab::crowd::{Plan, Share};
+    let dir = std::env::temp_dir().join(format!("lab-crowd-fixed-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let (scene, clips) = crowd_scene(&dir, false);
+    let out = dir.join("fixed");
+    let plan = Plan::Fixed(vec![
+        ("back".into(), vec![20.0, 40.0]),
+        ("a".into(), vec![30.0]),
+    ]);
+    let summary =
+        lab::crowd::crowd(&crowd_options(&scene, &clips, plan, &out), &|_, _| {}).unwrap();
+    // 2 levels x 2 back ratios; walk at 30, 20, 40 and march at 20, 40.
+    assert_eq!((summary.scenes, summary.encoded), (4, 5));
+    let m = &summary.manifest;
+    let s = m
+        .get("two/spiht/a30-back40")
+        .expect("ids name every group's ratio");
+    let sc = s.scene.as_ref().unwrap();
+    let ids: Vec<&str> = sc.characters.iter().map(|c| c.stimulus.as_str()).collect();
+    assert_eq!(
+        ids,
+        ["walk/spiht/cr30", "march/spiht/cr40", "walk/spiht/cr40"]
+    );
+    let d: Vec<f64> = sc.characters.iter().map(|c| c.distance_cm).collect();
+    assert_eq!(d, [300.0, 450.0, 1200.0]);
+    let r = m.get("one/reference").unwrap().scene.as_ref().unwrap();
+    assert!(
+        r.characters
+            .iter()
+            .all(|c| c.stimulus.ends_with("/reference"))
+    );
+
+    let refused = |plan: Plan, clips: &[PathBuf], why: &str| {
+        let out = dir.join("refused");
+        let err = lab::crowd::crowd(&crowd_options(&scene, clips, plan, &out), &|_, _| {})
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains(why), "{err}");
+        assert!(!out.exists(), "{why}: wrote {}", out.display());
+    };
+    refused(
+        Plan::Fixed(vec![("back".into(), vec![20.0])]),
+        &clips,
+        "no ratio for group \"a\"",
+    );
+    refused(
+        Plan::Fixed(vec![("a".into(), vec![20.0]), ("side".into(), vec![20.0])]),
+        &clips,
+        "the scene has no group \"side\"",
+    );
+    refused(
+        Plan::Budget {
+            totals: vec![lab::crowd::Budget::Cr(20.0)],
+            share: Share::Importance,
+        },
+        &clips,
+        "character \"a\" has no importance",
+    );
+    refused(
+        Plan::Budget {
+            totals: vec![lab::crowd::Budget::Cr(-1.0)],
+            share: Share::Distance,
+        },
+        &clips,
+        "must be positive",
+    );
+    refused(
+        Plan::Fixed(vec![("a".into(), vec![20.0]), ("back".into(), vec![20.0])]),
+        &clips[..1],
+        "performs clip \"march\"",
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}

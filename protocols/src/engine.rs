@@ -421,7 +421,8 @@ impl Session {
             (Protocol::Mos, _) => return Err(wrong("a rating")),
             (Protocol::Dscqs, Answer::Pair { a, b }) => {
                 let (a, b) = (on_scale(a)?, on_scale(b)?);
-                let (r, t) = if trial.reference_position == Position::A {
+                // `a` rates what was shown first: slot A, or the first interval.
+                let (r, t) = if matches!(trial.reference_position, Position::A | Position::First) {
                     (a, b)
                 } else {
                     (b, a)
@@ -435,7 +436,7 @@ impl Session {
                     reversal: None,
                 }
             }
-            (Protocol::Dscqs, _) => return Err(wrong("ratings of A and B")),
+            (Protocol::Dscqs, _) => return Err(wrong("ratings of both stimuli")),
             (Protocol::Staircase, Answer::Choice(p)) if p.fits(trial.arrangement) => {
                 // Thesis ch. 5: picking the original motion is the correct answer.
                 let correct = p == trial.reference_position;

@@ -8,10 +8,13 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
+use crate::record::StimulusEncoding;
+
 /// Current version of the `stimuli.json` format. Version 2 added a stimulus' `variant`,
-/// `target_max_error_cm` and the worst-window fields of its metrics; every one of them is
-/// optional, so a version-1 manifest reads as a version-2 one without them.
-pub const MANIFEST_VERSION: u32 = 2;
+/// `target_max_error_cm` and the worst-window fields of its metrics; version 3 the crowd
+/// scenes of `study crowd` (a stimulus' `scene`, whose `file` is then empty). Every one of
+/// them is optional, so a version-1 or -2 manifest reads as a version-3 one without them.
+pub const MANIFEST_VERSION: u32 = 3;
 
 /// The oldest `stimuli.json` version this build reads.
 pub const MANIFEST_VERSION_MIN: u32 = 1;
@@ -61,7 +64,9 @@ pub struct Stimulus {
     /// Bitstream size in bytes (0 for a reference).
     #[serde(default)]
     pub bytes: u64,
-    /// Decoded clip file relative to the manifest's folder (the source's copy for a reference).
+    /// Decoded clip file relative to the manifest's folder (the source's copy for a
+    /// reference); empty for a crowd scene, whose characters' stimuli have the files.
+    #[serde(default)]
     pub file: String,
     /// Skeleton file (ASF) relative to the manifest's folder, when `file` is an AMC.
     #[serde(default)]
@@ -78,6 +83,52 @@ pub struct Stimulus {
     /// Decode time in milliseconds.
     #[serde(default)]
     pub decode_ms: Option<f64>,
+    /// A crowd scene (thesis 6.5, `study crowd`): several characters, each shown by a
+    /// stimulus of this manifest. Its `clip` is the scene's distance level, its `bytes` the
+    /// sum of the characters' streams and its `achieved_cr` the scene's ratio (their raw
+    /// sizes over those bytes).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scene: Option<SceneStimulus>,
+}
+
+/// What a crowd scene of the manifest shows: its distance level and, per character, the
+/// stimulus it shows and how the scene's budget was shared.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SceneStimulus {
+    /// The study's distance level the scene was made for (`[scene] levels`).
+    pub level: String,
+    /// How the bytes were shared between the characters: `reference` (no compression),
+    /// `fixed` (a ratio per group), or a total budget shared `uniform`ly, by `distance`
+    /// (thesis eq. 6.4-6.5) or by `importance`.
+    pub allocation: String,
+    /// The total budget in bytes, when one was shared (`B` of eq. 6.5).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub budget_bytes: Option<f64>,
+    /// The characters, in the scene's order.
+    pub characters: Vec<SceneMember>,
+}
+
+/// One character of a crowd scene.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SceneMember {
+    /// Character name (`[[scene.characters]] name`).
+    pub name: String,
+    /// Its group.
+    pub group: String,
+    /// The stimulus it shows (an entry of this manifest: its compression ratio, bytes and
+    /// error are that entry's).
+    pub stimulus: String,
+    /// Its distance from the camera on this level, cm (`d_C` of eq. 6.4).
+    pub distance_cm: f64,
+    /// Its share score `S_k` of eq. 6.5 (`d_m / d_k` when shared by distance, its importance,
+    /// or 1 when shared uniformly); `None` when no budget was shared.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub score: Option<f64>,
+    /// Its budget `B_k` in bytes, when a budget was shared.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub budget_bytes: Option<f64>,
 }
 
 /// Objective error of a stimulus against its reference, via forward kinematics.
@@ -136,6 +187,29 @@ impl Stimulus {
 }
 
 impl StimulusManifest {
+    /// What a trial row logs about crowd scene `id` (`trials.csv` columns 30-32): each
+    /// character's compression ratio as `cr_<name>`, the scene's distance level as `level`
+    /// (1-based, in the order of `levels`), the scene's ratio, and the root mean square of
+    /// the characters' joint RMS errors. `None` for a stimulus that is no compressed scene or
+    /// whose characters are not in the manifest.
+    pub fn scene_encoding(&self, id: &str, levels: &[String]) -> Option<StimulusEncoding> {
+        let s = self.get(id)?;
+        let scene = s.scene.as_ref().filter(|_| s.codec != REFERENCE_CODEC)?;
+        let level = levels.iter().position(|l| *l == scene.level)?;
+        let mut codec_params = BTreeMap::from([("level".to_string(), (level + 1) as f64)]);
+        let mut squares = 0.0;
+        for c in &scene.characters {
+            let m = self.get(&c.stimulus)?;
+            codec_params.insert(format!("cr_{}", c.name), m.achieved_cr);
+            squares += m.metrics.map_or(0.0, |x| x.rms_cm * x.rms_cm);
+        }
+        Some(StimulusEncoding {
+            codec_params,
+            achieved_cr: s.achieved_cr,
+            rms_cm: (squares / scene.characters.len().max(1) as f64).sqrt(),
+        })
+    }
+
     /// The stimulus with id `id`.
     pub fn get(&self, id: &str) -> Option<&Stimulus> {
         self.stimuli.iter().find(|s| s.id == id)

@@ -9,7 +9,7 @@
 //! answer draws from a stream seeded by (seed, subject, trial index), so an answer does not
 //! depend on how many answers came before it in this process (resume gives the same answers).
 
-use crate::manifest::REFERENCE_CODEC;
+use crate::manifest::{REFERENCE_CODEC, SceneStimulus};
 use crate::record::{Answer, Position, Protocol, Response, Trial};
 use crate::rng::{StudyRng, purpose};
 use crate::study::{
@@ -143,6 +143,9 @@ impl Observer {
         if s.codec == REFERENCE_CODEC {
             return Ok(0.0);
         }
+        if let Some(scene) = &s.scene {
+            return self.scene_error(scene);
+        }
         let m = s
             .metrics
             .ok_or_else(|| ObserverError::NoMetrics { id: id.to_string() })?;
@@ -151,6 +154,41 @@ impl Observer {
             Metric::MaxCm => m.max_cm,
             Metric::MeanAngleDeg => m.mean_angle_deg,
         })
+    }
+
+    /// The error a simulated observer sees in a crowd scene (a model of this simulator, not
+    /// the thesis's): each character's error scaled by its apparent size, the nearest
+    /// character's distance over its own (a figure twice as far is drawn half as tall, so its
+    /// errors span half the pixels), averaged with the weights of `[simulation] attention`
+    /// (by character name, else group, else 1). Run 2 of thesis 6.5 (attend to the back
+    /// characters) is a study whose attention favours them.
+    fn scene_error(&self, scene: &SceneStimulus) -> Result<f64, ObserverError> {
+        let nearest = scene
+            .characters
+            .iter()
+            .map(|c| c.distance_cm)
+            .fold(f64::INFINITY, f64::min);
+        let (mut sum, mut weights) = (0.0, 0.0);
+        for c in &scene.characters {
+            let a = self
+                .settings
+                .attention
+                .get(&c.name)
+                .or_else(|| self.settings.attention.get(&c.group))
+                .copied()
+                .unwrap_or(1.0);
+            if a == 0.0 {
+                continue;
+            }
+            let size = if c.distance_cm > 0.0 {
+                nearest / c.distance_cm
+            } else {
+                1.0
+            };
+            sum += a * size * self.manifest_error(&c.stimulus)?;
+            weights += a;
+        }
+        Ok(if weights > 0.0 { sum / weights } else { 0.0 })
     }
 
     /// Latent quality of a stimulus whose objective error is `error` (metric units).
@@ -204,7 +242,7 @@ impl Observer {
             Protocol::Dscqs => {
                 let r = self.rate(self.manifest_error(&trial.reference)?, &mut rng);
                 let t = self.rate(test_error()?, &mut rng);
-                if trial.reference_position == Position::A {
+                if matches!(trial.reference_position, Position::A | Position::First) {
                     Answer::Pair { a: r, b: t }
                 } else {
                     Answer::Pair { a: t, b: r }

@@ -151,11 +151,12 @@ pub struct Trial {
 pub enum Answer {
     /// One rating of the test stimulus (MOS).
     Rating(f64),
-    /// Ratings of slot A and slot B (DSCQS).
+    /// Ratings of slot A and slot B (DSCQS), or of the first and the second stimulus of a
+    /// sequential DSCQS (thesis 6.5).
     Pair {
-        /// Rating of slot A.
+        /// Rating of slot A (the first stimulus).
         a: f64,
-        /// Rating of slot B.
+        /// Rating of slot B (the second stimulus).
         b: f64,
     },
     /// The position the subject picked as more natural and smooth (2AFC).
@@ -236,7 +237,8 @@ pub struct FrameTiming {
 
 /// What the runner logged about a stimulus it encoded and decoded for one trial (live
 /// staircase): the exact codec parameters, the compression ratio reached and the error of the
-/// decoded clip.
+/// decoded clip. A crowd scene's trial logs its characters' ratios and its level here
+/// ([`crate::manifest::StimulusManifest::scene_encoding`]).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct StimulusEncoding {
     /// Codec parameters of the bitstream (the level's parameter included), exact values.

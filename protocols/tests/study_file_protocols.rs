@@ -14,7 +14,12 @@ use protocols::{
 };
 
 fn issues(text: &str) -> Vec<(String, String)> {
-    match parse(text) {
+    invalid(parse(text))
+}
+
+/// The (key, reason) of every problem of a study file that must be invalid.
+fn invalid(parsed: Result<StudyDefinition, StudyError>) -> Vec<(String, String)> {
+    match parsed {
         Err(StudyError::Invalid { issues, .. }) => {
             issues.into_iter().map(|i| (i.key, i.reason)).collect()
         }
@@ -558,19 +563,19 @@ fn codec_problems_are_listed_with_every_other_problem() {
 }
 
 #[test]
-fn crowd_settings_are_read_and_every_mistake_is_listed() {
+fn crowdsourcing_settings_are_read_and_every_mistake_is_listed() {
     use protocols::study::HiddenRule;
     let base = example_text("mos.toml");
     let first = example("mos.toml").conditions[0].stimulus.clone();
     let study = parse(&format!(
-        "{base}\n[crowd]\nmin_window = [1024, 600]\nmin_refresh_hz = 59\nfullscreen = true\n\
+        "{base}\n[crowdsourcing]\nmin_window = [1024, 600]\nmin_refresh_hz = 59\nfullscreen = true\n\
          hidden = \"exclude\"\ncompletion_code = \"C0DE-1\"\n\
          completion_url = \"https://app.prolific.com/submissions/complete?cc=C0DE-1\"\n\
          max_gold_failures = 1\ngroups = 4\nquota = 25\n\
-         [[crowd.gold]]\nstimulus = \"{first}\"\nmax = 2\n"
+         [[crowdsourcing.gold]]\nstimulus = \"{first}\"\nmax = 2\n"
     ))
     .unwrap();
-    let c = &study.crowd;
+    let c = &study.crowdsourcing;
     assert_eq!(
         (c.min_window_px, c.min_refresh_hz, c.fullscreen),
         ([1024, 600], 59.0, true)
@@ -583,31 +588,202 @@ fn crowd_settings_are_read_and_every_mistake_is_listed() {
     let gold = c.gold_of(&first).unwrap();
     assert!(gold.passes(1.5) && gold.passes(2.0) && !gold.passes(2.5));
     // Without the table: the defaults (a 50 Hz display, 800 x 500, repeat a hidden trial).
-    let d = example("mos.toml").crowd;
+    let d = example("mos.toml").crowdsourcing;
     assert_eq!(
         (d.min_refresh_hz, d.min_window_px, d.hidden),
         (50.0, [800, 500], HiddenRule::Repeat)
     );
 
     let got = issues(&format!(
-        "{base}\n[crowd]\nmin_window = [10]\nhidden = \"skip\"\ncompletion_code = \"a b\"\n\
+        "{base}\n[crowdsourcing]\nmin_window = [10]\nhidden = \"skip\"\ncompletion_code = \"a b\"\n\
          completion_url = \"http://x\"\ngroups = 0\ncolour = 1\n\
-         [[crowd.gold]]\nstimulus = \"nope\"\n"
+         [[crowdsourcing.gold]]\nstimulus = \"nope\"\n"
     ));
     let has = |k: &str, r: &str| got.iter().any(|(gk, gr)| gk == k && gr.contains(r));
-    assert!(has("crowd.min_window", "[width, height]"), "{got:#?}");
-    assert!(has("crowd.hidden", "\"repeat\" or \"exclude\""), "{got:#?}");
-    assert!(has("crowd.completion_code", "letters, digits"), "{got:#?}");
-    assert!(has("crowd.completion_url", "https://"), "{got:#?}");
-    assert!(has("crowd.groups", "at least 1"), "{got:#?}");
-    assert!(has("crowd.colour", "unknown key"), "{got:#?}");
-    assert!(has("crowd.gold[0]", "give min"), "{got:#?}");
+    assert!(
+        has("crowdsourcing.min_window", "[width, height]"),
+        "{got:#?}"
+    );
+    assert!(
+        has("crowdsourcing.hidden", "\"repeat\" or \"exclude\""),
+        "{got:#?}"
+    );
+    assert!(
+        has("crowdsourcing.completion_code", "letters, digits"),
+        "{got:#?}"
+    );
+    assert!(has("crowdsourcing.completion_url", "https://"), "{got:#?}");
+    assert!(has("crowdsourcing.groups", "at least 1"), "{got:#?}");
+    assert!(has("crowdsourcing.colour", "unknown key"), "{got:#?}");
+    assert!(has("crowdsourcing.gold[0]", "give min"), "{got:#?}");
     assert!(
         has(
-            "crowd.gold[0].stimulus",
+            "crowdsourcing.gold[0].stimulus",
             "not one of the study's conditions"
         ),
         "{got:#?}"
     );
     assert_eq!(got.len(), 8, "{got:#?}");
+}
+
+/// The repository's crowd example (thesis 6.5) with `edit` applied to its text, over its own
+/// manifest (`examples/crowd/stimuli.json`).
+fn crowd(edit: impl Fn(String) -> String) -> Result<StudyDefinition, StudyError> {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples");
+    let text = edit(std::fs::read_to_string(dir.join("crowd-run1.toml")).unwrap());
+    let json = std::fs::read_to_string(dir.join("crowd/stimuli.json")).unwrap();
+    let m: protocols::manifest::StimulusManifest = serde_json::from_str(&json).unwrap();
+    StudyDefinition::parse(
+        &text,
+        Path::new("crowd.toml"),
+        move |_| Ok(m),
+        &common::TestCodecs,
+    )
+}
+
+fn crowd_issues(edit: impl Fn(String) -> String) -> Vec<(String, String)> {
+    invalid(crowd(edit))
+}
+
+/// Thesis 6.5 as a study file: three levels, three characters, twelve crowd scenes rated one
+/// after the other with the reference first; the engine scores both ratings, reference first.
+#[test]
+fn the_crowd_example_is_a_sequential_dscqs_over_twelve_scenes() {
+    let s = crowd(|t| t).unwrap();
+    assert_eq!(s.protocol, Protocol::Dscqs);
+    let scene = s.scene.as_ref().unwrap();
+    assert_eq!(scene.levels, ["near", "middle", "far"]);
+    let names: Vec<&str> = scene.characters.iter().map(|c| c.name.as_str()).collect();
+    assert_eq!(names, ["front", "back_left", "back_right"]);
+    assert_eq!(scene.groups(), ["front", "back"]);
+    assert_eq!(
+        scene
+            .placement(&scene.characters[1], 2)
+            .distance_cm
+            .to_bits(),
+        1300f64.to_bits()
+    );
+    assert_eq!(
+        scene
+            .placement(&scene.characters[0], 2)
+            .distance_cm
+            .to_bits(),
+        350f64.to_bits()
+    );
+    assert_eq!(s.conditions.len(), 12);
+    let mut session = protocols::Session::new(&s, 3).unwrap();
+    let mut shown = std::collections::BTreeSet::new();
+    while let Some(t) = session.next_trial(0).unwrap() {
+        assert_eq!(t.arrangement, protocols::Arrangement::Sequential);
+        assert_eq!(t.reference_position, protocols::Position::First);
+        let level = t.stimulus.split('/').next().unwrap();
+        assert_eq!(t.reference, format!("{level}/reference"));
+        shown.insert(t.stimulus.clone());
+        let o = session
+            .respond(&protocols::Response {
+                answer: protocols::Answer::Pair { a: 5.0, b: 3.0 },
+                response_time_ms: 1,
+                replays: 0,
+                dropped_frames: 0,
+            })
+            .unwrap();
+        assert_eq!(
+            (o.score_reference, o.score_test, o.score),
+            (Some(5.0), Some(3.0), 2.0)
+        );
+    }
+    assert_eq!(shown.len(), 12, "every scene once");
+}
+
+/// A crowd stimulus made for another layout, a crowd without a [scene], a scene in a
+/// staircase, bad scene keys and attention for a group the scene lacks are each reported with
+/// their key.
+#[test]
+fn crowd_mistakes_are_reported_with_their_keys() {
+    // The middle level's back characters moved: the stimuli were compressed for 9 m.
+    let got = crowd_issues(|t| t.replace("[600, 900, 1300]", "[600, 950, 1300]"));
+    assert!(
+        got.iter().any(|(k, r)| k == "conditions"
+            && r.contains("\"middle/spiht/front40-back20\"")
+            && r.contains("compressed for 900 cm")
+            && r.contains("950 cm ahead on level \"middle\"")),
+        "{got:#?}"
+    );
+    let got = crowd_issues(|t| {
+        let cut = t.find("\n[scene]").unwrap();
+        let end = t.find("\n[simulation]").unwrap();
+        format!("{}{}", &t[..cut], &t[end..])
+    });
+    assert!(
+        got.iter()
+            .any(|(k, r)| k == "conditions" && r.contains("needs a [scene]")),
+        "{got:#?}"
+    );
+    let got = crowd_issues(|t| {
+        t.replace("fov_deg = 40 }", "fov_deg = 400, zoom = 2 }")
+            .replace("name = \"back_right\"", "name = \"back right\"")
+            .replace(
+                "levels = [\"near\", \"middle\", \"far\"]",
+                "levels = [\"near\", \"middle\"]",
+            )
+    });
+    let attention =
+        crowd_issues(|t| t.replace("[simulation]", "[simulation]\nattention = { side = 1 }"));
+    for (key, why) in [
+        ("scene.camera.fov_deg", "400 is outside 5..=120"),
+        ("scene.camera.zoom", "unknown key"),
+        (
+            "scene.characters[2].name",
+            "\"back right\": use 1-24 letters",
+        ),
+        (
+            "scene.characters[1].distance_cm",
+            "3 distances for 2 level(s)",
+        ),
+    ] {
+        assert!(
+            got.iter().any(|(k, r)| k == key && r.contains(why)),
+            "{key}: {why} not in {got:#?}"
+        );
+    }
+    assert!(
+        attention
+            .iter()
+            .any(|(k, r)| k == "simulation.attention.side"
+                && r.contains("neither a group (front, back)")),
+        "{attention:#?}"
+    );
+    let staircase = crowd_issues(|t| t.replace("protocol = \"dscqs\"", "protocol = \"staircase\""));
+    for (key, why) in [("scene", "not a staircase"), ("staircase", "missing")] {
+        assert!(
+            staircase.iter().any(|(k, r)| k == key && r.contains(why)),
+            "{key}: {why} not in {staircase:#?}"
+        );
+    }
+}
+
+/// The simulated observer's error of a crowd scene: each character's manifest error scaled
+/// by its apparent size (the nearest distance over its own), averaged with the attention
+/// weights. Checked by hand on the example's scenes.
+#[test]
+fn a_simulated_observer_sees_a_crowd_by_size_and_attention() {
+    let run1 = crowd(|t| t).unwrap();
+    let run2 =
+        crowd(|t| t.replace("[simulation]", "[simulation]\nattention = { front = 0.2 }")).unwrap();
+    let rms = |id: &str| run1.manifest.get(id).unwrap().metrics.unwrap().rms_cm;
+    let (front, back) = (rms("march/spiht/cr40"), rms("march/spiht/cr80"));
+    let error = |s: &StudyDefinition, id: &str| {
+        protocols::observer::Observer::new(s, 1, 0)
+            .manifest_error(id)
+            .unwrap()
+    };
+    for (level, d) in [("near", 600.0), ("middle", 900.0), ("far", 1300.0)] {
+        let id = format!("{level}/spiht/front40-back80");
+        let size = 350.0 / d;
+        let want1 = (front + 2.0 * size * back) / 3.0;
+        let want2 = (0.2 * front + 2.0 * size * back) / 2.2;
+        assert!((error(&run1, &id) - want1).abs() < 1e-12, "{id}");
+        assert!((error(&run2, &id) - want2).abs() < 1e-12, "{id}");
+    }
+    assert_eq!(error(&run1, "far/reference").to_bits(), 0f64.to_bits());
 }

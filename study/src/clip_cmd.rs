@@ -4,7 +4,7 @@ use std::fmt::Write as _;
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
-use anyhow::{Result, bail};
+use anyhow::{Context as _, Result, bail};
 use lab::clips::ClipOptions;
 use motion::{Clip, SkeletonFormat, fk, io, synth};
 
@@ -124,33 +124,46 @@ pub enum ClipCommand {
         force: bool,
     },
     /// Render stills of the clips side by side as the study window draws them (offscreen,
-    /// no display needed), e.g. a reference and its decoded stimulus for a figure. An `.svg`
-    /// output labels each pane with its name and time as text (for papers); a `.png` output
-    /// is the bare pixels.
-    Render {
-        #[command(flatten)]
-        input: ClipInput,
-        /// Clip times to draw, seconds (one row of panes per time).
-        #[arg(long, value_delimiter = ',', default_value = "0")]
-        times: Vec<f64>,
-        /// Size of one pane, pixels.
-        #[arg(long, default_value_t = 480)]
-        pane: u32,
-        /// Pane names, one per clip in order (default: each file's name without its folder
-        /// and extension, `demo-walk` for the demo).
-        #[arg(long, value_delimiter = ',')]
-        labels: Vec<String>,
-        /// Draw no ground shadow.
-        #[arg(long)]
-        no_shadow: bool,
-        /// Output image: `.svg` (labelled) or `.png`.
-        #[arg(short, long, value_name = "OUT")]
-        output: PathBuf,
-        /// Replace output files that exist (atomically); without it an existing output is
-        /// refused.
-        #[arg(long)]
-        force: bool,
-    },
+    /// no display needed), e.g. a reference and its decoded stimulus for a figure; or, with
+    /// `--study` and `--scenes`, crowd scenes of a study with its `[scene]` camera and light.
+    /// An `.svg` output labels each pane with its name and time as text (for papers); a
+    /// `.png` output is the bare pixels.
+    Render(RenderArgs),
+}
+
+/// Arguments of `study clip render`.
+#[derive(Debug, clap::Args)]
+pub struct RenderArgs {
+    #[command(flatten)]
+    input: ClipInput,
+    /// A study file with a `[scene]`: draw its crowd scenes (`--scenes`) instead of clips.
+    #[arg(long, value_name = "TOML", requires = "scenes")]
+    study: Option<PathBuf>,
+    /// Crowd scene ids of the study's manifest, comma separated (e.g.
+    /// `far/reference,far/spiht/front40-back80`), one pane each.
+    #[arg(long, value_delimiter = ',', requires = "study")]
+    scenes: Vec<String>,
+    /// Clip times to draw, seconds (one row of panes per time).
+    #[arg(long, value_delimiter = ',', default_value = "0")]
+    times: Vec<f64>,
+    /// Size of one pane, pixels (its height and width; crowd scenes are 16:9 wide, as the
+    /// window shows them).
+    #[arg(long, default_value_t = 480)]
+    pane: u32,
+    /// Pane names, one per clip (or scene) in order (default: each file's name without its
+    /// folder and extension, `demo-walk` for the demo; the scene ids).
+    #[arg(long, value_delimiter = ',')]
+    labels: Vec<String>,
+    /// Draw no ground shadow.
+    #[arg(long)]
+    no_shadow: bool,
+    /// Output image: `.svg` (labelled) or `.png`.
+    #[arg(short, long, value_name = "OUT")]
+    output: PathBuf,
+    /// Replace output files that exist (atomically); without it an existing output is
+    /// refused.
+    #[arg(long)]
+    force: bool,
 }
 
 /// Runs a clip subcommand.
@@ -215,55 +228,88 @@ pub fn run(cmd: ClipCommand) -> Result<()> {
             eprintln!("wrote {}", output.display());
             Ok(())
         }
-        ClipCommand::Render {
-            input,
-            times,
-            pane,
-            labels,
-            no_shadow,
-            output,
-            force,
-        } => {
-            let mode = files::Mode::from_force(force);
-            let svg = match output.extension().and_then(|e| e.to_str()) {
-                Some(e) if e.eq_ignore_ascii_case("svg") => true,
-                Some(e) if e.eq_ignore_ascii_case("png") => false,
-                _ => bail!(
-                    "{}: expected an .svg (labelled) or .png output",
-                    output.display()
-                ),
-            };
-            // Refused before the (slow) offscreen render.
-            files::check_new(&output, mode)?;
-            let clips = input.load()?;
-            let names = pane_names(&clips, &labels)?;
-            let still = Still {
-                times: &times,
-                pane,
-                shadow: !no_shadow,
-            };
-            let image = render(&clips, &still)?;
-            if svg {
-                files::write(&output, labelled_svg(&image, &names, &still)?, mode)?;
-            } else {
-                image.write_png(&output, mode)?;
-            }
-            eprintln!(
-                "wrote {} ({} × {} panes)",
-                output.display(),
-                clips.len(),
-                times.len()
-            );
-            Ok(())
-        }
+        ClipCommand::Render(args) => render_command(args),
     }
+}
+
+/// `study clip render`.
+fn render_command(args: RenderArgs) -> Result<()> {
+    let RenderArgs {
+        input,
+        study,
+        scenes,
+        times,
+        pane,
+        labels,
+        no_shadow,
+        output,
+        force,
+    } = args;
+    let mode = files::Mode::from_force(force);
+    let svg = match output.extension().and_then(|e| e.to_str()) {
+        Some(e) if e.eq_ignore_ascii_case("svg") => true,
+        Some(e) if e.eq_ignore_ascii_case("png") => false,
+        _ => bail!(
+            "{}: expected an .svg (labelled) or .png output",
+            output.display()
+        ),
+    };
+    // Refused before the (slow) offscreen render.
+    files::check_new(&output, mode)?;
+    let still = Still {
+        times: &times,
+        pane,
+        wide: study.is_some(),
+        shadow: !no_shadow,
+    };
+    let (image, names) = if let Some(study) = study {
+        if !input.files.is_empty() || !input.amc.is_empty() || input.demo {
+            bail!("--study draws its crowd scenes: give no clip files or --demo");
+        }
+        let names = if labels.is_empty() {
+            scenes.clone()
+        } else {
+            pane_names_given(&labels, scenes.len(), "scene")?
+        };
+        (render_scenes(&study, &scenes, &still)?, names)
+    } else {
+        let clips = input.load()?;
+        let names = pane_names(&clips, &labels)?;
+        (render(&clips, &still)?, names)
+    };
+    if svg {
+        files::write(&output, labelled_svg(&image, &names, &still)?, mode)?;
+    } else {
+        image.write_png(&output, mode)?;
+    }
+    eprintln!(
+        "wrote {} ({} × {} panes)",
+        output.display(),
+        names.len(),
+        times.len()
+    );
+    Ok(())
 }
 
 /// What `study clip render` draws: times (rows), pane size, shadow.
 struct Still<'a> {
     times: &'a [f64],
+    /// Pane height, pixels (`--pane`).
     pane: u32,
+    /// Wide panes (16:9, the window's stimulus pane: crowd scenes), else square.
+    wide: bool,
     shadow: bool,
+}
+
+impl Still<'_> {
+    /// Pane width, pixels.
+    fn width(&self) -> u32 {
+        if self.wide {
+            self.pane * 16 / 9
+        } else {
+            self.pane
+        }
+    }
 }
 
 /// The name of each pane column: `--labels` when given (one per clip), else the file's stem.
@@ -278,41 +324,109 @@ fn pane_names(clips: &[Loaded], labels: &[String]) -> Result<Vec<String>> {
             })
             .collect());
     }
-    if labels.len() != clips.len() {
+    pane_names_given(labels, clips.len(), "clip")
+}
+
+/// `--labels`, one per pane: per clip, or per scene (`what` is `clip` or `scene`).
+fn pane_names_given(labels: &[String], panes: usize, what: &str) -> Result<Vec<String>> {
+    if labels.len() != panes {
         bail!(
-            "--labels: {} names for {} clips (one per clip, in order)",
-            labels.len(),
-            clips.len()
+            "--labels: {} names for {panes} {what}s (one per {what}, in order)",
+            labels.len()
         );
     }
     Ok(labels.to_vec())
 }
 
+/// Draws crowd scenes of `study` (columns) at every time (rows), each with the study's
+/// `[scene]` camera and light, each character framed by its clip in the level's reference
+/// scene, as the study window draws them.
+fn render_scenes(
+    study: &Path,
+    scenes: &[String],
+    still: &Still<'_>,
+) -> Result<crate::gui::render::Image> {
+    use crate::gui::scene::{Stage, View};
+    let file = lab::StudyFile::load(study)?;
+    let Some(settings) = file.definition.scene.as_ref() else {
+        bail!("{}: has no [scene] to draw", study.display());
+    };
+    let source = lab::source::ManifestStimuli::new(&file);
+    let mut crowds = Vec::new();
+    for id in scenes {
+        let st = source
+            .manifest()
+            .get(id)
+            .filter(|s| s.scene.is_some())
+            .with_context(|| format!("--scenes: {id:?} is not a crowd scene of the study"))?;
+        let reference = source
+            .manifest()
+            .reference_of(&st.clip)
+            .with_context(|| format!("--scenes: {id:?} has no reference scene"))?;
+        crowds.push(source.crowd_pair(id, &reference.id)?);
+    }
+    let far = crowds
+        .iter()
+        .flatten()
+        .map(|c| c.placement.distance_cm)
+        .fold(0.0, f64::max);
+    let view = View::crowd(&settings.camera, &settings.light, far).with_shadow(still.shadow);
+    let stages: Vec<Stage> = crowds
+        .iter()
+        .map(|crowd| {
+            Stage::crowd(
+                crowd
+                    .iter()
+                    .map(|c| (c.test.as_ref(), c.reference.as_ref(), c.placement)),
+                still.shadow,
+            )
+        })
+        .collect();
+    draw_panes(stages, &view, still)
+}
+
 /// Draws every clip (columns) at every time (rows) with the first clip's camera at that time,
 /// so a reference and its stimuli are framed alike.
 fn render(clips: &[Loaded], still: &Still<'_>) -> Result<crate::gui::render::Image> {
-    use crate::gui::render::{Offscreen, Pane};
-    use crate::gui::scene::{Figure, FrameShapes, View};
-    let (times, pane) = (still.times, still.pane);
+    use crate::gui::scene::{Figure, Stage, View};
     let Some(first) = clips.first() else {
         bail!("no clip to render");
     };
+    let view = View::framing(&first.clip).with_shadow(still.shadow);
+    let stages = clips
+        .iter()
+        .map(|c| Stage::single(Figure::new(&c.clip, &view)))
+        .collect();
+    draw_panes(stages, &view, still)
+}
+
+/// Draws `stages` (columns) at every time of `still` (rows) with `view`, offscreen.
+fn draw_panes(
+    mut stages: Vec<crate::gui::scene::Stage>,
+    view: &crate::gui::scene::View,
+    still: &Still<'_>,
+) -> Result<crate::gui::render::Image> {
+    use crate::gui::render::{Offscreen, Pane};
+    use crate::gui::scene::FrameShapes;
+    let (times, pane) = (still.times, still.pane);
+    if stages.is_empty() {
+        bail!("nothing to render");
+    }
     if !(64..=4096).contains(&pane) {
         bail!("--pane {pane}: expected 64..=4096 pixels");
     }
     if let Some(t) = times.iter().find(|t| !t.is_finite() || **t < 0.0) {
         bail!("--times: {t} is not a time in seconds");
     }
-    let (cols, rows) = (clips.len() as u32, times.len() as u32);
-    if u64::from(cols * pane) * u64::from(rows * pane) > 1 << 26 {
+    let (cols, rows, width) = (stages.len() as u32, times.len() as u32, still.width());
+    if u64::from(cols * width) * u64::from(rows * pane) > 1 << 26 {
         bail!("{cols}×{rows} panes of {pane} px is too large an image");
     }
-    let view = View::framing(&first.clip).with_shadow(still.shadow);
     let mut shapes = Vec::new();
     for t in times {
-        for c in clips {
+        for stage in &mut stages {
             let mut s = FrameShapes::default();
-            Figure::new(&c.clip, &view).shapes_at(*t, &mut s);
+            stage.shapes_at(*t, &mut s);
             shapes.push(s);
         }
     }
@@ -320,16 +434,16 @@ fn render(clips: &[Loaded], still: &Still<'_>) -> Result<crate::gui::render::Ima
         .iter()
         .enumerate()
         .map(|(k, s)| Pane {
-            x: (k as u32 % cols) * pane,
+            x: (k as u32 % cols) * width,
             y: (k as u32 / cols) * pane,
-            width: pane,
+            width,
             height: pane,
-            view: &view,
+            view,
             shapes: s,
         })
         .collect();
     let mut offscreen = Offscreen::new(4)?;
-    let image = offscreen.render(cols * pane, rows * pane, &panes)?;
+    let image = offscreen.render(cols * width, rows * pane, &panes)?;
     eprintln!("rendered with adapter {}", offscreen.adapter().name);
     Ok(image)
 }
@@ -342,7 +456,7 @@ fn labelled_svg(
     still: &Still<'_>,
 ) -> Result<String> {
     let png = image.png_bytes()?;
-    let (w, h, pane) = (image.width, image.height, still.pane);
+    let (w, h, pane, width) = (image.width, image.height, still.pane, still.width());
     let size = (f64::from(pane) / 16.0).clamp(10.0, 32.0);
     let mut s = String::new();
     let _ = writeln!(
@@ -360,7 +474,7 @@ fn labelled_svg(
     );
     for (row, t) in still.times.iter().enumerate() {
         for (col, name) in names.iter().enumerate() {
-            let (x, y) = (col as u32 * pane, row as u32 * pane);
+            let (x, y) = (col as u32 * width, row as u32 * pane);
             let pad = size * 0.6;
             let _ = writeln!(
                 s,
@@ -372,7 +486,7 @@ fn labelled_svg(
             let _ = writeln!(
                 s,
                 r#"<text class="time" x="{:.1}" y="{:.1}" text-anchor="end">t = {t:.2} s</text>"#,
-                f64::from(x + pane) - pad,
+                f64::from(x + width) - pad,
                 f64::from(y) + pad + size
             );
         }

@@ -95,22 +95,85 @@ pub struct SweepArgs {
     /// in its id (`walk/wavelet-perceptual/qp9-window128/cr20`).
     #[arg(long = "param", value_name = "KEY=V1,V2,...")]
     pub params: Vec<String>,
-    /// Output folder (gets `stimuli.json`, `rd.csv` and one folder per clip).
-    #[arg(short, long)]
-    pub output: PathBuf,
-    /// Parallel jobs (default: available cores).
-    #[arg(long)]
-    pub jobs: Option<usize>,
+    #[command(flatten)]
+    pub set: SetOutput,
     /// Hide the progress bar.
     #[arg(long)]
     pub quiet: bool,
     /// Primitive database for the `primitive` codec.
     #[arg(long, value_name = "FILE")]
     pub db: Option<PathBuf>,
+}
+
+/// Where a stimulus set goes (`study sweep`, `study crowd`).
+#[derive(Debug, clap::Args)]
+pub struct SetOutput {
+    /// Output folder (gets `stimuli.json`, `rd.csv` and one folder per clip).
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Parallel jobs (default: available cores).
+    #[arg(long)]
+    pub jobs: Option<usize>,
     /// Write into an output folder that holds files, replacing those of the same names (each
     /// atomically); without it such a folder is refused before anything is made.
     #[arg(long)]
     pub force: bool,
+}
+
+impl SetOutput {
+    /// `--jobs`, else the available cores.
+    fn jobs(&self) -> usize {
+        self.jobs
+            .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, usize::from))
+    }
+}
+
+/// Arguments of `study crowd`.
+#[derive(Debug, clap::Args)]
+pub struct CrowdArgs {
+    /// The study file (or any TOML file) whose `[scene]` places the characters.
+    pub scene: PathBuf,
+    /// The clips the characters perform (`.bvh`, or `.amc` with `.asf`), paired as `study
+    /// sweep` pairs them; a character's `clip` is a file's stem.
+    #[arg(long, num_args = 1.., required = true)]
+    pub clips: Vec<PathBuf>,
+    /// ASF skeleton of the AMC motions not named after one of the files.
+    #[arg(long, value_name = "SKEL")]
+    pub asf: Option<PathBuf>,
+    /// Codec (with rate control).
+    #[arg(long, default_value = "spiht")]
+    pub codec: String,
+    /// A ratio per group (repeatable), every group of the scene once: `--cr front=40 --cr
+    /// back=20,40,60,80` makes a scene per combination, at every level (thesis 6.5).
+    #[arg(long = "cr", value_name = "GROUP=V1,V2,...", conflicts_with_all = ["budget_cr", "budget_bytes"])]
+    pub cr: Vec<String>,
+    /// Total budgets as scene ratios (the characters' raw sizes over the budget), comma
+    /// separated: one scene per budget and level, shared as `--share` says.
+    #[arg(long, value_delimiter = ',', value_name = "CR")]
+    pub budget_cr: Vec<f64>,
+    /// Total budgets in bytes, comma separated.
+    #[arg(long, value_delimiter = ',', value_name = "BYTES")]
+    pub budget_bytes: Vec<f64>,
+    /// How a budget is shared: `uniform`, `distance` (eq. 6.4-6.5) or `importance` (the
+    /// scene's `importance` scores).
+    #[arg(long, value_enum, default_value_t = ShareArg::Distance)]
+    pub share: ShareArg,
+    /// Fixed codec parameter `key=value` (repeatable).
+    #[arg(long = "param", value_name = "KEY=VALUE")]
+    pub params: Vec<String>,
+    #[command(flatten)]
+    pub set: SetOutput,
+}
+
+/// How `study crowd` shares a budget.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum ShareArg {
+    /// The same share for every character.
+    Uniform,
+    /// Thesis eq. 6.4-6.5: in proportion to the nearest distance over the character's.
+    Distance,
+    /// In proportion to the `importance` the scene gives each character.
+    Importance,
 }
 
 /// `study codecs`: prints every codec (the `primitive` codec with a note that it needs
@@ -168,20 +231,21 @@ fn parse_params(items: &[String]) -> Result<Params> {
     Ok(p)
 }
 
-/// `--param KEY=V1,V2,...` of `study sweep`, in the order given.
-fn parse_grid(items: &[String]) -> Result<Vec<(String, Vec<f64>)>> {
+/// `--param KEY=V1,V2,...` of `study sweep` (and `--cr GROUP=V1,V2,...` of `study crowd`), in
+/// the order given.
+fn parse_grid(flag: &str, items: &[String]) -> Result<Vec<(String, Vec<f64>)>> {
     items
         .iter()
         .map(|item| {
             let Some((k, v)) = item.split_once('=') else {
-                bail!("--param `{item}`: expected KEY=V1,V2,...");
+                bail!("{flag} `{item}`: expected KEY=V1,V2,...");
             };
             let values = v
                 .split(',')
                 .map(|x| {
                     x.trim()
                         .parse::<f64>()
-                        .with_context(|| format!("--param `{item}`: `{x}` is not a number"))
+                        .with_context(|| format!("{flag} `{item}`: `{x}` is not a number"))
                 })
                 .collect::<Result<Vec<f64>>>()?;
             Ok((k.trim().to_string(), values))
@@ -368,6 +432,61 @@ pub fn decode(args: &DecodeArgs) -> Result<()> {
     Ok(())
 }
 
+/// `study crowd`.
+///
+/// # Errors
+/// As [`lab::crowd::crowd`], and a `--cr` that is not `GROUP=V1,V2,...`.
+pub fn crowd(args: &CrowdArgs) -> Result<()> {
+    use lab::crowd::{Budget, CrowdOptions, Plan, Share};
+    let plan = if args.cr.is_empty() {
+        Plan::Budget {
+            totals: args
+                .budget_cr
+                .iter()
+                .map(|&c| Budget::Cr(c))
+                .chain(args.budget_bytes.iter().map(|&b| Budget::Bytes(b)))
+                .collect(),
+            share: match args.share {
+                ShareArg::Uniform => Share::Uniform,
+                ShareArg::Distance => Share::Distance,
+                ShareArg::Importance => Share::Importance,
+            },
+        }
+    } else {
+        Plan::Fixed(parse_grid("--cr", &args.cr)?)
+    };
+    let options = CrowdOptions {
+        scene: args.scene.clone(),
+        clips: args.clips.clone(),
+        clip_options: ClipOptions {
+            asf: args.asf.clone(),
+            bvh_unit_cm: None,
+        },
+        codec: args.codec.clone(),
+        params: parse_params(&args.params)?,
+        plan,
+        output: args.set.output.clone(),
+        jobs: args.set.jobs(),
+        force: args.set.force,
+    };
+    let summary = lab::crowd::crowd(&options, &|_, _| {})?;
+    println!(
+        "{} crowd scenes ({} character stimuli encoded) and a reference scene per level in {}; \
+         manifest stimuli.json, per-character rd.csv",
+        summary.scenes,
+        summary.encoded,
+        args.set.output.display()
+    );
+    if let Some((id, budget, bytes)) = summary.worst_budget {
+        println!(
+            "budgets met: the furthest, {id}, holds {bytes} bytes for a budget of {budget:.0} \
+             ({:+.2} %)",
+            (bytes as f64 / budget - 1.0) * 100.0
+        );
+    }
+    Ok(())
+}
+
 /// `study sweep`.
 ///
 /// # Errors
@@ -383,13 +502,11 @@ pub fn sweep(args: &SweepArgs) -> Result<()> {
         codecs: args.codecs.clone(),
         targets: args.cr.clone(),
         max_errors_cm: args.max_error_cm.clone(),
-        params: parse_grid(&args.params)?,
-        output: args.output.clone(),
-        jobs: args
-            .jobs
-            .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, usize::from)),
+        params: parse_grid("--param", &args.params)?,
+        output: args.set.output.clone(),
+        jobs: args.set.jobs(),
         database: args.db.clone(),
-        force: args.force,
+        force: args.set.force,
     };
     let bar = if args.quiet {
         indicatif::ProgressBar::hidden()
@@ -410,7 +527,7 @@ pub fn sweep(args: &SweepArgs) -> Result<()> {
         "{} stimuli ({} references) in {}; manifest stimuli.json, rate–distortion rd.csv",
         summary.manifest.stimuli.len(),
         summary.references,
-        args.output.display()
+        args.set.output.display()
     );
     // Not reached is not a failure of the sweep: the rest is written, and rd.csv says why.
     if !summary.unreachable.is_empty() {

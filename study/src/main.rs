@@ -53,6 +53,9 @@ enum Command {
     Decode(codec_cmd::DecodeArgs),
     /// Build a stimulus set (clips × codecs × rates) with stimuli.json and rd.csv.
     Sweep(codec_cmd::SweepArgs),
+    /// Compress the crowd scenes of a study's `[scene]` (thesis 6.5): a ratio per group, or
+    /// one budget per scene shared uniformly, by distance (eq. 6.4-6.5) or by importance.
+    Crowd(codec_cmd::CrowdArgs),
     /// List the codecs and their parameters.
     Codecs,
     /// Validate a study file and list every problem at once.
@@ -77,6 +80,7 @@ fn main() -> ExitCode {
         Command::Encode(args) => codec_cmd::encode(&args),
         Command::Decode(args) => codec_cmd::decode(&args),
         Command::Sweep(args) => codec_cmd::sweep(&args),
+        Command::Crowd(args) => codec_cmd::crowd(&args),
         Command::Codecs => {
             codec_cmd::list();
             Ok(())

@@ -213,8 +213,8 @@ struct Logs {
     converted: from_results::ConvertedResults,
     incomplete: Vec<lab::integrity::Problem>,
     displays: Vec<analysis::display::SessionDisplay>,
-    /// What the study's `[crowd]` rules left out of the statistics.
-    exclusions: Vec<analysis::crowd::SessionExclusion>,
+    /// What the study's `[crowdsourcing]` rules left out of the statistics.
+    exclusions: Vec<analysis::exclusions::SessionExclusion>,
 }
 
 /// Sessions read and checked together, on [`READERS`] threads.
@@ -295,8 +295,9 @@ fn read_logs(
             ));
             // The crowd rules (gold trials, hidden pages) apply to sound logs only; the
             // integrity check saw every row.
-            let exclusion = analysis::crowd::session_exclusion(&session, &definition.crowd);
-            let kept = analysis::crowd::apply(&session, &exclusion);
+            let exclusion =
+                analysis::exclusions::session_exclusion(&session, &definition.crowdsourcing);
+            let kept = analysis::exclusions::apply(&session, &exclusion);
             exclusions.push(exclusion);
             let Some(session) = kept else { continue };
             if failed.is_none() && !damaged {
@@ -401,16 +402,16 @@ fn display_section(
 }
 
 /// The "Exclusions" section of a crowd study (gold trials, or trials left out because the
-/// page was hidden): who the `[crowd]` rules left out of the statistics, and why.
+/// page was hidden): who the `[crowdsourcing]` rules left out of the statistics, and why.
 fn exclusions_section(
     report: &mut analysis::report::Report,
-    exclusions: &[analysis::crowd::SessionExclusion],
-    crowd: &protocols::study::CrowdSettings,
+    exclusions: &[analysis::exclusions::SessionExclusion],
+    crowd: &protocols::study::CrowdsourcingSettings,
 ) {
     if crowd.gold.is_empty()
         && !exclusions
             .iter()
-            .any(analysis::crowd::SessionExclusion::any)
+            .any(analysis::exclusions::SessionExclusion::any)
     {
         return;
     }
@@ -421,7 +422,7 @@ fn exclusions_section(
         .collect();
     let section = report.section("Exclusions");
     section.text(format!(
-        "The study's crowd rules ([crowd] in the study file) left out {} of {} sessions{}.",
+        "The study's crowd rules ([crowdsourcing] in the study file) left out {} of {} sessions{}.",
         left_out.len(),
         exclusions.len(),
         if left_out.is_empty() {
@@ -430,7 +431,7 @@ fn exclusions_section(
             format!(" ({})", left_out.join(", "))
         }
     ));
-    section.table(analysis::crowd::exclusions_table(exclusions, crowd));
+    section.table(analysis::exclusions::exclusions_table(exclusions, crowd));
 }
 
 /// Runs `study report`.
@@ -476,7 +477,7 @@ pub fn run(args: &ReportArgs) -> Result<()> {
     let mut report = analysis.to_report(&converted.data, &options, &title);
     incomplete_section(&mut report, &incomplete);
     display_section(&mut report, &displays, args.drop_limit);
-    exclusions_section(&mut report, &exclusions, &study.crowd);
+    exclusions_section(&mut report, &exclusions, &study.crowdsourcing);
     let names = report.section("Subjects and stimuli");
     names.text(format!(
         "Subjects ({}): {}. Condition ids: {}.",

@@ -1,6 +1,8 @@
 //! `study clip ...` end to end, as a user runs it.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -247,6 +249,76 @@ fn an_svg_still_carries_each_panes_name_and_time_as_text() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
         err.contains("x.jpg: expected an .svg (labelled) or .png output"),
+        "{err}"
+    );
+}
+
+/// `study clip render --study --scenes` draws crowd scenes of a study with its camera: a 16:9
+/// pane per scene (as the window shows them), each holding three figures (joint-orange pixels
+/// in three groups of columns), at the nearest and the farthest level; a scene id the
+/// manifest lacks is refused, naming it.
+#[test]
+fn crowd_scenes_of_a_study_render_as_the_window_draws_them() {
+    let dir = tmp();
+    let png = dir.join("crowd.png");
+    let o = png.display().to_string();
+    let study_file = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../examples/crowd-run1.toml")
+        .display()
+        .to_string();
+    let args = |scenes: &str| {
+        [
+            "clip",
+            "render",
+            "--study",
+            &study_file,
+            "--scenes",
+            scenes,
+            "--times",
+            "1",
+            "--pane",
+            "240",
+            "-o",
+            &o,
+            "--force",
+        ]
+        .map(str::to_string)
+    };
+    let run = |scenes: &str| {
+        let a = args(scenes);
+        study(&a.iter().map(String::as_str).collect::<Vec<_>>())
+    };
+    let out = run("near/reference,far/spiht/front40-back80");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let image = common::Rgb::read(&png);
+    assert_eq!((image.width, image.height), (2 * 426, 240));
+    for pane in 0..2 {
+        // Columns of this pane holding joint orange, grouped by gaps of 4 or more pixels.
+        let orange: Vec<bool> = (pane * 426..(pane + 1) * 426)
+            .map(|x| (0..240).any(|y| image.is_orange(x, y)))
+            .collect();
+        let mut figures = 0;
+        let mut gap = usize::MAX;
+        for o in orange {
+            if o {
+                if gap >= 4 {
+                    figures += 1;
+                }
+                gap = 0;
+            } else {
+                gap = gap.saturating_add(1);
+            }
+        }
+        assert_eq!(figures, 3, "pane {pane}");
+    }
+    let out = run("far/spiht/front40-back90");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("\"far/spiht/front40-back90\" is not a crowd scene"),
         "{err}"
     );
 }

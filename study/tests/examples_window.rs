@@ -187,10 +187,74 @@ fn primitive_stimuli(out: &Path, clips: &[(String, motion::Clip)]) -> Vec<Stimul
                 }),
                 encode_ms: None,
                 decode_ms: None,
+                scene: None,
             });
         }
     }
     made_here
+}
+
+/// The crowd example's motion (thesis 6.5: every character performs the same movement in
+/// sync): the generated figure marching in place, 4 s at 30 Hz.
+fn crowd_motion() -> WalkParams {
+    WalkParams {
+        duration_s: 4.0,
+        frame_rate_hz: 30.0,
+        speed_cm_s: 0.0,
+        cycle_hz: 1.0,
+        amplitude: 1.4,
+    }
+}
+
+/// The crowd example's ratios (thesis 6.5): the front character at 40:1, the back ones varied.
+const CROWD_FRONT_CR: f64 = 40.0;
+const CROWD_BACK_CR: [f64; 4] = [20.0, 40.0, 60.0, 80.0];
+
+/// Makes the crowd examples' stimuli in `root/crowd` as `study crowd` does from the scene of
+/// `examples/crowd-run1.toml`, without the timings of this machine.
+fn make_crowd_stimuli(root: &Path) {
+    let src = root.join("source");
+    std::fs::create_dir_all(&src).unwrap();
+    let march = src.join("march.bvh");
+    motion::io::write_clip(
+        &walking_clip(&crowd_motion()),
+        &march,
+        None,
+        files::Mode::New,
+    )
+    .unwrap();
+    let out = root.join("crowd");
+    lab::crowd::crowd(
+        &lab::crowd::CrowdOptions {
+            scene: examples().join("crowd-run1.toml"),
+            clips: vec![march],
+            clip_options: lab::clips::ClipOptions::default(),
+            codec: "spiht".into(),
+            params: BTreeMap::new(),
+            plan: lab::crowd::Plan::Fixed(vec![
+                ("front".into(), vec![CROWD_FRONT_CR]),
+                ("back".into(), CROWD_BACK_CR.to_vec()),
+            ]),
+            output: out.clone(),
+            jobs: 2,
+            force: false,
+        },
+        &|_, _| {},
+    )
+    .unwrap();
+    let path = out.join("stimuli.json");
+    let mut manifest: StimulusManifest =
+        serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+    for s in &mut manifest.stimuli {
+        s.encode_ms = None;
+        s.decode_ms = None;
+    }
+    std::fs::write(
+        &path,
+        serde_json::to_string_pretty(&manifest).unwrap() + "\n",
+    )
+    .unwrap();
+    std::fs::remove_dir_all(&src).unwrap();
 }
 
 /// Every file under `dir`, by path relative to it.
@@ -209,6 +273,23 @@ fn tree(dir: &Path) -> BTreeMap<String, Vec<u8>> {
         }
     }
     out
+}
+
+/// The files under `made` are the files under `committed` (named `name` in messages), byte
+/// for byte.
+fn same_files(made: &Path, committed: &Path, name: &str) {
+    let (made, committed) = (tree(made), tree(committed));
+    assert_eq!(
+        made.keys().collect::<Vec<_>>(),
+        committed.keys().collect::<Vec<_>>(),
+        "{name}/ holds other files than the generator makes (REGENERATE_EXAMPLES=1)"
+    );
+    for (rel, bytes) in &made {
+        assert!(
+            committed[rel] == *bytes,
+            "{name}/{rel} differs from the generator (REGENERATE_EXAMPLES=1)"
+        );
+    }
 }
 
 fn scratch(name: &str) -> PathBuf {
@@ -240,19 +321,11 @@ fn example_stimuli_are_the_generated_ones() {
             == std::fs::read(ex.join("stimuli.json")).unwrap(),
         "examples/stimuli.json differs from the generator (REGENERATE_EXAMPLES=1 rewrites it)"
     );
-    let made = tree(&root.join("stimuli"));
-    let committed = tree(&ex.join("stimuli"));
-    assert_eq!(
-        made.keys().collect::<Vec<_>>(),
-        committed.keys().collect::<Vec<_>>(),
-        "examples/stimuli/ holds other files than the generator makes"
+    same_files(
+        &root.join("stimuli"),
+        &ex.join("stimuli"),
+        "examples/stimuli",
     );
-    for (rel, bytes) in &made {
-        assert!(
-            committed[rel] == *bytes,
-            "examples/stimuli/{rel} differs from the generator (REGENERATE_EXAMPLES=1)"
-        );
-    }
     let manifest: StimulusManifest =
         serde_json::from_slice(&std::fs::read(ex.join("stimuli.json")).unwrap()).unwrap();
     for s in &manifest.stimuli {
@@ -266,6 +339,25 @@ fn example_stimuli_are_the_generated_ones() {
     std::fs::remove_dir_all(&root).unwrap();
 }
 
+/// The crowd example's committed stimuli (`examples/crowd/`) are exactly what `study crowd`
+/// makes from its scene now (`REGENERATE_EXAMPLES=1` rewrites them).
+#[test]
+fn crowd_example_stimuli_are_the_generated_ones() {
+    let root = scratch("crowd-generated");
+    make_crowd_stimuli(&root);
+    let (made, committed) = (root.join("crowd"), examples().join("crowd"));
+    if std::env::var_os("REGENERATE_EXAMPLES").is_some() {
+        let _ = std::fs::remove_dir_all(&committed);
+        for (rel, bytes) in tree(&made) {
+            let to = committed.join(rel);
+            std::fs::create_dir_all(to.parent().unwrap()).unwrap();
+            std::fs::write(to, bytes).unwrap();
+        }
+    }
+    same_files(&made, &committed, "examples/crowd");
+    std::fs::remove_dir_all(&root).unwrap();
+}
+
 const EXAMPLES: [&str; 5] = [
     "mos.toml",
     "dscqs.toml",
@@ -274,10 +366,13 @@ const EXAMPLES: [&str; 5] = [
     "quest.toml",
 ];
 
+/// The two runs of the crowd study (thesis 6.5).
+const CROWD_EXAMPLES: [&str; 2] = ["crowd-run1.toml", "crowd-run2.toml"];
+
 /// `study check` of every example passes, its stimuli read.
 #[test]
 fn every_example_passes_check() {
-    for name in EXAMPLES {
+    for name in EXAMPLES.into_iter().chain(CROWD_EXAMPLES) {
         let out = Command::new(env!("CARGO_BIN_EXE_study"))
             .arg("check")
             .arg(examples().join(name))
@@ -431,4 +526,194 @@ fn each_example_records_its_first_answer_in_the_window() {
         assert!(!trials.records.is_empty(), "{name}");
         assert_eq!(trials.records[0].trial.index, 0, "{name}");
     }
+}
+
+/// Runs `study` with `args`, which must succeed.
+fn study_ok(args: &[&std::ffi::OsStr]) {
+    let out = Command::new(env!("CARGO_BIN_EXE_study"))
+        .args(args)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// The crowd examples simulate (both runs, ten subjects each) and their reports draw thesis
+/// Fig. 6.9: a curve per distance level of the MOS against the back characters' ratio, and a
+/// table of every scene with each character's ratio.
+#[test]
+fn the_crowd_examples_simulate_and_report_fig_6_9() {
+    let dir = scratch("crowd-report");
+    for run in CROWD_EXAMPLES {
+        let results = dir.join(format!("results-{run}"));
+        study_ok(&[
+            "simulate".as_ref(),
+            examples().join(run).as_os_str(),
+            "--subjects".as_ref(),
+            "10".as_ref(),
+            "--seed".as_ref(),
+            "3".as_ref(),
+            "-o".as_ref(),
+            results.as_os_str(),
+        ]);
+        // Every row carries the characters' ratios and the level.
+        let trials = results::trials::read_trials(&results.join("S001_s1/trials.csv")).unwrap();
+        assert_eq!(trials.records.len(), 12, "{run}");
+        for r in &trials.records {
+            let e = r.encoding.as_ref().expect("a crowd row logs its scene");
+            let level = e.codec_params["level"];
+            let name = r.trial.stimulus.split('/').next().unwrap();
+            assert_eq!(["near", "middle", "far"][level as usize - 1], name, "{run}");
+            assert!((e.codec_params["cr_front"] - CROWD_FRONT_CR).abs() < 0.02 * CROWD_FRONT_CR);
+            let back = e.codec_params["cr_back_left"];
+            assert_eq!(back.to_bits(), e.codec_params["cr_back_right"].to_bits());
+            assert!(
+                r.trial
+                    .stimulus
+                    .ends_with(&format!("back{}", (back / 10.0).round() * 10.0)),
+                "{run}: {} logs back CR {back}",
+                r.trial.stimulus
+            );
+        }
+        let report = dir.join(format!("report-{run}"));
+        study_ok(&[
+            "report".as_ref(),
+            results.as_os_str(),
+            "--no-png".as_ref(),
+            "-o".as_ref(),
+            report.as_os_str(),
+        ]);
+        let table = std::fs::read_to_string(report.join("tables/crowd.csv")).unwrap();
+        let mut lines = table.lines();
+        let header = lines.next().unwrap();
+        assert!(
+            header.starts_with("Level,Distance (m),x,CR front,CR back_left,CR back_right"),
+            "{header}"
+        );
+        let rows: Vec<&str> = lines.collect();
+        assert_eq!(rows.len(), 12, "{table}");
+        // Nearest level first, each level's ratios in order.
+        assert!(rows[0].starts_with("near,6.0,20,") && rows[11].starts_with("far,13.0,80,"));
+        let svg = std::fs::read_to_string(report.join("figures/crowd_mos.svg")).unwrap();
+        for legend in [
+            "near (back at 6.0 m)",
+            "middle (back at 9.0 m)",
+            "far (back at 13.0 m)",
+        ] {
+            assert!(svg.contains(legend), "{run}: no curve {legend:?}");
+        }
+        assert!(svg.contains("Compression ratio of the back characters (x:1)"));
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Figures in a screenshot: joint-orange pixels in the top `within` rows, grouped into
+/// columns separated by at least 12 empty pixel columns; each group's (left, right, height)
+/// in pixels, left to right.
+fn figures_in(png_path: &Path, within: f64) -> Vec<(usize, usize, usize)> {
+    let image = common::Rgb::read(png_path);
+    let rows = (image.height as f64 * within) as usize;
+    let mut columns: BTreeMap<usize, (usize, usize)> = BTreeMap::new();
+    for y in 0..rows {
+        for x in 0..image.width {
+            if image.is_orange(x, y) {
+                let e = columns.entry(x).or_insert((y, y));
+                e.1 = y;
+            }
+        }
+    }
+    let mut groups: Vec<(usize, usize, usize, usize)> = Vec::new();
+    for (&x, &(top, bottom)) in &columns {
+        match groups.last_mut() {
+            Some(g) if x <= g.1 + 12 => *g = (g.0, x, g.2.min(top), g.3.max(bottom)),
+            _ => groups.push((x, x, top, bottom)),
+        }
+    }
+    groups
+        .into_iter()
+        .map(|(l, r, t, b)| (l, r, b - t))
+        .collect()
+}
+
+/// Under Xvfb + lavapipe, a trial of the crowd example shows three figures in its pane, the
+/// front one taller than the two at the back by about the ratio of their distances (read
+/// from the screenshot), and its answer is recorded with the scene's ratios and level. One
+/// trial only (software rendering on two cores is slow).
+#[test]
+fn a_crowd_trial_shows_three_figures_at_their_distances_in_the_window() {
+    let Some(env) = setup("crowd") else { return };
+    let out = env.dir.join("results-crowd");
+    let session = out.join("S01_s1");
+    let mut child = spawn_run(&env, &examples().join("crowd-run1.toml"), &out);
+    let wid = find_window(&env, &mut child, "study: crowd-run1");
+    let deadline = Instant::now() + Duration::from_secs(300);
+    // Enter begins (once the stimuli are checked and the display measured; until the vote it
+    // does nothing on a trial); screenshots until one shows a scene.
+    let shot = env.dir.join("crowd.png");
+    let figures = loop {
+        assert!(Instant::now() < deadline, "no crowd scene appeared");
+        press(&env, &wid, &["Return"]);
+        std::thread::sleep(Duration::from_millis(600));
+        common::screenshot(&env, &shot);
+        // The stimulus area (the answer panel below it has no orange).
+        let found = figures_in(&shot, 0.74);
+        eprintln!("screenshot: figures (left, right, height) {found:?}");
+        if found.len() == 3 {
+            break found;
+        }
+    };
+    // The vote: 4 for the first scene, 2 for the second, Enter.
+    while logged_rows(&session) == 0 {
+        assert!(Instant::now() < deadline, "no answer was recorded");
+        for key in ["BackSpace", "4", "2", "Return"] {
+            press(&env, &wid, &[key]);
+            std::thread::sleep(Duration::from_millis(450));
+        }
+    }
+    assert!(
+        Command::new("kill")
+            .args(["-INT", &child.id().to_string()])
+            .status()
+            .unwrap()
+            .success()
+    );
+    let status = child.wait_with_output().unwrap();
+    assert!(
+        status.status.success(),
+        "{}",
+        String::from_utf8_lossy(&status.stderr)
+    );
+    let trials = results::trials::read_trials(&session.join("trials.csv")).unwrap();
+    let r = &trials.records[0];
+    assert_eq!(
+        r.response.answer,
+        protocols::Answer::Pair { a: 4.0, b: 2.0 },
+        "rated 1 then 2"
+    );
+    assert_eq!(
+        r.outcome.score_reference,
+        Some(4.0),
+        "the reference is shown first"
+    );
+    let e = r.encoding.as_ref().expect("the row logs the scene");
+    assert!(e.codec_params.contains_key("cr_back_left") && e.codec_params.contains_key("level"));
+    // The front figure stands between the two at the back and is taller than both; the two
+    // at the back, at one distance, are as tall as each other. Perspective makes heights go
+    // as 1/distance; the camera looking down 19° shrinks a far figure a little less (its
+    // ratio to the front one is 0.8-1.0 of the distances' ratio for this scene).
+    let back_cm = [600.0, 900.0, 1300.0][e.codec_params["level"] as usize - 1];
+    let ratio_of_distances = back_cm / 350.0;
+    let [(_, _, left), (_, _, front), (_, _, right)] = figures[..] else {
+        unreachable!()
+    };
+    let (left, front, right) = (left as f64, front as f64, right as f64);
+    assert!((left - right).abs() <= 0.1 * left.max(right), "{figures:?}");
+    let ratio = front / (0.5 * (left + right));
+    assert!(
+        ratio > 0.75 * ratio_of_distances && ratio < 1.1 * ratio_of_distances,
+        "front/back height {ratio:.2}, distances {ratio_of_distances:.2}: {figures:?}"
+    );
 }

@@ -48,8 +48,8 @@ fn setup(dir: &Path) -> PathBuf {
         &study,
         "format_version = 1\nname = \"crowd\"\nprotocol = \"mos\"\nstimuli = \"stimuli/stimuli.json\"\n\
          seed = 4\n[conditions]\nclips = [\"walk\"]\ncodecs = [\"spiht\"]\ntarget_cr = [10, 20]\n\
-         [crowd]\nhidden = \"exclude\"\ngroups = 3\nquota = 1\ncompletion_code = \"DONE-1\"\n\
-         [[crowd.gold]]\nstimulus = \"walk/spiht/cr20\"\nmax = 2\n",
+         [crowdsourcing]\nhidden = \"exclude\"\ngroups = 3\nquota = 1\ncompletion_code = \"DONE-1\"\n\
+         [[crowdsourcing.gold]]\nstimulus = \"walk/spiht/cr20\"\nmax = 2\n",
     )
     .unwrap();
     study

@@ -83,25 +83,12 @@ fn close_end_screen(env: &Env, wid: &str, mut child: Child) -> std::process::Out
 
 /// Pixels that are joint orange, in the left and in the right half of the screen.
 fn orange_per_half(png_path: &Path) -> [usize; 2] {
-    let mut dec = png::Decoder::new(std::io::BufReader::new(
-        std::fs::File::open(png_path).unwrap(),
-    ));
-    // ImageMagick may write 16-bit or paletted PNGs: read as 8-bit RGB(A).
-    dec.set_transformations(png::Transformations::normalize_to_color8());
-    let mut reader = dec.read_info().unwrap();
-    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
-    let info = reader.next_frame(&mut buf).unwrap();
-    let channels = info.line_size / info.width as usize;
-    if channels < 3 {
-        return [0, 0]; // a grey-only screen (ImageMagick writes it as grayscale)
-    }
+    let image = common::Rgb::read(png_path);
     let mut halves = [0; 2];
-    for y in 0..info.height as usize {
-        for x in 0..info.width as usize {
-            let i = y * info.line_size + x * channels;
-            let (r, b) = (i32::from(buf[i]), i32::from(buf[i + 2]));
-            if r - b > 60 {
-                halves[usize::from(x >= info.width as usize / 2)] += 1;
+    for y in 0..image.height {
+        for x in 0..image.width {
+            if image.is_orange(x, y) {
+                halves[usize::from(x >= image.width / 2)] += 1;
             }
         }
     }
@@ -122,14 +109,7 @@ fn study_run_under_xvfb_logs_every_trial_and_resumes_after_a_kill() {
         // Screenshot mid-presentation of the first trial.
         let shot = env.dir.join("trial.png");
         if !shot.exists() {
-            let ok = env
-                .cmd("import")
-                .args(["-window", "root"])
-                .arg(&shot)
-                .status()
-                .unwrap()
-                .success();
-            assert!(ok);
+            common::screenshot(&env, &shot);
             let halves = orange_per_half(&shot);
             eprintln!("screenshot: joint pixels per half {halves:?}");
             if halves[0] == 0 || halves[1] == 0 {
@@ -436,14 +416,7 @@ fn a_mos_trial_screenshot_shows_both_labels() {
         assert!(Instant::now() < deadline, "no labelled trial appeared");
         press(&env, &wid, &["Return"]);
         std::thread::sleep(Duration::from_millis(700));
-        let ok = env
-            .cmd("import")
-            .args(["-window", "root"])
-            .arg(&shot)
-            .status()
-            .unwrap()
-            .success();
-        assert!(ok);
+        common::screenshot(&env, &shot);
         let joints = orange_per_half(&shot);
         if joints[0] > 30 && joints[1] > 30 {
             break;

@@ -13,7 +13,7 @@ use lab::session::{self, Opened, Recorder, SessionOf};
 use lab::source::StimulusSource;
 use lab::{LabError, StudyFile};
 use protocols::record::{Answer, Arrangement, Block, Position, Protocol, Response, Trial};
-use protocols::study::{CrowdSettings, HiddenRule, ScaleKind, StudyDefinition};
+use protocols::study::{CrowdsourcingSettings, HiddenRule, ScaleKind, StudyDefinition};
 use protocols::{FrameTiming, StimulusEncoding, texts};
 use results::SessionManifest;
 use results::store::{BrowserInfo, DisplayInfo, SessionState};
@@ -127,8 +127,8 @@ pub struct Requirements {
 }
 
 impl Requirements {
-    /// What a study's `[crowd]` settings ask of the browser.
-    pub fn of(crowd: &CrowdSettings) -> Requirements {
+    /// What a study's `[crowdsourcing]` settings ask of the browser.
+    pub fn of(crowd: &CrowdsourcingSettings) -> Requirements {
         Requirements {
             min_window_px: crowd.min_window_px,
             min_refresh_hz: crowd.min_refresh_hz,
@@ -307,7 +307,7 @@ impl App {
             limits: options.limits,
             dashboard: options.dashboard_token.clone(),
             joins: Mutex::new(Bucket::new(options.limits.join_burst)),
-            requirements: Requirements::of(&study.definition.crowd),
+            requirements: Requirements::of(&study.definition.crowdsourcing),
             study,
         })
     }
@@ -378,7 +378,7 @@ impl App {
         }
         let who = identity(params).map_err(|e| ApiError::new(400, e.to_string()))?;
         let mut reg = lock(&self.registry);
-        let crowd = &self.definition().crowd;
+        let crowd = &self.definition().crowdsourcing;
         let full = || {
             ApiError::new(
                 503,
@@ -563,7 +563,7 @@ impl App {
             "state": state,
             "answered": answered,
             "requirements": self.requirements,
-            "hidden_rule": def.crowd.hidden,
+            "hidden_rule": def.crowdsourcing.hidden,
             "completion": (state == "finished").then(|| self.completion()).flatten(),
         }))
     }
@@ -747,7 +747,7 @@ impl App {
 
     /// The completion code and where the end screen sends the participant.
     fn completion(&self) -> Option<serde_json::Value> {
-        let c = &self.definition().crowd;
+        let c = &self.definition().crowdsourcing;
         (c.completion_code.is_some() || c.completion_url.is_some())
             .then(|| serde_json::json!({ "code": c.completion_code, "url": c.completion_url }))
     }
@@ -958,7 +958,7 @@ impl App {
         {
             return Err(ApiError::new(422, "unknown frame phase"));
         }
-        if req.hidden && def.crowd.hidden == HiddenRule::Repeat {
+        if req.hidden && def.crowdsourcing.hidden == HiddenRule::Repeat {
             return Err(ApiError::new(
                 422,
                 "the page was hidden while the stimuli played; the trial is shown again",
@@ -992,7 +992,7 @@ impl App {
             } else {
                 Vec::new()
             };
-            let crowd = &self.definition().crowd;
+            let crowd = &self.definition().crowdsourcing;
             let mut gold_failed = 0u32;
             for r in &records {
                 if crowd.gold_verdict(r).is_some_and(|(_, passed)| !passed) {

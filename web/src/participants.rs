@@ -44,7 +44,7 @@ pub struct Participant {
     pub source: String,
     /// The platform's other ids, as session manifest fields (`prolific_study_id`, ...).
     pub ids: BTreeMap<String, String>,
-    /// The plan group the participant was given (`[crowd] groups`), which is their subject
+    /// The plan group the participant was given (`[crowdsourcing] groups`), which is their subject
     /// index; `None`: the index derives from the subject id.
     pub group: Option<u32>,
     /// The session.

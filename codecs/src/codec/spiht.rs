@@ -117,25 +117,34 @@ impl SpihtCodec {
 }
 
 /// Scene-level allocation (thesis eq. 6.4-6.5): character `k` at distance `d_k` from the camera
-/// gets `B_k = S_k·B / Σ S_i` with `S_k = d_m / d_k`, `d_m` the front (nearest) character.
-/// Distances must be positive; an empty scene gets nothing.
-pub fn crowd_budgets(distances: &[f64], total: f64) -> Vec<f64> {
+/// gets `B_k = S_k·B / Σ S_i` with `S_k = d_m / d_k`, `d_m` the front (nearest) character's
+/// distance: [`share_budget`] of [`crowd_scores`]. `None` when a distance is not a positive
+/// finite number or `total` is not a finite number ≥ 0; an empty scene gets nothing.
+pub fn crowd_budgets(distances: &[f64], total: f64) -> Option<Vec<f64>> {
+    share_budget(&crowd_scores(distances)?, total)
+}
+
+/// Eq. 6.4: the bandwidth score `S_C = d_m / d_C` of each character, `d_m` the nearest
+/// character's distance (the front character scores 1, one twice as far 1/2). `None` when a
+/// distance is not a positive finite number.
+pub fn crowd_scores(distances: &[f64]) -> Option<Vec<f64>> {
+    if distances.iter().any(|d| !(d.is_finite() && *d > 0.0)) {
+        return None;
+    }
     let d_m = distances.iter().copied().fold(f64::INFINITY, f64::min);
-    let scores: Vec<f64> = distances
-        .iter()
-        .map(|&d| {
-            if d > 0.0 && d.is_finite() {
-                d_m / d
-            } else {
-                0.0
-            }
-        })
-        .collect();
+    Some(distances.iter().map(|&d| d_m / d).collect())
+}
+
+/// Eq. 6.5: `B_k = S_k·B / Σ S_i`, the total `B` shared in proportion to the scores (by
+/// distance, [`crowd_scores`]; equal scores share it uniformly; any importance score a user
+/// gives works alike). The shares add up to `total`. `None` when a score is not a positive
+/// finite number or `total` is not a finite number ≥ 0.
+pub fn share_budget(scores: &[f64], total: f64) -> Option<Vec<f64>> {
+    if scores.iter().any(|s| !(s.is_finite() && *s > 0.0)) || !(total.is_finite() && total >= 0.0) {
+        return None;
+    }
     let sum: f64 = scores.iter().sum();
-    scores
-        .iter()
-        .map(|s| if sum > 0.0 { s * total / sum } else { 0.0 })
-        .collect()
+    Some(scores.iter().map(|s| s * total / sum).collect())
 }
 
 /// The parameters of a SPIHT codec, read and range-checked once from [`Params`].
@@ -1785,15 +1794,38 @@ mod tests {
     }
 
     #[test]
-    fn crowd_allocation_eq_6_4() {
-        let b = crowd_budgets(&[2.0, 4.0, 4.0], 1000.0);
-        // S = [1, 0.5, 0.5] -> 500, 250, 250.
+    fn crowd_allocation_eq_6_4_and_6_5_by_hand() {
+        // Thesis 6.5's layout: the front character at 3 m, two behind it at 6 m.
+        // S = [3/3, 3/6, 3/6] = [1, 0.5, 0.5]; sum 2; B = 1000 -> 500, 250, 250.
+        let b = crowd_budgets(&[300.0, 600.0, 600.0], 1000.0).unwrap();
+        for (got, want) in b.iter().zip([500.0, 250.0, 250.0]) {
+            assert!((got - want).abs() < 1e-9, "{b:?}");
+        }
+        // The front is whichever is nearest, in any order: d = [4, 2, 8] m gives
+        // S = [2/4, 2/2, 2/8] = [0.5, 1, 0.25], sum 1.75; B = 700 -> 200, 400, 100.
+        let b = crowd_budgets(&[400.0, 200.0, 800.0], 700.0).unwrap();
+        for (got, want) in b.iter().zip([200.0, 400.0, 100.0]) {
+            assert!((got - want).abs() < 1e-9, "{b:?}");
+        }
+        let s = crowd_scores(&[250.0, 1000.0]).unwrap();
         assert!(
-            (b[0] - 500.0).abs() < 1e-9
-                && (b[1] - 250.0).abs() < 1e-9
-                && (b[2] - 250.0).abs() < 1e-9
+            (s[0] - 1.0).abs() < 1e-15 && (s[1] - 0.25).abs() < 1e-15,
+            "{s:?}"
         );
-        assert!(crowd_budgets(&[], 10.0).is_empty());
+        // Importance scores 3, 1 share 100 as 75, 25; equal scores share it uniformly.
+        let b = share_budget(&[3.0, 1.0], 100.0).unwrap();
+        assert!(
+            (b[0] - 75.0).abs() < 1e-12 && (b[1] - 25.0).abs() < 1e-12,
+            "{b:?}"
+        );
+        let b = share_budget(&[1.0; 3], 90.0).unwrap();
+        assert!(b.iter().all(|x| (x - 30.0).abs() < 1e-12), "{b:?}");
+        assert_eq!(crowd_budgets(&[], 10.0), Some(Vec::new()));
+        // No silent zero share: a distance or score that is not positive is refused.
+        assert_eq!(crowd_budgets(&[300.0, 0.0], 10.0), None);
+        assert_eq!(crowd_budgets(&[300.0, f64::NAN], 10.0), None);
+        assert_eq!(share_budget(&[1.0, -1.0], 10.0), None);
+        assert_eq!(share_budget(&[1.0], f64::INFINITY), None);
     }
 
     #[test]

@@ -9,12 +9,13 @@
 
 mod check;
 mod conditions;
-mod crowd;
+mod crowdsourcing;
 mod live;
 mod presentation;
 mod quest;
 mod rendering;
 mod scale;
+mod scene;
 mod session;
 mod simulation;
 mod staircase;
@@ -32,9 +33,12 @@ use crate::manifest::StimulusManifest;
 use crate::record::{Arrangement, Position, Protocol};
 use crate::staircase::StaircaseSettings;
 use check::Ctx;
-pub use crowd::{CrowdSettings, GoldTrial, HiddenRule};
+pub use crowdsourcing::{CrowdsourcingSettings, GoldTrial, HiddenRule};
 pub use quest::domain as quest_domain;
 pub use rendering::RenderingSettings;
+pub use scene::{
+    MAX_CHARACTERS, MAX_LEVELS, Placement, SceneCamera, SceneCharacter, SceneLight, SceneSettings,
+};
 
 /// Current version of the study file format.
 pub const STUDY_FORMAT_VERSION: u32 = 1;
@@ -399,6 +403,12 @@ pub struct SimulationSettings {
     pub lapse: f64,
     /// Mean response time, ms.
     pub response_time_ms: u64,
+    /// Crowd scenes: how much the simulated observer attends to each group (or character) of
+    /// the `[scene]`, by name; 1 for those not named. A scene's error is the
+    /// attention-weighted mean of its characters' errors, each scaled by its apparent size
+    /// (the nearest character's distance over its own), see [`crate::observer`].
+    #[serde(default)]
+    pub attention: BTreeMap<String, f64>,
 }
 
 impl Default for SimulationSettings {
@@ -414,6 +424,7 @@ impl Default for SimulationSettings {
             slope: 3.5,
             lapse: 0.02,
             response_time_ms: 1500,
+            attention: BTreeMap::new(),
         }
     }
 }
@@ -449,8 +460,11 @@ pub struct StudyDefinition {
     pub simulation: SimulationSettings,
     /// How the runner draws the figures (`[rendering]`).
     pub rendering: RenderingSettings,
-    /// What a study served to browsers needs (`[crowd]`).
-    pub crowd: CrowdSettings,
+    /// What a study served to browsers needs (`[crowdsourcing]`).
+    pub crowdsourcing: CrowdsourcingSettings,
+    /// Several characters per pane (`[scene]`, thesis 6.5): the conditions are crowd scenes
+    /// of the manifest, drawn with this camera and light; `None` for one figure per pane.
+    pub scene: Option<SceneSettings>,
     /// The stimulus manifest.
     pub manifest: StimulusManifest,
 }
@@ -510,29 +524,10 @@ impl StudyDefinition {
         manifest: impl FnOnce(&str) -> Result<StimulusManifest, String>,
         codecs: &dyn CodecCatalog,
     ) -> Result<Self, StudyError> {
-        let table: Table = text.parse().map_err(|e: toml::de::Error| {
-            let (line, column) = e.span().map_or((0, 0), |s| line_col(text, s.start));
-            StudyError::Syntax {
-                path: path.to_path_buf(),
-                line,
-                column,
-                message: e.message().to_string(),
-            }
-        })?;
+        let table = parse_toml(text, path)?;
         let mut cx = Ctx::default();
         let def = top::parse_table(&table, &mut cx, manifest, codecs);
-        match def {
-            Some(d) if cx.issues.is_empty() => Ok(d),
-            _ => {
-                if cx.issues.is_empty() {
-                    cx.err("", "study file is invalid");
-                }
-                Err(StudyError::Invalid {
-                    path: path.to_path_buf(),
-                    issues: cx.issues,
-                })
-            }
-        }
+        finish(def, cx, path, "study file is invalid")
     }
 
     /// Sessions' time estimate per trial, ms (playbacks, gaps).
@@ -545,6 +540,36 @@ impl StudyDefinition {
         };
         let n = u64::from(p.playback_count.max(1)) * shows;
         n * p.stimulus_duration_ms + n.saturating_sub(1) * p.gap_ms
+    }
+}
+
+/// `text` as a TOML table, or its syntax error with line and column (the file named `path`).
+fn parse_toml(text: &str, path: &Path) -> Result<Table, StudyError> {
+    text.parse().map_err(|e: toml::de::Error| {
+        let (line, column) = e.span().map_or((0, 0), |s| line_col(text, s.start));
+        StudyError::Syntax {
+            path: path.to_path_buf(),
+            line,
+            column,
+            message: e.message().to_string(),
+        }
+    })
+}
+
+/// What a parse of the file at `path` gave: the value when no problem was found, else every
+/// problem (`fallback` when the parse gave nothing and said nothing).
+fn finish<T>(value: Option<T>, mut cx: Ctx, path: &Path, fallback: &str) -> Result<T, StudyError> {
+    match value {
+        Some(v) if cx.issues.is_empty() => Ok(v),
+        _ => {
+            if cx.issues.is_empty() {
+                cx.err("", fallback);
+            }
+            Err(StudyError::Invalid {
+                path: path.to_path_buf(),
+                issues: cx.issues,
+            })
+        }
     }
 }
 

@@ -31,7 +31,16 @@ pub(super) fn parse_presentation(
         ],
     );
     let arrangement = if protocol == Some(Protocol::Dscqs) {
-        match cx.pick(t, P, "arrangement", &[("abab", Arrangement::Abab)]) {
+        // BT.500's A B A B, or thesis 6.5's reference then test, once each.
+        match cx.pick(
+            t,
+            P,
+            "arrangement",
+            &[
+                ("abab", Arrangement::Abab),
+                ("sequential", Arrangement::Sequential),
+            ],
+        ) {
             Some(a) => a,
             None if t.contains_key("arrangement") => return None,
             None => Arrangement::Abab,

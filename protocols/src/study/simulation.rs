@@ -21,6 +21,7 @@ pub(super) fn parse_simulation(t: &Table, cx: &mut Ctx) -> SimulationSettings {
             "slope",
             "lapse",
             "response_time_ms",
+            "attention",
         ],
     );
     let d = SimulationSettings::default();
@@ -77,6 +78,21 @@ pub(super) fn parse_simulation(t: &Table, cx: &mut Ctx) -> SimulationSettings {
     let response_time_ms = cx
         .uint(t, P, "response_time_ms", 600_000)
         .map_or(d.response_time_ms, u64::from);
+    let mut attention = std::collections::BTreeMap::new();
+    if let Some(a) = cx.table(t, P, "attention") {
+        for k in a.keys() {
+            match cx.float(a, "simulation.attention", k) {
+                Some(v) if v >= 0.0 => {
+                    attention.insert(k.clone(), v);
+                }
+                Some(v) => cx.err(
+                    format!("{P}.attention.{k}"),
+                    format!("must be 0 or more, got {v}"),
+                ),
+                None => {}
+            }
+        }
+    }
     SimulationSettings {
         metric: metric.unwrap_or(d.metric),
         quality_scale,
@@ -88,5 +104,6 @@ pub(super) fn parse_simulation(t: &Table, cx: &mut Ctx) -> SimulationSettings {
         slope,
         lapse,
         response_time_ms,
+        attention,
     }
 }

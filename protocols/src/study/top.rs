@@ -7,10 +7,11 @@ use toml::{Table, Value};
 
 use super::check::Ctx;
 use super::conditions::{parse_conditions, resolve_familiarization};
-use super::crowd::parse_crowd;
+use super::crowdsourcing::parse_crowdsourcing;
 use super::presentation::parse_presentation;
 use super::rendering::parse_rendering;
 use super::scale::parse_scale;
+use super::scene::{SceneSettings, check_scene_stimulus, parse_scene};
 use super::session::{FamSpec, parse_session};
 use super::simulation::parse_simulation;
 use super::staircase::parse_staircase;
@@ -53,7 +54,8 @@ const TOP_KEYS: &[&str] = &[
     "staircase",
     "simulation",
     "rendering",
-    "crowd",
+    "crowdsourcing",
+    "scene",
 ];
 
 /// The whole study file: its header, the manifest, the sections every protocol has, then
@@ -83,6 +85,7 @@ pub(super) fn parse_table(
     let sim_t = cx.table(t, "", "simulation").unwrap_or(&empty);
     let simulation = parse_simulation(sim_t, cx);
     let rendering = parse_rendering(cx.table(t, "", "rendering").unwrap_or(&empty), cx);
+    let scene = cx.table(t, "", "scene").and_then(|s| parse_scene(s, cx));
 
     let mut conditions = Vec::new();
     let mut familiarization = Vec::new();
@@ -91,6 +94,16 @@ pub(super) fn parse_table(
         Some(Protocol::Mos | Protocol::Dscqs) => {
             (conditions, familiarization) =
                 rating_sections(t, &session, familiarization_spec, manifest.as_ref(), cx);
+            if let Some(m) = &manifest {
+                check_crowd_conditions(
+                    &conditions,
+                    &familiarization,
+                    scene.as_ref(),
+                    t.contains_key("scene"),
+                    m,
+                    cx,
+                );
+            }
         }
         Some(Protocol::Staircase) => {
             staircase = staircase_sections(
@@ -103,16 +116,24 @@ pub(super) fn parse_table(
                 cx,
             );
             check_live_metric(t, &simulation, cx);
+            if t.contains_key("scene") {
+                cx.err(
+                    "scene",
+                    "crowd scenes are rated (protocol \"dscqs\" or \"mos\"), not a staircase",
+                );
+            }
         }
         None => {}
     }
 
-    let crowd = parse_crowd(
-        cx.table(t, "", "crowd").unwrap_or(&empty),
+    let crowdsourcing = parse_crowdsourcing(
+        cx.table(t, "", "crowdsourcing").unwrap_or(&empty),
         protocol,
         &conditions,
         cx,
     );
+    check_attention(&simulation, scene.as_ref(), t.contains_key("scene"), cx);
+
     Some(StudyDefinition {
         format_version: header.version? as u32,
         name: header.name?,
@@ -128,7 +149,8 @@ pub(super) fn parse_table(
         staircase,
         simulation,
         rendering,
-        crowd,
+        crowdsourcing,
+        scene,
         manifest: manifest?,
     })
 }
@@ -302,6 +324,76 @@ fn staircase_sections(
     }
 }
 
+/// A study with a `[scene]` rates crowd scenes, and only those; every one of them must be made
+/// for the study's scene (levels, characters, distances), and a crowd stimulus needs a
+/// `[scene]` to be drawn.
+fn check_crowd_conditions(
+    conditions: &[Condition],
+    familiarization: &[Condition],
+    scene: Option<&SceneSettings>,
+    has_scene: bool,
+    m: &StimulusManifest,
+    cx: &mut Ctx,
+) {
+    let all = conditions.iter().map(|c| ("conditions", c)).chain(
+        familiarization
+            .iter()
+            .map(|c| ("session.familiarization", c)),
+    );
+    for (key, c) in all {
+        for id in [&c.stimulus, &c.reference] {
+            let Some(st) = m.get(id) else { continue };
+            match (st.scene.is_some(), scene) {
+                (true, Some(scene)) => check_scene_stimulus(st, scene, m, key, cx),
+                (true, None) if !has_scene => cx.err(
+                    key,
+                    format!("{id:?} is a crowd scene: the study needs a [scene] to draw it"),
+                ),
+                (false, Some(_)) => cx.err(
+                    key,
+                    format!(
+                        "{id:?} is one clip, not a crowd scene: a study with a [scene] rates \
+                         the scenes of `study crowd`"
+                    ),
+                ),
+                _ => {}
+            }
+        }
+    }
+}
+
+/// `[simulation] attention` names groups or characters of the `[scene]`.
+fn check_attention(
+    simulation: &SimulationSettings,
+    scene: Option<&SceneSettings>,
+    has_scene: bool,
+    cx: &mut Ctx,
+) {
+    if simulation.attention.is_empty() {
+        return;
+    }
+    let Some(scene) = scene else {
+        if !has_scene {
+            cx.err(
+                "simulation.attention",
+                "attention weights are for the characters of a [scene]",
+            );
+        }
+        return;
+    };
+    for k in simulation.attention.keys() {
+        if scene.character(k).is_none() && !scene.groups().contains(&k.as_str()) {
+            cx.err(
+                format!("simulation.attention.{k}"),
+                format!(
+                    "{k:?} is neither a group ({}) nor a character of the [scene]",
+                    scene.groups().join(", ")
+                ),
+            );
+        }
+    }
+}
+
 /// A live staircase's simulated observer is told the error measured on the decoded clip,
 /// which is its joint RMS error: detecting by error there needs `metric = "rms_cm"`.
 fn check_live_metric(t: &Table, simulation: &SimulationSettings, cx: &mut Ctx) {
@@ -339,6 +431,26 @@ fn check_manifest(path: &str, m: &StimulusManifest, cx: &mut Ctx) {
                 format!(
                     "{path}: stimuli[{i}]: stimulus id {:?} is listed twice",
                     s.id
+                ),
+            );
+        }
+    }
+    // A crowd scene's clip is its level: a clip of one figure by that name would make the
+    // scene's reference ambiguous.
+    let plain: BTreeSet<&str> = m
+        .stimuli
+        .iter()
+        .filter(|s| s.scene.is_none())
+        .map(|s| s.clip.as_str())
+        .collect();
+    for (i, s) in m.stimuli.iter().enumerate() {
+        if s.scene.is_some() && plain.contains(s.clip.as_str()) {
+            cx.err(
+                "stimuli",
+                format!(
+                    "{path}: stimuli[{i}]: crowd scene {:?} is of level {:?}, also the name of \
+                     a clip",
+                    s.id, s.clip
                 ),
             );
         }

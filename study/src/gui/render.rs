@@ -356,9 +356,9 @@ impl SkeletonRenderer {
         let view = view.at(shapes.time_s);
         let vp = view.view_proj(aspect);
         let mut g: Vec<f32> = vp.iter().flatten().copied().collect();
-        let light = [0.35f32, 0.85, 0.4];
-        let n = light.iter().map(|v| v * v).sum::<f32>().sqrt();
-        g.extend_from_slice(&[light[0] / n, light[1] / n, light[2] / n, 0.35]);
+        let l = view.light;
+        let n = (l[0] * l[0] + l[1] * l[1] + l[2] * l[2]).sqrt().max(1e-6);
+        g.extend_from_slice(&[l[0] / n, l[1] / n, l[2] / n, l[3]]);
         // Shader layout: x, z = ground centre, y = half side, w = height.
         g.extend_from_slice(&[
             view.target[0],

@@ -10,12 +10,14 @@
 //! ([`View::at`]) and frames a window around the figure rather than the whole path, so a
 //! walking figure stays large. The reference and the test stimulus of a trial are drawn with
 //! the reference's view at their presentation time, so both panes move alike and appear at
-//! the same size and place. The renderer knows nothing of trials; this module knows nothing
-//! of wgpu.
+//! the same size and place. A crowd pane (thesis 6.5) is a [`Stage`] of several figures, each
+//! [`Placed`] on one ground and seen by the fixed camera and light of the study's `[scene]`
+//! ([`View::crowd`]). The renderer knows nothing of trials; this module knows nothing of wgpu.
 
 use motion::clip::Clip;
 use motion::math::Vec3;
 use motion::playback::{EndMode, Sampler};
+use protocols::study::{Placement, SceneCamera, SceneLight};
 
 /// A column-major 4×4 matrix (`m[column][row]`), as WGSL reads it.
 pub type Mat4 = [[f32; 4]; 4];
@@ -146,6 +148,130 @@ impl Figure {
         if let Some(ground) = self.shadow {
             for p in &self.points {
                 out.shadows.push(shadow_disc(to_f32(*p), r, ground));
+            }
+        }
+    }
+}
+
+/// Where a crowd character's clip goes in its pane (centimetres, y up): scaled from file
+/// units to cm, its start point (the smoothed root at time 0, on the ground) moved to the
+/// origin, turned about the vertical and set down at its place.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Placed {
+    /// The clip's start point on its ground, file units.
+    origin: [f32; 3],
+    /// Centimetres per file unit.
+    scale: f32,
+    /// Turn about +y (unit quaternion x, y, z, w).
+    turn: [f32; 4],
+    /// Where the start point goes, cm.
+    at: [f32; 3],
+}
+
+impl Placed {
+    /// The placement of a clip framed by `own` (its [`View::framing`], in file units, with
+    /// `cm_per_unit`) at `placement`: `x_cm` to the right of the camera's axis and
+    /// `distance_cm` ahead of it (−z), turned by `facing_deg` (counter-clockwise seen from
+    /// above).
+    pub fn new(own: &View, cm_per_unit: f64, placement: &Placement) -> Placed {
+        let half = (placement.facing_deg as f32).to_radians() * 0.5;
+        let scale = if cm_per_unit.is_finite() && cm_per_unit > 0.0 {
+            cm_per_unit as f32
+        } else {
+            1.0
+        };
+        Placed {
+            origin: [own.target[0], own.ground_y, own.target[2]],
+            scale,
+            turn: [0.0, half.sin(), 0.0, half.cos()],
+            at: [placement.x_cm as f32, 0.0, -(placement.distance_cm as f32)],
+        }
+    }
+
+    /// A point of the clip (file units) in the pane (cm).
+    fn point(&self, p: [f32; 3]) -> [f32; 3] {
+        add(
+            rotate_by(self.turn, scale3(sub(p, self.origin), self.scale)),
+            self.at,
+        )
+    }
+
+    /// `i` moved into the pane.
+    fn instance(&self, i: &Instance) -> Instance {
+        Instance {
+            position: self.point(i.position),
+            rotation: quat_mul(self.turn, i.rotation),
+            scale: scale3(i.scale, self.scale),
+            color: i.color,
+        }
+    }
+}
+
+/// What one pane draws: one figure (its view follows it), or the characters of a crowd
+/// scene, each placed on the pane's one ground ([`Placed`], seen by a [`View::crowd`]).
+#[derive(Debug, Clone)]
+pub struct Stage {
+    figures: Vec<(Figure, Option<Placed>)>,
+    scratch: FrameShapes,
+}
+
+impl Stage {
+    /// One figure.
+    pub fn single(figure: Figure) -> Stage {
+        Stage {
+            figures: vec![(figure, None)],
+            scratch: FrameShapes::default(),
+        }
+    }
+
+    /// A crowd pane: for each character the clip drawn, the clip that frames it (its
+    /// reference, so that a character is drawn alike in the reference and the compressed
+    /// scene: bone radius, ground, start point) and where it stands.
+    pub fn crowd<'a>(
+        characters: impl IntoIterator<Item = (&'a Clip, &'a Clip, Placement)>,
+        shadow: bool,
+    ) -> Stage {
+        let figures = characters
+            .into_iter()
+            .map(|(shown, framing, placement)| {
+                let own = View::framing(framing).with_shadow(shadow);
+                let placed = Placed::new(&own, framing.skeleton.units.cm_per_unit, &placement);
+                (Figure::new(shown, &own), Some(placed))
+            })
+            .collect();
+        Stage {
+            figures,
+            scratch: FrameShapes::default(),
+        }
+    }
+
+    /// Seconds from the first frame to one frame past the last of the longest figure.
+    pub fn duration_s(&self) -> f64 {
+        self.figures
+            .iter()
+            .map(|(f, _)| f.duration_s())
+            .fold(0.0, f64::max)
+    }
+
+    /// The shapes of every figure at presentation time `t_s`, in the pane's coordinates.
+    pub fn shapes_at(&mut self, t_s: f64, out: &mut FrameShapes) {
+        out.bones.clear();
+        out.joints.clear();
+        out.shadows.clear();
+        out.time_s = t_s;
+        for (figure, placed) in &mut self.figures {
+            figure.shapes_at(t_s, &mut self.scratch);
+            let placed = *placed;
+            let s = &self.scratch;
+            for (from, to) in [
+                (&s.bones, &mut out.bones),
+                (&s.joints, &mut out.joints),
+                (&s.shadows, &mut out.shadows),
+            ] {
+                match placed {
+                    Some(p) => to.extend(from.iter().map(|i| p.instance(i))),
+                    None => to.extend_from_slice(from),
+                }
             }
         }
     }
@@ -326,7 +452,12 @@ pub struct View {
     pub shadow: bool,
     /// The path the camera follows.
     pub track: Track,
+    /// Unit direction towards the light (x, y, z) and the ambient share (w).
+    pub light: [f32; 4],
 }
+
+/// The light of a one-figure pane: from the front-right and above, 35 % ambient.
+pub const DEFAULT_LIGHT: [f32; 4] = [0.349_128_27, 0.847_882_9, 0.399_003_73, 0.35];
 
 /// Azimuth of the camera from +z towards +x, and its elevation, degrees.
 const AZIMUTH_DEG: f32 = 30.0;
@@ -402,6 +533,47 @@ impl View {
             radius,
             shadow: true,
             track,
+            light: DEFAULT_LIGHT,
+        }
+    }
+
+    /// The fixed camera and light of a crowd pane (`[scene]`, thesis 6.5), in centimetres:
+    /// the eye `camera.height_cm` above the ground at the origin, looking along −z tilted down
+    /// by `camera.pitch_deg`, with the ground and its grid out past `far_cm`, the farthest a
+    /// character stands. It never moves and never backs off for a narrow pane.
+    pub fn crowd(camera: &SceneCamera, light: &SceneLight, far_cm: f64) -> View {
+        let far_cm = if far_cm.is_finite() && far_cm > 0.0 {
+            far_cm as f32
+        } else {
+            1000.0
+        };
+        let pitch = (camera.pitch_deg as f32).to_radians();
+        let eye = [0.0, camera.height_cm as f32, 0.0];
+        let forward = [0.0, -pitch.sin(), -pitch.cos()];
+        // The point looked at, half way out to the farthest character; the ground is
+        // centred under it and reaches past the camera and the farthest character.
+        let target = add(eye, scale3(forward, 0.5 * far_cm));
+        let dir = light.direction();
+        View {
+            target,
+            eye,
+            fov_y: (camera.fov_deg as f32).to_radians(),
+            near: 5.0,
+            far: 4.0 * far_cm + 2.0 * camera.height_cm as f32,
+            ground_y: 0.0,
+            ground_half: 1.2 * far_cm,
+            grid: 100.0,
+            bone_radius: 0.0,
+            figure_height: 0.0,
+            radius: 0.0,
+            shadow: true,
+            track: Track::still([target[0], target[2]]),
+            light: [
+                dir[0] as f32,
+                dir[1] as f32,
+                dir[2] as f32,
+                light.ambient as f32,
+            ],
         }
     }
 
@@ -489,6 +661,23 @@ fn normalize(a: [f32; 3]) -> [f32; 3] {
     if n > 0.0 { scale3(a, 1.0 / n) } else { a }
 }
 
+/// `v` rotated by the unit quaternion `q` (x, y, z, w).
+fn rotate_by(q: [f32; 4], v: [f32; 3]) -> [f32; 3] {
+    let u = [q[0], q[1], q[2]];
+    let t = scale3(cross(u, v), 2.0);
+    add(add(v, scale3(t, q[3])), cross(u, t))
+}
+
+/// The Hamilton product `a b` (rotate by `b`, then by `a`).
+fn quat_mul(a: [f32; 4], b: [f32; 4]) -> [f32; 4] {
+    [
+        a[3] * b[0] + a[0] * b[3] + a[1] * b[2] - a[2] * b[1],
+        a[3] * b[1] - a[0] * b[2] + a[1] * b[3] + a[2] * b[0],
+        a[3] * b[2] + a[0] * b[1] - a[1] * b[0] + a[2] * b[3],
+        a[3] * b[3] - a[0] * b[0] - a[1] * b[1] - a[2] * b[2],
+    ]
+}
+
 /// The unit quaternion turning +y onto the unit vector `d`.
 fn rotation_from_y(d: [f32; 3]) -> [f32; 4] {
     let c = d[1];
@@ -552,12 +741,6 @@ mod tests {
         [o[0] / o[3], o[1] / o[3], o[2] / o[3]]
     }
 
-    fn rotate(q: [f32; 4], v: [f32; 3]) -> [f32; 3] {
-        let u = [q[0], q[1], q[2]];
-        let t = scale3(cross(u, v), 2.0);
-        add(add(v, scale3(t, q[3])), cross(u, t))
-    }
-
     #[test]
     fn rotation_from_y_maps_y_onto_the_direction() {
         for d in [
@@ -568,7 +751,7 @@ mod tests {
             [-0.6, 0.7, -0.2],
         ] {
             let d = normalize(d);
-            let r = rotate(rotation_from_y(d), [0.0, 1.0, 0.0]);
+            let r = rotate_by(rotation_from_y(d), [0.0, 1.0, 0.0]);
             for k in 0..3 {
                 assert!((r[k] - d[k]).abs() < 1e-5, "{d:?} -> {r:?}");
             }
@@ -637,6 +820,75 @@ mod tests {
         assert!(s.shadows.is_empty());
     }
 
+    /// A crowd pane: each figure stands on the ground (y = 0 cm) at its place, as tall as it
+    /// is in centimetres, turned as asked; with the camera of the crowd example every joint
+    /// of every level projects inside a 16:9 pane, nearer figures taller.
+    #[test]
+    fn crowd_figures_stand_at_their_places_in_view() {
+        let clip = motion::synth::walking_clip(&motion::synth::WalkParams {
+            speed_cm_s: 0.0,
+            ..motion::synth::WalkParams::default()
+        });
+        let camera = SceneCamera {
+            height_cm: 250.0,
+            pitch_deg: 19.0,
+            fov_deg: 40.0,
+        };
+        let view = View::crowd(&camera, &SceneLight::default(), 1300.0);
+        let place = |x_cm, distance_cm, facing_deg| Placement {
+            x_cm,
+            distance_cm,
+            facing_deg,
+        };
+        let mut heights = Vec::new();
+        for (x, d) in [(0.0, 350.0), (-150.0, 600.0), (150.0, 1300.0)] {
+            for facing in [0.0, 180.0] {
+                let mut stage = Stage::crowd([(&clip, &clip, place(x, d, facing))], true);
+                let mut s = FrameShapes::default();
+                stage.shapes_at(0.0, &mut s);
+                let ys: Vec<f32> = s.joints.iter().map(|j| j.position[1]).collect();
+                let (lo, hi) = ys
+                    .iter()
+                    .fold((f32::MAX, f32::MIN), |(a, b), y| (a.min(*y), b.max(*y)));
+                // The lowest point of the whole clip is the ground: a foot at time 0 is on it.
+                assert!(lo > -0.5 && lo < 8.0, "feet at {lo} cm");
+                assert!((150.0..200.0).contains(&(hi - lo)), "{} cm tall", hi - lo);
+                let root = s.joints[0].position;
+                assert!(
+                    (root[0] - x as f32).abs() < 1.0 && (root[2] + d as f32).abs() < 1.0,
+                    "{root:?}"
+                );
+                // Turning half round puts the left hip on the other side of the root.
+                let hip = s.joints[1].position[0] - root[0];
+                if facing == 0.0 {
+                    assert!(hip > 0.0, "{hip}");
+                } else {
+                    assert!(hip < 0.0, "{hip}");
+                }
+                let vp = view.view_proj(16.0 / 9.0);
+                let ndc: Vec<[f32; 3]> = s
+                    .joints
+                    .iter()
+                    .map(|j| transform(&vp, j.position))
+                    .collect();
+                for p in &ndc {
+                    assert!(
+                        p[0].abs() < 1.0 && p[1].abs() < 1.0 && (0.0..1.0).contains(&p[2]),
+                        "{p:?}"
+                    );
+                }
+                let (nlo, nhi) = ndc
+                    .iter()
+                    .fold((f32::MAX, f32::MIN), |(a, b), p| (a.min(p[1]), b.max(p[1])));
+                heights.push(nhi - nlo);
+            }
+        }
+        assert!(
+            heights[0] > heights[2] && heights[2] > heights[4],
+            "{heights:?}"
+        );
+    }
+
     #[test]
     fn bones_join_parent_and_child_joints() {
         let clip = motion::synth::walking_clip(&motion::synth::WalkParams::default());
@@ -648,7 +900,7 @@ mod tests {
         assert!(shapes.bones.len() >= clip.skeleton.joints.len() / 2);
         for b in &shapes.bones {
             // The cylinder's far end is a joint.
-            let end = add(b.position, rotate(b.rotation, [0.0, b.scale[1], 0.0]));
+            let end = add(b.position, rotate_by(b.rotation, [0.0, b.scale[1], 0.0]));
             let hit = shapes
                 .joints
                 .iter()

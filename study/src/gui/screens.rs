@@ -14,12 +14,12 @@ use std::sync::Arc;
 
 use egui::{Align, Color32, Key, Layout, RichText, Ui, Vec2};
 use protocols::record::{Answer, Arrangement, Block, Position, Protocol, Response, Trial};
-use protocols::study::{RatingScale, ScaleKind, StimulusLabels};
+use protocols::study::{RatingScale, ReferencePlacement, ScaleKind, StimulusLabels};
 use protocols::{FrameTiming, StimulusEncoding, StudyDefinition};
 
 use super::flow::{Frame, Presentation, Show, stimulus_at};
 use super::render::{BACKGROUND, SkeletonCallback};
-use super::scene::{Figure, FrameShapes, View};
+use super::scene::{Figure, FrameShapes, Stage, View};
 use super::timing::FrameClock;
 use lab::session::Recorder;
 use lab::source::StimulusSource;
@@ -87,18 +87,43 @@ pub fn default_instructions(study: &StudyDefinition) -> String {
             )
         }
         Protocol::Dscqs => {
+            let [a, b] = dscqs_names(p.arrangement);
             let keys = if study.scale.kind == ScaleKind::Continuous {
-                " The number keys mark A first, then B; the Left and Right \
-                 arrow keys choose which scale the keys move."
+                format!(
+                    " The number keys mark {a} first, then {b}; the Left and Right arrow keys \
+                     choose which scale the keys move."
+                )
             } else {
-                " The number keys rate A first, then B; the Left and Right \
-                 arrow keys choose which row the keys change."
+                format!(
+                    " The number keys rate {a} first, then {b}; the Left and Right arrow keys \
+                     choose which row the keys change."
+                )
             };
-            format!(
+            let shows = if p.arrangement == Arrangement::Sequential {
+                let which = match p.reference_position {
+                    ReferencePlacement::Fixed(Position::First) => {
+                        "The first is the original, the second a compressed version of it."
+                    }
+                    ReferencePlacement::Fixed(_) => {
+                        "The second is the original, the first a compressed version of it."
+                    }
+                    ReferencePlacement::Random => {
+                        "One of them may be the original; you are not told which."
+                    }
+                };
+                format!(
+                    "Each trial shows two motions one after the other, {a} then {b}, with a grey \
+                     screen between them. {which} Then rate both."
+                )
+            } else {
                 "Each trial shows two motions, A and B, twice, with a grey screen between them: \
                  A, B, A, B. One of them may be the original; you are not told which. After the \
-                 second B, rate both. {}{keys}",
-                scale_instructions(&study.scale, "the quality of A and of B")
+                 second B, rate both."
+                    .to_string()
+            };
+            format!(
+                "{shows} {}{keys}",
+                scale_instructions(&study.scale, &format!("the quality of {a} and of {b}"))
             )
         }
         Protocol::Staircase => "Each trial shows two motions side by side. Choose the one that \
@@ -147,8 +172,9 @@ pub enum Exit {
 struct TrialScreen {
     trial: Trial,
     presentation: Presentation,
-    /// Figures at the arrangement's first and second position.
-    figures: [Figure; 2],
+    /// What the panes at the arrangement's first and second position draw: a figure each, or
+    /// a crowd scene each.
+    stages: [Stage; 2],
     view: View,
     first: Position,
     rating: Option<f64>,
@@ -672,30 +698,56 @@ impl StudyUi {
         self.stimuli
             .prepare(&self.recorder.lookahead(self.recorder.elapsed_ms()));
         let (reference, test, encoding) = (shown.reference, shown.test, shown.encoding);
-        let view = *self
-            .views
-            .entry(trial.reference.clone())
-            .or_insert_with(|| {
-                View::framing(&reference).with_shadow(self.study.rendering.ground_shadow)
-            });
-        let at = |p: Position| {
-            if stimulus_at(&trial, p) == trial.reference {
-                Arc::clone(&reference)
-            } else {
-                Arc::clone(&test)
-            }
+        let shadow = self.study.rendering.ground_shadow;
+        let is_reference = |p: Position| stimulus_at(&trial, p) == trial.reference;
+        let crowd = self
+            .study
+            .scene
+            .as_ref()
+            .filter(|_| !shown.crowd.is_empty());
+        let (view, stages) = if let Some(scene) = crowd {
+            // A crowd scene: every character placed on one ground, the study's camera.
+            let far = shown
+                .crowd
+                .iter()
+                .map(|c| c.placement.distance_cm)
+                .fold(0.0, f64::max);
+            let stage = |p: Position| {
+                Stage::crowd(
+                    shown.crowd.iter().map(|c| {
+                        let clip = if is_reference(p) {
+                            &c.reference
+                        } else {
+                            &c.test
+                        };
+                        (clip.as_ref(), c.reference.as_ref(), c.placement)
+                    }),
+                    shadow,
+                )
+            };
+            let view = View::crowd(&scene.camera, &scene.light, far).with_shadow(shadow);
+            (view, [stage(first), stage(first.other())])
+        } else {
+            let view = *self
+                .views
+                .entry(trial.reference.clone())
+                .or_insert_with(|| View::framing(&reference).with_shadow(shadow));
+            let stage = |p: Position| {
+                let clip = if is_reference(p) { &reference } else { &test };
+                Stage::single(Figure::new(clip, &view))
+            };
+            (view, [stage(first), stage(first.other())])
         };
-        let (a, b) = (at(first), at(first.other()));
         let presentation = Presentation::new(
             &trial,
             &self.study.presentation,
-            reference.duration_s(),
+            stages[0].duration_s(),
             now,
         );
         Ok(TrialScreen {
             trial,
             presentation,
-            figures: [Figure::new(&a, &view), Figure::new(&b, &view)],
+            stages,
             view,
             first,
             rating: None,
@@ -1180,16 +1232,27 @@ fn mos_answer(
     None
 }
 
-/// DSCQS: a rating of A and one of B. On a continuous scale, BT.500's pair of vertical
-/// scales, shown for the vote once the presentation is over; on a categorical one, a row of
-/// grades for each.
+/// What the two stimuli of a DSCQS trial are called on screen: A and B (BT.500's A B A B),
+/// or 1 and 2 (one after the other, thesis 6.5), as the presentation labels them.
+fn dscqs_names(arrangement: Arrangement) -> [&'static str; 2] {
+    if arrangement == Arrangement::Sequential {
+        ["1", "2"]
+    } else {
+        ["A", "B"]
+    }
+}
+
+/// DSCQS: a rating of A and one of B (of 1 and 2 when shown one after the other). On a
+/// continuous scale, BT.500's pair of vertical scales, shown for the vote once the
+/// presentation is over; on a categorical one, a row of grades for each.
 fn dscqs_answer(
     ui: &mut Ui,
     t: &mut TrialScreen,
     scale: &RatingScale,
     open: bool,
 ) -> Option<Answer> {
-    ui.label(RichText::new("Rate the quality of A and of B").size(18.0));
+    let [name_a, name_b] = dscqs_names(t.trial.arrangement);
+    ui.label(RichText::new(format!("Rate the quality of {name_a} and of {name_b}")).size(18.0));
     match scale.kind {
         ScaleKind::Continuous => {
             if t.presentation.accepts_response() {
@@ -1197,9 +1260,11 @@ fn dscqs_answer(
                     .horizontal(|ui| {
                         let w = 2.0 * 190.0 + 60.0;
                         ui.add_space(((ui.available_width() - w) * 0.5).max(0.0));
-                        let a = vertical_scale(ui, scale, &mut t.rating, open, !t.editing_b, "A");
+                        let a =
+                            vertical_scale(ui, scale, &mut t.rating, open, !t.editing_b, name_a);
                         ui.add_space(60.0);
-                        let b = vertical_scale(ui, scale, &mut t.rating_b, open, t.editing_b, "B");
+                        let b =
+                            vertical_scale(ui, scale, &mut t.rating_b, open, t.editing_b, name_b);
                         let used = |r: &egui::Response| r.clicked() || r.dragged();
                         [used(&a), used(&b)]
                     })
@@ -1214,8 +1279,8 @@ fn dscqs_answer(
         }
         ScaleKind::Categorical => {
             for (name, row, editing) in [
-                ("A", &mut t.rating, !t.editing_b),
-                ("B", &mut t.rating_b, t.editing_b),
+                (name_a, &mut t.rating, !t.editing_b),
+                (name_b, &mut t.rating_b, t.editing_b),
             ] {
                 ui.horizontal(|ui| {
                     let text = RichText::new(name).strong().size(18.0);
@@ -1251,11 +1316,11 @@ fn dscqs_answer(
     }
     let both = t.rating.zip(t.rating_b);
     let missing = match (t.rating, t.rating_b) {
-        (None, None) => "A and B",
-        (None, Some(_)) => "A",
-        _ => "B",
+        (None, None) => format!("{name_a} and {name_b}"),
+        (None, Some(_)) => name_a.to_string(),
+        _ => name_b.to_string(),
     };
-    if confirmed(ui, open, both.is_some(), &rate_hint(scale, missing)) {
+    if confirmed(ui, open, both.is_some(), &rate_hint(scale, &missing)) {
         return both.map(|(a, b)| Answer::Pair { a, b });
     }
     None
@@ -1436,7 +1501,7 @@ fn draw_viewport(
     );
     painter.rect_filled(rect, 0.0, bg);
     let mut shapes = FrameShapes::default();
-    t.figures[k].shapes_at(clip_time_s, &mut shapes);
+    t.stages[k].shapes_at(clip_time_s, &mut shapes);
     t.shapes[k] = Arc::new(shapes);
     if gpu {
         painter.add(egui_wgpu::Callback::new_paint_callback(

@@ -180,3 +180,53 @@ pub fn press(env: &Env, wid: &str, keys: &[&str]) {
     args.extend_from_slice(keys);
     env.xdotool(&args);
 }
+
+/// A screenshot of the whole X screen into `path` (ImageMagick's `import`).
+pub fn screenshot(env: &Env, path: &Path) {
+    let ok = env
+        .cmd("import")
+        .args(["-window", "root"])
+        .arg(path)
+        .status()
+        .unwrap()
+        .success();
+    assert!(ok, "import could not take a screenshot");
+}
+
+/// An image read as 8-bit colour (ImageMagick may write 16-bit, paletted or, for a grey-only
+/// screen, grayscale PNGs).
+pub struct Rgb {
+    pub width: usize,
+    pub height: usize,
+    line: usize,
+    channels: usize,
+    buf: Vec<u8>,
+}
+
+impl Rgb {
+    pub fn read(path: &Path) -> Rgb {
+        let mut dec =
+            png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
+        dec.set_transformations(png::Transformations::normalize_to_color8());
+        let mut reader = dec.read_info().unwrap();
+        let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+        let info = reader.next_frame(&mut buf).unwrap();
+        Rgb {
+            width: info.width as usize,
+            height: info.height as usize,
+            line: info.line_size,
+            channels: info.line_size / info.width as usize,
+            buf,
+        }
+    }
+
+    /// Whether the pixel at (x, y) is the joints' orange (red well above blue); never in a
+    /// grayscale image.
+    pub fn is_orange(&self, x: usize, y: usize) -> bool {
+        if self.channels < 3 {
+            return false;
+        }
+        let i = y * self.line + x * self.channels;
+        i32::from(self.buf[i]) - i32::from(self.buf[i + 2]) > 60
+    }
+}

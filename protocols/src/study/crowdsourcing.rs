@@ -1,4 +1,4 @@
-//! `[crowd]`: what a study served to participants' browsers (`study serve`) needs beyond a
+//! `[crowdsourcing]`: what a study served to participants' browsers (`study serve`) needs beyond a
 //! lab session: the environment check, the completion code and redirect, the rule for a page
 //! hidden during the stimuli, gold (catch) trials with their exclusion rule, and quotas of
 //! participants per plan group. Every key has a default, so a study without the table serves
@@ -41,9 +41,9 @@ impl GoldTrial {
     }
 }
 
-/// Crowd settings (`[crowd]`).
+/// Crowd settings (`[crowdsourcing]`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct CrowdSettings {
+pub struct CrowdsourcingSettings {
     /// Smallest browser window, CSS pixels.
     pub min_window_px: [u32; 2],
     /// Lowest display refresh rate, Hz (measured by the page).
@@ -67,9 +67,9 @@ pub struct CrowdSettings {
     pub quota: Option<u32>,
 }
 
-impl Default for CrowdSettings {
+impl Default for CrowdsourcingSettings {
     fn default() -> Self {
-        CrowdSettings {
+        CrowdsourcingSettings {
             min_window_px: [800, 500],
             min_refresh_hz: 50.0,
             fullscreen: false,
@@ -84,7 +84,7 @@ impl Default for CrowdSettings {
     }
 }
 
-impl CrowdSettings {
+impl CrowdsourcingSettings {
     /// The gold trial of test stimulus `id`, if it is one.
     pub fn gold_of(&self, id: &str) -> Option<&GoldTrial> {
         self.gold.iter().find(|g| g.stimulus == id)
@@ -107,7 +107,7 @@ impl CrowdSettings {
     }
 }
 
-const C: &str = "crowd";
+const C: &str = "crowdsourcing";
 
 fn code_ok(s: &str) -> bool {
     !s.is_empty()
@@ -116,12 +116,12 @@ fn code_ok(s: &str) -> bool {
             .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
 }
 
-pub(super) fn parse_crowd(
+pub(super) fn parse_crowdsourcing(
     t: &Table,
     protocol: Option<Protocol>,
     conditions: &[Condition],
     cx: &mut Ctx,
-) -> CrowdSettings {
+) -> CrowdsourcingSettings {
     cx.known(
         t,
         C,
@@ -138,7 +138,7 @@ pub(super) fn parse_crowd(
             "quota",
         ],
     );
-    let d = CrowdSettings::default();
+    let d = CrowdsourcingSettings::default();
     let min_window_px = match cx.floats(t, C, "min_window") {
         Some(v)
             if v.len() == 2
@@ -205,7 +205,7 @@ pub(super) fn parse_crowd(
     if quota == Some(0) {
         cx.err(join(C, "quota"), "must be at least 1");
     }
-    CrowdSettings {
+    CrowdsourcingSettings {
         min_window_px,
         min_refresh_hz,
         fullscreen: cx.boolean(t, C, "fullscreen").unwrap_or(d.fullscreen),
@@ -229,7 +229,7 @@ fn parse_gold(
         return Vec::new();
     };
     let Value::Array(items) = v else {
-        cx.wrong(C, "gold", "an array of tables ([[crowd.gold]])", v);
+        cx.wrong(C, "gold", "an array of tables ([[crowdsourcing.gold]])", v);
         return Vec::new();
     };
     if protocol == Some(Protocol::Staircase) {
