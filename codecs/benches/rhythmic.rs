@@ -4,6 +4,8 @@
 //! then encode and decode time per frame at the defaults (µs/frame = 10⁶ / thrpt).
 #![allow(clippy::unwrap_used, clippy::expect_used, missing_docs)]
 
+mod common;
+
 use std::hint::black_box;
 use std::time::Duration;
 
@@ -12,8 +14,8 @@ use codecs::codec::{self, Codec, Params};
 use codecs::metrics::compare;
 use codecs::rate;
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use motion::Clip;
 use motion::synth::{WalkParams, walking_clip};
-use motion::{Clip, data, io};
 
 fn report(name: &str, clip: &Clip, settings: &[(&str, f64)]) {
     let c = RhythmicCodec::new();
@@ -30,12 +32,13 @@ fn report(name: &str, clip: &Clip, settings: &[(&str, f64)]) {
     let parts = rhythmic::stream_parts(&s).unwrap();
     let cr = parts.cr_with_database();
     let wavelet = codec::by_name("wavelet-perceptual").unwrap();
-    let peer = rate::encode_to_cr(wavelet.as_ref(), clip, &Params::new(), cr)
-        .map(|w| {
+    let peer = rate::encode_to_cr(wavelet.as_ref(), clip, &Params::new(), cr).map_or_else(
+        |e| format!("({e})"),
+        |w| {
             let d = wavelet.decode(&w, &clip.skeleton).unwrap();
             format!("{:.2} cm", compare(clip, &d).unwrap().rms_cm)
-        })
-        .unwrap_or_else(|e| format!("({e})"));
+        },
+    );
     println!(
         "rhythmic/{name} {settings:?}: {} frames, {} segments, {} primitives; CR {cr:.1} with the \
          database ({} of {} bytes), {:.0} without; RMS {:.2} cm, max {:.2} cm, worst 1-s window \
@@ -54,10 +57,7 @@ fn report(name: &str, clip: &Clip, settings: &[(&str, f64)]) {
 }
 
 fn bench(c: &mut Criterion) {
-    let mut clips: Vec<(String, Clip)> = data::shared_clips()
-        .into_iter()
-        .map(|f| (f.name, io::read_clip(f.asf.as_deref(), &f.motion).unwrap()))
-        .collect();
+    let mut clips: Vec<(String, Clip)> = common::shared_clips();
     for duration_s in [20.0, 60.0] {
         clips.push((
             format!("walk-{duration_s}s"),

@@ -38,7 +38,7 @@ pub mod spiht;
 pub mod wavelet_codec;
 
 pub use prep::{unwrap_degrees, wrap_degrees};
-pub use primitive::PrimitiveCodec;
+pub use primitive::{Costs, Part, PrimitiveCodec};
 pub use rhythmic::RhythmicCodec;
 pub use spiht::{SpihtCodec, crowd_budgets};
 pub use wavelet_codec::{Selection, TranslationRule, WaveletCodec};
@@ -87,6 +87,9 @@ pub mod keys {
     pub const STEP_FLOOR: &str = "step_floor";
     /// `primitive`: the fingerprint of the primitive database.
     pub const DB: &str = "db";
+    /// `primitive`: 1 to code a difference on the 16 normalized frames where that meets the
+    /// threshold, 0 always at the segment's own length.
+    pub const NORMALIZED: &str = "normalized";
     /// `rhythmic`: the most primitives of the clip's database (1..=256).
     pub const K: &str = "k";
     /// `rhythmic`: the longest segment `S_M` in frames (15..=256).
