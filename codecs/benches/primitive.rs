@@ -9,7 +9,13 @@
 //! `primitive/<clip>/encode_cr20`: `rate::encode_to_cr` to 20:1 (±2 %), the whole search on
 //! `t_L`, as `study encode --codec primitive --cr 20` runs it. Target (issue 20): ≤ 200
 //! µs/frame.
+//!
+//! `primitive/<clip>/encode_own_length`: the encode with every difference at its segment's own
+//! length (`normalized = 0`, the default before issue 21), timed in the same run as the
+//! default for comparison.
 #![allow(clippy::unwrap_used, clippy::expect_used, missing_docs)]
+
+mod common;
 
 use std::hint::black_box;
 use std::sync::Arc;
@@ -19,22 +25,14 @@ use codecs::codec::{self, CodecContext, Params};
 use codecs::primitives::{Database, TrainParams};
 use codecs::rate;
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
-use motion::{Clip, data, io};
+use motion::Clip;
 
 fn bench(c: &mut Criterion) {
-    let clips: Vec<(String, Clip)> = data::shared_clips()
-        .into_iter()
-        .map(|f| (f.name, io::read_clip(f.asf.as_deref(), &f.motion).unwrap()))
-        .collect();
+    let clips: Vec<(String, Clip)> = common::shared_clips();
     let mut params = Params::new();
     params.insert(codec::keys::T_L.into(), 0.01);
     for (i, (name, clip)) in clips.iter().enumerate() {
-        let others: Vec<&Clip> = clips
-            .iter()
-            .enumerate()
-            .filter(|(k, _)| *k != i)
-            .map(|(_, (_, c))| c)
-            .collect();
+        let others = common::others(&clips, i);
         let db = Database::train(&others, &TrainParams::default(), |_, _| {});
         let ctx = CodecContext::with_primitives(Arc::new(db));
         let codec = codec::by_name_in("primitive", &ctx).unwrap();
@@ -42,8 +40,12 @@ fn bench(c: &mut Criterion) {
         let mut literal = params.clone();
         literal.insert(codec::keys::STEP_FLOOR.into(), 0.0);
         let cr_literal = codec.encode(clip, &literal).unwrap().compression_ratio();
+        let mut own = params.clone();
+        own.insert(codec::keys::NORMALIZED.into(), 0.0);
+        let cr_own = codec.encode(clip, &own).unwrap().compression_ratio();
         println!(
-            "primitive/{name}: {} frames, CR {:.2} at t_L = 0.01 (step_floor 0: {cr_literal:.2}), {} bytes",
+            "primitive/{name}: {} frames, CR {:.2} at t_L = 0.01 (step_floor 0: {cr_literal:.2}; \
+             own length: {cr_own:.2}), {} bytes",
             clip.frames(),
             stream.compression_ratio(),
             stream.byte_len(),
@@ -55,6 +57,9 @@ fn bench(c: &mut Criterion) {
             .measurement_time(Duration::from_secs(2));
         g.bench_function("encode", |b| {
             b.iter(|| codec.encode(black_box(clip), &params).unwrap());
+        });
+        g.bench_function("encode_own_length", |b| {
+            b.iter(|| codec.encode(black_box(clip), &own).unwrap());
         });
         g.bench_function("decode", |b| {
             b.iter(|| codec.decode(black_box(&stream), &clip.skeleton).unwrap());

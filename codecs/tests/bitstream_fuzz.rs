@@ -99,7 +99,7 @@ proptest! {
 
     /// 10,000 mutated streams per run: every one is refused (CRC, sizes, limits), none panics.
     #[test]
-    fn mutated_streams_are_errors(which in 0usize..7, m in mutation()) {
+    fn mutated_streams_are_errors(which in 0usize..8, m in mutation()) {
         let (clip, streams) = corpus();
         let original = &streams[which % streams.len()];
         if let Some(bad) = apply(original, &m) {
@@ -116,7 +116,7 @@ proptest! {
     /// the stream limits, and any clip they return has finite values and the right shape.
     #[test]
     fn payload_corruption_behind_a_valid_crc_never_panics(
-        which in 0usize..7,
+        which in 0usize..8,
         edits in prop::collection::vec((any::<usize>(), any::<u8>()), 1..6),
         cut in proptest::option::of(any::<usize>()),
     ) {

@@ -140,20 +140,28 @@ fn every_shared_clip_round_trips_within_its_joint_thresholds() {
 proptest! {
     #![proptest_config(ProptestConfig { cases: 24, failure_persistence: Some(Box::new(proptest::test_runner::FileFailurePersistence::WithSource("proptest-regressions"))), ..ProptestConfig::default() })]
 
-    /// Thesis 5.3.4's contract, over clips, thresholds and start frames: every decoded frame
-    /// (hence every segment's maximum) is within t_j of the source, for every joint.
+    /// Thesis 5.3.4's contract, over clips, thresholds, start frames and both grids of the
+    /// differences (16 normalized frames where they fit, or always the segment's own): every
+    /// decoded frame (hence every segment's maximum) is within t_j of the source, for every
+    /// joint.
     #[test]
     fn every_decoded_segment_is_within_its_threshold(
         which in 0usize..5,
         t_l in 0.002f64..0.05,
         upper in prop_oneof![Just(2.0), 1.0f64..4.0],
         start in 0usize..200,
+        normalized in 0u8..2,
     ) {
         let f = fixture();
         let (name, clip) = &f.clips[which % f.clips.len()];
         let piece = clip.excerpt(start..start + 240);
         let c = codec_with(&f.db);
-        let s = c.encode(&piece, &params(&[("t_l", t_l), ("upper_ratio", upper)])).unwrap();
+        let p = params(&[
+            ("t_l", t_l),
+            ("upper_ratio", upper),
+            ("normalized", f64::from(normalized)),
+        ]);
+        let s = c.encode(&piece, &p).unwrap();
         let d = c.decode(&s, &piece.skeleton).unwrap();
         let qa = to_quaternions(&piece);
         let qb = to_quaternions(&d);
@@ -168,6 +176,61 @@ proptest! {
             }
         }
     }
+}
+
+/// Differences on the 16 normalized frames (the default) code fewer bytes than at each
+/// segment's own length on every shared clip, within the same bound; a stream from before the
+/// `normalized` parameter (no such key) decodes as own-length, as it was written.
+#[test]
+fn normalized_differences_are_smaller_and_old_streams_decode_as_before() {
+    let f = fixture();
+    let c = codec_with(&f.db);
+    for (name, clip) in &f.clips {
+        let n = c.encode(clip, &params(&[("t_l", 0.01)])).unwrap();
+        assert_eq!(n.params["normalized"], 1.0);
+        let own = c
+            .encode(clip, &params(&[("t_l", 0.01), ("normalized", 0.0)]))
+            .unwrap();
+        assert!(
+            n.byte_len() < own.byte_len(),
+            "{name}: {} normalized, {} own length",
+            n.byte_len(),
+            own.byte_len()
+        );
+        let mut old = own.clone();
+        old.params.remove("normalized");
+        assert_eq!(
+            c.decode(&old, &clip.skeleton).unwrap(),
+            c.decode(&own, &clip.skeleton).unwrap()
+        );
+    }
+}
+
+/// The measured parts of a stream add up to its payload (to the range coder's flush), and the
+/// reference errors say which segments were coded.
+#[test]
+fn costs_add_up_to_the_stream() {
+    let f = fixture();
+    let c = PrimitiveCodec::new(Arc::clone(&f.db));
+    for (name, clip) in &f.clips {
+        let (s, k) = c.costs(clip, &params(&[("t_l", 0.01)])).unwrap();
+        let bits: f64 = k.bits.iter().sum();
+        let payload = 8.0 * s.payload.len() as f64;
+        assert!(
+            bits <= payload && payload <= bits + 8.0 * 6.0,
+            "{name}: {bits} bits counted, payload {payload}"
+        );
+        assert!(k.bits.iter().all(|&b| b >= 0.0));
+        assert_eq!(k.reference_error.len(), k.segments);
+        let within = k.reference_error.iter().filter(|&&e| e <= 1.0).count();
+        assert_eq!(within + k.coded, k.segments, "{name}");
+        assert!(k.normalized <= k.coded && k.coefficients >= k.coded);
+        assert_eq!(
+            k.segment_frames,
+            clip.frames() * to_quaternions(clip).joints.len()
+        );
+    }
+    assert!(c.costs(&f.clips[0].1, &params(&[("cr", 10.0)])).is_err());
 }
 
 #[test]

@@ -222,6 +222,51 @@ impl Quat {
         let d = self.dot(o);
         (2.0 * d * d - 1.0).clamp(-1.0, 1.0).acos()
     }
+
+    /// The vector `v` rotated by this unit quaternion (`q·v·q⁻¹`, the same as
+    /// `to_mat3()·v`).
+    pub fn rotate(self, v: Vec3) -> Vec3 {
+        // v + 2w(u × v) + 2u × (u × v), u the vector part.
+        let u = [self.x, self.y, self.z];
+        let c = cross(u, v);
+        let cc = cross(u, c);
+        [
+            v[0] + 2.0 * (self.w * c[0] + cc[0]),
+            v[1] + 2.0 * (self.w * c[1] + cc[1]),
+            v[2] + 2.0 * (self.w * c[2] + cc[2]),
+        ]
+    }
+
+    /// The angle in radians, in `(−π, π]`, of this rotation's twist about a coordinate axis
+    /// (swing-twist decomposition `q = swing·twist` with the twist about `axis`): for the
+    /// vertical axis, the heading of a body whose root has this world rotation. 0 where the
+    /// twist is undefined (a half turn about an axis perpendicular to `axis`).
+    pub fn twist_rad(self, axis: Axis) -> f64 {
+        let a = match axis {
+            Axis::X => self.x,
+            Axis::Y => self.y,
+            Axis::Z => self.z,
+        };
+        // q and −q are the same rotation: take the twist of the one with w ≥ 0 so that the
+        // angle lands in (−π, π].
+        let (w, a) = if self.w < 0.0 {
+            (-self.w, -a)
+        } else {
+            (self.w, a)
+        };
+        if w == 0.0 && a == 0.0 {
+            return 0.0;
+        }
+        2.0 * a.atan2(w)
+    }
+}
+
+fn cross(a: Vec3, b: Vec3) -> Vec3 {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
 }
 
 /// Hamilton product `a · b` (apply `b` first).
@@ -526,6 +571,37 @@ mod tests {
             let back = Quat::from_mat3(&q.to_mat3());
             assert!(back.distance(q) < 1e-7, "{a:?} {v}");
         }
+    }
+
+    #[test]
+    fn rotate_is_the_matrix_product_and_twist_recovers_a_heading() {
+        use crate::math::mul_vec;
+        let q = Quat::from_mat3(&euler_listed(
+            &[Axis::Y, Axis::X, Axis::Z],
+            &[70.0, 25.0, -40.0],
+        ));
+        let v = [0.3, -1.2, 2.5];
+        let (a, b) = (q.rotate(v), mul_vec(&q.to_mat3(), &v));
+        assert!((0..3).all(|i| (a[i] - b[i]).abs() < 1e-12), "{a:?} {b:?}");
+        // A heading of h about Y applied after a tilt about any horizontal axis: the twist
+        // about Y is h (for q and −q alike).
+        for h in [-179.0, -90.0, -10.0, 0.0, 45.0, 135.0, 179.5] {
+            for (tilt, dir) in [(0.0, 0.0), (20.0, 0.3), (-35.0, 2.0), (80.0, -1.0)] {
+                let (s, c) = (0.5 * f64::to_radians(tilt)).sin_cos();
+                let swing = Quat {
+                    w: c,
+                    x: s * f64::cos(dir),
+                    y: 0.0,
+                    z: s * f64::sin(dir),
+                };
+                let r = Quat::from_axis(Axis::Y, h) * swing;
+                for r in [r, -r] {
+                    let t = r.twist_rad(Axis::Y).to_degrees();
+                    assert!((t - h).abs() < 1e-9, "{h} {tilt}: {t}");
+                }
+            }
+        }
+        assert!(Quat::from_axis(Axis::X, 180.0).twist_rad(Axis::Y).abs() < 1e-12);
     }
 
     #[test]

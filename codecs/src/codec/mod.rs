@@ -10,9 +10,12 @@
 //! | `spiht` | 6 | thesis ch. 6: 1-D SPIHT, perceptual bit allocation eq. 6.1-6.3 |
 //! | `spiht-uniform` | 7 | 1-D SPIHT with equal bit shares (allocation ablation) |
 //! | `primitive` | 8 | thesis ch. 5: primitive database + incremental CDF 9/7 differences, knob `t_l` |
+//! | `rhythmic` | 9 | thesis ch. 4: whole-body segments as references to the clip's primitives, blended at the joins |
 //!
-//! Every lossy codec takes either its native parameters or `cr` (a target compression ratio);
-//! [`crate::rate::encode_to_cr`] reaches a target within ±2 % where the codec's knob allows.
+//! Every lossy codec but `rhythmic` takes either its native parameters or `cr` (a target
+//! compression ratio); [`crate::rate::encode_to_cr`] reaches a target within ±2 % where the
+//! codec's knob allows. `rhythmic`'s rate follows from how often the clip repeats its moves
+//! ([`RateControl::None`]).
 //!
 //! The `primitive` codec needs a context the others do not: the primitive database its
 //! decoder shares with the encoder. [`CodecContext`] carries it; [`by_name_in`],
@@ -30,11 +33,13 @@ use motion::clip::{Clip, ClipError, Skeleton};
 mod prep;
 pub mod primitive;
 pub mod raw;
+pub mod rhythmic;
 pub mod spiht;
 pub mod wavelet_codec;
 
 pub use prep::{unwrap_degrees, wrap_degrees};
-pub use primitive::PrimitiveCodec;
+pub use primitive::{Costs, Part, PrimitiveCodec};
+pub use rhythmic::RhythmicCodec;
 pub use spiht::{SpihtCodec, crowd_budgets};
 pub use wavelet_codec::{Selection, TranslationRule, WaveletCodec};
 
@@ -82,6 +87,19 @@ pub mod keys {
     pub const STEP_FLOOR: &str = "step_floor";
     /// `primitive`: the fingerprint of the primitive database.
     pub const DB: &str = "db";
+    /// `primitive`: 1 to code a difference on the 16 normalized frames where that meets the
+    /// threshold, 0 always at the segment's own length.
+    pub const NORMALIZED: &str = "normalized";
+    /// `rhythmic`: the most primitives of the clip's database (1..=256).
+    pub const K: &str = "k";
+    /// `rhythmic`: the longest segment `S_M` in frames (15..=256).
+    pub const S_M: &str = "s_m";
+    /// `rhythmic`: the share of each segment searched for blend points (0..=0.5, 0 = none).
+    pub const BLEND: &str = "blend";
+    /// `rhythmic`: 1 to send every segment's position and heading, 0 for the first only.
+    pub const ANCHOR: &str = "anchor";
+    /// `rhythmic`: the compression ratio of the database section (1..=100).
+    pub const DB_CR: &str = "db_cr";
 }
 
 /// `pairs` as [`Params`].
@@ -259,8 +277,8 @@ impl CodecContext {
     }
 }
 
-/// Every codec that needs no context (ids 1-7), in id order. The `primitive` codec is left
-/// out because it cannot encode without a database; [`registry_in`] lists every codec.
+/// Every codec that needs no context (ids 1-7 and 9), in id order. The `primitive` codec is
+/// left out because it cannot encode without a database; [`registry_in`] lists every codec.
 pub fn registry() -> Vec<Box<dyn Codec>> {
     vec![
         Box::new(raw::RawF32),
@@ -270,6 +288,7 @@ pub fn registry() -> Vec<Box<dyn Codec>> {
         Box::new(WaveletCodec::new(Selection::BoneLength)),
         Box::new(SpihtCodec::new(true)),
         Box::new(SpihtCodec::new(false)),
+        Box::new(RhythmicCodec::new()),
     ]
 }
 
@@ -278,6 +297,7 @@ pub fn registry() -> Vec<Box<dyn Codec>> {
 pub fn registry_in(ctx: &CodecContext) -> Vec<Box<dyn Codec>> {
     let mut r = registry();
     r.push(primitive_in(ctx));
+    r.sort_by_key(|c| c.id());
     r
 }
 

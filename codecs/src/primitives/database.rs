@@ -166,10 +166,11 @@ pub fn segment_distance(a: &Primitive, b: &Primitive) -> f64 {
 }
 
 /// SplitMix64: a tiny, well-known, seedable generator for reproducible seeding.
-struct SplitMix(u64);
+pub(crate) struct SplitMix(pub(crate) u64);
 
 impl SplitMix {
-    fn next_f64(&mut self) -> f64 {
+    /// The next value, uniform in `[0, 1)`.
+    pub(crate) fn next_f64(&mut self) -> f64 {
         self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
         let mut z = self.0;
         z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
@@ -219,34 +220,12 @@ fn cluster(
     if segs.len() <= k {
         return (segs.to_vec(), 0.0);
     }
-    // k-means++ seeding: each next centre drawn with probability ∝ D² to the nearest centre.
-    let first = ((rng.next_f64() * segs.len() as f64) as usize).min(segs.len() - 1);
-    let mut centres = vec![segs[first]];
-    let mut d2: Vec<f64> = segs
-        .iter()
-        .map(|s| segment_distance(&centres[0], s).powi(2))
-        .collect();
-    while centres.len() < k {
-        let total: f64 = d2.iter().sum();
-        let pick = if total > 0.0 {
-            let mut r = rng.next_f64() * total;
-            let mut idx = segs.len() - 1;
-            for (i, d) in d2.iter().enumerate() {
-                if r < *d {
-                    idx = i;
-                    break;
-                }
-                r -= d;
-            }
-            idx
-        } else {
-            ((rng.next_f64() * segs.len() as f64) as usize).min(segs.len() - 1)
-        };
-        centres.push(segs[pick]);
-        for (i, s) in segs.iter().enumerate() {
-            d2[i] = d2[i].min(segment_distance(&segs[pick], s).powi(2));
-        }
-    }
+    let mut centres: Vec<Primitive> = kmeanspp_seeds(segs.len(), k, rng, |a, b| {
+        segment_distance(&segs[a], &segs[b]).powi(2)
+    })
+    .into_iter()
+    .map(|i| segs[i])
+    .collect();
     let mut assign = vec![usize::MAX; segs.len()];
     for _ in 0..params.max_passes.max(1) {
         let mut changed = false;
@@ -274,6 +253,43 @@ fn cluster(
         .map(|s| nearest(&centres, s).1)
         .fold(0.0, f64::max);
     (centres, error)
+}
+
+/// k-means++ seeding (AV07) of `k` of `n` items (`k ≤ n`, `n ≥ 1`): the first uniformly, each
+/// next one with probability ∝ `d2(seed, i)`, item `i`'s squared distance to the seed nearest
+/// it so far (uniformly again once every item sits on a seed). Returns the seeds' indices.
+pub(crate) fn kmeanspp_seeds(
+    n: usize,
+    k: usize,
+    rng: &mut SplitMix,
+    d2: impl Fn(usize, usize) -> f64,
+) -> Vec<usize> {
+    let uniform = |rng: &mut SplitMix| ((rng.next_f64() * n as f64) as usize).min(n - 1);
+    let first = uniform(rng);
+    let mut seeds = vec![first];
+    let mut near: Vec<f64> = (0..n).map(|i| d2(first, i)).collect();
+    while seeds.len() < k {
+        let total: f64 = near.iter().sum();
+        let pick = if total > 0.0 {
+            let mut r = rng.next_f64() * total;
+            let mut idx = n - 1;
+            for (i, d) in near.iter().enumerate() {
+                if r < *d {
+                    idx = i;
+                    break;
+                }
+                r -= d;
+            }
+            idx
+        } else {
+            uniform(rng)
+        };
+        seeds.push(pick);
+        for (i, d) in near.iter_mut().enumerate() {
+            *d = d.min(d2(pick, i));
+        }
+    }
+    seeds
 }
 
 fn round_f32(p: &Primitive) -> Primitive {

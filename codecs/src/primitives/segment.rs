@@ -7,6 +7,17 @@
 //! rising or falling (the motion beats of KPS03). A segment ends at the first such crossing
 //! at least `min_frames` (15) after its start, or after `max_frames` (`S_M`) frames if none
 //! comes; the rest of the clip forms the last, possibly shorter, segment.
+//!
+//! [`segment_body`] cuts the whole body at once (thesis ch. 4, whose primitives are whole-body
+//! moves) by the same rule on one signal: the sum over joints of each joint's tangential
+//! acceleration weighted by the length its rotation swings, i.e. the rate of change of
+//! `Σ_j l_j·|ω_j|`, a proxy for how fast the bones' ends move (ch. 4.4 proposes weighting
+//! joints by bone length so that fingers count less than legs). It cuts only where that
+//! speed passes a minimum (the acceleration crosses zero from below): ch. 4 follows SI08, whose
+//! key poses are where "dancers clearly stop their movements", and the decoder blends the
+//! joins, which shows least where the body moves least.
+
+use std::ops::Range;
 
 use motion::quat::Quat;
 
@@ -114,35 +125,84 @@ fn tangential_acceleration(track: &[Quat], dt_s: f64) -> Vec<f64> {
     acc
 }
 
-/// Splits a joint's track into segments (see the module docs).
-pub fn segment_track(track: &[Quat], frame_rate_hz: f64, params: SegmentParams) -> Vec<Segment> {
-    let n = track.len();
-    let min = params.min_frames.max(1);
-    let max = params.max_frames.max(min);
-    let dt = if frame_rate_hz > 0.0 {
+/// Which zero crossings of the acceleration may end a segment.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Crossing {
+    /// Either sign change: a speed maximum or minimum (ch. 5).
+    Any,
+    /// From negative to positive only: a speed minimum (ch. 4's key poses).
+    Rising,
+}
+
+/// The frame step in seconds of a clip at `frame_rate_hz` (1 for a rate that is not positive).
+fn frame_step(frame_rate_hz: f64) -> f64 {
+    if frame_rate_hz > 0.0 {
         1.0 / frame_rate_hz
     } else {
         1.0
-    };
-    let acc = tangential_acceleration(track, dt);
+    }
+}
+
+/// Cuts `0..acc.len()` into segments of `params.min_frames..=params.max_frames` frames (the
+/// last one possibly shorter), each ending at the first `crossing` of `acc` that is at least
+/// `min_frames` after its start.
+fn chop(acc: &[f64], params: SegmentParams, crossing: Crossing) -> Vec<Range<usize>> {
+    let n = acc.len();
+    let min = params.min_frames.max(1);
+    let max = params.max_frames.max(min);
     let mut out = Vec::with_capacity(n / min + 1);
     let mut start = 0;
     while start < n {
         let mut end = (start + max).min(n);
         for i in (start + min)..end {
-            if i >= 1 && acc[i - 1] * acc[i] < 0.0 {
+            let cut = match crossing {
+                Crossing::Any => acc[i - 1] * acc[i] < 0.0,
+                Crossing::Rising => acc[i - 1] < 0.0 && acc[i] > 0.0,
+            };
+            if cut {
                 end = i;
                 break;
             }
         }
-        out.push(Segment {
-            start,
-            end,
-            normalized: normalize(&track[start..end]),
-        });
+        out.push(start..end);
         start = end;
     }
     out
+}
+
+/// Splits a joint's track into segments (see the module docs).
+pub fn segment_track(track: &[Quat], frame_rate_hz: f64, params: SegmentParams) -> Vec<Segment> {
+    let acc = tangential_acceleration(track, frame_step(frame_rate_hz));
+    chop(&acc, params, Crossing::Any)
+        .into_iter()
+        .map(|r| Segment {
+            start: r.start,
+            end: r.end,
+            normalized: normalize(&track[r]),
+        })
+        .collect()
+}
+
+/// Splits a whole body into segments (thesis ch. 4, see the module docs): `tracks[k]` is the
+/// `k`-th rotating joint's track (`frames` long), `weights[k]` the length its rotation swings.
+/// Returns the segments' frame ranges, which tile `0..frames`.
+pub fn segment_body(
+    tracks: &[Vec<Quat>],
+    weights: &[f64],
+    frames: usize,
+    frame_rate_hz: f64,
+    params: SegmentParams,
+) -> Vec<Range<usize>> {
+    let n = frames;
+    let dt = frame_step(frame_rate_hz);
+    let mut acc = vec![0.0; n];
+    for (track, &w) in tracks.iter().zip(weights) {
+        let track = &track[..n.min(track.len())];
+        for (a, t) in acc.iter_mut().zip(tangential_acceleration(track, dt)) {
+            *a += w * t;
+        }
+    }
+    chop(&acc, params, Crossing::Rising)
 }
 
 #[cfg(test)]
