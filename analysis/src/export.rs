@@ -9,14 +9,7 @@ use crate::descriptive::Rating;
 use crate::dmos::DscqsPair;
 use crate::findings::ConditionInfo;
 use crate::panel::{counting_sort, dense};
-
-fn csv_field(s: &str) -> String {
-    if s.contains([',', '"', '\n', '\r']) {
-        format!("\"{}\"", s.replace('"', "\"\""))
-    } else {
-        s.to_owned()
-    }
-}
+use crate::tables::csv_field;
 
 /// Text written in pieces and handed to a writer in blocks of [`Chunks::BLOCK`] bytes, so a
 /// million-row export is never one string in memory.
@@ -50,6 +43,28 @@ impl<W: Write> Chunks<W> {
     }
 }
 
+/// Hashes the bit pattern of a float in a few instructions (SipHash was a third of a cached
+/// lookup): a multiply, whose high bits are folded onto the low ones the table indexes by.
+#[derive(Default)]
+struct BitsHasher(u64);
+
+impl std::hash::Hasher for BitsHasher {
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.write_u64(self.0 ^ u64::from(b));
+        }
+    }
+
+    fn write_u64(&mut self, x: u64) {
+        let h = (x ^ self.0).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+        self.0 = h ^ (h >> 32);
+    }
+
+    fn finish(&self) -> u64 {
+        self.0
+    }
+}
+
 /// How many distinct floats [`FloatText`] keeps the text of.
 const FLOAT_TEXTS: usize = 1 << 16;
 
@@ -58,14 +73,14 @@ const FLOAT_TEXTS: usize = 1 << 16;
 /// `format`'s, whether it came from the cache or not.
 struct FloatText {
     format: fn(f64, &mut String),
-    known: HashMap<u64, Box<str>>,
+    known: HashMap<u64, Box<str>, std::hash::BuildHasherDefault<BitsHasher>>,
 }
 
 impl FloatText {
     fn new(format: fn(f64, &mut String)) -> Self {
         Self {
             format,
-            known: HashMap::new(),
+            known: HashMap::default(),
         }
     }
 
@@ -229,12 +244,13 @@ impl Cells {
     }
 }
 
-/// Where an entry's opinion scores come from: the rows of one condition in `cells`, with
-/// each row's subject and score.
+/// Where an entry's opinion scores come from: the rows of one condition in [`Cells`], and
+/// every row's subject and score.
 struct Scores<'c> {
+    /// Rows into `subjects` and `scores`, by subject, each subject's in row order.
     rows: &'c [u32],
-    subject: &'c dyn Fn(usize) -> u32,
-    score: &'c dyn Fn(usize) -> f64,
+    subjects: &'c [u32],
+    scores: &'c [f64],
 }
 
 impl SurealDataset<'_> {
@@ -256,7 +272,7 @@ impl SurealDataset<'_> {
         let mut previous: Option<u32> = None;
         for &row in scores.rows {
             let row = row as usize;
-            let subject = (scores.subject)(row);
+            let subject = scores.subjects[row];
             if previous == Some(subject) {
                 out.text.push_str(", ");
             } else {
@@ -272,7 +288,7 @@ impl SurealDataset<'_> {
                 out.text.push_str(": [");
                 previous = Some(subject);
             }
-            floats.push(&mut out.text, (scores.score)(row));
+            floats.push(&mut out.text, scores.scores[row]);
             out.spill()?;
         }
         if previous.is_some() {
@@ -340,31 +356,23 @@ impl SurealDataset<'_> {
     /// The writer's.
     pub fn write_python(&self, out: impl Write) -> io::Result<()> {
         // The pairs, and the ratings of conditions without pairs, by condition and subject.
+        let pair_subjects: Vec<u32> = self.dscqs.iter().map(|p| p.subject).collect();
         let pairs = Cells::new(
-            &self.dscqs.iter().map(|p| p.subject).collect::<Vec<_>>(),
+            &pair_subjects,
             &self.dscqs.iter().map(|p| p.condition).collect::<Vec<_>>(),
         );
-        let kept: Vec<u32> = (0..self.ratings.len() as u32)
-            .filter(|&i| {
-                let condition = self.ratings[i as usize].condition;
-                pairs.conditions.binary_search(&condition).is_err()
-            })
-            .collect();
-        let rated = Cells::new(
-            &kept
-                .iter()
-                .map(|&i| self.ratings[i as usize].subject)
-                .collect::<Vec<_>>(),
-            &kept
-                .iter()
-                .map(|&i| self.ratings[i as usize].condition)
-                .collect::<Vec<_>>(),
-        );
-        let rating_subject = |row: usize| self.ratings[kept[row] as usize].subject;
-        let rating_score = |row: usize| self.ratings[kept[row] as usize].score;
-        let pair_subject = |row: usize| self.dscqs[row].subject;
-        let test_score = |row: usize| self.dscqs[row].test_score;
-        let reference_score = |row: usize| self.dscqs[row].reference_score;
+        let test_scores: Vec<f64> = self.dscqs.iter().map(|p| p.test_score).collect();
+        let reference_scores: Vec<f64> = self.dscqs.iter().map(|p| p.reference_score).collect();
+        let paired = |c: u32| pairs.conditions.binary_search(&c).is_ok();
+        let (mut rated_subjects, mut rated_conditions, mut rated_scores) =
+            (Vec::new(), Vec::new(), Vec::new());
+        for r in self.ratings.iter().filter(|r| !paired(r.condition)) {
+            rated_subjects.push(r.subject);
+            rated_conditions.push(r.condition);
+            rated_scores.push(r.score);
+        }
+        let rated = Cells::new(&rated_subjects, &rated_conditions);
+        drop(rated_conditions);
         let path_of = |c: &ConditionInfo| match c.compression_ratio {
             Some(cr) => format!("{}/{}_{cr}", c.clip, c.method()),
             None => format!("{}/reference", c.clip),
@@ -383,8 +391,8 @@ impl SurealDataset<'_> {
                 });
                 let scores = Scores {
                     rows,
-                    subject: &rating_subject,
-                    score: &rating_score,
+                    subjects: &rated_subjects,
+                    scores: &rated_scores,
                 };
                 entries.push((c.id, content, path_of(c), scores));
             }
@@ -395,14 +403,14 @@ impl SurealDataset<'_> {
                 let content = contents.len() - 1;
                 let tests = Scores {
                     rows,
-                    subject: &pair_subject,
-                    score: &test_score,
+                    subjects: &pair_subjects,
+                    scores: &test_scores,
                 };
                 entries.push((c.id, content, path, tests));
                 let references = Scores {
                     rows,
-                    subject: &pair_subject,
-                    score: &reference_score,
+                    subjects: &pair_subjects,
+                    scores: &reference_scores,
                 };
                 references_out.push((content, ref_path, references));
             }

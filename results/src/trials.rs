@@ -339,11 +339,7 @@ fn split_line<'a>(
             quoted_field(line, start + 1).map_err(|m| (col, m.into()))?
         } else {
             let rest = &line[start..];
-            // Bytes, not chars: both are ASCII, and a byte loop is several times faster.
-            let end = rest
-                .bytes()
-                .position(|b| b == b',' || b == b'"')
-                .unwrap_or(rest.len());
+            let end = field_end(rest.as_bytes());
             if rest.as_bytes().get(end) == Some(&b'"') {
                 return Err((col, "quote inside an unquoted field".into()));
             }
@@ -357,6 +353,36 @@ fn split_line<'a>(
         // empty last field, which the next turn reads.
         start = next + 1;
     }
+}
+
+/// The index of the first `,` or `"` in `bytes` (its length when there is none), eight bytes
+/// at a time: both are ASCII, so no UTF-8 sequence holds them, and a word test per eight
+/// bytes is several times faster than a loop over bytes or chars.
+fn field_end(bytes: &[u8]) -> usize {
+    const ONES: u64 = u64::from_le_bytes([1; 8]);
+    const HIGH: u64 = u64::from_le_bytes([0x80; 8]);
+    // The high bit of each byte of `word` that equals `b` (and maybe of bytes after the
+    // first such byte, never before it).
+    let equal = |word: u64, b: u8| {
+        let x = word ^ (ONES * u64::from(b));
+        x.wrapping_sub(ONES) & !x & HIGH
+    };
+    let mut words = bytes.chunks_exact(8);
+    for (k, chunk) in words.by_ref().enumerate() {
+        let mut word = [0; 8];
+        word.copy_from_slice(chunk);
+        let word = u64::from_le_bytes(word);
+        let found = equal(word, b',') | equal(word, b'"');
+        if found != 0 {
+            return 8 * k + found.trailing_zeros() as usize / 8;
+        }
+    }
+    let tail = words.remainder();
+    let done = bytes.len() - tail.len();
+    done + tail
+        .iter()
+        .position(|&b| b == b',' || b == b'"')
+        .unwrap_or(tail.len())
 }
 
 /// The quoted field whose text starts at byte `from` (just after its opening quote), and the
@@ -773,6 +799,36 @@ mod tests {
         );
         assert_eq!(split(r#""",a"#, 3).unwrap(), ["", "a"]);
         assert_eq!(split("é,ü", 2).unwrap(), ["é", "ü"]);
+    }
+
+    /// The word test finds the first comma or quote at every place in a word and across
+    /// words, bytes above 0x80 (UTF-8) and bytes just below and above the two included.
+    #[test]
+    fn field_end_finds_the_first_comma_or_quote() {
+        let filler = [
+            b'a', b'+', b'-', b'!', b'#', 0xC3, 0xA9, 0x80, 0xFF, 0x00, 0x2B, 0x21,
+        ];
+        for len in 0..40 {
+            for at in 0..=len {
+                for mark in [b',', b'"'] {
+                    let mut bytes: Vec<u8> = (0..len)
+                        .map(|i| filler[(i * 7 + len) % filler.len()])
+                        .collect();
+                    if at < len {
+                        bytes[at] = mark;
+                        // A second mark later must not be the one found.
+                        if at + 3 < len {
+                            bytes[at + 3] = b',';
+                        }
+                    }
+                    let want = bytes
+                        .iter()
+                        .position(|&b| b == b',' || b == b'"')
+                        .unwrap_or(len);
+                    assert_eq!(super::field_end(&bytes), want, "{bytes:?}");
+                }
+            }
+        }
     }
 
     #[test]
