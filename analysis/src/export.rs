@@ -8,6 +8,7 @@ use std::io::{self, Write};
 use crate::descriptive::Rating;
 use crate::dmos::DscqsPair;
 use crate::findings::ConditionInfo;
+use crate::hashing::FastMap;
 use crate::panel::{counting_sort, dense};
 use crate::tables::csv_field;
 
@@ -43,28 +44,6 @@ impl<W: Write> Chunks<W> {
     }
 }
 
-/// Hashes the bit pattern of a float in a few instructions (SipHash was a third of a cached
-/// lookup): a multiply, whose high bits are folded onto the low ones the table indexes by.
-#[derive(Default)]
-struct BitsHasher(u64);
-
-impl std::hash::Hasher for BitsHasher {
-    fn write(&mut self, bytes: &[u8]) {
-        for &b in bytes {
-            self.write_u64(self.0 ^ u64::from(b));
-        }
-    }
-
-    fn write_u64(&mut self, x: u64) {
-        let h = (x ^ self.0).wrapping_mul(0x9E37_79B9_7F4A_7C15);
-        self.0 = h ^ (h >> 32);
-    }
-
-    fn finish(&self) -> u64 {
-        self.0
-    }
-}
-
 /// How many distinct floats [`FloatText`] keeps the text of.
 const FLOAT_TEXTS: usize = 1 << 16;
 
@@ -73,7 +52,7 @@ const FLOAT_TEXTS: usize = 1 << 16;
 /// `format`'s, whether it came from the cache or not.
 struct FloatText {
     format: fn(f64, &mut String),
-    known: HashMap<u64, Box<str>, std::hash::BuildHasherDefault<BitsHasher>>,
+    known: FastMap<u64, Box<str>>,
 }
 
 impl FloatText {
@@ -124,7 +103,7 @@ pub fn write_tidy_csv(
 ) -> io::Result<()> {
     let by_id: HashMap<u32, &ConditionInfo> = conditions.iter().map(|c| (c.id, c)).collect();
     // What follows the subject on every row of a condition, made once per condition.
-    let mut tails: HashMap<u32, String> = HashMap::new();
+    let mut tails: FastMap<u32, String> = FastMap::default();
     let names: Vec<String> = subjects.iter().map(|s| csv_field(s)).collect();
     let mut scores = FloatText::new(|x, out| {
         let _ = write!(out, "{x}");
@@ -265,7 +244,7 @@ impl SurealDataset<'_> {
     fn push_os<W: Write>(
         &self,
         out: &mut Chunks<W>,
-        names: &mut HashMap<u32, String>,
+        names: &mut FastMap<u32, String>,
         floats: &mut FloatText,
         scores: &Scores<'_>,
     ) -> io::Result<()> {
@@ -304,7 +283,7 @@ impl SurealDataset<'_> {
     fn write_entry<W: Write>(
         &self,
         out: &mut Chunks<W>,
-        names: &mut HashMap<u32, String>,
+        names: &mut FastMap<u32, String>,
         floats: &mut FloatText,
         asset: u32,
         content: usize,
@@ -434,7 +413,7 @@ impl SurealDataset<'_> {
             out.spill()?;
         }
         out.text.push_str("]\ndis_videos = [\n");
-        let (mut names, mut floats) = (HashMap::new(), FloatText::new(push_py_float));
+        let (mut names, mut floats) = (FastMap::default(), FloatText::new(push_py_float));
         for (asset, content, path, scores) in &entries {
             self.write_entry(
                 &mut out,

@@ -32,6 +32,7 @@ mod error;
 pub mod export;
 pub mod findings;
 pub mod from_results;
+mod hashing;
 pub mod jnd;
 mod panel;
 pub mod plots;
