@@ -74,17 +74,24 @@ pub fn session_exclusion(s: &SessionResults, crowd: &CrowdsourcingSettings) -> S
     }
 }
 
-/// `s` without the trials `e` leaves out (`None` when the whole session is excluded).
+/// `s` without the trials `e` leaves out (`None` when the whole session is excluded); `s`
+/// itself, not a copy, when it keeps every trial (the common case, read once per session).
 #[must_use]
-pub fn apply(s: &SessionResults, e: &SessionExclusion) -> Option<SessionResults> {
+pub fn apply<'s>(
+    s: &'s SessionResults,
+    e: &SessionExclusion,
+) -> Option<std::borrow::Cow<'s, SessionResults>> {
     if e.excluded {
         return None;
+    }
+    if e.hidden_trials.is_empty() {
+        return Some(std::borrow::Cow::Borrowed(s));
     }
     let mut kept = s.clone();
     kept.trials
         .records
         .retain(|r| !e.hidden_trials.contains(&r.trial.index));
-    Some(kept)
+    Some(std::borrow::Cow::Owned(kept))
 }
 
 /// The exclusions table: one row per session the rules touched.

@@ -1,18 +1,78 @@
 //! Interoperability: ratings as a tidy long CSV (R, pandas) and as a Netflix `sureal` dataset
 //! file (so its MOS, DMOS and MLE subject models can be run on our data).
 
-use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::collections::HashMap;
 use std::fmt::Write as _;
+use std::io::{self, Write};
 
 use crate::descriptive::Rating;
 use crate::dmos::DscqsPair;
 use crate::findings::ConditionInfo;
+use crate::hashing::FastMap;
+use crate::panel::{counting_sort, dense};
+use crate::tables::csv_field;
 
-fn csv_field(s: &str) -> String {
-    if s.contains([',', '"', '\n', '\r']) {
-        format!("\"{}\"", s.replace('"', "\"\""))
-    } else {
-        s.to_owned()
+/// Text written in pieces and handed to a writer in blocks of [`Chunks::BLOCK`] bytes, so a
+/// million-row export is never one string in memory.
+struct Chunks<W: Write> {
+    text: String,
+    out: W,
+}
+
+impl<W: Write> Chunks<W> {
+    const BLOCK: usize = 1 << 16;
+
+    fn new(out: W) -> Self {
+        Self {
+            text: String::with_capacity(Self::BLOCK + 1024),
+            out,
+        }
+    }
+
+    /// Hands the text over once a block is full.
+    fn spill(&mut self) -> io::Result<()> {
+        if self.text.len() >= Self::BLOCK {
+            self.out.write_all(self.text.as_bytes())?;
+            self.text.clear();
+        }
+        Ok(())
+    }
+
+    fn finish(mut self) -> io::Result<()> {
+        self.out.write_all(self.text.as_bytes())?;
+        self.out.flush()
+    }
+}
+
+/// How many distinct floats [`FloatText`] keeps the text of.
+const FLOAT_TEXTS: usize = 1 << 16;
+
+/// The text of floats already written, by bit pattern: ratings repeat the few values of a
+/// scale a million times, and formatting each anew was most of an export's time. The text is
+/// `format`'s, whether it came from the cache or not.
+struct FloatText {
+    format: fn(f64, &mut String),
+    known: FastMap<u64, Box<str>>,
+}
+
+impl FloatText {
+    fn new(format: fn(f64, &mut String)) -> Self {
+        Self {
+            format,
+            known: HashMap::default(),
+        }
+    }
+
+    fn push(&mut self, out: &mut String, x: f64) {
+        if let Some(text) = self.known.get(&x.to_bits()) {
+            out.push_str(text);
+            return;
+        }
+        let start = out.len();
+        (self.format)(x, out);
+        if self.known.len() < FLOAT_TEXTS {
+            self.known.insert(x.to_bits(), out[start..].into());
+        }
     }
 }
 
@@ -24,26 +84,57 @@ fn csv_field(s: &str) -> String {
 /// `subjects` names the numeric subjects (their ids from the results, as
 /// [`crate::study::StudyData::subjects`]); a subject past its end is written as its number.
 pub fn tidy_csv(subjects: &[String], ratings: &[Rating], conditions: &[ConditionInfo]) -> String {
+    let mut out = Vec::with_capacity(ratings.len() * 32 + 64);
+    // Writing into memory cannot fail.
+    let _ = write_tidy_csv(&mut out, subjects, ratings, conditions);
+    String::from_utf8(out).unwrap_or_else(|e| String::from_utf8_lossy(e.as_bytes()).into_owned())
+}
+
+/// [`tidy_csv`] written to `out` a block at a time (a writer of its own buffers nothing more
+/// than a block).
+///
+/// # Errors
+/// The writer's.
+pub fn write_tidy_csv(
+    out: impl Write,
+    subjects: &[String],
+    ratings: &[Rating],
+    conditions: &[ConditionInfo],
+) -> io::Result<()> {
     let by_id: HashMap<u32, &ConditionInfo> = conditions.iter().map(|c| (c.id, c)).collect();
-    let mut out = String::with_capacity(ratings.len() * 32 + 64);
-    out.push_str("subject,condition,codec,clip,compression_ratio,score\n");
+    // What follows the subject on every row of a condition, made once per condition.
+    let mut tails: FastMap<u32, String> = FastMap::default();
+    let names: Vec<String> = subjects.iter().map(|s| csv_field(s)).collect();
+    let mut scores = FloatText::new(|x, out| {
+        let _ = write!(out, "{x}");
+    });
+    let mut out = Chunks::new(out);
+    out.text
+        .push_str("subject,condition,codec,clip,compression_ratio,score\n");
     for r in ratings {
-        let info = by_id.get(&r.condition);
-        let _ = writeln!(
-            out,
-            "{},{},{},{},{},{}",
-            subjects
-                .get(r.subject as usize)
-                .map_or_else(|| r.subject.to_string(), |s| csv_field(s)),
-            r.condition,
-            info.map_or_else(String::new, |i| csv_field(&i.method())),
-            info.map_or_else(String::new, |i| csv_field(&i.clip)),
-            info.and_then(|i| i.compression_ratio)
-                .map_or_else(String::new, |x| x.to_string()),
-            r.score
-        );
+        match names.get(r.subject as usize) {
+            Some(name) => out.text.push_str(name),
+            None => {
+                let _ = write!(out.text, "{}", r.subject);
+            }
+        }
+        let tail = tails.entry(r.condition).or_insert_with(|| {
+            let info = by_id.get(&r.condition);
+            format!(
+                ",{},{},{},{},",
+                r.condition,
+                info.map_or_else(String::new, |i| csv_field(&i.method())),
+                info.map_or_else(String::new, |i| csv_field(&i.clip)),
+                info.and_then(|i| i.compression_ratio)
+                    .map_or_else(String::new, |x| x.to_string()),
+            )
+        });
+        out.text.push_str(tail);
+        scores.push(&mut out.text, r.score);
+        out.text.push('\n');
+        out.spill()?;
     }
-    out
+    out.finish()
 }
 
 fn py_str(s: &str) -> String {
@@ -54,14 +145,20 @@ fn py_str(s: &str) -> String {
 /// converters reject before here, become `float('nan')` and the like, which sureal reads as
 /// missing or as they are).
 fn py_float(x: f64) -> String {
+    let mut out = String::new();
+    push_py_float(x, &mut out);
+    out
+}
+
+fn push_py_float(x: f64, out: &mut String) {
     if x.is_finite() {
-        format!("{x:?}")
+        let _ = write!(out, "{x:?}");
     } else if x.is_nan() {
-        "float('nan')".to_owned()
+        out.push_str("float('nan')");
     } else if x > 0.0 {
-        "float('inf')".to_owned()
+        out.push_str("float('inf')");
     } else {
-        "float('-inf')".to_owned()
+        out.push_str("float('-inf')");
     }
 }
 
@@ -86,45 +183,121 @@ pub struct SurealDataset<'a> {
     pub ref_score: f64,
 }
 
-/// Scores of one entry: subject id → that subject's scores, in presentation order.
-type EntryScores = BTreeMap<u32, Vec<f64>>;
+/// Rows grouped by condition and, within a condition, by subject (each in ascending id), each
+/// group in row order: two stable counting sorts over dense ids.
+struct Cells {
+    /// Sorted unique condition ids.
+    conditions: Vec<u32>,
+    /// Rows of `conditions[k]`: `order[starts[k]..starts[k + 1]]`.
+    starts: Vec<usize>,
+    /// Row numbers by (condition, subject, row).
+    order: Vec<u32>,
+}
 
-impl SurealDataset<'_> {
-    fn subject_name(&self, id: u32) -> String {
-        match self.subjects.get(id as usize) {
-            Some(name) if !name.is_empty() => name.clone(),
-            _ => format!("s{id}"),
+impl Cells {
+    fn new(subject: &[u32], condition: &[u32]) -> Self {
+        let (subjects, s) = dense(subject);
+        let (conditions, c) = dense(condition);
+        let rows: Vec<u32> = (0..subject.len() as u32).collect();
+        let by_subject = counting_sort(&rows, &s, subjects.len());
+        drop(rows);
+        let order = counting_sort(&by_subject, &c, conditions.len());
+        let mut starts = vec![0usize; conditions.len() + 1];
+        for k in &c {
+            starts[*k as usize + 1] += 1;
+        }
+        for k in 0..conditions.len() {
+            starts[k + 1] += starts[k];
+        }
+        Self {
+            conditions,
+            starts,
+            order,
         }
     }
 
-    fn os_text(&self, os: &EntryScores) -> String {
-        os.iter()
-            .map(|(&s, scores)| {
-                let list = scores
-                    .iter()
-                    .map(|&x| py_float(x))
-                    .collect::<Vec<_>>()
-                    .join(", ");
-                format!("{}: [{list}]", py_str(&self.subject_name(s)))
-            })
-            .collect::<Vec<_>>()
-            .join(", ")
+    /// The rows of condition `id` in (subject, row) order; `None` when it has none.
+    fn of(&self, id: u32) -> Option<&[u32]> {
+        let k = self.conditions.binary_search(&id).ok()?;
+        Some(&self.order[self.starts[k]..self.starts[k + 1]])
+    }
+}
+
+/// Where an entry's opinion scores come from: the rows of one condition in [`Cells`], and
+/// every row's subject and score.
+struct Scores<'c> {
+    /// Rows into `subjects` and `scores`, by subject, each subject's in row order.
+    rows: &'c [u32],
+    subjects: &'c [u32],
+    scores: &'c [f64],
+}
+
+impl SurealDataset<'_> {
+    fn push_subject_name(&self, out: &mut String, id: u32) {
+        match self.subjects.get(id as usize) {
+            Some(name) if !name.is_empty() => out.push_str(&py_str(name)),
+            _ => out.push_str(&py_str(&format!("s{id}"))),
+        }
     }
 
-    fn write_entry(
+    /// `SUBJECT: [score, ...], ...`: the rows in (subject, row) order, one list per subject.
+    fn push_os<W: Write>(
         &self,
-        out: &mut String,
+        out: &mut Chunks<W>,
+        names: &mut FastMap<u32, String>,
+        floats: &mut FloatText,
+        scores: &Scores<'_>,
+    ) -> io::Result<()> {
+        let mut previous: Option<u32> = None;
+        for &row in scores.rows {
+            let row = row as usize;
+            let subject = scores.subjects[row];
+            if previous == Some(subject) {
+                out.text.push_str(", ");
+            } else {
+                if previous.is_some() {
+                    out.text.push_str("], ");
+                }
+                let name = names.entry(subject).or_insert_with(|| {
+                    let mut name = String::new();
+                    self.push_subject_name(&mut name, subject);
+                    name
+                });
+                out.text.push_str(name);
+                out.text.push_str(": [");
+                previous = Some(subject);
+            }
+            floats.push(&mut out.text, scores.scores[row]);
+            out.spill()?;
+        }
+        if previous.is_some() {
+            out.text.push(']');
+        }
+        Ok(())
+    }
+
+    #[expect(
+        clippy::too_many_arguments,
+        reason = "one entry's fields and the writer's caches; a struct would only rename them"
+    )]
+    fn write_entry<W: Write>(
+        &self,
+        out: &mut Chunks<W>,
+        names: &mut FastMap<u32, String>,
+        floats: &mut FloatText,
         asset: u32,
         content: usize,
         path: &str,
-        os: &EntryScores,
-    ) {
-        let _ = writeln!(
-            out,
-            "    {{'asset_id': {asset}, 'content_id': {content}, 'path': {}, 'os': {{{}}}}},",
-            py_str(path),
-            self.os_text(os)
+        scores: &Scores<'_>,
+    ) -> io::Result<()> {
+        let _ = write!(
+            out.text,
+            "    {{'asset_id': {asset}, 'content_id': {content}, 'path': {}, 'os': {{",
+            py_str(path)
         );
+        self.push_os(out, names, floats, scores)?;
+        out.text.push_str("}},\n");
+        out.spill()
     }
 
     /// The dataset as Python source, as `sureal.tools.misc.import_python_file` (and so every
@@ -147,36 +320,38 @@ impl SurealDataset<'_> {
     ///
     /// `asset_id` is the condition id.
     pub fn to_python(&self) -> String {
-        let paired: BTreeSet<u32> = self.dscqs.iter().map(|p| p.condition).collect();
-        let mut rated: BTreeMap<u32, EntryScores> = BTreeMap::new();
-        for r in self
-            .ratings
-            .iter()
-            .filter(|r| !paired.contains(&r.condition))
-        {
-            rated
-                .entry(r.condition)
-                .or_default()
-                .entry(r.subject)
-                .or_default()
-                .push(r.score);
+        let mut out = Vec::new();
+        // Writing into memory cannot fail.
+        let _ = self.write_python(&mut out);
+        String::from_utf8(out)
+            .unwrap_or_else(|e| String::from_utf8_lossy(e.as_bytes()).into_owned())
+    }
+
+    /// [`Self::to_python`] written to `out` a block at a time, from the ratings grouped by
+    /// condition and subject in place (no map per condition and subject, no string per
+    /// score).
+    ///
+    /// # Errors
+    /// The writer's.
+    pub fn write_python(&self, out: impl Write) -> io::Result<()> {
+        // The pairs, and the ratings of conditions without pairs, by condition and subject.
+        let pair_subjects: Vec<u32> = self.dscqs.iter().map(|p| p.subject).collect();
+        let pairs = Cells::new(
+            &pair_subjects,
+            &self.dscqs.iter().map(|p| p.condition).collect::<Vec<_>>(),
+        );
+        let test_scores: Vec<f64> = self.dscqs.iter().map(|p| p.test_score).collect();
+        let reference_scores: Vec<f64> = self.dscqs.iter().map(|p| p.reference_score).collect();
+        let paired = |c: u32| pairs.conditions.binary_search(&c).is_ok();
+        let (mut rated_subjects, mut rated_conditions, mut rated_scores) =
+            (Vec::new(), Vec::new(), Vec::new());
+        for r in self.ratings.iter().filter(|r| !paired(r.condition)) {
+            rated_subjects.push(r.subject);
+            rated_conditions.push(r.condition);
+            rated_scores.push(r.score);
         }
-        let mut tests: BTreeMap<u32, EntryScores> = BTreeMap::new();
-        let mut references: BTreeMap<u32, EntryScores> = BTreeMap::new();
-        for p in self.dscqs {
-            tests
-                .entry(p.condition)
-                .or_default()
-                .entry(p.subject)
-                .or_default()
-                .push(p.test_score);
-            references
-                .entry(p.condition)
-                .or_default()
-                .entry(p.subject)
-                .or_default()
-                .push(p.reference_score);
-        }
+        let rated = Cells::new(&rated_subjects, &rated_conditions);
+        drop(rated_conditions);
         let path_of = |c: &ConditionInfo| match c.compression_ratio {
             Some(cr) => format!("{}/{}_{cr}", c.clip, c.method()),
             None => format!("{}/reference", c.clip),
@@ -185,56 +360,93 @@ impl SurealDataset<'_> {
         // (asset id, content id, path, scores).
         let mut contents: Vec<(String, String)> = Vec::new();
         let mut clip_content: HashMap<&str, usize> = HashMap::new();
-        let mut entries: Vec<(u32, usize, String, &EntryScores)> = Vec::new();
-        let mut references_out: Vec<(usize, String, &EntryScores)> = Vec::new();
+        let mut entries: Vec<(u32, usize, String, Scores<'_>)> = Vec::new();
+        let mut references_out: Vec<(usize, String, Scores<'_>)> = Vec::new();
         for c in self.conditions {
-            if let Some(os) = rated.get(&c.id) {
+            if let Some(rows) = rated.of(c.id) {
                 let content = *clip_content.entry(c.clip.as_str()).or_insert_with(|| {
                     contents.push((c.clip.clone(), format!("{}/reference", c.clip)));
                     contents.len() - 1
                 });
-                entries.push((c.id, content, path_of(c), os));
+                let scores = Scores {
+                    rows,
+                    subjects: &rated_subjects,
+                    scores: &rated_scores,
+                };
+                entries.push((c.id, content, path_of(c), scores));
             }
-            if let (Some(os), Some(ref_os)) = (tests.get(&c.id), references.get(&c.id)) {
+            if let Some(rows) = pairs.of(c.id) {
                 let path = path_of(c);
                 let ref_path = format!("{path}/reference");
                 contents.push((c.clip.clone(), ref_path.clone()));
                 let content = contents.len() - 1;
-                entries.push((c.id, content, path, os));
-                references_out.push((content, ref_path, ref_os));
+                let tests = Scores {
+                    rows,
+                    subjects: &pair_subjects,
+                    scores: &test_scores,
+                };
+                entries.push((c.id, content, path, tests));
+                let references = Scores {
+                    rows,
+                    subjects: &pair_subjects,
+                    scores: &reference_scores,
+                };
+                references_out.push((content, ref_path, references));
             }
         }
         let mut next_asset = self.conditions.iter().map(|c| c.id + 1).max().unwrap_or(0);
-        let mut out = format!(
+        let mut out = Chunks::new(out);
+        let _ = write!(
+            out.text,
             "dataset_name = {}\nyuv_fmt = 'notyuv'\nwidth = 0\nheight = 0\nref_score = {}\n",
             py_str(self.name),
             py_float(self.ref_score)
         );
-        out.push_str("ref_videos = [\n");
+        out.text.push_str("ref_videos = [\n");
         for (id, (name, path)) in contents.iter().enumerate() {
             let _ = writeln!(
-                out,
+                out.text,
                 "    {{'content_id': {id}, 'content_name': {}, 'path': {}}},",
                 py_str(name),
                 py_str(path)
             );
+            out.spill()?;
         }
-        out.push_str("]\ndis_videos = [\n");
-        for (asset, content, path, os) in &entries {
-            self.write_entry(&mut out, *asset, *content, path, os);
+        out.text.push_str("]\ndis_videos = [\n");
+        let (mut names, mut floats) = (FastMap::default(), FloatText::new(push_py_float));
+        for (asset, content, path, scores) in &entries {
+            self.write_entry(
+                &mut out,
+                &mut names,
+                &mut floats,
+                *asset,
+                *content,
+                path,
+                scores,
+            )?;
         }
-        for (content, path, os) in &references_out {
-            self.write_entry(&mut out, next_asset, *content, path, os);
+        for (content, path, scores) in &references_out {
+            self.write_entry(
+                &mut out,
+                &mut names,
+                &mut floats,
+                next_asset,
+                *content,
+                path,
+                scores,
+            )?;
             next_asset += 1;
         }
-        out.push_str("]\n");
-        out
+        out.text.push_str("]\n");
+        out.finish()
     }
 }
 
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
+    use std::collections::BTreeMap;
 
     use super::*;
 
@@ -360,5 +572,225 @@ mod tests {
         assert_eq!(py_float(1e-7), "1e-7");
         assert_eq!(py_float(f64::NAN), "float('nan')");
         assert_eq!(py_float(f64::NEG_INFINITY), "float('-inf')");
+    }
+
+    /// The exports as first written (a map per condition and subject, a string per score),
+    /// kept as the oracle the streaming writers must match byte for byte.
+    mod oracle {
+        use std::collections::{BTreeMap, BTreeSet, HashMap};
+        use std::fmt::Write as _;
+
+        use super::super::{SurealDataset, csv_field, py_float, py_str};
+        use crate::descriptive::Rating;
+        use crate::findings::ConditionInfo;
+
+        pub fn tidy_csv(
+            subjects: &[String],
+            ratings: &[Rating],
+            conditions: &[ConditionInfo],
+        ) -> String {
+            let by_id: HashMap<u32, &ConditionInfo> =
+                conditions.iter().map(|c| (c.id, c)).collect();
+            let mut out = String::new();
+            out.push_str("subject,condition,codec,clip,compression_ratio,score\n");
+            for r in ratings {
+                let info = by_id.get(&r.condition);
+                let _ = writeln!(
+                    out,
+                    "{},{},{},{},{},{}",
+                    subjects
+                        .get(r.subject as usize)
+                        .map_or_else(|| r.subject.to_string(), |s| csv_field(s)),
+                    r.condition,
+                    info.map_or_else(String::new, |i| csv_field(&i.method())),
+                    info.map_or_else(String::new, |i| csv_field(&i.clip)),
+                    info.and_then(|i| i.compression_ratio)
+                        .map_or_else(String::new, |x| x.to_string()),
+                    r.score
+                );
+            }
+            out
+        }
+
+        type EntryScores = BTreeMap<u32, Vec<f64>>;
+
+        fn os_text(d: &SurealDataset<'_>, os: &EntryScores) -> String {
+            os.iter()
+                .map(|(&s, scores)| {
+                    let list = scores
+                        .iter()
+                        .map(|&x| py_float(x))
+                        .collect::<Vec<_>>()
+                        .join(", ");
+                    let name = match d.subjects.get(s as usize) {
+                        Some(name) if !name.is_empty() => name.clone(),
+                        _ => format!("s{s}"),
+                    };
+                    format!("{}: [{list}]", py_str(&name))
+                })
+                .collect::<Vec<_>>()
+                .join(", ")
+        }
+
+        pub fn to_python(d: &SurealDataset<'_>) -> String {
+            let paired: BTreeSet<u32> = d.dscqs.iter().map(|p| p.condition).collect();
+            let mut rated: BTreeMap<u32, EntryScores> = BTreeMap::new();
+            for r in d.ratings.iter().filter(|r| !paired.contains(&r.condition)) {
+                rated
+                    .entry(r.condition)
+                    .or_default()
+                    .entry(r.subject)
+                    .or_default()
+                    .push(r.score);
+            }
+            let mut tests: BTreeMap<u32, EntryScores> = BTreeMap::new();
+            let mut references: BTreeMap<u32, EntryScores> = BTreeMap::new();
+            for p in d.dscqs {
+                tests
+                    .entry(p.condition)
+                    .or_default()
+                    .entry(p.subject)
+                    .or_default()
+                    .push(p.test_score);
+                references
+                    .entry(p.condition)
+                    .or_default()
+                    .entry(p.subject)
+                    .or_default()
+                    .push(p.reference_score);
+            }
+            let path_of = |c: &ConditionInfo| match c.compression_ratio {
+                Some(cr) => format!("{}/{}_{cr}", c.clip, c.method()),
+                None => format!("{}/reference", c.clip),
+            };
+            let mut contents: Vec<(String, String)> = Vec::new();
+            let mut clip_content: HashMap<&str, usize> = HashMap::new();
+            let mut entries: Vec<(u32, usize, String, &EntryScores)> = Vec::new();
+            let mut references_out: Vec<(usize, String, &EntryScores)> = Vec::new();
+            for c in d.conditions {
+                if let Some(os) = rated.get(&c.id) {
+                    let content = *clip_content.entry(c.clip.as_str()).or_insert_with(|| {
+                        contents.push((c.clip.clone(), format!("{}/reference", c.clip)));
+                        contents.len() - 1
+                    });
+                    entries.push((c.id, content, path_of(c), os));
+                }
+                if let (Some(os), Some(ref_os)) = (tests.get(&c.id), references.get(&c.id)) {
+                    let path = path_of(c);
+                    let ref_path = format!("{path}/reference");
+                    contents.push((c.clip.clone(), ref_path.clone()));
+                    let content = contents.len() - 1;
+                    entries.push((c.id, content, path, os));
+                    references_out.push((content, ref_path, ref_os));
+                }
+            }
+            let mut next_asset = d.conditions.iter().map(|c| c.id + 1).max().unwrap_or(0);
+            let mut out = format!(
+                "dataset_name = {}\nyuv_fmt = 'notyuv'\nwidth = 0\nheight = 0\nref_score = {}\n",
+                py_str(d.name),
+                py_float(d.ref_score)
+            );
+            out.push_str("ref_videos = [\n");
+            for (id, (name, path)) in contents.iter().enumerate() {
+                let _ = writeln!(
+                    out,
+                    "    {{'content_id': {id}, 'content_name': {}, 'path': {}}},",
+                    py_str(name),
+                    py_str(path)
+                );
+            }
+            out.push_str("]\ndis_videos = [\n");
+            let entry = |out: &mut String, asset: u32, content: usize, path: &str, os| {
+                let _ = writeln!(
+                    out,
+                    "    {{'asset_id': {asset}, 'content_id': {content}, 'path': {}, 'os': {{{}}}}},",
+                    py_str(path),
+                    os_text(d, os)
+                );
+            };
+            for (asset, content, path, os) in &entries {
+                entry(&mut out, *asset, *content, path, os);
+            }
+            for (content, path, os) in &references_out {
+                entry(&mut out, next_asset, *content, path, os);
+                next_asset += 1;
+            }
+            out.push_str("]\n");
+            out
+        }
+    }
+
+    /// Random exports the way a results directory can make them and some it cannot (ids past
+    /// the names, a condition listed twice or not at all, pairs and ratings of one condition,
+    /// non-finite and thousands of distinct scores, names that need quoting): the streaming
+    /// writers give the oracle's bytes.
+    #[test]
+    fn streaming_exports_match_the_oracle() {
+        use rand::{RngExt as _, SeedableRng as _};
+        for seed in 0..12_u64 {
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+            let subjects: Vec<String> = ["S1", "", "a,b", "q\"x", "it's", "S\\6"]
+                .iter()
+                .take(rng.random_range(0..=6))
+                .map(|s| (*s).to_owned())
+                .collect();
+            let mut conditions: Vec<ConditionInfo> = (0..rng.random_range(1..8_u32))
+                .map(|id| {
+                    let mut c = condition(
+                        id * 3,
+                        ["walk", "run,fast", "o'clock"][id as usize % 3],
+                        (id % 4 != 0).then_some(10.0 * f64::from(id) + 0.5),
+                    );
+                    if id % 3 == 1 {
+                        c.params.insert("qp".to_owned(), f64::from(id));
+                    }
+                    c
+                })
+                .collect();
+            if seed % 3 == 0 {
+                let twice = conditions[0].clone();
+                conditions.push(twice);
+            }
+            let condition_ids = conditions.len() as u32 * 3 + 2;
+            let score = |rng: &mut rand_chacha::ChaCha8Rng| match rng.random_range(0..40) {
+                0 => f64::NAN,
+                1 => f64::INFINITY,
+                2 => 1e-7,
+                k if seed % 2 == 0 => 1.0 + f64::from(k % 9) / 2.0,
+                _ => rng.random::<f64>() * 100.0,
+            };
+            let n = if seed == 11 { 70_000 } else { 300 };
+            let ratings: Vec<Rating> = (0..n)
+                .map(|_| {
+                    rating(
+                        rng.random_range(0..9),
+                        rng.random_range(0..condition_ids),
+                        score(&mut rng),
+                    )
+                })
+                .collect();
+            let dscqs: Vec<DscqsPair> = (0..if seed % 4 == 1 { 200 } else { 0 })
+                .map(|_| DscqsPair {
+                    subject: rng.random_range(0..9),
+                    condition: rng.random_range(0..condition_ids),
+                    reference_score: score(&mut rng),
+                    test_score: score(&mut rng),
+                })
+                .collect();
+            let d = SurealDataset {
+                name: "it's a \\ test",
+                subjects: &subjects,
+                ratings: &ratings,
+                dscqs: &dscqs,
+                conditions: &conditions,
+                ref_score: 5.0,
+            };
+            assert_eq!(d.to_python(), oracle::to_python(&d), "seed {seed}");
+            assert_eq!(
+                tidy_csv(&subjects, &ratings, &conditions),
+                oracle::tidy_csv(&subjects, &ratings, &conditions),
+                "seed {seed}"
+            );
+        }
     }
 }

@@ -2,7 +2,7 @@
 //! `protocols::TrialRecord`) into this crate's plain inputs, with errors that name the file,
 //! line and column of a record the analysis cannot use.
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use protocols::manifest::{REFERENCE_CODEC, StimulusManifest};
@@ -15,6 +15,7 @@ use crate::descriptive::Rating;
 use crate::dmos::DscqsPair;
 use crate::error::AnalysisError;
 use crate::findings::ConditionInfo;
+use crate::hashing::FastMap;
 use crate::jnd::EncodedLevel;
 use crate::psychometric::TwoAfcTrial;
 use crate::staircase::{StaircaseStep, StaircaseTrack};
@@ -33,14 +34,14 @@ pub struct ConvertedResults {
 }
 
 struct Interner {
-    ids: HashMap<String, u32>,
+    ids: FastMap<String, u32>,
     names: Vec<String>,
 }
 
 impl Interner {
     fn new() -> Self {
         Self {
-            ids: HashMap::new(),
+            ids: FastMap::default(),
             names: Vec::new(),
         }
     }

@@ -35,6 +35,7 @@ pub mod exclusions;
 pub mod export;
 pub mod findings;
 pub mod from_results;
+mod hashing;
 pub mod jnd;
 pub mod mle;
 mod panel;

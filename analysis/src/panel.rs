@@ -14,7 +14,7 @@ const TABLE_LIMIT: u32 = 1 << 20;
 
 /// Sorted unique ids and, per row, the index of the row's id among them. Small ids use a
 /// presence table (linear time); large ones a sort and binary search.
-fn dense(ids: &[u32]) -> (Vec<u32>, Vec<u32>) {
+pub(crate) fn dense(ids: &[u32]) -> (Vec<u32>, Vec<u32>) {
     let max = ids.iter().copied().max().unwrap_or(0);
     if max < TABLE_LIMIT {
         let mut table = vec![u32::MAX; max as usize + 1];
@@ -42,7 +42,7 @@ fn dense(ids: &[u32]) -> (Vec<u32>, Vec<u32>) {
 }
 
 /// Stable counting sort of `rows` by `key[row]` (keys < `buckets`).
-fn counting_sort(rows: &[u32], key: &[u32], buckets: usize) -> Vec<u32> {
+pub(crate) fn counting_sort(rows: &[u32], key: &[u32], buckets: usize) -> Vec<u32> {
     let mut start = vec![0usize; buckets + 1];
     for &r in rows {
         start[key[r as usize] as usize + 1] += 1;

@@ -153,17 +153,19 @@ impl Report {
                             tables_dir.join(format!("{}.csv", t.name)),
                             t.to_csv().as_bytes(),
                         )?;
+                        let markdown = t.to_markdown();
                         put(
                             &mut written.files,
                             tables_dir.join(format!("{}.md", t.name)),
-                            t.to_markdown().as_bytes(),
+                            markdown.as_bytes(),
                         )?;
                         put(
                             &mut written.files,
                             tables_dir.join(format!("{}.tex", t.name)),
                             t.to_latex().as_bytes(),
                         )?;
-                        let _ = writeln!(md, "{}", t.to_markdown());
+                        md.push_str(&markdown);
+                        md.push('\n');
                         html.push_str(&t.to_html());
                     }
                     Block::Figure { name, figure } => {

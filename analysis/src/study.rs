@@ -327,20 +327,18 @@ pub fn analyze(data: &StudyData, options: &ReportOptions) -> Result<StudyAnalysi
             score: p.reference_score - p.test_score,
         })
         .collect();
-    let difference_means = Panel::new(&differences)?.subject_means(&differences);
+    let difference_panel = Panel::new(&differences)?;
+    let difference_means = difference_panel.subject_means(&differences);
     // BT.500's screening is defined per presentation, a repeat being a presentation of its
     // own (its J·K·R): it takes every rating, never the per-subject means, which would hide
     // an erratic observer's scatter.
-    let (presented, judged_means): (&[Rating], &[Rating]) = if data.dscqs.is_empty() {
-        (&data.ratings, &means)
-    } else {
-        (&differences, &difference_means)
-    };
-    let screening = if presented.is_empty() {
-        None
-    } else {
-        Some(screening_of_panel(presented, &Panel::new(presented)?))
-    };
+    let (presented, presented_panel, judged_means): (&[Rating], &Panel, &[Rating]) =
+        if data.dscqs.is_empty() {
+            (&data.ratings, &panel, &means)
+        } else {
+            (&differences, &difference_panel, &difference_means)
+        };
+    let screening = (!presented.is_empty()).then(|| screening_of_panel(presented, presented_panel));
     let rejected = screening
         .as_ref()
         .map(ScreeningReport::rejected)

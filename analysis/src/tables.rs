@@ -61,21 +61,43 @@ pub fn test_kind(alternative: Alternative) -> &'static str {
     }
 }
 
-fn csv_field(s: &str) -> String {
+/// `s` as one RFC 4180 CSV field: quoted (quotes doubled) when it holds a comma, a quote or a
+/// line break.
+pub(crate) fn csv_field(s: &str) -> String {
+    let mut out = String::new();
+    push_csv_field(&mut out, s);
+    out
+}
+
+/// Appends [`csv_field`] of `s` to `out`.
+pub(crate) fn push_csv_field(out: &mut String, s: &str) {
     if s.contains([',', '"', '\n', '\r']) {
-        format!("\"{}\"", s.replace('"', "\"\""))
+        out.push('"');
+        out.push_str(&s.replace('"', "\"\""));
+        out.push('"');
     } else {
-        s.to_owned()
+        out.push_str(s);
     }
 }
 
-fn md_cell(s: &str) -> String {
-    s.replace('|', "\\|").replace('\n', " ")
+/// Appends `s` as a Markdown table cell (`|` escaped, line breaks as spaces).
+fn push_md_cell(out: &mut String, s: &str) {
+    if s.contains(['|', '\n']) {
+        out.push_str(&s.replace('|', "\\|").replace('\n', " "));
+    } else {
+        out.push_str(s);
+    }
 }
 
 /// Escapes LaTeX special characters.
 pub fn latex_escape(s: &str) -> String {
     let mut out = String::with_capacity(s.len());
+    push_latex_escaped(&mut out, s);
+    out
+}
+
+/// Appends [`latex_escape`] of `s` to `out`.
+fn push_latex_escaped(out: &mut String, s: &str) {
     for c in s.chars() {
         match c {
             '&' | '%' | '$' | '#' | '_' | '{' | '}' => {
@@ -89,24 +111,24 @@ pub fn latex_escape(s: &str) -> String {
             _ => out.push(c),
         }
     }
-    out
+}
+
+/// Appends `cells`, each written by `push` and separated by `between`.
+fn push_joined(out: &mut String, cells: &[String], between: &str, push: fn(&mut String, &str)) {
+    for (i, c) in cells.iter().enumerate() {
+        if i > 0 {
+            out.push_str(between);
+        }
+        push(out, c);
+    }
 }
 
 impl Table {
     /// RFC 4180 CSV with a header row.
     pub fn to_csv(&self) -> String {
         let mut out = String::new();
-        let line = |cells: &[String]| {
-            cells
-                .iter()
-                .map(|c| csv_field(c))
-                .collect::<Vec<_>>()
-                .join(",")
-        };
-        out.push_str(&line(&self.columns));
-        out.push('\n');
-        for row in &self.rows {
-            out.push_str(&line(row));
+        for cells in std::iter::once(&self.columns).chain(&self.rows) {
+            push_joined(&mut out, cells, ",", push_csv_field);
             out.push('\n');
         }
         out
@@ -114,30 +136,20 @@ impl Table {
 
     /// GitHub-flavoured Markdown with the caption in bold above.
     pub fn to_markdown(&self) -> String {
-        let mut out = format!("**{}**\n\n", md_cell(&self.caption));
-        let _ = writeln!(
-            out,
-            "| {} |",
-            self.columns
-                .iter()
-                .map(|c| md_cell(c))
-                .collect::<Vec<_>>()
-                .join(" | ")
-        );
-        let _ = writeln!(
-            out,
-            "|{}",
-            self.columns.iter().map(|_| " --- |").collect::<String>()
-        );
-        for row in &self.rows {
-            let _ = writeln!(
-                out,
-                "| {} |",
-                row.iter()
-                    .map(|c| md_cell(c))
-                    .collect::<Vec<_>>()
-                    .join(" | ")
-            );
+        let mut out = String::from("**");
+        push_md_cell(&mut out, &self.caption);
+        out.push_str("**\n\n");
+        for (i, cells) in std::iter::once(&self.columns).chain(&self.rows).enumerate() {
+            out.push_str("| ");
+            push_joined(&mut out, cells, " | ", push_md_cell);
+            out.push_str(" |\n");
+            if i == 0 {
+                out.push('|');
+                for _ in &self.columns {
+                    out.push_str(" --- |");
+                }
+                out.push('\n');
+            }
         }
         out
     }
@@ -153,17 +165,12 @@ impl Table {
             "r".repeat(self.columns.len().saturating_sub(1))
         );
         out.push_str("\\toprule\n");
-        let row = |cells: &[String]| {
-            cells
-                .iter()
-                .map(|c| latex_escape(c))
-                .collect::<Vec<_>>()
-                .join(" & ")
-        };
-        let _ = writeln!(out, "{} \\\\", row(&self.columns));
-        out.push_str("\\midrule\n");
-        for r in &self.rows {
-            let _ = writeln!(out, "{} \\\\", row(r));
+        for (i, cells) in std::iter::once(&self.columns).chain(&self.rows).enumerate() {
+            push_joined(&mut out, cells, " & ", push_latex_escaped);
+            out.push_str(" \\\\\n");
+            if i == 0 {
+                out.push_str("\\midrule\n");
+            }
         }
         out.push_str("\\bottomrule\n\\end{tabular}\n\\end{table}\n");
         out
@@ -171,18 +178,21 @@ impl Table {
 
     /// An HTML `<table>` with escaped cells.
     pub fn to_html(&self) -> String {
-        let mut out = format!(
-            "<table>\n<caption>{}</caption>\n<thead><tr>",
-            html_escape(&self.caption)
-        );
+        let mut out = String::from("<table>\n<caption>");
+        push_html_escaped(&mut out, &self.caption);
+        out.push_str("</caption>\n<thead><tr>");
         for c in &self.columns {
-            let _ = write!(out, "<th>{}</th>", html_escape(c));
+            out.push_str("<th>");
+            push_html_escaped(&mut out, c);
+            out.push_str("</th>");
         }
         out.push_str("</tr></thead>\n<tbody>\n");
         for r in &self.rows {
             out.push_str("<tr>");
             for c in r {
-                let _ = write!(out, "<td>{}</td>", html_escape(c));
+                out.push_str("<td>");
+                push_html_escaped(&mut out, c);
+                out.push_str("</td>");
             }
             out.push_str("</tr>\n");
         }
@@ -193,10 +203,23 @@ impl Table {
 
 /// Escapes `&`, `<`, `>` and `"` for HTML.
 pub fn html_escape(s: &str) -> String {
-    s.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
-        .replace('"', "&quot;")
+    let mut out = String::with_capacity(s.len());
+    push_html_escaped(&mut out, s);
+    out
+}
+
+/// Appends [`html_escape`] of `s` to `out`.
+fn push_html_escaped(out: &mut String, s: &str) {
+    if s.contains(['&', '<', '>', '"']) {
+        out.push_str(
+            &s.replace('&', "&amp;")
+                .replace('<', "&lt;")
+                .replace('>', "&gt;")
+                .replace('"', "&quot;"),
+        );
+    } else {
+        out.push_str(s);
+    }
 }
 
 fn ratio(cr: Option<f64>) -> String {

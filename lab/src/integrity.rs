@@ -17,6 +17,7 @@
 use std::collections::HashMap;
 use std::fmt;
 use std::path::{Path, PathBuf};
+use std::sync::{Mutex, PoisonError};
 
 use protocols::engine::{Session, SessionStatus};
 use protocols::{Protocol, StudyDefinition};
@@ -60,12 +61,14 @@ impl fmt::Display for Problem {
 
 /// Checks the sessions of a results directory one at a time (as [`results::read_session`]
 /// reads them) against the study file they ran: at most one replay problem per session (the
-/// rows after the first bad one follow from it), and a session recorded twice.
+/// rows after the first bad one follow from it), and a session recorded twice. Shared by
+/// reference between threads: [`Self::check_alone`] on any of them, [`Self::check_repeat`]
+/// in session order.
 pub struct Checker<'a> {
     study: &'a StudyFile,
     run: &'a RunManifest,
     archived: bool,
-    seen: HashMap<(String, u32), PathBuf>,
+    seen: Mutex<HashMap<(String, u32), PathBuf>>,
 }
 
 impl<'a> Checker<'a> {
@@ -79,12 +82,12 @@ impl<'a> Checker<'a> {
             // nor its manifest's is the original's: sessions are held to the run's hashes
             // then.
             archived: same_file(&results.join(&run.study_file), &study.path),
-            seen: HashMap::new(),
+            seen: Mutex::new(HashMap::new()),
         }
     }
 
     /// The problems of one session (and of it against the sessions checked before).
-    pub fn check(&mut self, s: &SessionResults) -> Vec<Problem> {
+    pub fn check(&self, s: &SessionResults) -> Vec<Problem> {
         match self.check_repeat(s) {
             Some(p) => vec![p],
             None => self.check_alone(s),
@@ -93,10 +96,12 @@ impl<'a> Checker<'a> {
 
     /// A session recorded again (the same subject and session as one checked before); the
     /// first time, notes it.
-    pub fn check_repeat(&mut self, s: &SessionResults) -> Option<Problem> {
+    pub fn check_repeat(&self, s: &SessionResults) -> Option<Problem> {
         let m = &s.manifest;
         let key = (m.subject.clone(), m.session);
-        if let Some(first) = self.seen.get(&key) {
+        // A panic elsewhere while this was held leaves the map whole (one insert at a time).
+        let mut seen = self.seen.lock().unwrap_or_else(PoisonError::into_inner);
+        if let Some(first) = seen.get(&key) {
             return Some(Problem {
                 path: s.dir.join(SESSION_FILE),
                 line: None,
@@ -109,7 +114,7 @@ impl<'a> Checker<'a> {
                 ),
             });
         }
-        self.seen.insert(key, s.dir.clone());
+        seen.insert(key, s.dir.clone());
         None
     }
 
@@ -308,7 +313,57 @@ fn state_name(state: SessionState) -> &'static str {
 
 /// The engine after replaying a session's rows, or the first row that does not follow from the
 /// plan and the answers before it, with why.
+///
+/// A sound log takes [`replayed_sound`], which asks the engine the same questions
+/// [`Session::replay`] does but compares the answers in place; any doubt about a row (or a
+/// level logged before the exact grid, which `replay` accepts within rounding) replays the
+/// session again from the start with [`replayed_in_full`], which finds and words the problem.
 fn replayed(study: &StudyDefinition, s: &SessionResults) -> Result<Session, (usize, String)> {
+    match replayed_sound(study, s) {
+        Some(engine) => Ok(engine),
+        None => replayed_in_full(study, s),
+    }
+}
+
+/// The engine after replaying a session whose every row is the one the plan gives at its
+/// place (trial index = row number, the row's identity the manifest's, the trial the engine's
+/// next one field for field as [`Session::replay`] compares them, the outcome the engine's
+/// scoring of the response), else `None`. Accepts only what [`replayed_in_full`] accepts,
+/// leaving the engine in the same state, without the text `replay` makes of every field.
+fn replayed_sound(study: &StudyDefinition, s: &SessionResults) -> Option<Session> {
+    let m = &s.manifest;
+    let mut engine = Session::new(study, m.subject_index).ok()?;
+    for (i, rec) in s.trials.records.iter().enumerate() {
+        let logged = &rec.trial;
+        let sound = logged.index as usize == i
+            && check_row_identity(rec, m).is_ok()
+            && check_live_params(study, rec).is_ok();
+        if !sound {
+            return None;
+        }
+        let planned = engine.next_trial(0).ok()??;
+        // `replay`'s fields, `break_before` not among them; the level exactly.
+        let same = planned.index == logged.index
+            && planned.block == logged.block
+            && planned.condition == logged.condition
+            && planned.stimulus == logged.stimulus
+            && planned.reference == logged.reference
+            && planned.arrangement == logged.arrangement
+            && planned.reference_position == logged.reference_position
+            && planned.staircase == logged.staircase
+            && planned.level == logged.level;
+        if !same || engine.respond(&rec.response).ok()? != rec.outcome {
+            return None;
+        }
+    }
+    Some(engine)
+}
+
+/// [`replayed`], row by row through [`Session::replay`], naming the first row at fault.
+fn replayed_in_full(
+    study: &StudyDefinition,
+    s: &SessionResults,
+) -> Result<Session, (usize, String)> {
     let m = &s.manifest;
     let mut engine = match Session::new(study, m.subject_index) {
         Ok(e) => e,
@@ -400,5 +455,236 @@ fn unfinished_plan(study: &StudyDefinition, engine: &mut Session) -> Option<Stri
             format!("{} more trials", engine.not_shown().len() + 1)
         }),
         _ => (engine.status() == SessionStatus::Running).then(|| "more trials".to_owned()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
+    use std::collections::BTreeMap;
+    use std::path::Path;
+
+    use protocols::{
+        Answer, Arrangement, Block, Position, Protocol, Response, Session, TrialRecord,
+    };
+    use results::store::{SessionManifest, SessionState};
+    use results::{SessionResults, TrialsFile};
+
+    use super::{replayed, replayed_in_full, replayed_sound};
+    use crate::StudyFile;
+
+    /// An example study and two complete sessions of it, answered in memory (the two ends of
+    /// the scale in turn; a staircase right twice, then wrong).
+    fn sessions(name: &str) -> (StudyFile, Vec<SessionResults>) {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../examples/{name}.toml"));
+        let study = StudyFile::load(&path).unwrap();
+        let d = &study.definition;
+        let sessions = (0..2)
+            .map(|subject_index| {
+                let subject = format!("S{subject_index}");
+                let mut engine = Session::new(d, subject_index).unwrap();
+                let mut records = Vec::new();
+                while let Some(trial) = engine.next_trial(0).unwrap() {
+                    let k = records.len();
+                    let end = if k % 2 == 0 { d.scale.min } else { d.scale.max };
+                    let answer = match d.protocol {
+                        Protocol::Mos => Answer::Rating(end),
+                        Protocol::Dscqs => Answer::Pair {
+                            a: end,
+                            b: d.scale.max,
+                        },
+                        Protocol::Staircase if k % 3 == 2 => {
+                            Answer::Choice(flip(trial.reference_position))
+                        }
+                        Protocol::Staircase => Answer::Choice(trial.reference_position),
+                    };
+                    let response = Response {
+                        answer,
+                        response_time_ms: 900,
+                        replays: 0,
+                        dropped_frames: 0,
+                    };
+                    let outcome = engine.respond(&response).unwrap();
+                    records.push(TrialRecord {
+                        study: d.name.clone(),
+                        subject: subject.clone(),
+                        session: 1,
+                        protocol: d.protocol,
+                        trial,
+                        response,
+                        outcome,
+                        elapsed_ms: 0,
+                        wall_clock_ms: 0,
+                        monotonic_ms: 0,
+                        encoding: None,
+                        timing: None,
+                    });
+                }
+                let manifest = SessionManifest {
+                    format_version: 2,
+                    study: d.name.clone(),
+                    study_hash: study.hash.clone(),
+                    manifest_hash: Some(study.manifest_hash.clone()),
+                    protocol: d.protocol,
+                    subject,
+                    subject_index,
+                    session: 1,
+                    plan_seed: d.seed,
+                    observer_seed: None,
+                    software_version: String::new(),
+                    subject_fields: BTreeMap::new(),
+                    started_ms: 0,
+                    ended_ms: Some(0),
+                    status: SessionState::Complete,
+                    trials_logged: records.len() as u32,
+                    not_shown: Vec::new(),
+                    thresholds: Vec::new(),
+                    resumes: 0,
+                    torn_rows: Vec::new(),
+                    display: None,
+                    browser: None,
+                };
+                SessionResults {
+                    dir: Path::new("results").join(format!("S{subject_index}_s1")),
+                    manifest,
+                    trials: TrialsFile {
+                        format_version: 2,
+                        records,
+                        complete_bytes: 0,
+                        torn: None,
+                    },
+                }
+            })
+            .collect();
+        (study, sessions)
+    }
+
+    /// The other side, interval or slot.
+    fn flip(p: Position) -> Position {
+        match p {
+            Position::Left => Position::Right,
+            Position::Right => Position::Left,
+            Position::First => Position::Second,
+            Position::Second => Position::First,
+            Position::A => Position::B,
+            Position::B => Position::A,
+        }
+    }
+
+    /// Every way a row can differ from what the plan holds, one at a time, at row `i` (the
+    /// first, second, middle and last rows are tried).
+    fn edits(s: &SessionResults, i: usize) -> Vec<(&'static str, SessionResults)> {
+        let n = s.trials.records.len();
+        let other = (i + 1) % n;
+        let mut out = Vec::new();
+        let mut edit = |what, f: &dyn Fn(&mut SessionResults)| {
+            let mut e = s.clone();
+            f(&mut e);
+            out.push((what, e));
+        };
+        edit("swap", &|e| e.trials.records.swap(i, other));
+        edit("twice", &|e| {
+            let r = e.trials.records[i].clone();
+            e.trials.records.insert(i, r);
+        });
+        edit("deleted", &|e| drop(e.trials.records.remove(i)));
+        edit("cut", &|e| e.trials.records.truncate(i));
+        edit("index", &|e| e.trials.records[i].trial.index += 1);
+        edit("block", &|e| {
+            let b = &mut e.trials.records[i].trial.block;
+            *b = if *b == Block::Test {
+                Block::Familiarization
+            } else {
+                Block::Test
+            };
+        });
+        edit("stimulus", &|e| {
+            e.trials.records[i].trial.stimulus = s.trials.records[other].trial.stimulus.clone();
+        });
+        edit("condition", &|e| {
+            e.trials.records[i].trial.condition.push('x')
+        });
+        edit("reference", &|e| {
+            e.trials.records[i].trial.reference.push('x')
+        });
+        edit("arrangement", &|e| {
+            e.trials.records[i].trial.arrangement = Arrangement::Sequential;
+        });
+        edit("position", &|e| {
+            let p = &mut e.trials.records[i].trial.reference_position;
+            *p = flip(*p);
+        });
+        edit("staircase", &|e| {
+            let t = &mut e.trials.records[i].trial.staircase;
+            *t = Some(t.map_or(0, |k| k + 1));
+        });
+        // Within rounding (a log from before the exact grid) and not.
+        edit("level rounding", &|e| {
+            if let Some(l) = &mut e.trials.records[i].trial.level {
+                *l *= 1.0 + 1e-12;
+            }
+        });
+        edit("level", &|e| {
+            let l = &mut e.trials.records[i].trial.level;
+            *l = Some(l.map_or(1.0, |l| l * 1.5));
+        });
+        edit("break", &|e| {
+            let b = &mut e.trials.records[i].trial.break_before;
+            *b = !*b;
+        });
+        edit("answer", &|e| {
+            let a = &mut e.trials.records[i].response.answer;
+            *a = match *a {
+                Answer::Rating(v) => Answer::Rating(if v > 2.0 { v - 1.0 } else { v + 1.0 }),
+                Answer::Pair { a, b } => Answer::Pair { a: b, b: a + 1.0 },
+                Answer::Choice(p) => Answer::Choice(flip(p)),
+            };
+        });
+        edit("off scale", &|e| {
+            e.trials.records[i].response.answer = Answer::Rating(99.0)
+        });
+        edit("replays", &|e| e.trials.records[i].response.replays += 50);
+        edit("score", &|e| e.trials.records[i].outcome.score += 0.5);
+        edit("reversal", &|e| {
+            let r = &mut e.trials.records[i].outcome.reversal;
+            *r = Some(!r.unwrap_or(false));
+        });
+        edit("subject", &|e| e.trials.records[i].subject.push('x'));
+        edit("study", &|e| e.trials.records[i].study.push('x'));
+        edit("session", &|e| e.trials.records[i].session += 1);
+        edit("subject index", &|e| e.manifest.subject_index += 1);
+        out
+    }
+
+    /// The quick replay of sound logs gives what the replay row by row gives: the same
+    /// engine for every log it accepts (it accepts every untouched one), and for any edited
+    /// row the full replay's verdict, naming the same line with the same words.
+    #[test]
+    fn the_quick_replay_agrees_with_the_full_one() {
+        for name in ["mos", "dscqs", "staircase"] {
+            let (study, read) = sessions(name);
+            let definition = &study.definition;
+            for s in &read {
+                let quick = replayed_sound(definition, s).map(|e| format!("{e:?}"));
+                let full = replayed_in_full(definition, s).map(|e| format!("{e:?}"));
+                assert_eq!(quick.as_ref(), full.as_ref().ok(), "{name}: untouched log");
+                let n = s.trials.records.len();
+                for i in [0, 1, n / 2, n - 1] {
+                    for (what, edited) in edits(s, i) {
+                        let full = replayed_in_full(definition, &edited).map(|e| format!("{e:?}"));
+                        let got = replayed(definition, &edited).map(|e| format!("{e:?}"));
+                        assert_eq!(got, full, "{name}: {what} at row {i}");
+                        if let Some(quick) = replayed_sound(definition, &edited) {
+                            assert_eq!(
+                                Ok(format!("{quick:?}")),
+                                full,
+                                "{name}: {what} at row {i} passed the quick replay"
+                            );
+                        }
+                    }
+                }
+            }
+        }
     }
 }

@@ -604,12 +604,14 @@ pub fn session_dirs(dir: &Path) -> Result<(RunManifest, Vec<PathBuf>), ResultsEr
     for entry in fs::read_dir(dir).map_err(io(dir, "list"))? {
         let entry = entry.map_err(io(dir, "list"))?;
         let p = entry.path();
-        if p.join(TRIALS_FILE).is_file() && !p.join(SESSION_FILE).is_file() {
+        // One look per folder at a session (it has its manifest); a second only for others.
+        let session = p.join(SESSION_FILE).is_file();
+        if !session && p.join(TRIALS_FILE).is_file() {
             // A crash between creating the log and the first manifest write: say so rather
             // than skip the session (`study simulate --resume` completes it).
             return Err(ResultsError::MissingManifest { dir: p });
         }
-        if p.join(SESSION_FILE).is_file() {
+        if session {
             dirs.push(p);
             if dirs.len() > MAX_SESSIONS {
                 return Err(ResultsError::TooLarge {

@@ -6,7 +6,7 @@ whole process, at most 200 MiB peak memory, both measured in one run.
 
   python3 scripts/bench/report_million.py make  DIR   # results directory (not timed)
   python3 scripts/bench/report_million.py peer  DIR   # the pandas + SciPy report of DIR
-  python3 scripts/bench/report_million.py time  DIR   # both, timed with /usr/bin/time -v
+  python3 scripts/bench/report_million.py time  DIR [RUNS]  # both, timed with /usr/bin/time -v
 
 `make` sweeps the examples' two generated motions through the paper-000 design (2 clips x 3
 codecs x 7 ratios, into DIR-stimuli, the clips in DIR-clips) and runs `study simulate` on it
@@ -212,17 +212,27 @@ def main():
     elif what == "peer":
         peer(res, Path(sys.argv[3]) if len(sys.argv) > 3 else res.parent / "peer-report")
     elif what == "time":
-        for d in (res.parent / "study-report", res.parent / "peer-report"):
-            shutil.rmtree(d, ignore_errors=True)
-        # Warm the page cache once, so neither side pays for the first read.
-        subprocess.run(["cat", *map(str, res.glob("*/trials.csv"))], stdout=subprocess.DEVNULL)
-        ours = timed([STUDY, "report", str(res), "-o", str(res.parent / "study-report"),
-                      "--no-png"])
-        theirs = timed([sys.executable, __file__, "peer", str(res),
-                        str(res.parent / "peer-report")])
-        print(f"study report:   {ours[0]:.2f} s, {ours[1]:.0f} MiB peak")
-        print(f"pandas + SciPy: {theirs[0]:.2f} s, {theirs[1]:.0f} MiB peak")
-        print(f"ratio: {theirs[0] / ours[0]:.1f}x")
+        # RUNS pairs, each side right after the other; on a busy machine the median ratio
+        # and its spread say more than one pair.
+        runs = int(sys.argv[3]) if len(sys.argv) > 3 else 1
+        ratios = []
+        for run in range(1, runs + 1):
+            for d in (res.parent / "study-report", res.parent / "peer-report"):
+                shutil.rmtree(d, ignore_errors=True)
+            # Warm the page cache, so neither side pays for the first read.
+            for f in (*res.glob("*/trials.csv"), *res.glob("*/session.json")):
+                f.read_bytes()
+            ours = timed([STUDY, "report", str(res), "-o", str(res.parent / "study-report"),
+                          "--no-png"])
+            theirs = timed([sys.executable, __file__, "peer", str(res),
+                            str(res.parent / "peer-report")])
+            ratios.append(theirs[0] / ours[0])
+            print(f"run {run}: study report {ours[0]:.2f} s, {ours[1]:.0f} MiB peak; "
+                  f"pandas + SciPy {theirs[0]:.2f} s, {theirs[1]:.0f} MiB peak; "
+                  f"ratio {ratios[-1]:.1f}x", flush=True)
+        ratios.sort()
+        print(f"ratio: {ratios[len(ratios) // 2]:.1f}x median of {runs} "
+              f"({ratios[0]:.1f}x to {ratios[-1]:.1f}x)")
     else:
         sys.exit(__doc__)
 

@@ -1,6 +1,6 @@
 //! `study report RESULTS -o DIR`: every table and figure of a results directory.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use analysis::psychometric::{BootstrapOptions, FitOptions, Lapse, Shape};
 use analysis::study::{ReportOptions, analyze};
@@ -217,48 +217,133 @@ struct Logs {
     exclusions: Vec<analysis::exclusions::SessionExclusion>,
 }
 
-/// Sessions read and checked together, on [`READERS`] threads.
-const READ_BATCH: usize = 256;
 /// Threads that read and check sessions.
 const READERS: usize = 2;
 
-/// Reads and checks the sessions of `batch` ([`lab::integrity::Checker::check_alone`]) on
-/// [`READERS`] threads; results in the batch's order.
-fn read_and_check(
-    checker: &lab::integrity::Checker<'_>,
-    batch: &[PathBuf],
-) -> Result<Vec<(results::SessionResults, Vec<lab::integrity::Problem>)>> {
-    let per = batch.len().div_ceil(READERS).max(1);
-    std::thread::scope(|scope| {
-        let workers: Vec<_> = batch
-            .chunks(per)
-            .map(|part| {
-                scope.spawn(move || {
-                    part.iter()
-                        .map(|dir| {
-                            let session = results::read_session(dir)?;
-                            let found = checker.check_alone(&session);
-                            Ok((session, found))
-                        })
-                        .collect::<Result<Vec<_>>>()
-                })
-            })
-            .collect();
-        let mut out = Vec::with_capacity(batch.len());
-        for w in workers {
-            out.extend(
-                w.join()
-                    .map_err(|_| anyhow::anyhow!("a session reader thread panicked"))??,
-            );
-        }
-        Ok(out)
-    })
+/// What the sessions taken so far gave, taken in session order.
+struct Taken<'a> {
+    /// The session to take next.
+    next: usize,
+    /// The error that stops the reading: the first session that cannot be read (the readers
+    /// stop at it), or a reader that panicked.
+    stopped: Option<anyhow::Error>,
+    converter: from_results::Converter<'a>,
+    problems: Vec<lab::integrity::Problem>,
+    displays: Vec<analysis::display::SessionDisplay>,
+    /// What the study's `[crowdsourcing]` rules left out, per session.
+    exclusions: Vec<analysis::exclusions::SessionExclusion>,
+    /// The first error converting a sound session; the log check's verdict comes first.
+    failed: Option<anyhow::Error>,
 }
 
-/// Reads the sessions a batch at a time (a batch's rows in memory, not every session's) and
-/// checks each before any statistic ([`lab::integrity`]): damage is refused, every problem
-/// named once; sessions with trials missing at the end are refused unless
-/// `--allow-incomplete`, and then warned about and returned for the report to list.
+/// Sessions taken in order by [`READERS`] threads ([`read_in_order`]).
+struct Turns<'a> {
+    taken: std::sync::Mutex<Taken<'a>>,
+    /// Signalled whenever `next` or `stopped` changes.
+    turn: std::sync::Condvar,
+}
+
+impl<'a> Turns<'a> {
+    fn lock(&self) -> std::sync::MutexGuard<'_, Taken<'a>> {
+        self.taken
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+
+    /// Waits until session `i` is the next to take; `None` once the reading has stopped.
+    fn wait_for(&self, i: usize) -> Option<std::sync::MutexGuard<'_, Taken<'a>>> {
+        let mut taken = self.lock();
+        while taken.next != i && taken.stopped.is_none() {
+            taken = self
+                .turn
+                .wait(taken)
+                .unwrap_or_else(std::sync::PoisonError::into_inner);
+        }
+        taken.stopped.is_none().then_some(taken)
+    }
+}
+
+/// Stops the reading if its reader unwinds, so that no other reader waits for a session the
+/// panicking one will never take.
+struct StopOnPanic<'t, 'a>(&'t Turns<'a>);
+
+impl Drop for StopOnPanic<'_, '_> {
+    fn drop(&mut self) {
+        if std::thread::panicking() {
+            self.0
+                .lock()
+                .stopped
+                .get_or_insert_with(|| anyhow::anyhow!("a session reader thread panicked"));
+            self.0.turn.notify_all();
+        }
+    }
+}
+
+/// Reads and checks sessions on [`READERS`] threads, each taking the next unread session
+/// ([`lab::integrity::Checker::check_alone`], the part that needs no other session), then,
+/// when every session before it has been taken, adds it (`take`) and drops it itself: one
+/// session per reader in memory, every row freed by the thread that read it.
+fn read_in_order<'a>(
+    checker: &lab::integrity::Checker<'_>,
+    dirs: &[PathBuf],
+    taken: Taken<'a>,
+    take: &(dyn Fn(&mut Taken<'a>, &results::SessionResults, Vec<lab::integrity::Problem>) + Sync),
+) -> Result<Taken<'a>> {
+    let turns = Turns {
+        taken: std::sync::Mutex::new(taken),
+        turn: std::sync::Condvar::new(),
+    };
+    let unread = std::sync::atomic::AtomicUsize::new(0);
+    let read = || {
+        let _stop = StopOnPanic(&turns);
+        loop {
+            let i = unread.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            let Some(dir) = dirs.get(i) else { return };
+            let session = results::read_session(dir).map(|session| {
+                let found = checker.check_alone(&session);
+                (session, found)
+            });
+            let Some(mut taken) = turns.wait_for(i) else {
+                return;
+            };
+            let session = match session {
+                Ok((session, found)) => {
+                    take(&mut taken, &session, found);
+                    taken.next += 1;
+                    Some(session)
+                }
+                Err(e) => {
+                    taken.stopped = Some(e.into());
+                    None
+                }
+            };
+            drop(taken);
+            turns.turn.notify_all();
+            // Freed here, by the thread that allocated it, outside the lock.
+            drop(session);
+        }
+    };
+    std::thread::scope(|scope| {
+        let readers: Vec<_> = (0..READERS).map(|_| scope.spawn(read)).collect();
+        for reader in readers {
+            // A reader that panicked has said so in `stopped` (joined here, the panic is not
+            // the scope's).
+            let _ = reader.join();
+        }
+    });
+    let mut taken = turns
+        .taken
+        .into_inner()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    match taken.stopped.take() {
+        Some(e) => Err(e),
+        None => Ok(taken),
+    }
+}
+
+/// Reads the sessions and checks each before any statistic ([`lab::integrity`]): damage is
+/// refused, every problem named once; sessions with trials missing at the end are refused
+/// unless `--allow-incomplete`, and then warned about and returned for the report to list.
 fn read_logs(
     args: &ReportArgs,
     study: &lab::StudyFile,
@@ -268,49 +353,60 @@ fn read_logs(
 ) -> Result<Logs> {
     use lab::integrity::Kind;
     let definition = &study.definition;
-    let mut checker = lab::integrity::Checker::new(&args.results, study, run);
-    let mut converter = from_results::Converter::new(
+    let checker = lab::integrity::Checker::new(&args.results, study, run);
+    let converter = from_results::Converter::new(
         &definition.manifest,
         Some((definition.scale.min, definition.scale.max)),
     );
-    let (mut problems, mut displays) = (Vec::new(), Vec::with_capacity(dirs.len()));
-    let mut exclusions = Vec::new();
-    // The first error converting a sound session; the log check's verdict comes first.
-    let mut failed: Option<anyhow::Error> = None;
-    // Sessions are read and checked on two threads, a batch at a time (a batch's rows in
-    // memory, not every session's), then taken in order: repeats, display, conversion.
-    for batch in dirs.chunks(READ_BATCH) {
-        let checked = read_and_check(&checker, batch)?;
-        for (session, found) in checked {
-            let found: Vec<_> = checker
-                .check_repeat(&session)
-                .into_iter()
-                .chain(found)
-                .collect();
-            let damaged = found.iter().any(|p| p.kind == Kind::Damage);
-            problems.extend(found);
-            displays.push(analysis::display::session_display(
-                &session,
-                args.drop_limit,
-            ));
-            // The crowd rules (gold trials, hidden pages) apply to sound logs only; the
-            // integrity check saw every row.
-            let exclusion =
-                analysis::exclusions::session_exclusion(&session, &definition.crowdsourcing);
-            let kept = analysis::exclusions::apply(&session, &exclusion);
-            exclusions.push(exclusion);
-            let Some(session) = kept else { continue };
-            if failed.is_none() && !damaged {
-                let added = if weibull {
-                    check_weibull_levels(&session)
-                } else {
-                    Ok(())
-                }
-                .and_then(|()| converter.add(&session).map_err(anyhow::Error::from));
-                failed = added.err();
+    let taken = Taken {
+        next: 0,
+        stopped: None,
+        converter,
+        problems: Vec::new(),
+        displays: Vec::with_capacity(dirs.len()),
+        exclusions: Vec::with_capacity(dirs.len()),
+        failed: None,
+    };
+    // In session order: a session recorded twice, the display record, the crowdsourcing
+    // exclusions, the conversion.
+    let take = |taken: &mut Taken<'_>,
+                session: &results::SessionResults,
+                found: Vec<lab::integrity::Problem>| {
+        let found: Vec<_> = checker
+            .check_repeat(session)
+            .into_iter()
+            .chain(found)
+            .collect();
+        let damaged = found.iter().any(|p| p.kind == Kind::Damage);
+        taken.problems.extend(found);
+        taken
+            .displays
+            .push(analysis::display::session_display(session, args.drop_limit));
+        // The crowd rules (gold trials, hidden pages) apply to sound logs only; the
+        // integrity check saw every row.
+        let exclusion =
+            analysis::exclusions::session_exclusion(session, &definition.crowdsourcing);
+        let kept = analysis::exclusions::apply(session, &exclusion);
+        taken.exclusions.push(exclusion);
+        let Some(session) = kept else { return };
+        if taken.failed.is_none() && !damaged {
+            let added = if weibull {
+                check_weibull_levels(&session)
+            } else {
+                Ok(())
             }
+            .and_then(|()| taken.converter.add(&session).map_err(anyhow::Error::from));
+            taken.failed = added.err();
         }
-    }
+    };
+    let Taken {
+        converter,
+        problems,
+        displays,
+        exclusions,
+        failed,
+        ..
+    } = read_in_order(&checker, dirs, taken, &take)?;
     let refused: Vec<_> = problems
         .iter()
         .filter(|p| p.kind == Kind::Damage || !args.allow_incomplete)
@@ -434,6 +530,22 @@ fn exclusions_section(
     section.table(analysis::exclusions::exclusions_table(exclusions, crowd));
 }
 
+/// Writes `path` whole or not at all ([`files::AtomicFile`]) from `fill`, which streams it.
+fn write_streamed(
+    path: &Path,
+    mode: files::Mode,
+    fill: impl FnOnce(&mut files::AtomicFile) -> std::io::Result<()>,
+) -> Result<()> {
+    let mut file = files::AtomicFile::create(path, mode)?;
+    fill(&mut file).map_err(|source| files::Error::Io {
+        path: path.to_path_buf(),
+        op: "write",
+        source,
+    })?;
+    file.commit()?;
+    Ok(())
+}
+
 /// Runs `study report`.
 ///
 /// # Errors
@@ -468,52 +580,57 @@ pub fn run(args: &ReportArgs) -> Result<()> {
     let mode = files::Mode::from_force(args.force);
     files::prepare_dir(&args.output, mode)?;
     let analysis = analyze(&converted.data, &options)?;
-    let title = format!(
-        "Study {} ({} protocol, {} sessions)",
-        run.study,
-        converted.protocol,
-        dirs.len()
-    );
-    let mut report = analysis.to_report(&converted.data, &options, &title);
-    incomplete_section(&mut report, &incomplete);
-    display_section(&mut report, &displays, args.drop_limit);
-    exclusions_section(&mut report, &exclusions, &study.crowdsourcing);
-    let names = report.section("Subjects and stimuli");
-    names.text(format!(
-        "Subjects ({}): {}. Condition ids: {}.",
-        converted.data.subjects.len(),
-        converted.data.subjects.join(", "),
-        converted
-            .stimuli
-            .iter()
-            .enumerate()
-            .map(|(i, s)| format!("{i} = {s}"))
-            .collect::<Vec<_>>()
-            .join(", ")
-    ));
-    let written = report.write(&args.output, !args.no_png, mode)?;
-    files::write(
-        &args.output.join("ratings.csv"),
-        export::tidy_csv(
-            &converted.data.subjects,
-            &converted.data.ratings,
-            &converted.data.conditions,
-        ),
-        mode,
-    )?;
-    files::write(
-        &args.output.join("sureal_dataset.py"),
-        export::SurealDataset {
-            name: &run.study,
-            subjects: &converted.data.subjects,
-            ratings: &converted.data.ratings,
-            dscqs: &converted.data.dscqs,
-            conditions: &converted.data.conditions,
-            ref_score: study.scale.max,
-        }
-        .to_python(),
-        mode,
-    )?;
+    let data = &converted.data;
+    // The two exports (10⁶ rows each at a million ratings) are written on a second thread
+    // while this one lays out and writes the report.
+    let (written, exported) = std::thread::scope(|scope| {
+        let exports = scope.spawn(|| -> Result<()> {
+            write_streamed(&args.output.join("ratings.csv"), mode, |out| {
+                export::write_tidy_csv(out, &data.subjects, &data.ratings, &data.conditions)
+            })?;
+            write_streamed(&args.output.join("sureal_dataset.py"), mode, |out| {
+                export::SurealDataset {
+                    name: &run.study,
+                    subjects: &data.subjects,
+                    ratings: &data.ratings,
+                    dscqs: &data.dscqs,
+                    conditions: &data.conditions,
+                    ref_score: study.scale.max,
+                }
+                .write_python(out)
+            })
+        });
+        let title = format!(
+            "Study {} ({} protocol, {} sessions)",
+            run.study,
+            converted.protocol,
+            dirs.len()
+        );
+        let mut report = analysis.to_report(data, &options, &title);
+        incomplete_section(&mut report, &incomplete);
+        display_section(&mut report, &displays, args.drop_limit);
+        exclusions_section(&mut report, &exclusions, &study.crowdsourcing);
+        let names = report.section("Subjects and stimuli");
+        names.text(format!(
+            "Subjects ({}): {}. Condition ids: {}.",
+            data.subjects.len(),
+            data.subjects.join(", "),
+            converted
+                .stimuli
+                .iter()
+                .enumerate()
+                .map(|(i, s)| format!("{i} = {s}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ));
+        let written = report.write(&args.output, !args.no_png, mode);
+        let exported = exports
+            .join()
+            .unwrap_or_else(|_| Err(anyhow::anyhow!("the export writer thread panicked")));
+        (written, exported)
+    });
+    let written = written?;
+    exported?;
     println!(
         "{}: {} files ({} ratings, {} DSCQS pairs, {} staircases, {} 2AFC trials); open {}",
         args.output.display(),
