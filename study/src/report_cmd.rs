@@ -8,6 +8,7 @@ use analysis::{CiMethod, Confidence, export, from_results};
 use anyhow::{Context, Result, bail};
 use codecs::codec::keys;
 use protocols::StudyDefinition;
+use results::Store as _;
 
 /// Which confidence interval decides findings and fills the tables.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -34,8 +35,12 @@ pub enum ShapeArg {
     reason = "command-line switches: each bool is one flag a user passes"
 )]
 pub struct ReportArgs {
-    /// Results directory written by `study run` or `study simulate`.
-    pub results: PathBuf,
+    /// Results directory written by `study run` or `study simulate` (or `--store`).
+    #[arg(required_unless_present_any = ["store", "store_file"])]
+    pub results: Option<PathBuf>,
+    /// Or the results store: a folder, or a PostgreSQL database (and `--run`).
+    #[command(flatten)]
+    pub store: crate::store_args::StoreArgs,
     /// Output directory for report.md, report.html, tables/ and figures/.
     #[arg(short, long, value_name = "DIR")]
     pub output: PathBuf,
@@ -220,21 +225,33 @@ const READ_BATCH: usize = 256;
 /// Threads that read and check sessions.
 const READERS: usize = 2;
 
-/// Reads and checks the sessions of `batch` ([`lab::integrity::Checker::check_alone`]) on
-/// [`READERS`] threads; results in the batch's order.
-fn read_and_check(
+/// Reads (`load`) and checks the sessions of `batch`
+/// ([`lab::integrity::Checker::check_alone`]) on [`READERS`] threads; results in the batch's
+/// order.
+fn read_and_check<T: Send>(
     checker: &lab::integrity::Checker<'_>,
-    batch: &[PathBuf],
+    batch: Vec<T>,
+    load: impl Fn(T) -> Result<results::SessionResults> + Sync,
 ) -> Result<Vec<(results::SessionResults, Vec<lab::integrity::Problem>)>> {
     let per = batch.len().div_ceil(READERS).max(1);
+    let mut parts: Vec<Vec<T>> = Vec::with_capacity(READERS);
+    let mut items = batch.into_iter();
+    loop {
+        let part: Vec<T> = items.by_ref().take(per).collect();
+        if part.is_empty() {
+            break;
+        }
+        parts.push(part);
+    }
+    let load = &load;
     std::thread::scope(|scope| {
-        let workers: Vec<_> = batch
-            .chunks(per)
+        let workers: Vec<_> = parts
+            .into_iter()
             .map(|part| {
                 scope.spawn(move || {
-                    part.iter()
-                        .map(|dir| {
-                            let session = results::read_session(dir)?;
+                    part.into_iter()
+                        .map(|item| {
+                            let session = load(item)?;
                             let found = checker.check_alone(&session);
                             Ok((session, found))
                         })
@@ -242,7 +259,7 @@ fn read_and_check(
                 })
             })
             .collect();
-        let mut out = Vec::with_capacity(batch.len());
+        let mut out = Vec::new();
         for w in workers {
             out.extend(
                 w.join()
@@ -253,31 +270,70 @@ fn read_and_check(
     })
 }
 
+/// The sessions a report reads: a results folder's session folders, or a database run's
+/// sessions.
+enum Sessions {
+    Folder(Vec<PathBuf>),
+    Database(Box<results::pg::PgStore>, Vec<results::pg::SessionHead>),
+}
+
+impl Sessions {
+    fn len(&self) -> usize {
+        match self {
+            Sessions::Folder(dirs) => dirs.len(),
+            Sessions::Database(_, heads) => heads.len(),
+        }
+    }
+
+    /// Sessions `from..to`, read and checked.
+    fn read_and_check(
+        &mut self,
+        checker: &lab::integrity::Checker<'_>,
+        from: usize,
+        to: usize,
+    ) -> Result<Vec<(results::SessionResults, Vec<lab::integrity::Problem>)>> {
+        match self {
+            Sessions::Folder(dirs) => read_and_check(checker, dirs[from..to].to_vec(), |d| {
+                Ok(results::read_session(&d)?)
+            }),
+            Sessions::Database(store, heads) => {
+                // One connection reads the batch; the checks run on the threads.
+                let read = store.read(&heads[from..to])?;
+                read_and_check(checker, read, Ok)
+            }
+        }
+    }
+}
+
 /// Reads the sessions a batch at a time (a batch's rows in memory, not every session's) and
 /// checks each before any statistic ([`lab::integrity`]): damage is refused, every problem
 /// named once; sessions with trials missing at the end are refused unless
 /// `--allow-incomplete`, and then warned about and returned for the report to list.
 fn read_logs(
     args: &ReportArgs,
+    source: &Source,
     study: &lab::StudyFile,
-    run: &results::RunManifest,
-    dirs: &[PathBuf],
+    sessions: &mut Sessions,
     weibull: bool,
 ) -> Result<Logs> {
     use lab::integrity::Kind;
     let definition = &study.definition;
-    let mut checker = lab::integrity::Checker::new(&args.results, study, run);
+    let mut checker = match &source.folder {
+        Some(folder) => lab::integrity::Checker::new(folder, study, &source.run),
+        None => lab::integrity::Checker::with_archived(study, &source.run, source.archived),
+    };
     let mut converter = from_results::Converter::new(
         &definition.manifest,
         Some((definition.scale.min, definition.scale.max)),
     );
-    let (mut problems, mut displays) = (Vec::new(), Vec::with_capacity(dirs.len()));
+    let (mut problems, mut displays) = (Vec::new(), Vec::with_capacity(sessions.len()));
     // The first error converting a sound session; the log check's verdict comes first.
     let mut failed: Option<anyhow::Error> = None;
     // Sessions are read and checked on two threads, a batch at a time (a batch's rows in
     // memory, not every session's), then taken in order: repeats, display, conversion.
-    for batch in dirs.chunks(READ_BATCH) {
-        let checked = read_and_check(&checker, batch)?;
+    for from in (0..sessions.len()).step_by(READ_BATCH) {
+        let to = (from + READ_BATCH).min(sessions.len());
+        let checked = sessions.read_and_check(&checker, from, to)?;
         for (session, found) in checked {
             let found: Vec<_> = checker
                 .check_repeat(&session)
@@ -309,7 +365,7 @@ fn read_logs(
         let damaged = refused.iter().any(|p| p.kind == Kind::Damage);
         bail!(
             "{} cannot be reported: {}\n  {}{}",
-            args.results.display(),
+            source.location,
             if damaged {
                 "its logs are damaged (no statistic is drawn from logs that contradict themselves or the study)"
             } else {
@@ -387,23 +443,110 @@ fn display_section(
     }
 }
 
-/// Runs `study report`.
-///
-/// # Errors
-/// Unreadable or malformed results (named by file, line and column), a study file that does
-/// not load, or an output that cannot be written.
-pub fn run(args: &ReportArgs) -> Result<()> {
-    let (run, dirs) = results::session_dirs(&args.results)?;
+/// Where a report's sessions come from.
+struct Source {
+    /// The results folder (`None`: a database run).
+    folder: Option<PathBuf>,
+    /// How messages name it.
+    location: String,
+    /// Its run manifest.
+    run: results::RunManifest,
+    /// Whether the study file is the run's archived copy (a database run's, written out).
+    archived: bool,
+}
+
+/// The archived study file of a database run, written to a temporary folder and loaded.
+fn load_archived(store: &mut results::pg::PgStore) -> Result<lab::StudyFile> {
+    let archive = store.archive()?;
+    let dir = std::env::temp_dir().join(format!(
+        "study-report-{}-{}",
+        std::process::id(),
+        lab::session::now_ms()
+    ));
+    std::fs::create_dir_all(&dir)?;
+    let loaded = (|| {
+        files::write(
+            &dir.join(results::pg::STUDY_COPY),
+            &archive.study_copy,
+            files::Mode::New,
+        )?;
+        files::write(
+            &dir.join(results::pg::MANIFEST_COPY),
+            &archive.manifest_copy,
+            files::Mode::New,
+        )?;
+        Ok::<_, anyhow::Error>(lab::StudyFile::load(&dir.join(results::pg::STUDY_COPY))?)
+    })();
+    let _ = std::fs::remove_dir_all(&dir);
+    loaded.with_context(|| {
+        format!(
+            "loading the study file kept with {} (pass --study to name another)",
+            store.location()
+        )
+    })
+}
+
+/// The results `args` name, their sessions and the study file to report them with.
+fn open_source(args: &ReportArgs) -> Result<(Source, Sessions, lab::StudyFile)> {
+    if let Some(db) = args.store.database()? {
+        if args.results.is_some() {
+            bail!("name the results once: a folder, or --store");
+        }
+        let mut store = results::pg::PgStore::open(&db, args.store.run.as_deref())?;
+        let heads = store.sessions()?;
+        let (study_file, archived) = match &args.study {
+            Some(path) => (
+                lab::StudyFile::load(path)
+                    .with_context(|| format!("loading the study file {}", path.display()))?,
+                false,
+            ),
+            None => (load_archived(&mut store)?, true),
+        };
+        let source = Source {
+            folder: None,
+            location: store.location(),
+            run: store.run().clone(),
+            archived,
+        };
+        return Ok((
+            source,
+            Sessions::Database(Box::new(store), heads),
+            study_file,
+        ));
+    }
+    let folder = match (&args.results, &args.store.store) {
+        (Some(f), None) => f.clone(),
+        (None, Some(f)) => PathBuf::from(f),
+        _ => bail!("name the results once: a folder, or --store"),
+    };
+    let (run, dirs) = results::session_dirs(&folder)?;
     let study_path = args
         .study
         .clone()
-        .unwrap_or_else(|| args.results.join(&run.study_file));
+        .unwrap_or_else(|| folder.join(&run.study_file));
     let study_file = lab::StudyFile::load(&study_path).with_context(|| {
         format!(
             "loading the study file {} (pass --study to name another)",
             study_path.display()
         )
     })?;
+    let source = Source {
+        location: folder.display().to_string(),
+        folder: Some(folder),
+        run,
+        archived: false,
+    };
+    Ok((source, Sessions::Folder(dirs), study_file))
+}
+
+/// Runs `study report`.
+///
+/// # Errors
+/// Unreadable or malformed results (named by file, line and column), a study file that does
+/// not load, or an output that cannot be written.
+pub fn run(args: &ReportArgs) -> Result<()> {
+    let (source, mut sessions, study_file) = open_source(args)?;
+    let run = &source.run;
     let options = report_options(args, &study_file.definition)?;
     let Logs {
         converted,
@@ -411,9 +554,9 @@ pub fn run(args: &ReportArgs) -> Result<()> {
         displays,
     } = read_logs(
         args,
+        &source,
         &study_file,
-        &run,
-        &dirs,
+        &mut sessions,
         options.fit.shape == Shape::Weibull,
     )?;
     let study = study_file.definition;
@@ -424,7 +567,7 @@ pub fn run(args: &ReportArgs) -> Result<()> {
         "Study {} ({} protocol, {} sessions)",
         run.study,
         converted.protocol,
-        dirs.len()
+        sessions.len()
     );
     let mut report = analysis.to_report(&converted.data, &options, &title);
     incomplete_section(&mut report, &incomplete);

@@ -102,7 +102,14 @@ fn harness(fx: Fixture) -> (Harness<'static, (StudyUi, FrameClock)>, Run) {
     std::fs::create_dir_all(session_dir.parent().unwrap()).unwrap();
     let manifest = fresh_manifest(&study);
     let Opened::Ready { recorder, .. } =
-        Recorder::open(&study, 0, &session_dir, false, manifest).unwrap()
+        Recorder::open(
+            &study,
+            0,
+            &mut results::FolderStore::new(fx.dir.join("results")),
+            false,
+            manifest,
+        )
+        .unwrap()
     else {
         panic!("new session reported finished");
     };
