@@ -55,6 +55,46 @@ pub fn session_dir(results: &Path, subject: &str, session: u32) -> PathBuf {
     results.join(results::backend::session_name(subject, session))
 }
 
+/// Runs `f` until it succeeds or fails for another reason than an unreachable database,
+/// waiting for the database up to `patience`; `say` gets one line when it goes away and one
+/// when it is back.
+///
+/// # Errors
+/// `f`'s error, or the outage when it lasts longer than `patience`.
+pub fn retry_outage<T>(
+    patience: Duration,
+    say: &mut dyn FnMut(&str),
+    mut f: impl FnMut() -> Result<T>,
+) -> Result<T> {
+    let start = Instant::now();
+    let mut told = false;
+    loop {
+        match f() {
+            Ok(v) => {
+                if told {
+                    say(&format!(
+                        "the results database is back after {:.1} s; continuing",
+                        start.elapsed().as_secs_f64()
+                    ));
+                }
+                return Ok(v);
+            }
+            Err(e) if is_outage(&e) && start.elapsed() < patience => {
+                if !told {
+                    say(&format!(
+                        "{}; waiting for it (up to {} s)",
+                        crate::error::chain(&e),
+                        patience.as_secs()
+                    ));
+                    told = true;
+                }
+                std::thread::sleep(Duration::from_millis(250));
+            }
+            Err(e) => return Err(e),
+        }
+    }
+}
+
 /// Per-frame presentation intervals of a window session, beside `trials.csv`.
 pub use results::backend::FRAMES_FILE;
 
@@ -406,34 +446,11 @@ impl Recorder {
     /// answer is lost with this process; the session resumes where its committed answers
     /// end).
     pub fn commit_waiting(&mut self, patience: Duration, say: &mut dyn FnMut(&str)) -> Result<()> {
-        let start = Instant::now();
-        let mut told = false;
-        loop {
-            match self.commit_pending() {
-                Ok(()) => {
-                    if told {
-                        say(&format!(
-                            "{}: the results database is back after {:.1} s; the answer is committed, continuing",
-                            self.path().display(),
-                            start.elapsed().as_secs_f64()
-                        ));
-                    }
-                    return Ok(());
-                }
-                Err(e) if is_outage(&e) && start.elapsed() < patience => {
-                    if !told {
-                        say(&format!(
-                            "{}; the answer is kept and will be committed when it is back (waiting up to {} s)",
-                            crate::error::chain(&e),
-                            patience.as_secs()
-                        ));
-                        told = true;
-                    }
-                    std::thread::sleep(Duration::from_millis(250));
-                }
-                Err(e) => return Err(e),
-            }
-        }
+        say(&format!(
+            "{}: the answer is kept and is committed when the results database is back",
+            self.path().display()
+        ));
+        retry_outage(patience, say, || self.commit_pending())
     }
 
     /// The session clock of the last logged trial (0 for a new session), ms.

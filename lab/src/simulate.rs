@@ -104,8 +104,10 @@ fn simulate_into_database(
     stimuli: &mut dyn StimulusSource,
     report: &mut dyn FnMut(&str),
 ) -> Result<()> {
+    let wait = options.patience;
     if options.resume {
-        for m in store.abandoned()? {
+        let abandoned = session::retry_outage(wait, report, || Ok(store.abandoned()?))?;
+        for m in abandoned {
             // Only this simulation's sessions: not a real subject's in the same run.
             let index = m.subject_index;
             if m.session != 1 || m.observer_seed != Some(options.seed) || m.subject != subject_id(index)
@@ -124,7 +126,7 @@ fn simulate_into_database(
             }
         }
     } else {
-        let left = store.abandoned()?.len();
+        let left = session::retry_outage(wait, report, || Ok(store.abandoned()?))?.len();
         if left > 0 {
             report(&format!(
                 "note: {left} sessions of {} were left unfinished by a station; `--resume` continues them",
@@ -133,12 +135,14 @@ fn simulate_into_database(
         }
     }
     loop {
-        let number = store.next_subject_number()?;
+        let number = session::retry_outage(wait, report, || Ok(store.next_subject_number()?))?;
         if number > options.subjects {
             break;
         }
         let index = number - 1;
-        if store.find_session(&subject_id(index), 1)? != Found::Absent {
+        let found =
+            session::retry_outage(wait, report, || Ok(store.find_session(&subject_id(index), 1)?))?;
+        if found != Found::Absent {
             // Recorded already (imported under this id): the number is spent, take the next.
             continue;
         }
@@ -192,7 +196,11 @@ fn run_subject(
     let at = || format!("session {}", path.display());
     let def = &study.definition;
     let fresh = new_manifest(study, options.seed, subject);
-    let mut rec = match Recorder::open(def, subject, store, resume, fresh).context(at)? {
+    let opened = session::retry_outage(options.patience, report, || {
+        Recorder::open(def, subject, &mut *store, resume, fresh.clone())
+    })
+    .context(at)?;
+    let mut rec = match opened {
         Opened::Finished(m) => {
             return Ok(format!(
                 "{}: already {:?}, {} trials",
@@ -227,29 +235,7 @@ fn run_subject(
             rec.commit_waiting(options.patience, report).context(at)?;
         }
     }
-    finish_waiting(&mut rec, options.patience, report).context(at)?;
+    session::retry_outage(options.patience, report, || rec.finish()).context(at)?;
     Ok(rec.summary())
 }
 
-/// [`Recorder::finish`], waiting for an unreachable database as answers do.
-fn finish_waiting(
-    rec: &mut Recorder,
-    patience: Duration,
-    report: &mut dyn FnMut(&str),
-) -> Result<()> {
-    let start = std::time::Instant::now();
-    let mut told = false;
-    loop {
-        match rec.finish() {
-            Ok(_) => return Ok(()),
-            Err(e) if session::is_outage(&e) && start.elapsed() < patience => {
-                if !told {
-                    report(&format!("{}; retrying", crate::error::chain(&e)));
-                    told = true;
-                }
-                std::thread::sleep(Duration::from_millis(250));
-            }
-            Err(e) => return Err(e),
-        }
-    }
-}

@@ -532,6 +532,14 @@ impl PgStore {
         &self.db
     }
 
+    /// The store's connection, made again when the server closed it (a restart).
+    fn conn(&mut self) -> Result<&mut Client, ResultsError> {
+        if self.client.is_closed() {
+            self.client = self.db.open()?;
+        }
+        Ok(&mut self.client)
+    }
+
     fn err(&self, op: &str) -> impl Fn(postgres::Error) -> ResultsError + use<> {
         let location = self.location();
         let op = op.to_owned();
@@ -543,12 +551,13 @@ impl PgStore {
     /// # Errors
     /// Database errors.
     pub fn archive(&mut self) -> Result<Archive, ResultsError> {
+        let run_id = self.run_id;
         let err = self.err("reading the archived study");
         let row = self
-            .client
+            .conn()?
             .query_one(
                 "SELECT study_copy, manifest_copy FROM study_runs WHERE id = $1",
-                &[&self.run_id],
+                &[&run_id],
             )
             .map_err(err)?;
         let err = self.err("reading the archived study");
@@ -564,15 +573,16 @@ impl PgStore {
     /// # Errors
     /// Database errors.
     pub fn next_subject_number(&mut self) -> Result<u32, ResultsError> {
+        let run_id = self.run_id;
         let err = self.err("allocating a subject number");
         let row = self
-            .client
+            .conn()?
             .query_one(
                 "WITH n AS (UPDATE study_runs SET next_subject = next_subject + 1 \
                  WHERE id = $1 RETURNING next_subject - 1 AS number) \
                  INSERT INTO study_subject_numbers (run_id, number, station) \
                  SELECT $1, number, $2 FROM n RETURNING number",
-                &[&self.run_id, &station()],
+                &[&run_id, &station()],
             )
             .map_err(err)?;
         let n: i32 = row.try_get(0).map_err(self.err("allocating a subject number"))?;
@@ -585,15 +595,16 @@ impl PgStore {
     /// # Errors
     /// Database errors, a malformed manifest.
     pub fn abandoned(&mut self) -> Result<Vec<SessionManifest>, ResultsError> {
+        let run_id = self.run_id;
         let rows = self
-            .client
+            .conn()?
             .query(
                 "SELECT s.manifest FROM study_sessions s WHERE s.run_id = $1 \
                  AND s.status IN ('running', 'interrupted') AND NOT EXISTS (\
                  SELECT 1 FROM pg_locks l WHERE l.locktype = 'advisory' AND l.granted \
                  AND l.classid = $2::bigint::oid AND l.objid = s.id::bigint::oid \
                  AND l.objsubid = 2) ORDER BY s.id",
-                &[&self.run_id, &i64::from(LOCK_NAMESPACE)],
+                &[&run_id, &i64::from(LOCK_NAMESPACE)],
             )
             .map_err(self.err("listing abandoned sessions"))?;
         let path = Path::new(&self.location()).join(SESSION_FILE);
@@ -608,12 +619,13 @@ impl PgStore {
     /// # Errors
     /// Database errors, a malformed manifest, more than [`MAX_SESSIONS`] sessions.
     pub fn sessions(&mut self) -> Result<Vec<SessionHead>, ResultsError> {
+        let run_id = self.run_id;
         let rows = self
-            .client
+            .conn()?
             .query(
                 "SELECT id, subject, session, manifest, trials_format_version \
                  FROM study_sessions WHERE run_id = $1",
-                &[&self.run_id],
+                &[&run_id],
             )
             .map_err(self.err("listing the sessions"))?;
         if rows.len() > MAX_SESSIONS {
@@ -650,7 +662,7 @@ impl PgStore {
         let ids: Vec<i32> = heads.iter().map(|h| h.id).collect();
         let err = self.err("reading the answers");
         let mut rows = self
-            .client
+            .conn()?
             .query_raw(
                 &format!(
                     "SELECT {} FROM study_trials WHERE session_id = ANY($1) \
@@ -703,7 +715,7 @@ impl PgStore {
     /// Database errors.
     pub fn files(&mut self, head: &SessionHead) -> Result<Vec<(String, Vec<u8>)>, ResultsError> {
         let rows = self
-            .client
+            .conn()?
             .query(
                 "SELECT name, bytes FROM study_session_files WHERE session_id = $1 \
                  ORDER BY name, part",
@@ -723,7 +735,10 @@ impl PgStore {
     }
 
     fn holder(&mut self, id: i32) -> String {
-        let row = self.client.query_opt(
+        let Ok(client) = self.conn() else {
+            return "another station".into();
+        };
+        let row = client.query_opt(
             "SELECT a.application_name, host(a.client_addr) FROM pg_locks l \
              JOIN pg_stat_activity a ON a.pid = l.pid WHERE l.locktype = 'advisory' \
              AND l.granted AND l.classid = $1::bigint::oid AND l.objid = $2::bigint::oid \
@@ -734,12 +749,13 @@ impl PgStore {
     }
 
     fn session_id(&mut self, subject: &str, session: u32) -> Result<Option<i32>, ResultsError> {
+        let run_id = self.run_id;
         let session = i32::try_from(session).map_err(|_| refused("session number too large"))?;
         let row = self
-            .client
+            .conn()?
             .query_opt(
                 "SELECT id FROM study_sessions WHERE run_id = $1 AND subject = $2 AND session = $3",
-                &[&self.run_id, &subject, &session],
+                &[&run_id, &subject, &session],
             )
             .map_err(self.err("finding the session"))?;
         row.map(|r| r.try_get(0))
@@ -774,12 +790,13 @@ impl Store for PgStore {
     }
 
     fn find_session(&mut self, subject: &str, session: u32) -> Result<Found, ResultsError> {
+        let run_id = self.run_id;
         let s = i32::try_from(session).map_err(|_| refused("session number too large"))?;
         let row = self
-            .client
+            .conn()?
             .query_opt(
                 "SELECT manifest FROM study_sessions WHERE run_id = $1 AND subject = $2 AND session = $3",
-                &[&self.run_id, &subject, &s],
+                &[&run_id, &subject, &s],
             )
             .map_err(self.err("finding the session"))?;
         let path = self.session_path(subject, session).join(SESSION_FILE);
@@ -882,7 +899,7 @@ impl Store for PgStore {
             return Ok(());
         };
         let free: bool = self
-            .client
+            .conn()?
             .query_one(
                 "SELECT pg_try_advisory_lock($1, $2)",
                 &[&LOCK_NAMESPACE, &id],
@@ -895,7 +912,7 @@ impl Store for PgStore {
                 holder: self.holder(id),
             });
         }
-        self.client
+        self.conn()?
             .execute("SELECT pg_advisory_unlock($1, $2)", &[&LOCK_NAMESPACE, &id])
             .map_err(self.err("checking the session's lock"))?;
         Ok(())
@@ -906,7 +923,7 @@ impl Store for PgStore {
             return Ok(false);
         };
         let err = self.err("discarding the unstarted session");
-        let mut tx = self.client.transaction().map_err(err)?;
+        let mut tx = self.conn()?.transaction().map_err(err)?;
         let err = |e| db_error("", "discarding the unstarted session", &e);
         let locked: bool = tx
             .query_one("SELECT pg_try_advisory_xact_lock($1, $2)", &[&LOCK_NAMESPACE, &id])
@@ -1279,7 +1296,7 @@ pub fn import(
     let location = store.location();
     let err = |e: postgres::Error| db_error(&location, "importing", &e);
     let run_id = store.run_id;
-    let mut tx = store.client.transaction().map_err(err)?;
+    let mut tx = store.conn()?.transaction().map_err(err)?;
     let mut ids = Vec::with_capacity(dirs.len());
     let insert = tx
         .prepare(
