@@ -425,7 +425,16 @@ impl Recorder {
         if let Some(record) = &self.pending {
             let mut manifest = self.manifest.clone();
             manifest.trials_logged = self.log.rows() + 1;
-            self.log.append(record, &manifest)?;
+            match self.log.append(record, &manifest) {
+                Ok(()) => {}
+                Err(e @ ResultsError::Unavailable { .. }) => return Err(e.into()),
+                Err(e) => {
+                    // Refused, not unreachable: the session stops here (resumable). A folder
+                    // may hold the row already, so it is never written twice.
+                    self.pending = None;
+                    return Err(e.into());
+                }
+            }
             self.manifest = manifest;
             self.pending = None;
         }
