@@ -35,7 +35,10 @@ fn timed(study: &Path, args: &[&str], url: &str) -> (f64, f64) {
     assert!(out.status.success(), "{args:?}: {err}");
     let rss = err
         .lines()
-        .find_map(|l| l.trim().strip_prefix("Maximum resident set size (kbytes): "))
+        .find_map(|l| {
+            l.trim()
+                .strip_prefix("Maximum resident set size (kbytes): ")
+        })
         .and_then(|v| v.parse::<f64>().ok())
         .map_or(0.0, |kb| kb / 1024.0);
     (wall, rss)
@@ -50,7 +53,10 @@ fn files(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
             if p.is_dir() {
                 stack.push(p);
             } else {
-                out.push((p.strip_prefix(dir).unwrap().to_path_buf(), std::fs::read(&p).unwrap()));
+                out.push((
+                    p.strip_prefix(dir).unwrap().to_path_buf(),
+                    std::fs::read(&p).unwrap(),
+                ));
             }
         }
     }
@@ -91,12 +97,25 @@ fn main() {
         let d = out.join(format!("db-{k}"));
         from_folder.push(timed(
             &study,
-            &["report", folder.to_str().unwrap(), "--no-png", "-o", f.to_str().unwrap()],
+            &[
+                "report",
+                folder.to_str().unwrap(),
+                "--no-png",
+                "-o",
+                f.to_str().unwrap(),
+            ],
             &url,
         ));
         from_db.push(timed(
             &study,
-            &["report", "--store", "env", "--no-png", "-o", d.to_str().unwrap()],
+            &[
+                "report",
+                "--store",
+                "env",
+                "--no-png",
+                "-o",
+                d.to_str().unwrap(),
+            ],
             &url,
         ));
     }
@@ -106,8 +125,17 @@ fn main() {
         "the two reports differ"
     );
     let (f, d) = (median(from_folder), median(from_db));
-    println!("study report FOLDER:     {:.2} s, {:.0} MiB peak (median of 3)", f.0, f.1);
-    println!("study report --store DB: {:.2} s, {:.0} MiB peak (median of 3)", d.0, d.1);
-    println!("database / folder: {:.2}x (target <= 2x); the reports are identical", d.0 / f.0);
+    println!(
+        "study report FOLDER:     {:.2} s, {:.0} MiB peak (median of 3)",
+        f.0, f.1
+    );
+    println!(
+        "study report --store DB: {:.2} s, {:.0} MiB peak (median of 3)",
+        d.0, d.1
+    );
+    println!(
+        "database / folder: {:.2}x (target <= 2x); the reports are identical",
+        d.0 / f.0
+    );
     let _ = std::fs::remove_dir_all(&out);
 }

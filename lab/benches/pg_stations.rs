@@ -16,13 +16,13 @@
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
+use lab::StudyFile;
 use lab::results_dir::Destination;
 use lab::session::{Opened, Recorder, SessionOf};
 use lab::simulate::{SimulateOptions, subject_id};
-use lab::StudyFile;
 use protocols::observer::Observer;
-use results::pg::scratch::ScratchServer;
 use results::Store as _;
+use results::pg::scratch::ScratchServer;
 
 const STATIONS: u32 = 4;
 const PER_STATION: u32 = 50;
@@ -67,14 +67,23 @@ fn percentile(sorted: &[f64], q: f64) -> f64 {
     sorted[i]
 }
 
+#[expect(
+    clippy::too_many_lines,
+    reason = "one bounded run: the study, four stations, the check"
+)]
 fn main() {
     let dir = std::env::temp_dir().join(format!("pg-stations-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     let codecs = ["wavelet-perceptual", "wavelet-bone", "wavelet-standard"];
     let targets: Vec<f64> = (2..=14).map(|k| f64::from(k) * 5.0).collect();
-    lab::generated::walk_stimuli(&dir, &motion::synth::WalkParams::default(), &codecs, &targets)
-        .unwrap();
+    lab::generated::walk_stimuli(
+        &dir,
+        &motion::synth::WalkParams::default(),
+        &codecs,
+        &targets,
+    )
+    .unwrap();
     let study_path = dir.join("study.toml");
     std::fs::write(&study_path, STUDY).unwrap();
     let study = Arc::new(StudyFile::load(&study_path).unwrap());
@@ -96,9 +105,10 @@ fn main() {
         .map(|_| {
             let (db, study, commits) = (db.clone(), Arc::clone(&study), Arc::clone(&commits));
             std::thread::spawn(move || {
-                let mut store =
-                    lab::results_dir::open_database_for_simulation(&db, None, &study, seed, subjects)
-                        .unwrap();
+                let mut store = lab::results_dir::open_database_for_simulation(
+                    &db, None, &study, seed, subjects,
+                )
+                .unwrap();
                 let def = &study.definition;
                 let mut mine = Vec::new();
                 let mut sessions = 0;
@@ -130,8 +140,7 @@ fn main() {
                     let mut clock = 0;
                     while let Some(trial) = rec.next_trial(clock).unwrap() {
                         let response = observer.respond_measured(&trial, None).unwrap();
-                        clock += def.trial_presentation_ms()
-                            * (1 + u64::from(response.replays))
+                        clock += def.trial_presentation_ms() * (1 + u64::from(response.replays))
                             + response.response_time_ms
                             + def.presentation.gap_ms;
                         let t = Instant::now();
@@ -197,12 +206,20 @@ fn main() {
         let b: Vec<_> = f.trials.records.iter().map(strip).collect();
         lost += b.iter().filter(|r| !a.contains(r)).count();
         extra += a.len().saturating_sub(b.len());
-        assert_eq!(a, b, "{}", store.session_path(&s.manifest.subject, 1).display());
+        assert_eq!(
+            a,
+            b,
+            "{}",
+            store.session_path(&s.manifest.subject, 1).display()
+        );
     }
     println!(
         "{} sessions, {} answers checked against the same subjects simulated into a folder: {lost} lost, {extra} duplicated",
         from_db.len(),
-        from_db.iter().map(|s| s.trials.records.len()).sum::<usize>()
+        from_db
+            .iter()
+            .map(|s| s.trials.records.len())
+            .sum::<usize>()
     );
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -264,7 +264,7 @@ pub enum Destination {
     /// A database and the run's name in it (`None`: the study's name).
     Database {
         /// The database.
-        db: Database,
+        db: Box<Database>,
         /// The run.
         run: Option<String>,
     },

@@ -339,10 +339,9 @@ impl Recorder {
                 if let Some(m) = &old {
                     check_same_session(&manifest_path, m, &fresh)?;
                 }
-                if let Some(m) = old
-                    .as_ref()
-                    .filter(|m| matches!(m.status, SessionState::Complete | SessionState::TimeLimit))
-                {
+                if let Some(m) = old.as_ref().filter(|m| {
+                    matches!(m.status, SessionState::Complete | SessionState::TimeLimit)
+                }) {
                     store.check_not_held(&subject, number)?;
                     return Ok(Opened::Finished(m.clone()));
                 }

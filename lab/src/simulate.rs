@@ -110,7 +110,9 @@ fn simulate_into_database(
         for m in abandoned {
             // Only this simulation's sessions: not a real subject's in the same run.
             let index = m.subject_index;
-            if m.session != 1 || m.observer_seed != Some(options.seed) || m.subject != subject_id(index)
+            if m.session != 1
+                || m.observer_seed != Some(options.seed)
+                || m.subject != subject_id(index)
             {
                 continue;
             }
@@ -140,8 +142,9 @@ fn simulate_into_database(
             break;
         }
         let index = number - 1;
-        let found =
-            session::retry_outage(wait, report, || Ok(store.find_session(&subject_id(index), 1)?))?;
+        let found = session::retry_outage(wait, report, || {
+            Ok(store.find_session(&subject_id(index), 1)?)
+        })?;
         if found != Found::Absent {
             // Recorded already (imported under this id): the number is spent, take the next.
             continue;
@@ -238,4 +241,3 @@ fn run_subject(
     session::retry_outage(options.patience, report, || rec.finish()).context(at)?;
     Ok(rec.summary())
 }
-

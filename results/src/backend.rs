@@ -15,9 +15,7 @@ use std::path::{Path, PathBuf};
 
 use protocols::TrialRecord;
 
-use crate::store::{
-    LOCK_FILE, SESSION_FILE, SessionLock, SessionLog, TRIALS_FILE, read_manifest,
-};
+use crate::store::{LOCK_FILE, SESSION_FILE, SessionLock, SessionLog, TRIALS_FILE, read_manifest};
 use crate::trials::TornRow;
 use crate::{ResultsError, SessionManifest};
 

@@ -17,11 +17,11 @@ pub mod pg;
 pub mod store;
 pub mod trials;
 
+pub use backend::{FolderStore, SessionWriter, Store};
 pub use store::{
     RunManifest, SessionLog, SessionManifest, SessionResults, read_results_dir, read_session,
     session_dirs,
 };
-pub use backend::{FolderStore, SessionWriter, Store};
 pub use trials::{TornRow, TrialsFile, read_trials};
 
 /// Everything that can go wrong reading or writing results.

@@ -206,11 +206,8 @@ fn one_writer_per_session_and_rows_read_back_as_written(server: &ScratchServer) 
 fn roles_from_the_docs_allow_what_they_say(server: &ScratchServer) {
     let db = server.create_database("roles").unwrap();
     drop(open(&db));
-    let docs = std::fs::read_to_string(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../docs/postgres.md"
-    ))
-    .unwrap();
+    let docs = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../docs/postgres.md"))
+        .unwrap();
     let sql = docs
         .split("```sql\n")
         .nth(2)
@@ -256,7 +253,10 @@ fn roles_from_the_docs_allow_what_they_say(server: &ScratchServer) {
             &[&id],
         )
         .unwrap_err();
-    let why = err.as_db_error().map(|e| e.message().to_owned()).unwrap_or_default();
+    let why = err
+        .as_db_error()
+        .map(|e| e.message().to_owned())
+        .unwrap_or_default();
     assert!(why.contains("row-level security"), "{err}: {why}");
     for sql in [
         "UPDATE study_trials SET score = 1",
@@ -320,10 +320,7 @@ fn an_answer_survives_a_server_restart(server: &mut ScratchServer) {
     server.stop();
     m.trials_logged = 2;
     let err = writer.append(&record("S03", 1, 3.0), &m).unwrap_err();
-    assert!(
-        matches!(err, ResultsError::Unavailable { .. }),
-        "{err:?}"
-    );
+    assert!(matches!(err, ResultsError::Unavailable { .. }), "{err:?}");
     assert!(err.to_string().contains("cannot be reached"), "{err}");
     server.resume().unwrap();
     writer.append(&record("S03", 1, 3.0), &m).unwrap();
@@ -354,7 +351,10 @@ fn passwords_are_never_shown() {
     let err = Database::from_argument("postgres://station:s3cret@db.lab:5432/study")
         .unwrap_err()
         .to_string();
-    assert!(!err.contains("s3cret") && err.contains("STUDY_DATABASE_URL"), "{err}");
+    assert!(
+        !err.contains("s3cret") && err.contains("STUDY_DATABASE_URL"),
+        "{err}"
+    );
     let dir = std::env::temp_dir().join(format!("pg-pass-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let file = dir.join("url");
@@ -364,7 +364,10 @@ fn passwords_are_never_shown() {
         use std::os::unix::fs::PermissionsExt as _;
         std::fs::set_permissions(&file, std::fs::Permissions::from_mode(0o644)).unwrap();
         let err = Database::from_file(&file).unwrap_err().to_string();
-        assert!(err.contains("chmod 600") && !err.contains("s3cret"), "{err}");
+        assert!(
+            err.contains("chmod 600") && !err.contains("s3cret"),
+            "{err}"
+        );
         std::fs::set_permissions(&file, std::fs::Permissions::from_mode(0o600)).unwrap();
     }
     let db = Database::from_file(&file).unwrap();

@@ -1,6 +1,7 @@
 //! `study export`, `study import` and `study db-init`: results between a PostgreSQL database
 //! and results folders, and the database's schema (`docs/postgres.md`).
 
+use std::fmt::Write as _;
 use std::path::PathBuf;
 
 use anyhow::{Result, bail};
@@ -89,14 +90,19 @@ pub fn init(args: &DbInitArgs) -> Result<()> {
     let db = database(&args.store)?;
     let mut client = db.open()?;
     let runs = pg::runs(&mut client, db.shown())?;
-    println!(
-        "{}: results schema version {}; {} runs{}",
+    let mut text = format!(
+        "{}: results schema version {}; {} runs",
         db.shown(),
         pg::schema::SCHEMA_VERSION,
-        runs.len(),
-        runs.iter()
-            .map(|r| format!("\n  {} ({} sessions of study {:?})", r.name, r.sessions, r.run.study))
-            .collect::<String>()
+        runs.len()
     );
+    for r in &runs {
+        let _ = write!(
+            text,
+            "\n  {} ({} sessions of study {:?})",
+            r.name, r.sessions, r.run.study
+        );
+    }
+    println!("{text}");
     Ok(())
 }

@@ -9,12 +9,12 @@ use clap::{Parser, Subcommand};
 
 mod clip_cmd;
 mod codec_cmd;
+mod db_cmd;
 mod demo_cmd;
 mod gui;
 mod markers_cmd;
 mod primitives_cmd;
 mod report_cmd;
-mod db_cmd;
 mod run_cmd;
 mod store_args;
 mod study_cmd;

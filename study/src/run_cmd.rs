@@ -230,16 +230,16 @@ pub fn run(args: &RunArgs) -> anyhow::Result<()> {
 fn where_args(args: &RunArgs) -> String {
     let mut out = String::new();
     if let Some(o) = &args.output {
-        out.push_str(&format!(" -o {}", o.display()));
+        let _ = write!(out, " -o {}", o.display());
     }
     if let Some(s) = &args.store.store {
-        out.push_str(&format!(" --store {s}"));
+        let _ = write!(out, " --store {s}");
     }
     if let Some(f) = &args.store.store_file {
-        out.push_str(&format!(" --store-file {}", f.display()));
+        let _ = write!(out, " --store-file {}", f.display());
     }
     if let Some(r) = &args.store.run {
-        out.push_str(&format!(" --run {r}"));
+        let _ = write!(out, " --run {r}");
     }
     out
 }

@@ -70,7 +70,7 @@ impl StoreArgs {
                 bail!("-o names a results folder; results go to the database of --store instead");
             }
             return Ok(Destination::Database {
-                db,
+                db: Box::new(db),
                 run: self.run.clone(),
             });
         }
@@ -78,9 +78,9 @@ impl StoreArgs {
             (Some(_), Some(_)) => bail!("give the results folder once: --store or -o"),
             (Some(folder), None) => Ok(Destination::Folder(PathBuf::from(folder))),
             (None, Some(out)) => Ok(Destination::Folder(out.to_path_buf())),
-            (None, None) => default()
-                .map(Destination::Folder)
-                .ok_or_else(|| anyhow::anyhow!("say where the results go: -o FOLDER or --store STORE")),
+            (None, None) => default().map(Destination::Folder).ok_or_else(|| {
+                anyhow::anyhow!("say where the results go: -o FOLDER or --store STORE")
+            }),
         }
     }
 }

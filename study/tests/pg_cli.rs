@@ -51,7 +51,7 @@ fn simulate(url: &str, run: &str, subjects: u32, delay_ms: u64, resume: bool) ->
     study_cmd(url, &args)
 }
 
-fn ok(out: Output) -> String {
+fn ok(out: &Output) -> String {
     let text = format!(
         "{}{}",
         String::from_utf8_lossy(&out.stdout),
@@ -75,7 +75,10 @@ fn answers(client: &mut postgres::Client, run: &str) -> i64 {
 fn wait_for_answers(client: &mut postgres::Client, run: &str, n: i64, child: &mut Child) {
     let start = Instant::now();
     while answers(client, run) < n {
-        assert!(child.try_wait().unwrap().is_none(), "the station ended early");
+        assert!(
+            child.try_wait().unwrap().is_none(),
+            "the station ended early"
+        );
         assert!(start.elapsed() < Duration::from_secs(60), "no answers");
         std::thread::sleep(Duration::from_millis(20));
     }
@@ -109,10 +112,12 @@ fn records(dir: &Path) -> Vec<(String, Vec<TrialRecord>)> {
 }
 
 fn export(url: &str, run: &str, out: &Path) {
-    ok(study_cmd(url, &["export", "--store", "env", "--run", run, "-o"])
-        .arg(out)
-        .output()
-        .unwrap());
+    ok(
+        &study_cmd(url, &["export", "--store", "env", "--run", run, "-o"])
+            .arg(out)
+            .output()
+            .unwrap(),
+    );
 }
 
 /// Every file of a report folder, by relative path.
@@ -125,7 +130,10 @@ fn tree(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
             if p.is_dir() {
                 stack.push(p);
             } else {
-                out.push((p.strip_prefix(dir).unwrap().to_path_buf(), std::fs::read(&p).unwrap()));
+                out.push((
+                    p.strip_prefix(dir).unwrap().to_path_buf(),
+                    std::fs::read(&p).unwrap(),
+                ));
             }
         }
     }
@@ -134,7 +142,10 @@ fn tree(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
 }
 
 #[test]
-#[expect(clippy::too_many_lines, reason = "one study on one server, step by step")]
+#[expect(
+    clippy::too_many_lines,
+    reason = "one study on one server, step by step"
+)]
 fn stations_share_one_database() {
     let tmp = scratch();
     // No fsync: what is tested is station and server processes killed, not the machine.
@@ -151,7 +162,7 @@ fn stations_share_one_database() {
     let mut client = db.connect().unwrap();
 
     // The record of an uninterrupted run.
-    ok(simulate(&url, "clean", 3, 0, false).output().unwrap());
+    ok(&simulate(&url, "clean", 3, 0, false).output().unwrap());
     export(&url, "clean", &tmp.join("clean"));
     let clean = records(&tmp.join("clean"));
     assert_eq!(clean.len(), 3);
@@ -173,7 +184,7 @@ fn stations_share_one_database() {
         .unwrap()
         .get(0);
     assert_eq!(running, 1, "the killed station left its session running");
-    let text = ok(simulate(&url, "killed", 3, 0, true).output().unwrap());
+    let text = ok(&simulate(&url, "killed", 3, 0, true).output().unwrap());
     assert!(text.contains("S001: Complete"), "{text}");
     export(&url, "killed", &tmp.join("killed"));
     assert_eq!(records(&tmp.join("killed")), clean, "killed and resumed");
@@ -188,10 +199,9 @@ fn stations_share_one_database() {
     server.stop();
     std::thread::sleep(Duration::from_millis(1500));
     server.resume().unwrap();
-    let text = ok(station.wait_with_output().unwrap());
+    let text = ok(&station.wait_with_output().unwrap());
     assert!(
-        text.contains("the results database cannot be reached")
-            && text.contains("is back after"),
+        text.contains("the results database cannot be reached") && text.contains("is back after"),
         "{text}"
     );
     let mut client = db.connect().unwrap();
@@ -204,10 +214,16 @@ fn stations_share_one_database() {
         c.args(source)
             .args(["--bootstrap", "50", "--no-png", "-o"])
             .arg(out);
-        ok(c.output().unwrap());
+        ok(&c.output().unwrap());
     };
-    report(&["--store", "env", "--run", "clean"], &tmp.join("report-db"));
-    report(&[tmp.join("clean").to_str().unwrap()], &tmp.join("report-folder"));
+    report(
+        &["--store", "env", "--run", "clean"],
+        &tmp.join("report-db"),
+    );
+    report(
+        &[tmp.join("clean").to_str().unwrap()],
+        &tmp.join("report-folder"),
+    );
     assert_eq!(
         tree(&tmp.join("report-db")),
         tree(&tmp.join("report-folder"))
@@ -221,11 +237,13 @@ fn stations_share_one_database() {
         .unwrap();
     let text = String::from_utf8_lossy(&out.stderr);
     assert!(
-        !out.status.success() && text.contains("already there") && text.contains("nothing was imported"),
+        !out.status.success()
+            && text.contains("already there")
+            && text.contains("nothing was imported"),
         "{text}"
     );
     assert_eq!(answers(&mut client, "clean"), 42);
-    ok(study_cmd(&url, &["import"])
+    ok(&study_cmd(&url, &["import"])
         .arg(tmp.join("clean"))
         .args(["--store", "env", "--run", "copy"])
         .output()
@@ -235,7 +253,10 @@ fn stations_share_one_database() {
 
     // A password on the command line is refused without being printed.
     let out = study_cmd(&url, &["report", "--store"])
-        .arg(format!("postgres://postgres:s3cret@127.0.0.1:{}/lab", server.port()))
+        .arg(format!(
+            "postgres://postgres:s3cret@127.0.0.1:{}/lab",
+            server.port()
+        ))
         .args(["-o"])
         .arg(tmp.join("never"))
         .output()

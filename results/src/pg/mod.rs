@@ -41,8 +41,8 @@ use crate::backend::{
     session_name,
 };
 use crate::store::{
-    MAX_SESSIONS, RUN_FILE, SESSION_FILE, SessionState, TRIALS_FILE, read_limited,
-    read_manifest, session_dirs, write_json, write_new,
+    MAX_SESSIONS, RUN_FILE, SESSION_FILE, SessionState, TRIALS_FILE, read_limited, read_manifest,
+    session_dirs, write_json, write_new,
 };
 use crate::trials::{TRIALS_FORMAT_VERSION, TrialsFile, encode_row_as, header_of, read_trials};
 use crate::{ResultsError, RunManifest, SessionManifest, SessionResults};
@@ -76,7 +76,9 @@ fn chain(e: &postgres::Error) -> String {
     if let Some(db) = e.as_db_error() {
         text = format!("{}: {}", db.severity(), db.message());
         if let Some(detail) = db.detail() {
-            text.push_str(&format!(" ({detail})"));
+            text.push_str(" (");
+            text.push_str(detail);
+            text.push(')');
         }
         return text;
     }
@@ -200,8 +202,8 @@ impl Database {
     /// # Errors
     /// [`ResultsError::Store`] when it is unset or does not parse.
     pub fn from_env(var: &str) -> Result<Self, ResultsError> {
-        let text = std::env::var(var)
-            .map_err(|_| refused(format!("--store env: ${var} is not set")))?;
+        let text =
+            std::env::var(var).map_err(|_| refused(format!("--store env: ${var} is not set")))?;
         Self::parse(&text, &format!("${var}"))
     }
 
@@ -233,7 +235,10 @@ impl Database {
         }
         let bytes = read_limited(path, 64 * 1024)?;
         let text = String::from_utf8_lossy(&bytes);
-        let line = text.lines().map(str::trim).find(|l| !l.is_empty() && !l.starts_with('#'));
+        let line = text
+            .lines()
+            .map(str::trim)
+            .find(|l| !l.is_empty() && !l.starts_with('#'));
         let Some(line) = line else {
             return Err(refused(format!(
                 "{}: no connection string in it",
@@ -301,9 +306,7 @@ fn show(config: &postgres::Config) -> String {
         .collect();
     format!(
         "postgres://{}{}/{}",
-        config
-            .get_user()
-            .map_or(String::new(), |u| format!("{u}@")),
+        config.get_user().map_or(String::new(), |u| format!("{u}@")),
         hosts.join(","),
         config.get_dbname().unwrap_or("")
     )
@@ -376,11 +379,17 @@ pub fn runs(client: &mut Client, location: &str) -> Result<Vec<RunInfo>, Results
         .map_err(|e| db_error(location, "listing the runs", &e))?;
     rows.iter()
         .map(|r| {
-            let name: String = r.try_get(0).map_err(|e| db_error(location, "listing the runs", &e))?;
-            let manifest = r.try_get(1).map_err(|e| db_error(location, "listing the runs", &e))?;
+            let name: String = r
+                .try_get(0)
+                .map_err(|e| db_error(location, "listing the runs", &e))?;
+            let manifest = r
+                .try_get(1)
+                .map_err(|e| db_error(location, "listing the runs", &e))?;
             Ok(RunInfo {
                 run: from_json(manifest, &Path::new(location).join(&name).join(RUN_FILE))?,
-                sessions: r.try_get(2).map_err(|e| db_error(location, "listing the runs", &e))?,
+                sessions: r
+                    .try_get(2)
+                    .map_err(|e| db_error(location, "listing the runs", &e))?,
                 name,
             })
         })
@@ -585,7 +594,9 @@ impl PgStore {
                 &[&run_id, &station()],
             )
             .map_err(err)?;
-        let n: i32 = row.try_get(0).map_err(self.err("allocating a subject number"))?;
+        let n: i32 = row
+            .try_get(0)
+            .map_err(self.err("allocating a subject number"))?;
         u32::try_from(n).map_err(|_| refused(format!("subject number {n} is out of range")))
     }
 
@@ -817,8 +828,8 @@ impl Store for PgStore {
         let location = self.location();
         let err = |e: postgres::Error| db_error(&location, "creating the session", &e);
         let mut client = self.db.connect()?;
-        let session = i32::try_from(manifest.session)
-            .map_err(|_| refused("session number too large"))?;
+        let session =
+            i32::try_from(manifest.session).map_err(|_| refused("session number too large"))?;
         let version = TRIALS_FORMAT_VERSION as i32;
         let mut tx = client.transaction().map_err(err)?;
         let row = tx
@@ -847,7 +858,13 @@ impl Store for PgStore {
         tx.execute("SELECT pg_advisory_lock($1, $2)", &[&LOCK_NAMESPACE, &id])
             .map_err(err)?;
         tx.commit().map_err(err)?;
-        Ok(Box::new(PgWriter::new(self.db.clone(), client, id, 0, path)))
+        Ok(Box::new(PgWriter::new(
+            self.db.clone(),
+            client,
+            id,
+            0,
+            path,
+        )))
     }
 
     fn resume_session(
@@ -926,14 +943,20 @@ impl Store for PgStore {
         let mut tx = self.conn()?.transaction().map_err(err)?;
         let err = |e| db_error("", "discarding the unstarted session", &e);
         let locked: bool = tx
-            .query_one("SELECT pg_try_advisory_xact_lock($1, $2)", &[&LOCK_NAMESPACE, &id])
+            .query_one(
+                "SELECT pg_try_advisory_xact_lock($1, $2)",
+                &[&LOCK_NAMESPACE, &id],
+            )
             .and_then(|r| r.try_get(0))
             .map_err(err)?;
         if !locked {
             return Ok(false);
         }
-        tx.execute("DELETE FROM study_session_files WHERE session_id = $1", &[&id])
-            .map_err(err)?;
+        tx.execute(
+            "DELETE FROM study_session_files WHERE session_id = $1",
+            &[&id],
+        )
+        .map_err(err)?;
         let gone = tx
             .execute(
                 "DELETE FROM study_sessions s WHERE id = $1 AND trials_logged = 0 \
@@ -1018,7 +1041,9 @@ impl PgWriter {
             if !locked {
                 return Err(ResultsError::SessionBusy {
                     session: self.path.clone(),
-                    holder: "another station, which took the session over while the database was away".into(),
+                    holder:
+                        "another station, which took the session over while the database was away"
+                            .into(),
                 });
             }
             let n: i64 = client
@@ -1032,9 +1057,7 @@ impl PgWriter {
             self.frame_parts = None;
             self.client = Some(client);
         }
-        self.client
-            .as_mut()
-            .ok_or_else(|| refused("no connection"))
+        self.client.as_mut().ok_or_else(|| refused("no connection"))
     }
 
     fn update_manifest(&mut self, manifest: &SessionManifest) -> Result<(), ResultsError> {
@@ -1070,7 +1093,7 @@ impl SessionWriter for PgWriter {
         record: &TrialRecord,
         manifest: &SessionManifest,
     ) -> Result<(), ResultsError> {
-        let params = rows::Params::of(record)?;
+        let params = rows::Values::of(record)?;
         self.client()?;
         if let Some(found) = self.recount.take() {
             if found == self.rows + 1 {
@@ -1092,7 +1115,10 @@ impl SessionWriter for PgWriter {
                  UPDATE study_sessions SET manifest = $37, status = $38, trials_logged = $39 \
                  WHERE id = $1",
                 rows::COLUMNS,
-                (3..=36).map(|i| format!("${i}")).collect::<Vec<_>>().join(", ")
+                (3..=36)
+                    .map(|i| format!("${i}"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
             );
             let prepared = self.client()?.prepare(&sql);
             match prepared {
@@ -1261,38 +1287,7 @@ pub fn import(
         .iter()
         .map(|d| read_manifest(&d.join(SESSION_FILE)))
         .collect::<Result<_, _>>()?;
-    let mut seen: HashMap<(String, u32), &Path> = HashMap::new();
-    for (m, d) in manifests.iter().zip(&dirs) {
-        if let Some(first) = seen.insert((m.subject.clone(), m.session), d) {
-            return Err(refused(format!(
-                "{}: subject {:?} session {} is also in {}; nothing was imported",
-                d.display(),
-                m.subject,
-                m.session,
-                first.display()
-            )));
-        }
-    }
-    let existing: HashSet<(String, u32)> = store
-        .sessions()?
-        .into_iter()
-        .map(|h| (h.manifest.subject, h.manifest.session))
-        .collect();
-    let dup: Vec<String> = manifests
-        .iter()
-        .filter(|m| existing.contains(&(m.subject.clone(), m.session)))
-        .map(|m| session_name(&m.subject, m.session))
-        .collect();
-    if !dup.is_empty() {
-        return Err(refused(format!(
-            "{}: {} of the sessions in {} are already there ({}{}); nothing was imported",
-            store.location(),
-            dup.len(),
-            dir.display(),
-            dup.iter().take(5).cloned().collect::<Vec<_>>().join(", "),
-            if dup.len() > 5 { ", ..." } else { "" }
-        )));
-    }
+    check_new_sessions(&mut store, dir, &dirs, &manifests)?;
     let location = store.location();
     let err = |e: postgres::Error| db_error(&location, "importing", &e);
     let run_id = store.run_id;
@@ -1349,7 +1344,7 @@ pub fn import(
         }
         versions.push(trials.format_version as i32);
         for (i, r) in trials.records.iter().enumerate() {
-            let params = rows::Params::of(r)?;
+            let params = rows::Values::of(r)?;
             let n = i as i32;
             let mut all: Vec<&(dyn postgres::types::ToSql + Sync)> = vec![&id, &n];
             all.extend_from_slice(&params.refs());
@@ -1373,6 +1368,49 @@ pub fn import(
     .map_err(err)?;
     tx.commit().map_err(err)?;
     Ok((name, ids.len()))
+}
+
+/// Refuses an import whose sessions (`manifests`, of folders `dirs` in `dir`) are in the
+/// folder twice or in the run already.
+fn check_new_sessions(
+    store: &mut PgStore,
+    dir: &Path,
+    dirs: &[PathBuf],
+    manifests: &[SessionManifest],
+) -> Result<(), ResultsError> {
+    let mut seen: HashMap<(String, u32), &Path> = HashMap::new();
+    for (m, d) in manifests.iter().zip(dirs) {
+        if let Some(first) = seen.insert((m.subject.clone(), m.session), d) {
+            return Err(refused(format!(
+                "{}: subject {:?} session {} is also in {}; nothing was imported",
+                d.display(),
+                m.subject,
+                m.session,
+                first.display()
+            )));
+        }
+    }
+    let existing: HashSet<(String, u32)> = store
+        .sessions()?
+        .into_iter()
+        .map(|h| (h.manifest.subject, h.manifest.session))
+        .collect();
+    let dup: Vec<String> = manifests
+        .iter()
+        .filter(|m| existing.contains(&(m.subject.clone(), m.session)))
+        .map(|m| session_name(&m.subject, m.session))
+        .collect();
+    if !dup.is_empty() {
+        return Err(refused(format!(
+            "{}: {} of the sessions in {} are already there ({}{}); nothing was imported",
+            store.location(),
+            dup.len(),
+            dir.display(),
+            dup.iter().take(5).cloned().collect::<Vec<_>>().join(", "),
+            if dup.len() > 5 { ", ..." } else { "" }
+        )));
+    }
+    Ok(())
 }
 
 /// The files of session folder `dir` a database keeps beside its rows: `frames.csv` and

@@ -7,14 +7,13 @@ use std::path::Path;
 use postgres::Row;
 use postgres::types::ToSql;
 use protocols::{
-    Answer, Block, FrameTiming, Outcome, Protocol, Response, StimulusEncoding, Trial,
-    TrialRecord,
+    Answer, Block, FrameTiming, Outcome, Protocol, Response, StimulusEncoding, Trial, TrialRecord,
 };
 
 use crate::ResultsError;
 use crate::trials::{format_codec_params, parse_codec_params};
 
-/// The columns after `session_id, row_number`, in the order of [`Params`] and of
+/// The columns after `session_id, row_number`, in the order of [`Values`] and of
 /// [`SELECT_COLUMNS`].
 pub const COLUMNS: &str = "study, subject, session, trial_index, block, protocol, condition, \
     stimulus, reference, arrangement, reference_position, break_before, staircase, level, \
@@ -49,7 +48,7 @@ fn int4(column: &'static str, v: u32) -> Result<i32, ResultsError> {
 }
 
 /// One record's values, owned, in the order of [`COLUMNS`].
-pub struct Params {
+pub struct Values {
     study: String,
     subject: String,
     session: i32,
@@ -86,7 +85,7 @@ pub struct Params {
     interval_sd_ms: Option<f64>,
 }
 
-impl Params {
+impl Values {
     /// The values of `r`, checked as `trials.csv` checks them (finite numbers, codec
     /// parameters it can write).
     ///
@@ -103,12 +102,15 @@ impl Params {
         let (codec_params, achieved_cr, rms_cm) = match &r.encoding {
             None => (None, None, None),
             Some(e) => (
-                Some(format_codec_params(&e.codec_params).map_err(|m| unwritable("codec_params", m))?),
+                Some(
+                    format_codec_params(&e.codec_params)
+                        .map_err(|m| unwritable("codec_params", m))?,
+                ),
                 Some(e.achieved_cr),
                 Some(e.rms_cm),
             ),
         };
-        let p = Params {
+        let p = Values {
             study: r.study.clone(),
             subject: r.subject.clone(),
             session: int4("session", r.session)?,

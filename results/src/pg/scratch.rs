@@ -123,7 +123,16 @@ impl ScratchServer {
         };
         let out = server
             .command("initdb")
-            .args(["-A", "trust", "-U", "postgres", "-E", "UTF8", "--no-sync", "-D"])
+            .args([
+                "-A",
+                "trust",
+                "-U",
+                "postgres",
+                "-E",
+                "UTF8",
+                "--no-sync",
+                "-D",
+            ])
             .arg(server.dir.join("data"))
             .output()
             .map_err(|e| fail(format!("running initdb: {e}")))?;
@@ -184,7 +193,10 @@ impl ScratchServer {
         c.stdin(Stdio::null())
             .stdout(Stdio::from(log_file))
             .stderr(Stdio::from(stderr));
-        self.child = Some(c.spawn().map_err(|e| fail(format!("starting postgres: {e}")))?);
+        self.child = Some(
+            c.spawn()
+                .map_err(|e| fail(format!("starting postgres: {e}")))?,
+        );
         let start = Instant::now();
         let db = self.database();
         loop {
@@ -279,10 +291,7 @@ impl ScratchServer {
     }
 }
 
-#[expect(
-    clippy::panic,
-    reason = "a URL built from a port number always parses"
-)]
+#[expect(clippy::panic, reason = "a URL built from a port number always parses")]
 fn unreachable_database() -> Database {
     panic!("the scratch server's own URL does not parse")
 }

@@ -101,16 +101,14 @@ fn harness(fx: Fixture) -> (Harness<'static, (StudyUi, FrameClock)>, Run) {
     let session_dir = fx.dir.join("results").join("S01_s1");
     std::fs::create_dir_all(session_dir.parent().unwrap()).unwrap();
     let manifest = fresh_manifest(&study);
-    let Opened::Ready { recorder, .. } =
-        Recorder::open(
-            &study,
-            0,
-            &mut results::FolderStore::new(fx.dir.join("results")),
-            false,
-            manifest,
-        )
-        .unwrap()
-    else {
+    let Opened::Ready { recorder, .. } = Recorder::open(
+        &study,
+        0,
+        &mut results::FolderStore::new(fx.dir.join("results")),
+        false,
+        manifest,
+    )
+    .unwrap() else {
         panic!("new session reported finished");
     };
     let ui = StudyUi::new(Arc::new(study), stimuli, recorder, false);
@@ -709,7 +707,10 @@ fn a_database_outage_keeps_the_answer_and_the_window_says_so() {
     server.resume().unwrap();
     // Tried again every second: the answer goes in, and the session ends (2 trials).
     watch(&mut h, 2.5);
-    assert!(h.query_by_label("The results database cannot be reached").is_none());
+    assert!(
+        h.query_by_label("The results database cannot be reached")
+            .is_none()
+    );
     assert!(matches!(h.state().0.exit(), Some(Exit::Finished(_))));
     assert_eq!(answers(), 2);
     drop(fx);
