@@ -75,13 +75,24 @@ impl<'a> Checker<'a> {
     /// A checker of the sessions of `results` against `study` and the run manifest `run`.
     #[must_use]
     pub fn new(results: &Path, study: &'a StudyFile, run: &'a RunManifest) -> Self {
+        // The archived copy points at absolute stimulus paths, so neither its own hash nor
+        // its manifest's is the original's: sessions are held to the run's hashes then.
+        Self::with_archived(
+            study,
+            run,
+            same_file(&results.join(&run.study_file), &study.path),
+        )
+    }
+
+    /// A checker of sessions against `study`, which is the run's archived copy when
+    /// `archived` (a database run's copy, written out for the report): sessions are then held
+    /// to the run's hashes.
+    #[must_use]
+    pub fn with_archived(study: &'a StudyFile, run: &'a RunManifest, archived: bool) -> Self {
         Self {
             study,
             run,
-            // The archived copy points at absolute stimulus paths, so neither its own hash
-            // nor its manifest's is the original's: sessions are held to the run's hashes
-            // then.
-            archived: same_file(&results.join(&run.study_file), &study.path),
+            archived,
             seen: Mutex::new(HashMap::new()),
         }
     }

@@ -1,10 +1,13 @@
 //! A study's results directory: its run manifest (`run.json`), the archived study, and one
 //! folder per session. Created on first use, checked on every later one, never overwritten.
+//! Or the same as a run of a PostgreSQL database ([`open_database_for_subjects`],
+//! [`open_database_for_simulation`]).
 
 use std::fs;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use results::RunManifest;
+use results::pg::{Archive, Database, PgStore};
 use results::store::{
     LOCK_FILE, MANIFEST_FORMAT_VERSION, RUN_FILE, SESSION_FILE, TRIALS_FILE, read_manifest,
     write_json, write_new,
@@ -219,18 +222,7 @@ pub fn open_for_simulation(
                     run.study_hash
                 )));
             }
-            if old.observer_seed != run.observer_seed
-                || old.subjects != run.subjects
-                || old.plan_seed != run.plan_seed
-            {
-                return Err(refused(format!(
-                    "{}: recorded with --seed {:?}, {} subjects, study seed {}; resume with the same values",
-                    run_path.display(),
-                    old.observer_seed,
-                    old.subjects,
-                    old.plan_seed
-                )));
-            }
+            check_same_settings(&run_path.display().to_string(), &old, &run)?;
         } else {
             write_json(&run_path, &run)?;
         }
@@ -252,4 +244,114 @@ pub fn open_for_simulation(
     }
     study.archive(out)?;
     Ok(())
+}
+
+/// Refuses to continue simulated run `old` (named `what`) with other observer settings than
+/// `run`'s.
+fn check_same_settings(what: &str, old: &RunManifest, run: &RunManifest) -> Result<()> {
+    if old.observer_seed != run.observer_seed
+        || old.subjects != run.subjects
+        || old.plan_seed != run.plan_seed
+    {
+        return Err(refused(format!(
+            "{what}: recorded with --seed {:?}, {} subjects, study seed {}; resume with the same values",
+            old.observer_seed, old.subjects, old.plan_seed
+        )));
+    }
+    Ok(())
+}
+
+/// Where a run's results go: a results folder, or a run of a PostgreSQL database (by default
+/// named after the study).
+#[derive(Debug, Clone)]
+pub enum Destination {
+    /// A results folder.
+    Folder(PathBuf),
+    /// A database and the run's name in it (`None`: the study's name).
+    Database {
+        /// The database.
+        db: Box<Database>,
+        /// The run.
+        run: Option<String>,
+    },
+}
+
+/// The run name `run` asks for, or the study's.
+fn run_name(run: Option<&str>, study: &StudyFile) -> String {
+    run.map_or_else(|| study.definition.name.clone(), str::to_owned)
+}
+
+fn archive(study: &StudyFile) -> Result<Archive> {
+    let (study_copy, manifest_copy) = study.archive_copies()?;
+    Ok(Archive {
+        study_copy,
+        manifest_copy,
+    })
+}
+
+/// Opens run `run` (by default the study's name) of `db` for real subjects' sessions of
+/// `study`, creating it on first use. Returns the store and notes for the experimenter (the
+/// study file or stimuli changed since the run began), as [`open_for_subjects`] does.
+///
+/// # Errors
+/// The run holds another study; database errors.
+pub fn open_database_for_subjects(
+    db: &Database,
+    run: Option<&str>,
+    study: &StudyFile,
+) -> Result<(PgStore, Vec<String>)> {
+    let name = run_name(run, study);
+    let (store, _) =
+        PgStore::open_or_create(db, &name, &run_manifest(study, None, 0), &archive(study)?)?;
+    let old = store.run();
+    let place = format!("{}/{name}", db.shown());
+    check_same_study(Path::new(&place), old, study)?;
+    let mut notes = Vec::new();
+    if old.study_hash != study.hash
+        || old
+            .manifest_hash
+            .as_ref()
+            .is_some_and(|h| *h != study.manifest_hash)
+    {
+        notes.push(format!(
+            "note: {} or its stimuli changed since the first session of {place} (study hash {} -> {})",
+            study.path.display(),
+            old.study_hash,
+            study.hash
+        ));
+    }
+    Ok((store, notes))
+}
+
+/// Opens run `run` (by default the study's name) of `db` for `subjects` simulated observers
+/// of `study` (seed `seed`): created by the first station, joined by the others, which must
+/// run the same study file, stimuli, seeds and count.
+///
+/// # Errors
+/// The run holds another study, or was begun with other files or settings; database errors.
+pub fn open_database_for_simulation(
+    db: &Database,
+    run: Option<&str>,
+    study: &StudyFile,
+    seed: u64,
+    subjects: u32,
+) -> Result<PgStore> {
+    let name = run_name(run, study);
+    let fresh = run_manifest(study, Some(seed), subjects);
+    let (store, _) = PgStore::open_or_create(db, &name, &fresh, &archive(study)?)?;
+    let old = store.run();
+    let place = format!("{}/{name}", db.shown());
+    check_same_study(Path::new(&place), old, study)?;
+    if old.study_hash != fresh.study_hash
+        || old.manifest_hash.is_some() && old.manifest_hash != fresh.manifest_hash
+    {
+        return Err(refused(format!(
+            "{place}: the run was begun with another version of {} or its stimuli (study hash {}, now {}); use those files, or another run (--run)",
+            study.path.display(),
+            old.study_hash,
+            fresh.study_hash
+        )));
+    }
+    check_same_settings(&place, old, &fresh)?;
+    Ok(store)
 }

@@ -1,19 +1,25 @@
-//! One subject's session on disk: open or resume the results folder, replay the logged
-//! responses into the protocol engine, then log each new response (fsynced) before the next
-//! trial is asked for. The study window and simulation both use it; it knows nothing of
-//! drawing or of observers.
+//! One subject's session in a results store (a folder or a database,
+//! [`results::backend::Store`]): open or resume it, replay the logged responses into the
+//! protocol engine, then commit each new response (fsynced, or committed by the database)
+//! before the next trial is asked for. The study window and simulation both use it; it knows
+//! nothing of drawing or of observers.
+//!
+//! An answer the store could not take because the database was unreachable stays in the
+//! recorder ([`Recorder::pending`]) and no next trial is given until
+//! [`Recorder::commit_pending`] has committed it.
 
 use std::path::{Path, PathBuf};
-use std::time::{Instant, SystemTime, UNIX_EPOCH};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use protocols::{
     FrameTiming, Outcome, Response, Session, SessionStatus, StimulusEncoding, StudyDefinition,
     Trial, TrialRecord,
 };
-use results::store::{SessionLock, SessionState, read_manifest};
-use results::{SessionLog, SessionManifest};
+use results::backend::{Found, SessionWriter, Store};
+use results::store::SessionState;
+use results::{ResultsError, SessionManifest};
 
-use crate::error::{Context as _, Result, io_error, refused};
+use crate::error::{Context as _, LabError, Result, refused};
 
 /// A subject's plan index: stable for an id and session, different between subjects (FNV-1a
 /// of `subject/session`).
@@ -46,35 +52,61 @@ pub fn check_subject(id: &str) -> Result<()> {
 
 /// The folder of `subject`'s session `session` inside a results directory.
 pub fn session_dir(results: &Path, subject: &str, session: u32) -> PathBuf {
-    results.join(format!("{subject}_s{session}"))
+    results.join(results::backend::session_name(subject, session))
 }
 
-/// Removes session folder `dir` if nothing happened in it: no trial logged and never
-/// resumed, what a runner that could not open its window leaves. Returns whether it did; a
-/// folder holding anything else is left as it is.
+/// Runs `f` until it succeeds or fails for another reason than an unreachable database,
+/// waiting for the database up to `patience`; `say` gets one line when it goes away and one
+/// when it is back.
 ///
 /// # Errors
-/// The folder's files cannot be read or removed.
-pub fn discard_unstarted(dir: &Path) -> Result<bool> {
-    use results::store::{LOCK_FILE, SESSION_FILE, TRIALS_FILE};
-    let manifest: SessionManifest = read_manifest(&dir.join(SESSION_FILE))?;
-    let trials = results::read_trials(&dir.join(TRIALS_FILE))?;
-    if manifest.resumes > 0 || !trials.records.is_empty() || trials.torn.is_some() {
-        return Ok(false);
-    }
-    for f in [SESSION_FILE, TRIALS_FILE, LOCK_FILE] {
-        match std::fs::remove_file(dir.join(f)) {
-            Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
-                return Err(io_error(dir.join(f))(e));
+/// `f`'s error, or the outage when it lasts longer than `patience`.
+pub fn retry_outage<T>(
+    patience: Duration,
+    say: &mut dyn FnMut(&str),
+    mut f: impl FnMut() -> Result<T>,
+) -> Result<T> {
+    let start = Instant::now();
+    let mut told = false;
+    loop {
+        match f() {
+            Ok(v) => {
+                if told {
+                    say(&format!(
+                        "the results database is back after {:.1} s; continuing",
+                        start.elapsed().as_secs_f64()
+                    ));
+                }
+                return Ok(v);
             }
-            _ => {}
+            Err(e) if is_outage(&e) && start.elapsed() < patience => {
+                if !told {
+                    say(&format!(
+                        "{}; waiting for it (up to {} s)",
+                        crate::error::chain(&e),
+                        patience.as_secs()
+                    ));
+                    told = true;
+                }
+                std::thread::sleep(Duration::from_millis(250));
+            }
+            Err(e) => return Err(e),
         }
     }
-    Ok(std::fs::remove_dir(dir).is_ok())
 }
 
 /// Per-frame presentation intervals of a window session, beside `trials.csv`.
-pub const FRAMES_FILE: &str = "frames.csv";
+pub use results::backend::FRAMES_FILE;
+
+/// Whether `e` (or an error it wraps) says that the results database cannot be reached: the
+/// answer is kept and can be committed when it is back.
+pub fn is_outage(e: &LabError) -> bool {
+    match e {
+        LabError::Results(ResultsError::Unavailable { .. }) => true,
+        LabError::Context { source, .. } => is_outage(source),
+        _ => false,
+    }
+}
 
 /// Milliseconds since the Unix epoch.
 pub fn now_ms() -> u64 {
@@ -252,11 +284,15 @@ pub(crate) fn check_live_params(
     Ok(())
 }
 
-/// An open session: the engine, its log and its manifest.
+/// An open session: the engine, its writer and its manifest.
 pub struct Recorder {
     engine: Session,
-    log: SessionLog,
+    log: Box<dyn SessionWriter>,
     manifest: SessionManifest,
+    /// An answer scored but not yet committed (the database was unreachable).
+    pending: Option<TrialRecord>,
+    /// Frame intervals of answers not yet committed with them.
+    pending_frames: Vec<(u32, Vec<f64>, Vec<String>)>,
     study: String,
     /// Session clock (ms) at which this process took over: the last logged trial's.
     clock_base_ms: u64,
@@ -278,70 +314,63 @@ pub enum Opened {
 }
 
 impl Recorder {
-    /// Opens `dir` for subject `subject_index` of `study`: creates it, or with `resume`
-    /// continues an interrupted session there (a torn last row is set aside and reported on
+    /// Opens the session `fresh` describes (its subject and session number) in `store` for
+    /// subject `subject_index` of `study`: creates it, or with `resume` continues an
+    /// interrupted session there (a folder's torn last row is set aside and reported on
     /// stderr; the logged responses are replayed and must regenerate the logged trials).
     /// `fresh` is the manifest of a new session.
     ///
     /// # Errors
-    /// The folder exists without `resume`, a live runner holds it, the log cannot be read,
+    /// The session exists without `resume`, a live runner holds it, the log cannot be read,
     /// or the study no longer regenerates the logged trials.
     pub fn open(
         study: &StudyDefinition,
         subject_index: u32,
-        dir: &Path,
+        store: &mut dyn Store,
         resume: bool,
         fresh: SessionManifest,
     ) -> Result<Opened> {
         let mut engine = Session::new(study, subject_index)?;
-        let (log, logged, mut manifest) = if resume && dir.exists() {
-            let manifest_path = dir.join(results::store::SESSION_FILE);
-            let old: Option<SessionManifest> = if manifest_path.exists() {
-                Some(read_manifest(&manifest_path)?)
-            } else {
-                None
-            };
-            if let Some(m) = &old {
-                check_same_session(&manifest_path, m, &fresh)?;
+        let (subject, number) = (fresh.subject.clone(), fresh.session);
+        let path = store.session_path(&subject, number);
+        let found = store.find_session(&subject, number)?;
+        let (log, logged, mut manifest) = match found {
+            Found::Present(old) if resume => {
+                let manifest_path = path.join(results::store::SESSION_FILE);
+                if let Some(m) = &old {
+                    check_same_session(&manifest_path, m, &fresh)?;
+                }
+                if let Some(m) = old.as_ref().filter(|m| {
+                    matches!(m.status, SessionState::Complete | SessionState::TimeLimit)
+                }) {
+                    store.check_not_held(&subject, number)?;
+                    return Ok(Opened::Finished(m.clone()));
+                }
+                let resumed = store.resume_session(&subject, number)?;
+                let mut m = old.map_or(fresh, |m| *m);
+                m.resumes += 1;
+                m.status = SessionState::Running;
+                m.ended_ms = None;
+                if let Some((row, name)) = &resumed.torn {
+                    eprintln!(
+                        "warning: {}: line {} was torn ({} bytes, power cut mid-write?); set aside in {name}",
+                        path.join(results::store::TRIALS_FILE).display(),
+                        row.line,
+                        row.bytes.len()
+                    );
+                    m.torn_rows.push(name.clone());
+                }
+                (resumed.writer, resumed.records, m)
             }
-            if let Some(m) = old
-                .as_ref()
-                .filter(|m| matches!(m.status, SessionState::Complete | SessionState::TimeLimit))
-            {
-                // A crash after the final manifest write can leave the lock behind: take the
-                // stale lock over and release it (refused if a live runner holds it).
-                drop(SessionLock::acquire(dir)?);
-                return Ok(Opened::Finished(Box::new(m.clone())));
-            }
-            let resumed = SessionLog::resume(dir)?;
-            let mut m = old.unwrap_or(fresh);
-            m.resumes += 1;
-            m.status = SessionState::Running;
-            m.ended_ms = None;
-            if let Some((row, aside)) = &resumed.torn {
-                let name = aside
-                    .file_name()
-                    .map(|n| n.to_string_lossy().into_owned())
-                    .unwrap_or_default();
-                eprintln!(
-                    "warning: {}: line {} was torn ({} bytes, power cut mid-write?); set aside in {name}",
-                    dir.join(results::store::TRIALS_FILE).display(),
-                    row.line,
-                    row.bytes.len()
-                );
-                m.torn_rows.push(name);
-            }
-            (resumed.log, resumed.records, m)
-        } else {
-            if dir.exists() {
+            Found::Present(_) => {
                 return Err(refused(format!(
                     "{} already exists; results are never overwritten (use --resume to continue)",
-                    dir.display()
+                    path.display()
                 )));
             }
-            (SessionLog::create(dir)?, Vec::new(), fresh)
+            Found::Absent => (store.create_session(&fresh)?, Vec::new(), fresh),
         };
-        let trials = dir.join(results::store::TRIALS_FILE);
+        let trials = path.join(results::store::TRIALS_FILE);
         for (i, rec) in logged.iter().enumerate() {
             // Line 1 is the header.
             let at = || format!("cannot resume: {} line {}", trials.display(), i + 2);
@@ -353,8 +382,12 @@ impl Recorder {
                 .replay(&rec.trial, &rec.response, &rec.outcome)
                 .context(at)?;
         }
-        manifest.trials_logged = log.rows();
-        log.write_manifest(&manifest)?;
+        let mut log = log;
+        if manifest.resumes > 0 {
+            // A new session's manifest was written with it.
+            manifest.trials_logged = log.rows();
+            log.write_manifest(&manifest)?;
+        }
         let last = logged.last();
         Ok(Opened::Ready {
             resumed: logged.len() as u32,
@@ -363,11 +396,70 @@ impl Recorder {
                 log,
                 study: study.name.clone(),
                 manifest,
+                pending: None,
+                pending_frames: Vec::new(),
                 clock_base_ms: last.map_or(0, |r| r.elapsed_ms),
                 monotonic_base_ms: last.map_or(0, |r| r.monotonic_ms),
                 started: Instant::now(),
             }),
         })
+    }
+
+    /// Where the session is, for messages (its folder, or its name in the database).
+    pub fn path(&self) -> PathBuf {
+        self.log.path()
+    }
+
+    /// Whether an answer is waiting to be committed (the database was unreachable): no next
+    /// trial is given until [`Self::commit_pending`] has committed it.
+    pub fn pending(&self) -> bool {
+        self.pending.is_some()
+    }
+
+    /// Commits the answer (and its frame intervals) kept after an outage, if any.
+    ///
+    /// # Errors
+    /// The database is still unreachable ([`is_outage`]; the answer stays kept), or the
+    /// store refused it.
+    pub fn commit_pending(&mut self) -> Result<()> {
+        if let Some(record) = &self.pending {
+            let mut manifest = self.manifest.clone();
+            manifest.trials_logged = self.log.rows() + 1;
+            match self.log.append(record, &manifest) {
+                Ok(()) => {}
+                Err(e @ ResultsError::Unavailable { .. }) => return Err(e.into()),
+                Err(e) => {
+                    // Refused, not unreachable: the session stops here (resumable). A folder
+                    // may hold the row already, so it is never written twice.
+                    self.pending = None;
+                    return Err(e.into());
+                }
+            }
+            self.manifest = manifest;
+            self.pending = None;
+        }
+        while let Some((index, intervals, phases)) = self.pending_frames.first() {
+            let phases: Vec<&str> = phases.iter().map(String::as_str).collect();
+            self.log.append_frames(*index, intervals, &phases)?;
+            self.pending_frames.remove(0);
+        }
+        Ok(())
+    }
+
+    /// [`Self::commit_pending`] until it succeeds, as long as the database stays unreachable
+    /// for less than `patience`; `say` gets one line when the outage starts and one when it
+    /// ends (a simulated station's stderr).
+    ///
+    /// # Errors
+    /// The store refused the answer, or the database stayed away longer than `patience` (the
+    /// answer is lost with this process; the session resumes where its committed answers
+    /// end).
+    pub fn commit_waiting(&mut self, patience: Duration, say: &mut dyn FnMut(&str)) -> Result<()> {
+        say(&format!(
+            "{}: the answer is kept and is committed when the results database is back",
+            self.path().display()
+        ));
+        retry_outage(patience, say, || self.commit_pending())
     }
 
     /// The session clock of the last logged trial (0 for a new session), ms.
@@ -396,6 +488,10 @@ impl Recorder {
     /// The manifest cannot be written.
     pub fn update_manifest(&mut self, change: impl FnOnce(&mut SessionManifest)) -> Result<()> {
         change(&mut self.manifest);
+        if self.pending.is_some() {
+            // Written with the pending answer.
+            return Ok(());
+        }
         self.log.write_manifest(&self.manifest)?;
         Ok(())
     }
@@ -405,6 +501,12 @@ impl Recorder {
     /// # Errors
     /// Engine errors (a staircase level without a stimulus).
     pub fn next_trial(&mut self, elapsed_ms: u64) -> Result<Option<Trial>> {
+        if self.pending.is_some() {
+            return Err(refused(format!(
+                "{}: the last answer is not committed yet; no next trial before it is",
+                self.path().display()
+            )));
+        }
         Ok(self.engine.next_trial(elapsed_ms)?)
     }
 
@@ -414,13 +516,16 @@ impl Recorder {
         self.engine.lookahead(elapsed_ms)
     }
 
-    /// Scores `response` to the pending `trial` and appends the row (flushed and fsynced)
-    /// before returning: nothing can show the next stimulus before the answer is on disk.
-    /// `encoding` describes a stimulus encoded for this trial (live staircase), `timing` how
-    /// the window's display kept time during it.
+    /// Scores `response` to the pending `trial` and commits the row (flushed and fsynced, or
+    /// committed by the database) before returning: nothing can show the next stimulus before
+    /// the answer is durable. `encoding` describes a stimulus encoded for this trial (live
+    /// staircase), `timing` how the window's display kept time during it. When the database
+    /// cannot be reached the answer is kept ([`Self::pending`]) and the error says so
+    /// ([`is_outage`]).
     ///
     /// # Errors
-    /// The engine refuses the response, or the row cannot be written.
+    /// The engine refuses the response, an earlier answer is still pending, or the row cannot
+    /// be committed.
     pub fn record(
         &mut self,
         trial: Trial,
@@ -429,8 +534,14 @@ impl Recorder {
         encoding: Option<StimulusEncoding>,
         timing: Option<FrameTiming>,
     ) -> Result<Outcome> {
+        if self.pending.is_some() {
+            return Err(refused(format!(
+                "{}: the last answer is not committed yet",
+                self.path().display()
+            )));
+        }
         let outcome = self.engine.respond(&response)?;
-        let record = TrialRecord {
+        self.pending = Some(TrialRecord {
             study: self.study.clone(),
             subject: self.manifest.subject.clone(),
             session: self.manifest.session,
@@ -443,20 +554,16 @@ impl Recorder {
             monotonic_ms: self.monotonic_base_ms + self.started.elapsed().as_millis() as u64,
             encoding,
             timing,
-        };
-        self.log.append(&record)?;
-        // The manifest's count follows every row, so a session stopped at any point (but a
-        // kill between these two writes) reads as many trials in both files.
-        self.manifest.trials_logged = self.log.rows();
-        self.log.write_manifest(&self.manifest)?;
+        });
+        self.commit_pending()?;
         Ok(outcome)
     }
 
-    /// Appends the presentation intervals of trial `index` to `frames.csv` beside the trial
-    /// log (`trial_index,interval_ms,phase`, one row per presented frame, `phases[k]` what
-    /// frame `k` showed: `a`, `b`, `grey`, `both`, `answer`, ...), so every frame's timing
-    /// is kept, not only the per-trial summary. Flushed, not fsynced: the answer itself is
-    /// already on disk.
+    /// Appends the presentation intervals of trial `index` to `frames.csv` of the session
+    /// (`trial_index,interval_ms,phase`, one row per presented frame, `phases[k]` what frame
+    /// `k` showed: `a`, `b`, `grey`, `both`, `answer`, ...), so every frame's timing is kept,
+    /// not only the per-trial summary. A folder flushes without fsync: the answer itself is
+    /// already on disk. While the answer is pending, they wait with it.
     ///
     /// # Errors
     /// The file cannot be written.
@@ -466,43 +573,15 @@ impl Recorder {
         intervals: &[f64],
         phases: &[&str],
     ) -> Result<()> {
-        use std::fmt::Write as _;
-        use std::io::Write as _;
-        let path = self.log.dir().join(FRAMES_FILE);
-        // A session begun before the phase column keeps its two columns when resumed.
-        let phased = match std::fs::File::open(&path) {
-            Ok(f) => {
-                use std::io::Read as _;
-                let mut head = Vec::with_capacity(64);
-                f.take(64).read_to_end(&mut head).map_err(io_error(&path))?;
-                head.split(|b| *b == b'\n')
-                    .next()
-                    .is_some_and(|h| h.ends_with(b",phase"))
-            }
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => true,
-            Err(e) => return Err(io_error(&path)(e)),
-        };
-        let new = !path.exists();
-        let mut text = String::with_capacity(intervals.len() * 20 + 40);
-        if new {
-            text.push_str("trial_index,interval_ms,phase\n");
+        if self.pending.is_some() || !self.pending_frames.is_empty() {
+            self.pending_frames.push((
+                index,
+                intervals.to_vec(),
+                phases.iter().map(|p| (*p).to_owned()).collect(),
+            ));
+            return Ok(());
         }
-        for (k, ms) in intervals.iter().enumerate() {
-            if phased {
-                let phase = phases.get(k).copied().unwrap_or("");
-                let _ = writeln!(text, "{index},{ms:.3},{phase}");
-            } else {
-                let _ = writeln!(text, "{index},{ms:.3}");
-            }
-        }
-        let mut f = std::fs::OpenOptions::new()
-            .create(true)
-            .append(true)
-            .open(&path)
-            .map_err(io_error(&path))?;
-        f.write_all(text.as_bytes())
-            .and_then(|()| f.flush())
-            .map_err(io_error(&path))?;
+        self.log.append_frames(index, intervals, phases)?;
         Ok(())
     }
 
@@ -512,6 +591,7 @@ impl Recorder {
     /// # Errors
     /// The manifest cannot be written.
     pub fn interrupt(&mut self) -> Result<()> {
+        self.commit_pending()?;
         self.manifest.status = SessionState::Interrupted;
         self.manifest.trials_logged = self.log.rows();
         self.manifest.ended_ms = Some(now_ms());

@@ -1,15 +1,17 @@
 //! Dry runs: whole sessions with simulated observers, through the same engines, stimulus
 //! sources and session recorder a real subject's session uses.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Duration;
 
 use protocols::observer::Observer;
-use results::SessionManifest;
+use results::backend::{Found, Store};
+use results::pg::PgStore;
 use results::store::DisplayInfo;
+use results::{FolderStore, ResultsError, SessionManifest};
 
-use crate::error::{Context as _, Result};
-use crate::results_dir;
+use crate::error::{Context as _, LabError, Result};
+use crate::results_dir::{self, Destination};
 use crate::session::{self, Opened, Recorder, SessionOf};
 use crate::source::{self, StimulusSource};
 use crate::study::StudyFile;
@@ -23,12 +25,18 @@ pub struct SimulateOptions {
     pub subjects: u32,
     /// Seed of the simulated observers (the trial plans derive from the study's own seed).
     pub seed: u64,
-    /// Results directory to create (never overwritten).
-    pub output: PathBuf,
+    /// Where the sessions go: a results directory to create (never overwritten), or a run of
+    /// a database, which several stations may simulate into at once (each takes the next
+    /// subject number from the database until `subjects` are given out).
+    pub output: Destination,
     /// Pause before each answer (paces trials for kill tests).
     pub trial_delay: Duration,
-    /// Continue an interrupted run in an existing results directory.
+    /// Continue an interrupted run in an existing results directory (in a database: the
+    /// sessions no station holds any more, then new subjects as without it).
     pub resume: bool,
+    /// How long a station waits for an unreachable database before it stops (the answer it
+    /// holds is then asked again when the session resumes).
+    pub patience: Duration,
 }
 
 /// The id of simulated subject `index` (0-based): `S001`, `S002`, ...
@@ -36,26 +44,113 @@ pub fn subject_id(index: u32) -> String {
     format!("S{:03}", index + 1)
 }
 
-/// Runs `options.subjects` complete simulated sessions into a results directory; `report`
-/// gets one line per session as it ends.
+/// Runs `options.subjects` complete simulated sessions into a results directory or a
+/// database run; `report` gets one line per session as it ends (and a line when the database
+/// goes away and comes back).
 ///
 /// # Errors
 /// Study file problems, an existing output without resume, a resume whose logged trials the
-/// study no longer regenerates, I/O errors.
+/// study no longer regenerates, I/O and database errors.
 pub fn simulate(options: &SimulateOptions, report: &mut dyn FnMut(&str)) -> Result<()> {
     let study = StudyFile::load(&options.study)?;
-    let out = &options.output;
-    results_dir::open_for_simulation(out, &study, options.seed, options.subjects, options.resume)?;
     // One stimulus source (and cache of encoded levels) for every simulated subject.
     let mut stimuli = source::open(&study)?;
-    for subject in 0..options.subjects {
-        let dir = session::session_dir(out, &subject_id(subject), 1);
-        let summary = run_subject(&study, options, subject, &dir, stimuli.as_mut())
-            .context(|| format!("session {}", dir.display()))?;
-        report(&summary);
+    match &options.output {
+        Destination::Folder(out) => {
+            results_dir::open_for_simulation(
+                out,
+                &study,
+                options.seed,
+                options.subjects,
+                options.resume,
+            )?;
+            let mut store = FolderStore::new(out);
+            for subject in 0..options.subjects {
+                let summary = run_subject(
+                    &study,
+                    options,
+                    subject,
+                    &mut store,
+                    options.resume,
+                    stimuli.as_mut(),
+                    report,
+                )?;
+                report(&summary);
+            }
+        }
+        Destination::Database { db, run } => {
+            let mut store = results_dir::open_database_for_simulation(
+                db,
+                run.as_deref(),
+                &study,
+                options.seed,
+                options.subjects,
+            )?;
+            simulate_into_database(&study, options, &mut store, stimuli.as_mut(), report)?;
+        }
     }
     if let Some(s) = stimuli.summary() {
         report(&s);
+    }
+    Ok(())
+}
+
+/// Simulated sessions into a database run: with `resume` first the sessions no station holds
+/// any more, then new subjects numbered by the database until the run's count is given out.
+fn simulate_into_database(
+    study: &StudyFile,
+    options: &SimulateOptions,
+    store: &mut PgStore,
+    stimuli: &mut dyn StimulusSource,
+    report: &mut dyn FnMut(&str),
+) -> Result<()> {
+    let wait = options.patience;
+    if options.resume {
+        let abandoned = session::retry_outage(wait, report, || Ok(store.abandoned()?))?;
+        for m in abandoned {
+            // Only this simulation's sessions: not a real subject's in the same run.
+            let index = m.subject_index;
+            if m.session != 1
+                || m.observer_seed != Some(options.seed)
+                || m.subject != subject_id(index)
+            {
+                continue;
+            }
+            match run_subject(study, options, index, store, true, stimuli, report) {
+                Ok(summary) => report(&summary),
+                // Another station resumed it first.
+                Err(LabError::Context { source, .. })
+                    if matches!(*source, LabError::Results(ResultsError::SessionBusy { .. })) =>
+                {
+                    report(&format!("{}: taken over by another station", m.subject));
+                }
+                Err(e) => return Err(e),
+            }
+        }
+    } else {
+        let left = session::retry_outage(wait, report, || Ok(store.abandoned()?))?.len();
+        if left > 0 {
+            report(&format!(
+                "note: {left} sessions of {} were left unfinished by a station; `--resume` continues them",
+                store.location()
+            ));
+        }
+    }
+    loop {
+        let number = session::retry_outage(wait, report, || Ok(store.next_subject_number()?))?;
+        if number > options.subjects {
+            break;
+        }
+        let index = number - 1;
+        let found = session::retry_outage(wait, report, || {
+            Ok(store.find_session(&subject_id(index), 1)?)
+        })?;
+        if found != Found::Absent {
+            // Recorded already (imported under this id): the number is spent, take the next.
+            continue;
+        }
+        let summary = run_subject(study, options, index, store, false, stimuli, report)?;
+        report(&summary);
     }
     Ok(())
 }
@@ -89,17 +184,26 @@ fn new_manifest(study: &StudyFile, seed: u64, subject: u32) -> SessionManifest {
     m
 }
 
-/// One simulated subject's session in `dir`; returns its one-line summary.
+/// One simulated subject's session (subject `subject`, 0-based, id [`subject_id`]) in
+/// `store`; returns its one-line summary.
 fn run_subject(
     study: &StudyFile,
     options: &SimulateOptions,
     subject: u32,
-    dir: &Path,
+    store: &mut dyn Store,
+    resume: bool,
     stimuli: &mut dyn StimulusSource,
+    report: &mut dyn FnMut(&str),
 ) -> Result<String> {
+    let path = store.session_path(&subject_id(subject), 1);
+    let at = || format!("session {}", path.display());
     let def = &study.definition;
     let fresh = new_manifest(study, options.seed, subject);
-    let mut rec = match Recorder::open(def, subject, dir, options.resume, fresh)? {
+    let opened = session::retry_outage(options.patience, report, || {
+        Recorder::open(def, subject, &mut *store, resume, fresh.clone())
+    })
+    .context(at)?;
+    let mut rec = match opened {
         Opened::Finished(m) => {
             return Ok(format!(
                 "{}: already {:?}, {} trials",
@@ -111,18 +215,18 @@ fn run_subject(
     let observer = Observer::new(def, options.seed, subject);
     let mut clock_ms = rec.logged_clock_ms();
     let per_trial_ms = def.trial_presentation_ms();
-    while let Some(trial) = rec.next_trial(clock_ms)? {
+    while let Some(trial) = rec.next_trial(clock_ms).context(at)? {
         // A stimulus made for this trial (live staircase) is made now; the observer sees its
         // measured error. Prepared stimuli carry theirs in the manifest (a crowd scene's row
         // logs its characters' ratios).
-        let encoding = stimuli.encoding(&trial)?;
+        let encoding = stimuli.encoding(&trial).context(at)?;
         // A crowd scene's row logs its characters' pooled RMS; the observer weighs each
         // character itself (by size and attention) from the manifest.
         let measured = encoding
             .as_ref()
             .filter(|_| def.scene.is_none())
             .map(|e| e.rms_cm);
-        let response = observer.respond_measured(&trial, measured)?;
+        let response = observer.respond_measured(&trial, measured).context(at)?;
         if !options.trial_delay.is_zero() {
             std::thread::sleep(options.trial_delay);
         }
@@ -131,8 +235,14 @@ fn run_subject(
         clock_ms += per_trial_ms * (1 + u64::from(response.replays))
             + response.response_time_ms
             + def.presentation.gap_ms;
-        rec.record(trial, response, clock_ms, encoding, None)?;
+        if let Err(e) = rec.record(trial, response, clock_ms, encoding, None) {
+            if !session::is_outage(&e) {
+                return Err(e).context(at);
+            }
+            // The answer is kept: committed when the database is back, before the next trial.
+            rec.commit_waiting(options.patience, report).context(at)?;
+        }
     }
-    rec.finish()?;
+    session::retry_outage(options.patience, report, || rec.finish()).context(at)?;
     Ok(rec.summary())
 }

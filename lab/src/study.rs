@@ -75,6 +75,32 @@ impl StudyFile {
         if copy.exists() {
             return Ok(());
         }
+        let (study_copy, manifest_bytes) = self.archive_copies()?;
+        // A run killed between the two copies left a complete manifest copy (write_new is
+        // atomic) but no study copy: keep an identical one instead of refusing the resume.
+        let manifest_copy = out.join(MANIFEST_COPY);
+        match fs::read(&manifest_copy) {
+            Ok(existing) if existing == manifest_bytes => {}
+            Ok(_) => {
+                return Err(refused(format!(
+                    "{} exists and differs from the manifest of {}; results are never overwritten",
+                    manifest_copy.display(),
+                    self.path.display()
+                )));
+            }
+            Err(_) => write_new(&manifest_copy, &manifest_bytes)?,
+        }
+        write_new(&copy, &study_copy)
+            .context(|| format!("keeping a copy of {}", self.path.display()))?;
+        Ok(())
+    }
+
+    /// The copies [`Self::archive`] keeps (`study.toml`, `stimuli.json`), as bytes: a
+    /// database keeps them with its run.
+    ///
+    /// # Errors
+    /// The study file no longer parses as TOML, or the copy cannot be written as TOML.
+    pub fn archive_copies(&self) -> Result<(Vec<u8>, Vec<u8>)> {
         let original = &self.path;
         let mut table: toml::Table = self.text.parse().map_err(|e: toml::de::Error| {
             refused(format!("re-reading {}: {e}", original.display()))
@@ -113,23 +139,9 @@ impl StudyFile {
             "# Copy of {} kept with its results; `stimuli` points at the manifest copy beside it.\n",
             original.display()
         );
-        // A run killed between the two copies left a complete manifest copy (write_new is
-        // atomic) but no study copy: keep an identical one instead of refusing the resume.
-        let manifest_copy = out.join(MANIFEST_COPY);
-        let manifest_bytes = serde_json::to_vec_pretty(&manifest)?;
-        match fs::read(&manifest_copy) {
-            Ok(existing) if existing == manifest_bytes => {}
-            Ok(_) => {
-                return Err(refused(format!(
-                    "{} exists and differs from the manifest of {}; results are never overwritten",
-                    manifest_copy.display(),
-                    original.display()
-                )));
-            }
-            Err(_) => write_new(&manifest_copy, &manifest_bytes)?,
-        }
-        write_new(&copy, format!("{header}{body}").as_bytes())
-            .context(|| format!("keeping a copy of {}", original.display()))?;
-        Ok(())
+        Ok((
+            format!("{header}{body}").into_bytes(),
+            serde_json::to_vec_pretty(&manifest)?,
+        ))
     }
 }

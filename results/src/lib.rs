@@ -6,12 +6,18 @@
 //! ([`store::SessionManifest`]), a lock file against two writers, torn-row detection on resume,
 //! and readers that load a results directory back into typed records for the analysis crate.
 //! Formats are versioned and documented in `docs/results-format.md`.
+//!
+//! The same sessions can be kept in a PostgreSQL database instead ([`pg`],
+//! `docs/postgres.md`); [`backend::Store`] is what both give a session recorder.
 
 use std::path::PathBuf;
 
+pub mod backend;
+pub mod pg;
 pub mod store;
 pub mod trials;
 
+pub use backend::{FolderStore, SessionWriter, Store};
 pub use store::{
     RunManifest, SessionLog, SessionManifest, SessionResults, read_results_dir, read_session,
     session_dirs,
@@ -93,4 +99,45 @@ pub enum ResultsError {
         /// Why.
         reason: String,
     },
+    /// The results database cannot be reached (down, restarting, the network away): nothing
+    /// was refused, and the same call may succeed later.
+    #[error("{location}: the results database cannot be reached ({op}): {message}")]
+    Unavailable {
+        /// The database (never with its password), run or session.
+        location: String,
+        /// What was being done.
+        op: String,
+        /// The client's or server's words.
+        message: String,
+    },
+    /// The database refused what was asked.
+    #[error("{location}: {op}: {message}")]
+    Database {
+        /// The database (never with its password), run or session.
+        location: String,
+        /// What was being done.
+        op: String,
+        /// The server's words.
+        message: String,
+    },
+    /// Another station writes this session (it holds the session's lock in the database).
+    #[error("{}: {holder} is writing this session; two stations may not write one session", session.display())]
+    SessionBusy {
+        /// The session.
+        session: PathBuf,
+        /// Who holds it, as the database knows it.
+        holder: String,
+    },
+    /// The database's schema is not one this build can use.
+    #[error("{location}: {message}")]
+    Schema {
+        /// The database.
+        location: String,
+        /// Why.
+        message: String,
+    },
+    /// A store that cannot be used as asked (a connection string that does not parse or holds
+    /// a password where it would show, a run that does not exist, duplicates on import).
+    #[error("{0}")]
+    Store(String),
 }

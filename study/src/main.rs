@@ -9,6 +9,7 @@ use clap::{Parser, Subcommand};
 
 mod clip_cmd;
 mod codec_cmd;
+mod db_cmd;
 mod demo_cmd;
 mod gui;
 mod markers_cmd;
@@ -16,6 +17,7 @@ mod primitives_cmd;
 mod report_cmd;
 mod run_cmd;
 mod serve_cmd;
+mod store_args;
 mod study_cmd;
 
 /// Perceptual user studies of motion-capture compression.
@@ -65,6 +67,13 @@ enum Command {
     /// Every table and figure of a results directory: MOS / DMOS with CIs, t-tests, screening,
     /// thresholds, psychometric fit (report.md, report.html, CSV / Markdown / LaTeX, SVG / PNG).
     Report(report_cmd::ReportArgs),
+    /// Write a database run's results as a results folder (the format `study run -o` writes).
+    Export(db_cmd::ExportArgs),
+    /// Load a results folder into a database run (refusing sessions it holds already).
+    Import(db_cmd::ImportArgs),
+    /// Create or upgrade the results schema of a database (as its owner role) and list its
+    /// runs.
+    DbInit(db_cmd::DbInitArgs),
 }
 
 fn main() -> ExitCode {
@@ -88,6 +97,9 @@ fn main() -> ExitCode {
         Command::Check(args) => study_cmd::check(&args),
         Command::Simulate(args) => study_cmd::simulate(&args),
         Command::Report(args) => report_cmd::run(&args),
+        Command::Export(args) => db_cmd::export(&args),
+        Command::Import(args) => db_cmd::import(&args),
+        Command::DbInit(args) => db_cmd::init(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

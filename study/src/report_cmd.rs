@@ -1,5 +1,6 @@
 //! `study report RESULTS -o DIR`: every table and figure of a results directory.
 
+use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use analysis::psychometric::{BootstrapOptions, FitOptions, Lapse, Shape};
@@ -8,6 +9,7 @@ use analysis::{CiMethod, Confidence, export, from_results};
 use anyhow::{Context, Result, bail};
 use codecs::codec::keys;
 use protocols::StudyDefinition;
+use results::Store as _;
 
 /// Which confidence interval decides findings and fills the tables.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -34,8 +36,12 @@ pub enum ShapeArg {
     reason = "command-line switches: each bool is one flag a user passes"
 )]
 pub struct ReportArgs {
-    /// Results directory written by `study run` or `study simulate`.
-    pub results: PathBuf,
+    /// Results directory written by `study run` or `study simulate` (or `--store`).
+    #[arg(required_unless_present_any = ["store", "store_file"])]
+    pub results: Option<PathBuf>,
+    /// Or the results store: a folder, or a PostgreSQL database (and `--run`).
+    #[command(flatten)]
+    pub store: crate::store_args::StoreArgs,
     /// Output directory for report.md, report.html, tables/ and figures/.
     #[arg(short, long, value_name = "DIR")]
     pub output: PathBuf,
@@ -279,13 +285,84 @@ impl Drop for StopOnPanic<'_, '_> {
     }
 }
 
+/// How many sessions a database reader fetches in one query.
+const DB_BATCH: usize = 256;
+
+/// The sessions a report reads: a results folder's session folders, or a database run's
+/// sessions.
+enum Sessions {
+    Folder(Vec<PathBuf>),
+    Database(std::sync::Mutex<DbSessions>),
+}
+
+/// A database run's sessions, fetched [`DB_BATCH`] at a time over the store's one connection.
+struct DbSessions {
+    store: Box<results::pg::PgStore>,
+    heads: Vec<results::pg::SessionHead>,
+    /// Sessions fetched and not yet handed out, by index.
+    fetched: HashMap<usize, results::SessionResults>,
+    /// Sessions before this index have been fetched.
+    fetched_to: usize,
+}
+
+impl Sessions {
+    fn database(store: results::pg::PgStore, heads: Vec<results::pg::SessionHead>) -> Self {
+        Sessions::Database(std::sync::Mutex::new(DbSessions {
+            store: Box::new(store),
+            heads,
+            fetched: HashMap::new(),
+            fetched_to: 0,
+        }))
+    }
+
+    fn len(&self) -> usize {
+        match self {
+            Sessions::Folder(dirs) => dirs.len(),
+            Sessions::Database(db) => db
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner)
+                .heads
+                .len(),
+        }
+    }
+
+    /// Session `i` (< [`Self::len`]), read. The readers ask for increasing indices, so a
+    /// database session not yet fetched starts the next batch.
+    fn load(&self, i: usize) -> Result<results::SessionResults> {
+        match self {
+            Sessions::Folder(dirs) => Ok(results::read_session(&dirs[i])?),
+            Sessions::Database(db) => {
+                let mut guard = db.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+                let db = &mut *guard;
+                if let Some(session) = db.fetched.remove(&i) {
+                    return Ok(session);
+                }
+                if i < db.fetched_to {
+                    bail!(
+                        "session {i} of {} was handed out twice",
+                        db.store.location()
+                    );
+                }
+                let from = db.fetched_to;
+                let to = (i + 1).max(from + DB_BATCH).min(db.heads.len());
+                let read = db.store.read(&db.heads[from..to])?;
+                db.fetched.extend((from..to).zip(read));
+                db.fetched_to = to;
+                db.fetched
+                    .remove(&i)
+                    .with_context(|| format!("{} did not return session {i}", db.store.location()))
+            }
+        }
+    }
+}
+
 /// Reads and checks sessions on [`READERS`] threads, each taking the next unread session
 /// ([`lab::integrity::Checker::check_alone`], the part that needs no other session), then,
 /// when every session before it has been taken, adds it (`take`) and drops it itself: one
 /// session per reader in memory, every row freed by the thread that read it.
 fn read_in_order<'a>(
     checker: &lab::integrity::Checker<'_>,
-    dirs: &[PathBuf],
+    sessions: &Sessions,
     taken: Taken<'a>,
     take: &(dyn Fn(&mut Taken<'a>, &results::SessionResults, Vec<lab::integrity::Problem>) + Sync),
 ) -> Result<Taken<'a>> {
@@ -294,12 +371,15 @@ fn read_in_order<'a>(
         turn: std::sync::Condvar::new(),
     };
     let unread = std::sync::atomic::AtomicUsize::new(0);
+    let count = sessions.len();
     let read = || {
         let _stop = StopOnPanic(&turns);
         loop {
             let i = unread.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-            let Some(dir) = dirs.get(i) else { return };
-            let session = results::read_session(dir).map(|session| {
+            if i >= count {
+                return;
+            }
+            let session = sessions.load(i).map(|session| {
                 let found = checker.check_alone(&session);
                 (session, found)
             });
@@ -346,14 +426,17 @@ fn read_in_order<'a>(
 /// unless `--allow-incomplete`, and then warned about and returned for the report to list.
 fn read_logs(
     args: &ReportArgs,
+    source: &Source,
     study: &lab::StudyFile,
-    run: &results::RunManifest,
-    dirs: &[PathBuf],
+    sessions: &Sessions,
     weibull: bool,
 ) -> Result<Logs> {
     use lab::integrity::Kind;
     let definition = &study.definition;
-    let checker = lab::integrity::Checker::new(&args.results, study, run);
+    let checker = match &source.folder {
+        Some(folder) => lab::integrity::Checker::new(folder, study, &source.run),
+        None => lab::integrity::Checker::with_archived(study, &source.run, source.archived),
+    };
     let converter = from_results::Converter::new(
         &definition.manifest,
         Some((definition.scale.min, definition.scale.max)),
@@ -363,8 +446,8 @@ fn read_logs(
         stopped: None,
         converter,
         problems: Vec::new(),
-        displays: Vec::with_capacity(dirs.len()),
-        exclusions: Vec::with_capacity(dirs.len()),
+        displays: Vec::with_capacity(sessions.len()),
+        exclusions: Vec::with_capacity(sessions.len()),
         failed: None,
     };
     // In session order: a session recorded twice, the display record, the crowdsourcing
@@ -384,8 +467,7 @@ fn read_logs(
             .push(analysis::display::session_display(session, args.drop_limit));
         // The crowd rules (gold trials, hidden pages) apply to sound logs only; the
         // integrity check saw every row.
-        let exclusion =
-            analysis::exclusions::session_exclusion(session, &definition.crowdsourcing);
+        let exclusion = analysis::exclusions::session_exclusion(session, &definition.crowdsourcing);
         let kept = analysis::exclusions::apply(session, &exclusion);
         taken.exclusions.push(exclusion);
         let Some(session) = kept else { return };
@@ -406,7 +488,7 @@ fn read_logs(
         exclusions,
         failed,
         ..
-    } = read_in_order(&checker, dirs, taken, &take)?;
+    } = read_in_order(&checker, sessions, taken, &take)?;
     let refused: Vec<_> = problems
         .iter()
         .filter(|p| p.kind == Kind::Damage || !args.allow_incomplete)
@@ -415,7 +497,7 @@ fn read_logs(
         let damaged = refused.iter().any(|p| p.kind == Kind::Damage);
         bail!(
             "{} cannot be reported: {}\n  {}{}",
-            args.results.display(),
+            source.location,
             if damaged {
                 "its logs are damaged (no statistic is drawn from logs that contradict themselves or the study)"
             } else {
@@ -546,23 +628,106 @@ fn write_streamed(
     Ok(())
 }
 
-/// Runs `study report`.
-///
-/// # Errors
-/// Unreadable or malformed results (named by file, line and column), a study file that does
-/// not load, or an output that cannot be written.
-pub fn run(args: &ReportArgs) -> Result<()> {
-    let (run, dirs) = results::session_dirs(&args.results)?;
+/// Where a report's sessions come from.
+struct Source {
+    /// The results folder (`None`: a database run).
+    folder: Option<PathBuf>,
+    /// How messages name it.
+    location: String,
+    /// Its run manifest.
+    run: results::RunManifest,
+    /// Whether the study file is the run's archived copy (a database run's, written out).
+    archived: bool,
+}
+
+/// The archived study file of a database run, written to a temporary folder and loaded.
+fn load_archived(store: &mut results::pg::PgStore) -> Result<lab::StudyFile> {
+    let archive = store.archive()?;
+    let dir = std::env::temp_dir().join(format!(
+        "study-report-{}-{}",
+        std::process::id(),
+        lab::session::now_ms()
+    ));
+    std::fs::create_dir_all(&dir)?;
+    let loaded = (|| {
+        files::write(
+            &dir.join(results::pg::STUDY_COPY),
+            &archive.study_copy,
+            files::Mode::New,
+        )?;
+        files::write(
+            &dir.join(results::pg::MANIFEST_COPY),
+            &archive.manifest_copy,
+            files::Mode::New,
+        )?;
+        Ok::<_, anyhow::Error>(lab::StudyFile::load(&dir.join(results::pg::STUDY_COPY))?)
+    })();
+    let _ = std::fs::remove_dir_all(&dir);
+    loaded.with_context(|| {
+        format!(
+            "loading the study file kept with {} (pass --study to name another)",
+            store.location()
+        )
+    })
+}
+
+/// The results `args` name, their sessions and the study file to report them with.
+fn open_source(args: &ReportArgs) -> Result<(Source, Sessions, lab::StudyFile)> {
+    if let Some(db) = args.store.database()? {
+        if args.results.is_some() {
+            bail!("name the results once: a folder, or --store");
+        }
+        let mut store = results::pg::PgStore::open(&db, args.store.run.as_deref())?;
+        let heads = store.sessions()?;
+        let (study_file, archived) = match &args.study {
+            Some(path) => (
+                lab::StudyFile::load(path)
+                    .with_context(|| format!("loading the study file {}", path.display()))?,
+                false,
+            ),
+            None => (load_archived(&mut store)?, true),
+        };
+        let source = Source {
+            folder: None,
+            location: store.location(),
+            run: store.run().clone(),
+            archived,
+        };
+        return Ok((source, Sessions::database(store, heads), study_file));
+    }
+    let folder = match (&args.results, &args.store.store) {
+        (Some(f), None) => f.clone(),
+        (None, Some(f)) => PathBuf::from(f),
+        _ => bail!("name the results once: a folder, or --store"),
+    };
+    let (run, dirs) = results::session_dirs(&folder)?;
     let study_path = args
         .study
         .clone()
-        .unwrap_or_else(|| args.results.join(&run.study_file));
+        .unwrap_or_else(|| folder.join(&run.study_file));
     let study_file = lab::StudyFile::load(&study_path).with_context(|| {
         format!(
             "loading the study file {} (pass --study to name another)",
             study_path.display()
         )
     })?;
+    let source = Source {
+        location: folder.display().to_string(),
+        folder: Some(folder),
+        run,
+        archived: false,
+    };
+    Ok((source, Sessions::Folder(dirs), study_file))
+}
+
+/// Runs `study report`.
+///
+/// # Errors
+/// Unreadable or malformed results (named by file, line and column), a study file that does
+/// not load, or an output that cannot be written.
+pub fn run(args: &ReportArgs) -> Result<()> {
+    let (source, sessions, study_file) = open_source(args)?;
+    let run = &source.run;
     let options = report_options(args, &study_file.definition)?;
     let Logs {
         converted,
@@ -571,9 +736,9 @@ pub fn run(args: &ReportArgs) -> Result<()> {
         exclusions,
     } = read_logs(
         args,
+        &source,
         &study_file,
-        &run,
-        &dirs,
+        &sessions,
         options.fit.shape == Shape::Weibull,
     )?;
     let study = study_file.definition;
@@ -604,7 +769,7 @@ pub fn run(args: &ReportArgs) -> Result<()> {
             "Study {} ({} protocol, {} sessions)",
             run.study,
             converted.protocol,
-            dirs.len()
+            sessions.len()
         );
         let mut report = analysis.to_report(data, &options, &title);
         incomplete_section(&mut report, &incomplete);

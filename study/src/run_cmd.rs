@@ -9,8 +9,10 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use anyhow::{Context as _, bail};
 use clap::Args;
 use lab::StudyFile;
+use lab::results_dir::Destination;
 use lab::session::{self, Opened, Recorder, SessionOf};
 use results::store::DisplayInfo;
+use results::{FolderStore, Store};
 
 use crate::gui::render::BACKGROUND;
 use crate::gui::scene::{Figure, FrameShapes, View};
@@ -64,7 +66,8 @@ impl WindowArgs {
 pub struct RunArgs {
     /// Study file (TOML).
     pub study: PathBuf,
-    /// Subject id (letters, digits, `-` and `_`).
+    /// Subject id (letters, digits, `-` and `_`), or `auto` for the next subject number of a
+    /// database run (`S001`, `S002`, ...: never given to two stations).
     #[arg(long)]
     pub subject: String,
     /// Session number of this subject.
@@ -80,6 +83,9 @@ pub struct RunArgs {
     /// Default: `results-<study name>` beside the study file.
     #[arg(short = 'o', long = "output")]
     pub output: Option<PathBuf>,
+    /// Or a results store: a folder, or a PostgreSQL database several stations share.
+    #[command(flatten)]
+    pub store: crate::store_args::StoreArgs,
     /// Use a results directory that also holds files that are not this study's results
     /// (they are left as they are).
     #[arg(long)]
@@ -115,14 +121,23 @@ pub struct DisplayTestArgs {
 /// A bad study file or subject id, an existing session without `--resume`, no display, or a
 /// results folder that cannot be written.
 pub fn run(args: &RunArgs) -> anyhow::Result<()> {
-    session::check_subject(&args.subject)?;
+    let auto = args.subject == "auto";
+    if !auto {
+        session::check_subject(&args.subject)?;
+    }
     let file = StudyFile::load(&args.study)?;
-    let out = args
-        .output
-        .clone()
-        .unwrap_or_else(|| file.dir().join(format!("results-{}", file.definition.name)));
-    // Before anything is shown or written: the results folder is this study's.
-    lab::results_dir::check_for_subjects(&out, &file, args.force)?;
+    let destination = args.store.destination(args.output.as_deref(), || {
+        Some(file.dir().join(format!("results-{}", file.definition.name)))
+    })?;
+    if let Destination::Folder(out) = &destination {
+        if auto {
+            bail!(
+                "--subject auto takes the next subject number from a database (--store); with a results folder, name the subject"
+            );
+        }
+        // Before anything is shown or written: the results folder is this study's.
+        lab::results_dir::check_for_subjects(out, &file, args.force)?;
+    }
     if !window::display_available() {
         bail!(
             "no display (DISPLAY and WAYLAND_DISPLAY are unset): `study run` shows stimuli to a \
@@ -138,10 +153,11 @@ pub fn run(args: &RunArgs) -> anyhow::Result<()> {
         signal_hook::flag::register(sig, Arc::clone(&signalled))
             .context("installing the SIGINT/SIGTERM handler")?;
     }
-    let Some(recorder) = open_session(args, &file, &out)? else {
+    let (mut store, location, subject) = open_store(args, &file, &destination)?;
+    let Some(recorder) = open_session(args, &file, store.as_mut(), &subject)? else {
         return Ok(());
     };
-    let dir = session::session_dir(&out, &args.subject, args.session);
+    let dir = recorder.path();
     let stimuli = lab::source::open(&file)?;
     // Every stimulus the plan can show is checked while the welcome screen is up (Begin
     // waits for it, with a progress bar when it takes a while).
@@ -155,7 +171,11 @@ pub fn run(args: &RunArgs) -> anyhow::Result<()> {
         Ok(r) => r,
         Err(e) => {
             // A window that never opened leaves no session behind (a resumed one is kept).
-            if !args.resume && session::discard_unstarted(&dir).unwrap_or(false) {
+            if !args.resume
+                && store
+                    .discard_unstarted(&subject, args.session)
+                    .unwrap_or(false)
+            {
                 return Err(e.context(format!(
                     "the window did not open; no session was recorded in {}",
                     dir.display()
@@ -166,27 +186,24 @@ pub fn run(args: &RunArgs) -> anyhow::Result<()> {
     };
     print_timing(&report);
     if let Some(problems) = problems.get() {
-        // Nothing was shown: the session folder goes, as for a window that never opened.
+        // Nothing was shown: the session goes, as for a window that never opened.
         if !args.resume {
-            let _ = session::discard_unstarted(&dir);
+            let _ = store.discard_unstarted(&subject, args.session);
         }
         bail!("{problems}\nno trial was shown; fix the stimuli and run the session again");
     }
     let resume = || {
         format!(
-            "study run {} --subject {} --session {} --resume{}",
+            "study run {} --subject {subject} --session {} --resume{}",
             args.study.display(),
-            args.subject,
             args.session,
-            args.output
-                .as_ref()
-                .map_or_else(String::new, |o| format!(" -o {}", o.display()))
+            where_args(args)
         )
     };
     match exit {
         Some(Exit::Finished(summary)) => {
             println!("{summary}");
-            println!("results: {}", out.display());
+            println!("results: {location}");
             Ok(())
         }
         Some(Exit::Quit { logged }) => {
@@ -208,31 +225,92 @@ pub fn run(args: &RunArgs) -> anyhow::Result<()> {
     }
 }
 
-/// The subject's session in results directory `out`: new, or resumed with `--resume`;
-/// `None` (said on stdout) when it is already finished.
+/// The options of a resume command that name where the results are, as the experimenter
+/// gave them (a database by its URL without a password, `env` or the file).
+fn where_args(args: &RunArgs) -> String {
+    let mut out = String::new();
+    if let Some(o) = &args.output {
+        let _ = write!(out, " -o {}", o.display());
+    }
+    if let Some(s) = &args.store.store {
+        let _ = write!(out, " --store {s}");
+    }
+    if let Some(f) = &args.store.store_file {
+        let _ = write!(out, " --store-file {}", f.display());
+    }
+    if let Some(r) = &args.store.run {
+        let _ = write!(out, " --run {r}");
+    }
+    out
+}
+
+/// The store the session goes to (created or checked as the first session of a run), where
+/// it is for messages, and the subject's id (a new number from the database for `auto`).
+fn open_store(
+    args: &RunArgs,
+    file: &StudyFile,
+    destination: &Destination,
+) -> anyhow::Result<(Box<dyn Store>, String, String)> {
+    Ok(match destination {
+        Destination::Folder(out) => {
+            for note in lab::results_dir::open_for_subjects(out, file, args.force)? {
+                eprintln!("{note}");
+            }
+            (
+                Box::new(FolderStore::new(out)),
+                out.display().to_string(),
+                args.subject.clone(),
+            )
+        }
+        Destination::Database { db, run } => {
+            let (mut store, notes) =
+                lab::results_dir::open_database_for_subjects(db, run.as_deref(), file)?;
+            for note in notes {
+                eprintln!("{note}");
+            }
+            let subject = if args.subject == "auto" {
+                if args.resume {
+                    bail!("--resume continues a named subject's session: give its id, not auto");
+                }
+                loop {
+                    let id = lab::simulate::subject_id(store.next_subject_number()? - 1);
+                    if store.find_session(&id, args.session)? == results::backend::Found::Absent {
+                        println!("subject number from {}: {id}", store.location());
+                        break id;
+                    }
+                }
+            } else {
+                args.subject.clone()
+            };
+            let location = store.location();
+            (Box::new(store), location, subject)
+        }
+    })
+}
+
+/// The subject's session in `store`: new, or resumed with `--resume`; `None` (said on
+/// stdout) when it is already finished.
 fn open_session(
     args: &RunArgs,
     file: &StudyFile,
-    out: &std::path::Path,
+    store: &mut dyn Store,
+    subject: &str,
 ) -> anyhow::Result<Option<Box<Recorder>>> {
-    for note in lab::results_dir::open_for_subjects(out, file, args.force)? {
-        eprintln!("{note}");
-    }
-    let dir = session::session_dir(out, &args.subject, args.session);
-    let index = session::subject_index(&args.subject, args.session);
+    let index = session::subject_index(subject, args.session);
     let fresh = session::new_manifest(
         &file.definition,
         SessionOf {
             study_hash: &file.hash,
             manifest_hash: &file.manifest_hash,
-            subject: args.subject.clone(),
+            subject: subject.to_owned(),
             subject_index: index,
             session: args.session,
             observer_seed: None,
         },
     );
+    let dir = store.session_path(subject, args.session);
     Ok(
-        match Recorder::open(&file.definition, index, &dir, args.resume, fresh)? {
+        match Recorder::open(&file.definition, index, store, args.resume, fresh)? {
             Opened::Finished(m) => {
                 println!(
                     "{}: session already {:?} with {} trials; nothing to do",

@@ -30,7 +30,15 @@ pub struct SimulateArgs {
     pub seed: u64,
     /// Results directory to create (never overwritten).
     #[arg(short = 'o', long = "output")]
-    pub output: PathBuf,
+    pub output: Option<PathBuf>,
+    /// Or a results store: a folder, or a PostgreSQL database several stations simulate into
+    /// at once (subject numbers from the database).
+    #[command(flatten)]
+    pub store: crate::store_args::StoreArgs,
+    /// Seconds to wait for an unreachable database before stopping (the session resumes
+    /// where its committed answers end).
+    #[arg(long, default_value_t = 300)]
+    pub patience_s: u64,
     /// Pause before each answer, ms (paces trials for kill tests).
     #[arg(long, default_value_t = 0)]
     pub trial_delay_ms: u64,
@@ -199,9 +207,10 @@ pub fn simulate(args: &SimulateArgs) -> anyhow::Result<()> {
         study: args.study.clone(),
         subjects: args.subjects,
         seed: args.seed,
-        output: args.output.clone(),
+        output: args.store.destination(args.output.as_deref(), || None)?,
         trial_delay: Duration::from_millis(args.trial_delay_ms),
         resume: args.resume,
+        patience: Duration::from_secs(args.patience_s),
     };
     lab::simulate::simulate(&options, &mut |line| eprintln!("{line}"))?;
     Ok(())

@@ -480,7 +480,7 @@ fn check_rows(study: &Path, out: &Path, subject: &str, given: &BTreeMap<u32, Ans
     } = lab::session::Recorder::open(
         &file.definition,
         lab::session::subject_index(subject, 1),
-        &dir.join("s"),
+        &mut results::FolderStore::new(&dir),
         false,
         fresh,
     )
@@ -502,7 +502,7 @@ fn check_rows(study: &Path, out: &Path, subject: &str, given: &BTreeMap<u32, Ans
         rec.record(trial, response, 0, encoding, None).unwrap();
     }
     rec.finish().unwrap();
-    let replayed = results::read_trials(&dir.join("s/trials.csv")).unwrap();
+    let replayed = results::read_trials(&dir.join(format!("{subject}_s1/trials.csv"))).unwrap();
     want.extend(replayed.records);
     assert_eq!(served.records.len(), want.len(), "rows of {subject}");
     assert_eq!(

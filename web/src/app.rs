@@ -481,7 +481,13 @@ impl App {
         let dir = self.session_dir(p);
         let index = Self::subject_index(p);
         Ok(
-            match Recorder::open(&self.study.definition, index, &dir, true, fresh)? {
+            match Recorder::open(
+                &self.study.definition,
+                index,
+                &mut results::FolderStore::new(&self.out),
+                true,
+                fresh,
+            )? {
                 Opened::Finished(m) => Slot::Finished(m),
                 Opened::Ready { recorder, resumed } => {
                     let last = if resumed > 0 {

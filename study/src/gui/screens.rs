@@ -36,6 +36,8 @@ pub const ANSWER_RECORDED: &str = "Answer recorded";
 /// How long the acknowledgement stays up at least, seconds (into the next trial when the
 /// gap is shorter).
 const ACK_S: f64 = 1.0;
+/// Seconds between tries to commit an answer while the results database is unreachable.
+const RETRY_S: f64 = 1.0;
 
 /// The end screen ignores Enter this long, seconds, so the Enter that confirmed the last
 /// answer cannot close it unseen.
@@ -139,6 +141,16 @@ enum Screen {
     Trial(Box<TrialScreen>),
     /// The blank between an answer and the next trial, until this presentation time.
     Gap(f64),
+    /// The results database could not take the last answer: it is kept, and committed before
+    /// the next trial (tried again at `retry_at`).
+    Waiting {
+        /// When the outage began (presentation time).
+        since: f64,
+        /// When to try again.
+        retry_at: f64,
+        /// What the store said.
+        message: String,
+    },
     End(String),
     Failed(String),
 }
@@ -389,7 +401,10 @@ impl StudyUi {
     /// True while a trial presentation or the gap after it runs (the window repaints
     /// continuously then).
     pub fn animating(&self) -> bool {
-        matches!(self.screen, Screen::Trial(_) | Screen::Gap(_))
+        matches!(
+            self.screen,
+            Screen::Trial(_) | Screen::Gap(_) | Screen::Waiting { .. }
+        )
     }
 
     /// Whether the window may close now: once the session has stopped and, when it finished
@@ -448,6 +463,7 @@ impl StudyUi {
             Screen::Break => self.break_screen(ui, now, active, clock),
             Screen::Trial(_) => self.trial_screen(ui, now, active, clock),
             &Screen::Gap(until) => self.gap_screen(ui, now, until, clock),
+            Screen::Waiting { .. } => self.waiting_screen(ui, now, clock),
             Screen::End(text) | Screen::Failed(text) => {
                 let text = text.clone();
                 self.end_screen(ui, now, &text, active);
@@ -817,17 +833,67 @@ impl StudyUi {
         let (trial, encoding) = (t.trial.clone(), t.encoding.take());
         let phases = std::mem::take(&mut t.phases);
         match self.log_answer(trial, response, encoding, timing, clock, &phases) {
-            Ok(()) => {
-                // The documented gap between trials, as a blank with the acknowledgement;
-                // the acknowledgement stays a moment into the next trial when the gap is
-                // shorter.
-                let gap = self.study.presentation.gap_ms as f64 / 1e3;
-                self.ack_until = Some(now + gap.max(ACK_S));
-                if gap > 0.0 {
-                    self.screen = Screen::Gap(now + gap);
-                } else {
-                    self.advance(now, clock);
-                }
+            Ok(()) => self.answered(now, clock),
+            Err(e) if lab::session::is_outage(&e) => {
+                self.screen = Screen::Waiting {
+                    since: now,
+                    retry_at: now + RETRY_S,
+                    message: lab::error::chain(&e),
+                };
+            }
+            Err(e) => self.fail(&e),
+        }
+    }
+
+    /// After an answer is committed: the documented gap between trials, as a blank with the
+    /// acknowledgement (which stays a moment into the next trial when the gap is shorter).
+    fn answered(&mut self, now: f64, clock: &mut FrameClock) {
+        let gap = self.study.presentation.gap_ms as f64 / 1e3;
+        self.ack_until = Some(now + gap.max(ACK_S));
+        if gap > 0.0 {
+            self.screen = Screen::Gap(now + gap);
+        } else {
+            self.advance(now, clock);
+        }
+    }
+
+    /// The results database went away with an answer uncommitted: says so, and tries again
+    /// every [`RETRY_S`] until it is back; then the session goes on.
+    fn waiting_screen(&mut self, ui: &mut Ui, now: f64, clock: &mut FrameClock) {
+        let Screen::Waiting {
+            since,
+            retry_at,
+            message,
+        } = &self.screen
+        else {
+            return;
+        };
+        let (since, retry_at) = (*since, *retry_at);
+        let waited = now - since;
+        egui::CentralPanel::default().show(ui, |ui| {
+            ui.vertical_centered(|ui| {
+                ui.add_space(ui.available_height() * 0.3);
+                ui.heading("The results database cannot be reached");
+                ui.add_space(8.0);
+                ui.label(format!(
+                    "The last answer is kept and will be saved as soon as it is back; the next \
+                     trial waits for it. Waiting for {waited:.0} s."
+                ));
+                ui.add_space(8.0);
+                ui.label(RichText::new(message.as_str()).small());
+            });
+        });
+        if now < retry_at {
+            return;
+        }
+        match self.recorder.commit_pending() {
+            Ok(()) => self.answered(now, clock),
+            Err(e) if lab::session::is_outage(&e) => {
+                self.screen = Screen::Waiting {
+                    since,
+                    retry_at: now + RETRY_S,
+                    message: lab::error::chain(&e),
+                };
             }
             Err(e) => self.fail(&e),
         }
@@ -846,8 +912,20 @@ impl StudyUi {
     ) -> lab::Result<()> {
         let elapsed = self.recorder.elapsed_ms();
         let index = trial.index;
-        self.recorder
-            .record(trial, response, elapsed, encoding, timing)?;
+        let recorded = self
+            .recorder
+            .record(trial, response, elapsed, encoding, timing);
+        if let Err(e) = recorded {
+            if !lab::session::is_outage(&e) {
+                return Err(e);
+            }
+            // Kept with the answer until the database is back.
+            if timing.is_some() {
+                self.recorder
+                    .append_frame_intervals(index, clock.segment_intervals(), phases)?;
+            }
+            return Err(e);
+        }
         if timing.is_some() {
             self.recorder
                 .append_frame_intervals(index, clock.segment_intervals(), phases)?;

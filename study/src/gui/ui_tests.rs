@@ -101,9 +101,14 @@ fn harness(fx: Fixture) -> (Harness<'static, (StudyUi, FrameClock)>, Run) {
     let session_dir = fx.dir.join("results").join("S01_s1");
     std::fs::create_dir_all(session_dir.parent().unwrap()).unwrap();
     let manifest = fresh_manifest(&study);
-    let Opened::Ready { recorder, .. } =
-        Recorder::open(&study, 0, &session_dir, false, manifest).unwrap()
-    else {
+    let Opened::Ready { recorder, .. } = Recorder::open(
+        &study,
+        0,
+        &mut results::FolderStore::new(fx.dir.join("results")),
+        false,
+        manifest,
+    )
+    .unwrap() else {
         panic!("new session reported finished");
     };
     let ui = StudyUi::new(Arc::new(study), stimuli, recorder, false);
@@ -634,4 +639,79 @@ fn a_dscqs_scale_is_divided_into_the_five_bt500_grades() {
         assert!(band.contains(&v), "{grade}: {v} outside {band:?}");
     }
     drop(run.fx);
+}
+
+/// The results database stopped with an answer uncommitted: the window says so, keeps the
+/// answer, shows no next trial, and goes on when the server is back (a throw-away PostgreSQL
+/// server; under CI a missing one fails the test, elsewhere it is skipped).
+#[test]
+fn a_database_outage_keeps_the_answer_and_the_window_says_so() {
+    use results::pg::scratch::{ScratchServer, bin_dir};
+    let mut server = match ScratchServer::start(&std::env::temp_dir(), &["fsync=off"]) {
+        Ok(s) => s,
+        Err(e) if std::env::var_os("CI").is_none() && bin_dir().is_err() => {
+            eprintln!("skipped: {e}");
+            return;
+        }
+        Err(e) => panic!("{e}"),
+    };
+    let fx = fixture("pg", MOS);
+    let file = StudyFile::load(&fx.study_path).unwrap();
+    let stimuli = lab::source::open(&file).unwrap();
+    let db = server.create_database("ui").unwrap();
+    let (mut store, _) = lab::results_dir::open_database_for_subjects(&db, None, &file).unwrap();
+    let study = file.definition;
+    let Opened::Ready { recorder, .. } =
+        Recorder::open(&study, 0, &mut store, false, fresh_manifest(&study)).unwrap()
+    else {
+        panic!("new session reported finished");
+    };
+    let answers = || -> i64 {
+        db.connect()
+            .unwrap()
+            .query_one("SELECT count(*) FROM study_trials", &[])
+            .map_or(-1, |r| r.get(0))
+    };
+    let ui = StudyUi::new(Arc::new(study), stimuli, recorder, false);
+    let mut h = Harness::builder()
+        .with_size(egui::vec2(1280.0, 720.0))
+        .with_step_dt(DT)
+        .build_ui_state(
+            |ui, (screens, clock): &mut (StudyUi, FrameClock)| screens.ui(ui, clock),
+            (ui, FrameClock::new(None)),
+        );
+    h.run_steps(2);
+    h.get_by_role_and_label(Role::TextInput, "age").focus();
+    h.run_steps(1);
+    h.get_by_role_and_label(Role::TextInput, "age")
+        .type_text("40");
+    h.run_steps(2);
+    begin(&mut h);
+    watch(&mut h, 1.2);
+    h.get_by_label("4.5").click();
+    h.run_steps(1);
+    h.get_by_label("Continue").click();
+    h.run_steps(2);
+    assert_eq!(answers(), 1);
+    server.stop();
+    watch(&mut h, 1.7);
+    h.key_press(Key::Num3);
+    h.run_steps(1);
+    h.key_press(Key::Enter);
+    h.run_steps(3);
+    assert!(
+        h.query_by_label("The results database cannot be reached")
+            .is_some()
+    );
+    assert!(h.state().0.exit().is_none());
+    server.resume().unwrap();
+    // Tried again every second: the answer goes in, and the session ends (2 trials).
+    watch(&mut h, 2.5);
+    assert!(
+        h.query_by_label("The results database cannot be reached")
+            .is_none()
+    );
+    assert!(matches!(h.state().0.exit(), Some(Exit::Finished(_))));
+    assert_eq!(answers(), 2);
+    drop(fx);
 }

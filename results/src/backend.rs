@@ -1,0 +1,340 @@
+//! Where a study's sessions are kept, behind one interface: a results folder
+//! ([`FolderStore`], the crash-safe files of [`crate::store`]) or a PostgreSQL database
+//! ([`crate::pg::PgStore`]). Both give the same session semantics:
+//! - one writer per session: the folder's kernel lock on `session.lock`, the database's
+//!   session-level advisory lock held on the writer's connection; a second writer is refused
+//!   with [`ResultsError::Locked`] or [`ResultsError::SessionBusy`];
+//! - an answer is durable before [`SessionWriter::append`] returns (fsynced row, or a committed
+//!   transaction), so the next trial never starts before it;
+//! - a resumed session returns the committed rows, which the recorder replays through the
+//!   engine;
+//! - the study file's and the stimulus manifest's hashes are in every session's manifest.
+
+use std::fs;
+use std::path::{Path, PathBuf};
+
+use protocols::TrialRecord;
+
+use crate::store::{LOCK_FILE, SESSION_FILE, SessionLock, SessionLog, TRIALS_FILE, read_manifest};
+use crate::trials::TornRow;
+use crate::{ResultsError, SessionManifest};
+
+/// File name of a window session's per-frame presentation intervals, beside `trials.csv`.
+pub const FRAMES_FILE: &str = "frames.csv";
+
+/// The header of [`FRAMES_FILE`], with its line break.
+pub const FRAMES_HEADER: &str = "trial_index,interval_ms,phase\n";
+
+/// The folder name of `subject`'s session `session`: `<subject>_s<session>` (also the last
+/// part of a database session's name in messages).
+pub fn session_name(subject: &str, session: u32) -> String {
+    format!("{subject}_s{session}")
+}
+
+/// What a store holds of one session.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Found {
+    /// Nothing.
+    Absent,
+    /// The session, with its manifest (a folder created by a run that died before its first
+    /// manifest write has none).
+    Present(Option<Box<SessionManifest>>),
+}
+
+/// What [`Store::resume_session`] found.
+pub struct ResumedSession {
+    /// The session, open for more rows.
+    pub writer: Box<dyn SessionWriter>,
+    /// The committed rows, in order.
+    pub records: Vec<TrialRecord>,
+    /// A torn last row set aside (folders only), and the name it was set aside under.
+    pub torn: Option<(TornRow, String)>,
+}
+
+/// A results store: where sessions are created, resumed and found.
+pub trait Store {
+    /// Where the results are, for messages: the folder, or the database (never with its
+    /// password) and the run.
+    fn location(&self) -> String;
+
+    /// The path that names a session in messages: its folder, or
+    /// `<database>/<run>/<subject>_s<n>` for a database session (whose rows are numbered as
+    /// the lines of its exported `trials.csv`).
+    fn session_path(&self, subject: &str, session: u32) -> PathBuf;
+
+    /// Whether a session is recorded.
+    ///
+    /// # Errors
+    /// The store cannot be read.
+    fn find_session(&mut self, subject: &str, session: u32) -> Result<Found, ResultsError>;
+
+    /// Records a new session with `manifest` (its first manifest) and opens it for rows,
+    /// holding its lock.
+    ///
+    /// # Errors
+    /// [`ResultsError::Exists`] when it is recorded already, store errors otherwise.
+    fn create_session(
+        &mut self,
+        manifest: &SessionManifest,
+    ) -> Result<Box<dyn SessionWriter>, ResultsError>;
+
+    /// Reopens a recorded session for more rows: takes its lock and returns its committed
+    /// rows (a folder's torn last row set aside first).
+    ///
+    /// # Errors
+    /// Another writer holds it, or its rows cannot be read.
+    fn resume_session(
+        &mut self,
+        subject: &str,
+        session: u32,
+    ) -> Result<ResumedSession, ResultsError>;
+
+    /// Checks that no live writer holds a session (one that finished, before saying so); a
+    /// folder's lock left by a crash is taken over and released.
+    ///
+    /// # Errors
+    /// A live writer holds it.
+    fn check_not_held(&mut self, subject: &str, session: u32) -> Result<(), ResultsError>;
+
+    /// Removes a session in which nothing happened (no row logged, never resumed: what a
+    /// window that never opened leaves); returns whether it did.
+    ///
+    /// # Errors
+    /// The store cannot be read or changed.
+    fn discard_unstarted(&mut self, subject: &str, session: u32) -> Result<bool, ResultsError>;
+}
+
+/// One session open for rows, holding its lock until dropped.
+pub trait SessionWriter: Send {
+    /// Rows committed.
+    fn rows(&self) -> u32;
+
+    /// The path that names this session in messages ([`Store::session_path`]).
+    fn path(&self) -> PathBuf;
+
+    /// Commits one row and the manifest that counts it before returning: a folder fsyncs the
+    /// row, then replaces `session.json`; a database commits both in one transaction. After
+    /// an error the row may be committed or not; calling again with the same row commits it
+    /// once (a database writer that lost its connection reconnects, takes the session's lock
+    /// again and looks).
+    ///
+    /// # Errors
+    /// [`ResultsError::Unavailable`] when the database cannot be reached (try again later),
+    /// other errors when the row cannot be written.
+    fn append(
+        &mut self,
+        record: &TrialRecord,
+        manifest: &SessionManifest,
+    ) -> Result<(), ResultsError>;
+
+    /// Replaces the session's manifest.
+    ///
+    /// # Errors
+    /// As [`Self::append`].
+    fn write_manifest(&mut self, manifest: &SessionManifest) -> Result<(), ResultsError>;
+
+    /// Appends the presentation intervals of trial `index` to [`FRAMES_FILE`] (`phases[k]`
+    /// what frame `k` showed). A folder flushes without fsync: the answer itself is already
+    /// durable.
+    ///
+    /// # Errors
+    /// As [`Self::append`].
+    fn append_frames(
+        &mut self,
+        index: u32,
+        intervals: &[f64],
+        phases: &[&str],
+    ) -> Result<(), ResultsError>;
+}
+
+/// The rows [`FRAMES_FILE`] gets for trial `index`: `trial_index,interval_ms,phase` (or
+/// without the phase, `phased` false, for a file begun before the phase column).
+pub fn frame_rows(index: u32, intervals: &[f64], phases: &[&str], phased: bool) -> String {
+    use std::fmt::Write as _;
+    let mut text = String::with_capacity(intervals.len() * 20);
+    for (k, ms) in intervals.iter().enumerate() {
+        if phased {
+            let phase = phases.get(k).copied().unwrap_or("");
+            let _ = writeln!(text, "{index},{ms:.3},{phase}");
+        } else {
+            let _ = writeln!(text, "{index},{ms:.3}");
+        }
+    }
+    text
+}
+
+fn io(path: &Path) -> impl FnOnce(std::io::Error) -> ResultsError {
+    let path = path.to_path_buf();
+    move |cause| ResultsError::Io {
+        path,
+        op: "write",
+        cause,
+    }
+}
+
+/// A results folder (`docs/results-format.md`): one sub-folder per session.
+#[derive(Debug, Clone)]
+pub struct FolderStore {
+    root: PathBuf,
+}
+
+impl FolderStore {
+    /// The results folder `root` (its run manifest is `lab::results_dir`'s).
+    pub fn new(root: impl Into<PathBuf>) -> Self {
+        Self { root: root.into() }
+    }
+
+    /// The results folder.
+    pub fn root(&self) -> &Path {
+        &self.root
+    }
+}
+
+impl Store for FolderStore {
+    fn location(&self) -> String {
+        self.root.display().to_string()
+    }
+
+    fn session_path(&self, subject: &str, session: u32) -> PathBuf {
+        self.root.join(session_name(subject, session))
+    }
+
+    fn find_session(&mut self, subject: &str, session: u32) -> Result<Found, ResultsError> {
+        let dir = self.session_path(subject, session);
+        if !dir.exists() {
+            return Ok(Found::Absent);
+        }
+        let manifest = dir.join(SESSION_FILE);
+        Ok(Found::Present(if manifest.exists() {
+            Some(Box::new(read_manifest(&manifest)?))
+        } else {
+            None
+        }))
+    }
+
+    fn create_session(
+        &mut self,
+        manifest: &SessionManifest,
+    ) -> Result<Box<dyn SessionWriter>, ResultsError> {
+        let log = SessionLog::create(&self.session_path(&manifest.subject, manifest.session))?;
+        log.write_manifest(manifest)?;
+        Ok(Box::new(FolderWriter { log }))
+    }
+
+    fn resume_session(
+        &mut self,
+        subject: &str,
+        session: u32,
+    ) -> Result<ResumedSession, ResultsError> {
+        let resumed = SessionLog::resume(&self.session_path(subject, session))?;
+        let torn = resumed.torn.map(|(row, aside)| {
+            let name = aside
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            (row, name)
+        });
+        Ok(ResumedSession {
+            writer: Box::new(FolderWriter { log: resumed.log }),
+            records: resumed.records,
+            torn,
+        })
+    }
+
+    fn check_not_held(&mut self, subject: &str, session: u32) -> Result<(), ResultsError> {
+        // A crash after the final manifest write can leave the lock behind: take the stale
+        // lock over and release it (refused if a live runner holds it).
+        drop(SessionLock::acquire(&self.session_path(subject, session))?);
+        Ok(())
+    }
+
+    fn discard_unstarted(&mut self, subject: &str, session: u32) -> Result<bool, ResultsError> {
+        let dir = self.session_path(subject, session);
+        let manifest: SessionManifest = read_manifest(&dir.join(SESSION_FILE))?;
+        let trials = crate::read_trials(&dir.join(TRIALS_FILE))?;
+        if manifest.resumes > 0 || !trials.records.is_empty() || trials.torn.is_some() {
+            return Ok(false);
+        }
+        for f in [SESSION_FILE, TRIALS_FILE, LOCK_FILE] {
+            let path = dir.join(f);
+            match fs::remove_file(&path) {
+                Err(e) if e.kind() != std::io::ErrorKind::NotFound => return Err(io(&path)(e)),
+                _ => {}
+            }
+        }
+        Ok(fs::remove_dir(&dir).is_ok())
+    }
+}
+
+/// A folder session open for rows ([`SessionLog`]).
+#[derive(Debug)]
+pub struct FolderWriter {
+    log: SessionLog,
+}
+
+impl SessionWriter for FolderWriter {
+    fn rows(&self) -> u32 {
+        self.log.rows()
+    }
+
+    fn path(&self) -> PathBuf {
+        self.log.dir().to_path_buf()
+    }
+
+    fn append(
+        &mut self,
+        record: &TrialRecord,
+        manifest: &SessionManifest,
+    ) -> Result<(), ResultsError> {
+        self.log.append(record)?;
+        // The manifest's count follows every row, so a session stopped at any point (but a
+        // kill between these two writes) reads as many trials in both files.
+        self.log.write_manifest(manifest)
+    }
+
+    fn write_manifest(&mut self, manifest: &SessionManifest) -> Result<(), ResultsError> {
+        self.log.write_manifest(manifest)
+    }
+
+    fn append_frames(
+        &mut self,
+        index: u32,
+        intervals: &[f64],
+        phases: &[&str],
+    ) -> Result<(), ResultsError> {
+        use std::io::{Read as _, Write as _};
+        let path = self.log.dir().join(FRAMES_FILE);
+        let read = |e| ResultsError::Io {
+            path: path.clone(),
+            op: "read",
+            cause: e,
+        };
+        // A session begun before the phase column keeps its two columns when resumed.
+        let (new, phased) = match fs::File::open(&path) {
+            Ok(f) => {
+                let mut head = Vec::with_capacity(64);
+                f.take(64).read_to_end(&mut head).map_err(read)?;
+                let phased = head
+                    .split(|b| *b == b'\n')
+                    .next()
+                    .is_some_and(|h| h.ends_with(b",phase"));
+                (false, phased)
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => (true, true),
+            Err(e) => return Err(read(e)),
+        };
+        let mut text = String::new();
+        if new {
+            text.push_str(FRAMES_HEADER);
+        }
+        text.push_str(&frame_rows(index, intervals, phases, phased));
+        let mut f = fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(&path)
+            .map_err(io(&path))?;
+        f.write_all(text.as_bytes())
+            .and_then(|()| f.flush())
+            .map_err(io(&path))
+    }
+}

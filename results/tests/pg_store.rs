@@ -1,0 +1,383 @@
+//! The PostgreSQL store against a real server (a throw-away one, `initdb` in a temporary
+//! folder): subject numbers never given twice, one writer per session, the roles of
+//! `docs/postgres.md` (a station inserts rows only into the sessions it holds), schema
+//! versions, an answer kept through a server restart, and passwords never shown.
+//! Under CI a missing server fails these tests; elsewhere they say so and pass.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
+
+use std::collections::BTreeMap;
+use std::sync::{Arc, Barrier};
+
+use protocols::{
+    Answer, Arrangement, Block, Outcome, Position, Protocol, Response, Trial, TrialRecord,
+};
+use results::backend::{Found, Store};
+use results::pg::scratch::ScratchServer;
+use results::pg::{Archive, Database, PgStore};
+use results::store::{MANIFEST_FORMAT_VERSION, SessionState};
+use results::{ResultsError, RunManifest, SessionManifest};
+
+fn server() -> Option<ScratchServer> {
+    // No fsync: what is tested is a server process stopped or killed, not the machine.
+    match ScratchServer::start(&std::env::temp_dir(), &["fsync=off"]) {
+        Ok(s) => Some(s),
+        Err(e) if std::env::var_os("CI").is_none() && results::pg::scratch::bin_dir().is_err() => {
+            eprintln!("skipped: {e}");
+            None
+        }
+        Err(e) => panic!("{e}"),
+    }
+}
+
+fn run_manifest() -> RunManifest {
+    RunManifest {
+        format_version: MANIFEST_FORMAT_VERSION,
+        study: "pg-test".into(),
+        study_hash: "h1".into(),
+        manifest_hash: Some("m1".into()),
+        study_file: "study.toml".into(),
+        plan_seed: 7,
+        observer_seed: None,
+        subjects: 0,
+        software_version: "test".into(),
+        created_ms: 1,
+    }
+}
+
+fn archive() -> Archive {
+    Archive {
+        study_copy: b"name = \"pg-test\"\n".to_vec(),
+        manifest_copy: b"{}".to_vec(),
+    }
+}
+
+fn open(db: &Database) -> PgStore {
+    PgStore::open_or_create(db, "pg-test", &run_manifest(), &archive())
+        .unwrap()
+        .0
+}
+
+fn manifest(subject: &str) -> SessionManifest {
+    SessionManifest {
+        format_version: MANIFEST_FORMAT_VERSION,
+        study: "pg-test".into(),
+        study_hash: "h1".into(),
+        manifest_hash: Some("m1".into()),
+        protocol: Protocol::Mos,
+        subject: subject.into(),
+        subject_index: 3,
+        session: 1,
+        plan_seed: 7,
+        observer_seed: None,
+        software_version: "test".into(),
+        subject_fields: BTreeMap::new(),
+        started_ms: 5,
+        ended_ms: None,
+        status: SessionState::Running,
+        trials_logged: 0,
+        not_shown: Vec::new(),
+        thresholds: Vec::new(),
+        resumes: 0,
+        torn_rows: Vec::new(),
+        display: None,
+        browser: None,
+    }
+}
+
+fn record(subject: &str, index: u32, rating: f64) -> TrialRecord {
+    TrialRecord {
+        study: "pg-test".into(),
+        subject: subject.into(),
+        session: 1,
+        protocol: Protocol::Mos,
+        trial: Trial {
+            index,
+            block: Block::Test,
+            condition: "c, with \"quotes\"".into(),
+            stimulus: format!("walk/x/cr{index}"),
+            reference: "walk/reference".into(),
+            arrangement: Arrangement::SideBySide,
+            reference_position: Position::Left,
+            staircase: None,
+            level: Some(0.1 + f64::from(index)),
+            break_before: false,
+        },
+        response: Response {
+            answer: Answer::Rating(rating),
+            response_time_ms: 1234,
+            replays: 1,
+            dropped_frames: 0,
+        },
+        outcome: Outcome {
+            score: rating,
+            score_reference: None,
+            score_test: None,
+            correct: None,
+            reversal: None,
+        },
+        elapsed_ms: 100 * u64::from(index),
+        wall_clock_ms: 1_700_000_000_000,
+        monotonic_ms: 17,
+        encoding: None,
+        timing: None,
+    }
+}
+
+/// Two stations asking for subject numbers at the same moment, 100 times each: 200
+/// different numbers, 1 to 200, each recorded once.
+fn two_stations_never_get_the_same_subject_number(server: &ScratchServer) {
+    let db = server.create_database("numbers").unwrap();
+    drop(open(&db));
+    let barrier = Arc::new(Barrier::new(2));
+    let stations: Vec<_> = (0..2)
+        .map(|_| {
+            let (db, barrier) = (db.clone(), Arc::clone(&barrier));
+            std::thread::spawn(move || {
+                let mut store = PgStore::open(&db, Some("pg-test")).unwrap();
+                (0..100)
+                    .map(|_| {
+                        barrier.wait();
+                        store.next_subject_number().unwrap()
+                    })
+                    .collect::<Vec<u32>>()
+            })
+        })
+        .collect();
+    let mut all: Vec<u32> = stations
+        .into_iter()
+        .flat_map(|s| s.join().unwrap())
+        .collect();
+    all.sort_unstable();
+    assert_eq!(all, (1..=200).collect::<Vec<_>>());
+    let mut client = db.connect().unwrap();
+    let recorded: i64 = client
+        .query_one(
+            "SELECT count(DISTINCT number) FROM study_subject_numbers",
+            &[],
+        )
+        .unwrap()
+        .get(0);
+    assert_eq!(recorded, 200);
+}
+
+/// A session has one writer: a second station is refused while the first holds it, and gets
+/// it (with every committed row) once the first is gone. Rows and manifest come back as
+/// written.
+fn one_writer_per_session_and_rows_read_back_as_written(server: &ScratchServer) {
+    let db = server.create_database("writers").unwrap();
+    let mut a = open(&db);
+    let mut b = PgStore::open(&db, None).unwrap();
+    let mut m = manifest("S01");
+    let mut writer = a.create_session(&m).unwrap();
+    assert!(matches!(
+        a.create_session(&m),
+        Err(ResultsError::Exists { .. })
+    ));
+    for i in 0..3 {
+        m.trials_logged = i + 1;
+        writer
+            .append(&record("S01", i, 1.5 + f64::from(i)), &m)
+            .unwrap();
+    }
+    let busy = b.resume_session("S01", 1).err().unwrap();
+    let text = busy.to_string();
+    assert!(
+        matches!(busy, ResultsError::SessionBusy { .. }) && text.contains("pid"),
+        "{text}"
+    );
+    drop(writer);
+    let resumed = b.resume_session("S01", 1).unwrap();
+    assert_eq!(resumed.records.len(), 3);
+    assert_eq!(resumed.writer.rows(), 3);
+    assert_eq!(resumed.records[2], record("S01", 2, 3.5));
+    let Found::Present(Some(back)) = a.find_session("S01", 1).unwrap() else {
+        panic!("session not found");
+    };
+    assert_eq!(*back, m);
+    drop(resumed);
+    let heads = a.sessions().unwrap();
+    let read = a.read(&heads).unwrap();
+    assert_eq!(read.len(), 1);
+    assert_eq!(read[0].trials.records.len(), 3);
+}
+
+/// The roles of docs/postgres.md, run as written there: a station inserts answers only into
+/// a session whose lock it holds, and can neither change nor delete a committed answer; an
+/// analyst reads and writes nothing.
+fn roles_from_the_docs_allow_what_they_say(server: &ScratchServer) {
+    let db = server.create_database("roles").unwrap();
+    drop(open(&db));
+    let docs = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../docs/postgres.md"))
+        .unwrap();
+    let sql = docs
+        .split("```sql\n")
+        .nth(2)
+        .and_then(|s| s.split("```").next())
+        .expect("docs/postgres.md: the grants block (the second ```sql block)");
+    let mut admin = db.connect().unwrap();
+    admin
+        .batch_execute(
+            "CREATE ROLE study_station LOGIN; CREATE ROLE study_analyst LOGIN; \
+             CREATE ROLE study_owner LOGIN",
+        )
+        .unwrap();
+    admin.batch_execute(sql).unwrap();
+    let as_role = |role: &str| {
+        Database::parse(
+            &format!("postgres://{role}@127.0.0.1:{}/roles", server.port()),
+            "test",
+        )
+        .unwrap()
+    };
+    let station = as_role("study_station");
+    let mut store = PgStore::open(&station, Some("pg-test")).unwrap();
+    assert_eq!(store.next_subject_number().unwrap(), 1);
+    let mut m = manifest("S02");
+    let mut writer = store.create_session(&m).unwrap();
+    m.trials_logged = 1;
+    writer.append(&record("S02", 0, 4.0), &m).unwrap();
+    let mut other = station.connect().unwrap();
+    let id: i32 = other
+        .query_one("SELECT id FROM study_sessions WHERE subject = 'S02'", &[])
+        .unwrap()
+        .get(0);
+    // Another connection of the same role does not hold the session.
+    let err = other
+        .execute(
+            "INSERT INTO study_trials SELECT session_id, 1, study, subject, session, 1, block, \
+             protocol, condition, stimulus, reference, arrangement, reference_position, \
+             break_before, staircase, level, response, response_a, response_b, choice, score, \
+             score_reference, score_test, correct, reversal, response_time_ms, replays, \
+             dropped_frames, elapsed_ms, wall_clock_ms, monotonic_ms, codec_params, \
+             achieved_cr, rms_cm, frames_shown, interval_sd_ms FROM study_trials \
+             WHERE session_id = $1",
+            &[&id],
+        )
+        .unwrap_err();
+    let why = err
+        .as_db_error()
+        .map(|e| e.message().to_owned())
+        .unwrap_or_default();
+    assert!(why.contains("row-level security"), "{err}: {why}");
+    for sql in [
+        "UPDATE study_trials SET score = 1",
+        "DELETE FROM study_trials",
+    ] {
+        assert!(other.execute(sql, &[]).is_err(), "a station may not: {sql}");
+    }
+    let mut analyst = as_role("study_analyst").connect().unwrap();
+    let n: i64 = analyst
+        .query_one("SELECT count(*) FROM study_trials", &[])
+        .unwrap()
+        .get(0);
+    assert_eq!(n, 1);
+    assert!(
+        analyst
+            .execute("DELETE FROM study_session_files", &[])
+            .is_err()
+    );
+}
+
+/// The schema is migrated once by stations that start together, and a database whose schema
+/// is newer than this build is refused, saying so.
+fn schema_is_versioned_and_a_newer_one_refused(server: &ScratchServer) {
+    let db = server.create_database("schema").unwrap();
+    let starts: Vec<_> = (0..3)
+        .map(|_| {
+            let db = db.clone();
+            std::thread::spawn(move || db.open().map(|_| ()))
+        })
+        .collect();
+    for s in starts {
+        s.join().unwrap().unwrap();
+    }
+    let mut client = db.connect().unwrap();
+    let versions: Vec<i32> = client
+        .query("SELECT version FROM study_schema_version", &[])
+        .unwrap()
+        .iter()
+        .map(|r| r.get(0))
+        .collect();
+    assert_eq!(versions, [results::pg::schema::SCHEMA_VERSION]);
+    client
+        .execute(
+            "INSERT INTO study_schema_version (version, software) VALUES (99, 'future')",
+            &[],
+        )
+        .unwrap();
+    let err = db.open().err().unwrap().to_string();
+    assert!(err.contains("version 99") && err.contains("newer"), "{err}");
+}
+
+/// An answer whose commit met a stopped server is kept by the caller and committed once when
+/// the server is back; the writer takes its session again.
+fn an_answer_survives_a_server_restart(server: &mut ScratchServer) {
+    let db = server.create_database("restart").unwrap();
+    let mut store = open(&db);
+    let mut m = manifest("S03");
+    let mut writer = store.create_session(&m).unwrap();
+    m.trials_logged = 1;
+    writer.append(&record("S03", 0, 2.0), &m).unwrap();
+    server.stop();
+    m.trials_logged = 2;
+    let err = writer.append(&record("S03", 1, 3.0), &m).unwrap_err();
+    assert!(matches!(err, ResultsError::Unavailable { .. }), "{err:?}");
+    assert!(err.to_string().contains("cannot be reached"), "{err}");
+    server.resume().unwrap();
+    writer.append(&record("S03", 1, 3.0), &m).unwrap();
+    assert_eq!(writer.rows(), 2);
+    drop(writer);
+    let resumed = open(&db).resume_session("S03", 1).unwrap();
+    assert_eq!(
+        resumed.records,
+        [record("S03", 0, 2.0), record("S03", 1, 3.0)]
+    );
+}
+
+/// One throw-away server for every scenario (starting one is most of their cost), each in a
+/// database of its own; the restart comes last.
+#[test]
+fn postgres_store() {
+    let Some(mut server) = server() else { return };
+    two_stations_never_get_the_same_subject_number(&server);
+    one_writer_per_session_and_rows_read_back_as_written(&server);
+    roles_from_the_docs_allow_what_they_say(&server);
+    schema_is_versioned_and_a_newer_one_refused(&server);
+    an_answer_survives_a_server_restart(&mut server);
+}
+
+/// A password given on the command line is refused; one from a file is used but never shown.
+#[test]
+fn passwords_are_never_shown() {
+    let err = Database::from_argument("postgres://station:s3cret@db.lab:5432/study")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        !err.contains("s3cret") && err.contains("STUDY_DATABASE_URL"),
+        "{err}"
+    );
+    let dir = std::env::temp_dir().join(format!("pg-pass-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("url");
+    std::fs::write(&file, "postgres://station:s3cret@127.0.0.1:1/study\n").unwrap();
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt as _;
+        std::fs::set_permissions(&file, std::fs::Permissions::from_mode(0o644)).unwrap();
+        let err = Database::from_file(&file).unwrap_err().to_string();
+        assert!(
+            err.contains("chmod 600") && !err.contains("s3cret"),
+            "{err}"
+        );
+        std::fs::set_permissions(&file, std::fs::Permissions::from_mode(0o600)).unwrap();
+    }
+    let db = Database::from_file(&file).unwrap();
+    assert_eq!(db.to_string(), "postgres://station@127.0.0.1:1/study");
+    assert!(!format!("{db:?}").contains("s3cret"));
+    let err = db.connect().err().unwrap().to_string();
+    assert!(
+        err.contains("cannot be reached") && !err.contains("s3cret"),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
