@@ -229,7 +229,7 @@ struct Scores<'c> {
     /// Rows into `subjects` and `scores`, by subject, each subject's in row order.
     rows: &'c [u32],
     subjects: &'c [u32],
-    scores: &'c [f64],
+    values: &'c [f64],
 }
 
 impl SurealDataset<'_> {
@@ -267,7 +267,7 @@ impl SurealDataset<'_> {
                 out.text.push_str(": [");
                 previous = Some(subject);
             }
-            floats.push(&mut out.text, scores.scores[row]);
+            floats.push(&mut out.text, scores.values[row]);
             out.spill()?;
         }
         if previous.is_some() {
@@ -327,6 +327,32 @@ impl SurealDataset<'_> {
             .unwrap_or_else(|e| String::from_utf8_lossy(e.as_bytes()).into_owned())
     }
 
+    /// The dataset's head: its name, scale and reference videos (`contents`: name and path),
+    /// up to the list of distorted videos.
+    fn write_header<W: Write>(
+        &self,
+        out: &mut Chunks<W>,
+        contents: &[(String, String)],
+    ) -> io::Result<()> {
+        let _ = write!(
+            out.text,
+            "dataset_name = {}\nyuv_fmt = 'notyuv'\nwidth = 0\nheight = 0\nref_score = {}\n",
+            py_str(self.name),
+            py_float(self.ref_score)
+        );
+        out.text.push_str("ref_videos = [\n");
+        for (id, (name, path)) in contents.iter().enumerate() {
+            let _ = writeln!(
+                out.text,
+                "    {{'content_id': {id}, 'content_name': {}, 'path': {}}},",
+                py_str(name),
+                py_str(path)
+            );
+            out.spill()?;
+        }
+        Ok(())
+    }
+
     /// [`Self::to_python`] written to `out` a block at a time, from the ratings grouped by
     /// condition and subject in place (no map per condition and subject, no string per
     /// score).
@@ -371,7 +397,7 @@ impl SurealDataset<'_> {
                 let scores = Scores {
                     rows,
                     subjects: &rated_subjects,
-                    scores: &rated_scores,
+                    values: &rated_scores,
                 };
                 entries.push((c.id, content, path_of(c), scores));
             }
@@ -383,35 +409,20 @@ impl SurealDataset<'_> {
                 let tests = Scores {
                     rows,
                     subjects: &pair_subjects,
-                    scores: &test_scores,
+                    values: &test_scores,
                 };
                 entries.push((c.id, content, path, tests));
                 let references = Scores {
                     rows,
                     subjects: &pair_subjects,
-                    scores: &reference_scores,
+                    values: &reference_scores,
                 };
                 references_out.push((content, ref_path, references));
             }
         }
         let mut next_asset = self.conditions.iter().map(|c| c.id + 1).max().unwrap_or(0);
         let mut out = Chunks::new(out);
-        let _ = write!(
-            out.text,
-            "dataset_name = {}\nyuv_fmt = 'notyuv'\nwidth = 0\nheight = 0\nref_score = {}\n",
-            py_str(self.name),
-            py_float(self.ref_score)
-        );
-        out.text.push_str("ref_videos = [\n");
-        for (id, (name, path)) in contents.iter().enumerate() {
-            let _ = writeln!(
-                out.text,
-                "    {{'content_id': {id}, 'content_name': {}, 'path': {}}},",
-                py_str(name),
-                py_str(path)
-            );
-            out.spill()?;
-        }
+        self.write_header(&mut out, &contents)?;
         out.text.push_str("]\ndis_videos = [\n");
         let (mut names, mut floats) = (FastMap::default(), FloatText::new(push_py_float));
         for (asset, content, path, scores) in &entries {

@@ -614,10 +614,10 @@ mod tests {
             e.trials.records[i].trial.stimulus = s.trials.records[other].trial.stimulus.clone();
         });
         edit("condition", &|e| {
-            e.trials.records[i].trial.condition.push('x')
+            e.trials.records[i].trial.condition.push('x');
         });
         edit("reference", &|e| {
-            e.trials.records[i].trial.reference.push('x')
+            e.trials.records[i].trial.reference.push('x');
         });
         edit("arrangement", &|e| {
             e.trials.records[i].trial.arrangement = Arrangement::Sequential;
@@ -653,7 +653,7 @@ mod tests {
             };
         });
         edit("off scale", &|e| {
-            e.trials.records[i].response.answer = Answer::Rating(99.0)
+            e.trials.records[i].response.answer = Answer::Rating(99.0);
         });
         edit("replays", &|e| e.trials.records[i].response.replays += 50);
         edit("score", &|e| e.trials.records[i].outcome.score += 0.5);

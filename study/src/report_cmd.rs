@@ -393,7 +393,7 @@ fn read_in_order<'a>(
                     Some(session)
                 }
                 Err(e) => {
-                    taken.stopped = Some(e.into());
+                    taken.stopped = Some(e);
                     None
                 }
             };
