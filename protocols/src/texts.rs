@@ -2,8 +2,8 @@
 //! of `study serve`): the BT.500 grade labels, the 2AFC question, the acknowledgement, and
 //! the default instructions of each protocol as the study's presentation settings make them.
 
-use crate::record::{Arrangement, Protocol};
-use crate::study::{RatingScale, ScaleKind, StimulusLabels, StudyDefinition};
+use crate::record::{Arrangement, Position, Protocol};
+use crate::study::{RatingScale, ReferencePlacement, ScaleKind, StimulusLabels, StudyDefinition};
 
 /// The BT.500 five-grade quality labels, best first.
 pub const QUALITY_LABELS: [&str; 5] = ["Excellent", "Good", "Fair", "Poor", "Bad"];
@@ -86,23 +86,123 @@ pub fn default_instructions(study: &StudyDefinition) -> String {
             )
         }
         Protocol::Dscqs => {
+            let [a, b] = dscqs_names(p.arrangement);
             let keys = if study.scale.kind == ScaleKind::Continuous {
-                " The number keys mark A first, then B; the Left and Right \
-                 arrow keys choose which scale the keys move."
+                format!(
+                    " The number keys mark {a} first, then {b}; the Left and Right arrow keys \
+                     choose which scale the keys move."
+                )
             } else {
-                " The number keys rate A first, then B; the Left and Right \
-                 arrow keys choose which row the keys change."
+                format!(
+                    " The number keys rate {a} first, then {b}; the Left and Right arrow keys \
+                     choose which row the keys change."
+                )
             };
-            format!(
+            let shows = if p.arrangement == Arrangement::Sequential {
+                let which = match p.reference_position {
+                    ReferencePlacement::Fixed(Position::First) => {
+                        "The first is the original, the second a compressed version of it."
+                    }
+                    ReferencePlacement::Fixed(_) => {
+                        "The second is the original, the first a compressed version of it."
+                    }
+                    ReferencePlacement::Random => {
+                        "One of them may be the original; you are not told which."
+                    }
+                };
+                format!(
+                    "Each trial shows two motions one after the other, {a} then {b}, with a grey \
+                     screen between them. {which} Then rate both."
+                )
+            } else {
                 "Each trial shows two motions, A and B, twice, with a grey screen between them: \
                  A, B, A, B. One of them may be the original; you are not told which. After the \
-                 second B, rate both. {}{keys}",
-                scale_instructions(&study.scale, "the quality of A and of B")
+                 second B, rate both."
+                    .to_string()
+            };
+            format!(
+                "{shows} {}{keys}",
+                scale_instructions(&study.scale, &format!("the quality of {a} and of {b}"))
             )
         }
         Protocol::Staircase => "Each trial shows two motions side by side. Choose the one that \
                                 looks more natural with the Left or Right arrow key (or click). \
                                 Answer even when you are unsure."
             .to_string(),
+    }
+}
+
+/// What the two stimuli of a DSCQS trial are called on screen: A and B (BT.500's A B A B),
+/// or 1 and 2 (one after the other, thesis 6.5), as the presentation labels them.
+pub fn dscqs_names(arrangement: Arrangement) -> [&'static str; 2] {
+    if arrangement == Arrangement::Sequential {
+        ["1", "2"]
+    } else {
+        ["A", "B"]
+    }
+}
+
+/// How many trials a session has, as far as the subject can be told.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Planned {
+    /// Exactly this many (MOS, DSCQS: planned up front).
+    Exactly(u32),
+    /// At most this many (staircases capped by `max_trials`; they may stop earlier).
+    AtMost(u32),
+    /// Not known (a staircase that stops on reversals only).
+    Unknown,
+}
+
+impl Planned {
+    /// "Trial k of n", "Trial k of at most n" or "Trial k".
+    #[must_use]
+    pub fn trial_text(self, k: u32) -> String {
+        match self {
+            Planned::Exactly(n) => format!("Trial {k} of {n}"),
+            Planned::AtMost(n) => format!("Trial {k} of at most {n}"),
+            Planned::Unknown => format!("Trial {k}"),
+        }
+    }
+
+    /// "k of n trials done", and so on.
+    #[must_use]
+    pub fn done_text(self, done: u32) -> String {
+        match self {
+            Planned::Exactly(n) => format!("Trials done: {done} of {n}."),
+            Planned::AtMost(n) => format!("Trials done: {done} (at most {n})."),
+            Planned::Unknown => format!("Trials done: {done}."),
+        }
+    }
+
+    /// The number a progress bar runs to (exact plans only).
+    #[must_use]
+    pub fn exact(self) -> Option<u32> {
+        match self {
+            Planned::Exactly(n) if n > 0 => Some(n),
+            _ => None,
+        }
+    }
+}
+
+/// Total trials of a session: exact when the protocol plans them up front, an upper bound
+/// when every interleaved staircase has `max_trials`.
+#[must_use]
+pub fn planned_trials(study: &StudyDefinition) -> Planned {
+    match study.protocol {
+        Protocol::Mos | Protocol::Dscqs => Planned::Exactly(
+            (study.familiarization.len()
+                + study.conditions.len()
+                + study.session.hidden_repeats as usize) as u32,
+        ),
+        Protocol::Staircase => study
+            .staircase
+            .as_ref()
+            .and_then(|s| {
+                s.tracks
+                    .iter()
+                    .map(|t| t.settings.max_trials)
+                    .sum::<Option<u32>>()
+            })
+            .map_or(Planned::Unknown, Planned::AtMost),
     }
 }

@@ -711,6 +711,8 @@ impl App {
             "index": t.index,
             "practice": t.block == Block::Familiarization,
             "arrangement": t.arrangement,
+            // What a DSCQS pair is called on screen (A and B, or 1 and 2 one after the other).
+            "names": texts::dscqs_names(t.arrangement),
             "break_before": t.break_before,
             "slots": slots,
             "clip_s": pending.clip_s,
@@ -1062,24 +1064,9 @@ fn clip_text(s: &str, n: usize) -> String {
 
 /// How many trials the session has, as the subject can be told (as the window says it).
 fn planned(study: &StudyDefinition) -> (&'static str, Option<u32>) {
-    match study.protocol {
-        Protocol::Mos | Protocol::Dscqs => (
-            "exactly",
-            Some(
-                (study.familiarization.len()
-                    + study.conditions.len()
-                    + study.session.hidden_repeats as usize) as u32,
-            ),
-        ),
-        Protocol::Staircase => study
-            .staircase
-            .as_ref()
-            .and_then(|s| {
-                s.tracks
-                    .iter()
-                    .map(|t| t.settings.max_trials)
-                    .sum::<Option<u32>>()
-            })
-            .map_or(("unknown", None), |n| ("at_most", Some(n))),
+    match texts::planned_trials(study) {
+        texts::Planned::Exactly(n) => ("exactly", Some(n)),
+        texts::Planned::AtMost(n) => ("at_most", Some(n)),
+        texts::Planned::Unknown => ("unknown", None),
     }
 }

@@ -14,7 +14,7 @@ use std::sync::Arc;
 
 use egui::{Align, Color32, Key, Layout, RichText, Ui, Vec2};
 use protocols::record::{Answer, Arrangement, Block, Position, Protocol, Response, Trial};
-use protocols::study::{RatingScale, ReferencePlacement, ScaleKind, StimulusLabels};
+use protocols::study::{RatingScale, ScaleKind, StimulusLabels};
 use protocols::{FrameTiming, StimulusEncoding, StudyDefinition};
 
 use super::flow::{Frame, Presentation, Show, stimulus_at};
@@ -23,15 +23,10 @@ use super::scene::{Figure, FrameShapes, Stage, View};
 use super::timing::FrameClock;
 use lab::session::Recorder;
 use lab::source::StimulusSource;
-
-/// The BT.500 five-grade quality labels, best first.
-pub const QUALITY_LABELS: [&str; 5] = ["Excellent", "Good", "Fair", "Poor", "Bad"];
-
-/// The 2AFC question of thesis ch. 5.
-pub const AFC_QUESTION: &str = "Which motion looks more natural?";
-
-/// Shown after an answer was logged, over the blank gap before the next trial.
-pub const ANSWER_RECORDED: &str = "Answer recorded";
+pub use protocols::texts::{AFC_QUESTION, ANSWER_RECORDED, QUALITY_LABELS, default_instructions};
+use protocols::texts::{
+    Planned, categories, dscqs_names, format_rating, planned_trials, quality_label,
+};
 
 /// How long the acknowledgement stays up at least, seconds (into the next trial when the
 /// gap is shorter).
@@ -42,98 +37,6 @@ const RETRY_S: f64 = 1.0;
 /// The end screen ignores Enter this long, seconds, so the Enter that confirmed the last
 /// answer cannot close it unseen.
 const END_KEY_DELAY_S: f64 = 0.7;
-
-/// How the rating is given, for the instructions.
-fn scale_instructions(scale: &RatingScale, what: &str) -> String {
-    match scale.kind {
-        ScaleKind::Categorical => format!(
-            "Rate {what} from {} (worst) to {} (best), with the mouse or the number keys \
-             (the Up and Down arrow keys move by one step), then press Continue (Enter).",
-            format_rating(scale.min),
-            format_rating(scale.max)
-        ),
-        ScaleKind::Continuous => format!(
-            "Rate {what} by placing a mark on the scale, from Bad at the bottom to Excellent at \
-             the top: click or drag, or press 1 (Bad) to 5 (Excellent) and move the mark with \
-             the Up and Down arrow keys (Page Up and Page Down for larger steps). Then press \
-             Continue (Enter)."
-        ),
-    }
-}
-
-/// The default instructions for `study` (used when `[session] instructions` is not given):
-/// they say which motion is the original where the screen labels it (MOS), and that nobody
-/// says so where the design hides it (DSCQS, 2AFC).
-pub fn default_instructions(study: &StudyDefinition) -> String {
-    let p = &study.presentation;
-    match study.protocol {
-        Protocol::Mos => {
-            let how = if p.arrangement == Arrangement::Sequential {
-                "one after the other"
-            } else {
-                "side by side"
-            };
-            let which = match &p.labels {
-                Some(StimulusLabels { reference, test }) => format!(
-                    "the original motion, labelled “{reference}”, and a compressed version of it, \
-                     labelled “{test}”"
-                ),
-                None => "the original motion and a compressed version of it (they are not \
-                         labelled)"
-                    .to_string(),
-            };
-            format!(
-                "Each trial shows {which}, {how}. {} The first few trials show the range of \
-                 qualities you will meet.",
-                scale_instructions(&study.scale, "the quality of the compressed motion")
-            )
-        }
-        Protocol::Dscqs => {
-            let [a, b] = dscqs_names(p.arrangement);
-            let keys = if study.scale.kind == ScaleKind::Continuous {
-                format!(
-                    " The number keys mark {a} first, then {b}; the Left and Right arrow keys \
-                     choose which scale the keys move."
-                )
-            } else {
-                format!(
-                    " The number keys rate {a} first, then {b}; the Left and Right arrow keys \
-                     choose which row the keys change."
-                )
-            };
-            let shows = if p.arrangement == Arrangement::Sequential {
-                let which = match p.reference_position {
-                    ReferencePlacement::Fixed(Position::First) => {
-                        "The first is the original, the second a compressed version of it."
-                    }
-                    ReferencePlacement::Fixed(_) => {
-                        "The second is the original, the first a compressed version of it."
-                    }
-                    ReferencePlacement::Random => {
-                        "One of them may be the original; you are not told which."
-                    }
-                };
-                format!(
-                    "Each trial shows two motions one after the other, {a} then {b}, with a grey \
-                     screen between them. {which} Then rate both."
-                )
-            } else {
-                "Each trial shows two motions, A and B, twice, with a grey screen between them: \
-                 A, B, A, B. One of them may be the original; you are not told which. After the \
-                 second B, rate both."
-                    .to_string()
-            };
-            format!(
-                "{shows} {}{keys}",
-                scale_instructions(&study.scale, &format!("the quality of {a} and of {b}"))
-            )
-        }
-        Protocol::Staircase => "Each trial shows two motions side by side. Choose the one that \
-                                looks more natural with the Left or Right arrow key (or click). \
-                                Answer even when you are unsure."
-            .to_string(),
-    }
-}
 
 enum Screen {
     Welcome,
@@ -199,92 +102,6 @@ struct TrialScreen {
     shapes: [Arc<FrameShapes>; 2],
     /// How the test stimulus was encoded for this trial (live staircase).
     encoding: Option<StimulusEncoding>,
-}
-
-/// How many trials a session has, as far as the subject can be told.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Planned {
-    /// Exactly this many (MOS, DSCQS: planned up front).
-    Exactly(u32),
-    /// At most this many (staircases capped by `max_trials`; they may stop earlier).
-    AtMost(u32),
-    /// Not known (a staircase that stops on reversals only).
-    Unknown,
-}
-
-impl Planned {
-    /// "Trial k of n", "Trial k of at most n" or "Trial k".
-    fn trial_text(self, k: u32) -> String {
-        match self {
-            Planned::Exactly(n) => format!("Trial {k} of {n}"),
-            Planned::AtMost(n) => format!("Trial {k} of at most {n}"),
-            Planned::Unknown => format!("Trial {k}"),
-        }
-    }
-
-    /// "k of n trials done", and so on.
-    fn done_text(self, done: u32) -> String {
-        match self {
-            Planned::Exactly(n) => format!("Trials done: {done} of {n}."),
-            Planned::AtMost(n) => format!("Trials done: {done} (at most {n})."),
-            Planned::Unknown => format!("Trials done: {done}."),
-        }
-    }
-
-    /// The number a progress bar runs to (exact plans only).
-    fn exact(self) -> Option<u32> {
-        match self {
-            Planned::Exactly(n) if n > 0 => Some(n),
-            _ => None,
-        }
-    }
-}
-
-/// Total trials of a session: exact when the protocol plans them up front, an upper bound
-/// when every interleaved staircase has `max_trials`.
-fn planned_trials(study: &StudyDefinition) -> Planned {
-    match study.protocol {
-        Protocol::Mos | Protocol::Dscqs => Planned::Exactly(
-            (study.familiarization.len()
-                + study.conditions.len()
-                + study.session.hidden_repeats as usize) as u32,
-        ),
-        Protocol::Staircase => study
-            .staircase
-            .as_ref()
-            .and_then(|s| {
-                s.tracks
-                    .iter()
-                    .map(|t| t.settings.max_trials)
-                    .sum::<Option<u32>>()
-            })
-            .map_or(Planned::Unknown, Planned::AtMost),
-    }
-}
-
-/// The rating values of a categorical scale, low to high.
-fn categories(scale: &RatingScale) -> Vec<f64> {
-    let step = scale.step.filter(|s| *s > 0.0).unwrap_or(1.0);
-    let n = ((scale.max - scale.min) / step).round().clamp(0.0, 200.0) as usize;
-    (0..=n).map(|k| scale.min + k as f64 * step).collect()
-}
-
-fn format_rating(v: f64) -> String {
-    if v.fract().abs() < 1e-9 {
-        format!("{v:.0}")
-    } else {
-        format!("{v}")
-    }
-}
-
-/// BT.500 label of an integer rating on a five-grade scale.
-fn quality_label(scale: &RatingScale, v: f64) -> Option<&'static str> {
-    if (scale.max - scale.min - 4.0).abs() > 1e-9 || v.fract().abs() > 1e-9 {
-        return None;
-    }
-    QUALITY_LABELS
-        .get((scale.max - v).round() as usize)
-        .copied()
 }
 
 /// The subject's screens over one open session.
@@ -1308,16 +1125,6 @@ fn mos_answer(
         return t.rating.map(Answer::Rating);
     }
     None
-}
-
-/// What the two stimuli of a DSCQS trial are called on screen: A and B (BT.500's A B A B),
-/// or 1 and 2 (one after the other, thesis 6.5), as the presentation labels them.
-fn dscqs_names(arrangement: Arrangement) -> [&'static str; 2] {
-    if arrangement == Arrangement::Sequential {
-        ["1", "2"]
-    } else {
-        ["A", "B"]
-    }
 }
 
 /// DSCQS: a rating of A and one of B (of 1 and 2 when shown one after the other). On a

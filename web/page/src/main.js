@@ -364,12 +364,12 @@ function widgets(info, t, onChange) {
     rows.push(scale.kind === 'continuous' ? continuous(0, name) : categorical(0));
     box.append(rows[0].el);
   } else {
-    question = 'Rate the quality of A and of B';
-    names = ['A', 'B'];
+    names = t.names;
+    question = `Rate the quality of ${names[0]} and of ${names[1]}`;
     if (scale.kind === 'continuous') {
       const both = document.createElement('div');
       both.className = 'scales';
-      rows.push(continuous(0, 'A'), continuous(1, 'B'));
+      rows.push(continuous(0, names[0]), continuous(1, names[1]));
       both.append(rows[0].el, rows[1].el);
       box.append(both);
     } else {
@@ -391,7 +391,7 @@ function widgets(info, t, onChange) {
     $('continue').disabled = !(open && done);
     let what;
     if (n === 1) what = names[0];
-    else what = values[0] === null && values[1] === null ? 'A and B' : values[0] === null ? 'A' : 'B';
+    else what = values[0] === null && values[1] === null ? `${names[0]} and ${names[1]}` : values[0] === null ? names[0] : names[1];
     const hint = scale.kind === 'categorical' ? `Choose a rating for ${what} to continue.` : `Mark the scale of ${what} to continue.`;
     $('missing').textContent = open && !done ? hint : '';
   };
