@@ -285,72 +285,108 @@ impl Drop for StopOnPanic<'_, '_> {
     }
 }
 
-/// How many sessions a database reader fetches in one query.
+/// How many sessions the database fetcher reads in one query, and how many it may have
+/// queued ahead of the readers.
 const DB_BATCH: usize = 256;
 
 /// The sessions a report reads: a results folder's session folders, or a database run's
 /// sessions.
 enum Sessions {
     Folder(Vec<PathBuf>),
-    Database(std::sync::Mutex<DbSessions>),
+    Database(DbSessions),
 }
 
-/// A database run's sessions, fetched [`DB_BATCH`] at a time over the store's one connection.
+/// A database run's sessions, fetched in order, [`DB_BATCH`] at a time over the store's one
+/// connection, by a thread of their own while the readers check the ones before (fetching
+/// and checking overlap; a reader waited for each batch before).
 struct DbSessions {
-    store: Box<results::pg::PgStore>,
-    heads: Vec<results::pg::SessionHead>,
-    /// Sessions fetched and not yet handed out, by index.
-    fetched: HashMap<usize, results::SessionResults>,
-    /// Sessions before this index have been fetched.
-    fetched_to: usize,
+    count: usize,
+    location: String,
+    inbox: std::sync::Mutex<Inbox>,
+}
+
+/// The fetched sessions as the readers take them.
+struct Inbox {
+    /// Sessions in order from the fetcher (or its error).
+    from_fetcher: std::sync::mpsc::Receiver<Result<results::SessionResults, results::ResultsError>>,
+    /// Sessions received that another reader will ask for, by index.
+    early: HashMap<usize, results::SessionResults>,
+    /// How many sessions have been received.
+    received: usize,
 }
 
 impl Sessions {
     fn database(store: results::pg::PgStore, heads: Vec<results::pg::SessionHead>) -> Self {
-        Sessions::Database(std::sync::Mutex::new(DbSessions {
-            store: Box::new(store),
-            heads,
-            fetched: HashMap::new(),
-            fetched_to: 0,
-        }))
+        let (count, location) = (heads.len(), store.location());
+        let (to_readers, from_fetcher) = std::sync::mpsc::sync_channel(DB_BATCH);
+        std::thread::spawn(move || {
+            let mut store = store;
+            for batch in heads.chunks(DB_BATCH) {
+                let read = match store.read(batch) {
+                    Ok(read) => read,
+                    Err(e) => {
+                        let _ = to_readers.send(Err(e));
+                        return;
+                    }
+                };
+                for session in read {
+                    // The readers stopped (an error elsewhere): nothing more to fetch.
+                    if to_readers.send(Ok(session)).is_err() {
+                        return;
+                    }
+                }
+            }
+        });
+        Sessions::Database(DbSessions {
+            count,
+            location,
+            inbox: std::sync::Mutex::new(Inbox {
+                from_fetcher,
+                early: HashMap::new(),
+                received: 0,
+            }),
+        })
     }
 
     fn len(&self) -> usize {
         match self {
             Sessions::Folder(dirs) => dirs.len(),
-            Sessions::Database(db) => db
-                .lock()
-                .unwrap_or_else(std::sync::PoisonError::into_inner)
-                .heads
-                .len(),
+            Sessions::Database(db) => db.count,
         }
     }
 
     /// Session `i` (< [`Self::len`]), read. The readers ask for increasing indices, so a
-    /// database session not yet fetched starts the next batch.
+    /// database session is either received already or still to come from the fetcher.
     fn load(&self, i: usize) -> Result<results::SessionResults> {
         match self {
             Sessions::Folder(dirs) => Ok(results::read_session(&dirs[i])?),
             Sessions::Database(db) => {
-                let mut guard = db.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
-                let db = &mut *guard;
-                if let Some(session) = db.fetched.remove(&i) {
+                let mut inbox = db
+                    .inbox
+                    .lock()
+                    .unwrap_or_else(std::sync::PoisonError::into_inner);
+                if let Some(session) = inbox.early.remove(&i) {
                     return Ok(session);
                 }
-                if i < db.fetched_to {
-                    bail!(
-                        "session {i} of {} was handed out twice",
-                        db.store.location()
-                    );
+                if i < inbox.received {
+                    bail!("session {i} of {} was handed out twice", db.location);
                 }
-                let from = db.fetched_to;
-                let to = (i + 1).max(from + DB_BATCH).min(db.heads.len());
-                let read = db.store.read(&db.heads[from..to])?;
-                db.fetched.extend((from..to).zip(read));
-                db.fetched_to = to;
-                db.fetched
-                    .remove(&i)
-                    .with_context(|| format!("{} did not return session {i}", db.store.location()))
+                loop {
+                    let Ok(next) = inbox.from_fetcher.recv() else {
+                        bail!(
+                            "{} stopped sending sessions at {}",
+                            db.location,
+                            inbox.received
+                        );
+                    };
+                    let index = inbox.received;
+                    inbox.received += 1;
+                    let session = next?;
+                    if index == i {
+                        return Ok(session);
+                    }
+                    inbox.early.insert(index, session);
+                }
             }
         }
     }
