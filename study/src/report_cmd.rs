@@ -300,29 +300,32 @@ enum Sessions {
 /// connection, by a thread of their own while the readers check the ones before (fetching
 /// and checking overlap; a reader waited for each batch before).
 struct DbSessions {
-    count: usize,
+    heads: std::sync::Arc<Vec<results::pg::SessionHead>>,
     location: String,
     inbox: std::sync::Mutex<Inbox>,
 }
 
 /// The fetched sessions as the readers take them.
 struct Inbox {
-    /// Sessions in order from the fetcher (or its error).
-    from_fetcher: std::sync::mpsc::Receiver<Result<results::SessionResults, results::ResultsError>>,
-    /// Sessions received that another reader will ask for, by index.
-    early: HashMap<usize, results::SessionResults>,
+    /// Sessions' rows in order from the fetcher (or its error), decoded by the reader that
+    /// takes them.
+    from_fetcher: std::sync::mpsc::Receiver<Result<Vec<results::pg::Row>, results::ResultsError>>,
+    /// Sessions' rows received that another reader will ask for, by index.
+    early: HashMap<usize, Vec<results::pg::Row>>,
     /// How many sessions have been received.
     received: usize,
 }
 
 impl Sessions {
     fn database(store: results::pg::PgStore, heads: Vec<results::pg::SessionHead>) -> Self {
-        let (count, location) = (heads.len(), store.location());
+        let location = store.location();
+        let heads = std::sync::Arc::new(heads);
         let (to_readers, from_fetcher) = std::sync::mpsc::sync_channel(DB_BATCH);
+        let fetched = std::sync::Arc::clone(&heads);
         std::thread::spawn(move || {
             let mut store = store;
-            for batch in heads.chunks(DB_BATCH) {
-                let read = match store.read(batch) {
+            for batch in fetched.chunks(DB_BATCH) {
+                let read = match store.read_rows(batch) {
                     Ok(read) => read,
                     Err(e) => {
                         let _ = to_readers.send(Err(e));
@@ -338,7 +341,7 @@ impl Sessions {
             }
         });
         Sessions::Database(DbSessions {
-            count,
+            heads,
             location,
             inbox: std::sync::Mutex::new(Inbox {
                 from_fetcher,
@@ -351,7 +354,7 @@ impl Sessions {
     fn len(&self) -> usize {
         match self {
             Sessions::Folder(dirs) => dirs.len(),
-            Sessions::Database(db) => db.count,
+            Sessions::Database(db) => db.heads.len(),
         }
     }
 
@@ -361,33 +364,42 @@ impl Sessions {
         match self {
             Sessions::Folder(dirs) => Ok(results::read_session(&dirs[i])?),
             Sessions::Database(db) => {
-                let mut inbox = db
-                    .inbox
-                    .lock()
-                    .unwrap_or_else(std::sync::PoisonError::into_inner);
-                if let Some(session) = inbox.early.remove(&i) {
-                    return Ok(session);
-                }
-                if i < inbox.received {
-                    bail!("session {i} of {} was handed out twice", db.location);
-                }
-                loop {
-                    let Ok(next) = inbox.from_fetcher.recv() else {
-                        bail!(
-                            "{} stopped sending sessions at {}",
-                            db.location,
-                            inbox.received
-                        );
-                    };
-                    let index = inbox.received;
-                    inbox.received += 1;
-                    let session = next?;
-                    if index == i {
-                        return Ok(session);
-                    }
-                    inbox.early.insert(index, session);
-                }
+                let rows = db.rows(i)?;
+                // Decoded here, on the reader's thread, which also frees the records.
+                Ok(results::pg::decode_session(&db.heads[i], &rows)?)
             }
+        }
+    }
+}
+
+impl DbSessions {
+    /// The rows of session `i`, from the fetcher (or set aside by the other reader).
+    fn rows(&self, i: usize) -> Result<Vec<results::pg::Row>> {
+        let mut inbox = self
+            .inbox
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if let Some(rows) = inbox.early.remove(&i) {
+            return Ok(rows);
+        }
+        if i < inbox.received {
+            bail!("session {i} of {} was handed out twice", self.location);
+        }
+        loop {
+            let Ok(next) = inbox.from_fetcher.recv() else {
+                bail!(
+                    "{} stopped sending sessions at {}",
+                    self.location,
+                    inbox.received
+                );
+            };
+            let index = inbox.received;
+            inbox.received += 1;
+            let rows = next?;
+            if index == i {
+                return Ok(rows);
+            }
+            inbox.early.insert(index, rows);
         }
     }
 }

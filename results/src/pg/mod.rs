@@ -33,6 +33,8 @@ use std::fmt;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
+/// A row as the server sent it ([`PgStore::read_rows`], [`decode_session`]).
+pub use postgres::Row;
 use postgres::{Client, NoTls, Statement};
 use protocols::TrialRecord;
 
@@ -670,6 +672,20 @@ impl PgStore {
     /// # Errors
     /// Database errors, a row that does not decode (named by session, line and column).
     pub fn read(&mut self, heads: &[SessionHead]) -> Result<Vec<SessionResults>, ResultsError> {
+        self.read_rows(heads)?
+            .iter()
+            .zip(heads)
+            .map(|(rows, head)| decode_session(head, rows))
+            .collect()
+    }
+
+    /// The rows of `heads` (sessions of this run) as the server sent them, one list per
+    /// session in their order, for [`decode_session`] (which another thread may run: decoding
+    /// is most of a read's work on the client).
+    ///
+    /// # Errors
+    /// Database errors.
+    pub fn read_rows(&mut self, heads: &[SessionHead]) -> Result<Vec<Vec<Row>>, ResultsError> {
         let ids: Vec<i32> = heads.iter().map(|h| h.id).collect();
         let err = self.err("reading the answers");
         let mut rows = self
@@ -684,39 +700,16 @@ impl PgStore {
             )
             .map_err(&err)?;
         let at: HashMap<i32, usize> = heads.iter().enumerate().map(|(i, h)| (h.id, i)).collect();
-        let mut records: Vec<Vec<TrialRecord>> = vec![Vec::new(); heads.len()];
-        let paths: Vec<PathBuf> = heads.iter().map(|h| h.dir.join(TRIALS_FILE)).collect();
+        let mut out: Vec<Vec<Row>> = heads.iter().map(|_| Vec::new()).collect();
         while let Some(row) =
             postgres::fallible_iterator::FallibleIterator::next(&mut rows).map_err(&err)?
         {
             let id: i32 = row.try_get(0).map_err(&err)?;
-            let Some(&i) = at.get(&id) else { continue };
-            let record = rows::Decoder { trials: &paths[i] }.decode(&row)?;
-            let n: i32 = row.try_get(1).map_err(&err)?;
-            if usize::try_from(n).ok() != Some(records[i].len()) {
-                return Err(ResultsError::Malformed {
-                    path: paths[i].clone(),
-                    line: records[i].len() + 2,
-                    column: 1,
-                    message: format!("row {n} follows row {}", records[i].len() as i64 - 1),
-                });
+            if let Some(&i) = at.get(&id) {
+                out[i].push(row);
             }
-            records[i].push(record);
         }
-        Ok(heads
-            .iter()
-            .zip(records)
-            .map(|(h, records)| SessionResults {
-                dir: h.dir.clone(),
-                manifest: h.manifest.clone(),
-                trials: TrialsFile {
-                    format_version: h.version,
-                    records,
-                    complete_bytes: 0,
-                    torn: None,
-                },
-            })
-            .collect())
+        Ok(out)
     }
 
     /// The files kept with `head` beside its rows (`frames.csv`, rows set aside as torn by a
@@ -775,7 +768,7 @@ impl PgStore {
     }
 }
 
-fn describe_holder(row: Result<Option<postgres::Row>, postgres::Error>) -> String {
+fn describe_holder(row: Result<Option<Row>, postgres::Error>) -> String {
     match row {
         Ok(Some(r)) => {
             let app: Option<String> = r.try_get(0).ok().flatten();
@@ -1433,4 +1426,41 @@ fn kept_files(dir: &Path) -> Result<Vec<(String, Vec<u8>)>, ResultsError> {
     }
     out.sort();
     Ok(out)
+}
+
+/// The session `head` from its rows ([`PgStore::read_rows`]), which must run 0, 1, 2 ... in
+/// order.
+///
+/// # Errors
+/// A row that does not decode or is out of order, named by session, line and column.
+pub fn decode_session(head: &SessionHead, rows: &[Row]) -> Result<SessionResults, ResultsError> {
+    let path = head.dir.join(TRIALS_FILE);
+    let mut records = Vec::with_capacity(rows.len());
+    for row in rows {
+        let n: i32 = row.try_get(1).map_err(|e| ResultsError::Malformed {
+            path: path.clone(),
+            line: records.len() + 2,
+            column: 1,
+            message: format!("row_number: {e}"),
+        })?;
+        if usize::try_from(n).ok() != Some(records.len()) {
+            return Err(ResultsError::Malformed {
+                path,
+                line: records.len() + 2,
+                column: 1,
+                message: format!("row {n} follows row {}", records.len() as i64 - 1),
+            });
+        }
+        records.push(rows::Decoder { trials: &path }.decode(row)?);
+    }
+    Ok(SessionResults {
+        dir: head.dir.clone(),
+        manifest: head.manifest.clone(),
+        trials: TrialsFile {
+            format_version: head.version,
+            records,
+            complete_bytes: 0,
+            torn: None,
+        },
+    })
 }
