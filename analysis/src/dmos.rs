@@ -76,7 +76,8 @@ fn summarize_subject_means(
 /// ACR-HR differential MOS (ITU-T P.910, hidden reference removal): for every rating of a test
 /// condition, DV = V(test) − V(reference) + 5, where V(reference) is the same subject's score of
 /// the hidden reference of that condition (averaged if the subject rated it more than once).
-/// DV is summarised per condition over all of its ratings.
+/// A subject's DVs of a condition (hidden repeats) are averaged first, then the subjects'
+/// means summarised per condition (as the MOS and the DSCQS DMOS are: one value per subject).
 ///
 /// `reference_of` maps test condition ids to the id of their hidden reference; ratings of
 /// conditions not in the map (the references themselves) are skipped. P.910 notes that DV above
@@ -103,7 +104,7 @@ pub fn acr_hr_dmos<S: std::hash::BuildHasher>(
             e.1 += 1;
         }
     }
-    let mut dvs = Vec::new();
+    let mut per: BTreeMap<(u32, u32), (f64, usize)> = BTreeMap::new();
     for r in ratings {
         let Some(&reference) = reference_of.get(&r.condition) else {
             continue;
@@ -115,9 +116,14 @@ pub fn acr_hr_dmos<S: std::hash::BuildHasher>(
                 reference,
             });
         };
-        dvs.push((r.condition, r.score - sum / k as f64 + 5.0));
+        let e = per.entry((r.condition, r.subject)).or_insert((0.0, 0));
+        e.0 += r.score - sum / k as f64 + 5.0;
+        e.1 += 1;
     }
-    summarize_subject_means(dvs.into_iter(), confidence)
+    summarize_subject_means(
+        per.into_iter().map(|((c, _), (s, k))| (c, s / k as f64)),
+        confidence,
+    )
 }
 
 /// Replaces each score by its per-subject z-score, (x − mean_s)/SD_s with the sample SD

@@ -267,7 +267,9 @@ impl<'a> Converter<'a> {
                 }
             }
         }
-        if protocol == Protocol::Mos {
+        // A test whose clip's reference was rated as a condition too (P.910 ACR-HR; a MOS
+        // study with hidden references) gets its DMOS against that reference.
+        if matches!(protocol, Protocol::Mos | Protocol::Acr) {
             for c in &data.conditions {
                 if c.compression_ratio.is_some()
                     && let Some(r) = manifest.reference_of(&c.clip)
@@ -302,9 +304,14 @@ fn convert_record(
     scale: Option<(f64, f64)>,
 ) -> Result<(), AnalysisError> {
     match record.protocol {
-        Protocol::Mos => {
+        Protocol::Mos | Protocol::Acr | Protocol::Dcr => {
             let Answer::Rating(score) = record.response.answer else {
-                return Err(bad(path, index, "response", "a MOS trial needs one rating"));
+                return Err(bad(
+                    path,
+                    index,
+                    "response",
+                    format!("a {} trial needs one rating", record.protocol),
+                ));
             };
             check_scale(path, index, "score", score, scale)?;
             let condition = stimuli.id(&record.trial.stimulus);

@@ -190,6 +190,8 @@ fn place(placement: ReferencePlacement, arrangement: Arrangement, rng: &mut Stud
                 Arrangement::SideBySide => Position::Left,
                 Arrangement::Sequential => Position::First,
                 Arrangement::Abab => Position::A,
+                // Nothing to place: the reference is not shown.
+                Arrangement::Single => return Position::Hidden,
             };
             if rng.coin() { first } else { first.other() }
         }
@@ -208,7 +210,7 @@ impl Session {
         let mut plan = Vec::new();
         let mut stairs = None;
         match study.protocol {
-            Protocol::Mos | Protocol::Dscqs => {
+            Protocol::Mos | Protocol::Dscqs | Protocol::Acr | Protocol::Dcr => {
                 plan = plan_trials(study, subject, arrangement, placement);
             }
             Protocol::Staircase => {
@@ -411,14 +413,14 @@ impl Session {
             }
         };
         let outcome = match (self.protocol, response.answer) {
-            (Protocol::Mos, Answer::Rating(v)) => Outcome {
+            (Protocol::Mos | Protocol::Acr | Protocol::Dcr, Answer::Rating(v)) => Outcome {
                 score: on_scale(v)?,
                 score_reference: None,
                 score_test: None,
                 correct: None,
                 reversal: None,
             },
-            (Protocol::Mos, _) => return Err(wrong("a rating")),
+            (Protocol::Mos | Protocol::Acr | Protocol::Dcr, _) => return Err(wrong("a rating")),
             (Protocol::Dscqs, Answer::Pair { a, b }) => {
                 let (a, b) = (on_scale(a)?, on_scale(b)?);
                 // `a` rates what was shown first: slot A, or the first interval.
@@ -553,7 +555,7 @@ impl Session {
             return Vec::new();
         };
         let answers = match self.protocol {
-            Protocol::Mos => vec![Answer::Rating(self.scale.min)],
+            Protocol::Mos | Protocol::Acr | Protocol::Dcr => vec![Answer::Rating(self.scale.min)],
             Protocol::Dscqs => vec![Answer::Pair {
                 a: self.scale.min,
                 b: self.scale.min,
@@ -609,7 +611,7 @@ impl Session {
     }
 }
 
-/// MOS / DSCQS plan (paper 000 section IV): familiarization spanning the quality range first
+/// MOS / DSCQS / ACR / DCR plan (paper 000 section IV): familiarization spanning the quality range first
 /// (shuffled), then the test conditions shuffled per subject with hidden repeats inserted.
 fn plan_trials(
     study: &StudyDefinition,

@@ -238,7 +238,11 @@ impl Observer {
             ],
         );
         let answer = match self.protocol {
-            Protocol::Mos => Answer::Rating(self.rate(test_error()?, &mut rng)),
+            // ACR rates the stimulus shown (a hidden reference's error is 0); DCR rates the
+            // test's impairment on the same latent quality, with the reference shown.
+            Protocol::Mos | Protocol::Acr | Protocol::Dcr => {
+                Answer::Rating(self.rate(test_error()?, &mut rng))
+            }
             Protocol::Dscqs => {
                 let r = self.rate(self.manifest_error(&trial.reference)?, &mut rng);
                 let t = self.rate(test_error()?, &mut rng);

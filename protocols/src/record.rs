@@ -20,6 +20,13 @@ pub enum Protocol {
     Dscqs,
     /// Two-alternative forced choice with adaptive staircases (thesis ch. 5).
     Staircase,
+    /// Absolute category rating (ITU-T P.910 ACR): one stimulus at a time, rated on the
+    /// five-grade quality scale without a reference; with the clips' references among the
+    /// conditions (hidden reference) it is ACR-HR.
+    Acr,
+    /// Degradation category rating (ITU-T P.910 DCR, ITU-R BT.500 DSIS): the labelled
+    /// reference, then the test stimulus, rated on the five impairment categories.
+    Dcr,
 }
 
 /// Which part of a session a trial belongs to.
@@ -50,6 +57,9 @@ pub enum Position {
     A,
     /// DSCQS slot B (shown second and fourth).
     B,
+    /// Not shown: the reference of a single-stimulus trial (ACR), which the subject never
+    /// sees.
+    Hidden,
 }
 
 /// How the two stimuli of a trial are laid out.
@@ -62,6 +72,8 @@ pub enum Arrangement {
     Sequential,
     /// DSCQS: A B A B.
     Abab,
+    /// The test stimulus alone (ACR); the reference is not shown.
+    Single,
 }
 
 macro_rules! text_enum {
@@ -89,12 +101,13 @@ macro_rules! text_enum {
     };
 }
 
-text_enum!(Protocol, Protocol::Mos => "mos", Protocol::Dscqs => "dscqs", Protocol::Staircase => "staircase");
+text_enum!(Protocol, Protocol::Mos => "mos", Protocol::Dscqs => "dscqs", Protocol::Staircase => "staircase",
+    Protocol::Acr => "acr", Protocol::Dcr => "dcr");
 text_enum!(Block, Block::Familiarization => "familiarization", Block::Test => "test", Block::HiddenRepeat => "hidden_repeat");
 text_enum!(Position, Position::Left => "left", Position::Right => "right", Position::First => "first",
-    Position::Second => "second", Position::A => "a", Position::B => "b");
+    Position::Second => "second", Position::A => "a", Position::B => "b", Position::Hidden => "hidden");
 text_enum!(Arrangement, Arrangement::SideBySide => "side_by_side", Arrangement::Sequential => "sequential",
-    Arrangement::Abab => "abab");
+    Arrangement::Abab => "abab", Arrangement::Single => "single");
 
 impl Position {
     /// The other position of the same arrangement.
@@ -107,6 +120,7 @@ impl Position {
             Self::Second => Self::First,
             Self::A => Self::B,
             Self::B => Self::A,
+            Self::Hidden => Self::Hidden,
         }
     }
 
@@ -117,6 +131,7 @@ impl Position {
             (Arrangement::SideBySide, Self::Left | Self::Right)
                 | (Arrangement::Sequential, Self::First | Self::Second)
                 | (Arrangement::Abab, Self::A | Self::B)
+                | (Arrangement::Single, Self::Hidden)
         )
     }
 }
@@ -128,11 +143,12 @@ pub struct Trial {
     pub index: u32,
     /// Familiarization, test or hidden repeat.
     pub block: Block,
-    /// Condition label: the test stimulus id (MOS, DSCQS) or the staircase name.
+    /// Condition label: the test stimulus id (MOS, DSCQS, ACR, DCR) or the staircase name.
     pub condition: String,
-    /// Test (compressed / distorted) stimulus id.
+    /// Test (compressed / distorted) stimulus id; in ACR-HR the clip's reference itself for
+    /// a hidden-reference trial.
     pub stimulus: String,
-    /// Reference stimulus id.
+    /// Reference stimulus id (of the same clip; not shown in ACR).
     pub reference: String,
     /// Layout of the two stimuli.
     pub arrangement: Arrangement,
@@ -149,7 +165,7 @@ pub struct Trial {
 /// What the subject answered.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub enum Answer {
-    /// One rating of the test stimulus (MOS).
+    /// One rating of the test stimulus (MOS, ACR, DCR).
     Rating(f64),
     /// Ratings of slot A and slot B (DSCQS), or of the first and the second stimulus of a
     /// sequential DSCQS (thesis 6.5).
@@ -179,7 +195,7 @@ pub struct Response {
 /// The engine's scoring of a response.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Outcome {
-    /// MOS: the rating; DSCQS: reference score minus test score (BT.500 difference);
+    /// MOS, ACR, DCR: the rating; DSCQS: reference score minus test score (BT.500 difference);
     /// staircase: 1 correct, 0 wrong.
     pub score: f64,
     /// DSCQS: rating of the reference.

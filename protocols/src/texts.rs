@@ -3,10 +3,30 @@
 //! the default instructions of each protocol as the study's presentation settings make them.
 
 use crate::record::{Arrangement, Position, Protocol};
-use crate::study::{RatingScale, ReferencePlacement, ScaleKind, StimulusLabels, StudyDefinition};
+use crate::study::{
+    RatingScale, ReferencePlacement, ScaleKind, ScaleWords, StimulusLabels, StudyDefinition,
+};
 
 /// The BT.500 five-grade quality labels, best first.
 pub const QUALITY_LABELS: [&str; 5] = ["Excellent", "Good", "Fair", "Poor", "Bad"];
+
+/// The five impairment categories of ITU-T P.910 DCR (ITU-R BT.500 DSIS), least impaired
+/// (5) first.
+pub const IMPAIRMENT_LABELS: [&str; 5] = [
+    "Imperceptible",
+    "Perceptible but not annoying",
+    "Slightly annoying",
+    "Annoying",
+    "Very annoying",
+];
+
+/// The five grade labels of `scale`, best first.
+pub fn grade_labels(scale: &RatingScale) -> [&'static str; 5] {
+    match scale.words {
+        ScaleWords::Quality => QUALITY_LABELS,
+        ScaleWords::Impairment => IMPAIRMENT_LABELS,
+    }
+}
 
 /// The 2AFC question of thesis ch. 5.
 pub const AFC_QUESTION: &str = "Which motion looks more natural?";
@@ -23,12 +43,13 @@ pub fn format_rating(v: f64) -> String {
     }
 }
 
-/// BT.500 label of an integer rating on a five-grade scale.
+/// Label of an integer rating on a five-grade scale: BT.500's quality grades, or P.910 DCR's
+/// impairment categories on a DCR study's scale.
 pub fn quality_label(scale: &RatingScale, v: f64) -> Option<&'static str> {
     if (scale.max - scale.min - 4.0).abs() > 1e-9 || v.fract().abs() > 1e-9 {
         return None;
     }
-    QUALITY_LABELS
+    grade_labels(scale)
         .get((scale.max - v).round() as usize)
         .copied()
 }
@@ -125,6 +146,30 @@ pub fn default_instructions(study: &StudyDefinition) -> String {
                 scale_instructions(&study.scale, &format!("the quality of {a} and of {b}"))
             )
         }
+        Protocol::Acr => format!(
+            "Each trial shows one motion. {} Rate each motion on its own; there is no original \
+             to compare it with. The first few trials show the range of qualities you will meet.",
+            scale_instructions(&study.scale, "its quality")
+        ),
+        Protocol::Dcr => {
+            let label = |l: Option<&str>| l.map_or(String::new(), |l| format!(", labelled “{l}”"));
+            let (reference, test) = (
+                label(p.labels.as_ref().map(|l| l.reference.as_str())),
+                label(p.labels.as_ref().map(|l| l.test.as_str())),
+            );
+            let how = if p.arrangement == Arrangement::Sequential {
+                "then"
+            } else {
+                "beside"
+            };
+            format!(
+                "Each trial shows the original motion{reference}, {how} a compressed version of \
+                 it{test}. Rate how much the compression impairs the motion, from 5 \
+                 (imperceptible) to 1 (very annoying), with the mouse or the number keys, then \
+                 press Continue (Enter). The first few trials show the range of impairments you \
+                 will meet."
+            )
+        }
         Protocol::Staircase => "Each trial shows two motions side by side. Choose the one that \
                                 looks more natural with the Left or Right arrow key (or click). \
                                 Answer even when you are unsure."
@@ -189,7 +234,7 @@ impl Planned {
 #[must_use]
 pub fn planned_trials(study: &StudyDefinition) -> Planned {
     match study.protocol {
-        Protocol::Mos | Protocol::Dscqs => Planned::Exactly(
+        Protocol::Mos | Protocol::Dscqs | Protocol::Acr | Protocol::Dcr => Planned::Exactly(
             (study.familiarization.len()
                 + study.conditions.len()
                 + study.session.hidden_repeats as usize) as u32,

@@ -67,7 +67,9 @@ pub fn check(args: &CheckArgs) -> anyhow::Result<()> {
     writeln!(text, "  protocol: {}", study.protocol)?;
     writeln!(text, "  seed: {}", study.seed)?;
     match study.protocol {
-        Protocol::Mos | Protocol::Dscqs => describe_ratings(&mut text, study)?,
+        Protocol::Mos | Protocol::Dscqs | Protocol::Acr | Protocol::Dcr => {
+            describe_ratings(&mut text, study)?;
+        }
         Protocol::Staircase => match &live {
             Some(live) => describe_live(&mut text, study, live)?,
             None => describe_staircase(&mut text, study)?,
@@ -113,6 +115,17 @@ fn describe_ratings(text: &mut String, study: &StudyDefinition) -> std::fmt::Res
         study.conditions.len(),
         study.session.hidden_repeats
     )?;
+    let hidden = study
+        .conditions
+        .iter()
+        .filter(|c| c.stimulus == c.reference)
+        .count();
+    if hidden > 0 {
+        writeln!(
+            text,
+            "  hidden references: {hidden} (ACR-HR: DMOS = test - hidden reference + 5)"
+        )?;
+    }
     let est_min = n as f64 * study.trial_presentation_ms() as f64 / 60_000.0;
     writeln!(
         text,

@@ -268,7 +268,7 @@ pub fn presentation_ms(study: &StudyDefinition, arrangement: Arrangement, clip_s
     let grey = p.grey_ms as f64;
     let plays = f64::from(p.playback_count.max(1));
     match arrangement {
-        Arrangement::SideBySide => plays * clip,
+        Arrangement::SideBySide | Arrangement::Single => plays * clip,
         Arrangement::Sequential => plays * 2.0 * clip + (2.0 * plays - 1.0) * grey,
         Arrangement::Abab => 4.0 * clip + 3.0 * grey,
     }
@@ -280,6 +280,7 @@ fn first_position(a: Arrangement) -> Position {
         Arrangement::SideBySide => Position::Left,
         Arrangement::Sequential => Position::First,
         Arrangement::Abab => Position::A,
+        Arrangement::Single => Position::Hidden,
     }
 }
 
@@ -292,6 +293,15 @@ impl App {
     pub fn open(options: &ServeOptions) -> Result<App> {
         let page = read_page(&options.page)?;
         let study = StudyFile::load(&options.study)?;
+        // The page has the answer widgets of MOS, DSCQS and 2AFC only.
+        if matches!(study.definition.protocol, Protocol::Acr | Protocol::Dcr) {
+            return Err(WebError::Refused(format!(
+                "{}: protocol {} runs in the study window (study run); the browser page of \
+                 study serve runs mos, dscqs and staircase studies",
+                options.study.display(),
+                study.definition.protocol
+            )));
+        }
         lab::preflight::verify(&study, &|_, _| {})?;
         for note in lab::results_dir::open_for_subjects(&options.output, &study, false)? {
             eprintln!("{note}");

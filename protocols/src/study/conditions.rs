@@ -15,15 +15,40 @@ use super::check::Ctx;
 use super::session::FamSpec;
 use crate::manifest::{REFERENCE_CODEC, Stimulus, StimulusManifest};
 
-fn condition_of(id: &str, m: &StimulusManifest, key: &str, cx: &mut Ctx) -> Option<Condition> {
+/// Whether a study's conditions may be references (rated as tests: ACR's hidden reference).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum References {
+    /// Refused: the reference is shown beside or before its test (MOS, DSCQS, DCR).
+    Refused,
+    /// Allowed: ACR shows one stimulus, and a reference rated so is a hidden reference
+    /// (P.910 ACR-HR).
+    Hidden,
+}
+
+fn condition_of(
+    id: &str,
+    m: &StimulusManifest,
+    key: &str,
+    refs: References,
+    cx: &mut Ctx,
+) -> Option<Condition> {
     let Some(s) = m.get(id) else {
         cx.err(key, format!("stimulus {id:?} is not in the manifest"));
         return None;
     };
     if s.codec == REFERENCE_CODEC {
+        if refs == References::Hidden {
+            return Some(Condition {
+                stimulus: s.id.clone(),
+                reference: s.id.clone(),
+            });
+        }
         cx.err(
             key,
-            format!("stimulus {id:?} is a reference, not a test stimulus"),
+            format!(
+                "stimulus {id:?} is a reference, not a test stimulus (only an ACR study rates \
+                 references, as hidden references)"
+            ),
         );
         return None;
     }
@@ -149,9 +174,60 @@ fn ambiguous(hits: &[&Stimulus], cell: &str) -> String {
     )
 }
 
-pub(super) fn parse_conditions(t: &Table, m: &StimulusManifest, cx: &mut Ctx) -> Vec<Condition> {
+pub(super) fn parse_conditions(
+    t: &Table,
+    m: &StimulusManifest,
+    refs: References,
+    cx: &mut Ctx,
+) -> Vec<Condition> {
     const P: &str = "conditions";
-    cx.known(t, P, &["stimuli", "clips", "codecs", "target_cr", "params"]);
+    cx.known(
+        t,
+        P,
+        &[
+            "stimuli",
+            "clips",
+            "codecs",
+            "target_cr",
+            "params",
+            "hidden_reference",
+        ],
+    );
+    let hidden_reference = cx.boolean(t, P, "hidden_reference").unwrap_or(false);
+    if hidden_reference && refs != References::Hidden {
+        cx.err(
+            format!("{P}.hidden_reference"),
+            "only an ACR study (protocol = \"acr\") rates hidden references",
+        );
+    }
+    let mut out = grid_or_list(t, m, refs, cx);
+    if hidden_reference && refs == References::Hidden {
+        add_hidden_references(&mut out, m, cx);
+    }
+    out
+}
+
+/// P.910 ACR-HR: the reference of every clip among the conditions, rated as a test
+/// condition of its own (once, and in the order the clips first appear).
+fn add_hidden_references(out: &mut Vec<Condition>, m: &StimulusManifest, cx: &mut Ctx) {
+    let mut have: BTreeSet<String> = out.iter().map(|c| c.stimulus.clone()).collect();
+    let mut added = Vec::new();
+    for c in out.iter() {
+        if have.insert(c.reference.clone()) {
+            added.extend(condition_of(
+                &c.reference,
+                m,
+                "conditions.hidden_reference",
+                References::Hidden,
+                cx,
+            ));
+        }
+    }
+    out.extend(added);
+}
+
+fn grid_or_list(t: &Table, m: &StimulusManifest, refs: References, cx: &mut Ctx) -> Vec<Condition> {
+    const P: &str = "conditions";
     let mut out = Vec::new();
     let list = cx.strings(t, P, "stimuli");
     let grid_keys = ["clips", "codecs", "target_cr", "params"]
@@ -176,7 +252,7 @@ pub(super) fn parse_conditions(t: &Table, m: &StimulusManifest, cx: &mut Ctx) ->
                 );
                 continue;
             }
-            if let Some(c) = condition_of(id, m, &key, cx) {
+            if let Some(c) = condition_of(id, m, &key, refs, cx) {
                 out.push(c);
             }
         }
@@ -220,6 +296,7 @@ pub(super) fn parse_conditions(t: &Table, m: &StimulusManifest, cx: &mut Ctx) ->
                                     &s.id,
                                     m,
                                     &format!("{P}.codecs[{di}]"),
+                                    refs,
                                     cx,
                                 ));
                             }
@@ -237,7 +314,7 @@ pub(super) fn parse_conditions(t: &Table, m: &StimulusManifest, cx: &mut Ctx) ->
                                 );
                                 match hit.as_slice() {
                                     [] => cx.err(key, format!("no stimulus of {cell}")),
-                                    [s] => out.extend(condition_of(&s.id, m, &key, cx)),
+                                    [s] => out.extend(condition_of(&s.id, m, &key, refs, cx)),
                                     // One cell, one condition: a grid never picks several
                                     // variants of a codec at one rate unasked.
                                     _ => cx.err(key, ambiguous(&hit, &cell)),
@@ -261,6 +338,7 @@ pub(super) fn resolve_familiarization(
     spec: FamSpec,
     conditions: &[Condition],
     m: &StimulusManifest,
+    refs: References,
     cx: &mut Ctx,
 ) -> Vec<Condition> {
     match spec {
@@ -269,7 +347,13 @@ pub(super) fn resolve_familiarization(
             .iter()
             .enumerate()
             .filter_map(|(i, id)| {
-                condition_of(id, m, &format!("session.familiarization_stimuli[{i}]"), cx)
+                condition_of(
+                    id,
+                    m,
+                    &format!("session.familiarization_stimuli[{i}]"),
+                    refs,
+                    cx,
+                )
             })
             .collect(),
         FamSpec::Count(n) => {

@@ -30,53 +30,37 @@ pub(super) fn parse_presentation(
             "test_label",
         ],
     );
-    let arrangement = if protocol == Some(Protocol::Dscqs) {
+    let arrangement = match protocol {
         // BT.500's A B A B, or thesis 6.5's reference then test, once each.
-        match cx.pick(
+        Some(Protocol::Dscqs) => pick_arrangement(
             t,
-            P,
-            "arrangement",
             &[
                 ("abab", Arrangement::Abab),
                 ("sequential", Arrangement::Sequential),
             ],
-        ) {
-            Some(a) => a,
-            None if t.contains_key("arrangement") => return None,
-            None => Arrangement::Abab,
-        }
-    } else {
-        match cx.pick(
+            cx,
+        )?,
+        // P.910 ACR: one stimulus at a time.
+        Some(Protocol::Acr) => pick_arrangement(t, &[("single", Arrangement::Single)], cx)?,
+        // P.910 DCR: the reference, then the test (or both at once, side by side).
+        Some(Protocol::Dcr) => pick_arrangement(
             t,
-            P,
-            "arrangement",
+            &[
+                ("sequential", Arrangement::Sequential),
+                ("side_by_side", Arrangement::SideBySide),
+            ],
+            cx,
+        )?,
+        _ => pick_arrangement(
+            t,
             &[
                 ("side_by_side", Arrangement::SideBySide),
                 ("sequential", Arrangement::Sequential),
             ],
-        ) {
-            Some(a) => a,
-            None if t.contains_key("arrangement") => return None,
-            None => Arrangement::SideBySide,
-        }
+            cx,
+        )?,
     };
-    let reference_position = match cx.string(t, P, "reference_position").as_deref() {
-        None | Some("random") => ReferencePlacement::Random,
-        Some(s) => match s.parse::<Position>() {
-            Ok(p) if p.fits(arrangement) => ReferencePlacement::Fixed(p),
-            Ok(p) => {
-                cx.err(
-                    join(P, "reference_position"),
-                    format!("{p} does not fit arrangement {arrangement}"),
-                );
-                ReferencePlacement::Random
-            }
-            Err(e) => {
-                cx.err(join(P, "reference_position"), format!("{e} or \"random\""));
-                ReferencePlacement::Random
-            }
-        },
-    };
+    let reference_position = parse_reference_position(t, protocol, arrangement, cx);
     let playback_count = cx.uint(t, P, "playback_count", 100).unwrap_or(1);
     if playback_count == 0 {
         cx.err(join(P, "playback_count"), "must be at least 1");
@@ -103,6 +87,92 @@ pub(super) fn parse_presentation(
     })
 }
 
+/// `arrangement`, one of `choices` (the first is the default); `None` when given and not
+/// one of them (the problem is in `cx`).
+fn pick_arrangement(
+    t: &Table,
+    choices: &[(&str, Arrangement)],
+    cx: &mut Ctx,
+) -> Option<Arrangement> {
+    match cx.pick(t, "presentation", "arrangement", choices) {
+        Some(a) => Some(a),
+        None if t.contains_key("arrangement") => None,
+        None => choices.first().map(|c| c.1),
+    }
+}
+
+/// `reference_position`: a position of the arrangement or `"random"` (the default). ACR
+/// shows no reference, so it takes none; DCR shows the reference first (P.910), or on the
+/// side the study names.
+fn parse_reference_position(
+    t: &Table,
+    protocol: Option<Protocol>,
+    arrangement: Arrangement,
+    cx: &mut Ctx,
+) -> ReferencePlacement {
+    const P: &str = "presentation";
+    let given = cx.string(t, P, "reference_position");
+    match protocol {
+        Some(Protocol::Acr) => {
+            if given.is_some() {
+                cx.err(
+                    join(P, "reference_position"),
+                    "ACR shows no reference (P.910 single stimulus): remove it",
+                );
+            }
+            return ReferencePlacement::Fixed(Position::Hidden);
+        }
+        Some(Protocol::Dcr) => {
+            let default = if arrangement == Arrangement::Sequential {
+                Position::First
+            } else {
+                Position::Left
+            };
+            return match given.as_deref() {
+                None => ReferencePlacement::Fixed(default),
+                Some(s) => match s.parse::<Position>() {
+                    Ok(p)
+                        if p.fits(arrangement)
+                            && !(arrangement == Arrangement::Sequential
+                                && p == Position::Second) =>
+                    {
+                        ReferencePlacement::Fixed(p)
+                    }
+                    _ => {
+                        cx.err(
+                            join(P, "reference_position"),
+                            format!(
+                                "{s:?}: DCR shows the labelled reference first (P.910): give \
+                                 \"first\" with arrangement \"sequential\", \"left\" or \"right\" \
+                                 side by side"
+                            ),
+                        );
+                        ReferencePlacement::Fixed(default)
+                    }
+                },
+            };
+        }
+        _ => {}
+    }
+    match given.as_deref() {
+        None | Some("random") => ReferencePlacement::Random,
+        Some(s) => match s.parse::<Position>() {
+            Ok(p) if p.fits(arrangement) => ReferencePlacement::Fixed(p),
+            Ok(p) => {
+                cx.err(
+                    join(P, "reference_position"),
+                    format!("{p} does not fit arrangement {arrangement}"),
+                );
+                ReferencePlacement::Random
+            }
+            Err(e) => {
+                cx.err(join(P, "reference_position"), format!("{e} or \"random\""));
+                ReferencePlacement::Random
+            }
+        },
+    }
+}
+
 /// BT.500's mid-grey between the DSCQS intervals, about 3 s.
 const DSCQS_GREY_MS: u32 = 3000;
 
@@ -123,9 +193,16 @@ fn parse_grey(t: &Table, arrangement: Arrangement, gap_given: Option<u32>, cx: &
              sequential and DSCQS)",
         );
     }
+    if grey.is_some() && arrangement == Arrangement::Single {
+        cx.err(
+            join(P, "grey_ms"),
+            "an ACR trial shows one stimulus: there is no grey field between stimuli (gap_ms \
+             is the pause between trials)",
+        );
+    }
     grey.or(gap_given).unwrap_or(match arrangement {
         Arrangement::Abab => DSCQS_GREY_MS,
-        Arrangement::Sequential | Arrangement::SideBySide => 500,
+        Arrangement::Sequential | Arrangement::SideBySide | Arrangement::Single => 500,
     })
 }
 
@@ -143,12 +220,14 @@ fn parse_labels(t: &Table, protocol: Option<Protocol>, cx: &mut Ctx) -> Option<S
         Some(Protocol::Staircase) => {
             Some("in a 2AFC trial the reference's position is what the subject must find")
         }
-        Some(Protocol::Mos) | None => None,
+        Some(Protocol::Acr) => Some("ACR shows one motion and no reference (ITU-T P.910)"),
+        Some(Protocol::Mos | Protocol::Dcr) | None => None,
     };
     if let (Some(true), Some(why)) = (asked, hidden_by_design) {
         cx.err(join(P, "labels"), format!("cannot be true: {why}"));
     }
-    let shown = asked.unwrap_or(protocol == Some(Protocol::Mos)) && hidden_by_design.is_none();
+    let shown = asked.unwrap_or(matches!(protocol, Some(Protocol::Mos | Protocol::Dcr)))
+        && hidden_by_design.is_none();
     let mut text = |key: &str, default: &str| -> String {
         let Some(v) = cx.string(t, P, key) else {
             return default.to_string();

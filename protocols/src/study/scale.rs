@@ -1,9 +1,9 @@
-//! `[scale]`: the rating scale of a MOS or DSCQS study, with the protocol's defaults.
+//! `[scale]`: the rating scale of a MOS, DSCQS, ACR or DCR study, with the protocol's defaults.
 
 use toml::Table;
 
 use super::check::{Ctx, join};
-use super::{RatingScale, ScaleKind};
+use super::{RatingScale, ScaleKind, ScaleWords};
 use crate::record::Protocol;
 
 pub(super) fn parse_scale(
@@ -63,10 +63,33 @@ pub(super) fn parse_scale(
     } else if kind == ScaleKind::Categorical {
         cx.err(join(P, "step"), "a categorical scale needs a step");
     }
+    // P.910 DCR: five impairment categories, 5 (imperceptible) to 1 (very annoying).
+    if protocol == Some(Protocol::Dcr)
+        && (kind != ScaleKind::Categorical || min != 1.0 || max != 5.0 || step != Some(1.0))
+    {
+        cx.err(
+            P,
+            format!(
+                "DCR rates five impairment categories (P.910): use kind = \"categorical\", min = \
+                 1, max = 5, step = 1 (or omit [scale]), not {} {min}..{max} step {step:?}",
+                if kind == ScaleKind::Categorical {
+                    "categorical"
+                } else {
+                    "continuous"
+                }
+            ),
+        );
+    }
+    let words = if protocol == Some(Protocol::Dcr) {
+        ScaleWords::Impairment
+    } else {
+        ScaleWords::Quality
+    };
     Some(RatingScale {
         kind,
         min,
         max,
         step,
+        words,
     })
 }

@@ -6,7 +6,7 @@ use std::collections::BTreeSet;
 use toml::{Table, Value};
 
 use super::check::Ctx;
-use super::conditions::{parse_conditions, resolve_familiarization};
+use super::conditions::{References, parse_conditions, resolve_familiarization};
 use super::crowdsourcing::parse_crowdsourcing;
 use super::presentation::parse_presentation;
 use super::rendering::parse_rendering;
@@ -91,9 +91,20 @@ pub(super) fn parse_table(
     let mut familiarization = Vec::new();
     let mut staircase = None;
     match protocol {
-        Some(Protocol::Mos | Protocol::Dscqs) => {
-            (conditions, familiarization) =
-                rating_sections(t, &session, familiarization_spec, manifest.as_ref(), cx);
+        Some(p @ (Protocol::Mos | Protocol::Dscqs | Protocol::Acr | Protocol::Dcr)) => {
+            let refs = if p == Protocol::Acr {
+                References::Hidden
+            } else {
+                References::Refused
+            };
+            (conditions, familiarization) = rating_sections(
+                t,
+                &session,
+                familiarization_spec,
+                manifest.as_ref(),
+                refs,
+                cx,
+            );
             if let Some(m) = &manifest {
                 check_crowd_conditions(
                     &conditions,
@@ -235,13 +246,15 @@ fn load_checked_manifest(
     }
 }
 
-/// The sections of a MOS or DSCQS study: no `[staircase]`, the `[conditions]` and the
-/// familiarization stimuli chosen among them, and enough conditions to hide the repeats in.
+/// The sections of a rating study (MOS, DSCQS, ACR, DCR): no `[staircase]`, the
+/// `[conditions]` and the familiarization stimuli chosen among them, and enough conditions to
+/// hide the repeats in. `refs` says whether references may be conditions (ACR-HR).
 fn rating_sections(
     t: &Table,
     session: &SessionSettings,
     familiarization_spec: FamSpec,
     manifest: Option<&StimulusManifest>,
+    refs: References,
     cx: &mut Ctx,
 ) -> (Vec<Condition>, Vec<Condition>) {
     let mut conditions = Vec::new();
@@ -255,13 +268,20 @@ fn rating_sections(
     match cx.table(t, "", "conditions") {
         Some(ct) => {
             if let Some(m) = manifest {
-                conditions = parse_conditions(ct, m, cx);
-                familiarization = resolve_familiarization(familiarization_spec, &conditions, m, cx);
+                conditions = parse_conditions(ct, m, refs, cx);
+                familiarization =
+                    resolve_familiarization(familiarization_spec, &conditions, m, refs, cx);
             } else {
                 cx.known(
                     ct,
                     "conditions",
-                    &["stimuli", "clips", "codecs", "target_cr"],
+                    &[
+                        "stimuli",
+                        "clips",
+                        "codecs",
+                        "target_cr",
+                        "hidden_reference",
+                    ],
                 );
             }
         }

@@ -326,7 +326,7 @@ fn csv_column(i: usize) -> usize {
 fn decode(row: &Row) -> Field<TrialRecord> {
     let protocol: Protocol = named(row, 7)?;
     let answer = match protocol {
-        Protocol::Mos => Answer::Rating(finite(row, 16)?),
+        Protocol::Mos | Protocol::Acr | Protocol::Dcr => Answer::Rating(finite(row, 16)?),
         Protocol::Dscqs => Answer::Pair {
             a: finite(row, 17)?,
             b: finite(row, 18)?,

@@ -4,7 +4,8 @@
 //! presentation time and [`Presentation::accepts_response`] whether an answer counts yet.
 //! Side by side (MOS, 2AFC): both clips together, `playback_count` times. Sequential: first,
 //! grey, second. DSCQS (ITU-R BT.500): A, grey, B, grey, A, grey, B, each labelled "A" or
-//! "B", then the vote on grey. The grey lasts `grey_ms`. Each frame names its phase
+//! "B", then the vote on grey. Single (ACR, P.910): the test stimulus alone, `playback_count`
+//! times, then the vote on grey. The grey lasts `grey_ms`. Each frame names its phase
 //! ([`Frame::phase`]), which the session's frame log records.
 
 use protocols::record::{Arrangement, Position, Trial};
@@ -17,6 +18,8 @@ pub enum Show {
     Both,
     /// One stimulus, full width: the one at this position.
     One(Position),
+    /// The test stimulus alone, full width (a single-stimulus trial: ACR).
+    Test,
     /// A mid-grey field (between sequential stimuli).
     Grey,
 }
@@ -43,6 +46,7 @@ impl Show {
             Show::One(Position::Second) => "second",
             Show::One(Position::Left) => "left",
             Show::One(Position::Right) => "right",
+            Show::One(Position::Hidden) | Show::Test => "test",
             Show::Grey => "grey",
         }
     }
@@ -152,6 +156,19 @@ impl Presentation {
                     }
                 }
             }
+            Arrangement::Single => {
+                // P.910 ACR: the stimulus alone (repeats with the grey between), then the vote.
+                for k in 0..plays {
+                    if k > 0 {
+                        grey(&mut steps);
+                    }
+                    steps.push(Step {
+                        show: Show::Test,
+                        label: None,
+                        duration_s: clip_s,
+                    });
+                }
+            }
             Arrangement::Abab => {
                 // BT.500 DSCQS: A, grey, B, grey, A, grey, B, then the vote (on grey).
                 for (i, p) in [Position::A, Position::B, Position::A, Position::B]
@@ -228,8 +245,8 @@ impl Presentation {
                 finished: true,
                 past_end: true,
             },
-            // Sequential and DSCQS: a grey field with the voting question.
-            Arrangement::Sequential | Arrangement::Abab => Frame {
+            // Sequential, single and DSCQS: a grey field with the voting question.
+            Arrangement::Sequential | Arrangement::Abab | Arrangement::Single => Frame {
                 show: Show::Grey,
                 label: None,
                 clip_time_s: 0.0,
@@ -383,5 +400,20 @@ mod tests {
             ]
         );
         assert_eq!(stimulus_at(&t, Position::First), "test");
+    }
+
+    #[test]
+    fn single_shows_the_test_alone_then_asks_on_grey() {
+        let t = trial(Arrangement::Single, Position::Hidden);
+        let mut p = Presentation::new(&t, &settings(Arrangement::Single, 400, 2), 1.5, 0.0);
+        let shows: Vec<Show> = p.steps().iter().map(|s| s.show).collect();
+        assert_eq!(shows, [Show::Test, Show::Grey, Show::Test]);
+        assert!((p.duration_s() - 3.4).abs() < 1e-12);
+        let f = p.at(2.0);
+        assert_eq!((f.show, f.phase()), (Show::Test, "test"));
+        assert!(!p.accepts_response());
+        let f = p.at(3.5);
+        assert_eq!((f.show, f.phase()), (Show::Grey, "answer"));
+        assert!(p.accepts_response());
     }
 }

@@ -23,9 +23,9 @@ use super::scene::{Figure, FrameShapes, Stage, View};
 use super::timing::FrameClock;
 use lab::session::Recorder;
 use lab::source::StimulusSource;
-pub use protocols::texts::{AFC_QUESTION, ANSWER_RECORDED, QUALITY_LABELS, default_instructions};
+pub use protocols::texts::{AFC_QUESTION, ANSWER_RECORDED, default_instructions};
 use protocols::texts::{
-    Planned, categories, dscqs_names, format_rating, planned_trials, quality_label,
+    Planned, categories, dscqs_names, format_rating, grade_labels, planned_trials, quality_label,
 };
 
 /// How long the acknowledgement stays up at least, seconds (into the next trial when the
@@ -520,7 +520,9 @@ impl StudyUi {
     fn load_trial(&mut self, trial: Trial, now: f64) -> lab::Result<TrialScreen> {
         let first = match trial.arrangement {
             Arrangement::SideBySide => Position::Left,
-            Arrangement::Sequential => Position::First,
+            // A single stimulus (ACR) is drawn from the first stage: the test (its reference
+            // is `Position::Hidden`, never drawn).
+            Arrangement::Sequential | Arrangement::Single => Position::First,
             Arrangement::Abab => Position::A,
         };
         // A live trial's test stimulus is encoded now unless it was prepared (cached by
@@ -615,6 +617,8 @@ impl StudyUi {
                 let answer = ui
                     .vertical_centered(|ui| match self.study.protocol {
                         Protocol::Mos => mos_answer(ui, t, &self.study.scale, labels, open),
+                        Protocol::Acr => acr_answer(ui, t, &self.study.scale, open),
+                        Protocol::Dcr => dcr_answer(ui, t, &self.study.scale, labels, open),
                         Protocol::Dscqs => dscqs_answer(ui, t, &self.study.scale, open),
                         Protocol::Staircase => afc_answer(ui, t, open),
                     })
@@ -812,6 +816,7 @@ fn position_label(p: Position) -> &'static str {
         Position::Second => "Second",
         Position::A => "A",
         Position::B => "B",
+        Position::Hidden => "Hidden",
     }
 }
 
@@ -909,7 +914,7 @@ fn vertical_scale(
         let painter = ui.painter();
         painter.rect_filled(bar, 2.0, visuals.extreme_bg_color);
         let section = h / 5.0;
-        for (k, label) in QUALITY_LABELS.iter().enumerate() {
+        for (k, label) in grade_labels(scale).iter().enumerate() {
             let y = bar.top() + section * k as f32;
             if k > 0 {
                 painter.hline(bar.x_range(), y, egui::Stroke::new(1.0, text));
@@ -1108,8 +1113,20 @@ fn mos_answer(
             "the compressed motion".to_string(),
         ),
     };
-    ui.label(RichText::new(question).size(18.0));
     let name = labels.map_or("Quality", |l| l.test.as_str());
+    single_rating(ui, t, scale, open, (&question, &what, name))
+}
+
+/// One rating on a scale under `question`: buttons for a categorical scale, a vertical
+/// scale for a continuous one; the keys as in MOS.
+fn single_rating(
+    ui: &mut Ui,
+    t: &mut TrialScreen,
+    scale: &RatingScale,
+    open: bool,
+    (question, what, name): (&str, &str, &str),
+) -> Option<Answer> {
+    ui.label(RichText::new(question).size(18.0));
     if scale.kind == ScaleKind::Continuous {
         ui.horizontal(|ui| {
             ui.add_space(((ui.available_width() - 190.0) * 0.5).max(0.0));
@@ -1121,10 +1138,46 @@ fn mos_answer(
     if open {
         keyboard_rating(ui, scale, &mut t.rating);
     }
-    if confirmed(ui, open, t.rating.is_some(), &rate_hint(scale, &what)) {
+    if confirmed(ui, open, t.rating.is_some(), &rate_hint(scale, what)) {
         return t.rating.map(Answer::Rating);
     }
     None
+}
+
+/// ACR (P.910): one rating of the one motion shown, on the quality scale.
+fn acr_answer(ui: &mut Ui, t: &mut TrialScreen, scale: &RatingScale, open: bool) -> Option<Answer> {
+    single_rating(
+        ui,
+        t,
+        scale,
+        open,
+        ("Rate the quality of the motion", "the motion", "Quality"),
+    )
+}
+
+/// DCR (P.910, BT.500 DSIS): one rating of the test's impairment against the reference, on
+/// the five impairment categories.
+fn dcr_answer(
+    ui: &mut Ui,
+    t: &mut TrialScreen,
+    scale: &RatingScale,
+    labels: Option<&StimulusLabels>,
+    open: bool,
+) -> Option<Answer> {
+    let question = match labels {
+        Some(l) => format!(
+            "How impaired is “{}” compared with “{}”?",
+            l.test, l.reference
+        ),
+        None => "How impaired is the compressed motion compared with the original?".to_string(),
+    };
+    single_rating(
+        ui,
+        t,
+        scale,
+        open,
+        (&question, "the impairment", "Impairment"),
+    )
 }
 
 /// DSCQS: a rating of A and one of B (of 1 and 2 when shown one after the other). On a
@@ -1217,7 +1270,8 @@ fn afc_answer(ui: &mut Ui, t: &TrialScreen, open: bool) -> Option<Answer> {
     let (l, r, lk, rk) = match t.trial.arrangement {
         Arrangement::Sequential => (Position::First, Position::Second, Key::Num1, Key::Num2),
         Arrangement::Abab => (Position::A, Position::B, Key::A, Key::B),
-        Arrangement::SideBySide => (
+        // A 2AFC trial is never single (the study file refuses it); drawn as side by side.
+        Arrangement::SideBySide | Arrangement::Single => (
             Position::Left,
             Position::Right,
             Key::ArrowLeft,
@@ -1321,8 +1375,11 @@ fn stimuli_panel(
                         }
                     }
                 }
-                Show::One(p) => {
-                    let k = usize::from(p != t.first);
+                Show::One(_) | Show::Test => {
+                    let k = match frame.show {
+                        Show::One(p) => usize::from(p != t.first),
+                        _ => 0,
+                    };
                     let h = full.height() - 40.0;
                     let w = (h * 16.0 / 9.0).min(full.width());
                     let rect = egui::Rect::from_center_size(
@@ -1347,7 +1404,7 @@ fn stimuli_panel(
             // schedule's ("A", "B", "1", "2").
             let label = match frame.show {
                 Show::One(p) => stimulus_label(t, p, labels).or(frame.label),
-                Show::Both | Show::Grey => frame.label,
+                Show::Both | Show::Grey | Show::Test => frame.label,
             };
             if let Some(label) = label {
                 ui.with_layout(Layout::top_down(Align::Center), |ui| {

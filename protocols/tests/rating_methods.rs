@@ -1,0 +1,303 @@
+//! The single- and degradation-category rating methods of ITU-T P.910: ACR (one stimulus,
+//! five quality grades), ACR-HR (the clips' references rated among the tests as hidden
+//! references) and DCR (the labelled reference, then the test, five impairment categories).
+//! Their study-file rules (each mistake in `study check`'s one list), their plans (every
+//! condition once, hidden repeats, nothing random where nothing is placed), their scoring
+//! and their replay.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
+
+mod common;
+
+use std::collections::BTreeMap;
+
+use common::parse;
+use protocols::record::{Answer, Arrangement, Block, Position, Protocol, Response};
+use protocols::rng::StudyRng;
+use protocols::study::{ReferencePlacement, ScaleWords};
+use protocols::texts::{default_instructions, quality_label};
+use protocols::{Session, StudyError};
+
+const ACR_HR: &str = r#"
+format_version = 1
+name = "acr"
+protocol = "acr"
+stimuli = "stimuli.json"
+seed = 11
+
+[conditions]
+clips = ["walk", "dance"]
+codecs = ["wavelet-perceptual"]
+target_cr = [10, 30, 50]
+hidden_reference = true
+
+[session]
+familiarization = 2
+hidden_repeats = 3
+"#;
+
+const DCR: &str = r#"
+format_version = 1
+name = "dcr"
+protocol = "dcr"
+stimuli = "stimuli.json"
+seed = 12
+
+[conditions]
+stimuli = ["walk/wavelet-perceptual/cr10", "walk/wavelet-perceptual/cr50", "dance/wavelet-perceptual/cr30"]
+
+[session]
+hidden_repeats = 1
+"#;
+
+fn issues(text: &str) -> Vec<(String, String)> {
+    match parse(text) {
+        Err(StudyError::Invalid { issues, .. }) => {
+            issues.into_iter().map(|i| (i.key, i.reason)).collect()
+        }
+        other => panic!("expected Invalid, got {other:?}"),
+    }
+}
+
+fn has(got: &[(String, String)], key: &str, words: &str) -> bool {
+    got.iter().any(|(k, r)| k == key && r.contains(words))
+}
+
+fn rating(v: f64) -> Response {
+    Response {
+        answer: Answer::Rating(v),
+        response_time_ms: 900,
+        replays: 0,
+        dropped_frames: 0,
+    }
+}
+
+#[test]
+fn acr_hr_rates_each_clips_reference_as_a_condition() {
+    let s = parse(ACR_HR).unwrap();
+    assert_eq!(s.protocol, Protocol::Acr);
+    assert_eq!(s.presentation.arrangement, Arrangement::Single);
+    assert_eq!(
+        s.presentation.reference_position,
+        ReferencePlacement::Fixed(Position::Hidden)
+    );
+    assert_eq!(s.presentation.labels, None, "ACR shows nothing to label");
+    // P.910's five grades by default.
+    assert_eq!(
+        (s.scale.min, s.scale.max, s.scale.step),
+        (1.0, 5.0, Some(1.0))
+    );
+    assert_eq!(s.scale.words, ScaleWords::Quality);
+    let ids: Vec<&str> = s.conditions.iter().map(|c| c.stimulus.as_str()).collect();
+    assert_eq!(ids.len(), 8, "{ids:?}");
+    // The grid's six tests, then each clip's reference once, in the order the clips come.
+    assert_eq!(&ids[6..], ["walk/reference", "dance/reference"]);
+    for c in &s.conditions[6..] {
+        assert_eq!(
+            c.stimulus, c.reference,
+            "a hidden reference is its own reference"
+        );
+    }
+    // Listing a reference by id is the same thing.
+    let listed = ACR_HR
+        .replace(
+            "clips = [\"walk\", \"dance\"]\ncodecs = [\"wavelet-perceptual\"]\ntarget_cr = [10, 30, 50]\nhidden_reference = true",
+            "stimuli = [\"walk/wavelet-perceptual/cr10\", \"walk/reference\"]",
+        )
+        .replace("hidden_repeats = 3", "hidden_repeats = 1");
+    let s = parse(&listed).unwrap();
+    assert_eq!(s.conditions[1].stimulus, "walk/reference");
+    assert!(
+        default_instructions(&s).contains("Each trial shows one motion"),
+        "{}",
+        default_instructions(&s)
+    );
+}
+
+#[test]
+fn only_acr_rates_references_and_every_misfit_key_is_listed_at_once() {
+    // MOS (and DSCQS, DCR) show the reference beside or before the test: a reference as a
+    // condition is still refused there, with the way to do it.
+    let mos = ACR_HR.replace("protocol = \"acr\"", "protocol = \"mos\"");
+    let got = issues(&mos);
+    assert!(
+        has(&got, "conditions.hidden_reference", "only an ACR study"),
+        "{got:#?}"
+    );
+    let mos_listed = ACR_HR.replace("protocol = \"acr\"", "protocol = \"mos\"").replace(
+        "clips = [\"walk\", \"dance\"]\ncodecs = [\"wavelet-perceptual\"]\ntarget_cr = [10, 30, 50]\nhidden_reference = true",
+        "stimuli = [\"walk/wavelet-perceptual/cr10\", \"walk/reference\", \"walk/wavelet-perceptual/cr30\"]",
+    );
+    let got = issues(&mos_listed);
+    assert!(
+        has(
+            &got,
+            "conditions.stimuli[1]",
+            "only an ACR study rates references"
+        ),
+        "{got:#?}"
+    );
+    // ACR: no reference to place or label, no grey between stimuli, one arrangement.
+    let acr = ACR_HR.replace(
+        "[session]",
+        "[presentation]\narrangement = \"side_by_side\"\nreference_position = \"left\"\nlabels = true\n\n[session]",
+    );
+    let got = issues(&acr);
+    assert!(has(&got, "presentation.arrangement", "single"), "{got:#?}");
+    let acr = ACR_HR.replace(
+        "[session]",
+        "[presentation]\nreference_position = \"left\"\nlabels = true\ngrey_ms = 300\n\n[session]",
+    );
+    let got = issues(&acr);
+    for (key, words) in [
+        ("presentation.reference_position", "ACR shows no reference"),
+        ("presentation.labels", "ACR shows one motion"),
+        ("presentation.grey_ms", "one stimulus"),
+    ] {
+        assert!(has(&got, key, words), "missing {key}: {got:#?}");
+    }
+    assert_eq!(got.len(), 3, "{got:#?}");
+}
+
+#[test]
+fn dcr_shows_the_labelled_reference_first_on_five_impairment_categories() {
+    let s = parse(DCR).unwrap();
+    assert_eq!(s.presentation.arrangement, Arrangement::Sequential);
+    assert_eq!(
+        s.presentation.reference_position,
+        ReferencePlacement::Fixed(Position::First)
+    );
+    assert!(s.presentation.labels.is_some(), "DCR labels the reference");
+    assert_eq!(s.scale.words, ScaleWords::Impairment);
+    assert_eq!(quality_label(&s.scale, 5.0), Some("Imperceptible"));
+    assert_eq!(
+        quality_label(&s.scale, 4.0),
+        Some("Perceptible but not annoying")
+    );
+    assert_eq!(quality_label(&s.scale, 1.0), Some("Very annoying"));
+    let text = default_instructions(&s);
+    assert!(
+        text.contains("labelled “Original”, then a compressed version"),
+        "{text}"
+    );
+    // Side by side, the reference on a side the study names.
+    let side = DCR.replace(
+        "[session]",
+        "[presentation]\narrangement = \"side_by_side\"\nreference_position = \"right\"\n\n[session]",
+    );
+    assert_eq!(
+        parse(&side).unwrap().presentation.reference_position,
+        ReferencePlacement::Fixed(Position::Right)
+    );
+    // Never second, never drawn at random; never a continuous or other scale; never a
+    // hidden reference.
+    let bad = DCR
+        .replace(
+            "[session]",
+            "[presentation]\nreference_position = \"second\"\n\n[scale]\nkind = \"continuous\"\n\n[session]",
+        )
+        .replace(
+            "dance/wavelet-perceptual/cr30\"]",
+            "dance/wavelet-perceptual/cr30\", \"dance/reference\"]",
+        );
+    let got = issues(&bad);
+    assert!(
+        has(&got, "presentation.reference_position", "reference first"),
+        "{got:#?}"
+    );
+    assert!(has(&got, "scale", "five impairment categories"), "{got:#?}");
+    assert!(
+        has(&got, "conditions.stimuli[3]", "is a reference"),
+        "{got:#?}"
+    );
+    let random = DCR.replace(
+        "[session]",
+        "[presentation]\nreference_position = \"random\"\n\n[session]",
+    );
+    assert!(has(
+        &issues(&random),
+        "presentation.reference_position",
+        "reference first"
+    ));
+}
+
+/// Every condition once per session (hidden references included), the hidden repeats, the
+/// familiarization first; every trial single with its reference hidden, and an ACR plan draws
+/// no reference side, so it is the same plan whatever the placement code does.
+#[test]
+fn acr_sessions_plan_every_condition_once_and_replay_exactly() {
+    let study = parse(ACR_HR).unwrap();
+    for subject in 0..40 {
+        let mut s = Session::new(&study, subject).unwrap();
+        let mut rng = StudyRng::new(99, &[u64::from(subject)]);
+        let mut log = Vec::new();
+        while let Some(t) = s.next_trial(0).unwrap() {
+            assert_eq!(t.arrangement, Arrangement::Single);
+            assert_eq!(t.reference_position, Position::Hidden);
+            // Off the scale or the wrong kind of answer: refused, the trial stays.
+            assert!(s.respond(&rating(3.5)).is_err());
+            assert!(
+                s.respond(&Response {
+                    answer: Answer::Choice(Position::Left),
+                    ..rating(3.0)
+                })
+                .is_err()
+            );
+            let r = rating(f64::from(1 + rng.below(5) as u32));
+            let o = s.respond(&r).unwrap();
+            let Answer::Rating(v) = r.answer else {
+                unreachable!()
+            };
+            assert_eq!(o.score, v, "ACR scores the rating itself");
+            log.push((t, r, o));
+        }
+        let mut per: BTreeMap<&str, (usize, usize)> = BTreeMap::new();
+        for (t, _, _) in &log {
+            let e = per.entry(t.stimulus.as_str()).or_default();
+            match t.block {
+                Block::Test => e.0 += 1,
+                Block::HiddenRepeat => e.1 += 1,
+                Block::Familiarization => {}
+            }
+        }
+        assert_eq!(per.len(), 8);
+        assert!(per.values().all(|&(tests, _)| tests == 1), "{per:?}");
+        assert_eq!(per.values().map(|&(_, r)| r).sum::<usize>(), 3);
+        assert_eq!(log.len(), 2 + 8 + 3);
+        let fam = log
+            .iter()
+            .take_while(|(t, _, _)| t.block == Block::Familiarization)
+            .count();
+        assert_eq!(fam, 2);
+        // Resume = replay of the log.
+        let mut again = Session::new(&study, subject).unwrap();
+        for (t, r, o) in &log {
+            again.replay(t, r, o).unwrap();
+        }
+        assert_eq!(again.next_trial(0).unwrap(), None);
+    }
+}
+
+#[test]
+fn dcr_scores_one_impairment_rating_with_the_reference_first() {
+    let study = parse(DCR).unwrap();
+    let mut s = Session::new(&study, 4).unwrap();
+    let mut n = 0;
+    while let Some(t) = s.next_trial(0).unwrap() {
+        assert_eq!(
+            (t.arrangement, t.reference_position),
+            (Arrangement::Sequential, Position::First)
+        );
+        assert!(
+            s.respond(&Response {
+                answer: Answer::Pair { a: 5.0, b: 3.0 },
+                ..rating(3.0)
+            })
+            .is_err(),
+            "DCR takes one rating"
+        );
+        let o = s.respond(&rating(2.0)).unwrap();
+        assert_eq!((o.score, o.score_reference), (2.0, None));
+        n += 1;
+    }
+    assert_eq!(n, 3 + 1);
+}
