@@ -715,3 +715,104 @@ fn a_database_outage_keeps_the_answer_and_the_window_says_so() {
     assert_eq!(answers(), 2);
     drop(fx);
 }
+
+/// ACR-HR over the one-second walk: the two compressed versions and the walk's reference as
+/// a hidden reference.
+const ACR_HR: &str = "protocol = \"acr\"\n\
+    [conditions]\nclips = [\"walk\"]\ncodecs = [\"spiht\"]\ntarget_cr = [10, 20]\n\
+    hidden_reference = true\n\
+    [presentation]\ngap_ms = 200\n\
+    [session]\nfamiliarization = 0\nhidden_repeats = 0\n";
+
+const DCR: &str = "protocol = \"dcr\"\n\
+    [conditions]\nclips = [\"walk\"]\ncodecs = [\"spiht\"]\ntarget_cr = [10]\n\
+    [presentation]\ngrey_ms = 200\n\
+    [session]\nfamiliarization = 0\nhidden_repeats = 0\n";
+
+/// ACR (P.910): each trial shows one motion alone, unlabelled, then asks for one of the five
+/// quality grades on grey; every condition, the hidden reference included, is rated once and
+/// logged as a single-stimulus trial whose reference was hidden.
+#[test]
+fn an_acr_trial_shows_one_motion_and_takes_a_grade() {
+    let (mut h, run) = harness(fixture("acr", ACR_HR));
+    begin(&mut h);
+    assert!(h.query_by_label("Trial 1 of 3").is_some());
+    assert!(h.query_by_label("Rate the quality of the motion").is_some());
+    for grade in ["Excellent", "Good", "Fair", "Poor", "Bad"] {
+        assert!(h.query_by_label(grade).is_some(), "{grade}");
+    }
+    assert_eq!(
+        h.query_all_by_label("Original").count(),
+        0,
+        "no reference shown"
+    );
+    assert_eq!(h.state().0.pending_reference(), Some(Position::Hidden));
+    // After the one-second motion: the vote on grey.
+    watch(&mut h, 1.2);
+    assert!(h.query_by_label("Please answer below").is_some());
+    for (k, key) in [Key::Num5, Key::Num2, Key::Num4].into_iter().enumerate() {
+        h.key_press(key);
+        h.run_steps(1);
+        h.key_press(Key::Enter);
+        h.run_steps(3);
+        assert_eq!(rows(&run.session_dir).len(), k + 1);
+        watch(&mut h, 1.5);
+    }
+    let r = rows(&run.session_dir);
+    let answers: Vec<Answer> = r.iter().map(|r| r.response.answer).collect();
+    assert_eq!(
+        answers,
+        [
+            Answer::Rating(5.0),
+            Answer::Rating(2.0),
+            Answer::Rating(4.0)
+        ]
+    );
+    let mut shown: Vec<&str> = r.iter().map(|r| r.trial.stimulus.as_str()).collect();
+    shown.sort_unstable();
+    assert_eq!(shown.len(), 3);
+    assert!(shown.contains(&"walk/reference"), "{shown:?}");
+    for r in &r {
+        assert_eq!(r.protocol, protocols::Protocol::Acr);
+        assert_eq!(r.trial.arrangement, protocols::Arrangement::Single);
+    }
+    assert!(matches!(h.state().0.exit(), Some(Exit::Finished(_))));
+    drop(run.fx);
+}
+
+/// DCR (P.910): the labelled reference first, grey, the labelled test, then one of the five
+/// impairment categories.
+#[test]
+fn a_dcr_trial_shows_the_reference_first_and_takes_an_impairment() {
+    let (mut h, run) = harness(fixture("dcr", DCR));
+    begin(&mut h);
+    assert_eq!(h.state().0.pending_reference(), Some(Position::First));
+    // The first interval is the reference, labelled so.
+    assert_eq!(label_rects(&h, "Original").len(), 1);
+    assert_eq!(h.query_all_by_label("Compressed").count(), 0);
+    assert!(
+        h.query_by_label("How impaired is “Compressed” compared with “Original”?")
+            .is_some()
+    );
+    for words in [
+        "Imperceptible",
+        "Perceptible but not annoying",
+        "Slightly annoying",
+        "Annoying",
+        "Very annoying",
+    ] {
+        assert!(h.query_by_label(words).is_some(), "{words}");
+    }
+    watch(&mut h, 1.1);
+    assert_eq!(label_rects(&h, "Compressed").len(), 1, "then the test");
+    watch(&mut h, 1.0);
+    h.get_by_label("3").click();
+    h.run_steps(1);
+    h.get_by_label("Continue").click();
+    h.run_steps(2);
+    let r = rows(&run.session_dir);
+    assert_eq!(r.len(), 1);
+    assert_eq!(r[0].response.answer, Answer::Rating(3.0));
+    assert_eq!(r[0].protocol, protocols::Protocol::Dcr);
+    drop(run.fx);
+}

@@ -1,0 +1,191 @@
+//! Issue 24, item 1: the P.910 rating methods end to end. The ACR-HR and DCR examples are
+//! simulated (`study simulate`), reported (`study report`), and the report's MOS and ACR-HR
+//! DMOS tables are compared cell for cell with `scripts/golden/rating_methods.py`, which reads
+//! the same results folder with Python's csv module and computes the tables with NumPy and
+//! SciPy (subject means, `ddof = 1`, `scipy.stats.t.ppf`), none of the project's code.
+//!
+//! The Python is `$SUREAL_PYTHON` (the venv `scripts/test` makes for sureal, which has NumPy
+//! and SciPy at the pins of `scripts/reference/sureal-requirements.txt`), or without the
+//! variable that venv itself. Under `CI` a missing interpreter fails the tests; elsewhere they
+//! skip with a message.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+/// The Python with NumPy and SciPy, or `None` (outside CI only) to skip.
+fn python() -> Option<PathBuf> {
+    let ci = std::env::var_os("CI").is_some();
+    let venv = repo().join("target/sureal-env/bin/python");
+    let python = match std::env::var_os("SUREAL_PYTHON") {
+        Some(p) => PathBuf::from(p),
+        None if venv.exists() => venv,
+        None if ci => panic!(
+            "neither SUREAL_PYTHON nor {} is there: under CI these tests need the venv \
+             scripts/test makes",
+            venv.display()
+        ),
+        None => {
+            eprintln!("rating methods golden skipped: no SUREAL_PYTHON and no target/sureal-env");
+            return None;
+        }
+    };
+    let probe = Command::new(&python)
+        .args(["-c", "import numpy, scipy"])
+        .output();
+    match probe {
+        Ok(o) if o.status.success() => Some(python),
+        _ if ci => panic!("{} cannot import numpy and scipy", python.display()),
+        _ => {
+            eprintln!(
+                "rating methods golden skipped: {} lacks scipy",
+                python.display()
+            );
+            None
+        }
+    }
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let d = Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("rating-methods-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn study_ok(args: &[&std::ffi::OsStr]) -> String {
+    let out = Command::new(env!("CARGO_BIN_EXE_study"))
+        .args(args)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// Simulates `example` with `subjects` subjects and `seed`, reports it, and returns the
+/// results folder and the report folder.
+fn simulate_and_report(dir: &Path, example: &str, subjects: u32, seed: u64) -> (PathBuf, PathBuf) {
+    let results = dir.join(format!("results-{example}-{seed}"));
+    let report = dir.join(format!("report-{example}-{seed}"));
+    study_ok(&[
+        "simulate".as_ref(),
+        repo().join("examples").join(example).as_os_str(),
+        "--subjects".as_ref(),
+        subjects.to_string().as_ref(),
+        "--seed".as_ref(),
+        seed.to_string().as_ref(),
+        "-o".as_ref(),
+        results.as_os_str(),
+    ]);
+    study_ok(&[
+        "report".as_ref(),
+        results.as_os_str(),
+        "--no-png".as_ref(),
+        "-o".as_ref(),
+        report.as_os_str(),
+    ]);
+    (results, report)
+}
+
+/// The golden script's rows for `results`: ("mos", "dmos") → CSV lines.
+fn golden(python: &Path, results: &Path) -> serde_json::Value {
+    let out = Command::new(python)
+        .arg(repo().join("scripts/golden/rating_methods.py"))
+        .arg(results)
+        .arg(repo().join("examples/stimuli.json"))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+/// The data rows of a report table, as lines.
+fn table_rows(report: &Path, name: &str) -> Vec<String> {
+    let text = std::fs::read_to_string(report.join("tables").join(name)).unwrap();
+    let mut lines = text.lines();
+    assert_eq!(
+        lines.next(),
+        Some("Codec,Clip,CR,n,Mean,SD,CI ± (t),Lower,Upper"),
+        "{name}"
+    );
+    let mut rows: Vec<String> = lines.map(str::to_owned).collect();
+    rows.sort();
+    rows
+}
+
+fn golden_rows(g: &serde_json::Value, key: &str) -> Vec<String> {
+    let mut rows: Vec<String> = g[key]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| {
+            r.as_array()
+                .unwrap()
+                .iter()
+                .map(|c| c.as_str().unwrap())
+                .collect::<Vec<_>>()
+                .join(",")
+        })
+        .collect();
+    rows.sort();
+    rows
+}
+
+/// ACR-HR: two simulated panels of 12 subjects (hidden repeats make subjects rate some
+/// conditions twice, so the per-subject averaging is exercised); the report's MOS of every
+/// condition (the two hidden references included) and its DMOS = test − hidden reference + 5
+/// of every test condition equal SciPy's, every printed digit.
+#[test]
+fn acr_hr_report_equals_scipy() {
+    let Some(python) = python() else { return };
+    let dir = scratch("acr-hr");
+    for seed in [3, 8] {
+        let (results, report) = simulate_and_report(&dir, "acr-hr.toml", 12, seed);
+        let g = golden(&python, &results);
+        let mos = table_rows(&report, "mos.csv");
+        assert_eq!(mos.len(), 10, "8 tests and 2 hidden references");
+        assert_eq!(mos, golden_rows(&g, "mos"), "seed {seed}: MOS");
+        let dmos = table_rows(&report, "dmos_ci.csv");
+        assert_eq!(dmos.len(), 8, "a DMOS per test condition");
+        assert_eq!(dmos, golden_rows(&g, "dmos"), "seed {seed}: ACR-HR DMOS");
+        // Every row is one subject's: n = subjects, though repeats were rated twice.
+        assert!(dmos.iter().all(|r| r.split(',').nth(3) == Some("12")));
+        let md = std::fs::read_to_string(report.join("report.md")).unwrap();
+        assert!(md.contains("P.910 ACR-HR"), "the method is named");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// DCR: the report's mean impairment category per condition equals SciPy's; no DMOS (no
+/// hidden reference in a DCR study).
+#[test]
+fn dcr_report_equals_scipy() {
+    let Some(python) = python() else { return };
+    let dir = scratch("dcr");
+    let (results, report) = simulate_and_report(&dir, "dcr.toml", 10, 5);
+    let g = golden(&python, &results);
+    let mos = table_rows(&report, "mos.csv");
+    assert_eq!(mos.len(), 8);
+    assert_eq!(mos, golden_rows(&g, "mos"));
+    assert!(g["dmos"].as_array().unwrap().is_empty());
+    assert!(!report.join("tables/dmos_ci.csv").exists());
+    let trials = results::trials::read_trials(&results.join("S001_s1/trials.csv")).unwrap();
+    for r in &trials.records {
+        assert_eq!(r.protocol, protocols::Protocol::Dcr);
+        assert_eq!(r.trial.reference_position, protocols::Position::First);
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
