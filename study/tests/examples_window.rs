@@ -358,12 +358,14 @@ fn crowd_example_stimuli_are_the_generated_ones() {
     std::fs::remove_dir_all(&root).unwrap();
 }
 
-const EXAMPLES: [&str; 5] = [
+const EXAMPLES: [&str; 7] = [
     "mos.toml",
     "dscqs.toml",
     "staircase.toml",
     "live-staircase.toml",
     "quest.toml",
+    "acr-hr.toml",
+    "dcr.toml",
 ];
 
 /// The two runs of the crowd study (thesis 6.5).
@@ -455,6 +457,7 @@ fn spawn_run(env: &Env, study: &Path, out: &Path) -> Child {
 fn each_example_records_its_first_answer_in_the_window() {
     let Some(env) = setup("examples") else { return };
     for name in EXAMPLES {
+        let started = Instant::now();
         let out = env.dir.join(format!("results-{name}"));
         let session = out.join("S01_s1");
         let mut child = spawn_run(&env, &examples().join(name), &out);
@@ -503,7 +506,8 @@ fn each_example_records_its_first_answer_in_the_window() {
                         std::thread::sleep(Duration::from_millis(450));
                     }
                 }
-                "mos.toml" => press(&env, &wid, &["4", "Return"]),
+                // MOS, ACR (one motion) and DCR (reference then test): 4, Enter.
+                "mos.toml" | "acr-hr.toml" | "dcr.toml" => press(&env, &wid, &["4", "Return"]),
                 // 2AFC: the left one; Enter first begins a study without subject fields.
                 _ => press(&env, &wid, &["Return", "Left"]),
             }
@@ -525,6 +529,17 @@ fn each_example_records_its_first_answer_in_the_window() {
         let trials = results::trials::read_trials(&session.join("trials.csv")).unwrap();
         assert!(!trials.records.is_empty(), "{name}");
         assert_eq!(trials.records[0].trial.index, 0, "{name}");
+        if matches!(name, "acr-hr.toml" | "dcr.toml") {
+            assert_eq!(
+                trials.records[0].response.answer,
+                protocols::Answer::Rating(4.0),
+                "{name}"
+            );
+        }
+        eprintln!(
+            "{name}: first answer in the window after {:.1?}",
+            started.elapsed()
+        );
     }
 }
 
