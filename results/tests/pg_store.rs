@@ -174,7 +174,7 @@ fn one_writer_per_session_and_rows_read_back_as_written(server: &ScratchServer) 
         Err(ResultsError::Exists { .. })
     ));
     for i in 0..3 {
-        m.trials_logged = u32::try_from(i + 1).unwrap();
+        m.trials_logged = i + 1;
         writer
             .append(&record("S01", i, 1.5 + f64::from(i)), &m)
             .unwrap();
