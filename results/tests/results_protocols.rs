@@ -30,8 +30,12 @@ fn scratch(name: &str) -> PathBuf {
 
 fn record(i: u32, protocol: Protocol, rng: &mut StudyRng) -> TrialRecord {
     let (arrangement, answer, outcome, level, staircase) = match protocol {
-        Protocol::Mos => (
-            Arrangement::SideBySide,
+        Protocol::Mos | Protocol::Acr | Protocol::Dcr => (
+            match protocol {
+                Protocol::Acr => Arrangement::Single,
+                Protocol::Dcr => Arrangement::Sequential,
+                _ => Arrangement::SideBySide,
+            },
             Answer::Rating(1.0 + 0.5 * rng.below(9) as f64),
             Outcome {
                 score: 3.5,
@@ -73,10 +77,12 @@ fn record(i: u32, protocol: Protocol, rng: &mut StudyRng) -> TrialRecord {
             Some(i % 3),
         ),
     };
-    let reference_position = match arrangement {
-        Arrangement::SideBySide => Position::Left,
-        Arrangement::Sequential => Position::Second,
-        Arrangement::Abab => Position::B,
+    let reference_position = match (protocol, arrangement) {
+        (_, Arrangement::SideBySide) => Position::Left,
+        (Protocol::Dcr, Arrangement::Sequential) => Position::First,
+        (_, Arrangement::Sequential) => Position::Second,
+        (_, Arrangement::Abab) => Position::B,
+        (_, Arrangement::Single) => Position::Hidden,
     };
     TrialRecord {
         study: "study, \"quoted\"".into(),
@@ -162,8 +168,14 @@ fn manifest(trials: u32) -> SessionManifest {
 proptest! {
     #![proptest_config(ProptestConfig { cases: 200, ..ProptestConfig::default() })]
     #[test]
-    fn rows_round_trip(seed in any::<u64>(), which in 0_usize..3, n in 1_u32..20) {
-        let protocol = [Protocol::Mos, Protocol::Dscqs, Protocol::Staircase][which];
+    fn rows_round_trip(seed in any::<u64>(), which in 0_usize..5, n in 1_u32..20) {
+        let protocol = [
+            Protocol::Mos,
+            Protocol::Dscqs,
+            Protocol::Staircase,
+            Protocol::Acr,
+            Protocol::Dcr,
+        ][which];
         let mut rng = StudyRng::new(seed, &[]);
         let recs: Vec<TrialRecord> = (0..n).map(|i| record(i, protocol, &mut rng)).collect();
         let mut text = format!("{HEADER}\n");
@@ -374,11 +386,17 @@ fn atomic_manifest_replace_leaves_no_temporary() {
 fn mutated_results_files_give_errors_never_panics() {
     let mut rng = StudyRng::new(5, &[]);
     let mut text = format!("{HEADER}\n");
-    for (i, p) in [Protocol::Mos, Protocol::Dscqs, Protocol::Staircase]
-        .into_iter()
-        .cycle()
-        .take(9)
-        .enumerate()
+    for (i, p) in [
+        Protocol::Mos,
+        Protocol::Dscqs,
+        Protocol::Staircase,
+        Protocol::Acr,
+        Protocol::Dcr,
+    ]
+    .into_iter()
+    .cycle()
+    .take(9)
+    .enumerate()
     {
         text.push_str(&encode_row(&record(i as u32, p, &mut rng)).unwrap());
     }
