@@ -500,7 +500,7 @@ mod tests {
                     let k = records.len();
                     let end = if k % 2 == 0 { d.scale.min } else { d.scale.max };
                     let answer = match d.protocol {
-                        Protocol::Mos => Answer::Rating(end),
+                        Protocol::Mos | Protocol::Acr | Protocol::Dcr => Answer::Rating(end),
                         Protocol::Dscqs => Answer::Pair {
                             a: end,
                             b: d.scale.max,
@@ -580,6 +580,7 @@ mod tests {
             Position::Second => Position::First,
             Position::A => Position::B,
             Position::B => Position::A,
+            Position::Hidden => Position::Hidden,
         }
     }
 
