@@ -1,5 +1,5 @@
-//! `study check` and `study simulate` end to end on the shipped examples: MOS, DSCQS and
-//! staircase runs write complete results directories that the readers load back.
+//! `study check` and `study simulate` end to end on the shipped examples: MOS, DSCQS,
+//! staircase, ACR-HR and DCR runs write complete results directories that the readers load back.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
 
 use std::path::{Path, PathBuf};
@@ -29,6 +29,8 @@ fn simulate_writes_complete_results_for_every_protocol() {
         ("mos.toml", Protocol::Mos, Some(14)),
         ("dscqs.toml", Protocol::Dscqs, Some(10)),
         ("staircase.toml", Protocol::Staircase, None),
+        ("acr-hr.toml", Protocol::Acr, Some(14)),
+        ("dcr.toml", Protocol::Dcr, Some(12)),
     ] {
         let out = scratch(file);
         let st = study()
@@ -60,7 +62,7 @@ fn simulate_writes_complete_results_for_every_protocol() {
                 assert_eq!(r.protocol, protocol);
             }
             match protocol {
-                Protocol::Mos => {
+                Protocol::Mos | Protocol::Acr | Protocol::Dcr => {
                     // Simulated ratings follow quality: compression ratio 10 beats 30 on average.
                     let mean = |suffix: &str| {
                         let v: Vec<f64> = s
@@ -75,12 +77,23 @@ fn simulate_writes_complete_results_for_every_protocol() {
                             .collect();
                         v.iter().sum::<f64>() / v.len() as f64
                     };
+                    // (One category per grade in ACR and DCR: the standard wavelet's, whose
+                    // errors differ most.)
+                    let (hi, lo) = if protocol == Protocol::Mos {
+                        ("cr10", "cr30")
+                    } else {
+                        ("standard/cr10", "standard/cr30")
+                    };
                     assert!(
-                        mean("cr10") > mean("cr30") + 0.5,
-                        "{} vs {}",
-                        mean("cr10"),
-                        mean("cr30")
+                        mean(hi) > mean(lo) + 0.5,
+                        "{file}: {} vs {}",
+                        mean(hi),
+                        mean(lo)
                     );
+                    // ACR-HR: the hidden references are rated, and near the top.
+                    if protocol == Protocol::Acr {
+                        assert!(mean("/reference") >= 4.0, "{}", mean("/reference"));
+                    }
                 }
                 Protocol::Dscqs => assert!(
                     s.trials
