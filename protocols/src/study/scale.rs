@@ -64,9 +64,11 @@ pub(super) fn parse_scale(
         cx.err(join(P, "step"), "a categorical scale needs a step");
     }
     // P.910 DCR: five impairment categories, 5 (imperceptible) to 1 (very annoying).
-    if protocol == Some(Protocol::Dcr)
-        && (kind != ScaleKind::Categorical || min != 1.0 || max != 5.0 || step != Some(1.0))
-    {
+    let five_categories = kind == ScaleKind::Categorical
+        && [(min, 1.0), (max, 5.0), (step.unwrap_or(0.0), 1.0)]
+            .iter()
+            .all(|(v, want)| (v - want).abs() < 1e-12);
+    if protocol == Some(Protocol::Dcr) && !five_categories {
         cx.err(
             P,
             format!(
