@@ -414,6 +414,8 @@ pub struct PgStore {
     run_id: i32,
     name: String,
     run: RunManifest,
+    /// Bytes of the last [`PgStore::read_rows`], to size the next one's buffer.
+    last_batch_bytes: usize,
 }
 
 impl fmt::Debug for PgStore {
@@ -489,6 +491,7 @@ impl PgStore {
             run_id,
             name: name.to_owned(),
             run,
+            last_batch_bytes: 0,
         }))
     }
 
@@ -699,6 +702,7 @@ impl PgStore {
             .map(|h| h.id.to_string())
             .collect::<Vec<_>>()
             .join(",");
+        let expected = self.last_batch_bytes;
         let conn = self.conn()?;
         conn.execute(
             "SELECT set_config('study.read_sessions', $1, false)",
@@ -714,7 +718,9 @@ impl PgStore {
             ))
             .map_err(&err)?;
         let limit = crate::trials::MAX_TRIALS_BYTES;
-        let mut all = Vec::new();
+        // Room for a batch as large as the last one, so that the stream is not copied again
+        // each time the buffer doubles.
+        let mut all = Vec::with_capacity(expected);
         reader.take(limit + 1).read_to_end(&mut all).map_err(|e| {
             match e
                 .get_ref()
@@ -735,13 +741,16 @@ impl PgStore {
                 limit,
             });
         }
+        self.last_batch_bytes = all.len() + all.len() / 8;
         let bad = |message: String| ResultsError::Database {
             location: location.clone(),
             op: op.to_owned(),
             message,
         };
+        // The rows of one session are consecutive (ordered by session id): each session is
+        // a range of the one buffer, shared.
         let at: HashMap<i32, usize> = heads.iter().enumerate().map(|(i, h)| (h.id, i)).collect();
-        let mut out: Vec<SessionRows> = heads.iter().map(|_| SessionRows(Vec::new())).collect();
+        let mut ranges: Vec<Option<std::ops::Range<usize>>> = vec![None; heads.len()];
         let mut stream = rows::CopyRows::stream(&all).map_err(bad)?;
         let mut last: Option<(i32, Option<usize>)> = None;
         while let Some(row) = stream.next().map_err(bad)? {
@@ -753,11 +762,22 @@ impl PgStore {
                 _ => at.get(&id).copied(),
             };
             last = Some((id, i));
-            if let Some(i) = i {
-                out[i].0.extend_from_slice(row.bytes);
+            let Some(i) = i else { continue };
+            let (start, end) = (row.start, row.start + row.bytes.len());
+            match &mut ranges[i] {
+                Some(r) if r.end == start => r.end = end,
+                Some(_) => return Err(bad(format!("the rows of session {id} are not together"))),
+                r @ None => *r = Some(start..end),
             }
         }
-        Ok(out)
+        let all: std::sync::Arc<[u8]> = all.into();
+        Ok(ranges
+            .into_iter()
+            .map(|r| SessionRows {
+                batch: std::sync::Arc::clone(&all),
+                rows: r.unwrap_or(0..0),
+            })
+            .collect())
     }
 
     /// The files kept with `head` beside its rows (`frames.csv`, rows set aside as torn by a
@@ -1477,8 +1497,11 @@ fn kept_files(dir: &Path) -> Result<Vec<(String, Vec<u8>)>, ResultsError> {
 }
 
 /// One session's rows as the server sent them ([`PgStore::read_rows`]), undecoded: the
-/// rows of a binary `COPY`, back to back.
-pub struct SessionRows(Vec<u8>);
+/// rows of a binary `COPY`, back to back, in the buffer of the batch they came in.
+pub struct SessionRows {
+    batch: std::sync::Arc<[u8]>,
+    rows: std::ops::Range<usize>,
+}
 
 /// The session `head` from its rows ([`PgStore::read_rows`]), which must run 0, 1, 2 ... in
 /// order.
@@ -1491,7 +1514,7 @@ pub fn decode_session(
 ) -> Result<SessionResults, ResultsError> {
     let path = head.dir.join(TRIALS_FILE);
     let mut records = Vec::new();
-    let mut stream = rows::CopyRows::rows(&rows.0);
+    let mut stream = rows::CopyRows::rows(&rows.batch[rows.rows.clone()]);
     let malformed = |line: usize, column: usize, message: String| ResultsError::Malformed {
         path: path.clone(),
         line,
