@@ -770,7 +770,7 @@ impl PgStore {
                 r @ None => *r = Some(start..end),
             }
         }
-        let all: std::sync::Arc<[u8]> = all.into();
+        let all = std::sync::Arc::new(all);
         Ok(ranges
             .into_iter()
             .map(|r| SessionRows {
@@ -1499,7 +1499,7 @@ fn kept_files(dir: &Path) -> Result<Vec<(String, Vec<u8>)>, ResultsError> {
 /// One session's rows as the server sent them ([`PgStore::read_rows`]), undecoded: the
 /// rows of a binary `COPY`, back to back, in the buffer of the batch they came in.
 pub struct SessionRows {
-    batch: std::sync::Arc<[u8]>,
+    batch: std::sync::Arc<Vec<u8>>,
     rows: std::ops::Range<usize>,
 }
 
