@@ -10,13 +10,14 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::design;
 use crate::quest::{QuestError, QuestPlus};
 use crate::record::{Answer, Arrangement, Block, Outcome, Position, Protocol, Response, Trial};
 use crate::rng::{StudyRng, purpose};
 use crate::staircase::{Staircase, StaircaseError};
 use crate::study::{
-    ClipOrder, Condition, LiveClip, RatingScale, ReferencePlacement, StaircaseStudy,
-    StudyDefinition, Track,
+    ClipOrder, Condition, ConditionOrder, LiveClip, RatingScale, ReferencePlacement,
+    StaircaseStudy, StudyDefinition, Track,
 };
 
 /// Where a session stands.
@@ -182,9 +183,16 @@ pub struct Session {
     status: SessionStatus,
 }
 
-fn place(placement: ReferencePlacement, arrangement: Arrangement, rng: &mut StudyRng) -> Position {
+/// The reference's position: fixed, drawn from `rng`, or (counterbalanced) `balanced`.
+fn place(
+    placement: ReferencePlacement,
+    arrangement: Arrangement,
+    rng: &mut StudyRng,
+    balanced: Position,
+) -> Position {
     match placement {
         ReferencePlacement::Fixed(p) => p,
+        ReferencePlacement::Balanced => balanced,
         ReferencePlacement::Random => {
             let first = match arrangement {
                 Arrangement::SideBySide => Position::Left,
@@ -319,7 +327,17 @@ impl Session {
                     &[u64::from(self.subject), purpose::TRIAL, u64::from(index)],
                 );
                 let k = open[rng.index(open.len())];
-                let reference_position = place(self.placement, self.arrangement, &mut rng);
+                let reference_position = place(
+                    self.placement,
+                    self.arrangement,
+                    &mut rng,
+                    design::balanced_side_of_trial(
+                        self.seed,
+                        self.subject,
+                        index,
+                        self.arrangement,
+                    ),
+                );
                 let track = &st.tracks[k];
                 let level = st.staircases[k]
                     .next_level()
@@ -609,8 +627,13 @@ impl Session {
     }
 }
 
+/// Tags of the two balanced side draws of a rated plan.
+const SIDES_FAMILIARIZATION: u64 = 0x6661_6d69;
+const SIDES_CONDITIONS: u64 = 0x636f_6e64;
+
 /// MOS / DSCQS plan (paper 000 section IV): familiarization spanning the quality range first
-/// (shuffled), then the test conditions shuffled per subject with hidden repeats inserted.
+/// (shuffled), then the test conditions shuffled per subject (or in the subject's row of a
+/// balanced Latin square, `[design] order`) with hidden repeats inserted.
 fn plan_trials(
     study: &StudyDefinition,
     subject: u32,
@@ -623,7 +646,15 @@ fn plan_trials(
     let mut test: Vec<(usize, Block)> = (0..study.conditions.len())
         .map(|c| (c, Block::Test))
         .collect();
-    rng.shuffle(&mut test);
+    match study.design.order {
+        ConditionOrder::Random => rng.shuffle(&mut test),
+        ConditionOrder::LatinSquare => {
+            test = design::williams_row(test.len(), subject as usize)
+                .into_iter()
+                .map(|c| (c, Block::Test))
+                .collect();
+        }
+    }
     let n_rep = (study.session.hidden_repeats as usize).min(test.len());
     let mut pick: Vec<usize> = (0..test.len()).collect();
     // Partial Fisher-Yates: the first n_rep entries are a uniform sample of conditions.
@@ -647,21 +678,45 @@ fn plan_trials(
         };
         test.insert(at, (orig, Block::HiddenRepeat));
     }
+    // Counterbalanced sides: per condition (a hidden repeat shows the other side), and over
+    // the familiarization trials apart.
+    let balanced = placement == ReferencePlacement::Balanced;
+    let side_of = |tag: u64, n: usize| {
+        if balanced {
+            design::balanced_sides(study.seed, subject, &[tag], n, arrangement)
+        } else {
+            Vec::new()
+        }
+    };
+    let fam_sides = side_of(SIDES_FAMILIARIZATION, fam.len());
+    let cond_sides = side_of(SIDES_CONDITIONS, study.conditions.len());
+    let first = design::first_position(arrangement);
+    let fam_sides = fam_sides.into_iter().chain(std::iter::repeat(first));
+    let test_sides = test.iter().map(|&(c, b)| {
+        let s = cond_sides.get(c).copied().unwrap_or(first);
+        if b == Block::HiddenRepeat {
+            s.other()
+        } else {
+            s
+        }
+    });
+    let sides: Vec<Position> = fam_sides.take(fam.len()).chain(test_sides).collect();
     let test = test
         .into_iter()
         .filter_map(|(c, b)| study.conditions.get(c).map(|c| (c, b)));
     fam.into_iter()
         .map(|c| (c, Block::Familiarization))
         .chain(test)
+        .zip(sides)
         .enumerate()
-        .map(|(i, (c, block))| Trial {
+        .map(|(i, ((c, block), side))| Trial {
             index: i as u32,
             block,
             condition: c.stimulus.clone(),
             stimulus: c.stimulus.clone(),
             reference: c.reference.clone(),
             arrangement,
-            reference_position: place(placement, arrangement, &mut rng),
+            reference_position: place(placement, arrangement, &mut rng, side),
             staircase: None,
             level: None,
             break_before: false,

@@ -106,7 +106,7 @@ pub fn default_instructions(study: &StudyDefinition) -> String {
                     ReferencePlacement::Fixed(_) => {
                         "The second is the original, the first a compressed version of it."
                     }
-                    ReferencePlacement::Random => {
+                    ReferencePlacement::Random | ReferencePlacement::Balanced => {
                         "One of them may be the original; you are not told which."
                     }
                 };

@@ -76,6 +76,12 @@ pub struct RunArgs {
     /// Continue an interrupted session of this subject.
     #[arg(long)]
     pub resume: bool,
+    /// The subject's index in the study's counterbalancing (0, 1, 2, ...: subject k takes
+    /// row k mod rows of a Latin square, and subjects 2j and 2j+1 see mirrored reference
+    /// sides). Default: a hash of the subject id and session, which balances only on average.
+    /// Give the same index to `--resume`.
+    #[arg(long)]
+    pub subject_index: Option<u32>,
     /// Where the window goes.
     #[command(flatten)]
     pub window: WindowArgs,
@@ -296,7 +302,9 @@ fn open_session(
     store: &mut dyn Store,
     subject: &str,
 ) -> anyhow::Result<Option<Box<Recorder>>> {
-    let index = session::subject_index(subject, args.session);
+    let index = args
+        .subject_index
+        .unwrap_or_else(|| session::subject_index(subject, args.session));
     let fresh = session::new_manifest(
         &file.definition,
         SessionOf {

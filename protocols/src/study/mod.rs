@@ -10,6 +10,7 @@
 mod check;
 mod conditions;
 mod crowdsourcing;
+mod design;
 mod live;
 mod presentation;
 mod quest;
@@ -122,6 +123,36 @@ pub enum ReferencePlacement {
     Fixed(Position),
     /// Drawn per trial with probability one half.
     Random,
+    /// Counterbalanced (`"balanced"`): each subject sees the reference in each position
+    /// equally often (per condition in a rated study, per block of four trials in a
+    /// staircase), and the next subject sees the mirror image ([`crate::design`]).
+    Balanced,
+}
+
+/// The order of a rated study's test conditions (`[design] order`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ConditionOrder {
+    /// Shuffled per subject from the study seed.
+    Random,
+    /// A balanced Latin square (Williams design) over the conditions in file order; subject
+    /// `k` takes row `k mod rows` ([`crate::design::williams_row`]).
+    LatinSquare,
+}
+
+/// Design settings (`[design]`): counterbalancing.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DesignSettings {
+    /// The order of the test conditions.
+    pub order: ConditionOrder,
+}
+
+impl Default for DesignSettings {
+    fn default() -> Self {
+        Self {
+            order: ConditionOrder::Random,
+        }
+    }
 }
 
 /// Presentation settings (`[presentation]`).
@@ -462,6 +493,8 @@ pub struct StudyDefinition {
     pub rendering: RenderingSettings,
     /// What a study served to browsers needs (`[crowdsourcing]`).
     pub crowdsourcing: CrowdsourcingSettings,
+    /// Counterbalancing (`[design]`).
+    pub design: DesignSettings,
     /// Several characters per pane (`[scene]`, thesis 6.5): the conditions are crowd scenes
     /// of the manifest, drawn with this camera and light; `None` for one figure per pane.
     pub scene: Option<SceneSettings>,

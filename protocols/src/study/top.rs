@@ -8,6 +8,7 @@ use toml::{Table, Value};
 use super::check::Ctx;
 use super::conditions::{parse_conditions, resolve_familiarization};
 use super::crowdsourcing::parse_crowdsourcing;
+use super::design::parse_design;
 use super::presentation::parse_presentation;
 use super::rendering::parse_rendering;
 use super::scale::parse_scale;
@@ -56,6 +57,7 @@ const TOP_KEYS: &[&str] = &[
     "rendering",
     "crowdsourcing",
     "scene",
+    "design",
 ];
 
 /// The whole study file: its header, the manifest, the sections every protocol has, then
@@ -133,6 +135,7 @@ pub(super) fn parse_table(
         cx,
     );
     check_attention(&simulation, scene.as_ref(), t.contains_key("scene"), cx);
+    let design = parse_design(cx.table(t, "", "design").unwrap_or(&empty), protocol, cx);
 
     Some(StudyDefinition {
         format_version: header.version? as u32,
@@ -150,6 +153,7 @@ pub(super) fn parse_table(
         simulation,
         rendering,
         crowdsourcing,
+        design,
         scene,
         manifest: manifest?,
     })
