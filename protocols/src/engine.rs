@@ -155,6 +155,42 @@ struct Stairs {
     staircases: Vec<Procedure>,
     tolerance: f64,
     live: Option<LiveRun>,
+    /// Practice trials before the staircases (block `familiarization`), and their level
+    /// (`None`: each track's start).
+    practice: u32,
+    practice_level: Option<f64>,
+}
+
+impl Stairs {
+    /// The test stimulus and reference of trial `index` of `track` at `level`. Live: the clips
+    /// take turns across the session's trials, and the stimulus is named, not looked up; the
+    /// runner encodes it.
+    fn stimulus(
+        &self,
+        track: &Track,
+        index: u32,
+        level: f64,
+    ) -> Result<(String, String), EngineError> {
+        let missing = || EngineError::NoStimulus {
+            track: track.name.clone(),
+            level,
+        };
+        if let Some(live) = &self.live {
+            let c = live
+                .clips
+                .get(index as usize % live.clips.len().max(1))
+                .ok_or_else(missing)?;
+            Ok((
+                live.study.live_stimulus_id(&c.clip, level),
+                c.reference.clone(),
+            ))
+        } else {
+            let stimulus = track
+                .stimulus_at(level, self.tolerance)
+                .ok_or_else(missing)?;
+            Ok((stimulus.to_string(), track.reference.clone()))
+        }
+    }
 }
 
 /// A live staircase's clips in this subject's order, and how to name a derived stimulus.
@@ -248,6 +284,8 @@ impl Session {
                         staircases,
                         tolerance: sc.level_tolerance,
                         live,
+                        practice: sc.practice_trials,
+                        practice_level: sc.practice_level,
                     });
                 }
             }
@@ -310,10 +348,11 @@ impl Session {
                 t.clone()
             }
             Some(st) => {
+                let practice = index < st.practice;
                 let open: Vec<usize> = (0..st.staircases.len())
                     .filter(|&k| !st.staircases[k].is_finished())
                     .collect();
-                if open.is_empty() {
+                if open.is_empty() && !practice {
                     self.status = SessionStatus::Complete;
                     return Ok(None);
                 }
@@ -321,12 +360,17 @@ impl Session {
                     self.status = SessionStatus::TimeLimit;
                     return Ok(None);
                 }
-                // Staircases are interleaved at random among those still running.
                 let mut rng = StudyRng::new(
                     self.seed,
                     &[u64::from(self.subject), purpose::TRIAL, u64::from(index)],
                 );
-                let k = open[rng.index(open.len())];
+                // Practice trials take the tracks in turn; then the staircases are
+                // interleaved at random among those still running.
+                let k = if practice {
+                    index as usize % st.tracks.len().max(1)
+                } else {
+                    open[rng.index(open.len())]
+                };
                 let reference_position = place(
                     self.placement,
                     self.arrangement,
@@ -338,35 +382,24 @@ impl Session {
                         self.arrangement,
                     ),
                 );
-                let track = &st.tracks[k];
-                let level = st.staircases[k]
-                    .next_level()
-                    .unwrap_or(track.settings.start);
-                // Live: the clips take turns across the session's trials, and the stimulus
-                // is named, not looked up; the runner encodes it.
-                let (stimulus, reference) = if let Some(live) = &st.live {
-                    let Some(c) = live.clips.get(index as usize % live.clips.len().max(1)) else {
-                        return Err(EngineError::NoStimulus {
-                            track: track.name.clone(),
-                            level,
-                        });
-                    };
-                    (
-                        live.study.live_stimulus_id(&c.clip, level),
-                        c.reference.clone(),
-                    )
-                } else {
-                    let Some(stimulus) = track.stimulus_at(level, st.tolerance) else {
-                        return Err(EngineError::NoStimulus {
-                            track: track.name.clone(),
-                            level,
-                        });
-                    };
-                    (stimulus.to_string(), track.reference.clone())
+                let Some(track) = st.tracks.get(k) else {
+                    return Err(EngineError::NoPendingTrial);
                 };
+                let level = if practice {
+                    st.practice_level.unwrap_or(track.settings.start)
+                } else {
+                    st.staircases[k]
+                        .next_level()
+                        .unwrap_or(track.settings.start)
+                };
+                let (stimulus, reference) = st.stimulus(track, index, level)?;
                 Trial {
                     index,
-                    block: Block::Test,
+                    block: if practice {
+                        Block::Familiarization
+                    } else {
+                        Block::Test
+                    },
                     condition: track.name.clone(),
                     stimulus,
                     reference,
@@ -460,6 +493,8 @@ impl Session {
                 let correct = p == trial.reference_position;
                 let k = trial.staircase.unwrap_or(0) as usize;
                 let reversal = match self.stairs.as_mut().and_then(|s| s.staircases.get_mut(k)) {
+                    // A practice trial is scored for the log and moves no staircase.
+                    Some(_) if trial.block == Block::Familiarization => None,
                     Some(sc) => sc.add_response(correct)?,
                     None => return Err(EngineError::NoPendingTrial),
                 };

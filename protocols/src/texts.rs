@@ -202,6 +202,7 @@ pub fn planned_trials(study: &StudyDefinition) -> Planned {
                     .iter()
                     .map(|t| t.settings.max_trials)
                     .sum::<Option<u32>>()
+                    .map(|n| n + s.practice_trials)
             })
             .map_or(Planned::Unknown, Planned::AtMost),
     }

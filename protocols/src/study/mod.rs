@@ -325,6 +325,13 @@ pub struct StaircaseStudy {
     /// shared by the tracks; `None` for up-down staircases.
     #[serde(default)]
     pub quest: Option<crate::quest::QuestSettings>,
+    /// Practice trials before the staircases start (`practice_trials`), the tracks in turn,
+    /// logged in block `familiarization` and left out of every analysis.
+    #[serde(default)]
+    pub practice_trials: u32,
+    /// The level of every practice trial (`practice_level`); `None`: each track's start.
+    #[serde(default)]
+    pub practice_level: Option<f64>,
 }
 
 /// Prefix of every stimulus id a live staircase derives.

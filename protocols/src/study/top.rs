@@ -306,7 +306,8 @@ fn staircase_sections(
     if !matches!(familiarization_spec, FamSpec::None) {
         cx.err(
             "session.familiarization",
-            "familiarization trials are not supported in a staircase study",
+            "familiarization trials are not supported in a staircase study (practice trials \
+             before the staircases: [staircase] practice_trials)",
         );
     }
     if session.hidden_repeats > 0 {

@@ -399,6 +399,35 @@ fn a_live_staircase_prefetches_the_next_levels_while_a_trial_runs() {
     drop(run.fx);
 }
 
+#[test]
+fn practice_trials_before_a_staircase_are_marked_and_logged_as_practice() {
+    let practice = AFC.replace("max_trials = 3\n", "max_trials = 3\npractice_trials = 1\n");
+    let (mut h, run) = harness(fixture("practice", &practice));
+    begin(&mut h);
+    assert!(h.query_by_label("Trial 1 of at most 4").is_some());
+    assert!(h.query_by_label("(practice)").is_some());
+    for n in 1..=2 {
+        watch(&mut h, 1.0);
+        let right = h.state().0.pending_reference().unwrap();
+        h.key_press(if right == Position::Left {
+            Key::ArrowLeft
+        } else {
+            Key::ArrowRight
+        });
+        h.run_steps(2);
+        assert_eq!(rows(&run.session_dir).len(), n);
+        watch(&mut h, 0.5);
+    }
+    // Trial 2 is the staircase's first: no practice mark.
+    assert!(h.query_by_label("(practice)").is_none());
+    let r = rows(&run.session_dir);
+    assert_eq!(r[0].trial.block, protocols::Block::Familiarization);
+    assert_eq!(r[0].trial.level, Some(20.0));
+    assert_eq!(r[0].outcome.reversal, None);
+    assert_eq!(r[1].trial.block, protocols::Block::Test);
+    drop(run.fx);
+}
+
 /// A MOS study with a title, a 0.4 s gap and a break before every second trial.
 const MOS_LABELLED: &str = "protocol = \"mos\"\ntitle = \"Motion quality\"\n\
     [conditions]\nclips = [\"walk\"]\ncodecs = [\"spiht\"]\ntarget_cr = [10, 20]\n\
