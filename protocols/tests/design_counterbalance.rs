@@ -329,3 +329,45 @@ fn a_balanced_staircase_session_takes_its_sides_from_the_blocks() {
         assert!(n >= 8, "{n} trials");
     }
 }
+
+#[test]
+fn viewing_conditions_are_read_converted_and_checked() {
+    let base = "format_version = 1\nname = \"s\"\nprotocol = \"mos\"\nstimuli = \"stimuli.json\"\n\
+                seed = 1\n[conditions]\nstimuli = [\"walk/wavelet-bone/cr10\"]\n";
+    let st = parse(&format!(
+        "{base}[viewing]\ndistance_cm = 120\nscreen_size_cm = [80, 45]\nroom_illuminance_lux = 0\n"
+    ))
+    .unwrap();
+    let v = st.viewing.unwrap();
+    assert_eq!(v.distance_cm(), Some(120.0));
+    assert_eq!(
+        v.describe(),
+        vec![
+            ("viewing distance", "120 cm (2.667 H)".to_string()),
+            ("display", "80 × 45 cm".to_string()),
+            ("room illumination", "0 lux".to_string()),
+        ]
+    );
+    let err = parse(&format!(
+        "{base}[viewing]\ndistance_ph = 3\ndistance_cm = 100\npeak_luminance_cd_m2 = 100\n\
+         background_luminance_cd_m2 = 200\nroom_illuminance_lux = -1\nscreen_resolution = [1920.5, 1080]\n\
+         brightness = 1\n"
+    ))
+    .unwrap_err()
+    .to_string();
+    for want in [
+        "viewing.distance_cm: give the distance once",
+        "viewing.background_luminance_cd_m2: 200 cd/m² is above the peak luminance 100 cd/m²",
+        "viewing.room_illuminance_lux: -1 is outside 0..=100000 lux",
+        "viewing.screen_resolution: expected [width, height] in whole pixels",
+        "viewing.brightness: unknown key",
+        "viewing.distance_ph: a distance in picture heights needs the screen's size",
+    ] {
+        assert!(err.contains(want), "{want}\n{err}");
+    }
+    assert!(err.contains("6 problem(s)"), "{err}");
+    let err = parse(&format!("{base}[viewing]\n"))
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("viewing: states no condition"), "{err}");
+}

@@ -123,7 +123,29 @@ fn describe_design(text: &mut String, study: &StudyDefinition) -> std::fmt::Resu
             _ => "balanced (per condition, mirrored for the next subject)".to_string(),
         },
     };
-    writeln!(text, "  reference position: {side}")
+    writeln!(text, "  reference position: {side}")?;
+    if let Some(sc) = &study.staircase
+        && sc.practice_trials > 0
+    {
+        writeln!(
+            text,
+            "  practice: {} trial(s) before the staircases, not analysed",
+            sc.practice_trials
+        )?;
+    }
+    if let Some(v) = &study.viewing {
+        let stated: Vec<String> = v
+            .describe()
+            .into_iter()
+            .map(|(what, value)| format!("{what} {value}"))
+            .collect();
+        writeln!(
+            text,
+            "  viewing conditions (confirmed before each session): {}",
+            stated.join(", ")
+        )?;
+    }
+    Ok(())
 }
 
 /// A MOS or DSCQS study's trials and presentation time.

@@ -21,6 +21,7 @@ mod session;
 mod simulation;
 mod staircase;
 mod top;
+mod viewing;
 
 use std::collections::BTreeMap;
 use std::fmt;
@@ -40,6 +41,7 @@ pub use rendering::RenderingSettings;
 pub use scene::{
     MAX_CHARACTERS, MAX_LEVELS, Placement, SceneCamera, SceneCharacter, SceneLight, SceneSettings,
 };
+pub use viewing::{ScreenSize, ViewingDistance, ViewingSettings};
 
 /// Current version of the study file format.
 pub const STUDY_FORMAT_VERSION: u32 = 1;
@@ -502,6 +504,9 @@ pub struct StudyDefinition {
     pub crowdsourcing: CrowdsourcingSettings,
     /// Counterbalancing (`[design]`).
     pub design: DesignSettings,
+    /// The viewing conditions the experimenter confirms before each session (`[viewing]`);
+    /// `None`: the study states none.
+    pub viewing: Option<ViewingSettings>,
     /// Several characters per pane (`[scene]`, thesis 6.5): the conditions are crowd scenes
     /// of the manifest, drawn with this camera and light; `None` for one figure per pane.
     pub scene: Option<SceneSettings>,

@@ -16,6 +16,7 @@ use super::scene::{SceneSettings, check_scene_stimulus, parse_scene};
 use super::session::{FamSpec, parse_session};
 use super::simulation::parse_simulation;
 use super::staircase::parse_staircase;
+use super::viewing::parse_viewing;
 use super::{
     Condition, Detection, Metric, STUDY_FORMAT_VERSION, SessionSettings, SimulationSettings,
     StaircaseStudy, StudyDefinition,
@@ -58,6 +59,7 @@ const TOP_KEYS: &[&str] = &[
     "crowdsourcing",
     "scene",
     "design",
+    "viewing",
 ];
 
 /// The whole study file: its header, the manifest, the sections every protocol has, then
@@ -136,6 +138,7 @@ pub(super) fn parse_table(
     );
     check_attention(&simulation, scene.as_ref(), t.contains_key("scene"), cx);
     let design = parse_design(cx.table(t, "", "design").unwrap_or(&empty), protocol, cx);
+    let viewing = cx.table(t, "", "viewing").map(|v| parse_viewing(v, cx));
 
     Some(StudyDefinition {
         format_version: header.version? as u32,
@@ -154,6 +157,7 @@ pub(super) fn parse_table(
         rendering,
         crowdsourcing,
         design,
+        viewing,
         scene,
         manifest: manifest?,
     })
