@@ -371,3 +371,47 @@ fn viewing_conditions_are_read_converted_and_checked() {
         .to_string();
     assert!(err.contains("viewing: states no condition"), "{err}");
 }
+
+#[test]
+fn catch_trials_in_design_are_the_one_list_every_runner_and_the_report_use() {
+    let base = "format_version = 1\nname = \"s\"\nprotocol = \"mos\"\nstimuli = \"stimuli.json\"\n\
+                seed = 1\n[conditions]\nstimuli = [\"walk/wavelet-bone/cr10\", \"walk/wavelet-bone/cr70\"]\n";
+    let st = parse(&format!(
+        "{base}[design]\nmax_catch_failures = 1\n[[design.catch]]\nstimulus = \"walk/wavelet-bone/cr70\"\nmax = 2\n"
+    ))
+    .unwrap();
+    let g = st.crowdsourcing.gold_of("walk/wavelet-bone/cr70").unwrap();
+    assert!(g.passes(2.0) && !g.passes(2.5));
+    assert_eq!(st.crowdsourcing.max_gold_failures, 1);
+    // The older [crowdsourcing] spelling still reads, into the same list.
+    let old = parse(&format!(
+        "{base}[crowdsourcing]\nmax_gold_failures = 1\n[[crowdsourcing.gold]]\nstimulus = \"walk/wavelet-bone/cr70\"\nmax = 2\n"
+    ))
+    .unwrap();
+    assert_eq!(old.crowdsourcing.gold, st.crowdsourcing.gold);
+    let err = parse(&format!(
+        "{base}[crowdsourcing]\nmax_gold_failures = 2\n[[crowdsourcing.gold]]\nstimulus = \"walk/wavelet-bone/cr70\"\nmax = 2\n\
+         [design]\nmax_catch_failures = 1\n[[design.catch]]\nstimulus = \"walk/wavelet-bone/cr10\"\n"
+    ))
+    .unwrap_err()
+    .to_string();
+    assert!(
+        err.contains("design.catch: catch trials are given twice"),
+        "{err}"
+    );
+    assert!(
+        err.contains("design.max_catch_failures: given twice"),
+        "{err}"
+    );
+    assert!(
+        err.contains("design.catch[0]: give min (an identical pair) or max"),
+        "{err}"
+    );
+    let stair = common::example_text("staircase.toml")
+        + "\n[[design.catch]]\nstimulus = \"walk/reference\"\nmin = 4\n";
+    let err = parse(&stair).unwrap_err().to_string();
+    assert!(
+        err.contains("design.catch: catch (gold) trials are rated conditions"),
+        "{err}"
+    );
+}

@@ -130,14 +130,20 @@ pub(super) fn parse_table(
         None => {}
     }
 
-    let crowdsourcing = parse_crowdsourcing(
+    let mut crowdsourcing = parse_crowdsourcing(
         cx.table(t, "", "crowdsourcing").unwrap_or(&empty),
         protocol,
         &conditions,
         cx,
     );
     check_attention(&simulation, scene.as_ref(), t.contains_key("scene"), cx);
-    let design = parse_design(cx.table(t, "", "design").unwrap_or(&empty), protocol, cx);
+    let design = parse_design(
+        cx.table(t, "", "design").unwrap_or(&empty),
+        protocol,
+        &conditions,
+        &mut crowdsourcing,
+        cx,
+    );
     let viewing = cx.table(t, "", "viewing").map(|v| parse_viewing(v, cx));
 
     Some(StudyDefinition {
