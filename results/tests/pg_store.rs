@@ -202,6 +202,106 @@ fn one_writer_per_session_and_rows_read_back_as_written(server: &ScratchServer) 
     assert_eq!(read[0].trials.records.len(), 3);
 }
 
+/// Records of every kind (a DSCQS pair, a 2AFC choice of a live staircase with its encoding
+/// and frame timing, text needing quotes) come back from a report's read exactly as written;
+/// a value the database holds that no record can have is refused, naming the session's
+/// trials, the row's line in an exported `trials.csv`, the column and the reason.
+fn every_kind_of_row_read_back_and_bad_values_named(server: &ScratchServer) {
+    let db = server.create_database("kinds").unwrap();
+    let mut store = open(&db);
+    let mut m = manifest("S04");
+    let mut writer = store.create_session(&m).unwrap();
+    let mut pair = record("S04", 0, 0.0);
+    pair.protocol = Protocol::Dscqs;
+    pair.response.answer = Answer::Pair { a: 71.5, b: 12.25 };
+    pair.outcome = Outcome {
+        score: 59.25,
+        score_reference: Some(71.5),
+        score_test: Some(12.25),
+        correct: None,
+        reversal: None,
+    };
+    let mut choice = record("S04", 1, 0.0);
+    choice.protocol = Protocol::Staircase;
+    choice.trial.block = Block::Familiarization;
+    choice.trial.staircase = Some(2);
+    choice.trial.level = Some(-0.003_125);
+    choice.trial.break_before = true;
+    choice.trial.condition = "ünïcode, \"quoted\"\nline".into();
+    choice.response.answer = Answer::Choice(Position::Right);
+    choice.response.response_time_ms = u64::from(u32::MAX) + 7;
+    choice.outcome = Outcome {
+        score: 1.0,
+        score_reference: None,
+        score_test: None,
+        correct: Some(true),
+        reversal: Some(false),
+    };
+    choice.encoding = Some(protocols::StimulusEncoding {
+        codec_params: BTreeMap::from([("qp".to_string(), 9.0), ("window".to_string(), 128.0)]),
+        achieved_cr: 23.5,
+        rms_cm: 0.125,
+    });
+    choice.timing = Some(protocols::FrameTiming {
+        frames_shown: 240,
+        interval_sd_ms: 0.375,
+    });
+    let written = [pair, choice, record("S04", 2, 4.5)];
+    for (i, r) in written.iter().enumerate() {
+        m.trials_logged = u32::try_from(i + 1).unwrap();
+        writer.append(r, &m).unwrap();
+    }
+    drop(writer);
+    let heads = store.sessions().unwrap();
+    assert_eq!(store.read(&heads).unwrap()[0].trials.records, written);
+
+    let mut admin = db.connect().unwrap();
+    // Each damage committed (the store reads on its own connection), read, then undone.
+    for (sql, undo, line, column, says) in [
+        (
+            "UPDATE study_trials SET score = 'NaN' WHERE row_number = 2",
+            "UPDATE study_trials SET score = 4.5 WHERE row_number = 2",
+            4,
+            19,
+            "score: NaN is not finite",
+        ),
+        (
+            "UPDATE study_trials SET block = 'warmup' WHERE row_number = 1",
+            "UPDATE study_trials SET block = 'familiarization' WHERE row_number = 1",
+            3,
+            6,
+            "block: ",
+        ),
+        (
+            "UPDATE study_trials SET replays = -1 WHERE row_number = 0",
+            "UPDATE study_trials SET replays = 1 WHERE row_number = 0",
+            2,
+            25,
+            "replays: -1 is out of range",
+        ),
+        (
+            "UPDATE study_trials SET row_number = 5 WHERE row_number = 2",
+            "UPDATE study_trials SET row_number = 2 WHERE row_number = 5",
+            4,
+            1,
+            "row 5 follows row 1",
+        ),
+    ] {
+        admin.execute(sql, &[]).unwrap();
+        let e = store.read(&heads).unwrap_err();
+        admin.execute(undo, &[]).unwrap();
+        let text = e.to_string();
+        assert!(
+            matches!(&e, ResultsError::Malformed { line: l, column: c, .. } if *l == line && *c == column)
+                && text.contains(says)
+                && text.contains("S04_s1"),
+            "{sql}: {text:?} ({e:?})"
+        );
+    }
+    // Undamaged again: the same records.
+    assert_eq!(store.read(&heads).unwrap()[0].trials.records, written);
+}
+
 /// The roles of docs/postgres.md, run as written there: a station inserts answers only into
 /// a session whose lock it holds, and can neither change nor delete a committed answer; an
 /// analyst reads and writes nothing.
@@ -342,6 +442,7 @@ fn postgres_store() {
     let Some(mut server) = server() else { return };
     two_stations_never_get_the_same_subject_number(&server);
     one_writer_per_session_and_rows_read_back_as_written(&server);
+    every_kind_of_row_read_back_and_bad_values_named(&server);
     roles_from_the_docs_allow_what_they_say(&server);
     schema_is_versioned_and_a_newer_one_refused(&server);
     an_answer_survives_a_server_restart(&mut server);

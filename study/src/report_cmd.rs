@@ -309,9 +309,10 @@ struct DbSessions {
 struct Inbox {
     /// Sessions' rows in order from the fetcher (or its error), decoded by the reader that
     /// takes them.
-    from_fetcher: std::sync::mpsc::Receiver<Result<Vec<results::pg::Row>, results::ResultsError>>,
+    from_fetcher:
+        std::sync::mpsc::Receiver<Result<results::pg::SessionRows, results::ResultsError>>,
     /// Sessions' rows received that another reader will ask for, by index.
-    early: HashMap<usize, Vec<results::pg::Row>>,
+    early: HashMap<usize, results::pg::SessionRows>,
     /// How many sessions have been received.
     received: usize,
 }
@@ -374,7 +375,7 @@ impl Sessions {
 
 impl DbSessions {
     /// The rows of session `i`, from the fetcher (or set aside by the other reader).
-    fn rows(&self, i: usize) -> Result<Vec<results::pg::Row>> {
+    fn rows(&self, i: usize) -> Result<results::pg::SessionRows> {
         let mut inbox = self
             .inbox
             .lock()

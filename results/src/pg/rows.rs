@@ -4,7 +4,6 @@
 
 use std::path::Path;
 
-use postgres::Row;
 use postgres::types::ToSql;
 use protocols::{
     Answer, Block, FrameTiming, Outcome, Protocol, Response, StimulusEncoding, Trial, TrialRecord,
@@ -251,66 +250,236 @@ pub fn types() -> [postgres::types::Type; COLUMN_COUNT] {
     ]
 }
 
-/// Reads row `i` of a `SELECT` of [`SELECT_COLUMNS`] back into a record; an error names
-/// `trials` (the session's path in messages), the line the row has in an exported
-/// `trials.csv` and the column.
+/// Number of columns in [`SELECT_COLUMNS`].
+pub const SELECT_COUNT: usize = COLUMN_COUNT + 2;
+
+/// The start of every binary `COPY` stream: its 11-byte signature (the flags and header
+/// extension length follow it).
+const COPY_SIGNATURE: &[u8; 11] = b"PGCOPY\n\xff\r\n\0";
+
+/// A binary `COPY` stream of [`SELECT_COLUMNS`] rows, for splitting into sessions and
+/// decoding, with no per-row allocation: the server's rows are read straight from the bytes
+/// it sent (`COPY ... TO STDOUT (FORMAT binary)`), not through a `Row` per row.
+pub struct CopyRows<'a> {
+    bytes: &'a [u8],
+    at: usize,
+}
+
+/// One row of a [`CopyRows`] stream: its fields (`None` for NULL), and where it lies in
+/// the stream.
+pub struct Tuple<'a> {
+    fields: [Option<&'a [u8]>; SELECT_COUNT],
+    /// The row's bytes, from its field count to its last field's end.
+    pub bytes: &'a [u8],
+    /// Where the row starts in the bytes it was read from.
+    pub start: usize,
+}
+
+fn be_i16(b: &[u8]) -> Option<i16> {
+    Some(i16::from_be_bytes(b.get(..2)?.try_into().ok()?))
+}
+
+fn be_i32(b: &[u8]) -> Option<i32> {
+    Some(i32::from_be_bytes(b.get(..4)?.try_into().ok()?))
+}
+
+impl<'a> CopyRows<'a> {
+    /// The rows of a whole binary `COPY` stream (signature, flags, header extension, rows,
+    /// trailer).
+    ///
+    /// # Errors
+    /// A stream that does not start as binary `COPY` output does.
+    pub fn stream(bytes: &'a [u8]) -> Result<Self, String> {
+        let rest = bytes
+            .strip_prefix(COPY_SIGNATURE)
+            .ok_or("the server's rows are not a binary COPY stream")?;
+        let flags = be_i32(rest).ok_or("the binary COPY header is cut short")?;
+        if flags & 0xffff_0000_u32.cast_signed() != 0 {
+            return Err(format!(
+                "the binary COPY header has unknown flags {flags:#x}"
+            ));
+        }
+        let ext = be_i32(&rest[4..])
+            .and_then(|n| usize::try_from(n).ok())
+            .ok_or("the binary COPY header is cut short")?;
+        let at = COPY_SIGNATURE.len() + 8 + ext;
+        if at > bytes.len() {
+            return Err("the binary COPY header is cut short".into());
+        }
+        Ok(CopyRows { bytes, at })
+    }
+
+    /// The rows of one session cut from a stream by [`Self::next`] (the rows' bytes back to
+    /// back, no header or trailer).
+    pub fn rows(bytes: &'a [u8]) -> Self {
+        CopyRows { bytes, at: 0 }
+    }
+
+    /// The next row, `None` at the stream's trailer or the end of the bytes.
+    ///
+    /// # Errors
+    /// A row with another number of fields than [`SELECT_COLUMNS`], or cut short.
+    #[allow(clippy::should_implement_trait)]
+    pub fn next(&mut self) -> Result<Option<Tuple<'a>>, String> {
+        let start = self.at;
+        let b = self.bytes;
+        if start == b.len() {
+            return Ok(None);
+        }
+        let count = be_i16(&b[start..]).ok_or("a row is cut short")?;
+        if count == -1 {
+            self.at = b.len();
+            return Ok(None);
+        }
+        if usize::try_from(count).ok() != Some(SELECT_COUNT) {
+            return Err(format!(
+                "a row has {count} columns, not the {SELECT_COUNT} asked for"
+            ));
+        }
+        let mut at = start + 2;
+        let mut fields = [None; SELECT_COUNT];
+        for field in &mut fields {
+            let len = be_i32(&b[at.min(b.len())..]).ok_or("a row is cut short")?;
+            at += 4;
+            if len >= 0 {
+                let end = at
+                    .checked_add(len.unsigned_abs() as usize)
+                    .filter(|&e| e <= b.len())
+                    .ok_or("a row is cut short")?;
+                *field = Some(&b[at..end]);
+                at = end;
+            } else if len != -1 {
+                return Err(format!("a field has length {len}"));
+            }
+        }
+        self.at = at;
+        Ok(Some(Tuple {
+            fields,
+            bytes: &b[start..at],
+            start,
+        }))
+    }
+}
+
+type Field<T> = Result<T, (usize, String)>;
+
+fn null(i: usize) -> (usize, String) {
+    (i, "NULL where a value is required".into())
+}
+
+impl<'a> Tuple<'a> {
+    fn fixed<const N: usize>(&self, i: usize) -> Field<Option<[u8; N]>> {
+        self.fields[i]
+            .map(|b| {
+                b.try_into()
+                    .map_err(|_| (i, format!("{} bytes where {N} are expected", b.len())))
+            })
+            .transpose()
+    }
+
+    /// Column `i` as an `integer`.
+    pub fn opt_int4(&self, i: usize) -> Field<Option<i32>> {
+        Ok(self.fixed::<4>(i)?.map(i32::from_be_bytes))
+    }
+
+    /// Column `i` as a non-null `integer`.
+    pub fn int4(&self, i: usize) -> Field<i32> {
+        self.opt_int4(i)?.ok_or_else(|| null(i))
+    }
+
+    fn int8(&self, i: usize) -> Field<i64> {
+        Ok(i64::from_be_bytes(
+            self.fixed::<8>(i)?.ok_or_else(|| null(i))?,
+        ))
+    }
+
+    fn opt_f64(&self, i: usize) -> Field<Option<f64>> {
+        Ok(self.fixed::<8>(i)?.map(f64::from_be_bytes))
+    }
+
+    fn finite(&self, i: usize) -> Field<f64> {
+        let v = self.opt_f64(i)?.ok_or_else(|| null(i))?;
+        if v.is_finite() {
+            Ok(v)
+        } else {
+            Err((i, format!("{v} is not finite")))
+        }
+    }
+
+    fn opt_bool(&self, i: usize) -> Field<Option<bool>> {
+        match self.fixed::<1>(i)? {
+            None => Ok(None),
+            Some([0]) => Ok(Some(false)),
+            Some([1]) => Ok(Some(true)),
+            Some([b]) => Err((i, format!("{b} is not a boolean"))),
+        }
+    }
+
+    fn opt_str(&self, i: usize) -> Field<Option<&'a str>> {
+        self.fields[i]
+            .map(|b| std::str::from_utf8(b).map_err(|e| (i, format!("not UTF-8: {e}"))))
+            .transpose()
+    }
+
+    fn str(&self, i: usize) -> Field<&'a str> {
+        self.opt_str(i)?.ok_or_else(|| null(i))
+    }
+
+    fn string(&self, i: usize) -> Field<String> {
+        self.str(i).map(str::to_owned)
+    }
+
+    fn named<T: std::str::FromStr<Err = String>>(&self, i: usize) -> Field<T> {
+        self.str(i)?.parse().map_err(|e| (i, e))
+    }
+
+    fn unsigned<T: TryFrom<i64>>(&self, i: usize, wide: bool) -> Field<T> {
+        let v = if wide {
+            self.int8(i)?
+        } else {
+            i64::from(self.int4(i)?)
+        };
+        T::try_from(v).map_err(|_| (i, format!("{v} is out of range")))
+    }
+
+    fn opt_unsigned(&self, i: usize) -> Field<Option<u32>> {
+        self.opt_int4(i)?
+            .map(|v| u32::try_from(v).map_err(|_| (i, format!("{v} is out of range"))))
+            .transpose()
+    }
+}
+
+/// Reads rows of [`SELECT_COLUMNS`] back into records; an error names `trials` (the
+/// session's path in messages), the line the row has in an exported `trials.csv` and the
+/// column.
 pub struct Decoder<'a> {
     /// The path naming the session's trials in messages.
     pub trials: &'a Path,
 }
 
-type Field<T> = Result<T, (usize, String)>;
-
-fn get<'r, T: postgres::types::FromSql<'r>>(row: &'r Row, i: usize) -> Field<T> {
-    row.try_get(i).map_err(|e| (i, e.to_string()))
-}
-
-fn unsigned<T: TryFrom<i64>>(row: &Row, i: usize) -> Field<T> {
-    let v: i64 = match row.columns()[i].type_() {
-        &postgres::types::Type::INT4 => i64::from(get::<i32>(row, i)?),
-        _ => get::<i64>(row, i)?,
-    };
-    T::try_from(v).map_err(|_| (i, format!("{v} is out of range")))
-}
-
-fn opt_unsigned(row: &Row, i: usize) -> Field<Option<u32>> {
-    get::<Option<i32>>(row, i)?
-        .map(|v| u32::try_from(v).map_err(|_| (i, format!("{v} is out of range"))))
-        .transpose()
-}
-
-fn named<T: std::str::FromStr<Err = String>>(row: &Row, i: usize) -> Field<T> {
-    let s: &str = get(row, i)?;
-    s.parse().map_err(|e| (i, e))
-}
-
-fn finite(row: &Row, i: usize) -> Field<f64> {
-    let v: f64 = get(row, i)?;
-    if v.is_finite() {
-        Ok(v)
-    } else {
-        Err((i, format!("{v} is not finite")))
-    }
-}
-
 impl Decoder<'_> {
-    /// The record of `row` (a row of [`SELECT_COLUMNS`]).
+    /// The record of `row`.
     ///
     /// # Errors
     /// [`ResultsError::Malformed`] naming the row's line and column.
-    pub fn decode(&self, row: &Row) -> Result<TrialRecord, ResultsError> {
+    pub fn decode(&self, row: &Tuple<'_>) -> Result<TrialRecord, ResultsError> {
         decode(row).map_err(|(i, message)| {
             let line = row
-                .try_get::<_, i32>(1)
+                .int4(1)
                 .map_or(0, |n| usize::try_from(n).unwrap_or(0) + 2);
             ResultsError::Malformed {
                 path: self.trials.to_path_buf(),
                 line,
                 column: csv_column(i),
-                message: format!("{}: {message}", row.columns()[i].name()),
+                message: format!("{}: {message}", column_name(i)),
             }
         })
     }
+}
+
+/// The name of select column `i`.
+pub fn column_name(i: usize) -> &'static str {
+    SELECT_COLUMNS.split(", ").nth(i).unwrap_or("?")
 }
 
 /// The 1-based `trials.csv` column of select column `i` (the CSV's `response` holds a rating
@@ -323,65 +492,65 @@ fn csv_column(i: usize) -> usize {
     }
 }
 
-fn decode(row: &Row) -> Field<TrialRecord> {
-    let protocol: Protocol = named(row, 7)?;
+fn decode(row: &Tuple<'_>) -> Field<TrialRecord> {
+    let protocol: Protocol = row.named(7)?;
     let answer = match protocol {
-        Protocol::Mos => Answer::Rating(finite(row, 16)?),
+        Protocol::Mos => Answer::Rating(row.finite(16)?),
         Protocol::Dscqs => Answer::Pair {
-            a: finite(row, 17)?,
-            b: finite(row, 18)?,
+            a: row.finite(17)?,
+            b: row.finite(18)?,
         },
-        Protocol::Staircase => Answer::Choice(named(row, 19)?),
+        Protocol::Staircase => Answer::Choice(row.named(19)?),
     };
-    let encoding = match get::<Option<&str>>(row, 31)? {
+    let encoding = match row.opt_str(31)? {
         None => None,
         Some(params) => Some(StimulusEncoding {
             codec_params: parse_codec_params(params).map_err(|m| (31, m))?,
-            achieved_cr: finite(row, 32)?,
-            rms_cm: finite(row, 33)?,
+            achieved_cr: row.finite(32)?,
+            rms_cm: row.finite(33)?,
         }),
     };
-    let timing = match get::<Option<i32>>(row, 34)? {
+    let timing = match row.opt_unsigned(34)? {
         None => None,
-        Some(_) => Some(FrameTiming {
-            frames_shown: unsigned(row, 34)?,
-            interval_sd_ms: finite(row, 35)?,
+        Some(frames_shown) => Some(FrameTiming {
+            frames_shown,
+            interval_sd_ms: row.finite(35)?,
         }),
     };
-    let block: Block = named(row, 6)?;
+    let block: Block = row.named(6)?;
     Ok(TrialRecord {
-        study: get::<String>(row, 2)?,
-        subject: get::<String>(row, 3)?,
-        session: unsigned(row, 4)?,
+        study: row.string(2)?,
+        subject: row.string(3)?,
+        session: row.unsigned(4, false)?,
         protocol,
         trial: Trial {
-            index: unsigned(row, 5)?,
+            index: row.unsigned(5, false)?,
             block,
-            condition: get(row, 8)?,
-            stimulus: get(row, 9)?,
-            reference: get(row, 10)?,
-            arrangement: named(row, 11)?,
-            reference_position: named(row, 12)?,
-            break_before: get(row, 13)?,
-            staircase: opt_unsigned(row, 14)?,
-            level: get(row, 15)?,
+            condition: row.string(8)?,
+            stimulus: row.string(9)?,
+            reference: row.string(10)?,
+            arrangement: row.named(11)?,
+            reference_position: row.named(12)?,
+            break_before: row.opt_bool(13)?.ok_or_else(|| null(13))?,
+            staircase: row.opt_unsigned(14)?,
+            level: row.opt_f64(15)?,
         },
         response: Response {
             answer,
-            response_time_ms: unsigned(row, 25)?,
-            replays: unsigned(row, 26)?,
-            dropped_frames: unsigned(row, 27)?,
+            response_time_ms: row.unsigned(25, true)?,
+            replays: row.unsigned(26, false)?,
+            dropped_frames: row.unsigned(27, false)?,
         },
         outcome: Outcome {
-            score: finite(row, 20)?,
-            score_reference: get(row, 21)?,
-            score_test: get(row, 22)?,
-            correct: get(row, 23)?,
-            reversal: get(row, 24)?,
+            score: row.finite(20)?,
+            score_reference: row.opt_f64(21)?,
+            score_test: row.opt_f64(22)?,
+            correct: row.opt_bool(23)?,
+            reversal: row.opt_bool(24)?,
         },
-        elapsed_ms: unsigned(row, 28)?,
-        wall_clock_ms: unsigned(row, 29)?,
-        monotonic_ms: unsigned(row, 30)?,
+        elapsed_ms: row.unsigned(28, true)?,
+        wall_clock_ms: row.unsigned(29, true)?,
+        monotonic_ms: row.unsigned(30, true)?,
         encoding,
         timing,
     })
