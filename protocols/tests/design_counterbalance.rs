@@ -292,6 +292,20 @@ fn study_check_lists_design_problems() {
         err.contains("presentation.reference_position:") && err.contains("\"balanced\""),
         "{err}"
     );
+    // Served plan groups must complete the square: 3 conditions, 6 rows.
+    let three = "format_version = 1\nname = \"s\"\nprotocol = \"mos\"\nstimuli = \"stimuli.json\"\n\
+                 seed = 1\n[conditions]\nstimuli = [\"walk/wavelet-bone/cr10\", \"walk/wavelet-bone/cr20\", \
+                 \"walk/wavelet-bone/cr30\"]\n[design]\norder = \"latin_square\"\n";
+    let err = parse(&format!("{three}[crowdsourcing]\ngroups = 4\n"))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains(
+            "crowdsourcing.groups: 4 plan groups do not complete the Latin square's 6 rows"
+        ),
+        "{err}"
+    );
+    parse(&format!("{three}[crowdsourcing]\ngroups = 12\n")).unwrap();
     let stair = common::example_text("staircase.toml") + "\n[design]\norder = \"latin_square\"\n";
     let err = parse(&stair).unwrap_err().to_string();
     assert!(

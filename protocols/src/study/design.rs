@@ -60,5 +60,19 @@ pub(super) fn parse_design(
              conditions of a rated study (mos, dscqs)",
         );
     }
+    if order == ConditionOrder::LatinSquare
+        && let Some(g) = crowd.groups
+    {
+        let rows = crate::design::williams_rows(conditions.len());
+        if !(g as usize).is_multiple_of(rows) {
+            cx.err(
+                "crowdsourcing.groups",
+                format!(
+                    "{g} plan groups do not complete the Latin square's {rows} rows (subject \
+                     index k takes row k mod {rows}): use a multiple of {rows}"
+                ),
+            );
+        }
+    }
     DesignSettings { order }
 }
