@@ -555,6 +555,7 @@ mod tests {
                     torn_rows: Vec::new(),
                     display: None,
                     browser: None,
+                    viewing: None,
                 };
                 SessionResults {
                     dir: Path::new("results").join(format!("S{subject_index}_s1")),

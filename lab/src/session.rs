@@ -156,6 +156,11 @@ pub fn new_manifest(study: &StudyDefinition, of: SessionOf<'_>) -> SessionManife
         torn_rows: Vec::new(),
         display: None,
         browser: None,
+        // Unconfirmed until the experimenter confirms the study's viewing conditions.
+        viewing: study
+            .viewing
+            .as_ref()
+            .map(|_| results::ViewingRecord::default()),
     }
 }
 

@@ -22,7 +22,7 @@ use crate::trials::{
 
 /// Version of `session.json` and `run.json` written by this build. Version 2 added
 /// `manifest_hash`; version 1 files are still read.
-pub const MANIFEST_FORMAT_VERSION: u32 = 3;
+pub const MANIFEST_FORMAT_VERSION: u32 = 4;
 /// Largest manifest accepted by the readers, bytes.
 pub const MAX_MANIFEST_BYTES: u64 = 16 << 20;
 /// Most session directories read from one results directory.
@@ -289,6 +289,31 @@ pub struct SessionManifest {
     /// window or simulated session, and absent from their files.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub browser: Option<BrowserInfo>,
+    /// The study's viewing conditions as the experimenter confirmed and measured them before
+    /// the session (version 4); `None` for a study without `[viewing]`, and absent from its
+    /// files.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub viewing: Option<ViewingRecord>,
+}
+
+/// What the experimenter confirmed of a study's `[viewing]` conditions before a session, and
+/// what was measured (`study run --measured-*`, or typed on the window's confirmation screen);
+/// `None` where nothing was measured.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ViewingRecord {
+    /// The experimenter confirmed that the conditions are as the study states them.
+    pub confirmed: bool,
+    /// When, ms since the Unix epoch.
+    pub confirmed_ms: Option<u64>,
+    /// Measured viewing distance, cm.
+    pub distance_cm: Option<f64>,
+    /// Measured peak luminance of the display, cd/m².
+    pub peak_luminance_cd_m2: Option<f64>,
+    /// Measured background luminance, cd/m².
+    pub background_luminance_cd_m2: Option<f64>,
+    /// Measured room illumination, lux.
+    pub room_illuminance_lux: Option<f64>,
 }
 
 /// What a participant's browser reported and measured (`study serve`): the environment the

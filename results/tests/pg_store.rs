@@ -81,6 +81,7 @@ fn manifest(subject: &str) -> SessionManifest {
         torn_rows: Vec::new(),
         display: None,
         browser: None,
+        viewing: None,
     }
 }
 

@@ -156,6 +156,7 @@ fn manifest(trials: u32) -> SessionManifest {
             refresh_hz: 60.0,
         }),
         browser: None,
+        viewing: None,
     }
 }
 

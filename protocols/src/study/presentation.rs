@@ -62,6 +62,7 @@ pub(super) fn parse_presentation(
     };
     let reference_position = match cx.string(t, P, "reference_position").as_deref() {
         None | Some("random") => ReferencePlacement::Random,
+        Some("balanced") => ReferencePlacement::Balanced,
         Some(s) => match s.parse::<Position>() {
             Ok(p) if p.fits(arrangement) => ReferencePlacement::Fixed(p),
             Ok(p) => {
@@ -72,7 +73,10 @@ pub(super) fn parse_presentation(
                 ReferencePlacement::Random
             }
             Err(e) => {
-                cx.err(join(P, "reference_position"), format!("{e} or \"random\""));
+                cx.err(
+                    join(P, "reference_position"),
+                    format!("{e}, \"random\" or \"balanced\""),
+                );
                 ReferencePlacement::Random
             }
         },
