@@ -291,6 +291,8 @@ pub struct Recorder {
     manifest: SessionManifest,
     /// An answer scored but not yet committed (the database was unreachable).
     pending: Option<TrialRecord>,
+    /// The manifest changed while an answer was pending: written once it is committed.
+    manifest_changed: bool,
     /// Frame intervals of answers not yet committed with them.
     pending_frames: Vec<(u32, Vec<f64>, Vec<String>)>,
     study: String,
@@ -397,6 +399,7 @@ impl Recorder {
                 study: study.name.clone(),
                 manifest,
                 pending: None,
+                manifest_changed: false,
                 pending_frames: Vec::new(),
                 clock_base_ms: last.map_or(0, |r| r.elapsed_ms),
                 monotonic_base_ms: last.map_or(0, |r| r.monotonic_ms),
@@ -423,9 +426,7 @@ impl Recorder {
     /// store refused it.
     pub fn commit_pending(&mut self) -> Result<()> {
         if let Some(record) = &self.pending {
-            let mut manifest = self.manifest.clone();
-            manifest.trials_logged = self.log.rows() + 1;
-            match self.log.append(record, &manifest) {
+            match self.log.append(record) {
                 Ok(()) => {}
                 Err(e @ ResultsError::Unavailable { .. }) => return Err(e.into()),
                 Err(e) => {
@@ -435,8 +436,14 @@ impl Recorder {
                     return Err(e.into());
                 }
             }
-            self.manifest = manifest;
+            // The row is the record; the manifest file keeps the count of its last write.
+            self.manifest.trials_logged = self.log.rows();
             self.pending = None;
+        }
+        if self.manifest_changed {
+            self.manifest.trials_logged = self.log.rows();
+            self.log.write_manifest(&self.manifest)?;
+            self.manifest_changed = false;
         }
         while let Some((index, intervals, phases)) = self.pending_frames.first() {
             let phases: Vec<&str> = phases.iter().map(String::as_str).collect();
@@ -477,22 +484,26 @@ impl Recorder {
         self.engine.answered()
     }
 
-    /// The manifest as it stands.
+    /// The manifest as it stands (its `trials_logged` counts the rows committed so far,
+    /// though the file is rewritten only when the session's state changes).
     pub fn manifest(&self) -> &SessionManifest {
         &self.manifest
     }
 
-    /// Updates the manifest (display information, ...) and writes it.
+    /// Updates the manifest (display information, ...) and writes it (once the pending
+    /// answer is committed, if one is waiting).
     ///
     /// # Errors
     /// The manifest cannot be written.
     pub fn update_manifest(&mut self, change: impl FnOnce(&mut SessionManifest)) -> Result<()> {
         change(&mut self.manifest);
         if self.pending.is_some() {
-            // Written with the pending answer.
+            self.manifest_changed = true;
             return Ok(());
         }
+        self.manifest.trials_logged = self.log.rows();
         self.log.write_manifest(&self.manifest)?;
+        self.manifest_changed = false;
         Ok(())
     }
 
@@ -518,7 +529,8 @@ impl Recorder {
 
     /// Scores `response` to the pending `trial` and commits the row (flushed and fsynced, or
     /// committed by the database) before returning: nothing can show the next stimulus before
-    /// the answer is durable. `encoding` describes a stimulus encoded for this trial (live
+    /// the answer is durable. The row is the record: `session.json` is not rewritten per
+    /// answer (its `trials_logged` is the count at its last write; readers count the rows). `encoding` describes a stimulus encoded for this trial (live
     /// staircase), `timing` how the window's display kept time during it. When the database
     /// cannot be reached the answer is kept ([`Self::pending`]) and the error says so
     /// ([`is_outage`]).
