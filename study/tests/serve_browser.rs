@@ -1,8 +1,9 @@
 //! `study serve` end to end in a real headless Chromium (Debian's `chromium`, driven over
 //! WebDriver by `chromedriver`): a participant completes a MOS, a DSCQS and a live-staircase
-//! study on the page, with WebGL drawn by SwiftShader; each session's rows equal those of a
-//! session recorder given the same answers (what `study simulate` runs), timing columns
-//! aside. The MOS server is SIGKILLed mid-study and restarted: the page carries on and no
+//! study on the page, with WebGL drawn by SwiftShader, answering as `study simulate` (the
+//! real binary, `--subject` the id the browser got) answered for the same subject: the
+//! ratings, choices and replays of its `trials.csv`; each served session's rows equal the
+//! simulated session's column by column, timing columns aside. The MOS server is SIGKILLed mid-study and restarted: the page carries on and no
 //! answer is lost or logged twice. A second browser holding another participant's token is
 //! refused A's session.
 //!
@@ -17,7 +18,7 @@
     missing_docs
 )]
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::io::{BufRead as _, BufReader};
 use std::net::{TcpListener, TcpStream};
 use std::path::{Path, PathBuf};
@@ -330,7 +331,9 @@ const MOS: &str = "name = \"web-mos\"\nprotocol = \"mos\"\n\
     [session]\nfamiliarization = 1\nhidden_repeats = 1\nbreak_every_trials = 2\n\
     subject_fields = [\"age\"]\nconsent = \"You agree to watch four short motions.\"\n";
 
-const DSCQS: &str = "name = \"web-dscqs\"\nprotocol = \"dscqs\"\n\
+// Whole grades on the continuous scale, so that the keyboard can give any rating the
+// simulated observer gives.
+const DSCQS: &str = "name = \"web-dscqs\"\nprotocol = \"dscqs\"\n[scale]\nstep = 1\n\
     [conditions]\nclips = [\"walk\"]\ncodecs = [\"spiht\"]\ntarget_cr = [10, 20]\n\
     [presentation]\narrangement = \"abab\"\ngrey_ms = 150\ngap_ms = 100\nmax_replays = 0\n\
     stimulus_duration_ms = 500\n";
@@ -341,55 +344,96 @@ const STAIRCASE: &str = "name = \"web-stairs\"\nprotocol = \"staircase\"\n\
     max_trials = 4\n[[staircase.tracks]]\nname = \"walk\"\n\
     [staircase.live]\nclips = [\"walk\"]\n";
 
-/// How the test answers trial `k` of each protocol, and the keys or clicks that give it.
-fn scripted(protocol: &str, k: u32) -> Answer {
-    match protocol {
-        "mos" => Answer::Rating([4.0, 2.5, 5.0, 1.5][k as usize % 4]),
-        // Number keys on BT.500's continuous 0-100 scale mark the middle of a grade:
-        // 4 -> 70, 2 -> 30, 5 -> 90.
-        "dscqs" => [
-            Answer::Pair { a: 70.0, b: 30.0 },
-            Answer::Pair { a: 90.0, b: 70.0 },
-        ][k as usize % 2],
-        _ => Answer::Choice(if k.is_multiple_of(2) {
-            Position::Left
-        } else {
-            Position::Right
-        }),
-    }
+/// What the simulated observer answered, by trial index: the answer and the replays.
+type Script = BTreeMap<u32, (Answer, u32)>;
+
+/// Runs `study simulate STUDY --subject SUBJECT --seed SEED` (the real binary) into a
+/// folder of its own, and returns its rows and the answers they hold.
+fn simulate(
+    study: &Path,
+    dir: &Path,
+    subject: &str,
+    seed: u64,
+) -> (Vec<protocols::TrialRecord>, Script) {
+    let out = dir.join(format!("simulated-{seed}"));
+    let run = Command::new(env!("CARGO_BIN_EXE_study"))
+        .arg("simulate")
+        .arg(study)
+        .args(["--subject", subject, "--seed", &seed.to_string(), "-o"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "study simulate --subject {subject}: {}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let rows = results::read_trials(&out.join(format!("{subject}_s1/trials.csv")))
+        .unwrap()
+        .records;
+    let script = rows
+        .iter()
+        .map(|r| (r.trial.index, (r.response.answer, r.response.replays)))
+        .collect();
+    (rows, script)
 }
 
-fn give(b: &Browser, protocol: &str, k: u32) {
-    match (protocol, scripted(protocol, k)) {
-        ("mos", Answer::Rating(v)) => {
-            // The mouse: the grade, then Continue.
+/// Gives `answer` to the open trial as a participant does, after `replays` replays: MOS by
+/// mouse (the grade, then Continue), DSCQS by keyboard (a grade's digit, then Up/Down to the
+/// exact value, A then B, Enter), 2AFC by arrow key or click.
+fn give(b: &Browser, (answer, replays): (Answer, u32)) {
+    for _ in 0..replays {
+        b.wait("!document.getElementById('replay').hidden", 30);
+        b.click("#replay");
+    }
+    match answer {
+        Answer::Rating(v) => {
             b.click(&format!(".rating[data-value=\"{v}\"]"));
             b.click("#continue");
         }
-        ("dscqs", Answer::Pair { a, b: bv }) => {
-            let digit = |v: f64| ((v - 10.0) / 20.0 + 1.0).round().to_string();
-            b.keys(&[&digit(a), &digit(bv), "\u{E007}"]);
+        Answer::Pair { a, b: bv } => {
+            // Digit d marks the middle of grade d on BT.500's 0-100 scale, (d - 0.5) x 20;
+            // Up/Down move by the scale's step (1).
+            let keys = |v: f64| -> Vec<String> {
+                let d = ((v / 20.0).floor() + 1.0).clamp(1.0, 5.0);
+                let steps = (v - (d - 0.5) * 20.0).round() as i32;
+                let arrow = if steps > 0 { "\u{E013}" } else { "\u{E015}" };
+                std::iter::once(d.to_string())
+                    .chain((0..steps.abs()).map(|_| arrow.to_string()))
+                    .collect()
+            };
+            let mut all = vec!["\u{E012}".to_string()];
+            let ka = keys(a);
+            all.push(ka[0].clone());
+            // The digit moved the edit to B: back to A for the steps.
+            all.push("\u{E012}".into());
+            all.extend(ka[1..].iter().cloned());
+            all.push("\u{E014}".into());
+            all.extend(keys(bv));
+            all.push("\u{E007}".into());
+            let all: Vec<&str> = all.iter().map(String::as_str).collect();
+            b.keys(&all);
         }
-        (_, Answer::Choice(Position::Left)) => b.keys(&["\u{E012}"]),
-        (_, Answer::Choice(_)) => b.click("#choice-right"),
-        _ => unreachable!(),
+        Answer::Choice(Position::Left) => b.keys(&["\u{E012}"]),
+        Answer::Choice(_) => b.click("#choice-right"),
     }
 }
 
 /// Joins from a Prolific link, passes the welcome screen and answers trials until the
-/// session ends (or `stop_after` trials, then returns). Returns the answers given by index.
+/// session ends (or `stop_after` trials, then returns), answering as `script` says; notes
+/// the trials answered in `given`.
 fn take_part(
     b: &Browser,
     url: Option<&str>,
-    protocol: &str,
+    script: &Script,
     stop_after: Option<u32>,
-    given: &mut BTreeMap<u32, Answer>,
+    given: &mut BTreeSet<u32>,
 ) {
     if let Some(url) = url {
         b.go(url);
         welcome(b);
     }
-    answer_trials(b, protocol, stop_after, given);
+    answer_trials(b, script, stop_after, given);
 }
 
 /// From the environment check through the welcome screen.
@@ -416,12 +460,7 @@ fn welcome(b: &Browser) {
 }
 
 /// Answers trials (and breaks) until the end, or until `stop_after` answers in all.
-fn answer_trials(
-    b: &Browser,
-    protocol: &str,
-    stop_after: Option<u32>,
-    given: &mut BTreeMap<u32, Answer>,
-) {
+fn answer_trials(b: &Browser, script: &Script, stop_after: Option<u32>, given: &mut BTreeSet<u32>) {
     loop {
         b.wait(
             "['trial', 'break', 'end'].includes(document.body.dataset.screen)",
@@ -440,13 +479,19 @@ fn answer_trials(
             .js("return Number(document.body.dataset.trial);")
             .as_u64()
             .unwrap() as u32;
-        if given.contains_key(&k) && b.screen() == "trial" {
+        if given.contains(&k) && b.screen() == "trial" {
             // Still showing a trial answered already (the acknowledgement is on its way).
             std::thread::sleep(Duration::from_millis(50));
             continue;
         }
-        given.insert(k, scripted(protocol, k));
-        give(b, protocol, k);
+        let Some(&answer) = script.get(&k) else {
+            panic!(
+                "trial {k} is not in the simulated session ({} rows)",
+                script.len()
+            );
+        };
+        given.insert(k);
+        give(b, answer);
         b.wait(
             &format!(
                 "document.body.dataset.screen !== 'trial' || document.body.dataset.trial !== '{k}'"
@@ -459,75 +504,40 @@ fn answer_trials(
     }
 }
 
-/// The rows of the served session against a recorder given the same answers.
-fn check_rows(study: &Path, out: &Path, subject: &str, given: &BTreeMap<u32, Answer>) {
+/// The rows of the served session against the simulated session's, column by column,
+/// timing columns aside (the response time, dropped frames, the three clocks, the frame
+/// timing).
+fn check_rows(
+    out: &Path,
+    subject: &str,
+    simulated: &[protocols::TrialRecord],
+    given: &BTreeSet<u32>,
+) {
     let served = results::read_trials(&out.join(format!("{subject}_s1/trials.csv"))).unwrap();
-    let file = lab::StudyFile::load(study).unwrap();
-    let dir = temp_dir(&format!("replay-{subject}"));
-    let fresh = lab::session::new_manifest(
-        &file.definition,
-        lab::session::SessionOf {
-            study_hash: &file.hash,
-            manifest_hash: &file.manifest_hash,
-            subject: subject.to_string(),
-            subject_index: lab::session::subject_index(subject, 1),
-            session: 1,
-            observer_seed: None,
-        },
-    );
-    let lab::session::Opened::Ready {
-        recorder: mut rec, ..
-    } = lab::session::Recorder::open(
-        &file.definition,
-        lab::session::subject_index(subject, 1),
-        &mut results::FolderStore::new(&dir),
-        false,
-        fresh,
-    )
-    .unwrap()
-    else {
-        panic!("new session finished")
-    };
-    let source = lab::source::open(&file).unwrap();
-    let mut want = Vec::new();
-    while let Some(trial) = rec.next_trial(0).unwrap() {
-        let answer = given[&trial.index];
-        let encoding = source.encoding(&trial).unwrap();
-        let response = protocols::Response {
-            answer,
-            response_time_ms: 0,
-            replays: 0,
-            dropped_frames: 0,
-        };
-        rec.record(trial, response, 0, encoding, None).unwrap();
-    }
-    rec.finish().unwrap();
-    let replayed = results::read_trials(&dir.join(format!("{subject}_s1/trials.csv"))).unwrap();
-    want.extend(replayed.records);
-    assert_eq!(served.records.len(), want.len(), "rows of {subject}");
+    assert_eq!(served.records.len(), simulated.len(), "rows of {subject}");
     assert_eq!(
         served.records.len(),
         given.len(),
         "one row per answer given"
     );
-    for (got, want) in served.records.iter().zip(&want) {
-        // Timing columns aside, every column equal.
-        assert_eq!(got.study, want.study);
-        assert_eq!(got.subject, want.subject);
-        assert_eq!(got.protocol, want.protocol);
-        assert_eq!(got.trial, want.trial);
-        assert_eq!(got.response.answer, want.response.answer);
-        assert_eq!(got.response.replays, 0);
-        assert_eq!(got.outcome, want.outcome);
-        assert_eq!(got.encoding, want.encoding);
+    for (got, want) in served.records.iter().zip(simulated) {
+        let at = format!("{subject} trial {}", want.trial.index);
+        assert_eq!(got.study, want.study, "{at}");
+        assert_eq!(got.subject, want.subject, "{at}");
+        assert_eq!(got.session, want.session, "{at}");
+        assert_eq!(got.protocol, want.protocol, "{at}");
+        assert_eq!(got.trial, want.trial, "{at}");
+        assert_eq!(got.response.answer, want.response.answer, "{at}");
+        assert_eq!(got.response.replays, want.response.replays, "{at}");
+        assert_eq!(got.outcome, want.outcome, "{at}");
+        assert_eq!(got.encoding, want.encoding, "{at}");
         // The page measured its frames: every trial has timing from the browser.
         assert!(
             got.timing.is_some_and(|t| t.frames_shown > 2),
-            "{:?}",
+            "{at}: {:?}",
             got.timing
         );
     }
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 fn manifest(out: &Path, subject: &str) -> results::SessionManifest {
@@ -543,21 +553,27 @@ fn a_browser_completes_mos_through_a_server_kill_and_a_foreign_token_is_refused(
     let study = write_study(&dir, MOS);
     let out = dir.join("results");
     let port = free_port();
+    // The first observer whose session replays a trial (one in ten trials does), so that
+    // the page replays too.
+    let (simulated, script) = (1..=30)
+        .map(|seed| simulate(&study, &dir, "pidA", seed))
+        .find(|(_, script)| script.values().any(|(_, replays)| *replays > 0))
+        .expect("a simulated session with a replay among 30 observer seeds");
     let mut server = serve(&study, &out, port);
     let driver = Driver::start();
     let b = driver.browser(&dir.join("profile-a"));
     let url = format!("http://127.0.0.1:{port}/?PROLIFIC_PID=pidA&STUDY_ID=st1&SESSION_ID=se1");
-    let mut given = BTreeMap::new();
-    take_part(&b, Some(&url), "mos", Some(2), &mut given);
+    let mut given = BTreeSet::new();
+    take_part(&b, Some(&url), &script, Some(2), &mut given);
     // Mid-study: the server dies without a word, and comes back.
     server.child.kill().unwrap();
     server.child.wait().unwrap();
     std::thread::sleep(Duration::from_millis(300));
     server = serve(&study, &out, port);
     // The page carries on from where it was (it retries what it was sending).
-    take_part(&b, None, "mos", None, &mut given);
+    take_part(&b, None, &script, None, &mut given);
     assert_eq!(b.screen(), "end");
-    check_rows(&study, &out, "pidA", &given);
+    check_rows(&out, "pidA", &simulated, &given);
     let m = manifest(&out, "pidA");
     assert_eq!(m.status, results::store::SessionState::Complete);
     assert_eq!(
@@ -609,28 +625,27 @@ fn a_browser_completes_dscqs_and_a_live_staircase() {
         return;
     }
     let driver = Driver::start();
-    for (name, body, protocol) in [
-        ("dscqs", DSCQS, "dscqs"),
-        ("stairs", STAIRCASE, "staircase"),
-    ] {
+    for (name, body) in [("dscqs", DSCQS), ("stairs", STAIRCASE)] {
         let dir = temp_dir(name);
         let study = write_study(&dir, body);
         let out = dir.join("results");
         let port = free_port();
+        let subject = format!("W{name}");
+        let (simulated, script) = simulate(&study, &dir, &subject, 1);
         let _server = serve(&study, &out, port);
         let b = driver.browser(&dir.join("profile"));
-        let mut given = BTreeMap::new();
+        let mut given = BTreeSet::new();
         take_part(
             &b,
             Some(&format!(
-                "http://127.0.0.1:{port}/?workerId=W{name}&assignmentId=A1&hitId=H1"
+                "http://127.0.0.1:{port}/?workerId={subject}&assignmentId=A1&hitId=H1"
             )),
-            protocol,
+            &script,
             None,
             &mut given,
         );
         assert_eq!(b.screen(), "end");
-        check_rows(&study, &out, &format!("W{name}"), &given);
+        check_rows(&out, &subject, &simulated, &given);
         let _ = std::fs::remove_dir_all(&dir);
     }
 }
