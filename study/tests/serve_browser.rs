@@ -194,8 +194,9 @@ impl Browser {
             .to_string()
     }
 
-    /// Clicks the element `css` names; tried again (up to five times) while the page is
-    /// re-laying out under it (an intercepted click or a replaced element).
+    /// Clicks the element `css` names; tried again (for up to about three seconds, a loaded
+    /// machine lays out slowly) while the page is re-laying out under it (an intercepted
+    /// click, a replaced element, one not yet interactable).
     fn click(&self, css: &str) {
         for attempt in 0.. {
             let found = http(
@@ -219,7 +220,7 @@ impl Browser {
             });
             match clicked {
                 Some((200, _)) => return,
-                other if attempt >= 4 => panic!("click {css}: {found:?} {other:?}"),
+                other if attempt >= 30 => panic!("click {css}: {found:?} {other:?}"),
                 _ => std::thread::sleep(Duration::from_millis(100)),
             }
         }
@@ -265,6 +266,35 @@ impl Browser {
             );
             std::thread::sleep(Duration::from_millis(40));
         }
+    }
+
+    /// Runs `script` (which calls `done(value)`) asynchronously in the page.
+    fn js_async(&self, script: &str) -> Value {
+        self.cmd(
+            "POST",
+            "execute/async",
+            Some(&json!({
+                "script": format!("const done = arguments[arguments.length - 1]; {script}"),
+                "args": [],
+            })),
+        )
+    }
+
+    fn resize(&self, width: u32, height: u32) {
+        self.cmd(
+            "POST",
+            "window/rect",
+            Some(&json!({ "width": width, "height": height })),
+        );
+    }
+
+    fn text(&self, id: &str) -> String {
+        self.js(&format!(
+            "return document.getElementById('{id}').textContent;"
+        ))
+        .as_str()
+        .unwrap_or("")
+        .to_string()
     }
 
     fn screen(&self) -> String {
@@ -336,7 +366,7 @@ const MOS: &str = "name = \"web-mos\"\nprotocol = \"mos\"\n\
 const DSCQS: &str = "name = \"web-dscqs\"\nprotocol = \"dscqs\"\n[scale]\nstep = 1\n\
     [conditions]\nclips = [\"walk\"]\ncodecs = [\"spiht\"]\ntarget_cr = [10, 20]\n\
     [presentation]\narrangement = \"abab\"\ngrey_ms = 150\ngap_ms = 100\nmax_replays = 0\n\
-    stimulus_duration_ms = 500\n";
+    stimulus_duration_ms = 500\n[crowdsourcing]\nfullscreen = true\nmin_window = [640, 480]\n";
 
 const STAIRCASE: &str = "name = \"web-stairs\"\nprotocol = \"staircase\"\n\
     [presentation]\nloop = true\ngap_ms = 100\nstimulus_duration_ms = 500\n\
@@ -540,6 +570,121 @@ fn check_rows(
     }
 }
 
+/// Reloads the page once the pending trial's stimuli have played: the page continues the
+/// same session and the same trial, which plays again from the start before it can be
+/// answered; nothing is logged for it meanwhile.
+fn reload_mid_trial(b: &Browser, out: &Path, given: &BTreeSet<u32>) {
+    b.wait(
+        "document.body.dataset.screen === 'trial' && document.body.dataset.open === '1'",
+        60,
+    );
+    let k = b.js("return document.body.dataset.trial;");
+    let rows = std::fs::read(out.join("pidA_s1/trials.csv")).unwrap();
+    b.cmd("POST", "refresh", Some(&json!({})));
+    b.wait("document.body.dataset.screen === 'welcome'", 30);
+    assert_eq!(
+        b.text("welcome-resume"),
+        format!(
+            "Continuing the session: {} trials already done.",
+            given.len()
+        )
+    );
+    // Every state the page goes through from here, as it happens (not polled: a loaded
+    // machine's WebDriver round trips are slower than the presentation).
+    b.js(
+        "window.seen = []; new MutationObserver(() => { const d = document.body.dataset; \
+          const r = document.querySelector('.rating'); \
+          window.seen.push([d.screen, d.trial, d.open, r ? r.disabled : null, performance.now()]); \
+          }).observe(document.body, { attributes: true, subtree: true }); return null;",
+    );
+    b.click("#begin");
+    b.wait(
+        "document.body.dataset.screen === 'trial' && document.body.dataset.open === '1'",
+        30,
+    );
+    let seen = b.js("return window.seen;");
+    let seen = seen.as_array().unwrap();
+    let shown = seen
+        .iter()
+        .position(|s| s[0] == "trial")
+        .expect("the trial screen");
+    let opened = seen
+        .iter()
+        .position(|s| s[0] == "trial" && s[2] == "1")
+        .expect("the answer opened");
+    // The same trial, from the start: the answer widgets stay closed until it has played
+    // (500 ms of stimulus) again.
+    assert_eq!(seen[shown][1], k, "{seen:?}");
+    assert!(
+        seen[shown..opened]
+            .iter()
+            .all(|s| s[2] == "0" && s[3] != false),
+        "{seen:?}"
+    );
+    let waited = seen[opened][4].as_f64().unwrap() - seen[shown][4].as_f64().unwrap();
+    assert!(
+        waited >= 450.0,
+        "answers opened {waited:.0} ms after the trial showed"
+    );
+    assert_eq!(
+        std::fs::read(out.join("pidA_s1/trials.csv")).unwrap(),
+        rows,
+        "nothing logged by the reload"
+    );
+}
+
+/// The environment check of a study that asks for fullscreen and a 640×480 window, in a
+/// window too small: the page refuses with the reasons and offers no way on; the server
+/// refuses the same environment posted to it, and no participant or session is recorded.
+/// Enlarged, the window still waits for fullscreen; in fullscreen the check passes.
+fn environment_check(b: &Browser, url: &str, out: &Path) {
+    b.resize(560, 420);
+    b.go(url);
+    b.wait("document.body.dataset.checked === 'failed'", 30);
+    let problems = b.text("check-problems");
+    assert!(
+        problems.contains("the study needs at least 640×480. Enlarge the window.")
+            && problems.contains("The study runs in full screen."),
+        "{problems}"
+    );
+    assert_eq!(
+        b.js("return document.getElementById('check-continue').disabled;"),
+        json!(true)
+    );
+    let refused = b.js_async(
+        "fetch('/api/join', { method: 'POST', headers: { 'Content-Type': 'application/json' }, \
+         body: JSON.stringify({ params: { workerId: 'Wsmall' }, environment: state_env() }) })\
+         .then(async (r) => done([r.status, (await r.json()).error]));\
+         function state_env() { return { webgl2: true, webgl_renderer: 'x', user_agent: navigator.userAgent, \
+         screen_px: [screen.width, screen.height], window_px: [innerWidth, innerHeight], \
+         device_pixel_ratio: 1, refresh_hz: 60, fullscreen: false }; }",
+    );
+    assert_eq!(refused[0], json!(400), "{refused}");
+    let said = refused[1].as_str().unwrap();
+    assert!(
+        said.starts_with("this browser cannot run the study: the window is ")
+            && said.contains("the study needs at least 640×480; the study runs in fullscreen"),
+        "{said}"
+    );
+    let joined = std::fs::read_to_string(out.join("participants.csv")).unwrap_or_default();
+    assert!(!joined.contains("Wsmall"), "{joined}");
+    assert!(!out.join("Wsmall_s1").exists());
+    // Large enough, but not yet in fullscreen.
+    b.resize(1024, 720);
+    b.wait(
+        "!document.getElementById('check-problems').textContent.includes('Enlarge')",
+        30,
+    );
+    assert_eq!(b.text("check-problems"), "The study runs in full screen.");
+    assert_eq!(
+        b.js("return document.body.dataset.checked;"),
+        json!("failed")
+    );
+    b.click("#fullscreen");
+    b.wait("document.body.dataset.checked === 'ok'", 30);
+    assert_eq!(b.js("return !!document.fullscreenElement;"), json!(true));
+}
+
 fn manifest(out: &Path, subject: &str) -> results::SessionManifest {
     results::store::read_manifest(&out.join(format!("{subject}_s1/session.json"))).unwrap()
 }
@@ -571,6 +716,8 @@ fn a_browser_completes_mos_through_a_server_kill_and_a_foreign_token_is_refused(
     std::thread::sleep(Duration::from_millis(300));
     server = serve(&study, &out, port);
     // The page carries on from where it was (it retries what it was sending).
+    take_part(&b, None, &script, Some(3), &mut given);
+    reload_mid_trial(&b, &out, &given);
     take_part(&b, None, &script, None, &mut given);
     assert_eq!(b.screen(), "end");
     check_rows(&out, "pidA", &simulated, &given);
@@ -635,17 +782,32 @@ fn a_browser_completes_dscqs_and_a_live_staircase() {
         let _server = serve(&study, &out, port);
         let b = driver.browser(&dir.join("profile"));
         let mut given = BTreeSet::new();
-        take_part(
-            &b,
-            Some(&format!(
-                "http://127.0.0.1:{port}/?workerId={subject}&assignmentId=A1&hitId=H1"
-            )),
-            &script,
-            None,
-            &mut given,
-        );
+        let url = format!("http://127.0.0.1:{port}/?workerId={subject}&assignmentId=A1&hitId=H1");
+        let fullscreen = name == "dscqs";
+        if fullscreen {
+            environment_check(&b, &url, &out);
+            welcome(&b);
+            // One trial in fullscreen, the others after leaving it.
+            answer_trials(&b, &script, Some(1), &mut given);
+            b.js("document.exitFullscreen(); return null;");
+            b.wait("!document.fullscreenElement", 10);
+            answer_trials(&b, &script, None, &mut given);
+        } else {
+            take_part(&b, Some(&url), &script, None, &mut given);
+        }
         assert_eq!(b.screen(), "end");
         check_rows(&out, &subject, &simulated, &given);
+        if fullscreen {
+            let m = manifest(&out, &subject);
+            let browser = m.browser.expect("the browser's measurements");
+            assert!(browser.fullscreen, "the session began in fullscreen");
+            let first = *given.first().unwrap();
+            let after: Vec<u32> = given.iter().copied().filter(|k| *k != first).collect();
+            assert_eq!(
+                browser.windowed_trials, after,
+                "trials answered outside fullscreen"
+            );
+        }
         let _ = std::fs::remove_dir_all(&dir);
     }
 }
