@@ -669,6 +669,84 @@ impl Recorder {
 mod tests {
     use super::*;
 
+    /// The fsynced rows are the record: the manifest file is not rewritten per answer (its
+    /// count is the one of its last write), the recorder's manifest counts every row, a
+    /// display change writes the count, and a resume after a kill recounts the rows.
+    #[test]
+    fn the_rows_are_the_record_and_resume_recounts_them() {
+        use protocols::Answer;
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/mos.toml");
+        let study = crate::StudyFile::load(&path).unwrap();
+        let d = &study.definition;
+        let dir = std::env::temp_dir().join(format!("lab-session-rows-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let fresh = || {
+            new_manifest(
+                d,
+                SessionOf {
+                    study_hash: &study.hash,
+                    manifest_hash: &study.manifest_hash,
+                    subject: "S01".into(),
+                    subject_index: 7,
+                    session: 1,
+                    observer_seed: None,
+                },
+            )
+        };
+        let on_disk = || -> SessionManifest {
+            results::store::read_manifest(&dir.join("S01_s1").join(results::store::SESSION_FILE))
+                .unwrap()
+        };
+        let answer = |rec: &mut Recorder| {
+            let trial = rec.next_trial(0).unwrap().unwrap();
+            let response = protocols::Response {
+                answer: Answer::Rating(d.scale.max),
+                response_time_ms: 1,
+                replays: 0,
+                dropped_frames: 0,
+            };
+            rec.record(trial, response, 0, None, None).unwrap();
+        };
+        let mut store = results::FolderStore::new(&dir);
+        let Opened::Ready { mut recorder, .. } =
+            Recorder::open(d, 7, &mut store, false, fresh()).unwrap()
+        else {
+            panic!("a new session")
+        };
+        for _ in 0..3 {
+            answer(&mut recorder);
+        }
+        assert_eq!(recorder.manifest().trials_logged, 3);
+        assert_eq!(on_disk().trials_logged, 0, "not rewritten per row");
+        recorder
+            .update_manifest(|m| {
+                m.subject_fields.insert("age".into(), "31".into());
+            })
+            .unwrap();
+        assert_eq!(
+            (on_disk().trials_logged, on_disk().subject_fields.len()),
+            (3, 1)
+        );
+        answer(&mut recorder);
+        assert_eq!(on_disk().trials_logged, 3);
+        // Killed here: the lock goes with the process, the fourth row is on disk.
+        drop(recorder);
+        let Opened::Ready { recorder, resumed } =
+            Recorder::open(d, 7, &mut store, true, fresh()).unwrap()
+        else {
+            panic!("an unfinished session")
+        };
+        assert_eq!((resumed, recorder.manifest().trials_logged), (4, 4));
+        let m = on_disk();
+        assert_eq!(
+            (m.trials_logged, m.resumes, m.status),
+            (4, 1, SessionState::Running)
+        );
+        drop(recorder);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
     #[test]
     fn subject_ids_are_checked_and_indexed() {
         assert!(check_subject("S01_a-b").is_ok());
