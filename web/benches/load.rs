@@ -33,7 +33,7 @@ use serde_json::{Value, json};
 use tokio::io::{AsyncBufReadExt as _, AsyncReadExt as _, AsyncWriteExt as _, BufReader};
 use tokio::net::TcpStream;
 use tokio::sync::Barrier;
-use web::{Limits, ServeOptions};
+use web::{Limits, ServeOptions, client};
 
 const TRIALS: usize = 20;
 const DEADLINE: Duration = Duration::from_secs(300);
@@ -134,44 +134,21 @@ impl Participant {
             self.conn = Some(BufReader::new(s));
         }
         let conn = self.conn.as_mut().unwrap();
-        let body = body.map(Value::to_string).unwrap_or_default();
-        let auth = if self.token.is_empty() {
-            String::new()
-        } else {
-            format!("Authorization: Bearer {}\r\n", self.token)
-        };
-        let request = format!(
-            "{method} {path} HTTP/1.1\r\nHost: {}\r\n{auth}Content-Type: application/json\r\nContent-Length: {}\r\n\r\n{body}",
-            self.addr,
-            body.len()
-        );
+        let request = client::request_text(method, path, self.addr, &self.token, body);
         conn.get_mut().write_all(request.as_bytes()).await?;
         let mut line = String::new();
         if conn.read_line(&mut line).await? == 0 {
             return Err(std::io::Error::other("connection closed"));
         }
-        let status: u16 = line
-            .split(' ')
-            .nth(1)
-            .and_then(|c| c.parse().ok())
-            .ok_or_else(|| std::io::Error::other(format!("bad status line {line:?}")))?;
-        let (mut len, mut close) = (0usize, false);
+        let mut head = client::ReplyHead::from_status_line(&line)?;
         loop {
             line.clear();
             conn.read_line(&mut line).await?;
-            let l = line.trim_end();
-            if l.is_empty() {
+            if !head.header(&line) {
                 break;
             }
-            if let Some((k, v)) = l.split_once(':') {
-                let k = k.to_ascii_lowercase();
-                if k == "content-length" {
-                    len = v.trim().parse().unwrap_or(0);
-                } else if k == "connection" && v.trim().eq_ignore_ascii_case("close") {
-                    close = true;
-                }
-            }
         }
+        let (status, len, close) = (head.status, head.length, head.close);
         let mut body = vec![0u8; len];
         conn.read_exact(&mut body).await?;
         if close {
