@@ -21,7 +21,9 @@ use crate::trials::{
 };
 
 /// Version of `session.json` and `run.json` written by this build. Version 2 added
-/// `manifest_hash`; version 1 files are still read.
+/// `manifest_hash`, 3 `browser`; version 4 added `viewing`, and in it `trials_logged` is the
+/// count when the manifest was last written, not rewritten after every row (the rows are the
+/// record). Versions 1 to 3 are still read.
 pub const MANIFEST_FORMAT_VERSION: u32 = 4;
 /// Largest manifest accepted by the readers, bytes.
 pub const MAX_MANIFEST_BYTES: u64 = 16 << 20;
@@ -238,7 +240,7 @@ pub struct DisplayInfo {
     pub refresh_hz: f64,
 }
 
-/// `session.json` (format version 1).
+/// `session.json` (format version 4; 1-3 are read).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SessionManifest {
@@ -273,7 +275,9 @@ pub struct SessionManifest {
     pub ended_ms: Option<u64>,
     /// State.
     pub status: SessionState,
-    /// Trials logged in `trials.csv`.
+    /// Rows in `trials.csv` when this manifest was written (version 4: at open, resume,
+    /// display changes, interrupt and finish, so a running session's log may hold more;
+    /// versions 1-3 rewrote it after every row). Count the rows for the trials logged.
     pub trials_logged: u32,
     /// Stimulus ids planned but not shown (time limit).
     pub not_shown: Vec<String>,

@@ -45,6 +45,10 @@ pub struct SimulateArgs {
     /// Continue an interrupted run in an existing results directory.
     #[arg(long)]
     pub resume: bool,
+    /// Simulate one subject with this id instead of `S001`, `S002`, ...: its plan is the one
+    /// `study run --subject ID` and `study serve` give that id (a results folder only).
+    #[arg(long, value_name = "ID", conflicts_with = "subjects")]
+    pub subject: Option<String>,
 }
 
 /// `study check STUDY.toml`: every problem at once, or a summary of the study.
@@ -260,6 +264,9 @@ pub fn simulate(args: &SimulateArgs) -> anyhow::Result<()> {
         resume: args.resume,
         patience: Duration::from_secs(args.patience_s),
     };
-    lab::simulate::simulate(&options, &mut |line| eprintln!("{line}"))?;
+    match &args.subject {
+        Some(id) => lab::simulate::simulate_subject(&options, id, &mut |line| eprintln!("{line}"))?,
+        None => lab::simulate::simulate(&options, &mut |line| eprintln!("{line}"))?,
+    }
     Ok(())
 }

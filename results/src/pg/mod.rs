@@ -1123,11 +1123,12 @@ impl PgWriter {
 
     fn update_manifest(&mut self, manifest: &SessionManifest) -> Result<(), ResultsError> {
         let value = json(manifest)?;
-        let (id, logged) = (self.id, manifest.trials_logged as i32);
+        let id = self.id;
         let status = state_name(manifest.status);
+        // `trials_logged` counts the rows: each answer's insert sets it.
         let result = self.client()?.execute(
-            "UPDATE study_sessions SET manifest = $2, status = $3, trials_logged = $4 WHERE id = $1",
-            &[&id, &value, &status, &logged],
+            "UPDATE study_sessions SET manifest = $2, status = $3 WHERE id = $1",
+            &[&id, &value, &status],
         );
         match result {
             Ok(1) => Ok(()),
@@ -1149,18 +1150,14 @@ impl SessionWriter for PgWriter {
         self.path.clone()
     }
 
-    fn append(
-        &mut self,
-        record: &TrialRecord,
-        manifest: &SessionManifest,
-    ) -> Result<(), ResultsError> {
+    fn append(&mut self, record: &TrialRecord) -> Result<(), ResultsError> {
         let params = rows::Values::of(record)?;
         self.client()?;
         if let Some(found) = self.recount.take() {
             if found == self.rows + 1 {
                 // The answer was committed before the connection was lost.
                 self.rows = found;
-                return self.update_manifest(manifest);
+                return Ok(());
             }
             if found != self.rows {
                 return Err(refused(format!(
@@ -1173,8 +1170,7 @@ impl SessionWriter for PgWriter {
         if self.append.is_none() {
             let sql = format!(
                 "WITH row AS (INSERT INTO study_trials (session_id, row_number, {}) VALUES ($1, $2, {})) \
-                 UPDATE study_sessions SET manifest = $37, status = $38, trials_logged = $39 \
-                 WHERE id = $1",
+                 UPDATE study_sessions SET trials_logged = $2 + 1 WHERE id = $1",
                 rows::COLUMNS,
                 (3..=36)
                     .map(|i| format!("${i}"))
@@ -1189,13 +1185,9 @@ impl SessionWriter for PgWriter {
         }
         let statement = self.append.clone().ok_or_else(|| refused("no statement"))?;
         let row_number = i32::try_from(self.rows).map_err(|_| refused("too many rows"))?;
-        let value = json(manifest)?;
-        let status = state_name(manifest.status);
-        let logged = i32::try_from(manifest.trials_logged).unwrap_or(i32::MAX);
         let mut all: Vec<&(dyn postgres::types::ToSql + Sync)> = vec![&self.id, &row_number];
         let values = params.refs();
         all.extend_from_slice(&values);
-        all.extend_from_slice(&[&value, &status, &logged]);
         let result = self
             .client
             .as_mut()
@@ -1358,11 +1350,11 @@ pub fn import(
         .prepare(
             "INSERT INTO study_sessions (run_id, subject, session, study_hash, manifest_hash, \
              status, trials_logged, trials_format_version, manifest) \
-             VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9) RETURNING id",
+             VALUES ($1, $2, $3, $4, $5, $6, 0, $7, $8) RETURNING id",
         )
         .map_err(err)?;
     for m in &manifests {
-        // The trials format version is set once each file is read, below.
+        // The trials format version and the rows' count are set once the rows are in, below.
         let row = tx
             .query_one(
                 &insert,
@@ -1373,7 +1365,6 @@ pub fn import(
                     &m.study_hash,
                     &m.manifest_hash,
                     &state_name(m.status),
-                    &(i32::try_from(m.trials_logged).unwrap_or(i32::MAX)),
                     &0_i32,
                     &json(m)?,
                 ],
@@ -1422,7 +1413,8 @@ pub fn import(
         .map_err(err)?;
     }
     tx.execute(
-        "UPDATE study_sessions s SET trials_format_version = v.version \
+        "UPDATE study_sessions s SET trials_format_version = v.version, trials_logged = \
+         (SELECT count(*) FROM study_trials t WHERE t.session_id = s.id) \
          FROM unnest($1::integer[], $2::integer[]) AS v(id, version) WHERE s.id = v.id",
         &[&ids, &versions],
     )
