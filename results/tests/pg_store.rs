@@ -226,7 +226,7 @@ fn one_writer_per_session_and_rows_read_back_as_written(server: &ScratchServer) 
 fn every_kind_of_row_read_back_and_bad_values_named(server: &ScratchServer) {
     let db = server.create_database("kinds").unwrap();
     let mut store = open(&db);
-    let mut m = manifest("S04");
+    let m = manifest("S04");
     let mut writer = store.create_session(&m).unwrap();
     let mut pair = record("S04", 0, 0.0);
     pair.protocol = Protocol::Dscqs;
@@ -264,9 +264,8 @@ fn every_kind_of_row_read_back_and_bad_values_named(server: &ScratchServer) {
         interval_sd_ms: 0.375,
     });
     let written = [pair, choice, record("S04", 2, 4.5)];
-    for (i, r) in written.iter().enumerate() {
-        m.trials_logged = u32::try_from(i + 1).unwrap();
-        writer.append(r, &m).unwrap();
+    for r in &written {
+        writer.append(r).unwrap();
     }
     drop(writer);
     let heads = store.sessions().unwrap();
