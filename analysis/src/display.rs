@@ -31,6 +31,9 @@ pub struct SessionDisplay {
     pub flagged: bool,
     /// What the participant's browser measured (`study serve` sessions).
     pub browser: Option<results::store::BrowserInfo>,
+    /// The viewing conditions the experimenter confirmed and measured (a study with
+    /// `[viewing]`).
+    pub viewing: Option<results::ViewingRecord>,
 }
 
 /// One session's display figures, flagged when it dropped more than `drop_limit_percent` of
@@ -63,6 +66,7 @@ pub fn session_display(s: &SessionResults, drop_limit_percent: f64) -> SessionDi
         dropped_percent,
         flagged: dropped_percent.is_some_and(|p| p > drop_limit_percent),
         browser: m.browser.clone(),
+        viewing: m.viewing.clone(),
     }
 }
 

@@ -37,6 +37,7 @@ pub mod findings;
 pub mod from_results;
 mod hashing;
 pub mod jnd;
+pub mod method;
 pub mod mle;
 mod panel;
 pub mod plots;

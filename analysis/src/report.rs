@@ -92,6 +92,18 @@ impl Report {
         &mut self.sections[last]
     }
 
+    /// Starts a new section before every other one (the method comes before the results).
+    pub fn section_first(&mut self, heading: impl Into<String>) -> &mut Section {
+        self.sections.insert(
+            0,
+            Section {
+                heading: heading.into(),
+                blocks: Vec::new(),
+            },
+        );
+        &mut self.sections[0]
+    }
+
     /// Every table in the report.
     pub fn tables(&self) -> impl Iterator<Item = &Table> {
         self.sections

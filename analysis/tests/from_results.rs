@@ -123,6 +123,7 @@ fn session(subject: &str, protocol: Protocol, records: Vec<TrialRecord>) -> Sess
             torn_rows: vec![],
             display: None,
             browser: None,
+            viewing: None,
         },
         trials: TrialsFile {
             format_version: 2,

@@ -9,9 +9,11 @@
 //!
 //! Starts a throw-away server (fsync on), loads the folder with `study import` (timed), then
 //! runs `study report FOLDER` and `study report --store DB` (`--no-png`, as
-//! `report_million.py time` does) three times each, alternating, and prints the medians,
-//! their ratio and each one's peak memory; the two reports must be the same files. Without
-//! `REPORT_MILLION_DIR` it says how to make the data set and stops.
+//! `report_million.py time` does) three times each, alternating, and prints each pair (wall
+//! seconds, the client's CPU seconds, the server's CPU seconds), the medians, their ratio and
+//! each one's peak memory; the two reports must be the same files. The server's CPU time is
+//! what its postmaster counts for the backends it has reaped (`cutime + cstime` in
+//! `/proc/PID/stat`). Without `REPORT_MILLION_DIR` it says how to make the data set and stops.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
 
 use std::path::{Path, PathBuf};
@@ -20,8 +22,39 @@ use std::time::Instant;
 
 use results::pg::scratch::ScratchServer;
 
-/// Wall seconds and peak resident MiB of `cmd` (GNU time).
-fn timed(study: &Path, args: &[&str], url: &str) -> (f64, f64) {
+/// CPU seconds the reaped children of process `pid` have used (`cutime + cstime`).
+fn children_cpu(pid: u32) -> f64 {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap();
+    // Fields after the command name in parentheses: state is field 3, cutime 16, cstime 17.
+    let after = &stat[stat.rfind(')').unwrap() + 2..];
+    let f: Vec<f64> = after.split(' ').map(|v| v.parse().unwrap_or(0.0)).collect();
+    let ticks: f64 = String::from_utf8(
+        Command::new("getconf")
+            .arg("CLK_TCK")
+            .output()
+            .unwrap()
+            .stdout,
+    )
+    .unwrap()
+    .trim()
+    .parse()
+    .unwrap();
+    (f[13] + f[14]) / ticks
+}
+
+/// One run: wall seconds, peak resident MiB, the command's CPU seconds (user + system) and
+/// the server's.
+struct Run {
+    wall: f64,
+    mib: f64,
+    cpu: f64,
+    server_cpu: f64,
+}
+
+/// Runs `study ARGS` (GNU time); `server`, the postmaster whose reaped backends' CPU is
+/// counted.
+fn timed(study: &Path, args: &[&str], url: &str, server: u32) -> Run {
+    let before = children_cpu(server);
     let start = Instant::now();
     let out = Command::new("/usr/bin/time")
         .arg("-v")
@@ -33,15 +66,20 @@ fn timed(study: &Path, args: &[&str], url: &str) -> (f64, f64) {
     let wall = start.elapsed().as_secs_f64();
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "{args:?}: {err}");
-    let rss = err
-        .lines()
-        .find_map(|l| {
-            l.trim()
-                .strip_prefix("Maximum resident set size (kbytes): ")
-        })
-        .and_then(|v| v.parse::<f64>().ok())
-        .map_or(0.0, |kb| kb / 1024.0);
-    (wall, rss)
+    let field = |name: &str| {
+        err.lines()
+            .find_map(|l| l.trim().strip_prefix(name))
+            .and_then(|v| v.trim().parse::<f64>().ok())
+            .unwrap_or(0.0)
+    };
+    // The backend is reaped once it has seen the connection close.
+    std::thread::sleep(std::time::Duration::from_millis(300));
+    Run {
+        wall,
+        mib: field("Maximum resident set size (kbytes):") / 1024.0,
+        cpu: field("User time (seconds):") + field("System time (seconds):"),
+        server_cpu: children_cpu(server) - before,
+    }
 }
 
 fn files(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
@@ -64,8 +102,9 @@ fn files(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
     out
 }
 
-fn median(mut v: Vec<(f64, f64)>) -> (f64, f64) {
-    v.sort_by(|a, b| a.0.total_cmp(&b.0));
+fn median(v: &[Run]) -> &Run {
+    let mut v: Vec<&Run> = v.iter().collect();
+    v.sort_by(|a, b| a.wall.total_cmp(&b.wall));
     v[v.len() / 2]
 }
 
@@ -81,14 +120,19 @@ fn main() {
     let study = std::env::var_os("STUDY_BIN")
         .map_or_else(|| root.join("target/release/study"), PathBuf::from);
     let server = ScratchServer::start(&std::env::temp_dir(), &[]).unwrap();
+    let pid = server.pid().unwrap();
     server.create_database("million").unwrap();
     let url = server.url("million");
-    let (import_s, import_mib) = timed(
+    let import = timed(
         &study,
         &["import", folder.to_str().unwrap(), "--store", "env"],
         &url,
+        pid,
     );
-    println!("study import: {import_s:.1} s, {import_mib:.0} MiB peak");
+    println!(
+        "study import: {:.1} s, {:.0} MiB peak",
+        import.wall, import.mib
+    );
     let out = std::env::temp_dir().join(format!("pg-report-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&out);
     let (mut from_folder, mut from_db) = (Vec::new(), Vec::new());
@@ -105,6 +149,7 @@ fn main() {
                 f.to_str().unwrap(),
             ],
             &url,
+            pid,
         ));
         from_db.push(timed(
             &study,
@@ -117,25 +162,37 @@ fn main() {
                 d.to_str().unwrap(),
             ],
             &url,
+            pid,
         ));
+        let (f, d) = (&from_folder[k], &from_db[k]);
+        println!(
+            "pair {k}: folder {:.2} s (CPU {:.2} s), database {:.2} s (CPU {:.2} s here, {:.2} s \
+             in the server): {:.2}x",
+            f.wall,
+            f.cpu,
+            d.wall,
+            d.cpu,
+            d.server_cpu,
+            d.wall / f.wall
+        );
     }
     assert_eq!(
         files(&out.join("folder-0")),
         files(&out.join("db-0")),
         "the two reports differ"
     );
-    let (f, d) = (median(from_folder), median(from_db));
+    let (f, d) = (median(&from_folder), median(&from_db));
     println!(
         "study report FOLDER:     {:.2} s, {:.0} MiB peak (median of 3)",
-        f.0, f.1
+        f.wall, f.mib
     );
     println!(
         "study report --store DB: {:.2} s, {:.0} MiB peak (median of 3)",
-        d.0, d.1
+        d.wall, d.mib
     );
     println!(
         "database / folder: {:.2}x (target <= 2x); the reports are identical",
-        d.0 / f.0
+        d.wall / f.wall
     );
     let _ = std::fs::remove_dir_all(&out);
 }

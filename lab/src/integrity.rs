@@ -260,9 +260,13 @@ fn check_session(
         }
     };
     let logged = m.trials_logged as usize;
-    // A running session writes its manifest after each row: a crash between the two leaves
-    // one row more than the manifest counts.
-    let consistent = rows == logged || (!finished && rows == logged + 1);
+    // The rows are the record. A running session's manifest counts the rows at its last
+    // write (open, resume, a display change; before manifest version 4, after every row), so
+    // its log may hold more; an interrupted or finished session's manifest counts them all
+    // (an unfinished one of an earlier version may lack the row a kill cut it off from).
+    let consistent = rows == logged
+        || (!finished && rows == logged + 1)
+        || (m.status == SessionState::Running && rows > logged);
     if rows > logged && !consistent {
         push(
             &manifest,
@@ -555,6 +559,7 @@ mod tests {
                     torn_rows: Vec::new(),
                     display: None,
                     browser: None,
+                    viewing: None,
                 };
                 SessionResults {
                     dir: Path::new("results").join(format!("S{subject_index}_s1")),
@@ -667,6 +672,52 @@ mod tests {
         edit("session", &|e| e.trials.records[i].session += 1);
         edit("subject index", &|e| e.manifest.subject_index += 1);
         out
+    }
+
+    /// The rows are the record of how many trials were logged: a running session whose
+    /// manifest was last written at open or resume (fewer trials than its log holds) is
+    /// incomplete, not damaged; a manifest of an interrupted or finished session must count
+    /// every row, and a log shorter than any manifest's count is cut short.
+    #[test]
+    fn the_trial_count_comes_from_the_rows() {
+        use super::{Checker, Kind};
+        let (study, read) = sessions("mos");
+        let d = &study.definition;
+        let run = results::RunManifest {
+            format_version: 3,
+            study: d.name.clone(),
+            study_hash: study.hash.clone(),
+            manifest_hash: Some(study.manifest_hash.clone()),
+            study_file: "study.toml".into(),
+            plan_seed: d.seed,
+            observer_seed: None,
+            subjects: 2,
+            software_version: String::new(),
+            created_ms: 0,
+        };
+        let checker = Checker::with_archived(&study, &run, false);
+        let kinds = |status: SessionState, logged: usize, rows: usize| -> Vec<Kind> {
+            let mut s = read[0].clone();
+            s.trials.records.truncate(rows);
+            s.manifest.status = status;
+            s.manifest.trials_logged = logged as u32;
+            checker.check_alone(&s).iter().map(|p| p.kind).collect()
+        };
+        let n = read[0].trials.records.len();
+        assert!(n > 6, "{n} rows");
+        assert_eq!(kinds(SessionState::Complete, n, n), []);
+        // Written at open (0) or at a resume after 2 rows, then 5 more rows logged.
+        for logged in [0, 2, 5] {
+            assert_eq!(kinds(SessionState::Running, logged, 5), [Kind::Incomplete]);
+        }
+        assert_eq!(kinds(SessionState::Interrupted, 5, 5), [Kind::Incomplete]);
+        // Version 3 and before: a kill between the row and the manifest write.
+        assert_eq!(kinds(SessionState::Interrupted, 4, 5), [Kind::Incomplete]);
+        assert_eq!(kinds(SessionState::Interrupted, 2, 5), [Kind::Damage]);
+        assert_eq!(kinds(SessionState::Complete, n - 2, n), [Kind::Damage]);
+        for status in [SessionState::Running, SessionState::Complete] {
+            assert_eq!(kinds(status, 6, 5), [Kind::Incomplete], "{status:?}");
+        }
     }
 
     /// The quick replay of sound logs gives what the replay row by row gives: the same

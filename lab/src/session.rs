@@ -156,6 +156,11 @@ pub fn new_manifest(study: &StudyDefinition, of: SessionOf<'_>) -> SessionManife
         torn_rows: Vec::new(),
         display: None,
         browser: None,
+        // Unconfirmed until the experimenter confirms the study's viewing conditions.
+        viewing: study
+            .viewing
+            .as_ref()
+            .map(|_| results::ViewingRecord::default()),
     }
 }
 
@@ -291,6 +296,8 @@ pub struct Recorder {
     manifest: SessionManifest,
     /// An answer scored but not yet committed (the database was unreachable).
     pending: Option<TrialRecord>,
+    /// The manifest changed while an answer was pending: written once it is committed.
+    manifest_changed: bool,
     /// Frame intervals of answers not yet committed with them.
     pending_frames: Vec<(u32, Vec<f64>, Vec<String>)>,
     study: String,
@@ -397,6 +404,7 @@ impl Recorder {
                 study: study.name.clone(),
                 manifest,
                 pending: None,
+                manifest_changed: false,
                 pending_frames: Vec::new(),
                 clock_base_ms: last.map_or(0, |r| r.elapsed_ms),
                 monotonic_base_ms: last.map_or(0, |r| r.monotonic_ms),
@@ -423,9 +431,7 @@ impl Recorder {
     /// store refused it.
     pub fn commit_pending(&mut self) -> Result<()> {
         if let Some(record) = &self.pending {
-            let mut manifest = self.manifest.clone();
-            manifest.trials_logged = self.log.rows() + 1;
-            match self.log.append(record, &manifest) {
+            match self.log.append(record) {
                 Ok(()) => {}
                 Err(e @ ResultsError::Unavailable { .. }) => return Err(e.into()),
                 Err(e) => {
@@ -435,8 +441,14 @@ impl Recorder {
                     return Err(e.into());
                 }
             }
-            self.manifest = manifest;
+            // The row is the record; the manifest file keeps the count of its last write.
+            self.manifest.trials_logged = self.log.rows();
             self.pending = None;
+        }
+        if self.manifest_changed {
+            self.manifest.trials_logged = self.log.rows();
+            self.log.write_manifest(&self.manifest)?;
+            self.manifest_changed = false;
         }
         while let Some((index, intervals, phases)) = self.pending_frames.first() {
             let phases: Vec<&str> = phases.iter().map(String::as_str).collect();
@@ -477,22 +489,26 @@ impl Recorder {
         self.engine.answered()
     }
 
-    /// The manifest as it stands.
+    /// The manifest as it stands (its `trials_logged` counts the rows committed so far,
+    /// though the file is rewritten only when the session's state changes).
     pub fn manifest(&self) -> &SessionManifest {
         &self.manifest
     }
 
-    /// Updates the manifest (display information, ...) and writes it.
+    /// Updates the manifest (display information, ...) and writes it (once the pending
+    /// answer is committed, if one is waiting).
     ///
     /// # Errors
     /// The manifest cannot be written.
     pub fn update_manifest(&mut self, change: impl FnOnce(&mut SessionManifest)) -> Result<()> {
         change(&mut self.manifest);
         if self.pending.is_some() {
-            // Written with the pending answer.
+            self.manifest_changed = true;
             return Ok(());
         }
+        self.manifest.trials_logged = self.log.rows();
         self.log.write_manifest(&self.manifest)?;
+        self.manifest_changed = false;
         Ok(())
     }
 
@@ -518,7 +534,8 @@ impl Recorder {
 
     /// Scores `response` to the pending `trial` and commits the row (flushed and fsynced, or
     /// committed by the database) before returning: nothing can show the next stimulus before
-    /// the answer is durable. `encoding` describes a stimulus encoded for this trial (live
+    /// the answer is durable. The row is the record: `session.json` is not rewritten per
+    /// answer (its `trials_logged` is the count at its last write; readers count the rows). `encoding` describes a stimulus encoded for this trial (live
     /// staircase), `timing` how the window's display kept time during it. When the database
     /// cannot be reached the answer is kept ([`Self::pending`]) and the error says so
     /// ([`is_outage`]).
@@ -656,6 +673,84 @@ impl Recorder {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The fsynced rows are the record: the manifest file is not rewritten per answer (its
+    /// count is the one of its last write), the recorder's manifest counts every row, a
+    /// display change writes the count, and a resume after a kill recounts the rows.
+    #[test]
+    fn the_rows_are_the_record_and_resume_recounts_them() {
+        use protocols::Answer;
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/mos.toml");
+        let study = crate::StudyFile::load(&path).unwrap();
+        let d = &study.definition;
+        let dir = std::env::temp_dir().join(format!("lab-session-rows-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let fresh = || {
+            new_manifest(
+                d,
+                SessionOf {
+                    study_hash: &study.hash,
+                    manifest_hash: &study.manifest_hash,
+                    subject: "S01".into(),
+                    subject_index: 7,
+                    session: 1,
+                    observer_seed: None,
+                },
+            )
+        };
+        let on_disk = || -> SessionManifest {
+            results::store::read_manifest(&dir.join("S01_s1").join(results::store::SESSION_FILE))
+                .unwrap()
+        };
+        let answer = |rec: &mut Recorder| {
+            let trial = rec.next_trial(0).unwrap().unwrap();
+            let response = protocols::Response {
+                answer: Answer::Rating(d.scale.max),
+                response_time_ms: 1,
+                replays: 0,
+                dropped_frames: 0,
+            };
+            rec.record(trial, response, 0, None, None).unwrap();
+        };
+        let mut store = results::FolderStore::new(&dir);
+        let Opened::Ready { mut recorder, .. } =
+            Recorder::open(d, 7, &mut store, false, fresh()).unwrap()
+        else {
+            panic!("a new session")
+        };
+        for _ in 0..3 {
+            answer(&mut recorder);
+        }
+        assert_eq!(recorder.manifest().trials_logged, 3);
+        assert_eq!(on_disk().trials_logged, 0, "not rewritten per row");
+        recorder
+            .update_manifest(|m| {
+                m.subject_fields.insert("age".into(), "31".into());
+            })
+            .unwrap();
+        assert_eq!(
+            (on_disk().trials_logged, on_disk().subject_fields.len()),
+            (3, 1)
+        );
+        answer(&mut recorder);
+        assert_eq!(on_disk().trials_logged, 3);
+        // Killed here: the lock goes with the process, the fourth row is on disk.
+        drop(recorder);
+        let Opened::Ready { recorder, resumed } =
+            Recorder::open(d, 7, &mut store, true, fresh()).unwrap()
+        else {
+            panic!("an unfinished session")
+        };
+        assert_eq!((resumed, recorder.manifest().trials_logged), (4, 4));
+        let m = on_disk();
+        assert_eq!(
+            (m.trials_logged, m.resumes, m.status),
+            (4, 1, SessionState::Running)
+        );
+        drop(recorder);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 
     #[test]
     fn subject_ids_are_checked_and_indexed() {

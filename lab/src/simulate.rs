@@ -44,6 +44,66 @@ pub fn subject_id(index: u32) -> String {
     format!("S{:03}", index + 1)
 }
 
+/// A simulated subject: the id its session is recorded under and the index its plan and
+/// observer derive from.
+struct Subject {
+    id: String,
+    index: u32,
+}
+
+impl Subject {
+    /// Simulated subject `index` (0-based), [`subject_id`].
+    fn numbered(index: u32) -> Self {
+        Self {
+            id: subject_id(index),
+            index,
+        }
+    }
+}
+
+/// One simulated session of the subject `id`, whose plan index is the one `study run
+/// --subject ID` and `study serve` derive from that id ([`session::subject_index`] of
+/// session 1), into a results folder: what a real subject of that id would have logged had
+/// they answered as the simulated observer does (a test gives a browser those answers).
+///
+/// # Errors
+/// A bad subject id, a database destination (subjects there are numbered by the
+/// database), and as [`simulate`].
+pub fn simulate_subject(
+    options: &SimulateOptions,
+    id: &str,
+    report: &mut dyn FnMut(&str),
+) -> Result<()> {
+    session::check_subject(id)?;
+    let Destination::Folder(out) = &options.output else {
+        return Err(crate::error::refused(
+            "--subject ID simulates into a results folder (-o DIR); a database numbers its subjects",
+        ));
+    };
+    let study = StudyFile::load(&options.study)?;
+    let mut stimuli = source::open(&study)?;
+    results_dir::open_for_simulation(out, &study, options.seed, 1, options.resume)?;
+    let subject = Subject {
+        id: id.to_owned(),
+        index: session::subject_index(id, 1),
+    };
+    let mut store = FolderStore::new(out);
+    let summary = run_subject(
+        &study,
+        options,
+        &subject,
+        &mut store,
+        options.resume,
+        stimuli.as_mut(),
+        report,
+    )?;
+    report(&summary);
+    if let Some(s) = stimuli.summary() {
+        report(&s);
+    }
+    Ok(())
+}
+
 /// Runs `options.subjects` complete simulated sessions into a results directory or a
 /// database run; `report` gets one line per session as it ends (and a line when the database
 /// goes away and comes back).
@@ -69,7 +129,7 @@ pub fn simulate(options: &SimulateOptions, report: &mut dyn FnMut(&str)) -> Resu
                 let summary = run_subject(
                     &study,
                     options,
-                    subject,
+                    &Subject::numbered(subject),
                     &mut store,
                     options.resume,
                     stimuli.as_mut(),
@@ -116,7 +176,15 @@ fn simulate_into_database(
             {
                 continue;
             }
-            match run_subject(study, options, index, store, true, stimuli, report) {
+            match run_subject(
+                study,
+                options,
+                &Subject::numbered(index),
+                store,
+                true,
+                stimuli,
+                report,
+            ) {
                 Ok(summary) => report(&summary),
                 // Another station resumed it first.
                 Err(LabError::Context { source, .. })
@@ -149,22 +217,30 @@ fn simulate_into_database(
             // Recorded already (imported under this id): the number is spent, take the next.
             continue;
         }
-        let summary = run_subject(study, options, index, store, false, stimuli, report)?;
+        let summary = run_subject(
+            study,
+            options,
+            &Subject::numbered(index),
+            store,
+            false,
+            stimuli,
+            report,
+        )?;
         report(&summary);
     }
     Ok(())
 }
 
 /// The manifest of a new simulated session.
-fn new_manifest(study: &StudyFile, seed: u64, subject: u32) -> SessionManifest {
+fn new_manifest(study: &StudyFile, seed: u64, subject: &Subject) -> SessionManifest {
     let def = &study.definition;
     let mut m = session::new_manifest(
         def,
         SessionOf {
             study_hash: &study.hash,
             manifest_hash: &study.manifest_hash,
-            subject: subject_id(subject),
-            subject_index: subject,
+            subject: subject.id.clone(),
+            subject_index: subject.index,
             session: 1,
             observer_seed: Some(seed),
         },
@@ -184,23 +260,22 @@ fn new_manifest(study: &StudyFile, seed: u64, subject: u32) -> SessionManifest {
     m
 }
 
-/// One simulated subject's session (subject `subject`, 0-based, id [`subject_id`]) in
-/// `store`; returns its one-line summary.
+/// One simulated subject's session in `store`; returns its one-line summary.
 fn run_subject(
     study: &StudyFile,
     options: &SimulateOptions,
-    subject: u32,
+    subject: &Subject,
     store: &mut dyn Store,
     resume: bool,
     stimuli: &mut dyn StimulusSource,
     report: &mut dyn FnMut(&str),
 ) -> Result<String> {
-    let path = store.session_path(&subject_id(subject), 1);
+    let path = store.session_path(&subject.id, 1);
     let at = || format!("session {}", path.display());
     let def = &study.definition;
     let fresh = new_manifest(study, options.seed, subject);
     let opened = session::retry_outage(options.patience, report, || {
-        Recorder::open(def, subject, &mut *store, resume, fresh.clone())
+        Recorder::open(def, subject.index, &mut *store, resume, fresh.clone())
     })
     .context(at)?;
     let mut rec = match opened {
@@ -212,7 +287,7 @@ fn run_subject(
         }
         Opened::Ready { recorder, .. } => recorder,
     };
-    let observer = Observer::new(def, options.seed, subject);
+    let observer = Observer::new(def, options.seed, subject.index);
     let mut clock_ms = rec.logged_clock_ms();
     let per_trial_ms = def.trial_presentation_ms();
     while let Some(trial) = rec.next_trial(clock_ms).context(at)? {

@@ -10,13 +10,14 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::design;
 use crate::quest::{QuestError, QuestPlus};
 use crate::record::{Answer, Arrangement, Block, Outcome, Position, Protocol, Response, Trial};
 use crate::rng::{StudyRng, purpose};
 use crate::staircase::{Staircase, StaircaseError};
 use crate::study::{
-    ClipOrder, Condition, LiveClip, RatingScale, ReferencePlacement, StaircaseStudy,
-    StudyDefinition, Track,
+    ClipOrder, Condition, ConditionOrder, LiveClip, RatingScale, ReferencePlacement,
+    StaircaseStudy, StudyDefinition, Track,
 };
 
 /// Where a session stands.
@@ -154,6 +155,42 @@ struct Stairs {
     staircases: Vec<Procedure>,
     tolerance: f64,
     live: Option<LiveRun>,
+    /// Practice trials before the staircases (block `familiarization`), and their level
+    /// (`None`: each track's start).
+    practice: u32,
+    practice_level: Option<f64>,
+}
+
+impl Stairs {
+    /// The test stimulus and reference of trial `index` of `track` at `level`. Live: the clips
+    /// take turns across the session's trials, and the stimulus is named, not looked up; the
+    /// runner encodes it.
+    fn stimulus(
+        &self,
+        track: &Track,
+        index: u32,
+        level: f64,
+    ) -> Result<(String, String), EngineError> {
+        let missing = || EngineError::NoStimulus {
+            track: track.name.clone(),
+            level,
+        };
+        if let Some(live) = &self.live {
+            let c = live
+                .clips
+                .get(index as usize % live.clips.len().max(1))
+                .ok_or_else(missing)?;
+            Ok((
+                live.study.live_stimulus_id(&c.clip, level),
+                c.reference.clone(),
+            ))
+        } else {
+            let stimulus = track
+                .stimulus_at(level, self.tolerance)
+                .ok_or_else(missing)?;
+            Ok((stimulus.to_string(), track.reference.clone()))
+        }
+    }
 }
 
 /// A live staircase's clips in this subject's order, and how to name a derived stimulus.
@@ -182,9 +219,16 @@ pub struct Session {
     status: SessionStatus,
 }
 
-fn place(placement: ReferencePlacement, arrangement: Arrangement, rng: &mut StudyRng) -> Position {
+/// The reference's position: fixed, drawn from `rng`, or (counterbalanced) `balanced`.
+fn place(
+    placement: ReferencePlacement,
+    arrangement: Arrangement,
+    rng: &mut StudyRng,
+    balanced: Position,
+) -> Position {
     match placement {
         ReferencePlacement::Fixed(p) => p,
+        ReferencePlacement::Balanced => balanced,
         ReferencePlacement::Random => {
             let first = match arrangement {
                 Arrangement::SideBySide => Position::Left,
@@ -242,6 +286,8 @@ impl Session {
                         staircases,
                         tolerance: sc.level_tolerance,
                         live,
+                        practice: sc.practice_trials,
+                        practice_level: sc.practice_level,
                     });
                 }
             }
@@ -304,10 +350,11 @@ impl Session {
                 t.clone()
             }
             Some(st) => {
+                let practice = index < st.practice;
                 let open: Vec<usize> = (0..st.staircases.len())
                     .filter(|&k| !st.staircases[k].is_finished())
                     .collect();
-                if open.is_empty() {
+                if open.is_empty() && !practice {
                     self.status = SessionStatus::Complete;
                     return Ok(None);
                 }
@@ -315,42 +362,46 @@ impl Session {
                     self.status = SessionStatus::TimeLimit;
                     return Ok(None);
                 }
-                // Staircases are interleaved at random among those still running.
                 let mut rng = StudyRng::new(
                     self.seed,
                     &[u64::from(self.subject), purpose::TRIAL, u64::from(index)],
                 );
-                let k = open[rng.index(open.len())];
-                let reference_position = place(self.placement, self.arrangement, &mut rng);
-                let track = &st.tracks[k];
-                let level = st.staircases[k]
-                    .next_level()
-                    .unwrap_or(track.settings.start);
-                // Live: the clips take turns across the session's trials, and the stimulus
-                // is named, not looked up; the runner encodes it.
-                let (stimulus, reference) = if let Some(live) = &st.live {
-                    let Some(c) = live.clips.get(index as usize % live.clips.len().max(1)) else {
-                        return Err(EngineError::NoStimulus {
-                            track: track.name.clone(),
-                            level,
-                        });
-                    };
-                    (
-                        live.study.live_stimulus_id(&c.clip, level),
-                        c.reference.clone(),
-                    )
+                // Practice trials take the tracks in turn; then the staircases are
+                // interleaved at random among those still running.
+                let k = if practice {
+                    index as usize % st.tracks.len().max(1)
                 } else {
-                    let Some(stimulus) = track.stimulus_at(level, st.tolerance) else {
-                        return Err(EngineError::NoStimulus {
-                            track: track.name.clone(),
-                            level,
-                        });
-                    };
-                    (stimulus.to_string(), track.reference.clone())
+                    open[rng.index(open.len())]
                 };
+                let reference_position = place(
+                    self.placement,
+                    self.arrangement,
+                    &mut rng,
+                    design::balanced_side_of_trial(
+                        self.seed,
+                        self.subject,
+                        index,
+                        self.arrangement,
+                    ),
+                );
+                let Some(track) = st.tracks.get(k) else {
+                    return Err(EngineError::NoPendingTrial);
+                };
+                let level = if practice {
+                    st.practice_level.unwrap_or(track.settings.start)
+                } else {
+                    st.staircases[k]
+                        .next_level()
+                        .unwrap_or(track.settings.start)
+                };
+                let (stimulus, reference) = st.stimulus(track, index, level)?;
                 Trial {
                     index,
-                    block: Block::Test,
+                    block: if practice {
+                        Block::Familiarization
+                    } else {
+                        Block::Test
+                    },
                     condition: track.name.clone(),
                     stimulus,
                     reference,
@@ -444,6 +495,8 @@ impl Session {
                 let correct = p == trial.reference_position;
                 let k = trial.staircase.unwrap_or(0) as usize;
                 let reversal = match self.stairs.as_mut().and_then(|s| s.staircases.get_mut(k)) {
+                    // A practice trial is scored for the log and moves no staircase.
+                    Some(_) if trial.block == Block::Familiarization => None,
                     Some(sc) => sc.add_response(correct)?,
                     None => return Err(EngineError::NoPendingTrial),
                 };
@@ -611,8 +664,13 @@ impl Session {
     }
 }
 
-/// MOS / DSCQS / ACR / DCR plan (paper 000 section IV): familiarization spanning the quality range first
-/// (shuffled), then the test conditions shuffled per subject with hidden repeats inserted.
+/// Tags of the two balanced side draws of a rated plan.
+const SIDES_FAMILIARIZATION: u64 = 0x6661_6d69;
+const SIDES_CONDITIONS: u64 = 0x636f_6e64;
+
+/// MOS / DSCQS / ACR / DCR plan (paper 000 section IV): familiarization spanning the quality
+/// range first (shuffled), then the test conditions shuffled per subject (or in the subject's
+/// row of a balanced Latin square, `[design] order`) with hidden repeats inserted.
 fn plan_trials(
     study: &StudyDefinition,
     subject: u32,
@@ -625,7 +683,15 @@ fn plan_trials(
     let mut test: Vec<(usize, Block)> = (0..study.conditions.len())
         .map(|c| (c, Block::Test))
         .collect();
-    rng.shuffle(&mut test);
+    match study.design.order {
+        ConditionOrder::Random => rng.shuffle(&mut test),
+        ConditionOrder::LatinSquare => {
+            test = design::williams_row(test.len(), subject as usize)
+                .into_iter()
+                .map(|c| (c, Block::Test))
+                .collect();
+        }
+    }
     let n_rep = (study.session.hidden_repeats as usize).min(test.len());
     let mut pick: Vec<usize> = (0..test.len()).collect();
     // Partial Fisher-Yates: the first n_rep entries are a uniform sample of conditions.
@@ -649,21 +715,45 @@ fn plan_trials(
         };
         test.insert(at, (orig, Block::HiddenRepeat));
     }
+    // Counterbalanced sides: per condition (a hidden repeat shows the other side), and over
+    // the familiarization trials apart.
+    let balanced = placement == ReferencePlacement::Balanced;
+    let side_of = |tag: u64, n: usize| {
+        if balanced {
+            design::balanced_sides(study.seed, subject, &[tag], n, arrangement)
+        } else {
+            Vec::new()
+        }
+    };
+    let fam_sides = side_of(SIDES_FAMILIARIZATION, fam.len());
+    let cond_sides = side_of(SIDES_CONDITIONS, study.conditions.len());
+    let first = design::first_position(arrangement);
+    let fam_sides = fam_sides.into_iter().chain(std::iter::repeat(first));
+    let test_sides = test.iter().map(|&(c, b)| {
+        let s = cond_sides.get(c).copied().unwrap_or(first);
+        if b == Block::HiddenRepeat {
+            s.other()
+        } else {
+            s
+        }
+    });
+    let sides: Vec<Position> = fam_sides.take(fam.len()).chain(test_sides).collect();
     let test = test
         .into_iter()
         .filter_map(|(c, b)| study.conditions.get(c).map(|c| (c, b)));
     fam.into_iter()
         .map(|c| (c, Block::Familiarization))
         .chain(test)
+        .zip(sides)
         .enumerate()
-        .map(|(i, (c, block))| Trial {
+        .map(|(i, ((c, block), side))| Trial {
             index: i as u32,
             block,
             condition: c.stimulus.clone(),
             stimulus: c.stimulus.clone(),
             reference: c.reference.clone(),
             arrangement,
-            reference_position: place(placement, arrangement, &mut rng),
+            reference_position: place(placement, arrangement, &mut rng, side),
             staircase: None,
             level: None,
             break_before: false,

@@ -21,6 +21,7 @@
 //! ```
 
 pub mod catalog;
+pub mod design;
 pub mod engine;
 pub mod manifest;
 pub mod observer;

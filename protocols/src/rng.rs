@@ -21,6 +21,8 @@ pub mod purpose {
     pub const OBSERVER_TRIAL: u64 = 0x6f62_7472;
     /// The order of a live staircase's clips for one subject.
     pub const LIVE_CLIPS: u64 = 0x6c69_7665;
+    /// Balanced reference sides of one pair of subjects.
+    pub const SIDES: u64 = 0x7369_6465;
 }
 
 /// SplitMix64 finaliser (Steele, Lea & Flood 2014), used to mix seeds and tags.

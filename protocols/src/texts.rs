@@ -127,7 +127,7 @@ pub fn default_instructions(study: &StudyDefinition) -> String {
                     ReferencePlacement::Fixed(_) => {
                         "The second is the original, the first a compressed version of it."
                     }
-                    ReferencePlacement::Random => {
+                    ReferencePlacement::Random | ReferencePlacement::Balanced => {
                         "One of them may be the original; you are not told which."
                     }
                 };
@@ -247,6 +247,7 @@ pub fn planned_trials(study: &StudyDefinition) -> Planned {
                     .iter()
                     .map(|t| t.settings.max_trials)
                     .sum::<Option<u32>>()
+                    .map(|n| n + s.practice_trials)
             })
             .map_or(Planned::Unknown, Planned::AtMost),
     }

@@ -5,7 +5,8 @@
 //!   session-level advisory lock held on the writer's connection; a second writer is refused
 //!   with [`ResultsError::Locked`] or [`ResultsError::SessionBusy`];
 //! - an answer is durable before [`SessionWriter::append`] returns (fsynced row, or a committed
-//!   transaction), so the next trial never starts before it;
+//!   transaction), so the next trial never starts before it; the rows are the record of how
+//!   many trials were logged (a manifest's `trials_logged` is the count when it was written);
 //! - a resumed session returns the committed rows, which the recorder replays through the
 //!   engine;
 //! - the study file's and the stimulus manifest's hashes are in every session's manifest.
@@ -112,20 +113,19 @@ pub trait SessionWriter: Send {
     /// The path that names this session in messages ([`Store::session_path`]).
     fn path(&self) -> PathBuf;
 
-    /// Commits one row and the manifest that counts it before returning: a folder fsyncs the
-    /// row, then replaces `session.json`; a database commits both in one transaction. After
-    /// an error the row may be committed or not; calling again with the same row commits it
+    /// Commits one row before returning: a folder appends it to `trials.csv` and fsyncs it
+    /// (one fsync; `session.json` is not rewritten per row), a database inserts it and counts
+    /// it in the session's `trials_logged` column in one transaction. The rows are the
+    /// record: the manifest's `trials_logged` is the count when it was last written (at open,
+    /// resume, display changes, interrupt and finish), and readers count the rows. After an
+    /// error the row may be committed or not; calling again with the same row commits it
     /// once (a database writer that lost its connection reconnects, takes the session's lock
     /// again and looks).
     ///
     /// # Errors
     /// [`ResultsError::Unavailable`] when the database cannot be reached (try again later),
     /// other errors when the row cannot be written.
-    fn append(
-        &mut self,
-        record: &TrialRecord,
-        manifest: &SessionManifest,
-    ) -> Result<(), ResultsError>;
+    fn append(&mut self, record: &TrialRecord) -> Result<(), ResultsError>;
 
     /// Replaces the session's manifest.
     ///
@@ -281,15 +281,11 @@ impl SessionWriter for FolderWriter {
         self.log.dir().to_path_buf()
     }
 
-    fn append(
-        &mut self,
-        record: &TrialRecord,
-        manifest: &SessionManifest,
-    ) -> Result<(), ResultsError> {
-        self.log.append(record)?;
-        // The manifest's count follows every row, so a session stopped at any point (but a
-        // kill between these two writes) reads as many trials in both files.
-        self.log.write_manifest(manifest)
+    fn append(&mut self, record: &TrialRecord) -> Result<(), ResultsError> {
+        // The fsynced row is the commit point; the manifest is rewritten only when the
+        // session's state changes (a temporary file, its fsync, a rename and the folder's
+        // fsync per row cost two more fsyncs per answer).
+        self.log.append(record)
     }
 
     fn write_manifest(&mut self, manifest: &SessionManifest) -> Result<(), ResultsError> {

@@ -19,8 +19,8 @@ pub mod trials;
 
 pub use backend::{FolderStore, SessionWriter, Store};
 pub use store::{
-    RunManifest, SessionLog, SessionManifest, SessionResults, read_results_dir, read_session,
-    session_dirs,
+    RunManifest, SessionLog, SessionManifest, SessionResults, ViewingRecord, read_results_dir,
+    read_session, session_dirs,
 };
 pub use trials::{TornRow, TrialsFile, read_trials};
 

@@ -21,8 +21,10 @@ use crate::trials::{
 };
 
 /// Version of `session.json` and `run.json` written by this build. Version 2 added
-/// `manifest_hash`; version 1 files are still read.
-pub const MANIFEST_FORMAT_VERSION: u32 = 3;
+/// `manifest_hash`, 3 `browser`; version 4 added `viewing`, and in it `trials_logged` is the
+/// count when the manifest was last written, not rewritten after every row (the rows are the
+/// record). Versions 1 to 3 are still read.
+pub const MANIFEST_FORMAT_VERSION: u32 = 4;
 /// Largest manifest accepted by the readers, bytes.
 pub const MAX_MANIFEST_BYTES: u64 = 16 << 20;
 /// Most session directories read from one results directory.
@@ -238,7 +240,7 @@ pub struct DisplayInfo {
     pub refresh_hz: f64,
 }
 
-/// `session.json` (format version 1).
+/// `session.json` (format version 4; 1-3 are read).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SessionManifest {
@@ -273,7 +275,9 @@ pub struct SessionManifest {
     pub ended_ms: Option<u64>,
     /// State.
     pub status: SessionState,
-    /// Trials logged in `trials.csv`.
+    /// Rows in `trials.csv` when this manifest was written (version 4: at open, resume,
+    /// display changes, interrupt and finish, so a running session's log may hold more;
+    /// versions 1-3 rewrote it after every row). Count the rows for the trials logged.
     pub trials_logged: u32,
     /// Stimulus ids planned but not shown (time limit).
     pub not_shown: Vec<String>,
@@ -289,6 +293,31 @@ pub struct SessionManifest {
     /// window or simulated session, and absent from their files.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub browser: Option<BrowserInfo>,
+    /// The study's viewing conditions as the experimenter confirmed and measured them before
+    /// the session (version 4); `None` for a study without `[viewing]`, and absent from its
+    /// files.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub viewing: Option<ViewingRecord>,
+}
+
+/// What the experimenter confirmed of a study's `[viewing]` conditions before a session, and
+/// what was measured (`study run --measured-*`, or typed on the window's confirmation screen);
+/// `None` where nothing was measured.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ViewingRecord {
+    /// The experimenter confirmed that the conditions are as the study states them.
+    pub confirmed: bool,
+    /// When, ms since the Unix epoch.
+    pub confirmed_ms: Option<u64>,
+    /// Measured viewing distance, cm.
+    pub distance_cm: Option<f64>,
+    /// Measured peak luminance of the display, cd/m².
+    pub peak_luminance_cd_m2: Option<f64>,
+    /// Measured background luminance, cd/m².
+    pub background_luminance_cd_m2: Option<f64>,
+    /// Measured room illumination, lux.
+    pub room_illuminance_lux: Option<f64>,
 }
 
 /// What a participant's browser reported and measured (`study serve`): the environment the

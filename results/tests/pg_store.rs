@@ -81,6 +81,7 @@ fn manifest(subject: &str) -> SessionManifest {
         torn_rows: Vec::new(),
         display: None,
         browser: None,
+        viewing: None,
     }
 }
 
@@ -174,11 +175,28 @@ fn one_writer_per_session_and_rows_read_back_as_written(server: &ScratchServer) 
         Err(ResultsError::Exists { .. })
     ));
     for i in 0..3 {
-        m.trials_logged = i + 1;
         writer
-            .append(&record("S01", i, 1.5 + f64::from(i)), &m)
+            .append(&record("S01", i, 1.5 + f64::from(i)))
             .unwrap();
     }
+    // The rows are the record: the session's column counts them as they are committed, the
+    // manifest is the one last written (at creation here) until it is written again.
+    let column = |db: &Database| -> (i32, i64) {
+        let row = db
+            .connect()
+            .unwrap()
+            .query_one(
+                "SELECT trials_logged, (manifest->>'trials_logged')::bigint FROM study_sessions \
+                 WHERE subject = 'S01'",
+                &[],
+            )
+            .unwrap();
+        (row.get(0), row.get(1))
+    };
+    assert_eq!(column(&db), (3, 0));
+    m.trials_logged = 3;
+    writer.write_manifest(&m).unwrap();
+    assert_eq!(column(&db), (3, 3));
     let busy = b.resume_session("S01", 1).err().unwrap();
     let text = busy.to_string();
     assert!(
@@ -208,7 +226,7 @@ fn one_writer_per_session_and_rows_read_back_as_written(server: &ScratchServer) 
 fn every_kind_of_row_read_back_and_bad_values_named(server: &ScratchServer) {
     let db = server.create_database("kinds").unwrap();
     let mut store = open(&db);
-    let mut m = manifest("S04");
+    let m = manifest("S04");
     let mut writer = store.create_session(&m).unwrap();
     let mut pair = record("S04", 0, 0.0);
     pair.protocol = Protocol::Dscqs;
@@ -246,9 +264,8 @@ fn every_kind_of_row_read_back_and_bad_values_named(server: &ScratchServer) {
         interval_sd_ms: 0.375,
     });
     let written = [pair, choice, record("S04", 2, 4.5)];
-    for (i, r) in written.iter().enumerate() {
-        m.trials_logged = u32::try_from(i + 1).unwrap();
-        writer.append(r, &m).unwrap();
+    for r in &written {
+        writer.append(r).unwrap();
     }
     drop(writer);
     let heads = store.sessions().unwrap();
@@ -332,10 +349,9 @@ fn roles_from_the_docs_allow_what_they_say(server: &ScratchServer) {
     let station = as_role("study_station");
     let mut store = PgStore::open(&station, Some("pg-test")).unwrap();
     assert_eq!(store.next_subject_number().unwrap(), 1);
-    let mut m = manifest("S02");
+    let m = manifest("S02");
     let mut writer = store.create_session(&m).unwrap();
-    m.trials_logged = 1;
-    writer.append(&record("S02", 0, 4.0), &m).unwrap();
+    writer.append(&record("S02", 0, 4.0)).unwrap();
     let mut other = station.connect().unwrap();
     let id: i32 = other
         .query_one("SELECT id FROM study_sessions WHERE subject = 'S02'", &[])
@@ -414,17 +430,15 @@ fn schema_is_versioned_and_a_newer_one_refused(server: &ScratchServer) {
 fn an_answer_survives_a_server_restart(server: &mut ScratchServer) {
     let db = server.create_database("restart").unwrap();
     let mut store = open(&db);
-    let mut m = manifest("S03");
+    let m = manifest("S03");
     let mut writer = store.create_session(&m).unwrap();
-    m.trials_logged = 1;
-    writer.append(&record("S03", 0, 2.0), &m).unwrap();
+    writer.append(&record("S03", 0, 2.0)).unwrap();
     server.stop();
-    m.trials_logged = 2;
-    let err = writer.append(&record("S03", 1, 3.0), &m).unwrap_err();
+    let err = writer.append(&record("S03", 1, 3.0)).unwrap_err();
     assert!(matches!(err, ResultsError::Unavailable { .. }), "{err:?}");
     assert!(err.to_string().contains("cannot be reached"), "{err}");
     server.resume().unwrap();
-    writer.append(&record("S03", 1, 3.0), &m).unwrap();
+    writer.append(&record("S03", 1, 3.0)).unwrap();
     assert_eq!(writer.rows(), 2);
     drop(writer);
     let resumed = open(&db).resume_session("S03", 1).unwrap();

@@ -162,6 +162,7 @@ fn manifest(trials: u32) -> SessionManifest {
             refresh_hz: 60.0,
         }),
         browser: None,
+        viewing: None,
     }
 }
 

@@ -821,6 +821,17 @@ pub fn run(args: &ReportArgs) -> Result<()> {
             sessions.len()
         );
         let mut report = analysis.to_report(data, &options, &title);
+        analysis::method::method_section(
+            &mut report,
+            &study,
+            analysis::method::Observers {
+                sessions: displays.len(),
+                subjects: data.subjects.len(),
+                excluded_sessions: exclusions.iter().filter(|e| e.excluded).count(),
+                rejected: analysis.screening.as_ref().map(|s| s.rejected().len()),
+            },
+            &displays,
+        );
         incomplete_section(&mut report, &incomplete);
         display_section(&mut report, &displays, args.drop_limit);
         exclusions_section(&mut report, &exclusions, &study.crowdsourcing);

@@ -76,6 +76,15 @@ pub struct RunArgs {
     /// Continue an interrupted session of this subject.
     #[arg(long)]
     pub resume: bool,
+    /// The subject's index in the study's counterbalancing (0, 1, 2, ...: subject k takes
+    /// row k mod rows of a Latin square, and subjects 2j and 2j+1 see mirrored reference
+    /// sides). Default: a hash of the subject id and session, which balances only on average.
+    /// Give the same index to `--resume`.
+    #[arg(long)]
+    pub subject_index: Option<u32>,
+    /// What was measured of the study's `[viewing]` conditions before this session.
+    #[command(flatten)]
+    pub measured: MeasuredArgs,
     /// Where the window goes.
     #[command(flatten)]
     pub window: WindowArgs,
@@ -90,6 +99,62 @@ pub struct RunArgs {
     /// (they are left as they are).
     #[arg(long)]
     pub force: bool,
+}
+
+/// What the experimenter measured of the viewing conditions (a study with `[viewing]`): stored
+/// in `session.json` with the confirmation the window asks for, and shown on that screen for
+/// the experimenter to check.
+#[derive(Debug, Args, Default)]
+pub struct MeasuredArgs {
+    /// Measured viewing distance, cm.
+    #[arg(long = "measured-distance-cm", value_name = "CM", value_parser = measurement)]
+    pub distance_cm: Option<f64>,
+    /// Measured peak luminance of the display, cd/m².
+    #[arg(long = "measured-peak-cd-m2", value_name = "CD_M2", value_parser = measurement)]
+    pub peak_cd_m2: Option<f64>,
+    /// Measured background luminance, cd/m².
+    #[arg(
+        long = "measured-background-cd-m2",
+        value_name = "CD_M2",
+        value_parser = measurement
+    )]
+    pub background_cd_m2: Option<f64>,
+    /// Measured room illumination, lux.
+    #[arg(long = "measured-room-lux", value_name = "LUX", value_parser = measurement)]
+    pub room_lux: Option<f64>,
+}
+
+impl MeasuredArgs {
+    fn any(&self) -> bool {
+        self.distance_cm.is_some()
+            || self.peak_cd_m2.is_some()
+            || self.background_cd_m2.is_some()
+            || self.room_lux.is_some()
+    }
+
+    /// Writes the given measurements into `v`, keeping what is not given.
+    fn apply(&self, v: &mut results::ViewingRecord) {
+        let set = |to: &mut Option<f64>, from: Option<f64>| {
+            if from.is_some() {
+                *to = from;
+            }
+        };
+        set(&mut v.distance_cm, self.distance_cm);
+        set(&mut v.peak_luminance_cd_m2, self.peak_cd_m2);
+        set(&mut v.background_luminance_cd_m2, self.background_cd_m2);
+        set(&mut v.room_illuminance_lux, self.room_lux);
+    }
+}
+
+/// A measurement: a finite number, at least 0.
+fn measurement(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if (0.0..=1e6).contains(&v) => Ok(v),
+        Ok(_) => Err(format!(
+            "{s} is not a measurement (a number from 0 to 10^6)"
+        )),
+        Err(e) => Err(format!("{s:?}: {e}")),
+    }
 }
 
 /// Arguments of `study display-test`.
@@ -126,6 +191,7 @@ pub fn run(args: &RunArgs) -> anyhow::Result<()> {
         session::check_subject(&args.subject)?;
     }
     let file = StudyFile::load(&args.study)?;
+    check_measured(args, &file)?;
     let destination = args.store.destination(args.output.as_deref(), || {
         Some(file.dir().join(format!("results-{}", file.definition.name)))
     })?;
@@ -194,9 +260,12 @@ pub fn run(args: &RunArgs) -> anyhow::Result<()> {
     }
     let resume = || {
         format!(
-            "study run {} --subject {subject} --session {} --resume{}",
+            "study run {} --subject {subject} --session {}{} --resume{}",
             args.study.display(),
             args.session,
+            args.subject_index
+                .map(|k| format!(" --subject-index {k}"))
+                .unwrap_or_default(),
             where_args(args)
         )
     };
@@ -223,6 +292,18 @@ pub fn run(args: &RunArgs) -> anyhow::Result<()> {
         Some(Exit::Failed(e)) => bail!("{e} (the session is resumable with --resume)"),
         None => bail!("the window closed before the session ended (resumable with --resume)"),
     }
+}
+
+/// `--measured-*` needs a study that states viewing conditions.
+fn check_measured(args: &RunArgs, file: &StudyFile) -> anyhow::Result<()> {
+    if args.measured.any() && file.definition.viewing.is_none() {
+        bail!(
+            "{}: --measured-* records the study's viewing conditions, but the study file has no \
+             [viewing] table stating them",
+            args.study.display()
+        );
+    }
+    Ok(())
 }
 
 /// The options of a resume command that name where the results are, as the experimenter
@@ -296,7 +377,9 @@ fn open_session(
     store: &mut dyn Store,
     subject: &str,
 ) -> anyhow::Result<Option<Box<Recorder>>> {
-    let index = session::subject_index(subject, args.session);
+    let index = args
+        .subject_index
+        .unwrap_or_else(|| session::subject_index(subject, args.session));
     let fresh = session::new_manifest(
         &file.definition,
         SessionOf {
@@ -320,7 +403,15 @@ fn open_session(
                 );
                 None
             }
-            Opened::Ready { recorder, resumed } => {
+            Opened::Ready {
+                mut recorder,
+                resumed,
+            } => {
+                if args.measured.any() {
+                    recorder.update_manifest(|m| {
+                        args.measured.apply(m.viewing.get_or_insert_default());
+                    })?;
+                }
                 if resumed > 0 {
                     println!("{}: resuming after {resumed} logged trials", dir.display());
                 }

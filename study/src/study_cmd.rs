@@ -45,6 +45,10 @@ pub struct SimulateArgs {
     /// Continue an interrupted run in an existing results directory.
     #[arg(long)]
     pub resume: bool,
+    /// Simulate one subject with this id instead of `S001`, `S002`, ...: its plan is the one
+    /// `study run --subject ID` and `study serve` give that id (a results folder only).
+    #[arg(long, value_name = "ID", conflicts_with = "subjects")]
+    pub subject: Option<String>,
 }
 
 /// `study check STUDY.toml`: every problem at once, or a summary of the study.
@@ -78,6 +82,7 @@ pub fn check(args: &CheckArgs) -> anyhow::Result<()> {
     if let Some(ms) = study.session.time_limit_ms {
         writeln!(text, "  time limit: {:.1} min", ms as f64 / 60_000.0)?;
     }
+    describe_design(&mut text, study)?;
     writeln!(text, "  stimuli: {checked}")?;
     std::io::Write::write_all(&mut std::io::stdout(), text.as_bytes())?;
     Ok(())
@@ -100,6 +105,53 @@ pub fn preflight(file: &StudyFile) -> anyhow::Result<lab::preflight::Checked> {
         eprintln!();
     }
     Ok(checked?)
+}
+
+/// Counterbalancing: the order of the conditions and where the reference goes.
+fn describe_design(text: &mut String, study: &StudyDefinition) -> std::fmt::Result {
+    use protocols::study::{ConditionOrder, ReferencePlacement};
+    use std::fmt::Write as _;
+    if study.design.order == ConditionOrder::LatinSquare {
+        let rows = protocols::design::williams_rows(study.conditions.len());
+        writeln!(
+            text,
+            "  order: balanced Latin square (Williams), {rows} rows: subject index k takes row \
+             k mod {rows}; a complete block is {rows} subjects"
+        )?;
+    }
+    let side = match study.presentation.reference_position {
+        ReferencePlacement::Fixed(p) => format!("always {p}"),
+        ReferencePlacement::Random => "random per trial".to_string(),
+        ReferencePlacement::Balanced => match study.protocol {
+            Protocol::Staircase => "balanced (each block of 4 trials, mirrored for the next \
+                                    subject)"
+                .to_string(),
+            _ => "balanced (per condition, mirrored for the next subject)".to_string(),
+        },
+    };
+    writeln!(text, "  reference position: {side}")?;
+    if let Some(sc) = &study.staircase
+        && sc.practice_trials > 0
+    {
+        writeln!(
+            text,
+            "  practice: {} trial(s) before the staircases, not analysed",
+            sc.practice_trials
+        )?;
+    }
+    if let Some(v) = &study.viewing {
+        let stated: Vec<String> = v
+            .describe()
+            .into_iter()
+            .map(|(what, value)| format!("{what} {value}"))
+            .collect();
+        writeln!(
+            text,
+            "  viewing conditions (confirmed before each session): {}",
+            stated.join(", ")
+        )?;
+    }
+    Ok(())
 }
 
 /// A MOS or DSCQS study's trials and presentation time.
@@ -225,6 +277,9 @@ pub fn simulate(args: &SimulateArgs) -> anyhow::Result<()> {
         resume: args.resume,
         patience: Duration::from_secs(args.patience_s),
     };
-    lab::simulate::simulate(&options, &mut |line| eprintln!("{line}"))?;
+    match &args.subject {
+        Some(id) => lab::simulate::simulate_subject(&options, id, &mut |line| eprintln!("{line}"))?,
+        None => lab::simulate::simulate(&options, &mut |line| eprintln!("{line}"))?,
+    }
     Ok(())
 }

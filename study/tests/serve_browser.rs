@@ -1,8 +1,9 @@
 //! `study serve` end to end in a real headless Chromium (Debian's `chromium`, driven over
 //! WebDriver by `chromedriver`): a participant completes a MOS, a DSCQS and a live-staircase
-//! study on the page, with WebGL drawn by SwiftShader; each session's rows equal those of a
-//! session recorder given the same answers (what `study simulate` runs), timing columns
-//! aside. The MOS server is SIGKILLed mid-study and restarted: the page carries on and no
+//! study on the page, with WebGL drawn by SwiftShader, answering as `study simulate` (the
+//! real binary, `--subject` the id the browser got) answered for the same subject: the
+//! ratings, choices and replays of its `trials.csv`; each served session's rows equal the
+//! simulated session's column by column, timing columns aside. The MOS server is SIGKILLed mid-study and restarted: the page carries on and no
 //! answer is lost or logged twice. A second browser holding another participant's token is
 //! refused A's session.
 //!
@@ -17,7 +18,7 @@
     missing_docs
 )]
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::io::{BufRead as _, BufReader};
 use std::net::{TcpListener, TcpStream};
 use std::path::{Path, PathBuf};
@@ -193,8 +194,9 @@ impl Browser {
             .to_string()
     }
 
-    /// Clicks the element `css` names; tried again (up to five times) while the page is
-    /// re-laying out under it (an intercepted click or a replaced element).
+    /// Clicks the element `css` names; tried again (for up to about three seconds, a loaded
+    /// machine lays out slowly) while the page is re-laying out under it (an intercepted
+    /// click, a replaced element, one not yet interactable).
     fn click(&self, css: &str) {
         for attempt in 0.. {
             let found = http(
@@ -218,7 +220,7 @@ impl Browser {
             });
             match clicked {
                 Some((200, _)) => return,
-                other if attempt >= 4 => panic!("click {css}: {found:?} {other:?}"),
+                other if attempt >= 30 => panic!("click {css}: {found:?} {other:?}"),
                 _ => std::thread::sleep(Duration::from_millis(100)),
             }
         }
@@ -264,6 +266,35 @@ impl Browser {
             );
             std::thread::sleep(Duration::from_millis(40));
         }
+    }
+
+    /// Runs `script` (which calls `done(value)`) asynchronously in the page.
+    fn js_async(&self, script: &str) -> Value {
+        self.cmd(
+            "POST",
+            "execute/async",
+            Some(&json!({
+                "script": format!("const done = arguments[arguments.length - 1]; {script}"),
+                "args": [],
+            })),
+        )
+    }
+
+    fn resize(&self, width: u32, height: u32) {
+        self.cmd(
+            "POST",
+            "window/rect",
+            Some(&json!({ "width": width, "height": height })),
+        );
+    }
+
+    fn text(&self, id: &str) -> String {
+        self.js(&format!(
+            "return document.getElementById('{id}').textContent;"
+        ))
+        .as_str()
+        .unwrap_or("")
+        .to_string()
     }
 
     fn screen(&self) -> String {
@@ -330,10 +361,12 @@ const MOS: &str = "name = \"web-mos\"\nprotocol = \"mos\"\n\
     [session]\nfamiliarization = 1\nhidden_repeats = 1\nbreak_every_trials = 2\n\
     subject_fields = [\"age\"]\nconsent = \"You agree to watch four short motions.\"\n";
 
-const DSCQS: &str = "name = \"web-dscqs\"\nprotocol = \"dscqs\"\n\
+// Whole grades on the continuous scale, so that the keyboard can give any rating the
+// simulated observer gives.
+const DSCQS: &str = "name = \"web-dscqs\"\nprotocol = \"dscqs\"\n[scale]\nstep = 1\n\
     [conditions]\nclips = [\"walk\"]\ncodecs = [\"spiht\"]\ntarget_cr = [10, 20]\n\
     [presentation]\narrangement = \"abab\"\ngrey_ms = 150\ngap_ms = 100\nmax_replays = 0\n\
-    stimulus_duration_ms = 500\n";
+    stimulus_duration_ms = 500\n[crowdsourcing]\nfullscreen = true\nmin_window = [640, 480]\n";
 
 const STAIRCASE: &str = "name = \"web-stairs\"\nprotocol = \"staircase\"\n\
     [presentation]\nloop = true\ngap_ms = 100\nstimulus_duration_ms = 500\n\
@@ -341,55 +374,96 @@ const STAIRCASE: &str = "name = \"web-stairs\"\nprotocol = \"staircase\"\n\
     max_trials = 4\n[[staircase.tracks]]\nname = \"walk\"\n\
     [staircase.live]\nclips = [\"walk\"]\n";
 
-/// How the test answers trial `k` of each protocol, and the keys or clicks that give it.
-fn scripted(protocol: &str, k: u32) -> Answer {
-    match protocol {
-        "mos" => Answer::Rating([4.0, 2.5, 5.0, 1.5][k as usize % 4]),
-        // Number keys on BT.500's continuous 0-100 scale mark the middle of a grade:
-        // 4 -> 70, 2 -> 30, 5 -> 90.
-        "dscqs" => [
-            Answer::Pair { a: 70.0, b: 30.0 },
-            Answer::Pair { a: 90.0, b: 70.0 },
-        ][k as usize % 2],
-        _ => Answer::Choice(if k.is_multiple_of(2) {
-            Position::Left
-        } else {
-            Position::Right
-        }),
-    }
+/// What the simulated observer answered, by trial index: the answer and the replays.
+type Script = BTreeMap<u32, (Answer, u32)>;
+
+/// Runs `study simulate STUDY --subject SUBJECT --seed SEED` (the real binary) into a
+/// folder of its own, and returns its rows and the answers they hold.
+fn simulate(
+    study: &Path,
+    dir: &Path,
+    subject: &str,
+    seed: u64,
+) -> (Vec<protocols::TrialRecord>, Script) {
+    let out = dir.join(format!("simulated-{seed}"));
+    let run = Command::new(env!("CARGO_BIN_EXE_study"))
+        .arg("simulate")
+        .arg(study)
+        .args(["--subject", subject, "--seed", &seed.to_string(), "-o"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "study simulate --subject {subject}: {}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let rows = results::read_trials(&out.join(format!("{subject}_s1/trials.csv")))
+        .unwrap()
+        .records;
+    let script = rows
+        .iter()
+        .map(|r| (r.trial.index, (r.response.answer, r.response.replays)))
+        .collect();
+    (rows, script)
 }
 
-fn give(b: &Browser, protocol: &str, k: u32) {
-    match (protocol, scripted(protocol, k)) {
-        ("mos", Answer::Rating(v)) => {
-            // The mouse: the grade, then Continue.
+/// Gives `answer` to the open trial as a participant does, after `replays` replays: MOS by
+/// mouse (the grade, then Continue), DSCQS by keyboard (a grade's digit, then Up/Down to the
+/// exact value, A then B, Enter), 2AFC by arrow key or click.
+fn give(b: &Browser, (answer, replays): (Answer, u32)) {
+    for _ in 0..replays {
+        b.wait("!document.getElementById('replay').hidden", 30);
+        b.click("#replay");
+    }
+    match answer {
+        Answer::Rating(v) => {
             b.click(&format!(".rating[data-value=\"{v}\"]"));
             b.click("#continue");
         }
-        ("dscqs", Answer::Pair { a, b: bv }) => {
-            let digit = |v: f64| ((v - 10.0) / 20.0 + 1.0).round().to_string();
-            b.keys(&[&digit(a), &digit(bv), "\u{E007}"]);
+        Answer::Pair { a, b: bv } => {
+            // Digit d marks the middle of grade d on BT.500's 0-100 scale, (d - 0.5) x 20;
+            // Up/Down move by the scale's step (1).
+            let keys = |v: f64| -> Vec<String> {
+                let d = ((v / 20.0).floor() + 1.0).clamp(1.0, 5.0);
+                let steps = (v - (d - 0.5) * 20.0).round() as i32;
+                let arrow = if steps > 0 { "\u{E013}" } else { "\u{E015}" };
+                std::iter::once(d.to_string())
+                    .chain((0..steps.abs()).map(|_| arrow.to_string()))
+                    .collect()
+            };
+            let mut all = vec!["\u{E012}".to_string()];
+            let ka = keys(a);
+            all.push(ka[0].clone());
+            // The digit moved the edit to B: back to A for the steps.
+            all.push("\u{E012}".into());
+            all.extend(ka[1..].iter().cloned());
+            all.push("\u{E014}".into());
+            all.extend(keys(bv));
+            all.push("\u{E007}".into());
+            let all: Vec<&str> = all.iter().map(String::as_str).collect();
+            b.keys(&all);
         }
-        (_, Answer::Choice(Position::Left)) => b.keys(&["\u{E012}"]),
-        (_, Answer::Choice(_)) => b.click("#choice-right"),
-        _ => unreachable!(),
+        Answer::Choice(Position::Left) => b.keys(&["\u{E012}"]),
+        Answer::Choice(_) => b.click("#choice-right"),
     }
 }
 
 /// Joins from a Prolific link, passes the welcome screen and answers trials until the
-/// session ends (or `stop_after` trials, then returns). Returns the answers given by index.
+/// session ends (or `stop_after` trials, then returns), answering as `script` says; notes
+/// the trials answered in `given`.
 fn take_part(
     b: &Browser,
     url: Option<&str>,
-    protocol: &str,
+    script: &Script,
     stop_after: Option<u32>,
-    given: &mut BTreeMap<u32, Answer>,
+    given: &mut BTreeSet<u32>,
 ) {
     if let Some(url) = url {
         b.go(url);
         welcome(b);
     }
-    answer_trials(b, protocol, stop_after, given);
+    answer_trials(b, script, stop_after, given);
 }
 
 /// From the environment check through the welcome screen.
@@ -416,12 +490,7 @@ fn welcome(b: &Browser) {
 }
 
 /// Answers trials (and breaks) until the end, or until `stop_after` answers in all.
-fn answer_trials(
-    b: &Browser,
-    protocol: &str,
-    stop_after: Option<u32>,
-    given: &mut BTreeMap<u32, Answer>,
-) {
+fn answer_trials(b: &Browser, script: &Script, stop_after: Option<u32>, given: &mut BTreeSet<u32>) {
     loop {
         b.wait(
             "['trial', 'break', 'end'].includes(document.body.dataset.screen)",
@@ -440,13 +509,19 @@ fn answer_trials(
             .js("return Number(document.body.dataset.trial);")
             .as_u64()
             .unwrap() as u32;
-        if given.contains_key(&k) && b.screen() == "trial" {
+        if given.contains(&k) && b.screen() == "trial" {
             // Still showing a trial answered already (the acknowledgement is on its way).
             std::thread::sleep(Duration::from_millis(50));
             continue;
         }
-        given.insert(k, scripted(protocol, k));
-        give(b, protocol, k);
+        let Some(&answer) = script.get(&k) else {
+            panic!(
+                "trial {k} is not in the simulated session ({} rows)",
+                script.len()
+            );
+        };
+        given.insert(k);
+        give(b, answer);
         b.wait(
             &format!(
                 "document.body.dataset.screen !== 'trial' || document.body.dataset.trial !== '{k}'"
@@ -459,75 +534,155 @@ fn answer_trials(
     }
 }
 
-/// The rows of the served session against a recorder given the same answers.
-fn check_rows(study: &Path, out: &Path, subject: &str, given: &BTreeMap<u32, Answer>) {
+/// The rows of the served session against the simulated session's, column by column,
+/// timing columns aside (the response time, dropped frames, the three clocks, the frame
+/// timing).
+fn check_rows(
+    out: &Path,
+    subject: &str,
+    simulated: &[protocols::TrialRecord],
+    given: &BTreeSet<u32>,
+) {
     let served = results::read_trials(&out.join(format!("{subject}_s1/trials.csv"))).unwrap();
-    let file = lab::StudyFile::load(study).unwrap();
-    let dir = temp_dir(&format!("replay-{subject}"));
-    let fresh = lab::session::new_manifest(
-        &file.definition,
-        lab::session::SessionOf {
-            study_hash: &file.hash,
-            manifest_hash: &file.manifest_hash,
-            subject: subject.to_string(),
-            subject_index: lab::session::subject_index(subject, 1),
-            session: 1,
-            observer_seed: None,
-        },
-    );
-    let lab::session::Opened::Ready {
-        recorder: mut rec, ..
-    } = lab::session::Recorder::open(
-        &file.definition,
-        lab::session::subject_index(subject, 1),
-        &mut results::FolderStore::new(&dir),
-        false,
-        fresh,
-    )
-    .unwrap()
-    else {
-        panic!("new session finished")
-    };
-    let source = lab::source::open(&file).unwrap();
-    let mut want = Vec::new();
-    while let Some(trial) = rec.next_trial(0).unwrap() {
-        let answer = given[&trial.index];
-        let encoding = source.encoding(&trial).unwrap();
-        let response = protocols::Response {
-            answer,
-            response_time_ms: 0,
-            replays: 0,
-            dropped_frames: 0,
-        };
-        rec.record(trial, response, 0, encoding, None).unwrap();
-    }
-    rec.finish().unwrap();
-    let replayed = results::read_trials(&dir.join(format!("{subject}_s1/trials.csv"))).unwrap();
-    want.extend(replayed.records);
-    assert_eq!(served.records.len(), want.len(), "rows of {subject}");
+    assert_eq!(served.records.len(), simulated.len(), "rows of {subject}");
     assert_eq!(
         served.records.len(),
         given.len(),
         "one row per answer given"
     );
-    for (got, want) in served.records.iter().zip(&want) {
-        // Timing columns aside, every column equal.
-        assert_eq!(got.study, want.study);
-        assert_eq!(got.subject, want.subject);
-        assert_eq!(got.protocol, want.protocol);
-        assert_eq!(got.trial, want.trial);
-        assert_eq!(got.response.answer, want.response.answer);
-        assert_eq!(got.response.replays, 0);
-        assert_eq!(got.outcome, want.outcome);
-        assert_eq!(got.encoding, want.encoding);
+    for (got, want) in served.records.iter().zip(simulated) {
+        let at = format!("{subject} trial {}", want.trial.index);
+        assert_eq!(got.study, want.study, "{at}");
+        assert_eq!(got.subject, want.subject, "{at}");
+        assert_eq!(got.session, want.session, "{at}");
+        assert_eq!(got.protocol, want.protocol, "{at}");
+        assert_eq!(got.trial, want.trial, "{at}");
+        assert_eq!(got.response.answer, want.response.answer, "{at}");
+        assert_eq!(got.response.replays, want.response.replays, "{at}");
+        assert_eq!(got.outcome, want.outcome, "{at}");
+        assert_eq!(got.encoding, want.encoding, "{at}");
         // The page measured its frames: every trial has timing from the browser.
         assert!(
             got.timing.is_some_and(|t| t.frames_shown > 2),
-            "{:?}",
+            "{at}: {:?}",
             got.timing
         );
     }
-    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Reloads the page once the pending trial's stimuli have played: the page continues the
+/// same session and the same trial, which plays again from the start before it can be
+/// answered; nothing is logged for it meanwhile.
+fn reload_mid_trial(b: &Browser, out: &Path, given: &BTreeSet<u32>) {
+    b.wait(
+        "document.body.dataset.screen === 'trial' && document.body.dataset.open === '1'",
+        60,
+    );
+    let k = b.js("return document.body.dataset.trial;");
+    let rows = std::fs::read(out.join("pidA_s1/trials.csv")).unwrap();
+    b.cmd("POST", "refresh", Some(&json!({})));
+    b.wait("document.body.dataset.screen === 'welcome'", 30);
+    assert_eq!(
+        b.text("welcome-resume"),
+        format!(
+            "Continuing the session: {} trials already done.",
+            given.len()
+        )
+    );
+    // Every state the page goes through from here, as it happens (not polled: a loaded
+    // machine's WebDriver round trips are slower than the presentation).
+    b.js(
+        "window.seen = []; new MutationObserver(() => { const d = document.body.dataset; \
+          const r = document.querySelector('.rating'); \
+          window.seen.push([d.screen, d.trial, d.open, r ? r.disabled : null, performance.now()]); \
+          }).observe(document.body, { attributes: true, subtree: true }); return null;",
+    );
+    b.click("#begin");
+    b.wait(
+        "document.body.dataset.screen === 'trial' && document.body.dataset.open === '1'",
+        30,
+    );
+    let seen = b.js("return window.seen;");
+    let seen = seen.as_array().unwrap();
+    let shown = seen
+        .iter()
+        .position(|s| s[0] == "trial")
+        .expect("the trial screen");
+    let opened = seen
+        .iter()
+        .position(|s| s[0] == "trial" && s[2] == "1")
+        .expect("the answer opened");
+    // The same trial, from the start: the answer widgets stay closed until it has played
+    // (500 ms of stimulus) again.
+    assert_eq!(seen[shown][1], k, "{seen:?}");
+    assert!(
+        seen[shown..opened]
+            .iter()
+            .all(|s| s[2] == "0" && s[3] != false),
+        "{seen:?}"
+    );
+    let waited = seen[opened][4].as_f64().unwrap() - seen[shown][4].as_f64().unwrap();
+    assert!(
+        waited >= 450.0,
+        "answers opened {waited:.0} ms after the trial showed"
+    );
+    assert_eq!(
+        std::fs::read(out.join("pidA_s1/trials.csv")).unwrap(),
+        rows,
+        "nothing logged by the reload"
+    );
+}
+
+/// The environment check of a study that asks for fullscreen and a 640×480 window, in a
+/// window too small: the page refuses with the reasons and offers no way on; the server
+/// refuses the same environment posted to it, and no participant or session is recorded.
+/// Enlarged, the window still waits for fullscreen; in fullscreen the check passes.
+fn environment_check(b: &Browser, url: &str, out: &Path) {
+    b.resize(560, 420);
+    b.go(url);
+    b.wait("document.body.dataset.checked === 'failed'", 30);
+    let problems = b.text("check-problems");
+    assert!(
+        problems.contains("the study needs at least 640×480. Enlarge the window.")
+            && problems.contains("The study runs in full screen."),
+        "{problems}"
+    );
+    assert_eq!(
+        b.js("return document.getElementById('check-continue').disabled;"),
+        json!(true)
+    );
+    let refused = b.js_async(
+        "fetch('/api/join', { method: 'POST', headers: { 'Content-Type': 'application/json' }, \
+         body: JSON.stringify({ params: { workerId: 'Wsmall' }, environment: state_env() }) })\
+         .then(async (r) => done([r.status, (await r.json()).error]));\
+         function state_env() { return { webgl2: true, webgl_renderer: 'x', user_agent: navigator.userAgent, \
+         screen_px: [screen.width, screen.height], window_px: [innerWidth, innerHeight], \
+         device_pixel_ratio: 1, refresh_hz: 60, fullscreen: false }; }",
+    );
+    assert_eq!(refused[0], json!(400), "{refused}");
+    let said = refused[1].as_str().unwrap();
+    assert!(
+        said.starts_with("this browser cannot run the study: the window is ")
+            && said.contains("the study needs at least 640×480; the study runs in fullscreen"),
+        "{said}"
+    );
+    let joined = std::fs::read_to_string(out.join("participants.csv")).unwrap_or_default();
+    assert!(!joined.contains("Wsmall"), "{joined}");
+    assert!(!out.join("Wsmall_s1").exists());
+    // Large enough, but not yet in fullscreen.
+    b.resize(1024, 720);
+    b.wait(
+        "!document.getElementById('check-problems').textContent.includes('Enlarge')",
+        30,
+    );
+    assert_eq!(b.text("check-problems"), "The study runs in full screen.");
+    assert_eq!(
+        b.js("return document.body.dataset.checked;"),
+        json!("failed")
+    );
+    b.click("#fullscreen");
+    b.wait("document.body.dataset.checked === 'ok'", 30);
+    assert_eq!(b.js("return !!document.fullscreenElement;"), json!(true));
 }
 
 fn manifest(out: &Path, subject: &str) -> results::SessionManifest {
@@ -543,21 +698,29 @@ fn a_browser_completes_mos_through_a_server_kill_and_a_foreign_token_is_refused(
     let study = write_study(&dir, MOS);
     let out = dir.join("results");
     let port = free_port();
+    // The first observer whose session replays a trial (one in ten trials does), so that
+    // the page replays too.
+    let (simulated, script) = (1..=30)
+        .map(|seed| simulate(&study, &dir, "pidA", seed))
+        .find(|(_, script)| script.values().any(|(_, replays)| *replays > 0))
+        .expect("a simulated session with a replay among 30 observer seeds");
     let mut server = serve(&study, &out, port);
     let driver = Driver::start();
     let b = driver.browser(&dir.join("profile-a"));
     let url = format!("http://127.0.0.1:{port}/?PROLIFIC_PID=pidA&STUDY_ID=st1&SESSION_ID=se1");
-    let mut given = BTreeMap::new();
-    take_part(&b, Some(&url), "mos", Some(2), &mut given);
+    let mut given = BTreeSet::new();
+    take_part(&b, Some(&url), &script, Some(2), &mut given);
     // Mid-study: the server dies without a word, and comes back.
     server.child.kill().unwrap();
     server.child.wait().unwrap();
     std::thread::sleep(Duration::from_millis(300));
     server = serve(&study, &out, port);
     // The page carries on from where it was (it retries what it was sending).
-    take_part(&b, None, "mos", None, &mut given);
+    take_part(&b, None, &script, Some(3), &mut given);
+    reload_mid_trial(&b, &out, &given);
+    take_part(&b, None, &script, None, &mut given);
     assert_eq!(b.screen(), "end");
-    check_rows(&study, &out, "pidA", &given);
+    check_rows(&out, "pidA", &simulated, &given);
     let m = manifest(&out, "pidA");
     assert_eq!(m.status, results::store::SessionState::Complete);
     assert_eq!(
@@ -609,28 +772,42 @@ fn a_browser_completes_dscqs_and_a_live_staircase() {
         return;
     }
     let driver = Driver::start();
-    for (name, body, protocol) in [
-        ("dscqs", DSCQS, "dscqs"),
-        ("stairs", STAIRCASE, "staircase"),
-    ] {
+    for (name, body) in [("dscqs", DSCQS), ("stairs", STAIRCASE)] {
         let dir = temp_dir(name);
         let study = write_study(&dir, body);
         let out = dir.join("results");
         let port = free_port();
+        let subject = format!("W{name}");
+        let (simulated, script) = simulate(&study, &dir, &subject, 1);
         let _server = serve(&study, &out, port);
         let b = driver.browser(&dir.join("profile"));
-        let mut given = BTreeMap::new();
-        take_part(
-            &b,
-            Some(&format!(
-                "http://127.0.0.1:{port}/?workerId=W{name}&assignmentId=A1&hitId=H1"
-            )),
-            protocol,
-            None,
-            &mut given,
-        );
+        let mut given = BTreeSet::new();
+        let url = format!("http://127.0.0.1:{port}/?workerId={subject}&assignmentId=A1&hitId=H1");
+        let fullscreen = name == "dscqs";
+        if fullscreen {
+            environment_check(&b, &url, &out);
+            welcome(&b);
+            // One trial in fullscreen, the others after leaving it.
+            answer_trials(&b, &script, Some(1), &mut given);
+            b.js("document.exitFullscreen(); return null;");
+            b.wait("!document.fullscreenElement", 10);
+            answer_trials(&b, &script, None, &mut given);
+        } else {
+            take_part(&b, Some(&url), &script, None, &mut given);
+        }
         assert_eq!(b.screen(), "end");
-        check_rows(&study, &out, &format!("W{name}"), &given);
+        check_rows(&out, &subject, &simulated, &given);
+        if fullscreen {
+            let m = manifest(&out, &subject);
+            let browser = m.browser.expect("the browser's measurements");
+            assert!(browser.fullscreen, "the session began in fullscreen");
+            let first = *given.first().unwrap();
+            let after: Vec<u32> = given.iter().copied().filter(|k| *k != first).collect();
+            assert_eq!(
+                browser.windowed_trials, after,
+                "trials answered outside fullscreen"
+            );
+        }
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -199,3 +199,60 @@ fn resume_with_a_changed_study_is_a_clear_error() {
         "{err}"
     );
 }
+
+/// `--subject ID` simulates one subject under that id, with the plan index `study run
+/// --subject ID` and `study serve` derive from it (FNV-1a 32 of `ID/1`, computed here
+/// independently), so a test can give a browser the answers that subject's observer gives;
+/// an id that cannot name a folder, or `--subject` with `--subjects`, is refused.
+#[test]
+fn simulate_one_subject_by_id() {
+    let out = scratch("subject");
+    let st = study()
+        .arg("simulate")
+        .arg(examples().join("mos.toml"))
+        .args(["--subject", "pidA", "--seed", "3", "-o"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    let (_, sessions) = results::read_results_dir(&out).unwrap();
+    assert_eq!(sessions.len(), 1);
+    let m = &sessions[0].manifest;
+    let fnv = b"pidA/1".iter().fold(0x811c_9dc5_u32, |h, b| {
+        (h ^ u32::from(*b)).wrapping_mul(0x0100_0193)
+    });
+    assert_eq!(
+        (m.subject.as_str(), m.subject_index, m.observer_seed),
+        ("pidA", fnv, Some(3))
+    );
+    assert_eq!(m.status, SessionState::Complete);
+    assert_eq!(sessions[0].trials.records.len(), 14);
+    for (args, says) in [
+        (
+            &["--subject", "../x"][..],
+            "--subject \"../x\": use 1-64 letters, digits, '-' or '_'",
+        ),
+        (
+            &["--subject", "pidB", "--subjects", "2"][..],
+            "cannot be used with",
+        ),
+    ] {
+        let st = study()
+            .arg("simulate")
+            .arg(examples().join("mos.toml"))
+            .args(args)
+            .arg("-o")
+            .arg(scratch("refused"))
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&st.stderr);
+        assert!(
+            !st.status.success() && err.contains(says),
+            "{args:?}: {err}"
+        );
+    }
+}

@@ -5,6 +5,13 @@
 //! from every session's `trials.csv`), the answer acknowledgement latency and the next-trial
 //! stimulus latency (the trial and both of its clips), p50 / p99 / max.
 //!
+//! The participants are tasks on one client thread (a single-threaded tokio runtime of
+//! their own, apart from the server's), each with its own kept-alive connection, asking and
+//! waiting as the blocking `web::client::Client` does: the same requests at the same moments
+//! (each trial's presentation is waited out), but 200 OS threads competing with the server
+//! for the same two cores no longer inflate its tail. A busy client thread can only delay
+//! reading a reply, which counts against the server: the figures are not flattered.
+//!
 //! Bounded: 200 participants × 20 trials, and the run gives up after 300 s. Loopback only.
 //!
 //! `cargo bench -p web --bench load` (participants with `LOAD_PARTICIPANTS`, the clip length
@@ -17,14 +24,16 @@
     missing_docs
 )]
 
-use std::collections::BTreeMap;
+use std::net::SocketAddr;
 use std::path::Path;
-use std::sync::{Arc, Barrier, Mutex};
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use serde_json::json;
-use web::client::Client;
-use web::{Limits, ServeOptions};
+use serde_json::{Value, json};
+use tokio::io::{AsyncBufReadExt as _, AsyncReadExt as _, AsyncWriteExt as _, BufReader};
+use tokio::net::TcpStream;
+use tokio::sync::Barrier;
+use web::{Limits, ServeOptions, client};
 
 const TRIALS: usize = 20;
 const DEADLINE: Duration = Duration::from_secs(300);
@@ -79,39 +88,128 @@ struct Timings {
     errors: Vec<String>,
 }
 
+/// A participant's HTTP/1.1 connection, kept alive, as `web::client::Client` but async.
+struct Participant {
+    addr: SocketAddr,
+    conn: Option<BufReader<TcpStream>>,
+    subject: String,
+    token: String,
+}
+
+struct Reply {
+    status: u16,
+    body: Vec<u8>,
+}
+
+impl Reply {
+    fn json(&self) -> Value {
+        serde_json::from_slice(&self.body).unwrap_or(Value::Null)
+    }
+}
+
+impl Participant {
+    /// Sends one request (reconnecting once if the kept-alive connection was closed).
+    async fn request(
+        &mut self,
+        method: &str,
+        path: &str,
+        body: Option<&Value>,
+    ) -> std::io::Result<Reply> {
+        if let Ok(r) = self.try_request(method, path, body).await {
+            return Ok(r);
+        }
+        self.conn = None;
+        self.try_request(method, path, body).await
+    }
+
+    async fn try_request(
+        &mut self,
+        method: &str,
+        path: &str,
+        body: Option<&Value>,
+    ) -> std::io::Result<Reply> {
+        if self.conn.is_none() {
+            let s = TcpStream::connect(self.addr).await?;
+            s.set_nodelay(true)?;
+            self.conn = Some(BufReader::new(s));
+        }
+        let conn = self.conn.as_mut().unwrap();
+        let request = client::request_text(method, path, self.addr, &self.token, body);
+        conn.get_mut().write_all(request.as_bytes()).await?;
+        let mut line = String::new();
+        if conn.read_line(&mut line).await? == 0 {
+            return Err(std::io::Error::other("connection closed"));
+        }
+        let mut head = client::ReplyHead::from_status_line(&line)?;
+        loop {
+            line.clear();
+            conn.read_line(&mut line).await?;
+            if !head.header(&line) {
+                break;
+            }
+        }
+        let (status, len, close) = (head.status, head.length, head.close);
+        let mut body = vec![0u8; len];
+        conn.read_exact(&mut body).await?;
+        if close {
+            self.conn = None;
+        }
+        Ok(Reply { status, body })
+    }
+
+    fn session_path(&self, path: &str) -> String {
+        format!("/api/s/{}/{path}", self.subject)
+    }
+}
+
 /// One participant: join, begin, then each trial: ask for it and its clips (timed), wait
 /// out the presentation, answer (timed).
-fn participant(
-    addr: std::net::SocketAddr,
+async fn participant(
+    addr: SocketAddr,
     k: usize,
-    start: &Barrier,
-    out: &Mutex<Timings>,
+    start: Arc<Barrier>,
+    out: Arc<Mutex<Timings>>,
     t0: Instant,
 ) {
-    let mut c = Client::new(addr);
+    let mut c = Participant {
+        addr,
+        conn: None,
+        subject: String::new(),
+        token: String::new(),
+    };
     let mut local = Timings::default();
-    start.wait();
-    let r = c.join(&BTreeMap::from([(
-        "PROLIFIC_PID".to_string(),
-        format!("p{k:04}"),
-    )]));
-    if !r.as_ref().is_ok_and(|r| r.status == 200) {
-        out.lock()
-            .unwrap()
-            .errors
-            .push(format!("join {k}: {:?}", r.map(|r| r.json())));
-        return;
+    start.wait().await;
+    let join = json!({
+        "params": { "PROLIFIC_PID": format!("p{k:04}") },
+        "environment": web::client::environment(),
+    });
+    let r = c.request("POST", "/api/join", Some(&join)).await;
+    match &r {
+        Ok(r) if r.status == 200 => {
+            let v = r.json();
+            c.subject = v["subject"].as_str().unwrap_or_default().to_string();
+            c.token = v["token"].as_str().unwrap_or_default().to_string();
+        }
+        _ => {
+            out.lock()
+                .unwrap()
+                .errors
+                .push(format!("join {k}: {:?}", r.map(|r| r.json())));
+            return;
+        }
     }
     let begin =
         json!({ "fields": {}, "consent": false, "environment": web::client::environment() });
     let r = c
         .request("POST", &c.session_path("begin"), Some(&begin))
+        .await
         .unwrap();
     assert_eq!(r.status, 200);
     while t0.elapsed() < DEADLINE {
         let asked = Instant::now();
         let t = c
             .request("GET", &c.session_path("trial"), None)
+            .await
             .unwrap()
             .json();
         if t["done"] == json!(true) {
@@ -125,13 +223,14 @@ fn participant(
                     &c.session_path(&format!("clip/{index}/{slot}")),
                     None,
                 )
+                .await
                 .unwrap();
             assert_eq!(r.status, 200);
         }
         local.next_ms.push(asked.elapsed().as_secs_f64() * 1e3);
         let need = t["presentation_ms"].as_f64().unwrap();
         let played = Instant::now();
-        std::thread::sleep(Duration::from_secs_f64(need / 1e3 + 0.02));
+        tokio::time::sleep(Duration::from_secs_f64(need / 1e3 + 0.02)).await;
         let body = json!({
             "index": index, "answer": { "Rating": 1.0 + (k + index as usize) as f64 % 5.0 },
             "replays": 0, "response_time_ms": 100,
@@ -143,6 +242,7 @@ fn participant(
         let sent = Instant::now();
         let r = c
             .request("POST", &c.session_path("answer"), Some(&body))
+            .await
             .unwrap();
         local.ack_ms.push(sent.elapsed().as_secs_f64() * 1e3);
         if r.status == 200 {
@@ -175,18 +275,21 @@ fn main() {
     let out = Arc::new(Mutex::new(Timings::default()));
     let start = Arc::new(Barrier::new(n));
     let t0 = Instant::now();
-    let threads: Vec<_> = (0..n)
-        .map(|k| {
+    // Every participant on one client thread of its own (the server keeps its runtime).
+    let clients = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    clients.block_on(async {
+        let mut tasks = tokio::task::JoinSet::new();
+        for k in 0..n {
             let (out, start) = (Arc::clone(&out), Arc::clone(&start));
-            std::thread::Builder::new()
-                .stack_size(256 << 10)
-                .spawn(move || participant(addr, k, &start, &out, t0))
-                .unwrap()
-        })
-        .collect();
-    for t in threads {
-        t.join().unwrap();
-    }
+            tasks.spawn(participant(addr, k, start, out, t0));
+        }
+        while let Some(done) = tasks.join_next().await {
+            done.unwrap();
+        }
+    });
     let wall = t0.elapsed();
     rt.block_on(server.stop()).unwrap();
 

@@ -75,47 +75,21 @@ impl Client {
         let Some(conn) = self.conn.as_mut() else {
             return Err(std::io::Error::other("no connection"));
         };
-        let body = body.map(Value::to_string).unwrap_or_default();
-        let auth = if self.token.is_empty() {
-            String::new()
-        } else {
-            format!("Authorization: Bearer {}\r\n", self.token)
-        };
-        let head = format!(
-            "{method} {path} HTTP/1.1\r\nHost: {}\r\n{auth}Content-Type: application/json\r\nContent-Length: {}\r\n\r\n",
-            self.addr,
-            body.len()
-        );
-        let s = conn.get_mut();
-        s.write_all(head.as_bytes())?;
-        s.write_all(body.as_bytes())?;
+        let request = request_text(method, path, self.addr, &self.token, body);
+        conn.get_mut().write_all(request.as_bytes())?;
         let mut line = String::new();
         if conn.read_line(&mut line)? == 0 {
             return Err(std::io::Error::other("connection closed"));
         }
-        let status: u16 = line
-            .split(' ')
-            .nth(1)
-            .and_then(|c| c.parse().ok())
-            .ok_or_else(|| std::io::Error::other(format!("bad status line {line:?}")))?;
-        let mut len = 0usize;
-        let mut close = false;
+        let mut head = ReplyHead::from_status_line(&line)?;
         loop {
             line.clear();
             conn.read_line(&mut line)?;
-            let l = line.trim_end();
-            if l.is_empty() {
+            if !head.header(&line) {
                 break;
             }
-            if let Some((k, v)) = l.split_once(':') {
-                let k = k.to_ascii_lowercase();
-                if k == "content-length" {
-                    len = v.trim().parse().unwrap_or(0);
-                } else if k == "connection" && v.trim().eq_ignore_ascii_case("close") {
-                    close = true;
-                }
-            }
         }
+        let (status, len, close) = (head.status, head.length, head.close);
         let mut body = vec![0u8; len];
         conn.read_exact(&mut body)?;
         if close {
@@ -142,6 +116,73 @@ impl Client {
     /// `path` under this participant's API (`/api/s/{subject}/{path}`).
     pub fn session_path(&self, path: &str) -> String {
         format!("/api/s/{}/{path}", self.subject)
+    }
+}
+
+/// A whole request: its head (the participant's token, when there is one) and its JSON body.
+pub fn request_text(
+    method: &str,
+    path: &str,
+    host: SocketAddr,
+    token: &str,
+    body: Option<&Value>,
+) -> String {
+    let body = body.map(Value::to_string).unwrap_or_default();
+    let auth = if token.is_empty() {
+        String::new()
+    } else {
+        format!("Authorization: Bearer {token}\r\n")
+    };
+    format!(
+        "{method} {path} HTTP/1.1\r\nHost: {host}\r\n{auth}Content-Type: application/json\r\nContent-Length: {}\r\n\r\n{body}",
+        body.len()
+    )
+}
+
+/// What a reply's status line and headers said, read line by line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ReplyHead {
+    /// Status code.
+    pub status: u16,
+    /// `Content-Length` (0 without it).
+    pub length: usize,
+    /// `Connection: close`.
+    pub close: bool,
+}
+
+impl ReplyHead {
+    /// The head begun by status line `line`.
+    ///
+    /// # Errors
+    /// A line without a status code.
+    pub fn from_status_line(line: &str) -> std::io::Result<Self> {
+        let status = line
+            .split(' ')
+            .nth(1)
+            .and_then(|c| c.parse().ok())
+            .ok_or_else(|| std::io::Error::other(format!("bad status line {line:?}")))?;
+        Ok(Self {
+            status,
+            length: 0,
+            close: false,
+        })
+    }
+
+    /// Takes header line `line`; false at the empty line that ends the head.
+    pub fn header(&mut self, line: &str) -> bool {
+        let l = line.trim_end();
+        if l.is_empty() {
+            return false;
+        }
+        if let Some((k, v)) = l.split_once(':') {
+            let k = k.to_ascii_lowercase();
+            if k == "content-length" {
+                self.length = v.trim().parse().unwrap_or(0);
+            } else if k == "connection" && v.trim().eq_ignore_ascii_case("close") {
+                self.close = true;
+            }
+        }
+        true
     }
 }
 

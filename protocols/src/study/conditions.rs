@@ -25,6 +25,17 @@ pub(super) enum References {
     Hidden,
 }
 
+impl References {
+    /// What `protocol` allows: hidden references in ACR only.
+    pub(super) fn of(protocol: crate::record::Protocol) -> Self {
+        if protocol == crate::record::Protocol::Acr {
+            Self::Hidden
+        } else {
+            Self::Refused
+        }
+    }
+}
+
 fn condition_of(
     id: &str,
     m: &StimulusManifest,

@@ -196,7 +196,7 @@ pub(super) fn parse_crowdsourcing(
             "expected an https:// address without spaces",
         );
     }
-    let gold = parse_gold(t, protocol, conditions, cx);
+    let gold = parse_gold(t, C, "gold", protocol, conditions, cx);
     let groups = cx.uint(t, C, "groups", 1 << 20);
     if groups == Some(0) {
         cx.err(join(C, "groups"), "must be at least 1");
@@ -219,29 +219,37 @@ pub(super) fn parse_crowdsourcing(
     }
 }
 
-fn parse_gold(
+/// Catch (gold) trials at `table.key`: `[[crowdsourcing.gold]]`, or `[[design.catch]]`.
+pub(super) fn parse_gold(
     t: &Table,
+    table: &str,
+    key: &str,
     protocol: Option<Protocol>,
     conditions: &[Condition],
     cx: &mut Ctx,
 ) -> Vec<GoldTrial> {
-    let Some(v) = t.get("gold") else {
+    let Some(v) = t.get(key) else {
         return Vec::new();
     };
     let Value::Array(items) = v else {
-        cx.wrong(C, "gold", "an array of tables ([[crowdsourcing.gold]])", v);
+        cx.wrong(
+            table,
+            key,
+            &format!("an array of tables ([[{table}.{key}]])"),
+            v,
+        );
         return Vec::new();
     };
     if protocol == Some(Protocol::Staircase) {
         cx.err(
-            join(C, "gold"),
-            "gold trials are rated conditions: MOS and DSCQS only",
+            join(table, key),
+            "catch (gold) trials are rated conditions: MOS and DSCQS only",
         );
         return Vec::new();
     }
     let mut out = Vec::new();
     for (i, item) in items.iter().enumerate() {
-        let path = format!("{C}.gold[{i}]");
+        let path = format!("{table}.{key}[{i}]");
         let Value::Table(g) = item else {
             cx.err(path, "expected a table with stimulus and min or max");
             continue;

@@ -10,6 +10,7 @@
 mod check;
 mod conditions;
 mod crowdsourcing;
+mod design;
 mod live;
 mod presentation;
 mod quest;
@@ -20,6 +21,7 @@ mod session;
 mod simulation;
 mod staircase;
 mod top;
+mod viewing;
 
 use std::collections::BTreeMap;
 use std::fmt;
@@ -39,6 +41,7 @@ pub use rendering::RenderingSettings;
 pub use scene::{
     MAX_CHARACTERS, MAX_LEVELS, Placement, SceneCamera, SceneCharacter, SceneLight, SceneSettings,
 };
+pub use viewing::{ScreenSize, ViewingDistance, ViewingSettings};
 
 /// Current version of the study file format.
 pub const STUDY_FORMAT_VERSION: u32 = 1;
@@ -122,6 +125,36 @@ pub enum ReferencePlacement {
     Fixed(Position),
     /// Drawn per trial with probability one half.
     Random,
+    /// Counterbalanced (`"balanced"`): each subject sees the reference in each position
+    /// equally often (per condition in a rated study, per block of four trials in a
+    /// staircase), and the next subject sees the mirror image ([`crate::design`]).
+    Balanced,
+}
+
+/// The order of a rated study's test conditions (`[design] order`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ConditionOrder {
+    /// Shuffled per subject from the study seed.
+    Random,
+    /// A balanced Latin square (Williams design) over the conditions in file order; subject
+    /// `k` takes row `k mod rows` ([`crate::design::williams_row`]).
+    LatinSquare,
+}
+
+/// Design settings (`[design]`): counterbalancing.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DesignSettings {
+    /// The order of the test conditions.
+    pub order: ConditionOrder,
+}
+
+impl Default for DesignSettings {
+    fn default() -> Self {
+        Self {
+            order: ConditionOrder::Random,
+        }
+    }
 }
 
 /// Presentation settings (`[presentation]`).
@@ -308,6 +341,13 @@ pub struct StaircaseStudy {
     /// shared by the tracks; `None` for up-down staircases.
     #[serde(default)]
     pub quest: Option<crate::quest::QuestSettings>,
+    /// Practice trials before the staircases start (`practice_trials`), the tracks in turn,
+    /// logged in block `familiarization` and left out of every analysis.
+    #[serde(default)]
+    pub practice_trials: u32,
+    /// The level of every practice trial (`practice_level`); `None`: each track's start.
+    #[serde(default)]
+    pub practice_level: Option<f64>,
 }
 
 /// Prefix of every stimulus id a live staircase derives.
@@ -476,6 +516,11 @@ pub struct StudyDefinition {
     pub rendering: RenderingSettings,
     /// What a study served to browsers needs (`[crowdsourcing]`).
     pub crowdsourcing: CrowdsourcingSettings,
+    /// Counterbalancing (`[design]`).
+    pub design: DesignSettings,
+    /// The viewing conditions the experimenter confirms before each session (`[viewing]`);
+    /// `None`: the study states none.
+    pub viewing: Option<ViewingSettings>,
     /// Several characters per pane (`[scene]`, thesis 6.5): the conditions are crowd scenes
     /// of the manifest, drawn with this camera and light; `None` for one figure per pane.
     pub scene: Option<SceneSettings>,

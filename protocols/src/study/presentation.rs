@@ -156,6 +156,7 @@ fn parse_reference_position(
     }
     match given.as_deref() {
         None | Some("random") => ReferencePlacement::Random,
+        Some("balanced") => ReferencePlacement::Balanced,
         Some(s) => match s.parse::<Position>() {
             Ok(p) if p.fits(arrangement) => ReferencePlacement::Fixed(p),
             Ok(p) => {
@@ -166,7 +167,10 @@ fn parse_reference_position(
                 ReferencePlacement::Random
             }
             Err(e) => {
-                cx.err(join(P, "reference_position"), format!("{e} or \"random\""));
+                cx.err(
+                    join(P, "reference_position"),
+                    format!("{e}, \"random\" or \"balanced\""),
+                );
                 ReferencePlacement::Random
             }
         },

@@ -38,6 +38,8 @@ const STAIR_KEYS: &[&str] = &[
     "live",
     "method",
     "quest",
+    "practice_trials",
+    "practice_level",
 ];
 
 const P: &str = "staircase";
@@ -226,6 +228,8 @@ pub(super) fn parse_staircase(
     if method.is_some() && quest.is_none() {
         return None;
     }
+    let (practice_trials, practice_level) =
+        parse_practice(t, &shared, &tracks, live_asked, tolerance, cx);
     Some(StaircaseStudy {
         param: shared.param?,
         codec: shared.codec?,
@@ -233,7 +237,73 @@ pub(super) fn parse_staircase(
         tracks,
         live,
         quest,
+        practice_trials,
+        practice_level,
     })
+}
+
+/// Most practice trials before a staircase.
+const MAX_PRACTICE: u32 = 1000;
+
+/// `practice_trials` and `practice_level`: trials shown before the staircases start, at a
+/// fixed (easy) level, the tracks in turn; each track's start when no level is given (a
+/// QUEST+ or Psi track has none, so it needs the level). The level must be within
+/// `min`..=`max` and, from the manifest, have a stimulus in every track.
+fn parse_practice(
+    t: &Table,
+    shared: &Shared,
+    tracks: &[Track],
+    live: bool,
+    tolerance: f64,
+    cx: &mut Ctx,
+) -> (u32, Option<f64>) {
+    let n = cx.uint(t, P, "practice_trials", MAX_PRACTICE).unwrap_or(0);
+    let level = cx.float(t, P, "practice_level");
+    if n == 0 {
+        if level.is_some() {
+            cx.err(
+                join(P, "practice_level"),
+                "no practice trials (set practice_trials, or remove practice_level)",
+            );
+        }
+        return (0, level);
+    }
+    if shared.bayesian && level.is_none() {
+        cx.err(
+            join(P, "practice_level"),
+            "missing: a QUEST+ or Psi track has no start to practise at; give the level",
+        );
+        return (n, None);
+    }
+    if let Some(v) = level {
+        let (lo, hi) = (shared.settings.min, shared.settings.max);
+        if lo.is_some_and(|lo| v < lo) || hi.is_some_and(|hi| v > hi) {
+            cx.err(
+                join(P, "practice_level"),
+                format!(
+                    "{v} is outside min..=max ({}..={})",
+                    lo.unwrap_or(f64::NEG_INFINITY),
+                    hi.unwrap_or(f64::INFINITY)
+                ),
+            );
+            return (n, level);
+        }
+    }
+    if !live {
+        for (i, tr) in tracks.iter().enumerate() {
+            let at = level.unwrap_or(tr.settings.start);
+            if tr.stimulus_at(at, tolerance).is_none() {
+                cx.err(
+                    join(P, "practice_level"),
+                    format!(
+                        "track {:?} (staircase.tracks[{i}]) has no stimulus at practice level {at}",
+                        tr.name
+                    ),
+                );
+            }
+        }
+    }
+    (n, level)
 }
 
 /// The keys a track table may have: `keys`, less `start` in a QUEST+ or Psi study.

@@ -8,6 +8,7 @@ use toml::{Table, Value};
 use super::check::Ctx;
 use super::conditions::{References, parse_conditions, resolve_familiarization};
 use super::crowdsourcing::parse_crowdsourcing;
+use super::design::parse_design;
 use super::presentation::parse_presentation;
 use super::rendering::parse_rendering;
 use super::scale::parse_scale;
@@ -15,6 +16,7 @@ use super::scene::{SceneSettings, check_scene_stimulus, parse_scene};
 use super::session::{FamSpec, parse_session};
 use super::simulation::parse_simulation;
 use super::staircase::parse_staircase;
+use super::viewing::parse_viewing;
 use super::{
     Condition, Detection, Metric, STUDY_FORMAT_VERSION, SessionSettings, SimulationSettings,
     StaircaseStudy, StudyDefinition,
@@ -56,6 +58,8 @@ const TOP_KEYS: &[&str] = &[
     "rendering",
     "crowdsourcing",
     "scene",
+    "design",
+    "viewing",
 ];
 
 /// The whole study file: its header, the manifest, the sections every protocol has, then
@@ -92,17 +96,12 @@ pub(super) fn parse_table(
     let mut staircase = None;
     match protocol {
         Some(p @ (Protocol::Mos | Protocol::Dscqs | Protocol::Acr | Protocol::Dcr)) => {
-            let refs = if p == Protocol::Acr {
-                References::Hidden
-            } else {
-                References::Refused
-            };
             (conditions, familiarization) = rating_sections(
                 t,
                 &session,
                 familiarization_spec,
                 manifest.as_ref(),
-                refs,
+                References::of(p),
                 cx,
             );
             if let Some(m) = &manifest {
@@ -137,13 +136,21 @@ pub(super) fn parse_table(
         None => {}
     }
 
-    let crowdsourcing = parse_crowdsourcing(
+    let mut crowdsourcing = parse_crowdsourcing(
         cx.table(t, "", "crowdsourcing").unwrap_or(&empty),
         protocol,
         &conditions,
         cx,
     );
     check_attention(&simulation, scene.as_ref(), t.contains_key("scene"), cx);
+    let design = parse_design(
+        cx.table(t, "", "design").unwrap_or(&empty),
+        protocol,
+        &conditions,
+        &mut crowdsourcing,
+        cx,
+    );
+    let viewing = cx.table(t, "", "viewing").map(|v| parse_viewing(v, cx));
 
     Some(StudyDefinition {
         format_version: header.version? as u32,
@@ -161,6 +168,8 @@ pub(super) fn parse_table(
         simulation,
         rendering,
         crowdsourcing,
+        design,
+        viewing,
         scene,
         manifest: manifest?,
     })
@@ -322,7 +331,8 @@ fn staircase_sections(
     if !matches!(familiarization_spec, FamSpec::None) {
         cx.err(
             "session.familiarization",
-            "familiarization trials are not supported in a staircase study",
+            "familiarization trials are not supported in a staircase study (practice trials \
+             before the staircases: [staircase] practice_trials)",
         );
     }
     if session.hidden_repeats > 0 {

@@ -414,6 +414,8 @@ pub struct PgStore {
     run_id: i32,
     name: String,
     run: RunManifest,
+    /// Bytes of the last [`PgStore::read_rows`], to size the next one's buffer.
+    last_batch_bytes: usize,
 }
 
 impl fmt::Debug for PgStore {
@@ -489,6 +491,7 @@ impl PgStore {
             run_id,
             name: name.to_owned(),
             run,
+            last_batch_bytes: 0,
         }))
     }
 
@@ -699,6 +702,7 @@ impl PgStore {
             .map(|h| h.id.to_string())
             .collect::<Vec<_>>()
             .join(",");
+        let expected = self.last_batch_bytes;
         let conn = self.conn()?;
         conn.execute(
             "SELECT set_config('study.read_sessions', $1, false)",
@@ -714,7 +718,9 @@ impl PgStore {
             ))
             .map_err(&err)?;
         let limit = crate::trials::MAX_TRIALS_BYTES;
-        let mut all = Vec::new();
+        // Room for a batch as large as the last one, so that the stream is not copied again
+        // each time the buffer doubles.
+        let mut all = Vec::with_capacity(expected);
         reader.take(limit + 1).read_to_end(&mut all).map_err(|e| {
             match e
                 .get_ref()
@@ -735,13 +741,16 @@ impl PgStore {
                 limit,
             });
         }
+        self.last_batch_bytes = all.len() + all.len() / 8;
         let bad = |message: String| ResultsError::Database {
             location: location.clone(),
             op: op.to_owned(),
             message,
         };
+        // The rows of one session are consecutive (ordered by session id): each session is
+        // a range of the one buffer, shared.
         let at: HashMap<i32, usize> = heads.iter().enumerate().map(|(i, h)| (h.id, i)).collect();
-        let mut out: Vec<SessionRows> = heads.iter().map(|_| SessionRows(Vec::new())).collect();
+        let mut ranges: Vec<Option<std::ops::Range<usize>>> = vec![None; heads.len()];
         let mut stream = rows::CopyRows::stream(&all).map_err(bad)?;
         let mut last: Option<(i32, Option<usize>)> = None;
         while let Some(row) = stream.next().map_err(bad)? {
@@ -753,11 +762,22 @@ impl PgStore {
                 _ => at.get(&id).copied(),
             };
             last = Some((id, i));
-            if let Some(i) = i {
-                out[i].0.extend_from_slice(row.bytes);
+            let Some(i) = i else { continue };
+            let (start, end) = (row.start, row.start + row.bytes.len());
+            match &mut ranges[i] {
+                Some(r) if r.end == start => r.end = end,
+                Some(_) => return Err(bad(format!("the rows of session {id} are not together"))),
+                r @ None => *r = Some(start..end),
             }
         }
-        Ok(out)
+        let all = std::sync::Arc::new(all);
+        Ok(ranges
+            .into_iter()
+            .map(|r| SessionRows {
+                batch: std::sync::Arc::clone(&all),
+                rows: r.unwrap_or(0..0),
+            })
+            .collect())
     }
 
     /// The files kept with `head` beside its rows (`frames.csv`, rows set aside as torn by a
@@ -1103,11 +1123,12 @@ impl PgWriter {
 
     fn update_manifest(&mut self, manifest: &SessionManifest) -> Result<(), ResultsError> {
         let value = json(manifest)?;
-        let (id, logged) = (self.id, manifest.trials_logged as i32);
+        let id = self.id;
         let status = state_name(manifest.status);
+        // `trials_logged` counts the rows: each answer's insert sets it.
         let result = self.client()?.execute(
-            "UPDATE study_sessions SET manifest = $2, status = $3, trials_logged = $4 WHERE id = $1",
-            &[&id, &value, &status, &logged],
+            "UPDATE study_sessions SET manifest = $2, status = $3 WHERE id = $1",
+            &[&id, &value, &status],
         );
         match result {
             Ok(1) => Ok(()),
@@ -1129,18 +1150,14 @@ impl SessionWriter for PgWriter {
         self.path.clone()
     }
 
-    fn append(
-        &mut self,
-        record: &TrialRecord,
-        manifest: &SessionManifest,
-    ) -> Result<(), ResultsError> {
+    fn append(&mut self, record: &TrialRecord) -> Result<(), ResultsError> {
         let params = rows::Values::of(record)?;
         self.client()?;
         if let Some(found) = self.recount.take() {
             if found == self.rows + 1 {
                 // The answer was committed before the connection was lost.
                 self.rows = found;
-                return self.update_manifest(manifest);
+                return Ok(());
             }
             if found != self.rows {
                 return Err(refused(format!(
@@ -1153,8 +1170,7 @@ impl SessionWriter for PgWriter {
         if self.append.is_none() {
             let sql = format!(
                 "WITH row AS (INSERT INTO study_trials (session_id, row_number, {}) VALUES ($1, $2, {})) \
-                 UPDATE study_sessions SET manifest = $37, status = $38, trials_logged = $39 \
-                 WHERE id = $1",
+                 UPDATE study_sessions SET trials_logged = $2 + 1 WHERE id = $1",
                 rows::COLUMNS,
                 (3..=36)
                     .map(|i| format!("${i}"))
@@ -1169,13 +1185,9 @@ impl SessionWriter for PgWriter {
         }
         let statement = self.append.clone().ok_or_else(|| refused("no statement"))?;
         let row_number = i32::try_from(self.rows).map_err(|_| refused("too many rows"))?;
-        let value = json(manifest)?;
-        let status = state_name(manifest.status);
-        let logged = i32::try_from(manifest.trials_logged).unwrap_or(i32::MAX);
         let mut all: Vec<&(dyn postgres::types::ToSql + Sync)> = vec![&self.id, &row_number];
         let values = params.refs();
         all.extend_from_slice(&values);
-        all.extend_from_slice(&[&value, &status, &logged]);
         let result = self
             .client
             .as_mut()
@@ -1338,11 +1350,11 @@ pub fn import(
         .prepare(
             "INSERT INTO study_sessions (run_id, subject, session, study_hash, manifest_hash, \
              status, trials_logged, trials_format_version, manifest) \
-             VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9) RETURNING id",
+             VALUES ($1, $2, $3, $4, $5, $6, 0, $7, $8) RETURNING id",
         )
         .map_err(err)?;
     for m in &manifests {
-        // The trials format version is set once each file is read, below.
+        // The trials format version and the rows' count are set once the rows are in, below.
         let row = tx
             .query_one(
                 &insert,
@@ -1353,7 +1365,6 @@ pub fn import(
                     &m.study_hash,
                     &m.manifest_hash,
                     &state_name(m.status),
-                    &(i32::try_from(m.trials_logged).unwrap_or(i32::MAX)),
                     &0_i32,
                     &json(m)?,
                 ],
@@ -1402,7 +1413,8 @@ pub fn import(
         .map_err(err)?;
     }
     tx.execute(
-        "UPDATE study_sessions s SET trials_format_version = v.version \
+        "UPDATE study_sessions s SET trials_format_version = v.version, trials_logged = \
+         (SELECT count(*) FROM study_trials t WHERE t.session_id = s.id) \
          FROM unnest($1::integer[], $2::integer[]) AS v(id, version) WHERE s.id = v.id",
         &[&ids, &versions],
     )
@@ -1477,8 +1489,11 @@ fn kept_files(dir: &Path) -> Result<Vec<(String, Vec<u8>)>, ResultsError> {
 }
 
 /// One session's rows as the server sent them ([`PgStore::read_rows`]), undecoded: the
-/// rows of a binary `COPY`, back to back.
-pub struct SessionRows(Vec<u8>);
+/// rows of a binary `COPY`, back to back, in the buffer of the batch they came in.
+pub struct SessionRows {
+    batch: std::sync::Arc<Vec<u8>>,
+    rows: std::ops::Range<usize>,
+}
 
 /// The session `head` from its rows ([`PgStore::read_rows`]), which must run 0, 1, 2 ... in
 /// order.
@@ -1491,7 +1506,7 @@ pub fn decode_session(
 ) -> Result<SessionResults, ResultsError> {
     let path = head.dir.join(TRIALS_FILE);
     let mut records = Vec::new();
-    let mut stream = rows::CopyRows::rows(&rows.0);
+    let mut stream = rows::CopyRows::rows(&rows.batch[rows.rows.clone()]);
     let malformed = |line: usize, column: usize, message: String| ResultsError::Malformed {
         path: path.clone(),
         line,

@@ -271,6 +271,8 @@ pub struct Tuple<'a> {
     fields: [Option<&'a [u8]>; SELECT_COUNT],
     /// The row's bytes, from its field count to its last field's end.
     pub bytes: &'a [u8],
+    /// Where the row starts in the bytes it was read from.
+    pub start: usize,
 }
 
 fn be_i16(b: &[u8]) -> Option<i16> {
@@ -354,6 +356,7 @@ impl<'a> CopyRows<'a> {
         Ok(Some(Tuple {
             fields,
             bytes: &b[start..at],
+            start,
         }))
     }
 }

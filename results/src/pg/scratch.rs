@@ -231,6 +231,11 @@ impl ScratchServer {
         }
     }
 
+    /// The server's process id (the postmaster), while it runs.
+    pub fn pid(&self) -> Option<u32> {
+        self.child.as_ref().map(Child::id)
+    }
+
     /// Stops the server as an administrator would (fast shutdown: every connection ended).
     pub fn stop(&mut self) {
         self.signal("-INT");

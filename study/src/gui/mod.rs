@@ -11,6 +11,7 @@ pub mod render;
 pub mod scene;
 pub mod screens;
 pub mod timing;
+pub mod viewing;
 pub mod window;
 
 #[cfg(test)]

@@ -21,6 +21,7 @@ use super::flow::{Frame, Presentation, Show, stimulus_at};
 use super::render::{BACKGROUND, SkeletonCallback};
 use super::scene::{Figure, FrameShapes, Stage, View};
 use super::timing::FrameClock;
+use super::viewing::ViewingForm;
 use lab::session::Recorder;
 use lab::source::StimulusSource;
 pub use protocols::texts::{AFC_QUESTION, ANSWER_RECORDED, default_instructions};
@@ -39,6 +40,8 @@ const RETRY_S: f64 = 1.0;
 const END_KEY_DELAY_S: f64 = 0.7;
 
 enum Screen {
+    /// The experimenter confirms the study's viewing conditions (`[viewing]`).
+    Viewing(Box<ViewingForm>),
     Welcome,
     Break,
     Trial(Box<TrialScreen>),
@@ -153,11 +156,20 @@ impl StudyUi {
             })
             .collect();
         let planned = planned_trials(&study);
+        // A study with viewing conditions asks the experimenter to confirm them first (once:
+        // a resumed session that confirmed them goes straight to the welcome).
+        let screen = match (&study.viewing, &recorder.manifest().viewing) {
+            (Some(_), Some(v)) if !v.confirmed => Screen::Viewing(Box::new(ViewingForm::new(v))),
+            (Some(_), None) => Screen::Viewing(Box::new(ViewingForm::new(
+                &results::ViewingRecord::default(),
+            ))),
+            _ => Screen::Welcome,
+        };
         StudyUi {
             study,
             stimuli,
             recorder,
-            screen: Screen::Welcome,
+            screen,
             pause: Pause::None,
             exit: None,
             fields,
@@ -276,6 +288,7 @@ impl StudyUi {
         }
         let active = self.pause == Pause::None;
         match &self.screen {
+            Screen::Viewing(_) => self.viewing_screen(ui, active),
             Screen::Welcome => self.welcome(ui, now, active, clock),
             Screen::Break => self.break_screen(ui, now, active, clock),
             Screen::Trial(_) => self.trial_screen(ui, now, active, clock),
@@ -288,6 +301,22 @@ impl StudyUi {
         }
         if self.pause != Pause::None {
             self.pause_dialog(ui, now, clock);
+        }
+    }
+
+    fn viewing_screen(&mut self, ui: &mut Ui, active: bool) {
+        let (Screen::Viewing(form), Some(targets)) = (&mut self.screen, &self.study.viewing) else {
+            return;
+        };
+        let now_ms = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_millis() as u64);
+        let Some(record) = form.ui(ui, targets, active, now_ms) else {
+            return;
+        };
+        match self.recorder.update_manifest(|m| m.viewing = Some(record)) {
+            Ok(()) => self.screen = Screen::Welcome,
+            Err(e) => self.fail(&e),
         }
     }
 

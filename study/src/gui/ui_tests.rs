@@ -399,6 +399,83 @@ fn a_live_staircase_prefetches_the_next_levels_while_a_trial_runs() {
     drop(run.fx);
 }
 
+#[test]
+fn practice_trials_before_a_staircase_are_marked_and_logged_as_practice() {
+    let practice = AFC.replace("max_trials = 3\n", "max_trials = 3\npractice_trials = 1\n");
+    let (mut h, run) = harness(fixture("practice", &practice));
+    begin(&mut h);
+    assert!(h.query_by_label("Trial 1 of at most 4").is_some());
+    assert!(h.query_by_label("(practice)").is_some());
+    for n in 1..=2 {
+        watch(&mut h, 1.0);
+        let right = h.state().0.pending_reference().unwrap();
+        h.key_press(if right == Position::Left {
+            Key::ArrowLeft
+        } else {
+            Key::ArrowRight
+        });
+        h.run_steps(2);
+        assert_eq!(rows(&run.session_dir).len(), n);
+        watch(&mut h, 0.5);
+    }
+    // Trial 2 is the staircase's first: no practice mark.
+    assert!(h.query_by_label("(practice)").is_none());
+    let r = rows(&run.session_dir);
+    assert_eq!(r[0].trial.block, protocols::Block::Familiarization);
+    assert_eq!(r[0].trial.level, Some(20.0));
+    assert_eq!(r[0].outcome.reversal, None);
+    assert_eq!(r[1].trial.block, protocols::Block::Test);
+    drop(run.fx);
+}
+
+#[test]
+fn the_experimenter_confirms_the_viewing_conditions_before_the_welcome() {
+    let viewing = format!(
+        "{MOS}[viewing]\ndistance_ph = 3\nscreen_size_cm = [60, 34]\n\
+         peak_luminance_cd_m2 = 150\nroom_illuminance_lux = 20\n"
+    );
+    let (mut h, run) = harness(fixture("viewing", &viewing));
+    h.run_steps(2);
+    assert!(
+        h.query_by_label("Viewing conditions (experimenter)")
+            .is_some()
+    );
+    assert!(h.query_by_label("3 H (102 cm)").is_some());
+    assert!(h.query_by_label("Begin").is_none());
+    let field = "measured viewing distance (cm)";
+    h.get_by_role_and_label(Role::TextInput, field).focus();
+    h.run_steps(1);
+    h.get_by_role_and_label(Role::TextInput, field)
+        .type_text("10O");
+    h.run_steps(2);
+    h.get_by_label(super::viewing::CONFIRM).click();
+    h.run_steps(2);
+    // A typo is named and nothing is recorded.
+    assert!(
+        h.query_by_label("measured viewing distance: \"10O\" is not a number of cm")
+            .is_some()
+    );
+    let manifest: results::SessionManifest =
+        read_json(&run.session_dir.join(SESSION_FILE)).unwrap();
+    assert_eq!(manifest.viewing, Some(results::ViewingRecord::default()));
+    h.get_by_role_and_label(Role::TextInput, field).focus();
+    h.run_steps(1);
+    h.key_press(Key::Backspace);
+    h.get_by_role_and_label(Role::TextInput, field)
+        .type_text("0");
+    h.run_steps(2);
+    h.get_by_label(super::viewing::CONFIRM).click();
+    h.run_steps(2);
+    assert!(h.query_by_label("Begin").is_some());
+    let manifest: results::SessionManifest =
+        read_json(&run.session_dir.join(SESSION_FILE)).unwrap();
+    let v = manifest.viewing.unwrap();
+    assert!(v.confirmed && v.confirmed_ms.is_some());
+    assert_eq!(v.distance_cm, Some(100.0));
+    assert_eq!(v.peak_luminance_cd_m2, None);
+    drop(run.fx);
+}
+
 /// A MOS study with a title, a 0.4 s gap and a break before every second trial.
 const MOS_LABELLED: &str = "protocol = \"mos\"\ntitle = \"Motion quality\"\n\
     [conditions]\nclips = [\"walk\"]\ncodecs = [\"spiht\"]\ntarget_cr = [10, 20]\n\

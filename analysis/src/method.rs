@@ -1,0 +1,207 @@
+//! The report's "Method" section: what ITU-R BT.500 and ITU-T P.910 ask a report to state
+//! about how the study was run: the number of observers (and how many the screening and the
+//! exclusion rules left), the screening applied, the viewing distance, the display, its
+//! luminance and the environment, each as the study file states it and as the experimenters
+//! confirmed and measured it before the sessions (`session.json` `viewing`); plus the design
+//! (order of conditions, reference placement) and practice trials.
+
+use protocols::StudyDefinition;
+use protocols::record::Protocol;
+use protocols::study::{ConditionOrder, ReferencePlacement};
+
+use crate::display::SessionDisplay;
+use crate::report::Report;
+
+/// How many observers each stage left.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Observers {
+    /// Sessions read.
+    pub sessions: usize,
+    /// Distinct subjects whose ratings or choices were analysed.
+    pub subjects: usize,
+    /// Sessions the study's exclusion rules left out (catch trials).
+    pub excluded_sessions: usize,
+    /// Observers the BT.500 screening rejected (`None`: not applicable).
+    pub rejected: Option<usize>,
+}
+
+/// `min`–`max` (or the one value) of the measured values, with `unit`, and in how many of
+/// `n` sessions it was measured; `None` when no session measured it.
+fn measured(values: &[f64], n: usize, unit: &str) -> Option<String> {
+    let lo = values.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = values.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    if values.is_empty() {
+        return None;
+    }
+    let num = |v: f64| {
+        let s = format!("{v:.2}");
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    };
+    let range = if (hi - lo).abs() < 1e-9 {
+        format!("{} {unit}", num(lo))
+    } else {
+        format!("{}–{} {unit}", num(lo), num(hi))
+    };
+    Some(format!(
+        "measured {range} in {} of {n} sessions",
+        values.len()
+    ))
+}
+
+/// The method's sentences, in BT.500's order. Pure text: `method_section` puts it in the
+/// report.
+#[must_use]
+pub fn method_text(
+    study: &StudyDefinition,
+    observers: Observers,
+    displays: &[SessionDisplay],
+) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut who = format!(
+        "Observers: {} ({} sessions).",
+        observers.subjects, observers.sessions
+    );
+    if observers.excluded_sessions > 0 {
+        who = format!(
+            "{who} {} session(s) excluded by the study's catch-trial rules.",
+            observers.excluded_sessions
+        );
+    }
+    out.push(who);
+    out.push(match (study.protocol, observers.rejected) {
+        (Protocol::Staircase, _) => {
+            "Screening: none (2AFC thresholds; BT.500 screening applies to ratings).".into()
+        }
+        (_, Some(r)) => format!(
+            "Screening: ITU-R BT.500 observer screening (β2 kurtosis test on every \
+             presentation); {r} observer(s) rejected, {} retained.",
+            observers.subjects.saturating_sub(r)
+        ),
+        (_, None) => "Screening: BT.500 observer screening not applicable (too few \
+                      observers or presentations)."
+            .into(),
+    });
+    viewing_lines(study, displays, &mut out);
+    out.push(design_line(study));
+    out
+}
+
+/// The viewing distance, display, luminance and environment: targets, measurements, and how
+/// many sessions confirmed them.
+fn viewing_lines(study: &StudyDefinition, displays: &[SessionDisplay], out: &mut Vec<String>) {
+    let n = displays.len();
+    let confirmed = displays
+        .iter()
+        .filter(|d| d.viewing.as_ref().is_some_and(|v| v.confirmed))
+        .count();
+    let pick = |f: fn(&results::ViewingRecord) -> Option<f64>| -> Vec<f64> {
+        displays
+            .iter()
+            .filter_map(|d| d.viewing.as_ref().and_then(f))
+            .collect()
+    };
+    match &study.viewing {
+        None => out.push(
+            "Viewing conditions: not stated by the study file ([viewing]); BT.500 and P.910 \
+             ask for viewing distance, display, luminance and room illumination."
+                .into(),
+        ),
+        Some(v) => {
+            let stated = v.describe();
+            let target = |what: &str| {
+                stated
+                    .iter()
+                    .find(|(w, _)| *w == what)
+                    .map_or_else(|| "not stated".to_string(), |(_, s)| s.clone())
+            };
+            let line = |what: &str, m: Option<String>| match m {
+                Some(m) => format!("{what}: {} (target); {m}.", target(what)),
+                None => format!("{what}: {} (target); not measured.", target(what)),
+            };
+            let cap = |s: String| {
+                let mut c = s.chars();
+                c.next()
+                    .map(|f| f.to_uppercase().collect::<String>() + c.as_str())
+                    .unwrap_or_default()
+            };
+            out.push(cap(line(
+                "viewing distance",
+                measured(&pick(|r| r.distance_cm), n, "cm"),
+            )));
+            let mut display = format!("Display: {}", target("display"));
+            let hz: Vec<f64> = displays.iter().filter_map(|d| d.refresh_hz).collect();
+            if let Some(m) = measured(&hz, n, "Hz refresh") {
+                display = format!("{display}; {m}");
+            }
+            display.push('.');
+            out.push(display);
+            out.push(cap(line(
+                "peak luminance",
+                measured(&pick(|r| r.peak_luminance_cd_m2), n, "cd/m²"),
+            )));
+            out.push(cap(line(
+                "background luminance",
+                measured(&pick(|r| r.background_luminance_cd_m2), n, "cd/m²"),
+            )));
+            out.push(format!(
+                "Environment: room illumination {} (target); {}.",
+                target("room illumination"),
+                measured(&pick(|r| r.room_illuminance_lux), n, "lux")
+                    .unwrap_or_else(|| "not measured".into())
+            ));
+            out.push(format!(
+                "Viewing conditions confirmed by the experimenter before {confirmed} of {n} \
+                 sessions."
+            ));
+        }
+    }
+}
+
+/// The order of the conditions, the reference placement, and the trials not analysed.
+fn design_line(study: &StudyDefinition) -> String {
+    let mut design = Vec::new();
+    if study.protocol != Protocol::Staircase {
+        design.push(match study.design.order {
+            ConditionOrder::Random => "conditions in a random order per subject".to_string(),
+            ConditionOrder::LatinSquare => format!(
+                "conditions ordered by a balanced Latin square (Williams design, {} rows)",
+                protocols::design::williams_rows(study.conditions.len())
+            ),
+        });
+    }
+    design.push(match study.presentation.reference_position {
+        ReferencePlacement::Fixed(p) => format!("reference always {p}"),
+        ReferencePlacement::Random => "reference position random per trial".into(),
+        ReferencePlacement::Balanced => {
+            "reference position counterbalanced within and across subjects".into()
+        }
+    });
+    if let Some(sc) = &study.staircase
+        && sc.practice_trials > 0
+    {
+        design.push(format!(
+            "{} practice trial(s) before the staircases, not analysed",
+            sc.practice_trials
+        ));
+    }
+    if !study.familiarization.is_empty() {
+        design.push(format!(
+            "{} familiarization trial(s), not analysed",
+            study.familiarization.len()
+        ));
+    }
+    format!("Design: {}.", design.join("; "))
+}
+
+/// Adds the "Method" section, before the results.
+pub fn method_section(
+    report: &mut Report,
+    study: &StudyDefinition,
+    observers: Observers,
+    displays: &[SessionDisplay],
+) {
+    let section = report.section_first("Method");
+    for line in method_text(study, observers, displays) {
+        section.text(line);
+    }
+}
