@@ -535,8 +535,9 @@ impl Recorder {
     /// Scores `response` to the pending `trial` and commits the row (flushed and fsynced, or
     /// committed by the database) before returning: nothing can show the next stimulus before
     /// the answer is durable. The row is the record: `session.json` is not rewritten per
-    /// answer (its `trials_logged` is the count at its last write; readers count the rows). `encoding` describes a stimulus encoded for this trial (live
-    /// staircase), `timing` how the window's display kept time during it. When the database
+    /// answer (its `trials_logged` is the count at its last write; readers count the rows).
+    /// `encoding` describes a stimulus encoded for this trial (live staircase), `timing` how
+    /// the window's display kept time during it. When the database
     /// cannot be reached the answer is kept ([`Self::pending`]) and the error says so
     /// ([`is_outage`]).
     ///
