@@ -5,24 +5,13 @@
 
 mod common;
 
-use common::{LIVE, parse};
+use common::{LIVE, issues, parse};
 use protocols::observer::Observer;
 use protocols::rng::StudyRng;
-use protocols::{
-    Answer, ClipOrder, Detection, Response, Session, SessionStatus, StudyDefinition, StudyError,
-};
+use protocols::{Answer, ClipOrder, Detection, Response, Session, SessionStatus, StudyDefinition};
 
 fn live() -> StudyDefinition {
     parse(LIVE).unwrap()
-}
-
-fn issues(text: &str) -> Vec<(String, String)> {
-    match parse(text) {
-        Err(StudyError::Invalid { issues, .. }) => {
-            issues.into_iter().map(|i| (i.key, i.reason)).collect()
-        }
-        other => panic!("expected Invalid, got {other:?}"),
-    }
 }
 
 #[test]

@@ -5,8 +5,9 @@
 
 mod common;
 
+use common::issues;
 use protocols::engine::EngineError;
-use protocols::{Answer, Response, Session, StudyError, Trial, TrialRecord};
+use protocols::{Answer, Response, Session, Trial, TrialRecord};
 
 const QUEST: &str = r#"
 format_version = 1
@@ -37,15 +38,6 @@ clip = "walk"
 name = "dance"
 clip = "dance"
 "#;
-
-fn issues(text: &str) -> Vec<(String, String)> {
-    match common::parse(text) {
-        Err(StudyError::Invalid { issues, .. }) => {
-            issues.into_iter().map(|i| (i.key, i.reason)).collect()
-        }
-        other => panic!("expected problems, got {other:?}"),
-    }
-}
 
 fn answer(t: &Trial, correct: bool) -> Response {
     Response {

@@ -10,12 +10,12 @@ mod common;
 
 use std::collections::BTreeMap;
 
-use common::parse;
+use common::{has, issues, parse};
+use protocols::Session;
 use protocols::record::{Answer, Arrangement, Block, Position, Protocol, Response};
 use protocols::rng::StudyRng;
 use protocols::study::{ReferencePlacement, ScaleWords};
 use protocols::texts::{default_instructions, quality_label};
-use protocols::{Session, StudyError};
 
 const ACR_HR: &str = r#"
 format_version = 1
@@ -48,19 +48,6 @@ stimuli = ["walk/wavelet-perceptual/cr10", "walk/wavelet-perceptual/cr50", "danc
 [session]
 hidden_repeats = 1
 "#;
-
-fn issues(text: &str) -> Vec<(String, String)> {
-    match parse(text) {
-        Err(StudyError::Invalid { issues, .. }) => {
-            issues.into_iter().map(|i| (i.key, i.reason)).collect()
-        }
-        other => panic!("expected Invalid, got {other:?}"),
-    }
-}
-
-fn has(got: &[(String, String)], key: &str, words: &str) -> bool {
-    got.iter().any(|(k, r)| k == key && r.contains(words))
-}
 
 fn rating(v: f64) -> Response {
     Response {

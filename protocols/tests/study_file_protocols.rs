@@ -6,26 +6,12 @@ mod common;
 
 use std::path::Path;
 
-use common::{LIVE, example, example_text, manifest, parse};
+use common::{LIVE, example, example_text, invalid, issues, manifest, parse};
 use protocols::rng::StudyRng;
 use protocols::{
     CodecCatalog, CodecInfo, Protocol, Staircase, StaircaseSettings, StepType, StudyDefinition,
     StudyError,
 };
-
-fn issues(text: &str) -> Vec<(String, String)> {
-    invalid(parse(text))
-}
-
-/// The (key, reason) of every problem of a study file that must be invalid.
-fn invalid(parsed: Result<StudyDefinition, StudyError>) -> Vec<(String, String)> {
-    match parsed {
-        Err(StudyError::Invalid { issues, .. }) => {
-            issues.into_iter().map(|i| (i.key, i.reason)).collect()
-        }
-        other => panic!("expected Invalid, got {other:?}"),
-    }
-}
 
 #[test]
 fn examples_are_valid() {

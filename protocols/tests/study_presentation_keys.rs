@@ -5,22 +5,8 @@
 
 mod common;
 
-use common::{example, example_text, parse};
-use protocols::StudyError;
+use common::{example, example_text, has, issues, parse};
 use protocols::study::StimulusLabels;
-
-fn issues(text: &str) -> Vec<(String, String)> {
-    match parse(text) {
-        Err(StudyError::Invalid { issues, .. }) => {
-            issues.into_iter().map(|i| (i.key, i.reason)).collect()
-        }
-        other => panic!("expected Invalid, got {other:?}"),
-    }
-}
-
-fn has(got: &[(String, String)], key: &str, words: &str) -> bool {
-    got.iter().any(|(k, r)| k == key && r.contains(words))
-}
 
 fn labels(reference: &str, test: &str) -> StimulusLabels {
     StimulusLabels {

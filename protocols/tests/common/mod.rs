@@ -67,6 +67,26 @@ pub fn parse(text: &str) -> Result<StudyDefinition, protocols::StudyError> {
     StudyDefinition::parse(text, Path::new("test.toml"), move |_| Ok(m), &TestCodecs)
 }
 
+/// The (key, reason) of every problem of a study file that must be invalid.
+pub fn invalid(parsed: Result<StudyDefinition, protocols::StudyError>) -> Vec<(String, String)> {
+    match parsed {
+        Err(protocols::StudyError::Invalid { issues, .. }) => {
+            issues.into_iter().map(|i| (i.key, i.reason)).collect()
+        }
+        other => panic!("expected Invalid, got {other:?}"),
+    }
+}
+
+/// The (key, reason) of every problem of study file `text`, which must be invalid.
+pub fn issues(text: &str) -> Vec<(String, String)> {
+    invalid(parse(text))
+}
+
+/// Whether `got` has a problem at `key` whose reason contains `words`.
+pub fn has(got: &[(String, String)], key: &str, words: &str) -> bool {
+    got.iter().any(|(k, r)| k == key && r.contains(words))
+}
+
 pub fn example(name: &str) -> StudyDefinition {
     StudyDefinition::load(&examples().join(name), &TestCodecs).unwrap()
 }
