@@ -22,7 +22,7 @@ use codecs::primitives::{Database, SegmentParams, TrainParams};
 use motion::synth::{WalkParams, walking_clip};
 use protocols::manifest::{Stimulus, StimulusManifest, StimulusMetrics};
 
-use common::{Env, find_window, press, setup};
+use common::{Env, find_window, press, setup, study_ok};
 
 fn examples() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples")
@@ -541,19 +541,6 @@ fn each_example_records_its_first_answer_in_the_window() {
             started.elapsed()
         );
     }
-}
-
-/// Runs `study` with `args`, which must succeed.
-fn study_ok(args: &[&std::ffi::OsStr]) {
-    let out = Command::new(env!("CARGO_BIN_EXE_study"))
-        .args(args)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{args:?}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
 }
 
 /// The crowd examples simulate (both runs, ten subjects each) and their reports draw thesis

@@ -5,6 +5,20 @@
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 
+/// Runs `study` with `args`, which must succeed; its standard output.
+pub fn study_ok(args: &[&std::ffi::OsStr]) -> String {
+    let out = Command::new(env!("CARGO_BIN_EXE_study"))
+        .args(args)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
 /// The window tests' stimuli: a one-second generated walk (short presentations keep the
 /// tests quick) and SPIHT at 10:1 and 20:1, in `dir/stimuli/stimuli.json`.
 pub fn write_walk_stimuli(dir: &Path) {
