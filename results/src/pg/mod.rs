@@ -721,17 +721,18 @@ impl PgStore {
         // Room for a batch as large as the last one, so that the stream is not copied again
         // each time the buffer doubles.
         let mut all = Vec::with_capacity(expected);
+        let bad = |message: String| ResultsError::Database {
+            location: location.clone(),
+            op: op.to_owned(),
+            message,
+        };
         reader.take(limit + 1).read_to_end(&mut all).map_err(|e| {
             match e
                 .get_ref()
                 .and_then(|c| c.downcast_ref::<postgres::Error>())
             {
                 Some(e) => db_error(&location, op, e),
-                None => ResultsError::Database {
-                    location: location.clone(),
-                    op: op.to_owned(),
-                    message: e.to_string(),
-                },
+                None => bad(e.to_string()),
             }
         })?;
         if all.len() as u64 > limit {
@@ -742,11 +743,6 @@ impl PgStore {
             });
         }
         self.last_batch_bytes = all.len() + all.len() / 8;
-        let bad = |message: String| ResultsError::Database {
-            location: location.clone(),
-            op: op.to_owned(),
-            message,
-        };
         // The rows of one session are consecutive (ordered by session id): each session is
         // a range of the one buffer, shared.
         let at: HashMap<i32, usize> = heads.iter().enumerate().map(|(i, h)| (h.id, i)).collect();
@@ -763,11 +759,10 @@ impl PgStore {
             };
             last = Some((id, i));
             let Some(i) = i else { continue };
-            let (start, end) = (row.start, row.start + row.bytes.len());
             match &mut ranges[i] {
-                Some(r) if r.end == start => r.end = end,
+                Some(r) if r.end == row.span.start => r.end = row.span.end,
                 Some(_) => return Err(bad(format!("the rows of session {id} are not together"))),
-                r @ None => *r = Some(start..end),
+                r @ None => *r = Some(row.span),
             }
         }
         let all = std::sync::Arc::new(all);

@@ -269,10 +269,9 @@ pub struct CopyRows<'a> {
 /// the stream.
 pub struct Tuple<'a> {
     fields: [Option<&'a [u8]>; SELECT_COUNT],
-    /// The row's bytes, from its field count to its last field's end.
-    pub bytes: &'a [u8],
-    /// Where the row starts in the bytes it was read from.
-    pub start: usize,
+    /// Where the row lies in the bytes it was read from, from its field count to its last
+    /// field's end.
+    pub span: std::ops::Range<usize>,
 }
 
 fn be_i16(b: &[u8]) -> Option<i16> {
@@ -355,8 +354,7 @@ impl<'a> CopyRows<'a> {
         self.at = at;
         Ok(Some(Tuple {
             fields,
-            bytes: &b[start..at],
-            start,
+            span: start..at,
         }))
     }
 }
