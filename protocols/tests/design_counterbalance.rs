@@ -429,3 +429,135 @@ fn catch_trials_in_design_are_the_one_list_every_runner_and_the_report_use() {
         "{err}"
     );
 }
+
+/// `[[design.groups]]`: each group's sessions are planned over its own conditions (and every
+/// catch trial), in `[conditions]` order, so a group's Latin square is complete over its own
+/// block of subjects.
+#[test]
+fn between_subject_groups_plan_their_own_conditions() {
+    let all = stimuli(7);
+    let group_a: Vec<String> = vec![all[4].clone(), all[0].clone(), all[2].clone()];
+    let group_b: Vec<String> = vec![all[1].clone(), all[3].clone(), all[5].clone()];
+    let quoted = |v: &[String]| {
+        v.iter()
+            .map(|s| format!("{s:?}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let extra = format!(
+        "[[design.catch]]\nstimulus = {:?}\nmax = 2\n\
+         [[design.groups]]\nname = \"a\"\nstimuli = [{}]\nquota = 12\n\
+         [[design.groups]]\nname = \"b-2\"\nstimuli = [{}]\n",
+        all[6],
+        quoted(&group_a),
+        quoted(&group_b)
+    );
+    let study = study("mos", 7, 11, &extra);
+    let groups = &study.design.groups;
+    assert_eq!(groups.len(), 2);
+    assert_eq!((groups[0].name.as_str(), groups[0].quota), ("a", Some(12)));
+    assert_eq!((groups[1].name.as_str(), groups[1].quota), ("b-2", None));
+
+    // Group a: its three conditions and the catch trial, in [conditions] order.
+    let a = study.for_group(Some("a")).unwrap();
+    let got: Vec<&str> = a.conditions.iter().map(|c| c.stimulus.as_str()).collect();
+    assert_eq!(
+        got,
+        [&all[0], &all[2], &all[4], &all[6]].map(String::as_str)
+    );
+    // A complete block of the group's subjects (4 conditions: 4 rows) is a Latin square over
+    // exactly those conditions.
+    let rows = williams_rows(4);
+    let mut at_position = vec![BTreeMap::<String, u32>::new(); 4];
+    for k in 0..rows as u32 {
+        let test: Vec<String> = plan(&a, k)
+            .into_iter()
+            .filter(|(_, b, _)| *b == Block::Test)
+            .map(|(s, _, _)| s)
+            .collect();
+        assert_eq!(test.len(), 4, "subject {k}: {test:?}");
+        for (p, s) in test.into_iter().enumerate() {
+            *at_position[p].entry(s).or_default() += 1;
+        }
+    }
+    for counts in &at_position {
+        assert_eq!(counts.len(), 4, "{counts:?}");
+        assert!(counts.values().all(|&n| n == 1), "{counts:?}");
+    }
+    let b = study.for_group(Some("b-2")).unwrap();
+    let got: Vec<&str> = b.conditions.iter().map(|c| c.stimulus.as_str()).collect();
+    assert_eq!(
+        got,
+        [&all[1], &all[3], &all[5], &all[6]].map(String::as_str)
+    );
+
+    // A session must name its group, one of the study's; a study without groups takes none.
+    assert!(study.for_group(None).unwrap_err().contains("a, b-2"));
+    assert!(
+        study
+            .for_group(Some("c"))
+            .unwrap_err()
+            .contains("no group \"c\"")
+    );
+    let plain = self::study("mos", 3, 1, "");
+    assert!(plain.for_group(None).is_ok());
+    assert!(plain.for_group(Some("a")).is_err());
+}
+
+/// `study check`'s problems of `[[design.groups]]`, all in its one list.
+#[test]
+fn between_subject_groups_problems_are_listed() {
+    let base = "format_version = 1\nname = \"s\"\nprotocol = \"mos\"\nstimuli = \"stimuli.json\"\n\
+                seed = 1\n[conditions]\nstimuli = [\"walk/wavelet-bone/cr10\", \
+                \"walk/wavelet-bone/cr20\", \"walk/wavelet-bone/cr30\"]\n";
+    let got = common::issues(&format!(
+        "{base}[[design.groups]]\nname = \"a b\"\nstimuli = [\"walk/wavelet-bone/cr10\", \
+         \"walk/wavelet-bone/cr10\", \"walk/nope\"]\nquota = 0\ncolour = 1\n\
+         [[design.groups]]\nname = \"x\"\nstimuli = []\n\
+         [[design.groups]]\nname = \"x\"\nstimuli = [\"walk/wavelet-bone/cr20\"]\n\
+         [[design.groups]]\nstimuli = [\"walk/wavelet-bone/cr20\"]\n"
+    ));
+    let has = |key: &str, words: &str| common::has(&got, key, words);
+    assert!(has("design.groups[0].name", "use 1-32 letters"), "{got:?}");
+    assert!(has("design.groups[0].stimuli", "listed twice"), "{got:?}");
+    assert!(
+        has("design.groups[0].stimuli", "\"walk/nope\" is not one of"),
+        "{got:?}"
+    );
+    assert!(has("design.groups[0].quota", "at least 1"), "{got:?}");
+    assert!(has("design.groups[0].colour", "unknown key"), "{got:?}");
+    assert!(
+        has("design.groups[1].stimuli", "at least one condition"),
+        "{got:?}"
+    );
+    assert!(has("design.groups[2].name", "names two groups"), "{got:?}");
+    assert!(has("design.groups[3].name", "required"), "{got:?}");
+    assert_eq!(got.len(), 8, "{got:?}");
+    // Every condition is in some group.
+    let got = common::issues(&format!(
+        "{base}[[design.groups]]\nname = \"a\"\nstimuli = [\"walk/wavelet-bone/cr10\"]\n\
+         [[design.groups]]\nname = \"b\"\nstimuli = [\"walk/wavelet-bone/cr20\"]\n"
+    ));
+    assert_eq!(got.len(), 1, "{got:?}");
+    assert!(
+        common::has(
+            &got,
+            "design.groups",
+            "\"walk/wavelet-bone/cr30\" is in no group"
+        ),
+        "{got:?}"
+    );
+    // Not a table array, and not in a staircase.
+    let got = common::issues(&format!("{base}[design]\ngroups = 2\n"));
+    assert!(
+        common::has(&got, "design.groups", "an array of tables"),
+        "{got:?}"
+    );
+    let stair = common::example_text("staircase.toml")
+        + "\n[[design.groups]]\nname = \"a\"\nstimuli = [\"x\"]\n";
+    let got = common::issues(&stair);
+    assert!(
+        common::has(&got, "design.groups", "a staircase study's tracks"),
+        "{got:?}"
+    );
+}

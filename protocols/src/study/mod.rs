@@ -142,19 +142,36 @@ pub enum ConditionOrder {
     LatinSquare,
 }
 
-/// Design settings (`[design]`): counterbalancing.
+/// Design settings (`[design]`): counterbalancing and between-subject groups.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct DesignSettings {
     /// The order of the test conditions.
     pub order: ConditionOrder,
+    /// Between-subject groups (`[[design.groups]]`): each session is assigned one and sees
+    /// only its conditions; empty when every subject sees every condition.
+    #[serde(default)]
+    pub groups: Vec<SubjectGroup>,
 }
 
 impl Default for DesignSettings {
     fn default() -> Self {
         Self {
             order: ConditionOrder::Random,
+            groups: Vec::new(),
         }
     }
+}
+
+/// A between-subject group (`[[design.groups]]`): a name, the test conditions its subjects
+/// see, and how many sessions it takes.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct SubjectGroup {
+    /// Name (1-32 letters, digits, `-` or `_`), recorded in each of its sessions' manifests.
+    pub name: String,
+    /// Its test conditions' stimulus ids (each one of the study's conditions).
+    pub stimuli: Vec<String>,
+    /// Most sessions assigned to it; `None`: no limit.
+    pub quota: Option<u32>,
 }
 
 /// Presentation settings (`[presentation]`).
@@ -543,6 +560,57 @@ impl StudyDefinition {
     /// The title shown to subjects: `title` from the study file, or else its name.
     pub fn title(&self) -> &str {
         self.title.as_deref().unwrap_or(&self.name)
+    }
+
+    /// The study as a session of between-subject group `group` runs it: the test conditions
+    /// are the group's and the catch trials' (every session gets the catch trials), in the
+    /// order `[conditions]` lists them, so a Latin square runs over the group's conditions.
+    /// Without groups the study is itself (and `group` must be `None`).
+    ///
+    /// # Errors
+    /// A group given to a study without groups, none given to a study with groups, or a
+    /// name the study does not have.
+    pub fn for_group(&self, group: Option<&str>) -> Result<std::borrow::Cow<'_, Self>, String> {
+        let groups = &self.design.groups;
+        match group {
+            None if groups.is_empty() => Ok(std::borrow::Cow::Borrowed(self)),
+            None => Err(format!(
+                "study {:?} assigns every session to one of its groups ({}); none was given",
+                self.name,
+                self.group_names()
+            )),
+            Some(g) if groups.is_empty() => Err(format!(
+                "study {:?} has no between-subject groups ([[design.groups]]), but the session \
+                 is in group {g:?}",
+                self.name
+            )),
+            Some(g) => {
+                let Some(group) = groups.iter().find(|x| x.name == g) else {
+                    return Err(format!(
+                        "study {:?} has no group {g:?} (its groups: {})",
+                        self.name,
+                        self.group_names()
+                    ));
+                };
+                let keep = |c: &Condition| {
+                    group.stimuli.contains(&c.stimulus)
+                        || self
+                            .crowdsourcing
+                            .gold
+                            .iter()
+                            .any(|t| t.stimulus == c.stimulus)
+                };
+                let mut study = self.clone();
+                study.conditions.retain(keep);
+                Ok(std::borrow::Cow::Owned(study))
+            }
+        }
+    }
+
+    /// The between-subject groups' names, comma-separated, for messages.
+    fn group_names(&self) -> String {
+        let names: Vec<&str> = self.design.groups.iter().map(|g| g.name.as_str()).collect();
+        names.join(", ")
     }
 
     /// Reads and validates a study file and its stimulus manifest; a live staircase's codec
