@@ -52,6 +52,72 @@ pub struct ResumedSession {
     pub torn: Option<(TornRow, String)>,
 }
 
+/// A between-subject group as [`Store::assign_group`] sees it: its name and its quota.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct GroupQuota<'a> {
+    /// The group's name.
+    pub name: &'a str,
+    /// Most sessions it takes; `None`: no limit.
+    pub quota: Option<u32>,
+}
+
+/// A session's between-subject group, as [`Store::assign_group`] gave it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Assignment {
+    /// The group's name.
+    pub group: String,
+    /// The session's place in its group: 0 for the group's first session, 1 for the next,
+    /// ... (a subject index that completes the group's counterbalancing in turn).
+    pub ordinal: u32,
+    /// Whether this call made the assignment (`false`: the session had it already).
+    pub new: bool,
+}
+
+/// The group a new session joins, given how many sessions each group has: `wanted` when
+/// given (refused when at its quota), else the group with the fewest sessions among those
+/// under their quota, the first listed of equals. `Err` says why none can be.
+///
+/// # Errors
+/// `wanted` is not a group or is full; every group is full.
+pub fn choose_group(
+    groups: &[GroupQuota<'_>],
+    counts: &[u32],
+    wanted: Option<&str>,
+) -> Result<usize, String> {
+    let open = |i: usize| groups[i].quota.is_none_or(|q| counts[i] < q);
+    if let Some(w) = wanted {
+        let Some(i) = groups.iter().position(|g| g.name == w) else {
+            let names: Vec<&str> = groups.iter().map(|g| g.name).collect();
+            return Err(format!(
+                "there is no group {w:?} (the study's groups: {})",
+                names.join(", ")
+            ));
+        };
+        if !open(i) {
+            return Err(format!(
+                "group {w:?} is full: {} of its {} sessions are assigned",
+                counts[i],
+                groups[i].quota.unwrap_or(0)
+            ));
+        }
+        return Ok(i);
+    }
+    (0..groups.len())
+        .filter(|&i| open(i))
+        .min_by_key(|&i| (counts[i], i))
+        .ok_or_else(|| {
+            let full: Vec<String> = groups
+                .iter()
+                .zip(counts)
+                .map(|(g, n)| format!("{} {n}/{}", g.name, g.quota.unwrap_or(0)))
+                .collect();
+            format!(
+                "every group has its quota of sessions ({}); the study is complete",
+                full.join(", ")
+            )
+        })
+}
+
 /// A results store: where sessions are created, resumed and found.
 pub trait Store {
     /// Where the results are, for messages: the folder, or the database (never with its
@@ -103,7 +169,130 @@ pub trait Store {
     /// # Errors
     /// The store cannot be read or changed.
     fn discard_unstarted(&mut self, subject: &str, session: u32) -> Result<bool, ResultsError>;
+
+    /// The between-subject group of session `session` of `subject`: the one it was given
+    /// before (the same on every station, and on resume), else a new assignment by
+    /// [`choose_group`] from the sessions already assigned to each group, recorded before
+    /// it is returned. Two stations asking at once are served one after the other (the
+    /// folder's kernel lock on [`GROUPS_LOCK_FILE`], a lock on the run's row in the
+    /// database), so no group is given past its quota and no place twice. An assignment
+    /// stays with its session: a session that is never run keeps its place for that
+    /// subject and session.
+    ///
+    /// # Errors
+    /// The wanted group is not one of `groups` or is full, every group is full, or the
+    /// store cannot be read or written.
+    fn assign_group(
+        &mut self,
+        subject: &str,
+        session: u32,
+        groups: &[GroupQuota<'_>],
+        wanted: Option<&str>,
+    ) -> Result<Assignment, ResultsError>;
 }
+
+/// A results folder's record of between-subject group assignments: CSV with the header
+/// `subject,session,group,ordinal`, rewritten whole (a temporary file renamed) under
+/// [`GROUPS_LOCK_FILE`] for each new assignment.
+pub const GROUPS_FILE: &str = "groups.csv";
+
+/// The lock file [`FolderStore::assign_group`] holds while it reads and writes
+/// [`GROUPS_FILE`].
+pub const GROUPS_LOCK_FILE: &str = "groups.lock";
+
+/// Most assignments [`GROUPS_FILE`] may hold, and its largest size.
+const MAX_ASSIGNMENTS: usize = 1 << 20;
+const MAX_GROUPS_BYTES: u64 = 256 << 20;
+
+/// One line of [`GROUPS_FILE`].
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub(crate) struct AssignedRow {
+    pub(crate) subject: String,
+    pub(crate) session: u32,
+    pub(crate) group: String,
+    pub(crate) ordinal: u32,
+}
+
+/// The text of [`GROUPS_FILE`] holding `rows`.
+pub(crate) fn assignments_csv(rows: &[AssignedRow]) -> String {
+    use std::fmt::Write as _;
+    let mut text = String::with_capacity(32 * (rows.len() + 1));
+    text.push_str(GROUPS_HEADER);
+    text.push('\n');
+    for r in rows {
+        let _ = writeln!(
+            text,
+            "{},{},{},{}",
+            r.subject, r.session, r.group, r.ordinal
+        );
+    }
+    text
+}
+
+/// Reads [`GROUPS_FILE`] (absent: no assignments), refusing a malformed line by number.
+pub(crate) fn read_assignments(path: &Path) -> Result<Vec<AssignedRow>, ResultsError> {
+    if !path.exists() {
+        return Ok(Vec::new());
+    }
+    let bytes = crate::store::read_limited(path, MAX_GROUPS_BYTES)?;
+    let bad = |line: usize, column: usize, message: String| ResultsError::Malformed {
+        path: path.to_path_buf(),
+        line,
+        column,
+        message,
+    };
+    let text = String::from_utf8(bytes).map_err(|e| bad(1, 1, format!("not UTF-8 text: {e}")))?;
+    let mut lines = text.lines();
+    if lines.next() != Some(GROUPS_HEADER) {
+        return Err(bad(1, 1, format!("the header must be {GROUPS_HEADER:?}")));
+    }
+    let mut out = Vec::new();
+    for (i, l) in lines.enumerate() {
+        let line = i + 2;
+        if out.len() >= MAX_ASSIGNMENTS {
+            return Err(bad(
+                line,
+                1,
+                format!("more than {MAX_ASSIGNMENTS} assignments"),
+            ));
+        }
+        let f: Vec<&str> = l.split(',').collect();
+        if f.len() != 4 {
+            return Err(bad(line, 1, format!("{} fields; 4 expected", f.len())));
+        }
+        let number = |k: usize| {
+            f[k].parse::<u32>()
+                .map_err(|_| bad(line, k + 1, format!("{:?} is not a whole number", f[k])))
+        };
+        let row = AssignedRow {
+            subject: f[0].to_owned(),
+            session: number(1)?,
+            group: f[2].to_owned(),
+            ordinal: number(3)?,
+        };
+        if row.subject.is_empty() || row.group.is_empty() {
+            return Err(bad(line, 1, "an empty subject or group".to_owned()));
+        }
+        if out
+            .iter()
+            .any(|o: &AssignedRow| o.subject == row.subject && o.session == row.session)
+        {
+            return Err(bad(
+                line,
+                1,
+                format!(
+                    "session {} of {:?} is assigned twice",
+                    row.session, row.subject
+                ),
+            ));
+        }
+        out.push(row);
+    }
+    Ok(out)
+}
+
+/// The header of [`GROUPS_FILE`].
+const GROUPS_HEADER: &str = "subject,session,group,ordinal";
 
 /// One session open for rows, holding its lock until dropped.
 pub trait SessionWriter: Send {
@@ -263,6 +452,57 @@ impl Store for FolderStore {
             }
         }
         Ok(fs::remove_dir(&dir).is_ok())
+    }
+
+    fn assign_group(
+        &mut self,
+        subject: &str,
+        session: u32,
+        groups: &[GroupQuota<'_>],
+        wanted: Option<&str>,
+    ) -> Result<Assignment, ResultsError> {
+        let lock_path = self.root.join(GROUPS_LOCK_FILE);
+        let lock = fs::OpenOptions::new()
+            .write(true)
+            .create(true)
+            .truncate(false)
+            .open(&lock_path)
+            .map_err(io(&lock_path))?;
+        // Waits for another station's assignment (held only while it reads and writes the
+        // small file).
+        lock.lock().map_err(io(&lock_path))?;
+        let path = self.root.join(GROUPS_FILE);
+        let mut rows = read_assignments(&path)?;
+        if let Some(r) = rows
+            .iter()
+            .find(|r| r.subject == subject && r.session == session)
+        {
+            return Ok(Assignment {
+                group: r.group.clone(),
+                ordinal: r.ordinal,
+                new: false,
+            });
+        }
+        let counts: Vec<u32> = groups
+            .iter()
+            .map(|g| rows.iter().filter(|r| r.group == g.name).count() as u32)
+            .collect();
+        let i = choose_group(groups, &counts, wanted)
+            .map_err(|why| ResultsError::Store(format!("{}: {why}", self.root.display())))?;
+        let assignment = Assignment {
+            group: groups[i].name.to_owned(),
+            ordinal: counts[i],
+            new: true,
+        };
+        rows.push(AssignedRow {
+            subject: subject.to_owned(),
+            session,
+            group: assignment.group.clone(),
+            ordinal: assignment.ordinal,
+        });
+        crate::store::write_atomic(&path, assignments_csv(&rows).as_bytes())?;
+        drop(lock);
+        Ok(assignment)
     }
 }
 

@@ -23,8 +23,9 @@ use crate::trials::{
 /// Version of `session.json` and `run.json` written by this build. Version 2 added
 /// `manifest_hash`, 3 `browser`; version 4 added `viewing`, and in it `trials_logged` is the
 /// count when the manifest was last written, not rewritten after every row (the rows are the
-/// record). Versions 1 to 3 are still read.
-pub const MANIFEST_FORMAT_VERSION: u32 = 4;
+/// record); version 5 added a session's between-subject `group`. Versions 1 to 4 are still
+/// read.
+pub const MANIFEST_FORMAT_VERSION: u32 = 5;
 /// Largest manifest accepted by the readers, bytes.
 pub const MAX_MANIFEST_BYTES: u64 = 16 << 20;
 /// Most session directories read from one results directory.
@@ -240,7 +241,7 @@ pub struct DisplayInfo {
     pub refresh_hz: f64,
 }
 
-/// `session.json` (format version 4; 1-3 are read).
+/// `session.json` (format version 5; 1-4 are read).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SessionManifest {
@@ -298,6 +299,10 @@ pub struct SessionManifest {
     /// files.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub viewing: Option<ViewingRecord>,
+    /// The between-subject group the session was assigned (`[[design.groups]]`, version 5);
+    /// `None` for a study without groups, and absent from its files.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub group: Option<String>,
 }
 
 /// What the experimenter confirmed of a study's `[viewing]` conditions before a session, and

@@ -1,7 +1,8 @@
 //! The PostgreSQL store against a real server (a throw-away one, `initdb` in a temporary
 //! folder): subject numbers never given twice, one writer per session, the roles of
 //! `docs/postgres.md` (a station inserts rows only into the sessions it holds), schema
-//! versions, an answer kept through a server restart, and passwords never shown.
+//! versions, an answer kept through a server restart, and passwords never shown. Between-
+//! subject group assignments are checked here for both stores, the database and a folder.
 //! Under CI a missing server fails these tests; elsewhere they say so and pass.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
 
@@ -11,7 +12,7 @@ use std::sync::{Arc, Barrier};
 use protocols::{
     Answer, Arrangement, Block, Outcome, Position, Protocol, Response, Trial, TrialRecord,
 };
-use results::backend::{Found, Store};
+use results::backend::{FolderStore, Found, GROUPS_FILE, GroupQuota, Store};
 use results::pg::scratch::ScratchServer;
 use results::pg::{Archive, Database, PgStore};
 use results::store::{MANIFEST_FORMAT_VERSION, SessionState};
@@ -82,6 +83,7 @@ fn manifest(subject: &str) -> SessionManifest {
         display: None,
         browser: None,
         viewing: None,
+        group: None,
     }
 }
 
@@ -414,7 +416,10 @@ fn schema_is_versioned_and_a_newer_one_refused(server: &ScratchServer) {
         .iter()
         .map(|r| r.get(0))
         .collect();
-    assert_eq!(versions, [results::pg::schema::SCHEMA_VERSION]);
+    assert_eq!(
+        versions,
+        (1..=results::pg::schema::SCHEMA_VERSION).collect::<Vec<i32>>()
+    );
     client
         .execute(
             "INSERT INTO study_schema_version (version, software) VALUES (99, 'future')",
@@ -450,9 +455,165 @@ fn an_answer_survives_a_server_restart(server: &mut ScratchServer) {
 
 /// One throw-away server for every scenario (starting one is most of their cost), each in a
 /// database of its own; the restart comes last.
+/// Two stations assigning between-subject groups at the same moment, 25 new sessions each,
+/// into groups `a` and `b` of 20 sessions each: 40 assignments, 20 per group with the places
+/// 0 to 19 once each, and 10 refusals saying the study is complete; a session asked again
+/// keeps its group (full or not); the fewest-first order; a wanted group, full or unknown.
+fn stations_assign_groups_within_their_quotas(
+    station: &(dyn Fn() -> Box<dyn Store + Send> + Sync),
+) {
+    const GROUPS: [GroupQuota<'static>; 2] = [
+        GroupQuota {
+            name: "a",
+            quota: Some(20),
+        },
+        GroupQuota {
+            name: "b",
+            quota: Some(20),
+        },
+    ];
+    // Fewest first, the first listed of equals.
+    let mut first = station();
+    let order: Vec<String> = (0..3)
+        .map(|k| {
+            first
+                .assign_group(&format!("F{k}"), 1, &GROUPS, None)
+                .unwrap()
+                .group
+        })
+        .collect();
+    assert_eq!(order, ["a", "b", "a"]);
+    let again = first.assign_group("F1", 1, &GROUPS, None).unwrap();
+    assert_eq!(
+        (again.group.as_str(), again.ordinal, again.new),
+        ("b", 0, false)
+    );
+    let wanted = first.assign_group("W", 1, &GROUPS, Some("b")).unwrap();
+    assert_eq!((wanted.group.as_str(), wanted.ordinal), ("b", 1));
+    let err = first.assign_group("W2", 1, &GROUPS, Some("z")).unwrap_err();
+    assert!(err.to_string().contains("there is no group \"z\""), "{err}");
+    drop(first);
+
+    let barrier = Barrier::new(2);
+    let results: Vec<Vec<Result<(String, u32), String>>> = std::thread::scope(|scope| {
+        let runs: Vec<_> = (0..2)
+            .map(|s| {
+                let barrier = &barrier;
+                scope.spawn(move || {
+                    let mut store = station();
+                    (0..25)
+                        .map(|k| {
+                            barrier.wait();
+                            store
+                                .assign_group(&format!("S{s}-{k}"), 1, &GROUPS, None)
+                                .map(|a| (a.group, a.ordinal))
+                                .map_err(|e| e.to_string())
+                        })
+                        .collect()
+                })
+            })
+            .collect();
+        runs.into_iter().map(|r| r.join().unwrap()).collect()
+    });
+    let mut places: BTreeMap<String, Vec<u32>> = BTreeMap::new();
+    let mut refused = 0;
+    for r in results.into_iter().flatten() {
+        match r {
+            Ok((g, k)) => places.entry(g).or_default().push(k),
+            Err(e) => {
+                assert!(e.contains("every group has its quota"), "{e}");
+                refused += 1;
+            }
+        }
+    }
+    // 4 sessions were assigned before the race: a 0, 1 and b 0, 1.
+    for (g, mut ks) in places {
+        ks.sort_unstable();
+        assert_eq!(ks, (2..20).collect::<Vec<u32>>(), "group {g}");
+    }
+    assert_eq!(refused, 50 - 36);
+    let mut store = station();
+    let err = store
+        .assign_group("late", 1, &GROUPS, Some("a"))
+        .unwrap_err();
+    assert!(
+        err.to_string()
+            .contains("group \"a\" is full: 20 of its 20"),
+        "{err}"
+    );
+    let kept = store.assign_group("S0-0", 1, &GROUPS, None).unwrap();
+    assert!(!kept.new);
+}
+
+/// `study export` writes the run's group assignments as the folder's `groups.csv`, and
+/// `study import` loads them into a run that has none; into one that has its own they are
+/// refused, nothing imported.
+fn assignments_travel_with_export_and_import(server: &ScratchServer, db: &Database) {
+    let scratch =
+        std::env::temp_dir().join(format!("results-groups-export-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&scratch);
+    let out = scratch.join("exported");
+    results::pg::export(&mut open(db), &out).unwrap();
+    let csv = std::fs::read_to_string(out.join(GROUPS_FILE)).unwrap();
+    assert_eq!(csv.lines().count(), 1 + 40, "{csv}");
+    assert!(
+        csv.starts_with("subject,session,group,ordinal\nF0,1,a,0\nF2,1,a,1\n"),
+        "{csv}"
+    );
+    let other = server.create_database("groups_imported").unwrap();
+    results::pg::import(&other, &out, None).unwrap();
+    let again = scratch.join("again");
+    results::pg::export(&mut open(&other), &again).unwrap();
+    assert_eq!(
+        std::fs::read_to_string(again.join(GROUPS_FILE)).unwrap(),
+        csv
+    );
+    let err = results::pg::import(&other, &out, None)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("assigns sessions to between-subject groups, and so does run"),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&scratch).unwrap();
+}
+
+#[test]
+fn folder_stations_assign_groups_within_their_quotas() {
+    let dir = std::env::temp_dir().join(format!("results-groups-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    stations_assign_groups_within_their_quotas(&|| Box::new(FolderStore::new(&dir)));
+    // A damaged record is refused, naming its line.
+    let path = dir.join(GROUPS_FILE);
+    let text = std::fs::read_to_string(&path).unwrap();
+    std::fs::write(&path, text.replacen(",a,0", ",a,zero", 1)).unwrap();
+    let err = FolderStore::new(&dir)
+        .assign_group(
+            "X",
+            1,
+            &[GroupQuota {
+                name: "a",
+                quota: None,
+            }],
+            None,
+        )
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("groups.csv: line 2, column 4: \"zero\" is not a whole number"),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 #[test]
 fn postgres_store() {
     let Some(mut server) = server() else { return };
+    let db = server.create_database("groups").unwrap();
+    drop(open(&db));
+    stations_assign_groups_within_their_quotas(&|| Box::new(open(&db)));
+    assignments_travel_with_export_and_import(&server, &db);
     two_stations_never_get_the_same_subject_number(&server);
     one_writer_per_session_and_rows_read_back_as_written(&server);
     every_kind_of_row_read_back_and_bad_values_named(&server);

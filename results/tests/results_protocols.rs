@@ -163,6 +163,7 @@ fn manifest(trials: u32) -> SessionManifest {
         }),
         browser: None,
         viewing: None,
+        group: None,
     }
 }
 

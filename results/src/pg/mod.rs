@@ -37,8 +37,9 @@ use postgres::{Client, NoTls, Statement};
 use protocols::TrialRecord;
 
 use crate::backend::{
-    FRAMES_FILE, FRAMES_HEADER, Found, ResumedSession, SessionWriter, Store, frame_rows,
-    session_name,
+    AssignedRow, Assignment, FRAMES_FILE, FRAMES_HEADER, Found, GROUPS_FILE, GroupQuota,
+    ResumedSession, SessionWriter, Store, assignments_csv, choose_group, frame_rows,
+    read_assignments, session_name,
 };
 use crate::store::{
     MAX_SESSIONS, RUN_FILE, SESSION_FILE, SessionState, TRIALS_FILE, read_limited, read_manifest,
@@ -558,6 +559,37 @@ impl PgStore {
         move |e| db_error(&location, &op, &e)
     }
 
+    /// The run's between-subject group assignments, by group and place.
+    ///
+    /// # Errors
+    /// Database errors.
+    pub(crate) fn assignments(&mut self) -> Result<Vec<AssignedRow>, ResultsError> {
+        let run_id = self.run_id;
+        let err = self.err("reading the group assignments");
+        let rows = self
+            .conn()?
+            .query(
+                "SELECT subject, session, group_name, ordinal FROM study_group_assignments \
+                 WHERE run_id = $1 ORDER BY group_name, ordinal",
+                &[&run_id],
+            )
+            .map_err(&err)?;
+        rows.iter()
+            .map(|r| {
+                let number = |i: usize| -> Result<u32, ResultsError> {
+                    let n: i32 = r.try_get(i).map_err(&err)?;
+                    u32::try_from(n).map_err(|_| refused(format!("group assignment value {n}")))
+                };
+                Ok(AssignedRow {
+                    subject: r.try_get(0).map_err(&err)?,
+                    session: number(1)?,
+                    group: r.try_get(2).map_err(&err)?,
+                    ordinal: number(3)?,
+                })
+            })
+            .collect()
+    }
+
     /// The study file and stimulus manifest kept with the run.
     ///
     /// # Errors
@@ -1024,6 +1056,86 @@ impl Store for PgStore {
         tx.commit().map_err(err)?;
         Ok(gone == 1)
     }
+
+    fn assign_group(
+        &mut self,
+        subject: &str,
+        session: u32,
+        groups: &[GroupQuota<'_>],
+        wanted: Option<&str>,
+    ) -> Result<Assignment, ResultsError> {
+        let (run_id, location) = (self.run_id, self.location());
+        let session_no = i32::try_from(session)
+            .map_err(|_| refused(format!("session number {session} is out of range")))?;
+        let op = "assigning a between-subject group";
+        let err = |e| db_error(&location, op, &e);
+        let mut tx = self.conn()?.transaction().map_err(err)?;
+        // One assignment of this run at a time, on every station: the run's row is locked
+        // until this transaction ends.
+        tx.execute(
+            "SELECT 1 FROM study_runs WHERE id = $1 FOR UPDATE",
+            &[&run_id],
+        )
+        .map_err(err)?;
+        let before = tx
+            .query_opt(
+                "SELECT group_name, ordinal FROM study_group_assignments \
+                 WHERE run_id = $1 AND subject = $2 AND session = $3",
+                &[&run_id, &subject, &session_no],
+            )
+            .map_err(err)?;
+        let ordinal = |n: i32| {
+            u32::try_from(n).map_err(|_| refused(format!("{location}: group ordinal {n}")))
+        };
+        if let Some(row) = before {
+            return Ok(Assignment {
+                group: row.try_get(0).map_err(err)?,
+                ordinal: ordinal(row.try_get(1).map_err(err)?)?,
+                new: false,
+            });
+        }
+        let names: Vec<&str> = groups.iter().map(|g| g.name).collect();
+        let counted = tx
+            .query(
+                "SELECT group_name, count(*) FROM study_group_assignments \
+                 WHERE run_id = $1 AND group_name = ANY($2) GROUP BY group_name",
+                &[&run_id, &names],
+            )
+            .map_err(err)?;
+        let mut counts = vec![0_u32; groups.len()];
+        for row in &counted {
+            let name: &str = row.try_get(0).map_err(err)?;
+            let n: i64 = row.try_get(1).map_err(err)?;
+            if let Some(i) = names.iter().position(|g| *g == name) {
+                counts[i] = u32::try_from(n).unwrap_or(u32::MAX);
+            }
+        }
+        let i = choose_group(groups, &counts, wanted)
+            .map_err(|why| refused(format!("{location}: {why}")))?;
+        let assignment = Assignment {
+            group: groups[i].name.to_owned(),
+            ordinal: counts[i],
+            new: true,
+        };
+        let place = i32::try_from(assignment.ordinal)
+            .map_err(|_| refused(format!("{location}: group ordinal out of range")))?;
+        tx.execute(
+            "INSERT INTO study_group_assignments \
+             (run_id, subject, session, group_name, ordinal, station) \
+             VALUES ($1, $2, $3, $4, $5, $6)",
+            &[
+                &run_id,
+                &subject,
+                &session_no,
+                &assignment.group,
+                &place,
+                &station(),
+            ],
+        )
+        .map_err(err)?;
+        tx.commit().map_err(err)?;
+        Ok(assignment)
+    }
 }
 
 /// A database session open for rows: its own connection, which holds the session's lock.
@@ -1297,15 +1409,75 @@ pub fn export(store: &mut PgStore, out: &Path) -> Result<usize, ResultsError> {
             }
         }
     }
+    let assigned = store.assignments()?;
+    if !assigned.is_empty() {
+        write_new(
+            &out.join(GROUPS_FILE),
+            assignments_csv(&assigned).as_bytes(),
+        )?;
+    }
     crate::store::sync_dir(out)?;
     Ok(heads.len())
+}
+
+/// Folder `dir`'s group assignments (`groups.csv`), to be imported into `store`'s run, which
+/// must have none of its own (two records of places in the same groups would give places
+/// twice).
+fn folder_assignments(store: &mut PgStore, dir: &Path) -> Result<Vec<AssignedRow>, ResultsError> {
+    let assigned = read_assignments(&dir.join(GROUPS_FILE))?;
+    if !assigned.is_empty() && !store.assignments()?.is_empty() {
+        return Err(refused(format!(
+            "{}: {} assigns sessions to between-subject groups, and so does run {}; import \
+             into a new run (--run NAME); nothing was imported",
+            dir.join(GROUPS_FILE).display(),
+            dir.display(),
+            store.location()
+        )));
+    }
+    Ok(assigned)
+}
+
+/// Records what a folder keeps beside its sessions' rows in run `run_id`, as imported: the
+/// kept files (session id, name, bytes) and the group assignments (`groups.csv`).
+fn insert_kept(
+    tx: &mut postgres::Transaction<'_>,
+    run_id: i32,
+    kept: &[(i32, String, Vec<u8>)],
+    assigned: &[AssignedRow],
+) -> Result<(), postgres::Error> {
+    for (id, file, bytes) in kept {
+        tx.execute(
+            "INSERT INTO study_session_files (session_id, name, part, bytes) VALUES ($1, $2, 0, $3)",
+            &[id, file, bytes],
+        )?;
+    }
+    let importer = format!("{} (import)", station());
+    let number = |n: u32| i32::try_from(n).unwrap_or(i32::MAX);
+    for a in assigned {
+        tx.execute(
+            "INSERT INTO study_group_assignments \
+             (run_id, subject, session, group_name, ordinal, station) \
+             VALUES ($1, $2, $3, $4, $5, $6)",
+            &[
+                &run_id,
+                &a.subject,
+                &number(a.session),
+                &a.group,
+                &number(a.ordinal),
+                &importer,
+            ],
+        )?;
+    }
+    Ok(())
 }
 
 /// Loads results folder `dir` into run `name` of `db` (by default its study's name), created
 /// with the folder's run manifest and archived study when the database does not hold it. All
 /// or nothing, in one transaction; refused before anything is written when a session is
-/// already in the run (or twice in the folder), when a session's last row is torn, or when
-/// the run holds another study. Returns the run's name and the sessions loaded.
+/// already in the run (or twice in the folder), when a session's last row is torn, when the
+/// run holds another study, or when the folder and the run both assign between-subject
+/// groups (`groups.csv`, which is loaded with the sessions). Returns the run's name and the
+/// sessions loaded.
 ///
 /// # Errors
 /// As above; malformed files (named by file, line and column); database errors.
@@ -1336,6 +1508,7 @@ pub fn import(
         .map(|d| read_manifest(&d.join(SESSION_FILE)))
         .collect::<Result<_, _>>()?;
     check_new_sessions(&mut store, dir, &dirs, &manifests)?;
+    let assigned = folder_assignments(&mut store, dir)?;
     let location = store.location();
     let err = |e: postgres::Error| db_error(&location, "importing", &e);
     let run_id = store.run_id;
@@ -1400,13 +1573,7 @@ pub fn import(
         kept.extend(kept_files(d)?.into_iter().map(|(f, b)| (id, f, b)));
     }
     writer.finish().map_err(err)?;
-    for (id, file, bytes) in &kept {
-        tx.execute(
-            "INSERT INTO study_session_files (session_id, name, part, bytes) VALUES ($1, $2, 0, $3)",
-            &[id, file, bytes],
-        )
-        .map_err(err)?;
-    }
+    insert_kept(&mut tx, run_id, &kept, &assigned).map_err(err)?;
     tx.execute(
         "UPDATE study_sessions s SET trials_format_version = v.version, trials_logged = \
          (SELECT count(*) FROM study_trials t WHERE t.session_id = s.id) \

@@ -9,8 +9,9 @@ use super::{LOCK_NAMESPACE, db_error};
 use crate::ResultsError;
 
 /// The migrations, in order; migration `i` (1-based) brings the schema to version `i`.
-/// Documented in `docs/postgres.md`.
-pub const MIGRATIONS: &[&str] = &[r"
+/// Documented in `docs/postgres.md`. Version 2 added the between-subject group assignments.
+pub const MIGRATIONS: &[&str] = &[
+    r"
 CREATE TABLE study_runs (
     id integer GENERATED ALWAYS AS IDENTITY PRIMARY KEY,
     name text NOT NULL UNIQUE,
@@ -115,7 +116,21 @@ CREATE POLICY study_sessions_update ON study_sessions FOR UPDATE
     USING (study_holds_session(id));
 CREATE POLICY study_sessions_delete ON study_sessions FOR DELETE
     USING (study_holds_session(id) AND trials_logged = 0);
-"];
+",
+    r"
+CREATE TABLE study_group_assignments (
+    run_id integer NOT NULL REFERENCES study_runs (id),
+    subject text NOT NULL,
+    session integer NOT NULL,
+    group_name text NOT NULL,
+    ordinal integer NOT NULL CHECK (ordinal >= 0),
+    station text NOT NULL,
+    assigned_at timestamptz NOT NULL DEFAULT now(),
+    PRIMARY KEY (run_id, subject, session),
+    UNIQUE (run_id, group_name, ordinal)
+);
+",
+];
 
 /// The schema version this build writes and reads.
 pub const SCHEMA_VERSION: i32 = MIGRATIONS.len() as i32;
