@@ -34,6 +34,8 @@ pub struct SessionDisplay {
     /// The viewing conditions the experimenter confirmed and measured (a study with
     /// `[viewing]`).
     pub viewing: Option<results::ViewingRecord>,
+    /// The session's between-subject group (`[[design.groups]]`).
+    pub group: Option<String>,
 }
 
 /// One session's display figures, flagged when it dropped more than `drop_limit_percent` of
@@ -67,6 +69,7 @@ pub fn session_display(s: &SessionResults, drop_limit_percent: f64) -> SessionDi
         flagged: dropped_percent.is_some_and(|p| p > drop_limit_percent),
         browser: m.browser.clone(),
         viewing: m.viewing.clone(),
+        group: m.group.clone(),
     }
 }
 

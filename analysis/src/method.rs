@@ -3,7 +3,7 @@
 //! exclusion rules left), the screening applied, the viewing distance, the display, its
 //! luminance and the environment, each as the study file states it and as the experimenters
 //! confirmed and measured it before the sessions (`session.json` `viewing`); plus the design
-//! (order of conditions, reference placement) and practice trials.
+//! (order of conditions, reference placement, between-subject groups) and practice trials.
 
 use protocols::StudyDefinition;
 use protocols::record::Protocol;
@@ -83,7 +83,41 @@ pub fn method_text(
     });
     viewing_lines(study, displays, &mut out);
     out.push(design_line(study));
+    if let Some(groups) = groups_line(study, displays) {
+        out.push(groups);
+    }
     out
+}
+
+/// The between-subject groups: each one's conditions, the sessions read of it and its quota.
+fn groups_line(study: &StudyDefinition, displays: &[SessionDisplay]) -> Option<String> {
+    if study.design.groups.is_empty() {
+        return None;
+    }
+    let each: Vec<String> = study
+        .design
+        .groups
+        .iter()
+        .map(|g| {
+            let n = displays
+                .iter()
+                .filter(|d| d.group.as_deref() == Some(g.name.as_str()))
+                .count();
+            let quota = g
+                .quota
+                .map_or_else(String::new, |q| format!(" of a quota of {q}"));
+            format!(
+                "{} ({} condition(s), {n} session(s){quota})",
+                g.name,
+                g.stimuli.len()
+            )
+        })
+        .collect();
+    Some(format!(
+        "Between-subject groups, each session assigned one by the results store (the group \
+         with the fewest sessions first) and shown its conditions and the catch trials: {}.",
+        each.join("; ")
+    ))
 }
 
 /// The viewing distance, display, luminance and environment: targets, measurements, and how

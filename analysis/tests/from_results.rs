@@ -124,6 +124,7 @@ fn session(subject: &str, protocol: Protocol, records: Vec<TrialRecord>) -> Sess
             display: None,
             browser: None,
             viewing: None,
+            group: None,
         },
         trials: TrialsFile {
             format_version: 2,

@@ -48,6 +48,7 @@ fn session(name: &str, hz: Option<f64>, viewing: Option<ViewingRecord>) -> Sessi
         flagged: false,
         browser: None,
         viewing,
+        group: None,
     }
 }
 

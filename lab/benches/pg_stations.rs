@@ -127,6 +127,7 @@ fn main() {
                             subject_index: index,
                             session: 1,
                             observer_seed: Some(seed),
+                            group: None,
                         },
                     );
                     fresh.display = None;

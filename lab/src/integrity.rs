@@ -334,6 +334,11 @@ fn state_name(state: SessionState) -> &'static str {
 /// level logged before the exact grid, which `replay` accepts within rounding) replays the
 /// session again from the start with [`replayed_in_full`], which finds and words the problem.
 fn replayed(study: &StudyDefinition, s: &SessionResults) -> Result<Session, (usize, String)> {
+    // A session of a between-subject group was planned over its group's conditions.
+    let study = study
+        .for_group(s.manifest.group.as_deref())
+        .map_err(|e| (1, format!("the study cannot plan this session: {e}")))?;
+    let study = study.as_ref();
     match replayed_sound(study, s) {
         Some(engine) => Ok(engine),
         None => replayed_in_full(study, s),
@@ -560,6 +565,7 @@ mod tests {
                     display: None,
                     browser: None,
                     viewing: None,
+                    group: None,
                 };
                 SessionResults {
                     dir: Path::new("results").join(format!("S{subject_index}_s1")),

@@ -7,6 +7,7 @@ use std::fs;
 use std::path::{Path, PathBuf};
 
 use results::RunManifest;
+use results::backend::{GROUPS_FILE, GROUPS_LOCK_FILE};
 use results::pg::{Archive, Database, PgStore};
 use results::store::{
     LOCK_FILE, MANIFEST_FORMAT_VERSION, RUN_FILE, SESSION_FILE, TRIALS_FILE, read_manifest,
@@ -41,15 +42,22 @@ pub const PARTICIPANTS_FILE: &str = "participants.csv";
 /// Whether `name` is one of the files a results directory holds beside its sessions, or a
 /// temporary file one of its writers left behind.
 fn is_results_file(name: &str) -> bool {
-    [RUN_FILE, STUDY_COPY, MANIFEST_COPY, PARTICIPANTS_FILE]
-        .iter()
-        .any(|f| {
-            name == *f
-                || name
-                    .strip_prefix('.')
-                    .and_then(|n| n.strip_prefix(*f))
-                    .is_some_and(|rest| rest.starts_with('.'))
-        })
+    [
+        RUN_FILE,
+        STUDY_COPY,
+        MANIFEST_COPY,
+        PARTICIPANTS_FILE,
+        GROUPS_FILE,
+        GROUPS_LOCK_FILE,
+    ]
+    .iter()
+    .any(|f| {
+        name == *f
+            || name
+                .strip_prefix('.')
+                .and_then(|n| n.strip_prefix(*f))
+                .is_some_and(|rest| rest.starts_with('.'))
+    })
 }
 
 /// Whether `dir` looks like a session folder: `<subject>_s<n>`, holding nothing but a

@@ -129,6 +129,9 @@ pub struct SessionOf<'a> {
     pub session: u32,
     /// Seed of the simulated observer; `None` for a real subject.
     pub observer_seed: Option<u64>,
+    /// The between-subject group the session was assigned ([`assign_group`]); `None` for a
+    /// study without groups.
+    pub group: Option<String>,
 }
 
 /// The manifest of a new, running session of `study`; everything else starts empty.
@@ -161,7 +164,59 @@ pub fn new_manifest(study: &StudyDefinition, of: SessionOf<'_>) -> SessionManife
             .viewing
             .as_ref()
             .map(|_| results::ViewingRecord::default()),
+        group: of.group,
     }
+}
+
+/// The between-subject group of a session of `study` (`None` for a study without groups),
+/// with the subject index that balances within the group: `subject_index` when given, else
+/// the session's place in its group (its k-th session takes row k of a Latin square). The
+/// store assigns the group once ([`Store::assign_group`]), so a resumed session, on any
+/// station, gets the same; `wanted` asks for one group (refused when it is full).
+///
+/// # Errors
+/// The store's: the wanted group is not the study's or is full, every group is full, or the
+/// store cannot be read or written.
+pub fn assign_group(
+    study: &StudyDefinition,
+    store: &mut dyn Store,
+    subject: &str,
+    session: u32,
+    wanted: Option<&str>,
+    subject_index: Option<u32>,
+) -> Result<(Option<String>, u32)> {
+    let fallback = || subject_index.unwrap_or_else(|| self::subject_index(subject, session));
+    if study.design.groups.is_empty() {
+        if let Some(w) = wanted {
+            return Err(refused(format!(
+                "--group {w:?}: study {:?} has no between-subject groups ([[design.groups]])",
+                study.name
+            )));
+        }
+        return Ok((None, fallback()));
+    }
+    let groups: Vec<results::backend::GroupQuota<'_>> = study
+        .design
+        .groups
+        .iter()
+        .map(|g| results::backend::GroupQuota {
+            name: &g.name,
+            quota: g.quota,
+        })
+        .collect();
+    let a = store.assign_group(subject, session, &groups, wanted)?;
+    if let Some(w) = wanted
+        && w != a.group
+    {
+        return Err(refused(format!(
+            "{}: session {session} of {subject:?} was assigned group {:?} before; it stays in it \
+             (leave out --group, or give --group {})",
+            store.location(),
+            a.group,
+            a.group
+        )));
+    }
+    Ok((Some(a.group), subject_index.unwrap_or(a.ordinal)))
 }
 
 /// Refuses to resume the session recorded in `path` (`old`) as the one `fresh` describes
@@ -221,6 +276,11 @@ fn check_same_session(path: &Path, old: &SessionManifest, fresh: &SessionManifes
         "observer seed",
         format!("{:?}", old.observer_seed),
         format!("{:?}", fresh.observer_seed),
+    );
+    field(
+        "group",
+        format!("{:?}", old.group),
+        format!("{:?}", fresh.group),
     );
     if differ.is_empty() {
         return Ok(());
@@ -337,6 +397,9 @@ impl Recorder {
         resume: bool,
         fresh: SessionManifest,
     ) -> Result<Opened> {
+        // A session of a between-subject group is planned over its group's conditions.
+        let study = study.for_group(fresh.group.as_deref()).map_err(refused)?;
+        let study = study.as_ref();
         let mut engine = Session::new(study, subject_index)?;
         let (subject, number) = (fresh.subject.clone(), fresh.session);
         let path = store.session_path(&subject, number);
@@ -697,6 +760,7 @@ mod tests {
                     subject_index: 7,
                     session: 1,
                     observer_seed: None,
+                    group: None,
                 },
             )
         };

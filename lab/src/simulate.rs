@@ -44,6 +44,12 @@ pub fn subject_id(index: u32) -> String {
     format!("S{:03}", index + 1)
 }
 
+/// The index `k` whose [`subject_id`] is `id`, if any.
+fn subject_number(id: &str) -> Option<u32> {
+    let k = id.strip_prefix('S')?.parse::<u32>().ok()?.checked_sub(1)?;
+    (subject_id(k) == id).then_some(k)
+}
+
 /// A simulated subject: the id its session is recorded under and the index its plan and
 /// observer derive from.
 struct Subject {
@@ -168,11 +174,15 @@ fn simulate_into_database(
     if options.resume {
         let abandoned = session::retry_outage(wait, report, || Ok(store.abandoned()?))?;
         for m in abandoned {
-            // Only this simulation's sessions: not a real subject's in the same run.
-            let index = m.subject_index;
+            // Only this simulation's sessions: not a real subject's in the same run. A
+            // simulated subject's plan index is its number, or in a study with groups its
+            // place in its group.
+            let Some(index) = subject_number(&m.subject) else {
+                continue;
+            };
             if m.session != 1
                 || m.observer_seed != Some(options.seed)
-                || m.subject != subject_id(index)
+                || (m.group.is_none() && m.subject_index != index)
             {
                 continue;
             }
@@ -231,8 +241,14 @@ fn simulate_into_database(
     Ok(())
 }
 
-/// The manifest of a new simulated session.
-fn new_manifest(study: &StudyFile, seed: u64, subject: &Subject) -> SessionManifest {
+/// The manifest of a new simulated session of `group` with plan index `plan_index`.
+fn new_manifest(
+    study: &StudyFile,
+    seed: u64,
+    subject: &Subject,
+    group: Option<String>,
+    plan_index: u32,
+) -> SessionManifest {
     let def = &study.definition;
     let mut m = session::new_manifest(
         def,
@@ -240,9 +256,10 @@ fn new_manifest(study: &StudyFile, seed: u64, subject: &Subject) -> SessionManif
             study_hash: &study.hash,
             manifest_hash: &study.manifest_hash,
             subject: subject.id.clone(),
-            subject_index: subject.index,
+            subject_index: plan_index,
             session: 1,
             observer_seed: Some(seed),
+            group,
         },
     );
     m.subject_fields = def
@@ -273,9 +290,17 @@ fn run_subject(
     let path = store.session_path(&subject.id, 1);
     let at = || format!("session {}", path.display());
     let def = &study.definition;
-    let fresh = new_manifest(study, options.seed, subject);
+    // In a study with between-subject groups the store assigns the group (the one with the
+    // fewest sessions), and the plan index is the session's place in it, so each group's
+    // Latin square fills in turn; the observer stays the subject's.
+    let own_index = def.design.groups.is_empty().then_some(subject.index);
+    let (group, plan_index) = session::retry_outage(options.patience, report, || {
+        session::assign_group(def, &mut *store, &subject.id, 1, None, own_index)
+    })
+    .context(at)?;
+    let fresh = new_manifest(study, options.seed, subject, group, plan_index);
     let opened = session::retry_outage(options.patience, report, || {
-        Recorder::open(def, subject.index, &mut *store, resume, fresh.clone())
+        Recorder::open(def, plan_index, &mut *store, resume, fresh.clone())
     })
     .context(at)?;
     let mut rec = match opened {

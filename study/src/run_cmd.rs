@@ -82,6 +82,12 @@ pub struct RunArgs {
     /// Give the same index to `--resume`.
     #[arg(long)]
     pub subject_index: Option<u32>,
+    /// The between-subject group of a study with `[[design.groups]]`. Default: the store
+    /// assigns the group with the fewest sessions among those under their quota (the same
+    /// on every station), and the session's place in it is its subject index. A session keeps
+    /// its group when resumed.
+    #[arg(long)]
+    pub group: Option<String>,
     /// What was measured of the study's `[viewing]` conditions before this session.
     #[command(flatten)]
     pub measured: MeasuredArgs,
@@ -377,9 +383,17 @@ fn open_session(
     store: &mut dyn Store,
     subject: &str,
 ) -> anyhow::Result<Option<Box<Recorder>>> {
-    let index = args
-        .subject_index
-        .unwrap_or_else(|| session::subject_index(subject, args.session));
+    let (group, index) = session::assign_group(
+        &file.definition,
+        store,
+        subject,
+        args.session,
+        args.group.as_deref(),
+        args.subject_index,
+    )?;
+    if let Some(g) = &group {
+        println!("{subject} session {}: group {g}", args.session);
+    }
     let fresh = session::new_manifest(
         &file.definition,
         SessionOf {
@@ -389,6 +403,7 @@ fn open_session(
             subject_index: index,
             session: args.session,
             observer_seed: None,
+            group,
         },
     );
     let dir = store.session_path(subject, args.session);

@@ -107,11 +107,35 @@ pub fn preflight(file: &StudyFile) -> anyhow::Result<lab::preflight::Checked> {
     Ok(checked?)
 }
 
+/// The trials of a session of between-subject group `group`.
+fn group_trials(study: &StudyDefinition, group: &str) -> Option<u32> {
+    let of_group = study.for_group(Some(group)).ok()?;
+    protocols::texts::planned_trials(&of_group).exact()
+}
+
 /// Counterbalancing: the order of the conditions and where the reference goes.
 fn describe_design(text: &mut String, study: &StudyDefinition) -> std::fmt::Result {
     use protocols::study::{ConditionOrder, ReferencePlacement};
     use std::fmt::Write as _;
-    if study.design.order == ConditionOrder::LatinSquare {
+    for g in &study.design.groups {
+        let quota = g
+            .quota
+            .map_or_else(|| "no quota".into(), |q| format!("quota {q}"));
+        let trials = group_trials(study, &g.name).unwrap_or(0);
+        writeln!(
+            text,
+            "  group {}: {} condition(s), {trials} trials per session, {quota}",
+            g.name,
+            g.stimuli.len()
+        )?;
+    }
+    if study.design.order == ConditionOrder::LatinSquare && !study.design.groups.is_empty() {
+        writeln!(
+            text,
+            "  order: balanced Latin square (Williams) over each group's conditions: a \
+             session's place in its group takes that row"
+        )?;
+    } else if study.design.order == ConditionOrder::LatinSquare {
         let rows = protocols::design::williams_rows(study.conditions.len());
         writeln!(
             text,
@@ -160,13 +184,25 @@ fn describe_ratings(text: &mut String, study: &StudyDefinition) -> std::fmt::Res
     let n = study.familiarization.len()
         + study.conditions.len()
         + study.session.hidden_repeats as usize;
-    writeln!(
-        text,
-        "  trials per session: {n} ({} familiarization, {} conditions, {} hidden repeats)",
-        study.familiarization.len(),
-        study.conditions.len(),
-        study.session.hidden_repeats
-    )?;
+    if study.design.groups.is_empty() {
+        writeln!(
+            text,
+            "  trials per session: {n} ({} familiarization, {} conditions, {} hidden repeats)",
+            study.familiarization.len(),
+            study.conditions.len(),
+            study.session.hidden_repeats
+        )?;
+    } else {
+        writeln!(
+            text,
+            "  conditions: {} in {} between-subject groups (each session sees its group's; \
+             {} familiarization, {} hidden repeats)",
+            study.conditions.len(),
+            study.design.groups.len(),
+            study.familiarization.len(),
+            study.session.hidden_repeats
+        )?;
+    }
     let hidden = study
         .conditions
         .iter()
@@ -178,6 +214,18 @@ fn describe_ratings(text: &mut String, study: &StudyDefinition) -> std::fmt::Res
             "  hidden references: {hidden} (ACR-HR: DMOS = test - hidden reference + 5)"
         )?;
     }
+    // A session of a between-subject group shows its group's trials: the largest group's.
+    let n = if study.design.groups.is_empty() {
+        n
+    } else {
+        study
+            .design
+            .groups
+            .iter()
+            .filter_map(|g| group_trials(study, &g.name))
+            .max()
+            .map_or(n, |t| t as usize)
+    };
     let est_min = n as f64 * study.trial_presentation_ms() as f64 / 60_000.0;
     writeln!(
         text,

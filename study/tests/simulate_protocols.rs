@@ -256,3 +256,130 @@ fn simulate_one_subject_by_id() {
         );
     }
 }
+
+/// `examples/groups.toml` (two between-subject groups of 12): simulated subjects are assigned
+/// alternately, each session's rows are its group's conditions only (its place in the group
+/// picks its Latin-square row), the report's integrity check replays every session over its
+/// group and its Method section counts the groups' sessions.
+#[test]
+fn between_subject_groups_are_assigned_simulated_and_reported() {
+    let out = scratch("groups");
+    let example = examples().join("groups.toml");
+    let simulate = |subjects: &str| {
+        study()
+            .arg("simulate")
+            .arg(&example)
+            .args(["--subjects", subjects, "--seed", "5", "-o"])
+            .arg(&out)
+            .output()
+            .unwrap()
+    };
+    let st = simulate("24");
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    let (_, sessions) = results::read_results_dir(&out).unwrap();
+    assert_eq!(sessions.len(), 24);
+    let mut places = std::collections::BTreeMap::<String, Vec<u32>>::new();
+    for s in &sessions {
+        let m = &s.manifest;
+        let group = m.group.clone().expect("every session has a group");
+        // S001 (index 0) to the first group, S002 to the second, ...
+        let number: u32 = m.subject[1..].parse().unwrap();
+        let first = if number % 2 == 1 {
+            "perceptual"
+        } else {
+            "standard"
+        };
+        assert_eq!(group, first, "{}", m.subject);
+        places
+            .entry(group.clone())
+            .or_default()
+            .push(m.subject_index);
+        let codec = format!("wavelet-{group}/");
+        for r in s
+            .trials
+            .records
+            .iter()
+            .filter(|r| r.trial.block == Block::Test)
+        {
+            assert!(
+                r.trial.stimulus.contains(&codec),
+                "{}: {}",
+                m.subject,
+                r.trial.stimulus
+            );
+        }
+        let tests = s
+            .trials
+            .records
+            .iter()
+            .filter(|r| r.trial.block == Block::Test)
+            .count();
+        assert_eq!(tests, 4, "{}", m.subject);
+    }
+    for (g, mut ks) in places {
+        ks.sort_unstable();
+        assert_eq!(ks, (0..12).collect::<Vec<u32>>(), "group {g}");
+    }
+    let groups_csv = std::fs::read_to_string(out.join("groups.csv")).unwrap();
+    assert_eq!(groups_csv.lines().count(), 25, "{groups_csv}");
+
+    let report = out.with_extension("report");
+    let st = study()
+        .arg("report")
+        .arg(&out)
+        .args(["--no-png", "-o"])
+        .arg(&report)
+        .output()
+        .unwrap();
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    let text = std::fs::read_to_string(report.join("report.md")).unwrap();
+    assert!(
+        text.contains(
+            "Between-subject groups, each session assigned one by the results store (the group \
+             with the fewest sessions first) and shown its conditions and the catch trials: \
+             perceptual (4 condition(s), 12 session(s) of a quota of 12); standard (4 \
+             condition(s), 12 session(s) of a quota of 12)."
+        ),
+        "{text}"
+    );
+}
+
+/// `examples/groups.toml` with quotas of 2: the fifth simulated subject is refused, every
+/// group being full, before anything of it is written.
+#[test]
+fn a_study_whose_groups_are_full_refuses_the_next_subject() {
+    let example = examples().join("groups.toml");
+    let small = scratch("groups-quota");
+    std::fs::create_dir_all(&small).unwrap();
+    let text = std::fs::read_to_string(&example)
+        .unwrap()
+        .replace("quota = 12", "quota = 2")
+        .replace(
+            "stimuli = \"stimuli.json\"",
+            &format!("stimuli = {:?}", examples().join("stimuli.json")),
+        );
+    std::fs::write(small.join("groups.toml"), text).unwrap();
+    let results = small.join("results");
+    let st = study()
+        .arg("simulate")
+        .arg(small.join("groups.toml"))
+        .args(["--subjects", "5", "--seed", "5", "-o"])
+        .arg(&results)
+        .output()
+        .unwrap();
+    assert!(!st.status.success());
+    let err = String::from_utf8_lossy(&st.stderr);
+    assert!(
+        err.contains("every group has its quota of sessions (perceptual 2/2, standard 2/2)"),
+        "{err}"
+    );
+    assert!(results.join("S004_s1").is_dir() && !results.join("S005_s1").exists());
+}

@@ -302,6 +302,15 @@ impl App {
                 study.definition.protocol
             )));
         }
+        // Participants are spread over plan groups here ([crowdsourcing] groups and quota).
+        if !study.definition.design.groups.is_empty() {
+            return Err(WebError::Refused(format!(
+                "{}: [[design.groups]] (between-subject groups) are assigned by study run and \
+                 study simulate; study serve spreads participants over [crowdsourcing] groups \
+                 with a quota",
+                options.study.display()
+            )));
+        }
         lab::preflight::verify(&study, &|_, _| {})?;
         for note in lab::results_dir::open_for_subjects(&options.output, &study, false)? {
             eprintln!("{note}");
@@ -471,6 +480,7 @@ impl App {
                 subject_index: Self::subject_index(p),
                 session: 1,
                 observer_seed: None,
+                group: None,
             },
         )
     }

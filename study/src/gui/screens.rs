@@ -155,7 +155,11 @@ impl StudyUi {
                 (f.clone(), v)
             })
             .collect();
-        let planned = planned_trials(&study);
+        // A between-subject group's session has its group's trials (the recorder opened it
+        // with the group, so the group is the study's).
+        let planned = study
+            .for_group(recorder.manifest().group.as_deref())
+            .map_or_else(|_| planned_trials(&study), |s| planned_trials(&s));
         // A study with viewing conditions asks the experimenter to confirm them first (once:
         // a resumed session that confirmed them goes straight to the welcome).
         let screen = match (&study.viewing, &recorder.manifest().viewing) {

@@ -132,6 +132,7 @@ fn fresh_manifest(study: &StudyDefinition) -> results::SessionManifest {
             subject_index: 0,
             session: 1,
             observer_seed: None,
+            group: None,
         },
     )
 }
