@@ -10,6 +10,7 @@ use protocols::{Answer, Block, Protocol, TrialRecord};
 use results::SessionResults;
 use results::store::{SESSION_FILE, TRIALS_FILE};
 
+use crate::bradley_terry::PairChoice;
 use crate::crowd::CrowdDesign;
 use crate::descriptive::Rating;
 use crate::dmos::DscqsPair;
@@ -344,6 +345,37 @@ fn convert_record(
                 subject,
                 condition,
                 score: test_score,
+            });
+        }
+        Protocol::PairComparison => {
+            let t = &record.trial;
+            let choice = match record.response.answer {
+                Answer::Choice(p) if p.fits(t.arrangement) => p,
+                other => {
+                    return Err(bad(
+                        path,
+                        index,
+                        "response",
+                        format!(
+                            "a pair_comparison trial needs a position of arrangement {}, got \
+                             {other:?}",
+                            t.arrangement
+                        ),
+                    ));
+                }
+            };
+            // The `reference` column holds the pair's other test stimulus, shown at the
+            // reference position.
+            let (a, b) = (stimuli.id(&t.stimulus), stimuli.id(&t.reference));
+            let (winner, loser) = if choice == t.reference_position {
+                (b, a)
+            } else {
+                (a, b)
+            };
+            data.pair_choices.push(PairChoice {
+                subject,
+                winner,
+                loser,
             });
         }
         Protocol::Staircase => {

@@ -509,10 +509,12 @@ mod tests {
                             a: end,
                             b: d.scale.max,
                         },
-                        Protocol::Staircase if k % 3 == 2 => {
+                        Protocol::Staircase | Protocol::PairComparison if k % 3 == 2 => {
                             Answer::Choice(flip(trial.reference_position))
                         }
-                        Protocol::Staircase => Answer::Choice(trial.reference_position),
+                        Protocol::Staircase | Protocol::PairComparison => {
+                            Answer::Choice(trial.reference_position)
+                        }
                     };
                     let response = Response {
                         answer,

@@ -31,6 +31,9 @@ pub fn grade_labels(scale: &RatingScale) -> [&'static str; 5] {
 /// The 2AFC question of thesis ch. 5.
 pub const AFC_QUESTION: &str = "Which motion looks more natural?";
 
+/// The question of a pair comparison (P.910 PC): which of two versions is better.
+pub const PC_QUESTION: &str = "Which motion looks better?";
+
 /// Shown after an answer was logged, over the blank gap before the next trial.
 pub const ANSWER_RECORDED: &str = "Answer recorded";
 
@@ -170,6 +173,18 @@ pub fn default_instructions(study: &StudyDefinition) -> String {
                  will meet."
             )
         }
+        Protocol::PairComparison => {
+            let (shows, keys) = if p.arrangement == Arrangement::Sequential {
+                ("one after the other, with a grey screen between them", "the 1 or 2 key")
+            } else {
+                ("side by side", "the Left or Right arrow key")
+            };
+            format!(
+                "Each trial shows two versions of the same motion {shows}. Neither is the \
+                 original. Choose the one that looks better with {keys} (or click). Answer even \
+                 when you are unsure."
+            )
+        }
         Protocol::Staircase => "Each trial shows two motions side by side. Choose the one that \
                                 looks more natural with the Left or Right arrow key (or click). \
                                 Answer even when you are unsure."
@@ -238,6 +253,9 @@ pub fn planned_trials(study: &StudyDefinition) -> Planned {
             (study.familiarization.len()
                 + study.conditions.len()
                 + study.session.hidden_repeats as usize) as u32,
+        ),
+        Protocol::PairComparison => Planned::Exactly(
+            (study.pairs().len() + study.session.hidden_repeats as usize) as u32,
         ),
         Protocol::Staircase => study
             .staircase

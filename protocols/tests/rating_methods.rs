@@ -119,7 +119,7 @@ fn only_acr_rates_references_and_every_misfit_key_is_listed_at_once() {
         has(
             &got,
             "conditions.stimuli[1]",
-            "only an ACR study rates references"
+            "only an ACR or a pair comparison study shows references"
         ),
         "{got:#?}"
     );

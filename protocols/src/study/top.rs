@@ -115,6 +115,20 @@ pub(super) fn parse_table(
                 );
             }
         }
+        Some(Protocol::PairComparison) => {
+            pair_comparison_rules(t, &familiarization_spec, scale_t.is_some(), cx);
+            (conditions, _) = rating_sections(
+                t,
+                &session,
+                FamSpec::None,
+                manifest.as_ref(),
+                References::of(Protocol::PairComparison),
+                cx,
+            );
+            if manifest.is_some() {
+                check_pairs(&conditions, session.hidden_repeats, cx);
+            }
+        }
         Some(Protocol::Staircase) => {
             staircase = staircase_sections(
                 t,
@@ -308,6 +322,66 @@ fn rating_sections(
         );
     }
     (conditions, familiarization)
+}
+
+/// What a pair comparison (P.910 PC) has no use for: a rating scale (the subject picks one
+/// of two), familiarization trials (not offered yet: the test pairs start at once), and a
+/// crowd `[scene]` (rated scenes only).
+fn pair_comparison_rules(t: &Table, familiarization: &FamSpec, has_scale: bool, cx: &mut Ctx) {
+    if has_scale {
+        cx.err(
+            "scale",
+            "a pair comparison asks which of two motions is better, not for a rating: remove \
+             [scale]",
+        );
+    }
+    if !matches!(familiarization, FamSpec::None) {
+        cx.err(
+            "session.familiarization",
+            "familiarization trials are not offered in a pair comparison study (its pairs start \
+             at once); remove familiarization",
+        );
+    }
+    if t.contains_key("scene") {
+        cx.err(
+            "scene",
+            "crowd scenes are rated (protocol \"dscqs\" or \"mos\"), not compared in pairs",
+        );
+    }
+}
+
+/// A pair comparison compares conditions of the same clip: every clip needs two of them, the
+/// pairs may be at most [`super::MAX_PAIRS`], and the hidden repeats repeat pairs.
+fn check_pairs(conditions: &[Condition], hidden_repeats: u32, cx: &mut Ctx) {
+    for members in super::conditions_by_clip(conditions) {
+        if members.len() < 2
+            && let Some(c) = members.first().and_then(|&i| conditions.get(i))
+        {
+            cx.err(
+                "conditions",
+                format!(
+                    "{:?} is the only condition of its clip (reference {:?}): a pair comparison \
+                     compares two versions of the same clip, so each clip needs at least 2",
+                    c.stimulus, c.reference
+                ),
+            );
+        }
+    }
+    let pairs = super::pair_count(conditions);
+    if pairs > super::MAX_PAIRS {
+        cx.err(
+            "conditions",
+            format!(
+                "{pairs} pairs (every pair of a clip's conditions) is over the limit of {}",
+                super::MAX_PAIRS
+            ),
+        );
+    } else if pairs > 0 && hidden_repeats as usize > pairs && hidden_repeats as usize <= conditions.len() {
+        cx.err(
+            "session.hidden_repeats",
+            format!("{hidden_repeats} repeats but only {pairs} pairs"),
+        );
+    }
 }
 
 /// The sections of a staircase study: none of the settings only rating studies have
