@@ -220,7 +220,7 @@ fn one_writer_per_session_and_rows_read_back_as_written(server: &ScratchServer) 
 }
 
 /// Records of every kind (a DSCQS pair, a 2AFC choice of a live staircase with its encoding
-/// and frame timing, text needing quotes) come back from a report's read exactly as written;
+/// and frame timing, a pair comparison's choice, text needing quotes) come back from a report's read exactly as written;
 /// a value the database holds that no record can have is refused, naming the session's
 /// trials, the row's line in an exported `trials.csv`, the column and the reason.
 fn every_kind_of_row_read_back_and_bad_values_named(server: &ScratchServer) {
@@ -263,7 +263,22 @@ fn every_kind_of_row_read_back_and_bad_values_named(server: &ScratchServer) {
         frames_shown: 240,
         interval_sd_ms: 0.375,
     });
-    let written = [pair, choice, record("S04", 2, 4.5)];
+    // A pair comparison's choice: the `reference` column is the pair's other test stimulus.
+    let mut preferred = record("S04", 3, 0.0);
+    preferred.protocol = Protocol::PairComparison;
+    preferred.trial.condition = "walk/x/cr3 vs walk/y/cr3".into();
+    preferred.trial.reference = "walk/y/cr3".into();
+    preferred.trial.level = None;
+    preferred.trial.reference_position = Position::Right;
+    preferred.response.answer = Answer::Choice(Position::Left);
+    preferred.outcome = Outcome {
+        score: 1.0,
+        score_reference: None,
+        score_test: None,
+        correct: None,
+        reversal: None,
+    };
+    let written = [pair, choice, record("S04", 2, 4.5), preferred];
     for r in &written {
         writer.append(r).unwrap();
     }
@@ -296,11 +311,11 @@ fn every_kind_of_row_read_back_and_bad_values_named(server: &ScratchServer) {
             "replays: -1 is out of range",
         ),
         (
-            "UPDATE study_trials SET row_number = 5 WHERE row_number = 2",
-            "UPDATE study_trials SET row_number = 2 WHERE row_number = 5",
-            4,
+            "UPDATE study_trials SET row_number = 5 WHERE row_number = 3",
+            "UPDATE study_trials SET row_number = 3 WHERE row_number = 5",
+            5,
             1,
-            "row 5 follows row 1",
+            "row 5 follows row 2",
         ),
     ] {
         admin.execute(sql, &[]).unwrap();

@@ -76,6 +76,25 @@ fn record(i: u32, protocol: Protocol, rng: &mut StudyRng) -> TrialRecord {
             Some(0.024 - 0.002 * f64::from(i % 7)),
             Some(i % 3),
         ),
+        // The `reference` column holds the pair's other test stimulus; score 1: the
+        // `stimulus` column's was preferred.
+        Protocol::PairComparison => (
+            Arrangement::SideBySide,
+            Answer::Choice(if rng.coin() {
+                Position::Left
+            } else {
+                Position::Right
+            }),
+            Outcome {
+                score: 1.0,
+                score_reference: None,
+                score_test: None,
+                correct: None,
+                reversal: None,
+            },
+            None,
+            None,
+        ),
     };
     let reference_position = match (protocol, arrangement) {
         (_, Arrangement::SideBySide) => Position::Left,
@@ -169,13 +188,14 @@ fn manifest(trials: u32) -> SessionManifest {
 proptest! {
     #![proptest_config(ProptestConfig { cases: 200, ..ProptestConfig::default() })]
     #[test]
-    fn rows_round_trip(seed in any::<u64>(), which in 0_usize..5, n in 1_u32..20) {
+    fn rows_round_trip(seed in any::<u64>(), which in 0_usize..6, n in 1_u32..20) {
         let protocol = [
             Protocol::Mos,
             Protocol::Dscqs,
             Protocol::Staircase,
             Protocol::Acr,
             Protocol::Dcr,
+            Protocol::PairComparison,
         ][which];
         let mut rng = StudyRng::new(seed, &[]);
         let recs: Vec<TrialRecord> = (0..n).map(|i| record(i, protocol, &mut rng)).collect();
@@ -393,6 +413,7 @@ fn mutated_results_files_give_errors_never_panics() {
         Protocol::Staircase,
         Protocol::Acr,
         Protocol::Dcr,
+        Protocol::PairComparison,
     ]
     .into_iter()
     .cycle()
