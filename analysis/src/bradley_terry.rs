@@ -356,7 +356,9 @@ pub struct PairComparisonAnalysis {
 /// The anchor-first order of items: the original, then by ratio, then by method.
 fn item_order(a: &BtItem, b: &BtItem) -> std::cmp::Ordering {
     let cr = |i: &BtItem| i.compression_ratio.unwrap_or(f64::NEG_INFINITY);
-    cr(a).total_cmp(&cr(b)).then_with(|| a.method.cmp(&b.method))
+    cr(a)
+        .total_cmp(&cr(b))
+        .then_with(|| a.method.cmp(&b.method))
 }
 
 /// Fits the choices of every clip, and of all clips pooled (items: method and ratio), with

@@ -165,7 +165,10 @@ fn design_line(study: &StudyDefinition) -> String {
     let mut design = Vec::new();
     let pc = study.protocol == Protocol::PairComparison;
     let (items, n) = if pc {
-        ("pairs (every pair of a clip's conditions)", study.pairs().len())
+        (
+            "pairs (every pair of a clip's conditions)",
+            study.pairs().len(),
+        )
     } else {
         ("conditions", study.conditions.len())
     };

@@ -175,7 +175,10 @@ pub fn default_instructions(study: &StudyDefinition) -> String {
         }
         Protocol::PairComparison => {
             let (shows, keys) = if p.arrangement == Arrangement::Sequential {
-                ("one after the other, with a grey screen between them", "the 1 or 2 key")
+                (
+                    "one after the other, with a grey screen between them",
+                    "the 1 or 2 key",
+                )
             } else {
                 ("side by side", "the Left or Right arrow key")
             };
@@ -254,9 +257,9 @@ pub fn planned_trials(study: &StudyDefinition) -> Planned {
                 + study.conditions.len()
                 + study.session.hidden_repeats as usize) as u32,
         ),
-        Protocol::PairComparison => Planned::Exactly(
-            (study.pairs().len() + study.session.hidden_repeats as usize) as u32,
-        ),
+        Protocol::PairComparison => {
+            Planned::Exactly((study.pairs().len() + study.session.hidden_repeats as usize) as u32)
+        }
         Protocol::Staircase => study
             .staircase
             .as_ref()

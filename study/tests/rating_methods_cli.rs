@@ -15,10 +15,10 @@
 //! `$BAYES_PYTHON` (pinned in `scripts/reference/bayes-requirements.txt`).
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
 
-mod common;
 #[path = "../../scripts/golden/bayes_python.rs"]
 #[allow(dead_code, reason = "this file runs its script itself")]
 mod bayes_python;
+mod common;
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -260,10 +260,9 @@ fn pair_comparison_report_equals_choix() {
                 "seed {seed}, {clip}"
             );
             // The win matrix as the report writes it.
-            let wins = std::fs::read_to_string(
-                report.join(format!("tables/pc_wins_{}.csv", k + 1)),
-            )
-            .unwrap();
+            let wins =
+                std::fs::read_to_string(report.join(format!("tables/pc_wins_{}.csv", k + 1)))
+                    .unwrap();
             let counts: Vec<Vec<u64>> = wins
                 .lines()
                 .skip(1)

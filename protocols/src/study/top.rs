@@ -376,7 +376,10 @@ fn check_pairs(conditions: &[Condition], hidden_repeats: u32, cx: &mut Ctx) {
                 super::MAX_PAIRS
             ),
         );
-    } else if pairs > 0 && hidden_repeats as usize > pairs && hidden_repeats as usize <= conditions.len() {
+    } else if pairs > 0
+        && hidden_repeats as usize > pairs
+        && hidden_repeats as usize <= conditions.len()
+    {
         cx.err(
             "session.hidden_repeats",
             format!("{hidden_repeats} repeats but only {pairs} pairs"),
