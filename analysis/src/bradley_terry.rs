@@ -630,6 +630,49 @@ mod tests {
         assert!(e.se[0] > 0.0 && e.se[1] > 0.0 && e.se[2] == 0.0);
     }
 
+    /// The Fisher-information interval covers the true scale value at about its nominal
+    /// rate: 600 simulated studies of four items with known Bradley-Terry values (every pair
+    /// compared 30 times), each from its own seed, 1,800 intervals at 95 %. The count must lie
+    /// within 4 binomial standard errors of 95 % (1,710 ± 37).
+    #[test]
+    fn fisher_intervals_cover_the_true_values_at_their_nominal_rate() {
+        let truth: [f64; 4] = [0.0, -0.5, 0.4, -1.2];
+        let (mut covered, mut intervals, mut unfit) = (0_u32, 0_u32, 0_u32);
+        for seed in 0..600_u64 {
+            let mut rng = protocols::rng::StudyRng::new(seed, &[0x6274]);
+            let mut m = WinMatrix::new(4);
+            for i in 0..4 {
+                for j in i + 1..4 {
+                    let p = 1.0 / (1.0 + (truth[j] - truth[i]).exp());
+                    for _ in 0..30 {
+                        if rng.unit_f64() < p {
+                            m.add(i, j);
+                        } else {
+                            m.add(j, i);
+                        }
+                    }
+                }
+            }
+            match fit(&m, 0, Confidence::default()).unwrap() {
+                BtOutcome::Fitted(e) => {
+                    for i in 1..4 {
+                        intervals += 1;
+                        covered += u32::from(e.lower[i] <= truth[i] && truth[i] <= e.upper[i]);
+                    }
+                }
+                BtOutcome::NoFiniteEstimate { .. } => unfit += 1,
+            }
+        }
+        assert_eq!(unfit, 0);
+        eprintln!("Bradley-Terry Fisher intervals: {covered} of {intervals} covered");
+        let expected = 0.95 * f64::from(intervals);
+        let sd = (f64::from(intervals) * 0.95 * 0.05).sqrt();
+        assert!(
+            (f64::from(covered) - expected).abs() <= 4.0 * sd,
+            "{covered} of {intervals} covered"
+        );
+    }
+
     #[test]
     fn an_item_that_never_lost_has_no_finite_scale_value() {
         let mut m = WinMatrix::new(3);
