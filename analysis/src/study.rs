@@ -416,16 +416,19 @@ pub fn analyze(data: &StudyData, options: &ReportOptions) -> Result<StudyAnalysi
         jnd,
         bayes: (!data.staircases.is_empty()).then(|| bayesian_fits(data, options)),
         subject_model: subject_model(data)?,
-        pair_comparison: if data.pair_choices.is_empty() {
-            None
-        } else {
-            Some(analyze_pairs(
-                &data.conditions,
-                &data.pair_choices,
-                options.confidence,
-            )?)
-        },
+        pair_comparison: pair_comparison(data, options)?,
     })
+}
+
+/// The Bradley-Terry fits of a pair comparison study's choices (none without choices).
+fn pair_comparison(
+    data: &StudyData,
+    options: &ReportOptions,
+) -> Result<Option<PairComparisonAnalysis>, AnalysisError> {
+    if data.pair_choices.is_empty() {
+        return Ok(None);
+    }
+    analyze_pairs(&data.conditions, &data.pair_choices, options.confidence).map(Some)
 }
 
 /// The maximum-likelihood subject model of a rating study (not DSCQS) of at most

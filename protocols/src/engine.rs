@@ -525,9 +525,6 @@ impl Session {
                     reversal,
                 }
             }
-            (Protocol::Staircase, _) => {
-                return Err(wrong("a choice of a position of this arrangement"));
-            }
             (Protocol::PairComparison, Answer::Choice(p)) if p.fits(trial.arrangement) => {
                 // The `reference` column holds the pair's other test stimulus, shown at the
                 // reference position: picking the other position prefers `stimulus`.
@@ -540,7 +537,7 @@ impl Session {
                     reversal: None,
                 }
             }
-            (Protocol::PairComparison, _) => {
+            (Protocol::Staircase | Protocol::PairComparison, _) => {
                 return Err(wrong("a choice of a position of this arrangement"));
             }
         };

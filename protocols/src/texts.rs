@@ -173,26 +173,29 @@ pub fn default_instructions(study: &StudyDefinition) -> String {
                  will meet."
             )
         }
-        Protocol::PairComparison => {
-            let (shows, keys) = if p.arrangement == Arrangement::Sequential {
-                (
-                    "one after the other, with a grey screen between them",
-                    "the 1 or 2 key",
-                )
-            } else {
-                ("side by side", "the Left or Right arrow key")
-            };
-            format!(
-                "Each trial shows two versions of the same motion {shows}. Neither is the \
-                 original. Choose the one that looks better with {keys} (or click). Answer even \
-                 when you are unsure."
-            )
-        }
+        Protocol::PairComparison => pair_comparison_instructions(p.arrangement),
         Protocol::Staircase => "Each trial shows two motions side by side. Choose the one that \
                                 looks more natural with the Left or Right arrow key (or click). \
                                 Answer even when you are unsure."
             .to_string(),
     }
+}
+
+/// The default instructions of a pair comparison shown in `arrangement`.
+fn pair_comparison_instructions(arrangement: Arrangement) -> String {
+    let (shows, keys) = if arrangement == Arrangement::Sequential {
+        (
+            "one after the other, with a grey screen between them",
+            "the 1 or 2 key",
+        )
+    } else {
+        ("side by side", "the Left or Right arrow key")
+    };
+    format!(
+        "Each trial shows two versions of the same motion {shows}. Neither is the original. \
+         Choose the one that looks better with {keys} (or click). Answer even when you are \
+         unsure."
+    )
 }
 
 /// What the two stimuli of a DSCQS trial are called on screen: A and B (BT.500's A B A B),

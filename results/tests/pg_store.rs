@@ -219,6 +219,26 @@ fn one_writer_per_session_and_rows_read_back_as_written(server: &ScratchServer) 
     assert_eq!(read[0].trials.records.len(), 3);
 }
 
+/// A pair comparison's choice (row 3 of session S04): the `reference` column is the pair's
+/// other test stimulus, and the `stimulus` column's version was preferred.
+fn pair_comparison_row() -> TrialRecord {
+    let mut preferred = record("S04", 3, 0.0);
+    preferred.protocol = Protocol::PairComparison;
+    preferred.trial.condition = "walk/x/cr3 vs walk/y/cr3".into();
+    preferred.trial.reference = "walk/y/cr3".into();
+    preferred.trial.level = None;
+    preferred.trial.reference_position = Position::Right;
+    preferred.response.answer = Answer::Choice(Position::Left);
+    preferred.outcome = Outcome {
+        score: 1.0,
+        score_reference: None,
+        score_test: None,
+        correct: None,
+        reversal: None,
+    };
+    preferred
+}
+
 /// Records of every kind (a DSCQS pair, a 2AFC choice of a live staircase with its encoding
 /// and frame timing, a pair comparison's choice, text needing quotes) come back from a report's read exactly as written;
 /// a value the database holds that no record can have is refused, naming the session's
@@ -263,22 +283,7 @@ fn every_kind_of_row_read_back_and_bad_values_named(server: &ScratchServer) {
         frames_shown: 240,
         interval_sd_ms: 0.375,
     });
-    // A pair comparison's choice: the `reference` column is the pair's other test stimulus.
-    let mut preferred = record("S04", 3, 0.0);
-    preferred.protocol = Protocol::PairComparison;
-    preferred.trial.condition = "walk/x/cr3 vs walk/y/cr3".into();
-    preferred.trial.reference = "walk/y/cr3".into();
-    preferred.trial.level = None;
-    preferred.trial.reference_position = Position::Right;
-    preferred.response.answer = Answer::Choice(Position::Left);
-    preferred.outcome = Outcome {
-        score: 1.0,
-        score_reference: None,
-        score_test: None,
-        correct: None,
-        reversal: None,
-    };
-    let written = [pair, choice, record("S04", 2, 4.5), preferred];
+    let written = [pair, choice, record("S04", 2, 4.5), pair_comparison_row()];
     for r in &written {
         writer.append(r).unwrap();
     }

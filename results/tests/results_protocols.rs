@@ -28,6 +28,36 @@ fn scratch(name: &str) -> PathBuf {
     d
 }
 
+/// A pair comparison row's arrangement, answer and outcome: the `reference` column holds the
+/// pair's other test stimulus; score 1: the `stimulus` column's version was preferred.
+fn pair_comparison_parts(
+    rng: &mut StudyRng,
+) -> (Arrangement, Answer, Outcome, Option<f64>, Option<u32>) {
+    let side = if rng.coin() {
+        Position::Left
+    } else {
+        Position::Right
+    };
+    let outcome = Outcome {
+        score: 1.0,
+        score_reference: None,
+        score_test: None,
+        correct: None,
+        reversal: None,
+    };
+    (
+        Arrangement::SideBySide,
+        Answer::Choice(side),
+        outcome,
+        None,
+        None,
+    )
+}
+
+#[expect(
+    clippy::too_many_lines,
+    reason = "one record of every protocol, each arm its own shape"
+)]
 fn record(i: u32, protocol: Protocol, rng: &mut StudyRng) -> TrialRecord {
     let (arrangement, answer, outcome, level, staircase) = match protocol {
         Protocol::Mos | Protocol::Acr | Protocol::Dcr => (
@@ -76,25 +106,7 @@ fn record(i: u32, protocol: Protocol, rng: &mut StudyRng) -> TrialRecord {
             Some(0.024 - 0.002 * f64::from(i % 7)),
             Some(i % 3),
         ),
-        // The `reference` column holds the pair's other test stimulus; score 1: the
-        // `stimulus` column's was preferred.
-        Protocol::PairComparison => (
-            Arrangement::SideBySide,
-            Answer::Choice(if rng.coin() {
-                Position::Left
-            } else {
-                Position::Right
-            }),
-            Outcome {
-                score: 1.0,
-                score_reference: None,
-                score_test: None,
-                correct: None,
-                reversal: None,
-            },
-            None,
-            None,
-        ),
+        Protocol::PairComparison => pair_comparison_parts(rng),
     };
     let reference_position = match (protocol, arrangement) {
         (_, Arrangement::SideBySide) => Position::Left,

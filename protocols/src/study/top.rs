@@ -116,18 +116,8 @@ pub(super) fn parse_table(
             }
         }
         Some(Protocol::PairComparison) => {
-            pair_comparison_rules(t, &familiarization_spec, scale_t.is_some(), cx);
-            (conditions, _) = rating_sections(
-                t,
-                &session,
-                FamSpec::None,
-                manifest.as_ref(),
-                References::of(Protocol::PairComparison),
-                cx,
-            );
-            if manifest.is_some() {
-                check_pairs(&conditions, session.hidden_repeats, cx);
-            }
+            let m = manifest.as_ref();
+            conditions = pc_sections(t, &session, &familiarization_spec, scale_t, m, cx);
         }
         Some(Protocol::Staircase) => {
             staircase = staircase_sections(
@@ -140,12 +130,6 @@ pub(super) fn parse_table(
                 cx,
             );
             check_live_metric(t, &simulation, cx);
-            if t.contains_key("scene") {
-                cx.err(
-                    "scene",
-                    "crowd scenes are rated (protocol \"dscqs\" or \"mos\"), not a staircase",
-                );
-            }
         }
         None => {}
     }
@@ -350,6 +334,31 @@ fn pair_comparison_rules(t: &Table, familiarization: &FamSpec, has_scale: bool, 
     }
 }
 
+/// The conditions of a pair comparison, checked as a rating study's (no familiarization) and
+/// for pairs, and what a pair comparison has no use for ([`pair_comparison_rules`]).
+fn pc_sections(
+    t: &Table,
+    session: &SessionSettings,
+    familiarization: &FamSpec,
+    scale: Option<&Table>,
+    manifest: Option<&StimulusManifest>,
+    cx: &mut Ctx,
+) -> Vec<Condition> {
+    pair_comparison_rules(t, familiarization, scale.is_some(), cx);
+    let (conditions, _) = rating_sections(
+        t,
+        session,
+        FamSpec::None,
+        manifest,
+        References::of(Protocol::PairComparison),
+        cx,
+    );
+    if manifest.is_some() {
+        check_pairs(&conditions, session.hidden_repeats, cx);
+    }
+    conditions
+}
+
 /// A pair comparison compares conditions of the same clip: every clip needs two of them, the
 /// pairs may be at most [`super::MAX_PAIRS`], and the hidden repeats repeat pairs.
 fn check_pairs(conditions: &[Condition], hidden_repeats: u32, cx: &mut Ctx) {
@@ -420,6 +429,12 @@ fn staircase_sections(
     }
     if has_scale {
         cx.err("scale", "a staircase study has no rating scale");
+    }
+    if t.contains_key("scene") {
+        cx.err(
+            "scene",
+            "crowd scenes are rated (protocol \"dscqs\" or \"mos\"), not a staircase",
+        );
     }
     match cx.table(t, "", "staircase") {
         Some(st) => parse_staircase(st, manifest, codecs, cx),

@@ -951,7 +951,8 @@ fn a_pair_comparison_trial_shows_two_versions_and_takes_a_side() {
             unreachable!()
         };
         let stimulus_won = p != r.trial.reference_position;
-        assert_eq!(r.outcome.score, if stimulus_won { 1.0 } else { 0.0 });
+        let want: f64 = if stimulus_won { 1.0 } else { 0.0 };
+        assert_eq!(r.outcome.score.to_bits(), want.to_bits());
     }
     watch(&mut h, 1.5);
     assert!(matches!(h.state().0.exit(), Some(Exit::Finished(_))));
