@@ -727,7 +727,7 @@ mod tests {
     /// row the full replay's verdict, naming the same line with the same words.
     #[test]
     fn the_quick_replay_agrees_with_the_full_one() {
-        for name in ["mos", "dscqs", "staircase"] {
+        for name in ["mos", "dscqs", "staircase", "pc"] {
             let (study, read) = sessions(name);
             let definition = &study.definition;
             for s in &read {
