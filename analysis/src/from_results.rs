@@ -10,6 +10,7 @@ use protocols::{Answer, Block, Protocol, TrialRecord};
 use results::SessionResults;
 use results::store::{SESSION_FILE, TRIALS_FILE};
 
+use crate::bradley_terry::PairChoice;
 use crate::crowd::CrowdDesign;
 use crate::descriptive::Rating;
 use crate::dmos::DscqsPair;
@@ -346,6 +347,10 @@ fn convert_record(
                 score: test_score,
             });
         }
+        Protocol::PairComparison => {
+            let choice = pair_choice(record, path, index, subject, stimuli)?;
+            data.pair_choices.push(choice);
+        }
         Protocol::Staircase => {
             let staircase = record
                 .trial
@@ -391,6 +396,43 @@ fn convert_record(
         }
     }
     Ok(())
+}
+
+/// A pair comparison row as the choice it logs: the `reference` column holds the pair's
+/// other test stimulus, shown at the reference position.
+fn pair_choice(
+    record: &TrialRecord,
+    path: &Path,
+    index: usize,
+    subject: u32,
+    stimuli: &mut Interner,
+) -> Result<PairChoice, AnalysisError> {
+    let t = &record.trial;
+    let choice = match record.response.answer {
+        Answer::Choice(p) if p.fits(t.arrangement) => p,
+        other => {
+            return Err(bad(
+                path,
+                index,
+                "response",
+                format!(
+                    "a pair_comparison trial needs a position of arrangement {}, got {other:?}",
+                    t.arrangement
+                ),
+            ));
+        }
+    };
+    let (a, b) = (stimuli.id(&t.stimulus), stimuli.id(&t.reference));
+    let (winner, loser) = if choice == t.reference_position {
+        (b, a)
+    } else {
+        (a, b)
+    };
+    Ok(PairChoice {
+        subject,
+        winner,
+        loser,
+    })
 }
 
 /// The CR (and error) a staircase trial's stimulus reached at its level: logged in the row by

@@ -4,7 +4,8 @@
 //! confidence intervals ([`descriptive`]), DSCQS and ACR-HR DMOS ([`dmos`]), paired / Welch /
 //! Student t-tests with Holm correction ([`ttest`]), power analysis ([`power`]), BT.500 Annex 2
 //! observer screening ([`screening`]), staircase thresholds ([`staircase`]) and the share of
-//! viewers who would notice a level ([`jnd`]), maximum-likelihood
+//! viewers who would notice a level ([`jnd`]), Bradley-Terry scale values of pair
+//! comparisons ([`bradley_terry`]), maximum-likelihood
 //! psychometric fits with bootstrap CIs ([`psychometric`]), rate findings ([`findings`]), and
 //! the tables, plots and report that `study report` writes.
 //!
@@ -24,6 +25,7 @@
 //! ```
 
 pub mod bayesian;
+pub mod bradley_terry;
 mod confidence;
 pub mod crowd;
 pub mod descriptive;

@@ -72,6 +72,9 @@ pub fn method_text(
         (Protocol::Staircase, _) => {
             "Screening: none (2AFC thresholds; BT.500 screening applies to ratings).".into()
         }
+        (Protocol::PairComparison, _) => "Screening: none (pair comparison choices; BT.500 \
+                                          screening applies to ratings)."
+            .into(),
         (_, Some(r)) => format!(
             "Screening: ITU-R BT.500 observer screening (β2 kurtosis test on every \
              presentation); {r} observer(s) rejected, {} retained.",
@@ -194,20 +197,34 @@ fn viewing_lines(study: &StudyDefinition, displays: &[SessionDisplay], out: &mut
 /// The order of the conditions, the reference placement, and the trials not analysed.
 fn design_line(study: &StudyDefinition) -> String {
     let mut design = Vec::new();
+    let pc = study.protocol == Protocol::PairComparison;
+    let (items, n) = if pc {
+        (
+            "pairs (every pair of a clip's conditions)",
+            study.pairs().len(),
+        )
+    } else {
+        ("conditions", study.conditions.len())
+    };
     if study.protocol != Protocol::Staircase {
         design.push(match study.design.order {
-            ConditionOrder::Random => "conditions in a random order per subject".to_string(),
+            ConditionOrder::Random => format!("{items} in a random order per subject"),
             ConditionOrder::LatinSquare => format!(
-                "conditions ordered by a balanced Latin square (Williams design, {} rows)",
-                protocols::design::williams_rows(study.conditions.len())
+                "{items} ordered by a balanced Latin square (Williams design, {} rows)",
+                protocols::design::williams_rows(n)
             ),
         });
     }
+    let what = if pc {
+        "the side of each pair's versions"
+    } else {
+        "reference position"
+    };
     design.push(match study.presentation.reference_position {
         ReferencePlacement::Fixed(p) => format!("reference always {p}"),
-        ReferencePlacement::Random => "reference position random per trial".into(),
+        ReferencePlacement::Random => format!("{what} random per trial"),
         ReferencePlacement::Balanced => {
-            "reference position counterbalanced within and across subjects".into()
+            format!("{what} counterbalanced within and across subjects")
         }
     });
     if let Some(sc) = &study.staircase

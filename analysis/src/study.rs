@@ -6,6 +6,7 @@ use std::collections::{BTreeMap, BTreeSet, HashMap};
 use serde::Serialize;
 
 use crate::bayesian::{self, BayesFit, Sigmoid};
+use crate::bradley_terry::{PairChoice, PairComparisonAnalysis, analyze_pairs};
 use crate::confidence::Confidence;
 use crate::crowd::CrowdDesign;
 use crate::descriptive::{CiMethod, ConditionStats, Rating, condition_stats};
@@ -50,6 +51,8 @@ pub struct StudyData {
     pub subjects: Vec<String>,
     /// The crowd scenes among the conditions (thesis 6.5), when the study rated any.
     pub crowd: Option<CrowdDesign>,
+    /// Pair comparison answers (P.910 PC).
+    pub pair_choices: Vec<PairChoice>,
 }
 
 impl StudyData {
@@ -168,6 +171,8 @@ pub struct StudyAnalysis {
     /// Subject bias and inconsistency by maximum likelihood (sureal's MLE model), for rating
     /// studies (not DSCQS) of at most [`MLE_MAX_RATINGS`] ratings.
     pub subject_model: Option<crate::mle::SubjectModel>,
+    /// Bradley-Terry scale values of a pair comparison study.
+    pub pair_comparison: Option<PairComparisonAnalysis>,
 }
 
 /// Most ratings the report fits the subject model to: sureal's iteration passes over every
@@ -411,7 +416,19 @@ pub fn analyze(data: &StudyData, options: &ReportOptions) -> Result<StudyAnalysi
         jnd,
         bayes: (!data.staircases.is_empty()).then(|| bayesian_fits(data, options)),
         subject_model: subject_model(data)?,
+        pair_comparison: pair_comparison(data, options)?,
     })
+}
+
+/// The Bradley-Terry fits of a pair comparison study's choices (none without choices).
+fn pair_comparison(
+    data: &StudyData,
+    options: &ReportOptions,
+) -> Result<Option<PairComparisonAnalysis>, AnalysisError> {
+    if data.pair_choices.is_empty() {
+        return Ok(None);
+    }
+    analyze_pairs(&data.conditions, &data.pair_choices, options.confidence).map(Some)
 }
 
 /// The maximum-likelihood subject model of a rating study (not DSCQS) of at most
@@ -658,6 +675,9 @@ impl StudyAnalysis {
         }
         if !self.dmos.is_empty() {
             self.dmos_section(&mut report, data, options);
+        }
+        if let Some(pc) = &self.pair_comparison {
+            crate::bradley_terry::report_section(&mut report, pc, options.confidence);
         }
         if let Some(crowd) = &data.crowd {
             self.crowd_section(&mut report, crowd, data, options, title);

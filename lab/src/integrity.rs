@@ -514,10 +514,12 @@ mod tests {
                             a: end,
                             b: d.scale.max,
                         },
-                        Protocol::Staircase if k % 3 == 2 => {
+                        Protocol::Staircase | Protocol::PairComparison if k % 3 == 2 => {
                             Answer::Choice(flip(trial.reference_position))
                         }
-                        Protocol::Staircase => Answer::Choice(trial.reference_position),
+                        Protocol::Staircase | Protocol::PairComparison => {
+                            Answer::Choice(trial.reference_position)
+                        }
                     };
                     let response = Response {
                         answer,
@@ -731,7 +733,7 @@ mod tests {
     /// row the full replay's verdict, naming the same line with the same words.
     #[test]
     fn the_quick_replay_agrees_with_the_full_one() {
-        for name in ["mos", "dscqs", "staircase"] {
+        for name in ["mos", "dscqs", "staircase", "pc"] {
             let (study, read) = sessions(name);
             let definition = &study.definition;
             for s in &read {

@@ -255,7 +255,24 @@ impl Session {
         let mut stairs = None;
         match study.protocol {
             Protocol::Mos | Protocol::Dscqs | Protocol::Acr | Protocol::Dcr => {
-                plan = plan_trials(study, subject, arrangement, placement);
+                let items = |list: &[Condition]| -> Vec<PlanItem> {
+                    list.iter().map(PlanItem::condition).collect()
+                };
+                let (fam, test) = (items(&study.familiarization), items(&study.conditions));
+                plan = plan_trials(study, &fam, &test, subject, arrangement, placement);
+            }
+            Protocol::PairComparison => {
+                let test: Vec<PlanItem> = study
+                    .pairs()
+                    .into_iter()
+                    .filter_map(|(i, j)| {
+                        Some(PlanItem::pair(
+                            study.conditions.get(i)?,
+                            study.conditions.get(j)?,
+                        ))
+                    })
+                    .collect();
+                plan = plan_trials(study, &[], &test, subject, arrangement, placement);
             }
             Protocol::Staircase => {
                 if let Some(sc) = &study.staircase {
@@ -508,7 +525,19 @@ impl Session {
                     reversal,
                 }
             }
-            (Protocol::Staircase, _) => {
+            (Protocol::PairComparison, Answer::Choice(p)) if p.fits(trial.arrangement) => {
+                // The `reference` column holds the pair's other test stimulus, shown at the
+                // reference position: picking the other position prefers `stimulus`.
+                let preferred_stimulus = p != trial.reference_position;
+                Outcome {
+                    score: if preferred_stimulus { 1.0 } else { 0.0 },
+                    score_reference: None,
+                    score_test: None,
+                    correct: None,
+                    reversal: None,
+                }
+            }
+            (Protocol::Staircase | Protocol::PairComparison, _) => {
                 return Err(wrong("a choice of a position of this arrangement"));
             }
         };
@@ -613,6 +642,8 @@ impl Session {
                 a: self.scale.min,
                 b: self.scale.min,
             }],
+            // The plan does not depend on which stimulus was preferred.
+            Protocol::PairComparison => vec![Answer::Choice(trial.reference_position)],
             Protocol::Staircase => vec![
                 Answer::Choice(trial.reference_position),
                 Answer::Choice(trial.reference_position.other()),
@@ -668,21 +699,50 @@ impl Session {
 const SIDES_FAMILIARIZATION: u64 = 0x6661_6d69;
 const SIDES_CONDITIONS: u64 = 0x636f_6e64;
 
-/// MOS / DSCQS / ACR / DCR plan (paper 000 section IV): familiarization spanning the quality
-/// range first (shuffled), then the test conditions shuffled per subject (or in the subject's
-/// row of a balanced Latin square, `[design] order`) with hidden repeats inserted.
+/// One thing a rated plan shows in a trial: a condition (its test stimulus, and its
+/// reference where the arrangement shows one), or a pair of a pair comparison.
+struct PlanItem {
+    condition: String,
+    stimulus: String,
+    reference: String,
+}
+
+impl PlanItem {
+    fn condition(c: &Condition) -> Self {
+        Self {
+            condition: c.stimulus.clone(),
+            stimulus: c.stimulus.clone(),
+            reference: c.reference.clone(),
+        }
+    }
+
+    /// P.910 PC: two conditions of one clip; `b` goes in the trial's reference column and is
+    /// shown at its reference position, `a` at the other.
+    fn pair(a: &Condition, b: &Condition) -> Self {
+        Self {
+            condition: format!("{} vs {}", a.stimulus, b.stimulus),
+            stimulus: a.stimulus.clone(),
+            reference: b.stimulus.clone(),
+        }
+    }
+}
+
+/// MOS / DSCQS / ACR / DCR / pair comparison plan (paper 000 section IV): familiarization
+/// spanning the quality range first (shuffled), then the test items (conditions, or a pair
+/// comparison's pairs) shuffled per subject (or in the subject's row of a balanced Latin
+/// square, `[design] order`) with hidden repeats inserted.
 fn plan_trials(
     study: &StudyDefinition,
+    fam: &[PlanItem],
+    items: &[PlanItem],
     subject: u32,
     arrangement: Arrangement,
     placement: ReferencePlacement,
 ) -> Vec<Trial> {
     let mut rng = StudyRng::new(study.seed, &[u64::from(subject), purpose::PLAN]);
-    let mut fam: Vec<&Condition> = study.familiarization.iter().collect();
+    let mut fam: Vec<&PlanItem> = fam.iter().collect();
     rng.shuffle(&mut fam);
-    let mut test: Vec<(usize, Block)> = (0..study.conditions.len())
-        .map(|c| (c, Block::Test))
-        .collect();
+    let mut test: Vec<(usize, Block)> = (0..items.len()).map(|c| (c, Block::Test)).collect();
     match study.design.order {
         ConditionOrder::Random => rng.shuffle(&mut test),
         ConditionOrder::LatinSquare => {
@@ -726,7 +786,7 @@ fn plan_trials(
         }
     };
     let fam_sides = side_of(SIDES_FAMILIARIZATION, fam.len());
-    let cond_sides = side_of(SIDES_CONDITIONS, study.conditions.len());
+    let cond_sides = side_of(SIDES_CONDITIONS, items.len());
     let first = design::first_position(arrangement);
     let fam_sides = fam_sides.into_iter().chain(std::iter::repeat(first));
     let test_sides = test.iter().map(|&(c, b)| {
@@ -740,7 +800,7 @@ fn plan_trials(
     let sides: Vec<Position> = fam_sides.take(fam.len()).chain(test_sides).collect();
     let test = test
         .into_iter()
-        .filter_map(|(c, b)| study.conditions.get(c).map(|c| (c, b)));
+        .filter_map(|(c, b)| items.get(c).map(|c| (c, b)));
     fam.into_iter()
         .map(|c| (c, Block::Familiarization))
         .chain(test)
@@ -749,7 +809,7 @@ fn plan_trials(
         .map(|(i, ((c, block), side))| Trial {
             index: i as u32,
             block,
-            condition: c.stimulus.clone(),
+            condition: c.condition.clone(),
             stimulus: c.stimulus.clone(),
             reference: c.reference.clone(),
             arrangement,

@@ -5,7 +5,9 @@
 //! result to the scale. A 2AFC observer answers correctly with the probability of a Weibull or
 //! logistic psychometric function of the level, or (`detection = "error"`) of the distorted
 //! stimulus's objective error, which a live staircase's runner measures on the clip it just
-//! decoded and passes in ([`Observer::respond_measured`]); guess rate 1/2 and a lapse rate. Every
+//! decoded and passes in ([`Observer::respond_measured`]); guess rate 1/2 and a lapse rate. A
+//! pair comparison observer (Thurstone case V) draws both stimuli's latent qualities with
+//! their own noise and prefers the higher, so the conditions' true scale is known. Every
 //! answer draws from a stream seeded by (seed, subject, trial index), so an answer does not
 //! depend on how many answers came before it in this process (resume gives the same answers).
 
@@ -251,6 +253,21 @@ impl Observer {
                 } else {
                     Answer::Pair { a: t, b: r }
                 }
+            }
+            // A Thurstone case V observer: each stimulus' latent quality plus its own
+            // normal noise (`noise_sd`), the better-looking one picked; the subject's bias
+            // shifts both alike and cancels. P(stimulus preferred) = Φ((q_s - q_r) / (σ√2)).
+            Protocol::PairComparison => {
+                let q = |e: f64, rng: &mut StudyRng| {
+                    self.quality_of_error(e) + self.settings.noise_sd * rng.normal()
+                };
+                let qs = q(test_error()?, &mut rng);
+                let qr = q(self.manifest_error(&trial.reference)?, &mut rng);
+                Answer::Choice(if qs > qr {
+                    trial.reference_position.other()
+                } else {
+                    trial.reference_position
+                })
             }
             Protocol::Staircase => {
                 let level = trial

@@ -27,6 +27,10 @@ pub enum Protocol {
     /// Degradation category rating (ITU-T P.910 DCR, ITU-R BT.500 DSIS): the labelled
     /// reference, then the test stimulus, rated on the five impairment categories.
     Dcr,
+    /// Pair comparison (ITU-T P.910 PC): two test stimuli of the same source clip, side by
+    /// side or one after the other, and the subject picks the better one (forced choice);
+    /// analysed with Bradley-Terry scale values.
+    PairComparison,
 }
 
 /// Which part of a session a trial belongs to.
@@ -102,7 +106,7 @@ macro_rules! text_enum {
 }
 
 text_enum!(Protocol, Protocol::Mos => "mos", Protocol::Dscqs => "dscqs", Protocol::Staircase => "staircase",
-    Protocol::Acr => "acr", Protocol::Dcr => "dcr");
+    Protocol::Acr => "acr", Protocol::Dcr => "dcr", Protocol::PairComparison => "pair_comparison");
 text_enum!(Block, Block::Familiarization => "familiarization", Block::Test => "test", Block::HiddenRepeat => "hidden_repeat");
 text_enum!(Position, Position::Left => "left", Position::Right => "right", Position::First => "first",
     Position::Second => "second", Position::A => "a", Position::B => "b", Position::Hidden => "hidden");
@@ -143,12 +147,14 @@ pub struct Trial {
     pub index: u32,
     /// Familiarization, test or hidden repeat.
     pub block: Block,
-    /// Condition label: the test stimulus id (MOS, DSCQS, ACR, DCR) or the staircase name.
+    /// Condition label: the test stimulus id (MOS, DSCQS, ACR, DCR), the staircase name, or
+    /// in a pair comparison the pair, `<stimulus> vs <reference>`.
     pub condition: String,
     /// Test (compressed / distorted) stimulus id; in ACR-HR the clip's reference itself for
     /// a hidden-reference trial.
     pub stimulus: String,
-    /// Reference stimulus id (of the same clip; not shown in ACR).
+    /// Reference stimulus id (of the same clip; not shown in ACR). In a pair comparison the
+    /// pair's other test stimulus (of the same clip), shown at `reference_position`.
     pub reference: String,
     /// Layout of the two stimuli.
     pub arrangement: Arrangement,
@@ -175,7 +181,8 @@ pub enum Answer {
         /// Rating of slot B (the second stimulus).
         b: f64,
     },
-    /// The position the subject picked as more natural and smooth (2AFC).
+    /// The position the subject picked as more natural and smooth (2AFC), or as the better
+    /// of the two (pair comparison).
     Choice(Position),
 }
 
@@ -196,7 +203,8 @@ pub struct Response {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Outcome {
     /// MOS, ACR, DCR: the rating; DSCQS: reference score minus test score (BT.500 difference);
-    /// staircase: 1 correct, 0 wrong.
+    /// staircase: 1 correct, 0 wrong; pair comparison: 1 when the subject preferred the
+    /// trial's `stimulus`, 0 when the other (`reference` column) one.
     pub score: f64,
     /// DSCQS: rating of the reference.
     pub score_reference: Option<f64>,

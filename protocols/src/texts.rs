@@ -31,6 +31,9 @@ pub fn grade_labels(scale: &RatingScale) -> [&'static str; 5] {
 /// The 2AFC question of thesis ch. 5.
 pub const AFC_QUESTION: &str = "Which motion looks more natural?";
 
+/// The question of a pair comparison (P.910 PC): which of two versions is better.
+pub const PC_QUESTION: &str = "Which motion looks better?";
+
 /// Shown after an answer was logged, over the blank gap before the next trial.
 pub const ANSWER_RECORDED: &str = "Answer recorded";
 
@@ -170,11 +173,29 @@ pub fn default_instructions(study: &StudyDefinition) -> String {
                  will meet."
             )
         }
+        Protocol::PairComparison => pair_comparison_instructions(p.arrangement),
         Protocol::Staircase => "Each trial shows two motions side by side. Choose the one that \
                                 looks more natural with the Left or Right arrow key (or click). \
                                 Answer even when you are unsure."
             .to_string(),
     }
+}
+
+/// The default instructions of a pair comparison shown in `arrangement`.
+fn pair_comparison_instructions(arrangement: Arrangement) -> String {
+    let (shows, keys) = if arrangement == Arrangement::Sequential {
+        (
+            "one after the other, with a grey screen between them",
+            "the 1 or 2 key",
+        )
+    } else {
+        ("side by side", "the Left or Right arrow key")
+    };
+    format!(
+        "Each trial shows two versions of the same motion {shows}. Neither is the original. \
+         Choose the one that looks better with {keys} (or click). Answer even when you are \
+         unsure."
+    )
 }
 
 /// What the two stimuli of a DSCQS trial are called on screen: A and B (BT.500's A B A B),
@@ -239,6 +260,9 @@ pub fn planned_trials(study: &StudyDefinition) -> Planned {
                 + study.conditions.len()
                 + study.session.hidden_repeats as usize) as u32,
         ),
+        Protocol::PairComparison => {
+            Planned::Exactly((study.pairs().len() + study.session.hidden_repeats as usize) as u32)
+        }
         Protocol::Staircase => study
             .staircase
             .as_ref()

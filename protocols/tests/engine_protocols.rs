@@ -25,7 +25,7 @@ fn random_response(study: &StudyDefinition, trial: &Trial, rng: &mut StudyRng) -
             a: rating(rng),
             b: rating(rng),
         },
-        Protocol::Staircase => {
+        Protocol::Staircase | Protocol::PairComparison => {
             let p = trial.reference_position;
             Answer::Choice(if rng.coin() { p } else { p.other() })
         }

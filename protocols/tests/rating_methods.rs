@@ -119,7 +119,7 @@ fn only_acr_rates_references_and_every_misfit_key_is_listed_at_once() {
         has(
             &got,
             "conditions.stimuli[1]",
-            "only an ACR study rates references"
+            "only an ACR or a pair comparison study shows references"
         ),
         "{got:#?}"
     );
@@ -291,4 +291,192 @@ fn dcr_scores_one_impairment_rating_with_the_reference_first() {
         n += 1;
     }
     assert_eq!(n, 3 + 1);
+}
+
+const PC: &str = r#"
+format_version = 1
+name = "pc"
+protocol = "pair_comparison"
+stimuli = "stimuli.json"
+seed = 13
+
+[conditions]
+clips = ["walk", "dance"]
+codecs = ["wavelet-perceptual"]
+target_cr = [10, 30, 50]
+hidden_reference = true
+
+[presentation]
+reference_position = "balanced"
+
+[session]
+hidden_repeats = 3
+"#;
+
+fn choice(p: Position) -> Response {
+    Response {
+        answer: Answer::Choice(p),
+        ..rating(0.0)
+    }
+}
+
+/// P.910 PC: every unordered pair of a clip's four conditions (its original among them) is
+/// one test trial, never a pair across clips; the hidden repeats show a pair again with its
+/// sides swapped; the balanced placement shows each pair's second condition on the left for
+/// one subject of a pair of subjects and on the right for the other; a choice scores 1 when
+/// the `stimulus` column's version was preferred; replay regenerates the session.
+#[test]
+fn pair_comparison_plans_every_pair_of_a_clip_once_and_scores_the_preferred() {
+    let study = parse(PC).unwrap();
+    assert_eq!(study.protocol, Protocol::PairComparison);
+    assert_eq!(study.presentation.arrangement, Arrangement::SideBySide);
+    assert_eq!(study.presentation.labels, None);
+    assert_eq!(study.conditions.len(), 8);
+    assert_eq!(study.pairs().len(), 12, "6 pairs per clip of 4 conditions");
+    let clip = |id: &str| id.split('/').next().unwrap().to_owned();
+    let mut sides: BTreeMap<(u32, String), Position> = BTreeMap::new();
+    for subject in 0..6 {
+        let mut s = Session::new(&study, subject).unwrap();
+        let mut log = Vec::new();
+        let mut rng = StudyRng::new(7, &[u64::from(subject)]);
+        while let Some(t) = s.next_trial(0).unwrap() {
+            assert_eq!(clip(&t.stimulus), clip(&t.reference));
+            assert_eq!(t.condition, format!("{} vs {}", t.stimulus, t.reference));
+            // A rating, or a position of another arrangement: refused, the trial stays.
+            assert!(s.respond(&rating(3.0)).is_err());
+            assert!(s.respond(&choice(Position::First)).is_err());
+            let pick = if rng.coin() {
+                Position::Left
+            } else {
+                Position::Right
+            };
+            let o = s.respond(&choice(pick)).unwrap();
+            let want: f64 = if pick == t.reference_position {
+                0.0
+            } else {
+                1.0
+            };
+            assert_eq!(o.score.to_bits(), want.to_bits());
+            assert_eq!((o.correct, o.reversal), (None, None));
+            if t.block == Block::Test {
+                sides.insert((subject, t.condition.clone()), t.reference_position);
+            }
+            log.push((t, choice(pick), o));
+        }
+        assert_eq!(log.len(), 12 + 3);
+        let tests: Vec<&str> = log
+            .iter()
+            .filter(|(t, _, _)| t.block == Block::Test)
+            .map(|(t, _, _)| t.condition.as_str())
+            .collect();
+        let unique: std::collections::BTreeSet<&str> = tests.iter().copied().collect();
+        assert_eq!((tests.len(), unique.len()), (12, 12));
+        for (t, _, _) in log
+            .iter()
+            .filter(|(t, _, _)| t.block == Block::HiddenRepeat)
+        {
+            let original = log
+                .iter()
+                .find(|(o, _, _)| o.block == Block::Test && o.condition == t.condition)
+                .unwrap();
+            assert_eq!(t.reference_position, original.0.reference_position.other());
+        }
+        // Within a subject the sides are balanced: six of the twelve pairs each way.
+        let left = log
+            .iter()
+            .filter(|(t, _, _)| t.block == Block::Test && t.reference_position == Position::Left)
+            .count();
+        assert_eq!(left, 6);
+        let mut again = Session::new(&study, subject).unwrap();
+        for (t, r, o) in &log {
+            again.replay(t, r, o).unwrap();
+        }
+        assert_eq!(again.next_trial(0).unwrap(), None);
+    }
+    // Across each pair of subjects, each pair's sides are mirrored.
+    for k in [0, 2, 4] {
+        for ((s, c), p) in sides.iter().filter(|((s, _), _)| *s == k) {
+            assert_eq!(sides[&(s + 1, c.clone())], p.other(), "{c}");
+        }
+    }
+    let text = default_instructions(&study);
+    assert!(text.contains("Neither is the original"), "{text}");
+    assert_eq!(
+        protocols::texts::planned_trials(&study),
+        protocols::texts::Planned::Exactly(15)
+    );
+}
+
+/// A Latin square over a pair comparison orders its pairs: across a complete block of
+/// subjects every pair is at every position equally often.
+#[test]
+fn pair_comparison_latin_square_orders_the_pairs() {
+    let study = parse(
+        &PC.replace(
+            "[session]",
+            "[design]\norder = \"latin_square\"\n\n[session]",
+        )
+        .replace("hidden_repeats = 3", "hidden_repeats = 0"),
+    )
+    .unwrap();
+    let n = study.pairs().len();
+    let rows = protocols::design::williams_rows(n);
+    let mut at: BTreeMap<(String, usize), usize> = BTreeMap::new();
+    for subject in 0..rows as u32 {
+        let mut s = Session::new(&study, subject).unwrap();
+        let mut k = 0;
+        while let Some(t) = s.next_trial(0).unwrap() {
+            *at.entry((t.condition.clone(), k)).or_default() += 1;
+            s.respond(&choice(Position::Left)).unwrap();
+            k += 1;
+        }
+        assert_eq!(k, n);
+    }
+    assert_eq!(at.len(), n * n);
+    assert!(at.values().all(|&c| c == rows / n), "{at:?}");
+}
+
+/// Everything a pair comparison has no use for, in `study check`'s one list.
+#[test]
+fn pair_comparison_rules_are_listed_at_once() {
+    let bad = PC
+        .replace(
+            "reference_position = \"balanced\"",
+            "reference_position = \"left\"\nlabels = true",
+        )
+        .replace(
+            "[session]\nhidden_repeats = 3",
+            "[scale]\nkind = \"continuous\"\n\n[session]\nhidden_repeats = 3\nfamiliarization = 2",
+        );
+    let got = issues(&bad);
+    for (key, words) in [
+        ("presentation.reference_position", "never on a fixed side"),
+        ("presentation.labels", "no labelled reference"),
+        ("scale", "not for a rating"),
+        ("session.familiarization", "not offered"),
+    ] {
+        assert!(has(&got, key, words), "missing {key}: {got:#?}");
+    }
+    assert_eq!(got.len(), 4, "{got:#?}");
+    // A clip with one condition has nothing to pair; more repeats than pairs.
+    let lonely = PC
+        .replace(
+            "clips = [\"walk\", \"dance\"]\ncodecs = [\"wavelet-perceptual\"]\ntarget_cr = [10, 30, 50]\nhidden_reference = true",
+            "stimuli = [\"walk/wavelet-perceptual/cr10\", \"walk/wavelet-perceptual/cr30\", \"dance/wavelet-perceptual/cr30\"]",
+        )
+        .replace("hidden_repeats = 3", "hidden_repeats = 2");
+    let got = issues(&lonely);
+    assert!(
+        has(
+            &got,
+            "conditions",
+            "\"dance/wavelet-perceptual/cr30\" is the only condition"
+        ),
+        "{got:#?}"
+    );
+    assert!(
+        has(&got, "session.hidden_repeats", "2 repeats but only 1 pairs"),
+        "{got:#?}"
+    );
+    assert_eq!(got.len(), 2, "{got:#?}");
 }

@@ -578,7 +578,7 @@ fn decode_fields<'a>(
             a: r.float(16)?,
             b: r.float(17)?,
         },
-        Protocol::Staircase => Answer::Choice(r.named(15)?),
+        Protocol::Staircase | Protocol::PairComparison => Answer::Choice(r.named(15)?),
     };
     let trial = Trial {
         index: r.parse(4)?,

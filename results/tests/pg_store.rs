@@ -221,8 +221,28 @@ fn one_writer_per_session_and_rows_read_back_as_written(server: &ScratchServer) 
     assert_eq!(read[0].trials.records.len(), 3);
 }
 
+/// A pair comparison's choice (row 3 of session S04): the `reference` column is the pair's
+/// other test stimulus, and the `stimulus` column's version was preferred.
+fn pair_comparison_row() -> TrialRecord {
+    let mut preferred = record("S04", 3, 0.0);
+    preferred.protocol = Protocol::PairComparison;
+    preferred.trial.condition = "walk/x/cr3 vs walk/y/cr3".into();
+    preferred.trial.reference = "walk/y/cr3".into();
+    preferred.trial.level = None;
+    preferred.trial.reference_position = Position::Right;
+    preferred.response.answer = Answer::Choice(Position::Left);
+    preferred.outcome = Outcome {
+        score: 1.0,
+        score_reference: None,
+        score_test: None,
+        correct: None,
+        reversal: None,
+    };
+    preferred
+}
+
 /// Records of every kind (a DSCQS pair, a 2AFC choice of a live staircase with its encoding
-/// and frame timing, text needing quotes) come back from a report's read exactly as written;
+/// and frame timing, a pair comparison's choice, text needing quotes) come back from a report's read exactly as written;
 /// a value the database holds that no record can have is refused, naming the session's
 /// trials, the row's line in an exported `trials.csv`, the column and the reason.
 fn every_kind_of_row_read_back_and_bad_values_named(server: &ScratchServer) {
@@ -265,7 +285,7 @@ fn every_kind_of_row_read_back_and_bad_values_named(server: &ScratchServer) {
         frames_shown: 240,
         interval_sd_ms: 0.375,
     });
-    let written = [pair, choice, record("S04", 2, 4.5)];
+    let written = [pair, choice, record("S04", 2, 4.5), pair_comparison_row()];
     for r in &written {
         writer.append(r).unwrap();
     }
@@ -298,11 +318,11 @@ fn every_kind_of_row_read_back_and_bad_values_named(server: &ScratchServer) {
             "replays: -1 is out of range",
         ),
         (
-            "UPDATE study_trials SET row_number = 5 WHERE row_number = 2",
-            "UPDATE study_trials SET row_number = 2 WHERE row_number = 5",
-            4,
+            "UPDATE study_trials SET row_number = 5 WHERE row_number = 3",
+            "UPDATE study_trials SET row_number = 3 WHERE row_number = 5",
+            5,
             1,
-            "row 5 follows row 1",
+            "row 5 follows row 2",
         ),
     ] {
         admin.execute(sql, &[]).unwrap();

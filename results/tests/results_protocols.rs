@@ -28,6 +28,36 @@ fn scratch(name: &str) -> PathBuf {
     d
 }
 
+/// A pair comparison row's arrangement, answer and outcome: the `reference` column holds the
+/// pair's other test stimulus; score 1: the `stimulus` column's version was preferred.
+fn pair_comparison_parts(
+    rng: &mut StudyRng,
+) -> (Arrangement, Answer, Outcome, Option<f64>, Option<u32>) {
+    let side = if rng.coin() {
+        Position::Left
+    } else {
+        Position::Right
+    };
+    let outcome = Outcome {
+        score: 1.0,
+        score_reference: None,
+        score_test: None,
+        correct: None,
+        reversal: None,
+    };
+    (
+        Arrangement::SideBySide,
+        Answer::Choice(side),
+        outcome,
+        None,
+        None,
+    )
+}
+
+#[expect(
+    clippy::too_many_lines,
+    reason = "one record of every protocol, each arm its own shape"
+)]
 fn record(i: u32, protocol: Protocol, rng: &mut StudyRng) -> TrialRecord {
     let (arrangement, answer, outcome, level, staircase) = match protocol {
         Protocol::Mos | Protocol::Acr | Protocol::Dcr => (
@@ -76,6 +106,7 @@ fn record(i: u32, protocol: Protocol, rng: &mut StudyRng) -> TrialRecord {
             Some(0.024 - 0.002 * f64::from(i % 7)),
             Some(i % 3),
         ),
+        Protocol::PairComparison => pair_comparison_parts(rng),
     };
     let reference_position = match (protocol, arrangement) {
         (_, Arrangement::SideBySide) => Position::Left,
@@ -170,13 +201,14 @@ fn manifest(trials: u32) -> SessionManifest {
 proptest! {
     #![proptest_config(ProptestConfig { cases: 200, ..ProptestConfig::default() })]
     #[test]
-    fn rows_round_trip(seed in any::<u64>(), which in 0_usize..5, n in 1_u32..20) {
+    fn rows_round_trip(seed in any::<u64>(), which in 0_usize..6, n in 1_u32..20) {
         let protocol = [
             Protocol::Mos,
             Protocol::Dscqs,
             Protocol::Staircase,
             Protocol::Acr,
             Protocol::Dcr,
+            Protocol::PairComparison,
         ][which];
         let mut rng = StudyRng::new(seed, &[]);
         let recs: Vec<TrialRecord> = (0..n).map(|i| record(i, protocol, &mut rng)).collect();
@@ -394,6 +426,7 @@ fn mutated_results_files_give_errors_never_panics() {
         Protocol::Staircase,
         Protocol::Acr,
         Protocol::Dcr,
+        Protocol::PairComparison,
     ]
     .into_iter()
     .cycle()

@@ -882,8 +882,12 @@ pub fn run(args: &ReportArgs) -> Result<()> {
     });
     let written = written?;
     exported?;
+    let choices = match converted.data.pair_choices.len() {
+        0 => String::new(),
+        n => format!(", {n} pair comparison choices"),
+    };
     println!(
-        "{}: {} files ({} ratings, {} DSCQS pairs, {} staircases, {} 2AFC trials); open {}",
+        "{}: {} files ({} ratings, {} DSCQS pairs, {} staircases, {} 2AFC trials{choices}); open {}",
         args.output.display(),
         written.files.len() + 2,
         converted.data.ratings.len(),

@@ -74,6 +74,7 @@ pub fn check(args: &CheckArgs) -> anyhow::Result<()> {
         Protocol::Mos | Protocol::Dscqs | Protocol::Acr | Protocol::Dcr => {
             describe_ratings(&mut text, study)?;
         }
+        Protocol::PairComparison => describe_pairs(&mut text, study)?,
         Protocol::Staircase => match &live {
             Some(live) => describe_live(&mut text, study, live)?,
             None => describe_staircase(&mut text, study)?,
@@ -136,7 +137,12 @@ fn describe_design(text: &mut String, study: &StudyDefinition) -> std::fmt::Resu
              session's place in its group takes that row"
         )?;
     } else if study.design.order == ConditionOrder::LatinSquare {
-        let rows = protocols::design::williams_rows(study.conditions.len());
+        let items = if study.protocol == Protocol::PairComparison {
+            study.pairs().len()
+        } else {
+            study.conditions.len()
+        };
+        let rows = protocols::design::williams_rows(items);
         writeln!(
             text,
             "  order: balanced Latin square (Williams), {rows} rows: subject index k takes row \
@@ -150,6 +156,9 @@ fn describe_design(text: &mut String, study: &StudyDefinition) -> std::fmt::Resu
             Protocol::Staircase => "balanced (each block of 4 trials, mirrored for the next \
                                     subject)"
                 .to_string(),
+            Protocol::PairComparison => {
+                "balanced (per pair, mirrored for the next subject)".to_string()
+            }
             _ => "balanced (per condition, mirrored for the next subject)".to_string(),
         },
     };
@@ -226,6 +235,37 @@ fn describe_ratings(text: &mut String, study: &StudyDefinition) -> std::fmt::Res
             .max()
             .map_or(n, |t| t as usize)
     };
+    let est_min = n as f64 * study.trial_presentation_ms() as f64 / 60_000.0;
+    writeln!(
+        text,
+        "  presentation time: {est_min:.1} min without answers"
+    )
+}
+
+/// A pair comparison's pairs, trials and presentation time.
+fn describe_pairs(text: &mut String, study: &StudyDefinition) -> std::fmt::Result {
+    use std::fmt::Write as _;
+    let pairs = study.pairs().len();
+    let n = pairs + study.session.hidden_repeats as usize;
+    writeln!(
+        text,
+        "  trials per session: {n} ({pairs} pairs of {} conditions, {} hidden repeats with \
+         the sides swapped)",
+        study.conditions.len(),
+        study.session.hidden_repeats
+    )?;
+    let anchors = study
+        .conditions
+        .iter()
+        .filter(|c| c.stimulus == c.reference)
+        .count();
+    if anchors > 0 {
+        writeln!(
+            text,
+            "  originals compared: {anchors} (unlabelled; each clip's scale is anchored at its \
+             original)"
+        )?;
+    }
     let est_min = n as f64 * study.trial_presentation_ms() as f64 / 60_000.0;
     writeln!(
         text,

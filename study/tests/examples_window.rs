@@ -358,7 +358,7 @@ fn crowd_example_stimuli_are_the_generated_ones() {
     std::fs::remove_dir_all(&root).unwrap();
 }
 
-const EXAMPLES: [&str; 7] = [
+const EXAMPLES: [&str; 8] = [
     "mos.toml",
     "dscqs.toml",
     "staircase.toml",
@@ -366,6 +366,7 @@ const EXAMPLES: [&str; 7] = [
     "quest.toml",
     "acr-hr.toml",
     "dcr.toml",
+    "pc.toml",
 ];
 
 /// The two runs of the crowd study (thesis 6.5).
@@ -508,7 +509,8 @@ fn each_example_records_its_first_answer_in_the_window() {
                 }
                 // MOS, ACR (one motion) and DCR (reference then test): 4, Enter.
                 "mos.toml" | "acr-hr.toml" | "dcr.toml" => press(&env, &wid, &["4", "Return"]),
-                // 2AFC: the left one; Enter first begins a study without subject fields.
+                // 2AFC and pair comparison: the left one; Enter first begins a study without
+                // subject fields.
                 _ => press(&env, &wid, &["Return", "Left"]),
             }
             std::thread::sleep(Duration::from_millis(700));
@@ -535,6 +537,15 @@ fn each_example_records_its_first_answer_in_the_window() {
                 protocols::Answer::Rating(4.0),
                 "{name}"
             );
+        }
+        if name == "pc.toml" {
+            let r = &trials.records[0];
+            assert_eq!(r.protocol, protocols::Protocol::PairComparison);
+            assert_eq!(
+                r.response.answer,
+                protocols::Answer::Choice(protocols::Position::Left)
+            );
+            assert_ne!(r.trial.stimulus, r.trial.reference, "two test versions");
         }
         eprintln!(
             "{name}: first answer in the window after {:.1?}",

@@ -8,8 +8,16 @@
 //! and SciPy at the pins of `scripts/reference/sureal-requirements.txt`), or without the
 //! variable that venv itself. Under `CI` a missing interpreter fails the tests; elsewhere they
 //! skip with a message.
+//!
+//! The pair comparison example is simulated and reported the same way, and the report's
+//! Bradley-Terry scale values, CIs and win counts are compared with
+//! `scripts/golden/pair_comparison.py`, which fits with choix (`ilsr_pairwise`, alpha = 0) in
+//! `$BAYES_PYTHON` (pinned in `scripts/reference/bayes-requirements.txt`).
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
 
+#[path = "../../scripts/golden/bayes_python.rs"]
+#[allow(dead_code, reason = "this file runs its script itself")]
+mod bayes_python;
 mod common;
 
 use std::path::{Path, PathBuf};
@@ -177,6 +185,94 @@ fn dcr_report_equals_scipy() {
     for r in &trials.records {
         assert_eq!(r.protocol, protocols::Protocol::Dcr);
         assert_eq!(r.trial.reference_position, protocols::Position::First);
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// The report's `pc_scale.csv` rows and the golden script's agree: clip, codec, ratio, wins
+/// and comparisons exactly, scale value, SE and bounds to 2e-6 (the table prints six
+/// decimals; choix iterates to 1e-12).
+fn assert_pc_equal(report: &Path, g: &serde_json::Value) {
+    let text = std::fs::read_to_string(report.join("tables/pc_scale.csv")).unwrap();
+    let mut lines = text.lines();
+    assert_eq!(
+        lines.next(),
+        Some("Clip,Codec,CR,Wins,Comparisons,Scale,SE,Lower,Upper")
+    );
+    let ours: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    let theirs = g["rows"].as_array().unwrap();
+    assert_eq!(ours.len(), theirs.len());
+    for (o, t) in ours.iter().zip(theirs) {
+        let t = t.as_array().unwrap();
+        for k in 0..3 {
+            assert_eq!(o[k], t[k].as_str().unwrap(), "{o:?} vs {t:?}");
+        }
+        for k in 3..5 {
+            assert_eq!(o[k], t[k].as_u64().unwrap().to_string(), "{o:?} vs {t:?}");
+        }
+        for k in 5..9 {
+            let (a, b): (f64, f64) = (o[k].parse().unwrap(), t[k].as_f64().unwrap());
+            assert!((a - b).abs() < 2e-6, "column {k}: {o:?} vs {t:?}");
+        }
+    }
+}
+
+/// Pair comparison (P.910 PC): two simulated panels of 16; every clip's fit and the pooled
+/// one equal choix's maximum-likelihood Bradley-Terry scale (the same anchor), their Fisher
+/// information intervals equal NumPy's, the win matrices equal the script's counts; and the
+/// simulated Thurstone observer's clearly worst version (standard wavelet at 30:1, by far
+/// the largest error) has the lowest scale value of its clip.
+#[test]
+fn pair_comparison_report_equals_choix() {
+    let Some(python) = bayes_python::python("choix", "pair comparison golden") else {
+        return;
+    };
+    let dir = scratch("pc");
+    for seed in [3, 8] {
+        let (results, report) = simulate_and_report(&dir, "pc.toml", 16, seed);
+        let out = Command::new(&python)
+            .arg(repo().join("scripts/golden/pair_comparison.py"))
+            .arg(&results)
+            .arg(repo().join("examples/stimuli.json"))
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let g: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        assert_pc_equal(&report, &g);
+        // Two clips of five conditions and the pool: fifteen rows, anchored at the originals.
+        let rows = g["rows"].as_array().unwrap();
+        assert_eq!(rows.len(), 15);
+        for (k, clip) in ["march", "walk", "all"].iter().enumerate() {
+            let group = &rows[5 * k..5 * k + 5];
+            assert_eq!(group[0][0], *clip);
+            assert_eq!(group[0][2], "ref", "the original is the anchor");
+            let worst = group
+                .iter()
+                .min_by(|a, b| a[5].as_f64().unwrap().total_cmp(&b[5].as_f64().unwrap()))
+                .unwrap();
+            assert_eq!(
+                (worst[1].as_str(), worst[2].as_str()),
+                (Some("wavelet-standard"), Some("30:1")),
+                "seed {seed}, {clip}"
+            );
+            // The win matrix as the report writes it.
+            let wins =
+                std::fs::read_to_string(report.join(format!("tables/pc_wins_{}.csv", k + 1)))
+                    .unwrap();
+            let counts: Vec<Vec<u64>> = wins
+                .lines()
+                .skip(1)
+                .map(|l| l.split(',').skip(1).map(|c| c.parse().unwrap()).collect())
+                .collect();
+            let want: Vec<Vec<u64>> = serde_json::from_value(g["wins"][*clip].clone()).unwrap();
+            assert_eq!(counts, want, "seed {seed}, {clip}");
+        }
+        let md = std::fs::read_to_string(report.join("report.md")).unwrap();
+        assert!(md.contains("Pair comparison (Bradley-Terry)"));
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -1,5 +1,5 @@
 //! `study check` and `study simulate` end to end on the shipped examples: MOS, DSCQS,
-//! staircase, ACR-HR and DCR runs write complete results directories that the readers load back.
+//! staircase, ACR-HR, DCR and pair comparison runs write complete results directories that the readers load back.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
 
 use std::path::{Path, PathBuf};
@@ -31,6 +31,7 @@ fn simulate_writes_complete_results_for_every_protocol() {
         ("staircase.toml", Protocol::Staircase, None),
         ("acr-hr.toml", Protocol::Acr, Some(14)),
         ("dcr.toml", Protocol::Dcr, Some(12)),
+        ("pc.toml", Protocol::PairComparison, Some(22)),
     ] {
         let out = scratch(file);
         let st = study()
@@ -101,6 +102,7 @@ fn simulate_writes_complete_results_for_every_protocol() {
                         .iter()
                         .all(|r| r.outcome.score_reference.is_some())
                 ),
+                Protocol::PairComparison => pair_comparison_session(s),
                 Protocol::Staircase => {
                     assert_eq!(s.manifest.thresholds.len(), 2);
                     assert!(
@@ -123,6 +125,35 @@ fn simulate_writes_complete_results_for_every_protocol() {
         assert!(!again.status.success());
         assert!(String::from_utf8_lossy(&again.stderr).contains("never overwritten"));
     }
+}
+
+/// A simulated pair comparison session of the example: every pair of a clip's five
+/// conditions once, then two again with the sides swapped; each row's two stimuli are of one
+/// clip, and the score says which column's version won.
+fn pair_comparison_session(s: &results::SessionResults) {
+    let mut pairs: Vec<&str> = s
+        .trials
+        .records
+        .iter()
+        .filter(|r| r.trial.block == Block::Test)
+        .map(|r| r.trial.condition.as_str())
+        .collect();
+    pairs.sort_unstable();
+    pairs.dedup();
+    assert_eq!(pairs.len(), 20, "{pairs:?}");
+    for r in &s.trials.records {
+        let clip = |id: &str| id.split('/').next().unwrap_or("").to_owned();
+        assert_eq!(clip(&r.trial.stimulus), clip(&r.trial.reference));
+        assert_ne!(r.trial.stimulus, r.trial.reference);
+        assert!(matches!(r.outcome.score, 0.0 | 1.0));
+    }
+    let repeats = s
+        .trials
+        .records
+        .iter()
+        .filter(|r| r.trial.block == Block::HiddenRepeat)
+        .count();
+    assert_eq!(repeats, 2);
 }
 
 #[test]

@@ -294,7 +294,10 @@ impl App {
         let page = read_page(&options.page)?;
         let study = StudyFile::load(&options.study)?;
         // The page has the answer widgets of MOS, DSCQS and 2AFC only.
-        if matches!(study.definition.protocol, Protocol::Acr | Protocol::Dcr) {
+        if matches!(
+            study.definition.protocol,
+            Protocol::Acr | Protocol::Dcr | Protocol::PairComparison
+        ) {
             return Err(WebError::Refused(format!(
                 "{}: protocol {} runs in the study window (study run); the browser page of \
                  study serve runs mos, dscqs and staircase studies",

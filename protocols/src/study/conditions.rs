@@ -21,14 +21,16 @@ pub(super) enum References {
     /// Refused: the reference is shown beside or before its test (MOS, DSCQS, DCR).
     Refused,
     /// Allowed: ACR shows one stimulus, and a reference rated so is a hidden reference
-    /// (P.910 ACR-HR).
+    /// (P.910 ACR-HR); a pair comparison shows two unlabelled stimuli, and the original
+    /// among them is one more condition, the anchor its scale values are read against.
     Hidden,
 }
 
 impl References {
-    /// What `protocol` allows: hidden references in ACR only.
+    /// What `protocol` allows: hidden references in ACR and pair comparison only.
     pub(super) fn of(protocol: crate::record::Protocol) -> Self {
-        if protocol == crate::record::Protocol::Acr {
+        use crate::record::Protocol;
+        if matches!(protocol, Protocol::Acr | Protocol::PairComparison) {
             Self::Hidden
         } else {
             Self::Refused
@@ -57,8 +59,8 @@ fn condition_of(
         cx.err(
             key,
             format!(
-                "stimulus {id:?} is a reference, not a test stimulus (only an ACR study rates \
-                 references, as hidden references)"
+                "stimulus {id:?} is a reference, not a test stimulus (only an ACR or a pair \
+                 comparison study shows references as conditions, unlabelled)"
             ),
         );
         return None;
@@ -208,7 +210,8 @@ pub(super) fn parse_conditions(
     if hidden_reference && refs != References::Hidden {
         cx.err(
             format!("{P}.hidden_reference"),
-            "only an ACR study (protocol = \"acr\") rates hidden references",
+            "only an ACR study (protocol = \"acr\") or a pair comparison (protocol = \
+             \"pair_comparison\") has hidden references",
         );
     }
     let mut out = grid_or_list(t, m, refs, cx);

@@ -240,7 +240,10 @@ pub(super) fn parse_gold(
         );
         return Vec::new();
     };
-    if protocol == Some(Protocol::Staircase) {
+    if matches!(
+        protocol,
+        Some(Protocol::Staircase | Protocol::PairComparison)
+    ) {
         cx.err(
             join(table, key),
             "catch (gold) trials are rated conditions: MOS and DSCQS only",

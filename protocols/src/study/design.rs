@@ -65,7 +65,13 @@ pub(super) fn parse_design(
     if order == ConditionOrder::LatinSquare
         && let Some(g) = crowd.groups
     {
-        let rows = crate::design::williams_rows(conditions.len());
+        // A pair comparison's square orders its pairs.
+        let items = if protocol == Some(Protocol::PairComparison) {
+            super::pair_count(conditions)
+        } else {
+            conditions.len()
+        };
+        let rows = crate::design::williams_rows(items);
         if !(g as usize).is_multiple_of(rows) {
             cx.err(
                 "crowdsourcing.groups",

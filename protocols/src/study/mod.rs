@@ -51,6 +51,9 @@ pub const MAX_STUDY_BYTES: u64 = 1 << 20;
 pub const MAX_MANIFEST_BYTES: u64 = 64 << 20;
 /// Most conditions (test stimuli) a study may list.
 pub const MAX_CONDITIONS: usize = 100_000;
+/// Most pairs a pair comparison study may compare (every pair of a clip's conditions is one
+/// trial per subject: 10 000 is far beyond a session, and bounds what a plan allocates).
+pub const MAX_PAIRS: usize = 10_000;
 /// Most staircases a study may interleave.
 pub const MAX_TRACKS: usize = 256;
 
@@ -545,6 +548,44 @@ pub struct StudyDefinition {
     pub manifest: StimulusManifest,
 }
 
+/// The conditions of each clip (by reference), as indices into `conditions`, the clips in
+/// the order their first condition is listed.
+pub(crate) fn conditions_by_clip(conditions: &[Condition]) -> Vec<Vec<usize>> {
+    let mut slot: BTreeMap<&str, usize> = BTreeMap::new();
+    let mut groups: Vec<Vec<usize>> = Vec::new();
+    for (i, c) in conditions.iter().enumerate() {
+        let k = *slot.entry(c.reference.as_str()).or_insert_with(|| {
+            groups.push(Vec::new());
+            groups.len() - 1
+        });
+        groups[k].push(i);
+    }
+    groups
+}
+
+/// How many pairs [`pairs_of`] gives, without making them.
+pub(crate) fn pair_count(conditions: &[Condition]) -> usize {
+    conditions_by_clip(conditions)
+        .iter()
+        .map(|m| m.len().saturating_mul(m.len().saturating_sub(1)) / 2)
+        .fold(0, usize::saturating_add)
+}
+
+/// Every unordered pair of `conditions` that share a reference (a clip), `(i, j)` with
+/// `i < j`, grouped by clip in the order clips first appear. A validated study has at most
+/// [`MAX_PAIRS`] of them.
+pub(crate) fn pairs_of(conditions: &[Condition]) -> Vec<(usize, usize)> {
+    let mut out = Vec::new();
+    for members in conditions_by_clip(conditions) {
+        for (k, &i) in members.iter().enumerate() {
+            for &j in &members[k + 1..] {
+                out.push((i, j));
+            }
+        }
+    }
+    out
+}
+
 /// 64-bit FNV-1a of `bytes`, hex: identifies a study file in session manifests (not a
 /// cryptographic hash).
 pub fn content_hash(bytes: &[u8]) -> String {
@@ -557,6 +598,14 @@ pub fn content_hash(bytes: &[u8]) -> String {
 }
 
 impl StudyDefinition {
+    /// The pairs of a pair comparison (P.910 PC): every unordered pair of conditions of the
+    /// same source clip (the same reference), as indices into [`Self::conditions`], `(i, j)`
+    /// with `i < j`; the clips in the order their first condition is listed, a clip's pairs
+    /// in lexicographic order.
+    pub fn pairs(&self) -> Vec<(usize, usize)> {
+        pairs_of(&self.conditions)
+    }
+
     /// The title shown to subjects: `title` from the study file, or else its name.
     pub fn title(&self) -> &str {
         self.title.as_deref().unwrap_or(&self.name)

@@ -103,7 +103,8 @@ fn pick_arrangement(
 
 /// `reference_position`: a position of the arrangement or `"random"` (the default). ACR
 /// shows no reference, so it takes none; DCR shows the reference first (P.910), or on the
-/// side the study names.
+/// side the study names; a pair comparison takes `"random"` or `"balanced"` only (the
+/// position of a pair's second stimulus).
 fn parse_reference_position(
     t: &Table,
     protocol: Option<Protocol>,
@@ -157,6 +158,19 @@ fn parse_reference_position(
     match given.as_deref() {
         None | Some("random") => ReferencePlacement::Random,
         Some("balanced") => ReferencePlacement::Balanced,
+        // A pair comparison places a pair's two test stimuli; a fixed side would put one
+        // condition of every pair on one side and confound the side with the condition.
+        Some(s) if protocol == Some(Protocol::PairComparison) => {
+            cx.err(
+                join(P, "reference_position"),
+                format!(
+                    "{s:?}: a pair comparison places each pair's two motions by \"random\" (the \
+                     default) or \"balanced\" (each subject sees each condition of a pair on \
+                     each side equally often), never on a fixed side"
+                ),
+            );
+            ReferencePlacement::Random
+        }
         Some(s) => match s.parse::<Position>() {
             Ok(p) if p.fits(arrangement) => ReferencePlacement::Fixed(p),
             Ok(p) => {
@@ -225,6 +239,9 @@ fn parse_labels(t: &Table, protocol: Option<Protocol>, cx: &mut Ctx) -> Option<S
             Some("in a 2AFC trial the reference's position is what the subject must find")
         }
         Some(Protocol::Acr) => Some("ACR shows one motion and no reference (ITU-T P.910)"),
+        Some(Protocol::PairComparison) => {
+            Some("a pair comparison shows two test motions and no labelled reference (ITU-T P.910)")
+        }
         Some(Protocol::Mos | Protocol::Dcr) | None => None,
     };
     if let (Some(true), Some(why)) = (asked, hidden_by_design) {

@@ -115,6 +115,10 @@ pub(super) fn parse_table(
                 );
             }
         }
+        Some(Protocol::PairComparison) => {
+            let m = manifest.as_ref();
+            conditions = pc_sections(t, &session, &familiarization_spec, scale_t, m, cx);
+        }
         Some(Protocol::Staircase) => {
             staircase = staircase_sections(
                 t,
@@ -126,12 +130,6 @@ pub(super) fn parse_table(
                 cx,
             );
             check_live_metric(t, &simulation, cx);
-            if t.contains_key("scene") {
-                cx.err(
-                    "scene",
-                    "crowd scenes are rated (protocol \"dscqs\" or \"mos\"), not a staircase",
-                );
-            }
         }
         None => {}
     }
@@ -310,6 +308,94 @@ fn rating_sections(
     (conditions, familiarization)
 }
 
+/// What a pair comparison (P.910 PC) has no use for: a rating scale (the subject picks one
+/// of two), familiarization trials (not offered yet: the test pairs start at once), and a
+/// crowd `[scene]` (rated scenes only).
+fn pair_comparison_rules(t: &Table, familiarization: &FamSpec, has_scale: bool, cx: &mut Ctx) {
+    if has_scale {
+        cx.err(
+            "scale",
+            "a pair comparison asks which of two motions is better, not for a rating: remove \
+             [scale]",
+        );
+    }
+    if !matches!(familiarization, FamSpec::None) {
+        cx.err(
+            "session.familiarization",
+            "familiarization trials are not offered in a pair comparison study (its pairs start \
+             at once); remove familiarization",
+        );
+    }
+    if t.contains_key("scene") {
+        cx.err(
+            "scene",
+            "crowd scenes are rated (protocol \"dscqs\" or \"mos\"), not compared in pairs",
+        );
+    }
+}
+
+/// The conditions of a pair comparison, checked as a rating study's (no familiarization) and
+/// for pairs, and what a pair comparison has no use for ([`pair_comparison_rules`]).
+fn pc_sections(
+    t: &Table,
+    session: &SessionSettings,
+    familiarization: &FamSpec,
+    scale: Option<&Table>,
+    manifest: Option<&StimulusManifest>,
+    cx: &mut Ctx,
+) -> Vec<Condition> {
+    pair_comparison_rules(t, familiarization, scale.is_some(), cx);
+    let (conditions, _) = rating_sections(
+        t,
+        session,
+        FamSpec::None,
+        manifest,
+        References::of(Protocol::PairComparison),
+        cx,
+    );
+    if manifest.is_some() {
+        check_pairs(&conditions, session.hidden_repeats, cx);
+    }
+    conditions
+}
+
+/// A pair comparison compares conditions of the same clip: every clip needs two of them, the
+/// pairs may be at most [`super::MAX_PAIRS`], and the hidden repeats repeat pairs.
+fn check_pairs(conditions: &[Condition], hidden_repeats: u32, cx: &mut Ctx) {
+    for members in super::conditions_by_clip(conditions) {
+        if members.len() < 2
+            && let Some(c) = members.first().and_then(|&i| conditions.get(i))
+        {
+            cx.err(
+                "conditions",
+                format!(
+                    "{:?} is the only condition of its clip (reference {:?}): a pair comparison \
+                     compares two versions of the same clip, so each clip needs at least 2",
+                    c.stimulus, c.reference
+                ),
+            );
+        }
+    }
+    let pairs = super::pair_count(conditions);
+    if pairs > super::MAX_PAIRS {
+        cx.err(
+            "conditions",
+            format!(
+                "{pairs} pairs (every pair of a clip's conditions) is over the limit of {}",
+                super::MAX_PAIRS
+            ),
+        );
+    } else if pairs > 0
+        && hidden_repeats as usize > pairs
+        && hidden_repeats as usize <= conditions.len()
+    {
+        cx.err(
+            "session.hidden_repeats",
+            format!("{hidden_repeats} repeats but only {pairs} pairs"),
+        );
+    }
+}
+
 /// The sections of a staircase study: none of the settings only rating studies have
 /// (conditions, familiarization, hidden repeats, a `[scale]`, which `has_scale` tells), and the
 /// `[staircase]` table.
@@ -343,6 +429,12 @@ fn staircase_sections(
     }
     if has_scale {
         cx.err("scale", "a staircase study has no rating scale");
+    }
+    if t.contains_key("scene") {
+        cx.err(
+            "scene",
+            "crowd scenes are rated (protocol \"dscqs\" or \"mos\"), not a staircase",
+        );
     }
     match cx.table(t, "", "staircase") {
         Some(st) => parse_staircase(st, manifest, codecs, cx),

@@ -498,7 +498,7 @@ fn decode(row: &Tuple<'_>) -> Field<TrialRecord> {
             a: row.finite(17)?,
             b: row.finite(18)?,
         },
-        Protocol::Staircase => Answer::Choice(row.named(19)?),
+        Protocol::Staircase | Protocol::PairComparison => Answer::Choice(row.named(19)?),
     };
     let encoding = match row.opt_str(31)? {
         None => None,

@@ -24,7 +24,7 @@ use super::timing::FrameClock;
 use super::viewing::ViewingForm;
 use lab::session::Recorder;
 use lab::source::StimulusSource;
-pub use protocols::texts::{AFC_QUESTION, ANSWER_RECORDED, default_instructions};
+pub use protocols::texts::{AFC_QUESTION, ANSWER_RECORDED, PC_QUESTION, default_instructions};
 use protocols::texts::{
     Planned, categories, dscqs_names, format_rating, grade_labels, planned_trials, quality_label,
 };
@@ -653,7 +653,8 @@ impl StudyUi {
                         Protocol::Acr => acr_answer(ui, t, &self.study.scale, open),
                         Protocol::Dcr => dcr_answer(ui, t, &self.study.scale, labels, open),
                         Protocol::Dscqs => dscqs_answer(ui, t, &self.study.scale, open),
-                        Protocol::Staircase => afc_answer(ui, t, open),
+                        Protocol::Staircase => afc_answer(ui, t, AFC_QUESTION, open),
+                        Protocol::PairComparison => afc_answer(ui, t, PC_QUESTION, open),
                     })
                     .inner;
                 (answer, replay_row(ui, t, active))
@@ -1297,9 +1298,10 @@ fn dscqs_answer(
     None
 }
 
-/// 2AFC: which of the two is the distorted one, by button or key.
-fn afc_answer(ui: &mut Ui, t: &TrialScreen, open: bool) -> Option<Answer> {
-    ui.label(RichText::new(AFC_QUESTION).size(20.0));
+/// 2AFC: which of the two is the distorted one; pair comparison: which of two versions is
+/// better; by button or key.
+fn afc_answer(ui: &mut Ui, t: &TrialScreen, question: &str, open: bool) -> Option<Answer> {
+    ui.label(RichText::new(question).size(20.0));
     let (l, r, lk, rk) = match t.trial.arrangement {
         Arrangement::Sequential => (Position::First, Position::Second, Key::Num1, Key::Num2),
         Arrangement::Abab => (Position::A, Position::B, Key::A, Key::B),

@@ -894,3 +894,68 @@ fn a_dcr_trial_shows_the_reference_first_and_takes_an_impairment() {
     assert_eq!(r[0].protocol, protocols::Protocol::Dcr);
     drop(run.fx);
 }
+
+/// A pair comparison over the one-second walk: its two compressed versions and its original,
+/// unlabelled, in pairs.
+const PC: &str = "protocol = \"pair_comparison\"\n\
+    [conditions]\nclips = [\"walk\"]\ncodecs = [\"spiht\"]\ntarget_cr = [10, 20]\n\
+    hidden_reference = true\n\
+    [presentation]\ngap_ms = 200\n\
+    [session]\nhidden_repeats = 0\n";
+
+/// Pair comparison (P.910 PC): two unlabelled versions side by side and "which looks
+/// better?"; the Left/Right buttons and keys stay closed until the motions have played, then
+/// a key or a click answers; the three pairs are logged with the position picked and the
+/// score saying which column's version won.
+#[test]
+fn a_pair_comparison_trial_shows_two_versions_and_takes_a_side() {
+    let (mut h, run) = harness(fixture("pc", PC));
+    begin(&mut h);
+    assert!(h.query_by_label("Trial 1 of 3").is_some());
+    assert!(h.query_by_label("Which motion looks better?").is_some());
+    assert!(h.query_by_label("Original").is_none() && h.query_by_label("Compressed").is_none());
+    assert!(h.get_by_label("Left").accesskit_node().is_disabled());
+    // An early key is ignored.
+    h.key_press(Key::ArrowLeft);
+    h.run_steps(1);
+    assert_eq!(rows(&run.session_dir).len(), 0);
+    watch(&mut h, 1.2);
+    h.key_press(Key::ArrowLeft);
+    h.run_steps(3);
+    assert_eq!(rows(&run.session_dir).len(), 1);
+    watch(&mut h, 1.5);
+    watch(&mut h, 1.2);
+    h.get_by_label("Right").click();
+    h.run_steps(3);
+    assert_eq!(rows(&run.session_dir).len(), 2);
+    watch(&mut h, 1.5);
+    watch(&mut h, 1.2);
+    h.key_press(Key::ArrowRight);
+    h.run_steps(3);
+    let r = rows(&run.session_dir);
+    let picked: Vec<Answer> = r.iter().map(|r| r.response.answer).collect();
+    assert_eq!(
+        picked,
+        [
+            Answer::Choice(Position::Left),
+            Answer::Choice(Position::Right),
+            Answer::Choice(Position::Right)
+        ]
+    );
+    let mut pairs: Vec<&str> = r.iter().map(|r| r.trial.condition.as_str()).collect();
+    pairs.sort_unstable();
+    pairs.dedup();
+    assert_eq!(pairs.len(), 3, "every pair once: {pairs:?}");
+    for r in &r {
+        assert_eq!(r.protocol, protocols::Protocol::PairComparison);
+        let Answer::Choice(p) = r.response.answer else {
+            unreachable!()
+        };
+        let stimulus_won = p != r.trial.reference_position;
+        let want: f64 = if stimulus_won { 1.0 } else { 0.0 };
+        assert_eq!(r.outcome.score.to_bits(), want.to_bits());
+    }
+    watch(&mut h, 1.5);
+    assert!(matches!(h.state().0.exit(), Some(Exit::Finished(_))));
+    drop(run.fx);
+}
