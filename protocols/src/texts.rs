@@ -170,6 +170,16 @@ pub fn default_instructions(study: &StudyDefinition) -> String {
                  will meet."
             )
         }
+        Protocol::Mushra => concat!(
+            "Each screen shows the original motion, labelled “Reference”, and beside it several \
+             versions of it, lettered A, B, C ... One of them is the original itself, hidden \
+             among them; rate it 100 when you find it. Rate each lettered motion from 0 (bad) \
+             to 100 (excellent) against the reference on its slider: click it, drag, or press \
+             Tab to go from slider to slider and the arrow keys to move one (Page Up and Page \
+             Down by 10). The sliders open once every motion has played through; Replay shows \
+             them again. Press Continue (Enter) when every letter has its rating."
+        )
+        .to_string(),
         Protocol::Staircase => "Each trial shows two motions side by side. Choose the one that \
                                 looks more natural with the Left or Right arrow key (or click). \
                                 Answer even when you are unsure."
@@ -238,6 +248,12 @@ pub fn planned_trials(study: &StudyDefinition) -> Planned {
             (study.familiarization.len()
                 + study.conditions.len()
                 + study.session.hidden_repeats as usize) as u32,
+        ),
+        // One row per rated pane: the conditions, and each screen's hidden reference and
+        // anchor.
+        Protocol::Mushra => Planned::Exactly(
+            (study.conditions.len() + study.mushra.as_ref().map_or(0, |m| 2 * m.anchors.len()))
+                as u32,
         ),
         Protocol::Staircase => study
             .staircase

@@ -263,7 +263,19 @@ fn every_kind_of_row_read_back_and_bad_values_named(server: &ScratchServer) {
         frames_shown: 240,
         interval_sd_ms: 0.375,
     });
-    let written = [pair, choice, record("S04", 2, 4.5)];
+    // A MUSHRA pane's row: the grid and its pane (L, the last letter), a window row whose
+    // screen's frames went with its first pane (none of its own).
+    let mut pane = record("S04", 3, 0.0);
+    pane.protocol = Protocol::Mushra;
+    pane.trial.arrangement = Arrangement::Grid;
+    pane.trial.reference_position = Position::Pane(11);
+    pane.response.answer = Answer::Rating(73.0);
+    pane.outcome.score = 73.0;
+    pane.timing = Some(protocols::FrameTiming {
+        frames_shown: 0,
+        interval_sd_ms: 0.0,
+    });
+    let written = [pair, choice, record("S04", 2, 4.5), pane];
     for r in &written {
         writer.append(r).unwrap();
     }
@@ -296,11 +308,11 @@ fn every_kind_of_row_read_back_and_bad_values_named(server: &ScratchServer) {
             "replays: -1 is out of range",
         ),
         (
-            "UPDATE study_trials SET row_number = 5 WHERE row_number = 2",
-            "UPDATE study_trials SET row_number = 2 WHERE row_number = 5",
-            4,
+            "UPDATE study_trials SET row_number = 7 WHERE row_number = 3",
+            "UPDATE study_trials SET row_number = 3 WHERE row_number = 7",
+            5,
             1,
-            "row 5 follows row 1",
+            "row 7 follows row 2",
         ),
     ] {
         admin.execute(sql, &[]).unwrap();

@@ -30,10 +30,11 @@ fn scratch(name: &str) -> PathBuf {
 
 fn record(i: u32, protocol: Protocol, rng: &mut StudyRng) -> TrialRecord {
     let (arrangement, answer, outcome, level, staircase) = match protocol {
-        Protocol::Mos | Protocol::Acr | Protocol::Dcr => (
+        Protocol::Mos | Protocol::Acr | Protocol::Dcr | Protocol::Mushra => (
             match protocol {
                 Protocol::Acr => Arrangement::Single,
                 Protocol::Dcr => Arrangement::Sequential,
+                Protocol::Mushra => Arrangement::Grid,
                 _ => Arrangement::SideBySide,
             },
             Answer::Rating(1.0 + 0.5 * rng.below(9) as f64),
@@ -83,6 +84,8 @@ fn record(i: u32, protocol: Protocol, rng: &mut StudyRng) -> TrialRecord {
         (_, Arrangement::Sequential) => Position::Second,
         (_, Arrangement::Abab) => Position::B,
         (_, Arrangement::Single) => Position::Hidden,
+        // A MUSHRA row names the pane its stimulus was shown in, A to L.
+        (_, Arrangement::Grid) => Position::Pane((i % 12) as u8),
     };
     TrialRecord {
         study: "study, \"quoted\"".into(),
@@ -169,13 +172,14 @@ fn manifest(trials: u32) -> SessionManifest {
 proptest! {
     #![proptest_config(ProptestConfig { cases: 200, ..ProptestConfig::default() })]
     #[test]
-    fn rows_round_trip(seed in any::<u64>(), which in 0_usize..5, n in 1_u32..20) {
+    fn rows_round_trip(seed in any::<u64>(), which in 0_usize..6, n in 1_u32..20) {
         let protocol = [
             Protocol::Mos,
             Protocol::Dscqs,
             Protocol::Staircase,
             Protocol::Acr,
             Protocol::Dcr,
+            Protocol::Mushra,
         ][which];
         let mut rng = StudyRng::new(seed, &[]);
         let recs: Vec<TrialRecord> = (0..n).map(|i| record(i, protocol, &mut rng)).collect();
@@ -393,6 +397,7 @@ fn mutated_results_files_give_errors_never_panics() {
         Protocol::Staircase,
         Protocol::Acr,
         Protocol::Dcr,
+        Protocol::Mushra,
     ]
     .into_iter()
     .cycle()

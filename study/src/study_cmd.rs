@@ -74,6 +74,7 @@ pub fn check(args: &CheckArgs) -> anyhow::Result<()> {
         Protocol::Mos | Protocol::Dscqs | Protocol::Acr | Protocol::Dcr => {
             describe_ratings(&mut text, study)?;
         }
+        Protocol::Mushra => describe_mushra(&mut text, study)?,
         Protocol::Staircase => match &live {
             Some(live) => describe_live(&mut text, study, live)?,
             None => describe_staircase(&mut text, study)?,
@@ -120,6 +121,11 @@ fn describe_design(text: &mut String, study: &StudyDefinition) -> std::fmt::Resu
         )?;
     }
     let side = match study.presentation.reference_position {
+        _ if study.protocol == Protocol::Mushra => {
+            "a pane of its own, labelled; the rated stimuli shuffled over the lettered panes \
+             per screen and subject"
+                .to_string()
+        }
         ReferencePlacement::Fixed(p) => format!("always {p}"),
         ReferencePlacement::Random => "random per trial".to_string(),
         ReferencePlacement::Balanced => match study.protocol {
@@ -179,6 +185,53 @@ fn describe_ratings(text: &mut String, study: &StudyDefinition) -> std::fmt::Res
         )?;
     }
     let est_min = n as f64 * study.trial_presentation_ms() as f64 / 60_000.0;
+    writeln!(
+        text,
+        "  presentation time: {est_min:.1} min without answers"
+    )
+}
+
+/// A MUSHRA study: its screens (one per clip) with their panes, the anchors and the
+/// post-screening rules.
+fn describe_mushra(text: &mut String, study: &StudyDefinition) -> std::fmt::Result {
+    use protocols::study::AnchorRule;
+    use std::fmt::Write as _;
+    let Some(m) = &study.mushra else {
+        return Ok(());
+    };
+    let screens = protocols::study::mushra_screens(&study.conditions);
+    let rated: usize = screens.iter().map(|(_, c)| c.len() + 2).sum();
+    writeln!(
+        text,
+        "  screens per session: {} (one per clip), {rated} rated panes in all",
+        screens.len()
+    )?;
+    for (reference, tests) in &screens {
+        let anchor = m
+            .anchors
+            .iter()
+            .find(|a| a.reference == *reference)
+            .map_or("?", |a| a.stimulus.as_str());
+        writeln!(
+            text,
+            "  screen {reference:?}: {} test conditions + hidden reference + anchor {anchor:?}",
+            tests.len()
+        )?;
+    }
+    writeln!(
+        text,
+        "  post-screening (BS.1534-3): excluded when the hidden reference is rated below {} on \
+         more than {}% of the screens; the anchor rated above {} on more than {}%: {}",
+        m.reference_below,
+        100.0 * m.max_fraction,
+        m.anchor_above,
+        100.0 * m.max_fraction,
+        match m.anchor_rule {
+            AnchorRule::Report => "reported, kept",
+            AnchorRule::Exclude => "excluded",
+        }
+    )?;
+    let est_min = screens.len() as f64 * study.trial_presentation_ms() as f64 / 60_000.0;
     writeln!(
         text,
         "  presentation time: {est_min:.1} min without answers"

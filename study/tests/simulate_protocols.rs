@@ -1,5 +1,5 @@
 //! `study check` and `study simulate` end to end on the shipped examples: MOS, DSCQS,
-//! staircase, ACR-HR and DCR runs write complete results directories that the readers load back.
+//! staircase, ACR-HR, DCR and MUSHRA runs write complete results directories that the readers load back.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
 
 use std::path::{Path, PathBuf};
@@ -31,6 +31,7 @@ fn simulate_writes_complete_results_for_every_protocol() {
         ("staircase.toml", Protocol::Staircase, None),
         ("acr-hr.toml", Protocol::Acr, Some(14)),
         ("dcr.toml", Protocol::Dcr, Some(12)),
+        ("mushra.toml", Protocol::Mushra, Some(10)),
     ] {
         let out = scratch(file);
         let st = study()
@@ -62,6 +63,37 @@ fn simulate_writes_complete_results_for_every_protocol() {
                 assert_eq!(r.protocol, protocol);
             }
             match protocol {
+                Protocol::Mushra => {
+                    // Two screens of five panes (3 tests, hidden reference, anchor), each
+                    // screen's panes lettered A-E in order; the hidden reference rated near the
+                    // top and far above the anchor.
+                    let panes: Vec<String> = s
+                        .trials
+                        .records
+                        .iter()
+                        .map(|r| r.trial.reference_position.to_string())
+                        .collect();
+                    let letters = ["pane_a", "pane_b", "pane_c", "pane_d", "pane_e"];
+                    assert_eq!(panes, [letters, letters].concat(), "{file}");
+                    let score = |suffix: &str| {
+                        let v: Vec<f64> = s
+                            .trials
+                            .records
+                            .iter()
+                            .filter(|r| r.trial.stimulus.ends_with(suffix))
+                            .map(|r| r.outcome.score)
+                            .collect();
+                        assert_eq!(v.len(), 2, "{suffix}: one per screen");
+                        v.iter().sum::<f64>() / 2.0
+                    };
+                    assert!(score("/reference") >= 85.0, "{}", score("/reference"));
+                    assert!(
+                        score("standard/cr30") + 50.0 < score("/reference"),
+                        "anchor {} vs hidden reference {}",
+                        score("standard/cr30"),
+                        score("/reference")
+                    );
+                }
                 Protocol::Mos | Protocol::Acr | Protocol::Dcr => {
                     // Simulated ratings follow quality: compression ratio 10 beats 30 on average.
                     let mean = |suffix: &str| {

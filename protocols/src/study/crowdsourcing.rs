@@ -240,10 +240,11 @@ pub(super) fn parse_gold(
         );
         return Vec::new();
     };
-    if protocol == Some(Protocol::Staircase) {
+    if matches!(protocol, Some(Protocol::Staircase | Protocol::Mushra)) {
         cx.err(
             join(table, key),
-            "catch (gold) trials are rated conditions: MOS and DSCQS only",
+            "catch (gold) trials are rated conditions of one-stimulus screens: MOS, DSCQS, ACR \
+             and DCR only (a MUSHRA screen's hidden reference and anchor are its checks)",
         );
         return Vec::new();
     }

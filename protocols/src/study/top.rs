@@ -9,6 +9,7 @@ use super::check::Ctx;
 use super::conditions::{References, parse_conditions, resolve_familiarization};
 use super::crowdsourcing::parse_crowdsourcing;
 use super::design::parse_design;
+use super::mushra::parse_mushra;
 use super::presentation::parse_presentation;
 use super::rendering::parse_rendering;
 use super::scale::parse_scale;
@@ -60,6 +61,7 @@ const TOP_KEYS: &[&str] = &[
     "scene",
     "design",
     "viewing",
+    "mushra",
 ];
 
 /// The whole study file: its header, the manifest, the sections every protocol has, then
@@ -94,8 +96,12 @@ pub(super) fn parse_table(
     let mut conditions = Vec::new();
     let mut familiarization = Vec::new();
     let mut staircase = None;
+    let mut mushra = None;
     match protocol {
-        Some(p @ (Protocol::Mos | Protocol::Dscqs | Protocol::Acr | Protocol::Dcr)) => {
+        Some(
+            p
+            @ (Protocol::Mos | Protocol::Dscqs | Protocol::Acr | Protocol::Dcr | Protocol::Mushra),
+        ) => {
             (conditions, familiarization) = rating_sections(
                 t,
                 &session,
@@ -111,6 +117,24 @@ pub(super) fn parse_table(
                     scene.as_ref(),
                     t.contains_key("scene"),
                     m,
+                    cx,
+                );
+            }
+            if p == Protocol::Mushra {
+                if t.contains_key("scene") {
+                    cx.err(
+                        "scene",
+                        "a MUSHRA screen shows one figure per pane, not crowd scenes",
+                    );
+                }
+                let has_familiarization = !familiarization.is_empty()
+                    || session_t.contains_key("familiarization_stimuli");
+                mushra = parse_mushra(
+                    cx.table(t, "", "mushra"),
+                    &conditions,
+                    has_familiarization,
+                    &session,
+                    manifest.as_ref(),
                     cx,
                 );
             }
@@ -134,6 +158,12 @@ pub(super) fn parse_table(
             }
         }
         None => {}
+    }
+    if protocol.is_some_and(|p| p != Protocol::Mushra) && t.contains_key("mushra") {
+        cx.err(
+            "mushra",
+            "only a MUSHRA study (protocol = \"mushra\") has a [mushra] table",
+        );
     }
 
     let mut crowdsourcing = parse_crowdsourcing(
@@ -171,6 +201,7 @@ pub(super) fn parse_table(
         design,
         viewing,
         scene,
+        mushra,
         manifest: manifest?,
     })
 }
