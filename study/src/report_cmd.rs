@@ -648,6 +648,39 @@ fn display_section(
     }
 }
 
+/// The MUSHRA statistics (BS.1534-3 post-screening, each stimulus over the assessors kept)
+/// of a MUSHRA study: its anchors are the study file's, found among the rated stimuli by id.
+fn mushra_analysis(
+    m: &protocols::study::MushraSettings,
+    converted: &from_results::ConvertedResults,
+    confidence: analysis::Confidence,
+) -> Result<(analysis::mushra::MushraAnalysis, analysis::mushra::Rules)> {
+    use analysis::mushra::{Rules, analyze};
+    let anchors: std::collections::BTreeSet<u32> = converted
+        .stimuli
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| m.is_anchor(s))
+        .map(|(i, _)| i as u32)
+        .collect();
+    let rules = Rules {
+        reference_below: m.reference_below,
+        anchor_above: m.anchor_above,
+        max_fraction: m.max_fraction,
+        exclude_on_anchor: m.anchor_rule == protocols::study::AnchorRule::Exclude,
+    };
+    let data = &converted.data;
+    let result = analyze(
+        &data.ratings,
+        &data.conditions,
+        &converted.stimuli,
+        &anchors,
+        &rules,
+        confidence,
+    )?;
+    Ok((result, rules))
+}
+
 /// The "Exclusions" section of a crowd study (gold trials, or trials left out because the
 /// page was hidden): who the `[crowdsourcing]` rules left out of the statistics, and why.
 fn exclusions_section(
@@ -820,6 +853,10 @@ pub fn run(args: &ReportArgs) -> Result<()> {
     let mode = files::Mode::from_force(args.force);
     files::prepare_dir(&args.output, mode)?;
     let analysis = analyze(&converted.data, &options)?;
+    let mushra = match &study.mushra {
+        Some(m) => Some(mushra_analysis(m, &converted, options.confidence)?),
+        None => None,
+    };
     let data = &converted.data;
     // The two exports (10⁶ rows each at a million ratings) are written on a second thread
     // while this one lays out and writes the report.
@@ -847,6 +884,15 @@ pub fn run(args: &ReportArgs) -> Result<()> {
             sessions.len()
         );
         let mut report = analysis.to_report(data, &options, &title);
+        if let Some((m, rules)) = &mushra {
+            m.section(
+                &mut report,
+                &converted.stimuli,
+                &data.conditions,
+                &|s| data.subject_name(s),
+                rules,
+            );
+        }
         analysis::method::method_section(
             &mut report,
             &study,
