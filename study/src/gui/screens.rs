@@ -1226,7 +1226,16 @@ fn keyboard_rating(ui: &Ui, scale: &RatingScale, value: &mut Option<f64>) -> boo
 fn progress_panel(ui: &mut Ui, t: &TrialScreen, done: u32, planned: Planned, ack: bool) {
     egui::Panel::top("progress").show(ui, |ui| {
         ui.horizontal(|ui| {
-            ui.label(planned.trial_text(done + 1));
+            if t.trial.arrangement == Arrangement::Grid {
+                // A MUSHRA screen rates several panes at once: count the ratings.
+                ui.label(format!(
+                    "{} This screen: {} lettered motions.",
+                    planned.done_text(done),
+                    t.panes.len()
+                ));
+            } else {
+                ui.label(planned.trial_text(done + 1));
+            }
             if t.trial.block == Block::Familiarization {
                 ui.label(RichText::new("(practice)").italics());
             }
