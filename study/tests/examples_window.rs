@@ -358,7 +358,7 @@ fn crowd_example_stimuli_are_the_generated_ones() {
     std::fs::remove_dir_all(&root).unwrap();
 }
 
-const EXAMPLES: [&str; 7] = [
+const EXAMPLES: [&str; 8] = [
     "mos.toml",
     "dscqs.toml",
     "staircase.toml",
@@ -366,6 +366,7 @@ const EXAMPLES: [&str; 7] = [
     "quest.toml",
     "acr-hr.toml",
     "dcr.toml",
+    "mushra.toml",
 ];
 
 /// The two runs of the crowd study (thesis 6.5).
@@ -437,10 +438,16 @@ fn logged_rows(session: &Path) -> usize {
 }
 
 fn spawn_run(env: &Env, study: &Path, out: &Path) -> Child {
+    // A MUSHRA screen draws six panes at once: a small window keeps lavapipe's frames quick.
+    let size = if study.ends_with("mushra.toml") {
+        "640x480"
+    } else {
+        "1280x720"
+    };
     env.cmd(env!("CARGO_BIN_EXE_study"))
         .arg("run")
         .arg(study)
-        .args(["--subject", "S01", "-o"])
+        .args(["--subject", "S01", "--window-size", size, "-o"])
         .arg(out)
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
@@ -506,6 +513,18 @@ fn each_example_records_its_first_answer_in_the_window() {
                         std::thread::sleep(Duration::from_millis(450));
                     }
                 }
+                // MUSHRA: Tab to each slider in turn (A to E, the order they are drawn) and
+                // Up sets it to 1; Enter continues once every letter has a rating. A round
+                // begun before the sliders opened is completed by the next.
+                "mushra.toml" => {
+                    for _ in 0..5 {
+                        for key in ["Tab", "Up"] {
+                            press(&env, &wid, &[key]);
+                            std::thread::sleep(Duration::from_millis(300));
+                        }
+                    }
+                    press(&env, &wid, &["Return"]);
+                }
                 // MOS, ACR (one motion) and DCR (reference then test): 4, Enter.
                 "mos.toml" | "acr-hr.toml" | "dcr.toml" => press(&env, &wid, &["4", "Return"]),
                 // 2AFC: the left one; Enter first begins a study without subject fields.
@@ -535,6 +554,21 @@ fn each_example_records_its_first_answer_in_the_window() {
                 protocols::Answer::Rating(4.0),
                 "{name}"
             );
+        }
+        if name == "mushra.toml" {
+            // The whole first screen: one row per pane, A to E, each rated from the keys,
+            // the first carrying the screen's frames.
+            let panes: Vec<String> = trials
+                .records
+                .iter()
+                .map(|r| r.trial.reference_position.to_string())
+                .collect();
+            assert_eq!(panes, ["pane_a", "pane_b", "pane_c", "pane_d", "pane_e"]);
+            assert!(trials.records.iter().all(|r| matches!(
+                r.response.answer,
+                protocols::Answer::Rating(v) if (1.0..=100.0).contains(&v)
+            )));
+            assert!(trials.records[0].timing.is_some_and(|t| t.frames_shown > 0));
         }
         eprintln!(
             "{name}: first answer in the window after {:.1?}",
