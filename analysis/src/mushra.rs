@@ -239,7 +239,23 @@ impl MushraAnalysis {
                 listed.join(", ")
             },
         ));
-        s.table(Table {
+        s.table(self.screening_table(subject_name));
+        s.text(format!(
+            "Each stimulus over the {} assessors kept (each rates each stimulus once): mean, \
+             sample SD and the {:.0} % Student-t confidence interval; the hidden reference and \
+             the anchor of each clip shown with the tests.",
+            self.assessors.iter().filter(|a| !a.excluded).count(),
+            self.conditions
+                .iter()
+                .find_map(|c| c.summary.map(|s| s.confidence.percent()))
+                .unwrap_or(95.0)
+        ));
+        s.table(self.condition_table(names, &info));
+    }
+
+    /// `tables/mushra_screening.csv`: every assessor's post-screening.
+    fn screening_table(&self, subject_name: &dyn Fn(u32) -> String) -> Table {
+        Table {
             name: "mushra_screening".into(),
             caption: "BS.1534-3 post-screening of the assessors".into(),
             columns: [
@@ -270,18 +286,12 @@ impl MushraAnalysis {
                     ]
                 })
                 .collect(),
-        });
-        s.text(format!(
-            "Each stimulus over the {} assessors kept (each rates each stimulus once): mean, \
-             sample SD and the {:.0} % Student-t confidence interval; the hidden reference and \
-             the anchor of each clip shown with the tests.",
-            self.assessors.iter().filter(|a| !a.excluded).count(),
-            self.conditions
-                .iter()
-                .find_map(|c| c.summary.map(|s| s.confidence.percent()))
-                .unwrap_or(95.0)
-        ));
-        s.table(Table {
+        }
+    }
+
+    /// `tables/mushra.csv`: every stimulus over the assessors kept.
+    fn condition_table(&self, names: &[String], info: &BTreeMap<u32, &ConditionInfo>) -> Table {
+        Table {
             name: "mushra".into(),
             caption: "MUSHRA scores per stimulus (assessors kept)".into(),
             columns: [
@@ -319,7 +329,7 @@ impl MushraAnalysis {
                     ]
                 })
                 .collect(),
-        });
+        }
     }
 }
 

@@ -151,7 +151,7 @@ impl Position {
 
     /// MUSHRA pane `i` (0 = A), or `None` past [`MAX_PANES`].
     pub fn pane(i: usize) -> Option<Self> {
-        (i < MAX_PANES).then(|| Self::Pane(i as u8))
+        (i < MAX_PANES).then_some(Self::Pane(i as u8))
     }
 
     /// The letter a subject sees on a MUSHRA pane (`A` for pane 0); `None` for other

@@ -28,15 +28,21 @@ fn scratch(name: &str) -> PathBuf {
     d
 }
 
+/// How a one-rating protocol's trial is laid out; a MUSHRA row names the pane its stimulus was
+/// shown in (A to L) as its position.
+fn rating_arrangement(protocol: Protocol) -> Arrangement {
+    match protocol {
+        Protocol::Acr => Arrangement::Single,
+        Protocol::Dcr => Arrangement::Sequential,
+        Protocol::Mushra => Arrangement::Grid,
+        _ => Arrangement::SideBySide,
+    }
+}
+
 fn record(i: u32, protocol: Protocol, rng: &mut StudyRng) -> TrialRecord {
     let (arrangement, answer, outcome, level, staircase) = match protocol {
         Protocol::Mos | Protocol::Acr | Protocol::Dcr | Protocol::Mushra => (
-            match protocol {
-                Protocol::Acr => Arrangement::Single,
-                Protocol::Dcr => Arrangement::Sequential,
-                Protocol::Mushra => Arrangement::Grid,
-                _ => Arrangement::SideBySide,
-            },
+            rating_arrangement(protocol),
             Answer::Rating(1.0 + 0.5 * rng.below(9) as f64),
             Outcome {
                 score: 3.5,
@@ -84,7 +90,6 @@ fn record(i: u32, protocol: Protocol, rng: &mut StudyRng) -> TrialRecord {
         (_, Arrangement::Sequential) => Position::Second,
         (_, Arrangement::Abab) => Position::B,
         (_, Arrangement::Single) => Position::Hidden,
-        // A MUSHRA row names the pane its stimulus was shown in, A to L.
         (_, Arrangement::Grid) => Position::Pane((i % 12) as u8),
     };
     TrialRecord {

@@ -63,37 +63,7 @@ fn simulate_writes_complete_results_for_every_protocol() {
                 assert_eq!(r.protocol, protocol);
             }
             match protocol {
-                Protocol::Mushra => {
-                    // Two screens of five panes (3 tests, hidden reference, anchor), each
-                    // screen's panes lettered A-E in order; the hidden reference rated near the
-                    // top and far above the anchor.
-                    let panes: Vec<String> = s
-                        .trials
-                        .records
-                        .iter()
-                        .map(|r| r.trial.reference_position.to_string())
-                        .collect();
-                    let letters = ["pane_a", "pane_b", "pane_c", "pane_d", "pane_e"];
-                    assert_eq!(panes, [letters, letters].concat(), "{file}");
-                    let score = |suffix: &str| {
-                        let v: Vec<f64> = s
-                            .trials
-                            .records
-                            .iter()
-                            .filter(|r| r.trial.stimulus.ends_with(suffix))
-                            .map(|r| r.outcome.score)
-                            .collect();
-                        assert_eq!(v.len(), 2, "{suffix}: one per screen");
-                        v.iter().sum::<f64>() / 2.0
-                    };
-                    assert!(score("/reference") >= 85.0, "{}", score("/reference"));
-                    assert!(
-                        score("standard/cr30") + 50.0 < score("/reference"),
-                        "anchor {} vs hidden reference {}",
-                        score("standard/cr30"),
-                        score("/reference")
-                    );
-                }
+                Protocol::Mushra => check_mushra(s),
                 Protocol::Mos | Protocol::Acr | Protocol::Dcr => {
                     // Simulated ratings follow quality: compression ratio 10 beats 30 on average.
                     let mean = |suffix: &str| {
@@ -155,6 +125,41 @@ fn simulate_writes_complete_results_for_every_protocol() {
         assert!(!again.status.success());
         assert!(String::from_utf8_lossy(&again.stderr).contains("never overwritten"));
     }
+}
+
+/// A simulated MUSHRA session of the example: two screens of five panes (3 tests, hidden
+/// reference, anchor), each screen's panes lettered A-E in order; the hidden reference rated
+/// near the top and far above the anchor.
+fn check_mushra(s: &results::SessionResults) {
+    // Two screens of five panes (3 tests, hidden reference, anchor), each
+    // screen's panes lettered A-E in order; the hidden reference rated near the
+    // top and far above the anchor.
+    let panes: Vec<String> = s
+        .trials
+        .records
+        .iter()
+        .map(|r| r.trial.reference_position.to_string())
+        .collect();
+    let letters = ["pane_a", "pane_b", "pane_c", "pane_d", "pane_e"];
+    assert_eq!(panes, [letters, letters].concat());
+    let score = |suffix: &str| {
+        let v: Vec<f64> = s
+            .trials
+            .records
+            .iter()
+            .filter(|r| r.trial.stimulus.ends_with(suffix))
+            .map(|r| r.outcome.score)
+            .collect();
+        assert_eq!(v.len(), 2, "{suffix}: one per screen");
+        v.iter().sum::<f64>() / 2.0
+    };
+    assert!(score("/reference") >= 85.0, "{}", score("/reference"));
+    assert!(
+        score("standard/cr30") + 50.0 < score("/reference"),
+        "anchor {} vs hidden reference {}",
+        score("standard/cr30"),
+        score("/reference")
+    );
 }
 
 #[test]

@@ -135,6 +135,46 @@ pub(super) fn parse_mushra(
     let ids = cx.required(ids, t, P, "anchors")?;
     let m = manifest?;
     let screens = screens(conditions);
+    let mut by_reference = parse_anchors(&ids, m, conditions, &screens, cx);
+    let mut anchors = Vec::new();
+    for (reference, tests) in &screens {
+        let rated = tests.len() + 2;
+        if rated > MAX_PANES {
+            cx.err(
+                "conditions",
+                format!(
+                    "reference {reference:?}: {} test conditions + hidden reference + anchor = \
+                     {rated} rated panes, more than the {MAX_PANES} a screen shows (BS.1534 \
+                     asks for few stimuli at once): split the conditions over two studies",
+                    tests.len()
+                ),
+            );
+        }
+        match by_reference.remove(reference) {
+            Some(a) => anchors.push(a),
+            None => cx.err(
+                join(P, "anchors"),
+                format!("no anchor for the clip of reference {reference:?}: give one per clip"),
+            ),
+        }
+    }
+    Some(MushraSettings {
+        anchors,
+        reference_below,
+        anchor_above,
+        max_fraction,
+        anchor_rule,
+    })
+}
+
+/// `anchors`: each id's anchor by its clip's reference, every problem named by its index.
+fn parse_anchors(
+    ids: &[String],
+    m: &StimulusManifest,
+    conditions: &[Condition],
+    screens: &[(String, Vec<&Condition>)],
+    cx: &mut Ctx,
+) -> BTreeMap<String, Condition> {
     let tests: BTreeSet<&str> = conditions.iter().map(|c| c.stimulus.as_str()).collect();
     let mut by_reference: BTreeMap<String, Condition> = BTreeMap::new();
     for (i, id) in ids.iter().enumerate() {
@@ -191,33 +231,5 @@ pub(super) fn parse_mushra(
             );
         }
     }
-    let mut anchors = Vec::new();
-    for (reference, tests) in &screens {
-        let rated = tests.len() + 2;
-        if rated > MAX_PANES {
-            cx.err(
-                "conditions",
-                format!(
-                    "reference {reference:?}: {} test conditions + hidden reference + anchor = \
-                     {rated} rated panes, more than the {MAX_PANES} a screen shows (BS.1534 \
-                     asks for few stimuli at once): split the conditions over two studies",
-                    tests.len()
-                ),
-            );
-        }
-        match by_reference.remove(reference) {
-            Some(a) => anchors.push(a),
-            None => cx.err(
-                join(P, "anchors"),
-                format!("no anchor for the clip of reference {reference:?}: give one per clip"),
-            ),
-        }
-    }
-    Some(MushraSettings {
-        anchors,
-        reference_below,
-        anchor_above,
-        max_fraction,
-        anchor_rule,
-    })
+    by_reference
 }

@@ -67,6 +67,10 @@ const TOP_KEYS: &[&str] = &[
 /// The whole study file: its header, the manifest, the sections every protocol has, then
 /// the protocol's own; `None` when something the definition needs is missing (the problem is
 /// in `cx`).
+#[expect(
+    clippy::too_many_lines,
+    reason = "the study file's one walk: every protocol's sections in one match, read top to bottom"
+)]
 pub(super) fn parse_table(
     t: &Table,
     cx: &mut Ctx,
@@ -98,10 +102,7 @@ pub(super) fn parse_table(
     let mut staircase = None;
     let mut mushra = None;
     match protocol {
-        Some(
-            p
-            @ (Protocol::Mos | Protocol::Dscqs | Protocol::Acr | Protocol::Dcr | Protocol::Mushra),
-        ) => {
+        Some(p) if p != Protocol::Staircase => {
             (conditions, familiarization) = rating_sections(
                 t,
                 &session,
@@ -121,22 +122,9 @@ pub(super) fn parse_table(
                 );
             }
             if p == Protocol::Mushra {
-                if t.contains_key("scene") {
-                    cx.err(
-                        "scene",
-                        "a MUSHRA screen shows one figure per pane, not crowd scenes",
-                    );
-                }
-                let has_familiarization = !familiarization.is_empty()
+                let fam = !familiarization.is_empty()
                     || session_t.contains_key("familiarization_stimuli");
-                mushra = parse_mushra(
-                    cx.table(t, "", "mushra"),
-                    &conditions,
-                    has_familiarization,
-                    &session,
-                    manifest.as_ref(),
-                    cx,
-                );
+                mushra = mushra_sections(t, &conditions, fam, &session, manifest.as_ref(), cx);
             }
         }
         Some(Protocol::Staircase) => {
@@ -157,13 +145,7 @@ pub(super) fn parse_table(
                 );
             }
         }
-        None => {}
-    }
-    if protocol.is_some_and(|p| p != Protocol::Mushra) && t.contains_key("mushra") {
-        cx.err(
-            "mushra",
-            "only a MUSHRA study (protocol = \"mushra\") has a [mushra] table",
-        );
+        Some(_) | None => {}
     }
 
     let mut crowdsourcing = parse_crowdsourcing(
@@ -254,6 +236,12 @@ fn parse_header(t: &Table, cx: &mut Ctx) -> Header {
     });
     let protocol: Option<Protocol> = cx.parse_enum(t, "", "protocol");
     let protocol = cx.required(protocol, t, "", "protocol");
+    if protocol.is_some_and(|p| p != Protocol::Mushra) && t.contains_key("mushra") {
+        cx.err(
+            "mushra",
+            "only a MUSHRA study (protocol = \"mushra\") has a [mushra] table",
+        );
+    }
     let stimuli_path = cx.string(t, "", "stimuli");
     let stimuli_path = cx.required(stimuli_path, t, "", "stimuli");
     let seed = cx.int(t, "", "seed", 0, i64::MAX);
@@ -284,6 +272,26 @@ fn load_checked_manifest(
             None
         }
     }
+}
+
+/// A MUSHRA study's `[mushra]` and its rules (no crowd scenes); `fam`: the session asks
+/// for familiarization trials.
+fn mushra_sections(
+    t: &Table,
+    conditions: &[Condition],
+    fam: bool,
+    session: &SessionSettings,
+    manifest: Option<&StimulusManifest>,
+    cx: &mut Ctx,
+) -> Option<super::MushraSettings> {
+    if t.contains_key("scene") {
+        cx.err(
+            "scene",
+            "a MUSHRA screen shows one figure per pane, not crowd scenes",
+        );
+    }
+    let table = cx.table(t, "", "mushra");
+    parse_mushra(table, conditions, fam, session, manifest, cx)
 }
 
 /// The sections of a rating study (MOS, DSCQS, ACR, DCR): no `[staircase]`, the

@@ -1632,13 +1632,13 @@ fn grid_columns(n: usize, w: f32, h: f32) -> usize {
 
 /// A MUSHRA screen's panes in a grid: the labelled reference first, then the lettered panes
 /// (each labelled above its viewport, `names`).
-fn grid_panes<'a>(
+fn grid_panes(
     painter: &egui::Painter,
     gpu: bool,
     t: &mut TrialScreen,
     full: egui::Rect,
     clip_time_s: f64,
-    names: &mut Vec<(egui::Rect, &'a str)>,
+    names: &mut Vec<(egui::Rect, &str)>,
 ) {
     let n = t.stages.len();
     let (gap, band) = (8.0, 26.0);
