@@ -95,13 +95,22 @@ struct Run {
 }
 
 fn harness(fx: Fixture) -> (Harness<'static, (StudyUi, FrameClock)>, Run) {
+    harness_after(fx, |_| {})
+}
+
+/// [`harness`] over a session to which `before` has already logged some answers (a session
+/// stopped part way and resumed).
+fn harness_after(
+    fx: Fixture,
+    before: impl FnOnce(&mut Recorder),
+) -> (Harness<'static, (StudyUi, FrameClock)>, Run) {
     let file = StudyFile::load(&fx.study_path).unwrap();
     let stimuli = lab::source::open(&file).unwrap();
     let study = file.definition;
     let session_dir = fx.dir.join("results").join("S01_s1");
     std::fs::create_dir_all(session_dir.parent().unwrap()).unwrap();
     let manifest = fresh_manifest(&study);
-    let Opened::Ready { recorder, .. } = Recorder::open(
+    let Opened::Ready { mut recorder, .. } = Recorder::open(
         &study,
         0,
         &mut results::FolderStore::new(fx.dir.join("results")),
@@ -111,6 +120,7 @@ fn harness(fx: Fixture) -> (Harness<'static, (StudyUi, FrameClock)>, Run) {
     .unwrap() else {
         panic!("new session reported finished");
     };
+    before(&mut recorder);
     let ui = StudyUi::new(Arc::new(study), stimuli, recorder, false);
     let h = Harness::builder()
         .with_size(egui::vec2(1280.0, 720.0))
@@ -991,5 +1001,64 @@ fn a_mushra_screen_rates_every_pane_on_a_slider_after_the_play() {
         && r.trial.reference == "walk/reference"));
     watch(&mut h, 0.5);
     assert!(matches!(h.state().0.exit(), Some(Exit::Finished(_))));
+    drop(run.fx);
+}
+
+/// A MUSHRA session stopped after the first pane of a screen was logged shows, on resume,
+/// the reference and the panes not yet rated (B and C, not A), and logs them after it.
+#[test]
+fn a_mushra_screen_resumed_part_way_shows_the_panes_left() {
+    let mut first = None;
+    let (mut h, run) = harness_after(fixture("mushra-resume", MUSHRA), |recorder| {
+        let t = recorder.next_trial(0).unwrap().unwrap();
+        let response = protocols::Response {
+            answer: Answer::Rating(70.0),
+            response_time_ms: 900,
+            replays: 0,
+            dropped_frames: 0,
+        };
+        recorder.record(t.clone(), response, 0, None, None).unwrap();
+        first = Some(t);
+    });
+    begin(&mut h);
+    assert!(
+        h.query_by_label("Trials done: 1 of 3. This screen: 2 lettered motions.")
+            .is_some()
+    );
+    assert_eq!(label_rects(&h, "Reference").len(), 1);
+    assert_eq!(h.query_all_by_label("A").count(), 0, "pane A was rated");
+    for letter in ["B", "C"] {
+        assert_eq!(label_rects(&h, letter).len(), 2, "{letter}");
+    }
+    watch(&mut h, 1.2);
+    for k in 0..2 {
+        let rect = sliders(&h)[k].0;
+        h.get_all_by_role(Role::Slider)
+            .find(|n| n.rect() == rect)
+            .unwrap()
+            .focus();
+        h.run_steps(1);
+        h.key_press(Key::PageUp);
+        h.run_steps(1);
+    }
+    h.key_press(Key::Enter);
+    h.run_steps(3);
+    let r = rows(&run.session_dir);
+    assert_eq!(r.len(), 3);
+    assert_eq!(Some(&r[0].trial), first.as_ref());
+    let panes: Vec<String> = r
+        .iter()
+        .map(|r| r.trial.reference_position.to_string())
+        .collect();
+    assert_eq!(panes, ["pane_a", "pane_b", "pane_c"]);
+    let answers: Vec<Answer> = r.iter().map(|r| r.response.answer).collect();
+    assert_eq!(
+        answers,
+        [
+            Answer::Rating(70.0),
+            Answer::Rating(10.0),
+            Answer::Rating(10.0)
+        ]
+    );
     drop(run.fx);
 }
