@@ -62,14 +62,16 @@ fn scratch(name: &str) -> PathBuf {
     d
 }
 
-/// Simulates `example` with `subjects` subjects and `seed`, reports it, and returns the
-/// results folder and the report folder.
-fn simulate_and_report(dir: &Path, example: &str, subjects: u32, seed: u64) -> (PathBuf, PathBuf) {
-    let results = dir.join(format!("results-{example}-{seed}"));
-    let report = dir.join(format!("report-{example}-{seed}"));
+/// Simulates the study file `study` (an example's name, or a path) with `subjects` subjects
+/// and `seed`, reports it, and returns the results folder and the report folder.
+fn simulate_and_report(dir: &Path, study: &str, subjects: u32, seed: u64) -> (PathBuf, PathBuf) {
+    let path = repo().join("examples").join(study);
+    let stem = path.file_stem().unwrap().to_string_lossy().into_owned();
+    let results = dir.join(format!("results-{stem}-{seed}"));
+    let report = dir.join(format!("report-{stem}-{seed}"));
     study_ok(&[
         "simulate".as_ref(),
-        repo().join("examples").join(example).as_os_str(),
+        path.as_os_str(),
         "--subjects".as_ref(),
         subjects.to_string().as_ref(),
         "--seed".as_ref(),
@@ -118,19 +120,7 @@ fn table_rows(report: &Path, name: &str) -> Vec<String> {
 }
 
 fn golden_rows(g: &serde_json::Value, key: &str) -> Vec<String> {
-    let mut rows: Vec<String> = g[key]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|r| {
-            r.as_array()
-                .unwrap()
-                .iter()
-                .map(|c| c.as_str().unwrap())
-                .collect::<Vec<_>>()
-                .join(",")
-        })
-        .collect();
+    let mut rows = golden_lines(g, key);
     rows.sort();
     rows
 }
@@ -234,25 +224,7 @@ fn mushra_report_equals_scipy() {
         (repo().join("examples/mushra.toml"), 2),
         (dir.join("mushra-strict.toml"), 5),
     ] {
-        let results = dir.join(format!("results-{seed}"));
-        let report = dir.join(format!("report-{seed}"));
-        study_ok(&[
-            "simulate".as_ref(),
-            study.as_os_str(),
-            "--subjects".as_ref(),
-            "12".as_ref(),
-            "--seed".as_ref(),
-            seed.to_string().as_ref(),
-            "-o".as_ref(),
-            results.as_os_str(),
-        ]);
-        study_ok(&[
-            "report".as_ref(),
-            results.as_os_str(),
-            "--no-png".as_ref(),
-            "-o".as_ref(),
-            report.as_os_str(),
-        ]);
+        let (results, report) = simulate_and_report(&dir, study.to_str().unwrap(), 12, seed);
         let out = Command::new(&python)
             .arg(repo().join("scripts/golden/mushra.py"))
             .arg(&results)
