@@ -523,3 +523,23 @@ fn mushra_time_limits_and_breaks_fall_between_screens() {
         "a break before the second screen only"
     );
 }
+
+#[test]
+fn mushra_screens_follow_the_latin_square_when_asked() {
+    let study =
+        parse(&MUSHRA.replace("[mushra]", "[design]\norder = \"latin_square\"\n\n[mushra]"))
+            .unwrap();
+    let first_screen = |subject: u32| {
+        let mut s = Session::new(&study, subject).unwrap();
+        s.next_trial(0).unwrap().unwrap().reference
+    };
+    // Williams rows over the two screens (walk, dance): 0 1, then 1 0, for every block.
+    for subject in 0..6 {
+        let want = if subject % 2 == 0 {
+            "walk/reference"
+        } else {
+            "dance/reference"
+        };
+        assert_eq!(first_screen(subject), want, "subject {subject}");
+    }
+}

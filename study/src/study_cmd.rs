@@ -113,7 +113,13 @@ fn describe_design(text: &mut String, study: &StudyDefinition) -> std::fmt::Resu
     use protocols::study::{ConditionOrder, ReferencePlacement};
     use std::fmt::Write as _;
     if study.design.order == ConditionOrder::LatinSquare {
-        let rows = protocols::design::williams_rows(study.conditions.len());
+        // A MUSHRA study orders its screens (one per clip), the others their conditions.
+        let n = if study.protocol == Protocol::Mushra {
+            protocols::study::mushra_screens(&study.conditions).len()
+        } else {
+            study.conditions.len()
+        };
+        let rows = protocols::design::williams_rows(n);
         writeln!(
             text,
             "  order: balanced Latin square (Williams), {rows} rows: subject index k takes row \
