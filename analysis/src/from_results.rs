@@ -305,7 +305,8 @@ fn convert_record(
     scale: Option<(f64, f64)>,
 ) -> Result<(), AnalysisError> {
     match record.protocol {
-        Protocol::Mos | Protocol::Acr | Protocol::Dcr => {
+        // A MUSHRA row rates one pane: a test condition, the hidden reference or the anchor.
+        Protocol::Mos | Protocol::Acr | Protocol::Dcr | Protocol::Mushra => {
             let Answer::Rating(score) = record.response.answer else {
                 return Err(bad(
                     path,

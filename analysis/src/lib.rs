@@ -41,6 +41,7 @@ mod hashing;
 pub mod jnd;
 pub mod method;
 pub mod mle;
+pub mod mushra;
 mod panel;
 pub mod plots;
 pub mod power;

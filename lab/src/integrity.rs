@@ -509,7 +509,9 @@ mod tests {
                     let k = records.len();
                     let end = if k % 2 == 0 { d.scale.min } else { d.scale.max };
                     let answer = match d.protocol {
-                        Protocol::Mos | Protocol::Acr | Protocol::Dcr => Answer::Rating(end),
+                        Protocol::Mos | Protocol::Acr | Protocol::Dcr | Protocol::Mushra => {
+                            Answer::Rating(end)
+                        }
                         Protocol::Dscqs => Answer::Pair {
                             a: end,
                             b: d.scale.max,
@@ -594,6 +596,7 @@ mod tests {
             Position::A => Position::B,
             Position::B => Position::A,
             Position::Hidden => Position::Hidden,
+            Position::Pane(i) => Position::Pane((i + 1) % protocols::MAX_PANES as u8),
         }
     }
 
@@ -733,7 +736,7 @@ mod tests {
     /// row the full replay's verdict, naming the same line with the same words.
     #[test]
     fn the_quick_replay_agrees_with_the_full_one() {
-        for name in ["mos", "dscqs", "staircase", "pc"] {
+        for name in ["mos", "dscqs", "staircase", "pc", "mushra"] {
             let (study, read) = sessions(name);
             let definition = &study.definition;
             for s in &read {

@@ -589,6 +589,12 @@ impl Recorder {
         Ok(self.engine.next_trial(elapsed_ms)?)
     }
 
+    /// The rest of the pending trial's MUSHRA screen, in pane order (the pending trial first;
+    /// see `protocols::Session::screen`): what the window shows together.
+    pub fn screen(&self) -> Vec<Trial> {
+        self.engine.screen()
+    }
+
     /// The trials that can follow the pending one (one per answer that leads somewhere
     /// different; see `protocols::Session::lookahead`), for preparing their stimuli early.
     pub fn lookahead(&self, elapsed_ms: u64) -> Vec<Trial> {

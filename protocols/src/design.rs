@@ -61,6 +61,8 @@ pub fn first_position(arrangement: Arrangement) -> Position {
         Arrangement::Abab => Position::A,
         // One stimulus (ACR): the reference is not shown.
         Arrangement::Single => Position::Hidden,
+        // MUSHRA: the first pane (its plan places every stimulus itself).
+        Arrangement::Grid => Position::Pane(0),
     }
 }
 

@@ -236,6 +236,8 @@ fn place(
                 Arrangement::Abab => Position::A,
                 // Nothing to place: the reference is not shown.
                 Arrangement::Single => return Position::Hidden,
+                // A MUSHRA plan places every stimulus itself.
+                Arrangement::Grid => return Position::Pane(0),
             };
             if rng.coin() { first } else { first.other() }
         }
@@ -274,6 +276,7 @@ impl Session {
                     .collect();
                 plan = plan_trials(study, &[], &test, subject, arrangement, placement);
             }
+            Protocol::Mushra => plan = plan_mushra(study, subject),
             Protocol::Staircase => {
                 if let Some(sc) = &study.staircase {
                     let staircases = sc
@@ -430,14 +433,29 @@ impl Session {
                 }
             }
         };
-        if self.time_limit_ms.is_some_and(|l| elapsed_ms >= l) {
+        // A MUSHRA screen is shown whole: the time limit and breaks fall between screens, and
+        // `break_every_trials` counts screens.
+        let (starts_screen, count) = if self.protocol == Protocol::Mushra {
+            let starts = index == 0 || self.screen_start(index as usize);
+            let screen = self.plan[..=(index as usize).min(self.plan.len() - 1)]
+                .iter()
+                .enumerate()
+                .filter(|(i, _)| *i == 0 || self.screen_start(*i))
+                .count()
+                - 1;
+            (starts, screen as u32)
+        } else {
+            (true, index)
+        };
+        if starts_screen && self.time_limit_ms.is_some_and(|l| elapsed_ms >= l) {
             self.status = SessionStatus::TimeLimit;
             return Ok(None);
         }
-        trial.break_before = index > 0
+        trial.break_before = starts_screen
+            && count > 0
             && self
                 .break_every
-                .is_some_and(|n| n > 0 && index.is_multiple_of(n));
+                .is_some_and(|n| n > 0 && count.is_multiple_of(n));
         self.pending = Some(trial.clone());
         Ok(Some(trial))
     }
@@ -481,14 +499,19 @@ impl Session {
             }
         };
         let outcome = match (self.protocol, response.answer) {
-            (Protocol::Mos | Protocol::Acr | Protocol::Dcr, Answer::Rating(v)) => Outcome {
+            (
+                Protocol::Mos | Protocol::Acr | Protocol::Dcr | Protocol::Mushra,
+                Answer::Rating(v),
+            ) => Outcome {
                 score: on_scale(v)?,
                 score_reference: None,
                 score_test: None,
                 correct: None,
                 reversal: None,
             },
-            (Protocol::Mos | Protocol::Acr | Protocol::Dcr, _) => return Err(wrong("a rating")),
+            (Protocol::Mos | Protocol::Acr | Protocol::Dcr | Protocol::Mushra, _) => {
+                return Err(wrong("a rating"));
+            }
             (Protocol::Dscqs, Answer::Pair { a, b }) => {
                 let (a, b) = (on_scale(a)?, on_scale(b)?);
                 // `a` rates what was shown first: slot A, or the first interval.
@@ -637,7 +660,9 @@ impl Session {
             return Vec::new();
         };
         let answers = match self.protocol {
-            Protocol::Mos | Protocol::Acr | Protocol::Dcr => vec![Answer::Rating(self.scale.min)],
+            Protocol::Mos | Protocol::Acr | Protocol::Dcr | Protocol::Mushra => {
+                vec![Answer::Rating(self.scale.min)]
+            }
             Protocol::Dscqs => vec![Answer::Pair {
                 a: self.scale.min,
                 b: self.scale.min,
@@ -670,6 +695,39 @@ impl Session {
         next
     }
 
+    /// Whether plan trial `i` (> 0) begins a new MUSHRA screen: its clip differs from the one
+    /// before (a plan has one screen per clip).
+    fn screen_start(&self, i: usize) -> bool {
+        match (
+            i.checked_sub(1).and_then(|p| self.plan.get(p)),
+            self.plan.get(i),
+        ) {
+            (Some(a), Some(b)) => a.reference != b.reference,
+            _ => true,
+        }
+    }
+
+    /// The rest of the pending trial's MUSHRA screen: the pending trial and the trials after
+    /// it on the same screen, in pane order (the window shows them together, then answers
+    /// each in this order). A session resumed in the middle of a screen gives the panes not
+    /// yet answered. Empty without a pending trial; the pending trial alone for the other
+    /// protocols.
+    pub fn screen(&self) -> Vec<Trial> {
+        let Some(pending) = &self.pending else {
+            return Vec::new();
+        };
+        let mut out = vec![pending.clone()];
+        if self.protocol != Protocol::Mushra {
+            return out;
+        }
+        let mut i = pending.index as usize + 1;
+        while let Some(t) = self.plan.get(i).filter(|_| !self.screen_start(i)) {
+            out.push(t.clone());
+            i += 1;
+        }
+        out
+    }
+
     /// Trials planned but not shown (after a time limit, or still to come).
     pub fn not_shown(&self) -> Vec<Trial> {
         let from = self.next_index as usize + usize::from(self.pending.is_some());
@@ -693,6 +751,56 @@ impl Session {
             })
             .unwrap_or_default()
     }
+}
+
+/// MUSHRA plan (ITU-R BS.1534-3, adapted): one screen per clip, in a random order per subject
+/// (or the subject's row of a balanced Latin square over the screens, `[design] order`); on
+/// each screen the clip's test conditions, its hidden reference and its anchor, shuffled over
+/// the panes A, B, C ... One trial per rated stimulus, in pane order; the labelled reference
+/// is every trial's `reference`.
+fn plan_mushra(study: &StudyDefinition, subject: u32) -> Vec<Trial> {
+    let mut rng = StudyRng::new(study.seed, &[u64::from(subject), purpose::PLAN]);
+    let screens = crate::study::mushra_screens(&study.conditions);
+    let mut order: Vec<usize> = (0..screens.len()).collect();
+    match study.design.order {
+        ConditionOrder::Random => rng.shuffle(&mut order),
+        ConditionOrder::LatinSquare => order = design::williams_row(order.len(), subject as usize),
+    }
+    let anchors = study
+        .mushra
+        .as_ref()
+        .map(|m| m.anchors.as_slice())
+        .unwrap_or_default();
+    let mut plan = Vec::new();
+    for k in order {
+        let Some((reference, tests)) = screens.get(k) else {
+            continue;
+        };
+        let mut rated: Vec<&str> = tests.iter().map(|c| c.stimulus.as_str()).collect();
+        rated.push(reference);
+        rated.extend(
+            anchors
+                .iter()
+                .filter(|a| a.reference == *reference)
+                .map(|a| a.stimulus.as_str()),
+        );
+        rng.shuffle(&mut rated);
+        for (pane, stimulus) in rated.into_iter().enumerate() {
+            plan.push(Trial {
+                index: plan.len() as u32,
+                block: Block::Test,
+                condition: stimulus.to_string(),
+                stimulus: stimulus.to_string(),
+                reference: reference.clone(),
+                arrangement: Arrangement::Grid,
+                reference_position: Position::pane(pane).unwrap_or(Position::Pane(0)),
+                staircase: None,
+                level: None,
+                break_before: false,
+            });
+        }
+    }
+    plan
 }
 
 /// Tags of the two balanced side draws of a rated plan.

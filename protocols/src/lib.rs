@@ -36,7 +36,7 @@ pub use catalog::{CodecCatalog, CodecInfo};
 pub use engine::{EngineError, Session, SessionStatus};
 pub use quest::{QuestMethod, QuestPlus, QuestSettings};
 pub use record::{
-    Answer, Arrangement, Block, FrameTiming, Outcome, Position, Protocol, Response,
+    Answer, Arrangement, Block, FrameTiming, MAX_PANES, Outcome, Position, Protocol, Response,
     StimulusEncoding, Trial, TrialRecord,
 };
 pub use staircase::{Staircase, StaircaseSettings, StepType};

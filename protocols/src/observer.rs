@@ -242,7 +242,9 @@ impl Observer {
         let answer = match self.protocol {
             // ACR rates the stimulus shown (a hidden reference's error is 0); DCR rates the
             // test's impairment on the same latent quality, with the reference shown.
-            Protocol::Mos | Protocol::Acr | Protocol::Dcr => {
+            // MUSHRA rates each pane on its own row, the same way (a hidden reference's error
+            // is 0, the anchor's the largest).
+            Protocol::Mos | Protocol::Acr | Protocol::Dcr | Protocol::Mushra => {
                 Answer::Rating(self.rate(test_error()?, &mut rng))
             }
             Protocol::Dscqs => {

@@ -31,6 +31,11 @@ pub enum Protocol {
     /// side or one after the other, and the subject picks the better one (forced choice);
     /// analysed with Bradley-Terry scale values.
     PairComparison,
+    /// MUSHRA-style multi-stimulus rating (ITU-R BS.1534-3 adapted to motion): one screen per
+    /// clip with the labelled reference and, unlabelled in a shuffled grid, every test
+    /// condition of the clip, a hidden reference and a low anchor, each rated 0-100. One row
+    /// per rated stimulus.
+    Mushra,
 }
 
 /// Which part of a session a trial belongs to.
@@ -64,7 +69,19 @@ pub enum Position {
     /// Not shown: the reference of a single-stimulus trial (ACR), which the subject never
     /// sees.
     Hidden,
+    /// MUSHRA: the pane of the grid the rated stimulus was shown in, 0 = the pane lettered A
+    /// (below [`MAX_PANES`]); the labelled reference has a pane of its own.
+    Pane(u8),
 }
+
+/// Most unlabelled panes (rated stimuli) a MUSHRA screen may show, lettered A to L.
+pub const MAX_PANES: usize = 12;
+
+/// The file names of the MUSHRA panes, `pane_a` ... `pane_l`.
+const PANE_NAMES: [&str; MAX_PANES] = [
+    "pane_a", "pane_b", "pane_c", "pane_d", "pane_e", "pane_f", "pane_g", "pane_h", "pane_i",
+    "pane_j", "pane_k", "pane_l",
+];
 
 /// How the two stimuli of a trial are laid out.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -78,6 +95,8 @@ pub enum Arrangement {
     Abab,
     /// The test stimulus alone (ACR); the reference is not shown.
     Single,
+    /// MUSHRA: the labelled reference and the rated stimuli at once, in a grid of panes.
+    Grid,
 }
 
 macro_rules! text_enum {
@@ -106,12 +125,72 @@ macro_rules! text_enum {
 }
 
 text_enum!(Protocol, Protocol::Mos => "mos", Protocol::Dscqs => "dscqs", Protocol::Staircase => "staircase",
-    Protocol::Acr => "acr", Protocol::Dcr => "dcr", Protocol::PairComparison => "pair_comparison");
+    Protocol::Acr => "acr", Protocol::Dcr => "dcr", Protocol::PairComparison => "pair_comparison",
+    Protocol::Mushra => "mushra");
 text_enum!(Block, Block::Familiarization => "familiarization", Block::Test => "test", Block::HiddenRepeat => "hidden_repeat");
-text_enum!(Position, Position::Left => "left", Position::Right => "right", Position::First => "first",
-    Position::Second => "second", Position::A => "a", Position::B => "b", Position::Hidden => "hidden");
 text_enum!(Arrangement, Arrangement::SideBySide => "side_by_side", Arrangement::Sequential => "sequential",
-    Arrangement::Abab => "abab", Arrangement::Single => "single");
+    Arrangement::Abab => "abab", Arrangement::Single => "single", Arrangement::Grid => "grid");
+
+/// The fixed names of [`Position`] (the panes are `pane_a` ... `pane_l`).
+const POSITION_NAMES: [(Position, &str); 7] = [
+    (Position::Left, "left"),
+    (Position::Right, "right"),
+    (Position::First, "first"),
+    (Position::Second, "second"),
+    (Position::A, "a"),
+    (Position::B, "b"),
+    (Position::Hidden, "hidden"),
+];
+
+impl Position {
+    /// The name used in files.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Pane(i) => PANE_NAMES.get(usize::from(i)).copied().unwrap_or("pane_?"),
+            p => POSITION_NAMES
+                .iter()
+                .find(|(q, _)| *q == p)
+                .map_or("?", |(_, n)| n),
+        }
+    }
+
+    /// MUSHRA pane `i` (0 = A), or `None` past [`MAX_PANES`].
+    pub fn pane(i: usize) -> Option<Self> {
+        (i < MAX_PANES).then_some(Self::Pane(i as u8))
+    }
+
+    /// The letter a subject sees on a MUSHRA pane (`A` for pane 0); `None` for other
+    /// positions.
+    pub fn pane_letter(self) -> Option<char> {
+        match self {
+            Self::Pane(i) if usize::from(i) < MAX_PANES => Some(char::from(b'A' + i)),
+            _ => None,
+        }
+    }
+}
+
+impl fmt::Display for Position {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+impl FromStr for Position {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        if let Some((p, _)) = POSITION_NAMES.iter().find(|(_, n)| *n == s) {
+            return Ok(*p);
+        }
+        if let Some(i) = PANE_NAMES.iter().position(|n| *n == s) {
+            return Ok(Self::Pane(i as u8));
+        }
+        let names: Vec<&str> = POSITION_NAMES.iter().map(|(_, n)| *n).collect();
+        Err(format!(
+            "expected one of {}, pane_a ... pane_l, got {s:?}",
+            names.join(", ")
+        ))
+    }
+}
 
 impl Position {
     /// The other position of the same arrangement.
@@ -125,6 +204,7 @@ impl Position {
             Self::A => Self::B,
             Self::B => Self::A,
             Self::Hidden => Self::Hidden,
+            Self::Pane(i) => Self::Pane(i),
         }
     }
 
@@ -136,7 +216,7 @@ impl Position {
                 | (Arrangement::Sequential, Self::First | Self::Second)
                 | (Arrangement::Abab, Self::A | Self::B)
                 | (Arrangement::Single, Self::Hidden)
-        )
+        ) || matches!((arrangement, self), (Arrangement::Grid, Self::Pane(i)) if usize::from(i) < MAX_PANES)
     }
 }
 

@@ -82,6 +82,15 @@ fn scale_instructions(scale: &RatingScale, what: &str) -> String {
     }
 }
 
+/// The default instructions of a MUSHRA study (BS.1534-3 adapted).
+const MUSHRA_INSTRUCTIONS: &str = "Each screen shows the original motion, labelled “Reference”, and beside it several \
+     versions of it, lettered A, B, C ... One of them is the original itself, hidden \
+     among them; rate it 100 when you find it. Rate each lettered motion from 0 (bad) \
+     to 100 (excellent) against the reference on its slider: click it, drag, or press \
+     Tab to go from slider to slider and the arrow keys to move one (Page Up and Page \
+     Down by 10). The sliders open once every motion has played through; Replay shows \
+     them again. Press Continue (Enter) when every letter has its rating.";
+
 /// The default instructions for `study` (used when `[session] instructions` is not given):
 /// they say which motion is the original where the screen labels it (MOS), and that nobody
 /// says so where the design hides it (DSCQS, 2AFC).
@@ -174,6 +183,7 @@ pub fn default_instructions(study: &StudyDefinition) -> String {
             )
         }
         Protocol::PairComparison => pair_comparison_instructions(p.arrangement),
+        Protocol::Mushra => MUSHRA_INSTRUCTIONS.to_string(),
         Protocol::Staircase => "Each trial shows two motions side by side. Choose the one that \
                                 looks more natural with the Left or Right arrow key (or click). \
                                 Answer even when you are unsure."
@@ -263,6 +273,12 @@ pub fn planned_trials(study: &StudyDefinition) -> Planned {
         Protocol::PairComparison => {
             Planned::Exactly((study.pairs().len() + study.session.hidden_repeats as usize) as u32)
         }
+        // One row per rated pane: the conditions, and each screen's hidden reference and
+        // anchor.
+        Protocol::Mushra => Planned::Exactly(
+            (study.conditions.len() + study.mushra.as_ref().map_or(0, |m| 2 * m.anchors.len()))
+                as u32,
+        ),
         Protocol::Staircase => study
             .staircase
             .as_ref()

@@ -480,3 +480,254 @@ fn pair_comparison_rules_are_listed_at_once() {
     );
     assert_eq!(got.len(), 2, "{got:#?}");
 }
+
+const MUSHRA: &str = r#"
+format_version = 1
+name = "mushra"
+protocol = "mushra"
+stimuli = "stimuli.json"
+seed = 13
+
+[conditions]
+clips = ["walk", "dance"]
+codecs = ["wavelet-perceptual"]
+target_cr = [10, 30, 50]
+
+[mushra]
+anchors = ["walk/wavelet-standard/cr70", "dance/wavelet-standard/cr70"]
+"#;
+
+#[test]
+fn mushra_takes_bs1534_defaults_and_lists_every_misfit_key_at_once() {
+    let s = parse(MUSHRA).unwrap();
+    assert_eq!(s.presentation.arrangement, Arrangement::Grid);
+    assert_eq!(
+        s.presentation.labels, None,
+        "the panes are labelled by the window"
+    );
+    assert_eq!(
+        (s.scale.min, s.scale.max, s.scale.step),
+        (0.0, 100.0, Some(1.0))
+    );
+    let m = s.mushra.as_ref().unwrap();
+    assert_eq!(
+        (m.reference_below, m.anchor_above, m.max_fraction),
+        (90.0, 90.0, 0.15)
+    );
+    assert_eq!(m.anchor_rule, protocols::study::AnchorRule::Report);
+    assert_eq!(m.anchors.len(), 2);
+    assert_eq!(m.anchors[0].reference, "walk/reference");
+    // Every mistake in one list.
+    let bad = MUSHRA
+        .replace(
+            "anchors = [\"walk/wavelet-standard/cr70\", \"dance/wavelet-standard/cr70\"]",
+            "anchors = [\"walk/wavelet-perceptual/cr10\", \"walk/reference\", \"nope\"]\nmax_fraction = 1.5\nanchor_rule = \"drop\"",
+        )
+        .replace(
+            "[mushra]",
+            "[presentation]\narrangement = \"side_by_side\"\n\n[scale]\nkind = \"categorical\"\nmin = 1\nmax = 5\nstep = 1\n\n[session]\nhidden_repeats = 1\nfamiliarization = 1\n\n[mushra]",
+        );
+    let got = issues(&bad);
+    for (key, words) in [
+        ("presentation.arrangement", "grid"),
+        ("scale", "continuous 0-100"),
+        ("session.hidden_repeats", "remove hidden_repeats"),
+        ("session.familiarization", "no familiarization"),
+        ("mushra.max_fraction", "0..=1"),
+        ("mushra.anchor_rule", "report, exclude"),
+        ("mushra.anchors[0]", "also a test condition"),
+        ("mushra.anchors[1]", "is a reference"),
+        ("mushra.anchors[2]", "not in the manifest"),
+        (
+            "mushra.anchors",
+            "no anchor for the clip of reference \"walk/reference\"",
+        ),
+        (
+            "mushra.anchors",
+            "no anchor for the clip of reference \"dance/reference\"",
+        ),
+    ] {
+        assert!(has(&got, key, words), "missing {key} ({words}): {got:#?}");
+    }
+    // No anchor table at all; two anchors of one clip; a grid too large for a screen.
+    let got = issues(&MUSHRA.replace(
+        "[mushra]\nanchors = [\"walk/wavelet-standard/cr70\", \"dance/wavelet-standard/cr70\"]\n",
+        "",
+    ));
+    assert!(has(&got, "mushra", "missing"), "{got:#?}");
+    let got = issues(&MUSHRA.replace(
+        "\"dance/wavelet-standard/cr70\"]",
+        "\"dance/wavelet-standard/cr70\", \"walk/wavelet-bone/cr70\"]",
+    ));
+    assert!(has(&got, "mushra.anchors[2]", "two anchors"), "{got:#?}");
+    let big = MUSHRA
+        .replace(
+            "codecs = [\"wavelet-perceptual\"]",
+            "codecs = [\"wavelet-perceptual\", \"wavelet-bone\"]",
+        )
+        .replace(
+            "target_cr = [10, 30, 50]",
+            "target_cr = [10, 20, 30, 40, 50, 60]",
+        );
+    let got = issues(&big);
+    assert!(
+        has(&got, "conditions", "14 rated panes, more than the 12"),
+        "{got:#?}"
+    );
+    // Another protocol does not take [mushra]; catch trials and scenes are not MUSHRA's.
+    let got = issues(&MUSHRA.replace("protocol = \"mushra\"", "protocol = \"acr\""));
+    assert!(has(&got, "mushra", "only a MUSHRA study"), "{got:#?}");
+    let got = issues(&format!(
+        "{MUSHRA}\n[[design.catch]]\nstimulus = \"walk/wavelet-perceptual/cr10\"\nmin = 50\n"
+    ));
+    assert!(has(&got, "design.catch", "MUSHRA screen"), "{got:#?}");
+}
+
+#[test]
+fn mushra_screens_hold_each_clip_tests_hidden_reference_and_anchor_shuffled_and_replay() {
+    let study = parse(MUSHRA).unwrap();
+    let mut first_pane_is_reference = 0;
+    let mut orders = std::collections::BTreeSet::new();
+    let subjects = 60;
+    for subject in 0..subjects {
+        let mut s = Session::new(&study, subject).unwrap();
+        let mut log = Vec::new();
+        let mut screens: Vec<Vec<protocols::Trial>> = Vec::new();
+        while let Some(t) = s.next_trial(0).unwrap() {
+            assert_eq!(t.arrangement, Arrangement::Grid);
+            assert_eq!(t.block, Block::Test);
+            let screen = s.screen();
+            assert_eq!(screen[0], t);
+            if screens
+                .last()
+                .is_none_or(|last| last[0].reference != t.reference)
+            {
+                screens.push(screen);
+            }
+            assert!(s.respond(&rating(100.5)).is_err(), "off the 0-100 scale");
+            let r = rating(f64::from(subject % 101));
+            let o = s.respond(&r).unwrap();
+            assert_eq!(o.score.to_bits(), f64::from(subject % 101).to_bits());
+            log.push((t, r, o));
+        }
+        assert_eq!(
+            log.len(),
+            2 * (3 + 2),
+            "3 tests + hidden reference + anchor per clip"
+        );
+        assert_eq!(screens.len(), 2);
+        for screen in &screens {
+            let reference = screen[0].reference.clone();
+            let clip = reference.split('/').next().unwrap().to_string();
+            let mut ids: Vec<&str> = screen.iter().map(|t| t.stimulus.as_str()).collect();
+            // The pending trial's screen is the whole screen, panes A.. in order.
+            let panes: Vec<Position> = screen.iter().map(|t| t.reference_position).collect();
+            assert_eq!(panes, (0..5).map(Position::Pane).collect::<Vec<_>>());
+            assert!(screen.iter().all(|t| t.reference == reference));
+            if screen[0].stimulus == reference {
+                first_pane_is_reference += 1;
+            }
+            orders.insert(ids.join(","));
+            ids.sort_unstable();
+            let mut want = vec![
+                format!("{clip}/reference"),
+                format!("{clip}/wavelet-perceptual/cr10"),
+                format!("{clip}/wavelet-perceptual/cr30"),
+                format!("{clip}/wavelet-perceptual/cr50"),
+                format!("{clip}/wavelet-standard/cr70"),
+            ];
+            want.sort_unstable();
+            assert_eq!(ids, want);
+        }
+        // The same subject gets the same plan; resume = replay, also from inside a screen.
+        let mut again = Session::new(&study, subject).unwrap();
+        for (t, r, o) in &log[..3] {
+            again.replay(t, r, o).unwrap();
+        }
+        assert_eq!(again.next_trial(0).unwrap().as_ref(), Some(&log[3].0));
+        let rest: Vec<_> = again.screen();
+        assert_eq!(
+            rest.len(),
+            2,
+            "a screen resumed after 3 of 5 panes shows the other 2"
+        );
+        again.respond(&log[3].1).unwrap();
+        for (t, r, o) in &log[4..] {
+            again.replay(t, r, o).unwrap();
+        }
+        assert_eq!(again.next_trial(0).unwrap(), None);
+    }
+    // The hidden reference lands on pane A about one screen in five (2 x 60 screens: the
+    // binomial's 99.9 % range for p = 0.2 is about 10-40).
+    assert!(
+        (10..=40).contains(&first_pane_is_reference),
+        "{first_pane_is_reference}"
+    );
+    assert!(
+        orders.len() > 60,
+        "orders vary per subject and screen: {}",
+        orders.len()
+    );
+}
+
+#[test]
+fn mushra_time_limits_and_breaks_fall_between_screens() {
+    let study = parse(&MUSHRA.replace(
+        "[mushra]",
+        "[session]\nbreak_every_trials = 1\ntime_limit_min = 1\n\n[mushra]",
+    ))
+    .unwrap();
+    let mut s = Session::new(&study, 3).unwrap();
+    let mut breaks = Vec::new();
+    for k in 0..5 {
+        // Past the limit inside the first screen: the screen is finished.
+        let t = s
+            .next_trial(if k == 0 { 0 } else { 120_000 })
+            .unwrap()
+            .unwrap();
+        breaks.push(t.break_before);
+        s.respond(&rating(50.0)).unwrap();
+    }
+    assert_eq!(breaks, [false; 5]);
+    assert_eq!(
+        s.next_trial(120_000).unwrap(),
+        None,
+        "no new screen after the limit"
+    );
+    assert_eq!(s.status(), protocols::SessionStatus::TimeLimit);
+    let study = parse(&MUSHRA.replace("[mushra]", "[session]\nbreak_every_trials = 1\n\n[mushra]"))
+        .unwrap();
+    let mut s = Session::new(&study, 3).unwrap();
+    let mut breaks = Vec::new();
+    while let Some(t) = s.next_trial(0).unwrap() {
+        breaks.push(t.break_before);
+        s.respond(&rating(50.0)).unwrap();
+    }
+    assert_eq!(
+        breaks,
+        [
+            false, false, false, false, false, true, false, false, false, false
+        ],
+        "a break before the second screen only"
+    );
+}
+
+#[test]
+fn mushra_screens_follow_the_latin_square_when_asked() {
+    let study =
+        parse(&MUSHRA.replace("[mushra]", "[design]\norder = \"latin_square\"\n\n[mushra]"))
+            .unwrap();
+    let first_screen = |subject: u32| {
+        let mut s = Session::new(&study, subject).unwrap();
+        s.next_trial(0).unwrap().unwrap().reference
+    };
+    // Williams rows over the two screens (walk, dance): 0 1, then 1 0, for every block.
+    for subject in 0..6 {
+        let want = if subject % 2 == 0 {
+            "walk/reference"
+        } else {
+            "dance/reference"
+        };
+        assert_eq!(first_screen(subject), want, "subject {subject}");
+    }
+}

@@ -573,7 +573,9 @@ fn decode_fields<'a>(
         ));
     }
     let answer = match protocol {
-        Protocol::Mos | Protocol::Acr | Protocol::Dcr => Answer::Rating(r.float(15)?),
+        Protocol::Mos | Protocol::Acr | Protocol::Dcr | Protocol::Mushra => {
+            Answer::Rating(r.float(15)?)
+        }
         Protocol::Dscqs => Answer::Pair {
             a: r.float(16)?,
             b: r.float(17)?,

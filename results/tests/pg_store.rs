@@ -221,6 +221,22 @@ fn one_writer_per_session_and_rows_read_back_as_written(server: &ScratchServer) 
     assert_eq!(read[0].trials.records.len(), 3);
 }
 
+/// A MUSHRA pane's row (row 4 of session S04): the grid and its pane (L, the last letter), a
+/// window row whose screen's frames went with its first pane (none of its own).
+fn mushra_pane_row() -> TrialRecord {
+    let mut pane = record("S04", 4, 0.0);
+    pane.protocol = Protocol::Mushra;
+    pane.trial.arrangement = Arrangement::Grid;
+    pane.trial.reference_position = Position::Pane(11);
+    pane.response.answer = Answer::Rating(73.0);
+    pane.outcome.score = 73.0;
+    pane.timing = Some(protocols::FrameTiming {
+        frames_shown: 0,
+        interval_sd_ms: 0.0,
+    });
+    pane
+}
+
 /// A pair comparison's choice (row 3 of session S04): the `reference` column is the pair's
 /// other test stimulus, and the `stimulus` column's version was preferred.
 fn pair_comparison_row() -> TrialRecord {
@@ -242,7 +258,7 @@ fn pair_comparison_row() -> TrialRecord {
 }
 
 /// Records of every kind (a DSCQS pair, a 2AFC choice of a live staircase with its encoding
-/// and frame timing, a pair comparison's choice, text needing quotes) come back from a report's read exactly as written;
+/// and frame timing, a pair comparison's choice, a MUSHRA pane, text needing quotes) come back from a report's read exactly as written;
 /// a value the database holds that no record can have is refused, naming the session's
 /// trials, the row's line in an exported `trials.csv`, the column and the reason.
 fn every_kind_of_row_read_back_and_bad_values_named(server: &ScratchServer) {
@@ -285,7 +301,13 @@ fn every_kind_of_row_read_back_and_bad_values_named(server: &ScratchServer) {
         frames_shown: 240,
         interval_sd_ms: 0.375,
     });
-    let written = [pair, choice, record("S04", 2, 4.5), pair_comparison_row()];
+    let written = [
+        pair,
+        choice,
+        record("S04", 2, 4.5),
+        pair_comparison_row(),
+        mushra_pane_row(),
+    ];
     for r in &written {
         writer.append(r).unwrap();
     }
@@ -318,11 +340,11 @@ fn every_kind_of_row_read_back_and_bad_values_named(server: &ScratchServer) {
             "replays: -1 is out of range",
         ),
         (
-            "UPDATE study_trials SET row_number = 5 WHERE row_number = 3",
-            "UPDATE study_trials SET row_number = 3 WHERE row_number = 5",
-            5,
+            "UPDATE study_trials SET row_number = 7 WHERE row_number = 4",
+            "UPDATE study_trials SET row_number = 4 WHERE row_number = 7",
+            6,
             1,
-            "row 5 follows row 2",
+            "row 7 follows row 3",
         ),
     ] {
         admin.execute(sql, &[]).unwrap();

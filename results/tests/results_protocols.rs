@@ -54,18 +54,21 @@ fn pair_comparison_parts(
     )
 }
 
-#[expect(
-    clippy::too_many_lines,
-    reason = "one record of every protocol, each arm its own shape"
-)]
+/// How a one-rating protocol's trial is laid out; a MUSHRA row names the pane its stimulus was
+/// shown in (A to L) as its position.
+fn rating_arrangement(protocol: Protocol) -> Arrangement {
+    match protocol {
+        Protocol::Acr => Arrangement::Single,
+        Protocol::Dcr => Arrangement::Sequential,
+        Protocol::Mushra => Arrangement::Grid,
+        _ => Arrangement::SideBySide,
+    }
+}
+
 fn record(i: u32, protocol: Protocol, rng: &mut StudyRng) -> TrialRecord {
     let (arrangement, answer, outcome, level, staircase) = match protocol {
-        Protocol::Mos | Protocol::Acr | Protocol::Dcr => (
-            match protocol {
-                Protocol::Acr => Arrangement::Single,
-                Protocol::Dcr => Arrangement::Sequential,
-                _ => Arrangement::SideBySide,
-            },
+        Protocol::Mos | Protocol::Acr | Protocol::Dcr | Protocol::Mushra => (
+            rating_arrangement(protocol),
             Answer::Rating(1.0 + 0.5 * rng.below(9) as f64),
             Outcome {
                 score: 3.5,
@@ -114,6 +117,7 @@ fn record(i: u32, protocol: Protocol, rng: &mut StudyRng) -> TrialRecord {
         (_, Arrangement::Sequential) => Position::Second,
         (_, Arrangement::Abab) => Position::B,
         (_, Arrangement::Single) => Position::Hidden,
+        (_, Arrangement::Grid) => Position::Pane((i % 12) as u8),
     };
     TrialRecord {
         study: "study, \"quoted\"".into(),
@@ -201,7 +205,7 @@ fn manifest(trials: u32) -> SessionManifest {
 proptest! {
     #![proptest_config(ProptestConfig { cases: 200, ..ProptestConfig::default() })]
     #[test]
-    fn rows_round_trip(seed in any::<u64>(), which in 0_usize..6, n in 1_u32..20) {
+    fn rows_round_trip(seed in any::<u64>(), which in 0_usize..7, n in 1_u32..20) {
         let protocol = [
             Protocol::Mos,
             Protocol::Dscqs,
@@ -209,6 +213,7 @@ proptest! {
             Protocol::Acr,
             Protocol::Dcr,
             Protocol::PairComparison,
+            Protocol::Mushra,
         ][which];
         let mut rng = StudyRng::new(seed, &[]);
         let recs: Vec<TrialRecord> = (0..n).map(|i| record(i, protocol, &mut rng)).collect();
@@ -427,6 +432,7 @@ fn mutated_results_files_give_errors_never_panics() {
         Protocol::Acr,
         Protocol::Dcr,
         Protocol::PairComparison,
+        Protocol::Mushra,
     ]
     .into_iter()
     .cycle()

@@ -648,6 +648,67 @@ fn display_section(
     }
 }
 
+/// A MUSHRA study's statistics and the rules they followed.
+struct MushraReport {
+    analysis: analysis::mushra::MushraAnalysis,
+    rules: analysis::mushra::Rules,
+}
+
+impl MushraReport {
+    /// Adds the "MUSHRA" section to `report`.
+    fn add_to(
+        &self,
+        report: &mut analysis::report::Report,
+        converted: &from_results::ConvertedResults,
+    ) {
+        let data = &converted.data;
+        self.analysis.section(
+            report,
+            &converted.stimuli,
+            &data.conditions,
+            &|s| data.subject_name(s),
+            &self.rules,
+        );
+    }
+}
+
+/// The MUSHRA statistics (BS.1534-3 post-screening, each stimulus over the assessors kept)
+/// of a MUSHRA study, `None` for other protocols: its anchors are the study file's, found
+/// among the rated stimuli by id.
+fn mushra_analysis(
+    study: &protocols::StudyDefinition,
+    converted: &from_results::ConvertedResults,
+    confidence: analysis::Confidence,
+) -> Result<Option<MushraReport>> {
+    use analysis::mushra::{Rules, analyze};
+    let Some(m) = &study.mushra else {
+        return Ok(None);
+    };
+    let anchors: std::collections::BTreeSet<u32> = converted
+        .stimuli
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| m.is_anchor(s))
+        .map(|(i, _)| i as u32)
+        .collect();
+    let rules = Rules {
+        reference_below: m.reference_below,
+        anchor_above: m.anchor_above,
+        max_fraction: m.max_fraction,
+        exclude_on_anchor: m.anchor_rule == protocols::study::AnchorRule::Exclude,
+    };
+    let data = &converted.data;
+    let analysis = analyze(
+        &data.ratings,
+        &data.conditions,
+        &converted.stimuli,
+        &anchors,
+        &rules,
+        confidence,
+    )?;
+    Ok(Some(MushraReport { analysis, rules }))
+}
+
 /// The "Exclusions" section of a crowd study (gold trials, or trials left out because the
 /// page was hidden): who the `[crowdsourcing]` rules left out of the statistics, and why.
 fn exclusions_section(
@@ -820,6 +881,7 @@ pub fn run(args: &ReportArgs) -> Result<()> {
     let mode = files::Mode::from_force(args.force);
     files::prepare_dir(&args.output, mode)?;
     let analysis = analyze(&converted.data, &options)?;
+    let mushra = mushra_analysis(&study, &converted, options.confidence)?;
     let data = &converted.data;
     // The two exports (10⁶ rows each at a million ratings) are written on a second thread
     // while this one lays out and writes the report.
@@ -847,6 +909,9 @@ pub fn run(args: &ReportArgs) -> Result<()> {
             sessions.len()
         );
         let mut report = analysis.to_report(data, &options, &title);
+        if let Some(m) = &mushra {
+            m.add_to(&mut report, &converted);
+        }
         analysis::method::method_section(
             &mut report,
             &study,

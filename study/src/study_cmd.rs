@@ -75,6 +75,7 @@ pub fn check(args: &CheckArgs) -> anyhow::Result<()> {
             describe_ratings(&mut text, study)?;
         }
         Protocol::PairComparison => describe_pairs(&mut text, study)?,
+        Protocol::Mushra => describe_mushra(&mut text, study)?,
         Protocol::Staircase => match &live {
             Some(live) => describe_live(&mut text, study, live)?,
             None => describe_staircase(&mut text, study)?,
@@ -137,10 +138,12 @@ fn describe_design(text: &mut String, study: &StudyDefinition) -> std::fmt::Resu
              session's place in its group takes that row"
         )?;
     } else if study.design.order == ConditionOrder::LatinSquare {
-        let items = if study.protocol == Protocol::PairComparison {
-            study.pairs().len()
-        } else {
-            study.conditions.len()
+        // A pair comparison orders its pairs, a MUSHRA study its screens (one per clip), the
+        // others their conditions.
+        let items = match study.protocol {
+            Protocol::PairComparison => study.pairs().len(),
+            Protocol::Mushra => protocols::study::mushra_screens(&study.conditions).len(),
+            _ => study.conditions.len(),
         };
         let rows = protocols::design::williams_rows(items);
         writeln!(
@@ -150,6 +153,11 @@ fn describe_design(text: &mut String, study: &StudyDefinition) -> std::fmt::Resu
         )?;
     }
     let side = match study.presentation.reference_position {
+        _ if study.protocol == Protocol::Mushra => {
+            "a pane of its own, labelled; the rated stimuli shuffled over the lettered panes \
+             per screen and subject"
+                .to_string()
+        }
         ReferencePlacement::Fixed(p) => format!("always {p}"),
         ReferencePlacement::Random => "random per trial".to_string(),
         ReferencePlacement::Balanced => match study.protocol {
@@ -267,6 +275,53 @@ fn describe_pairs(text: &mut String, study: &StudyDefinition) -> std::fmt::Resul
         )?;
     }
     let est_min = n as f64 * study.trial_presentation_ms() as f64 / 60_000.0;
+    writeln!(
+        text,
+        "  presentation time: {est_min:.1} min without answers"
+    )
+}
+
+/// A MUSHRA study: its screens (one per clip) with their panes, the anchors and the
+/// post-screening rules.
+fn describe_mushra(text: &mut String, study: &StudyDefinition) -> std::fmt::Result {
+    use protocols::study::AnchorRule;
+    use std::fmt::Write as _;
+    let Some(m) = &study.mushra else {
+        return Ok(());
+    };
+    let screens = protocols::study::mushra_screens(&study.conditions);
+    let rated: usize = screens.iter().map(|(_, c)| c.len() + 2).sum();
+    writeln!(
+        text,
+        "  screens per session: {} (one per clip), {rated} rated panes in all",
+        screens.len()
+    )?;
+    for (reference, tests) in &screens {
+        let anchor = m
+            .anchors
+            .iter()
+            .find(|a| a.reference == *reference)
+            .map_or("?", |a| a.stimulus.as_str());
+        writeln!(
+            text,
+            "  screen {reference:?}: {} test conditions + hidden reference + anchor {anchor:?}",
+            tests.len()
+        )?;
+    }
+    writeln!(
+        text,
+        "  post-screening (BS.1534-3): excluded when the hidden reference is rated below {} on \
+         more than {}% of the screens; the anchor rated above {} on more than {}%: {}",
+        m.reference_below,
+        100.0 * m.max_fraction,
+        m.anchor_above,
+        100.0 * m.max_fraction,
+        match m.anchor_rule {
+            AnchorRule::Report => "reported, kept",
+            AnchorRule::Exclude => "excluded",
+        }
+    )?;
+    let est_min = screens.len() as f64 * study.trial_presentation_ms() as f64 / 60_000.0;
     writeln!(
         text,
         "  presentation time: {est_min:.1} min without answers"

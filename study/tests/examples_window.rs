@@ -358,7 +358,7 @@ fn crowd_example_stimuli_are_the_generated_ones() {
     std::fs::remove_dir_all(&root).unwrap();
 }
 
-const EXAMPLES: [&str; 8] = [
+const EXAMPLES: [&str; 9] = [
     "mos.toml",
     "dscqs.toml",
     "staircase.toml",
@@ -367,6 +367,7 @@ const EXAMPLES: [&str; 8] = [
     "acr-hr.toml",
     "dcr.toml",
     "pc.toml",
+    "mushra.toml",
 ];
 
 /// The two runs of the crowd study (thesis 6.5).
@@ -438,10 +439,16 @@ fn logged_rows(session: &Path) -> usize {
 }
 
 fn spawn_run(env: &Env, study: &Path, out: &Path) -> Child {
+    // A MUSHRA screen draws six panes at once: a small window keeps lavapipe's frames quick.
+    let size = if study.ends_with("mushra.toml") {
+        "640x480"
+    } else {
+        "1280x720"
+    };
     env.cmd(env!("CARGO_BIN_EXE_study"))
         .arg("run")
         .arg(study)
-        .args(["--subject", "S01", "-o"])
+        .args(["--subject", "S01", "--window-size", size, "-o"])
         .arg(out)
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
@@ -507,6 +514,18 @@ fn each_example_records_its_first_answer_in_the_window() {
                         std::thread::sleep(Duration::from_millis(450));
                     }
                 }
+                // MUSHRA: Tab to each slider in turn (A to E, the order they are drawn) and
+                // Up sets it to 1; Enter continues once every letter has a rating. A round
+                // begun before the sliders opened is completed by the next.
+                "mushra.toml" => {
+                    for _ in 0..5 {
+                        for key in ["Tab", "Up"] {
+                            press(&env, &wid, &[key]);
+                            std::thread::sleep(Duration::from_millis(300));
+                        }
+                    }
+                    press(&env, &wid, &["Return"]);
+                }
                 // MOS, ACR (one motion) and DCR (reference then test): 4, Enter.
                 "mos.toml" | "acr-hr.toml" | "dcr.toml" => press(&env, &wid, &["4", "Return"]),
                 // 2AFC and pair comparison: the left one; Enter first begins a study without
@@ -531,26 +550,45 @@ fn each_example_records_its_first_answer_in_the_window() {
         let trials = results::trials::read_trials(&session.join("trials.csv")).unwrap();
         assert!(!trials.records.is_empty(), "{name}");
         assert_eq!(trials.records[0].trial.index, 0, "{name}");
-        if matches!(name, "acr-hr.toml" | "dcr.toml") {
-            assert_eq!(
-                trials.records[0].response.answer,
-                protocols::Answer::Rating(4.0),
-                "{name}"
-            );
-        }
-        if name == "pc.toml" {
-            let r = &trials.records[0];
-            assert_eq!(r.protocol, protocols::Protocol::PairComparison);
-            assert_eq!(
-                r.response.answer,
-                protocols::Answer::Choice(protocols::Position::Left)
-            );
-            assert_ne!(r.trial.stimulus, r.trial.reference, "two test versions");
-        }
+        check_first_answers(name, &trials.records);
         eprintln!(
             "{name}: first answer in the window after {:.1?}",
             started.elapsed()
         );
+    }
+}
+
+/// What each example's first answers must be, as the keys gave them.
+fn check_first_answers(name: &str, records: &[protocols::TrialRecord]) {
+    if matches!(name, "acr-hr.toml" | "dcr.toml") {
+        assert_eq!(
+            records[0].response.answer,
+            protocols::Answer::Rating(4.0),
+            "{name}"
+        );
+    }
+    if name == "pc.toml" {
+        let r = &records[0];
+        assert_eq!(r.protocol, protocols::Protocol::PairComparison);
+        assert_eq!(
+            r.response.answer,
+            protocols::Answer::Choice(protocols::Position::Left)
+        );
+        assert_ne!(r.trial.stimulus, r.trial.reference, "two test versions");
+    }
+    if name == "mushra.toml" {
+        // The whole first screen: one row per pane, A to E, each rated from the keys,
+        // the first carrying the screen's frames.
+        let panes: Vec<String> = records
+            .iter()
+            .map(|r| r.trial.reference_position.to_string())
+            .collect();
+        assert_eq!(panes, ["pane_a", "pane_b", "pane_c", "pane_d", "pane_e"]);
+        assert!(records.iter().all(|r| matches!(
+            r.response.answer,
+            protocols::Answer::Rating(v) if (1.0..=100.0).contains(&v)
+        )));
+        assert!(records[0].timing.is_some_and(|t| t.frames_shown > 0));
     }
 }
 

@@ -1,4 +1,4 @@
-//! Issue 24, item 1: the P.910 rating methods end to end. The ACR-HR and DCR examples are
+//! Issue 24, item 1: the P.910 rating methods and the MUSHRA-style method end to end. The ACR-HR and DCR examples are
 //! simulated (`study simulate`), reported (`study report`), and the report's MOS and ACR-HR
 //! DMOS tables are compared cell for cell with `scripts/golden/rating_methods.py`, which reads
 //! the same results folder with Python's csv module and computes the tables with NumPy and
@@ -70,14 +70,16 @@ fn scratch(name: &str) -> PathBuf {
     d
 }
 
-/// Simulates `example` with `subjects` subjects and `seed`, reports it, and returns the
-/// results folder and the report folder.
-fn simulate_and_report(dir: &Path, example: &str, subjects: u32, seed: u64) -> (PathBuf, PathBuf) {
-    let results = dir.join(format!("results-{example}-{seed}"));
-    let report = dir.join(format!("report-{example}-{seed}"));
+/// Simulates the study file `study` (an example's name, or a path) with `subjects` subjects
+/// and `seed`, reports it, and returns the results folder and the report folder.
+fn simulate_and_report(dir: &Path, study: &str, subjects: u32, seed: u64) -> (PathBuf, PathBuf) {
+    let path = repo().join("examples").join(study);
+    let stem = path.file_stem().unwrap().to_string_lossy().into_owned();
+    let results = dir.join(format!("results-{stem}-{seed}"));
+    let report = dir.join(format!("report-{stem}-{seed}"));
     study_ok(&[
         "simulate".as_ref(),
-        repo().join("examples").join(example).as_os_str(),
+        path.as_os_str(),
         "--subjects".as_ref(),
         subjects.to_string().as_ref(),
         "--seed".as_ref(),
@@ -126,19 +128,7 @@ fn table_rows(report: &Path, name: &str) -> Vec<String> {
 }
 
 fn golden_rows(g: &serde_json::Value, key: &str) -> Vec<String> {
-    let mut rows: Vec<String> = g[key]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|r| {
-            r.as_array()
-                .unwrap()
-                .iter()
-                .map(|c| c.as_str().unwrap())
-                .collect::<Vec<_>>()
-                .join(",")
-        })
-        .collect();
+    let mut rows = golden_lines(g, key);
     rows.sort();
     rows
 }
@@ -186,6 +176,109 @@ fn dcr_report_equals_scipy() {
         assert_eq!(r.protocol, protocols::Protocol::Dcr);
         assert_eq!(r.trial.reference_position, protocols::Position::First);
     }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// The rows of a report table as CSV lines, after checking its header.
+fn table_with_header(report: &Path, name: &str, header: &str) -> Vec<String> {
+    let text = std::fs::read_to_string(report.join("tables").join(name)).unwrap();
+    let mut lines = text.lines();
+    assert_eq!(lines.next(), Some(header), "{name}");
+    lines.map(str::to_owned).collect()
+}
+
+/// The golden script's rows of `key` as CSV lines, in its order.
+fn golden_lines(g: &serde_json::Value, key: &str) -> Vec<String> {
+    g[key]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| {
+            r.as_array()
+                .unwrap()
+                .iter()
+                .map(|c| c.as_str().unwrap())
+                .collect::<Vec<_>>()
+                .join(",")
+        })
+        .collect()
+}
+
+/// MUSHRA (BS.1534-3 adapted): simulated panels of the example, reported; the report's
+/// post-screening of every assessor and its table of every stimulus over the assessors kept
+/// (tests, hidden references, anchors) equal `scripts/golden/mushra.py` (csv, tomllib and
+/// `scipy.stats.t`) row for row and cell for cell, in the same order. The anchor rule is
+/// tried both ways: listed only (the example), and excluding (a copy of the study with the
+/// anchor limit lowered so that assessors trip it).
+#[test]
+fn mushra_report_equals_scipy() {
+    let Some(python) = python() else { return };
+    let dir = scratch("mushra");
+    let example = std::fs::read_to_string(repo().join("examples/mushra.toml")).unwrap();
+    let strict = example
+        .replace(
+            "stimuli = \"stimuli.json\"",
+            &format!(
+                "stimuli = {:?}",
+                repo().join("examples/stimuli.json").canonicalize().unwrap()
+            ),
+        )
+        .replace("anchor_above = 90", "anchor_above = 15")
+        .replace("anchor_rule = \"report\"", "anchor_rule = \"exclude\"");
+    std::fs::write(dir.join("mushra-strict.toml"), strict).unwrap();
+    let mut excluded = 0;
+    let mut by_anchor = 0;
+    for (study, seed) in [
+        (repo().join("examples/mushra.toml"), 2),
+        (dir.join("mushra-strict.toml"), 5),
+    ] {
+        let (results, report) = simulate_and_report(&dir, study.to_str().unwrap(), 12, seed);
+        let out = Command::new(&python)
+            .arg(repo().join("scripts/golden/mushra.py"))
+            .arg(&results)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let g: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        let screening = table_with_header(
+            &report,
+            "mushra_screening.csv",
+            "Subject,Screens,Hidden reference low,Anchor high,Excluded",
+        );
+        assert_eq!(screening.len(), 12);
+        assert_eq!(
+            screening,
+            golden_lines(&g, "screening"),
+            "seed {seed}: screening"
+        );
+        excluded += screening.iter().filter(|r| r.contains(",yes: ")).count();
+        by_anchor += screening
+            .iter()
+            .filter(|r| r.ends_with(",yes: anchor"))
+            .count();
+        let table = table_with_header(
+            &report,
+            "mushra.csv",
+            "Stimulus,Clip,Role,n,Mean,SD,CI ± (t),Lower,Upper",
+        );
+        assert_eq!(table.len(), 10, "6 tests, 2 hidden references, 2 anchors");
+        assert_eq!(
+            table,
+            golden_lines(&g, "conditions"),
+            "seed {seed}: conditions"
+        );
+        let md = std::fs::read_to_string(report.join("report.md")).unwrap();
+        assert!(md.contains("BS.1534-3"), "the post-screening is named");
+    }
+    // The screening excluded someone, and the excluding anchor rule did too: both paths ran.
+    assert!(
+        excluded > by_anchor && by_anchor > 0,
+        "{excluded} {by_anchor}"
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

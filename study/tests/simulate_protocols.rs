@@ -1,5 +1,5 @@
 //! `study check` and `study simulate` end to end on the shipped examples: MOS, DSCQS,
-//! staircase, ACR-HR, DCR and pair comparison runs write complete results directories that the readers load back.
+//! staircase, ACR-HR, DCR, pair comparison and MUSHRA runs write complete results directories that the readers load back.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
 
 use std::path::{Path, PathBuf};
@@ -32,6 +32,7 @@ fn simulate_writes_complete_results_for_every_protocol() {
         ("acr-hr.toml", Protocol::Acr, Some(14)),
         ("dcr.toml", Protocol::Dcr, Some(12)),
         ("pc.toml", Protocol::PairComparison, Some(22)),
+        ("mushra.toml", Protocol::Mushra, Some(10)),
     ] {
         let out = scratch(file);
         let st = study()
@@ -103,6 +104,7 @@ fn simulate_writes_complete_results_for_every_protocol() {
                         .all(|r| r.outcome.score_reference.is_some())
                 ),
                 Protocol::PairComparison => pair_comparison_session(s),
+                Protocol::Mushra => check_mushra(s),
                 Protocol::Staircase => {
                     assert_eq!(s.manifest.thresholds.len(), 2);
                     assert!(
@@ -125,6 +127,41 @@ fn simulate_writes_complete_results_for_every_protocol() {
         assert!(!again.status.success());
         assert!(String::from_utf8_lossy(&again.stderr).contains("never overwritten"));
     }
+}
+
+/// A simulated MUSHRA session of the example: two screens of five panes (3 tests, hidden
+/// reference, anchor), each screen's panes lettered A-E in order; the hidden reference rated
+/// near the top and far above the anchor.
+fn check_mushra(s: &results::SessionResults) {
+    // Two screens of five panes (3 tests, hidden reference, anchor), each
+    // screen's panes lettered A-E in order; the hidden reference rated near the
+    // top and far above the anchor.
+    let panes: Vec<String> = s
+        .trials
+        .records
+        .iter()
+        .map(|r| r.trial.reference_position.to_string())
+        .collect();
+    let letters = ["pane_a", "pane_b", "pane_c", "pane_d", "pane_e"];
+    assert_eq!(panes, [letters, letters].concat());
+    let score = |suffix: &str| {
+        let v: Vec<f64> = s
+            .trials
+            .records
+            .iter()
+            .filter(|r| r.trial.stimulus.ends_with(suffix))
+            .map(|r| r.outcome.score)
+            .collect();
+        assert_eq!(v.len(), 2, "{suffix}: one per screen");
+        v.iter().sum::<f64>() / 2.0
+    };
+    assert!(score("/reference") >= 85.0, "{}", score("/reference"));
+    assert!(
+        score("standard/cr30") + 50.0 < score("/reference"),
+        "anchor {} vs hidden reference {}",
+        score("standard/cr30"),
+        score("/reference")
+    );
 }
 
 /// A simulated pair comparison session of the example: every pair of a clip's five

@@ -268,7 +268,7 @@ pub fn presentation_ms(study: &StudyDefinition, arrangement: Arrangement, clip_s
     let grey = p.grey_ms as f64;
     let plays = f64::from(p.playback_count.max(1));
     match arrangement {
-        Arrangement::SideBySide | Arrangement::Single => plays * clip,
+        Arrangement::SideBySide | Arrangement::Single | Arrangement::Grid => plays * clip,
         Arrangement::Sequential => plays * 2.0 * clip + (2.0 * plays - 1.0) * grey,
         Arrangement::Abab => 4.0 * clip + 3.0 * grey,
     }
@@ -281,6 +281,7 @@ fn first_position(a: Arrangement) -> Position {
         Arrangement::Sequential => Position::First,
         Arrangement::Abab => Position::A,
         Arrangement::Single => Position::Hidden,
+        Arrangement::Grid => Position::Pane(0),
     }
 }
 
@@ -296,7 +297,7 @@ impl App {
         // The page has the answer widgets of MOS, DSCQS and 2AFC only.
         if matches!(
             study.definition.protocol,
-            Protocol::Acr | Protocol::Dcr | Protocol::PairComparison
+            Protocol::Acr | Protocol::Dcr | Protocol::PairComparison | Protocol::Mushra
         ) {
             return Err(WebError::Refused(format!(
                 "{}: protocol {} runs in the study window (study run); the browser page of \

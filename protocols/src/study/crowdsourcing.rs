@@ -242,11 +242,13 @@ pub(super) fn parse_gold(
     };
     if matches!(
         protocol,
-        Some(Protocol::Staircase | Protocol::PairComparison)
+        Some(Protocol::Staircase | Protocol::PairComparison | Protocol::Mushra)
     ) {
         cx.err(
             join(table, key),
-            "catch (gold) trials are rated conditions: MOS and DSCQS only",
+            "catch (gold) trials are rated conditions of one-stimulus screens: MOS, DSCQS, ACR \
+             and DCR only (a pair comparison rates nothing; a MUSHRA screen's hidden reference \
+             and anchor are its checks)",
         );
         return Vec::new();
     }

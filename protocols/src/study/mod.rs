@@ -12,6 +12,7 @@ mod conditions;
 mod crowdsourcing;
 mod design;
 mod live;
+mod mushra;
 mod presentation;
 mod quest;
 mod rendering;
@@ -36,6 +37,7 @@ use crate::record::{Arrangement, Position, Protocol};
 use crate::staircase::StaircaseSettings;
 use check::Ctx;
 pub use crowdsourcing::{CrowdsourcingSettings, GoldTrial, HiddenRule};
+pub use mushra::{AnchorRule, MushraSettings, screens as mushra_screens};
 pub use quest::domain as quest_domain;
 pub use rendering::RenderingSettings;
 pub use scene::{
@@ -544,6 +546,9 @@ pub struct StudyDefinition {
     /// Several characters per pane (`[scene]`, thesis 6.5): the conditions are crowd scenes
     /// of the manifest, drawn with this camera and light; `None` for one figure per pane.
     pub scene: Option<SceneSettings>,
+    /// A MUSHRA study's anchors and post-screening rules (`[mushra]`); `None` for other
+    /// protocols.
+    pub mushra: Option<MushraSettings>,
     /// The stimulus manifest.
     pub manifest: StimulusManifest,
 }
@@ -710,7 +715,7 @@ impl StudyDefinition {
     pub fn trial_presentation_ms(&self) -> u64 {
         let p = &self.presentation;
         let shows = match p.arrangement {
-            Arrangement::SideBySide | Arrangement::Single => 1,
+            Arrangement::SideBySide | Arrangement::Single | Arrangement::Grid => 1,
             Arrangement::Sequential => 2,
             Arrangement::Abab => 4,
         };

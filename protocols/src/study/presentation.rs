@@ -42,6 +42,8 @@ pub(super) fn parse_presentation(
         )?,
         // P.910 ACR: one stimulus at a time.
         Some(Protocol::Acr) => pick_arrangement(t, &[("single", Arrangement::Single)], cx)?,
+        // BS.1534 (adapted): the reference and every rated stimulus at once, in a grid.
+        Some(Protocol::Mushra) => pick_arrangement(t, &[("grid", Arrangement::Grid)], cx)?,
         // P.910 DCR: the reference, then the test (or both at once, side by side).
         Some(Protocol::Dcr) => pick_arrangement(
             t,
@@ -122,6 +124,16 @@ fn parse_reference_position(
                 );
             }
             return ReferencePlacement::Fixed(Position::Hidden);
+        }
+        Some(Protocol::Mushra) => {
+            if given.is_some() {
+                cx.err(
+                    join(P, "reference_position"),
+                    "a MUSHRA screen shows the labelled reference in a pane of its own and \
+                     shuffles the rated stimuli over the others per screen: remove it",
+                );
+            }
+            return ReferencePlacement::Random;
         }
         Some(Protocol::Dcr) => {
             let default = if arrangement == Arrangement::Sequential {
@@ -211,6 +223,13 @@ fn parse_grey(t: &Table, arrangement: Arrangement, gap_given: Option<u32>, cx: &
              sequential and DSCQS)",
         );
     }
+    if grey.is_some() && arrangement == Arrangement::Grid {
+        cx.err(
+            join(P, "grey_ms"),
+            "a MUSHRA screen shows every stimulus at once: there is no grey field between \
+             stimuli (gap_ms is the pause between screens)",
+        );
+    }
     if grey.is_some() && arrangement == Arrangement::Single {
         cx.err(
             join(P, "grey_ms"),
@@ -220,7 +239,10 @@ fn parse_grey(t: &Table, arrangement: Arrangement, gap_given: Option<u32>, cx: &
     }
     grey.or(gap_given).unwrap_or(match arrangement {
         Arrangement::Abab => DSCQS_GREY_MS,
-        Arrangement::Sequential | Arrangement::SideBySide | Arrangement::Single => 500,
+        Arrangement::Sequential
+        | Arrangement::SideBySide
+        | Arrangement::Single
+        | Arrangement::Grid => 500,
     })
 }
 
@@ -241,6 +263,9 @@ fn parse_labels(t: &Table, protocol: Option<Protocol>, cx: &mut Ctx) -> Option<S
         Some(Protocol::Acr) => Some("ACR shows one motion and no reference (ITU-T P.910)"),
         Some(Protocol::PairComparison) => {
             Some("a pair comparison shows two test motions and no labelled reference (ITU-T P.910)")
+        }
+        Some(Protocol::Mushra) => {
+            Some("a MUSHRA screen labels its panes itself: Reference, then A, B, C ...")
         }
         Some(Protocol::Mos | Protocol::Dcr) | None => None,
     };

@@ -25,7 +25,9 @@ pub(super) fn parse_scale(
     let kind = match kind {
         Some(k) => k,
         None if t.contains_key("kind") => return None,
-        None if protocol == Some(Protocol::Dscqs) => ScaleKind::Continuous,
+        None if matches!(protocol, Some(Protocol::Dscqs | Protocol::Mushra)) => {
+            ScaleKind::Continuous
+        }
         None => ScaleKind::Categorical,
     };
     let (dmin, dmax, dstep) = match kind {
@@ -38,6 +40,8 @@ pub(super) fn parse_scale(
                 1.0
             }),
         ),
+        // BS.1534: a 0-100 slider; whole points keep it keyboard-friendly.
+        ScaleKind::Continuous if protocol == Some(Protocol::Mushra) => (0.0, 100.0, Some(1.0)),
         ScaleKind::Continuous => (0.0, 100.0, None),
     };
     let min = cx.float(t, P, "min").unwrap_or(dmin);
@@ -79,6 +83,18 @@ pub(super) fn parse_scale(
                 } else {
                     "continuous"
                 }
+            ),
+        );
+    }
+    let zero_to_hundred =
+        kind == ScaleKind::Continuous && (min - 0.0).abs() < 1e-12 && (max - 100.0).abs() < 1e-12;
+    if protocol == Some(Protocol::Mushra) && !zero_to_hundred {
+        cx.err(
+            P,
+            format!(
+                "MUSHRA rates on BS.1534's continuous 0-100 scale (its post-screening limits are \
+                 on it): use kind = \"continuous\", min = 0, max = 100 (or omit [scale]), not \
+                 {min}..{max}"
             ),
         );
     }

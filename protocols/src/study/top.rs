@@ -9,6 +9,7 @@ use super::check::Ctx;
 use super::conditions::{References, parse_conditions, resolve_familiarization};
 use super::crowdsourcing::parse_crowdsourcing;
 use super::design::parse_design;
+use super::mushra::parse_mushra;
 use super::presentation::parse_presentation;
 use super::rendering::parse_rendering;
 use super::scale::parse_scale;
@@ -60,11 +61,16 @@ const TOP_KEYS: &[&str] = &[
     "scene",
     "design",
     "viewing",
+    "mushra",
 ];
 
 /// The whole study file: its header, the manifest, the sections every protocol has, then
 /// the protocol's own; `None` when something the definition needs is missing (the problem is
 /// in `cx`).
+#[expect(
+    clippy::too_many_lines,
+    reason = "the study file's one walk: every protocol's sections in one match, read top to bottom"
+)]
 pub(super) fn parse_table(
     t: &Table,
     cx: &mut Ctx,
@@ -94,8 +100,13 @@ pub(super) fn parse_table(
     let mut conditions = Vec::new();
     let mut familiarization = Vec::new();
     let mut staircase = None;
+    let mut mushra = None;
     match protocol {
-        Some(p @ (Protocol::Mos | Protocol::Dscqs | Protocol::Acr | Protocol::Dcr)) => {
+        Some(Protocol::PairComparison) => {
+            let m = manifest.as_ref();
+            conditions = pc_sections(t, &session, &familiarization_spec, scale_t, m, cx);
+        }
+        Some(p) if p != Protocol::Staircase => {
             (conditions, familiarization) = rating_sections(
                 t,
                 &session,
@@ -114,10 +125,11 @@ pub(super) fn parse_table(
                     cx,
                 );
             }
-        }
-        Some(Protocol::PairComparison) => {
-            let m = manifest.as_ref();
-            conditions = pc_sections(t, &session, &familiarization_spec, scale_t, m, cx);
+            if p == Protocol::Mushra {
+                let fam = !familiarization.is_empty()
+                    || session_t.contains_key("familiarization_stimuli");
+                mushra = mushra_sections(t, &conditions, fam, &session, manifest.as_ref(), cx);
+            }
         }
         Some(Protocol::Staircase) => {
             staircase = staircase_sections(
@@ -131,7 +143,7 @@ pub(super) fn parse_table(
             );
             check_live_metric(t, &simulation, cx);
         }
-        None => {}
+        Some(_) | None => {}
     }
 
     let mut crowdsourcing = parse_crowdsourcing(
@@ -169,6 +181,7 @@ pub(super) fn parse_table(
         design,
         viewing,
         scene,
+        mushra,
         manifest: manifest?,
     })
 }
@@ -221,6 +234,12 @@ fn parse_header(t: &Table, cx: &mut Ctx) -> Header {
     });
     let protocol: Option<Protocol> = cx.parse_enum(t, "", "protocol");
     let protocol = cx.required(protocol, t, "", "protocol");
+    if protocol.is_some_and(|p| p != Protocol::Mushra) && t.contains_key("mushra") {
+        cx.err(
+            "mushra",
+            "only a MUSHRA study (protocol = \"mushra\") has a [mushra] table",
+        );
+    }
     let stimuli_path = cx.string(t, "", "stimuli");
     let stimuli_path = cx.required(stimuli_path, t, "", "stimuli");
     let seed = cx.int(t, "", "seed", 0, i64::MAX);
@@ -251,6 +270,26 @@ fn load_checked_manifest(
             None
         }
     }
+}
+
+/// A MUSHRA study's `[mushra]` and its rules (no crowd scenes); `fam`: the session asks
+/// for familiarization trials.
+fn mushra_sections(
+    t: &Table,
+    conditions: &[Condition],
+    fam: bool,
+    session: &SessionSettings,
+    manifest: Option<&StimulusManifest>,
+    cx: &mut Ctx,
+) -> Option<super::MushraSettings> {
+    if t.contains_key("scene") {
+        cx.err(
+            "scene",
+            "a MUSHRA screen shows one figure per pane, not crowd scenes",
+        );
+    }
+    let table = cx.table(t, "", "mushra");
+    parse_mushra(table, conditions, fam, session, manifest, cx)
 }
 
 /// The sections of a rating study (MOS, DSCQS, ACR, DCR): no `[staircase]`, the

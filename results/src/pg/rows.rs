@@ -493,7 +493,9 @@ fn csv_column(i: usize) -> usize {
 fn decode(row: &Tuple<'_>) -> Field<TrialRecord> {
     let protocol: Protocol = row.named(7)?;
     let answer = match protocol {
-        Protocol::Mos | Protocol::Acr | Protocol::Dcr => Answer::Rating(row.finite(16)?),
+        Protocol::Mos | Protocol::Acr | Protocol::Dcr | Protocol::Mushra => {
+            Answer::Rating(row.finite(16)?)
+        }
         Protocol::Dscqs => Answer::Pair {
             a: row.finite(17)?,
             b: row.finite(18)?,

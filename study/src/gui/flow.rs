@@ -5,7 +5,8 @@
 //! Side by side (MOS, 2AFC): both clips together, `playback_count` times. Sequential: first,
 //! grey, second. DSCQS (ITU-R BT.500): A, grey, B, grey, A, grey, B, each labelled "A" or
 //! "B", then the vote on grey. Single (ACR, P.910): the test stimulus alone, `playback_count`
-//! times, then the vote on grey. The grey lasts `grey_ms`. Each frame names its phase
+//! times, then the vote on grey. Grid (MUSHRA): every pane together, `playback_count` times,
+//! then the sliders open while the panes loop or hold. The grey lasts `grey_ms`. Each frame names its phase
 //! ([`Frame::phase`]), which the session's frame log records.
 
 use protocols::record::{Arrangement, Position, Trial};
@@ -22,6 +23,9 @@ pub enum Show {
     Test,
     /// A mid-grey field (between sequential stimuli).
     Grey,
+    /// Every pane of a MUSHRA screen at once: the labelled reference and the lettered
+    /// stimuli.
+    Grid,
 }
 
 /// One timed step of a presentation.
@@ -47,6 +51,7 @@ impl Show {
             Show::One(Position::Left) => "left",
             Show::One(Position::Right) => "right",
             Show::One(Position::Hidden) | Show::Test => "test",
+            Show::One(Position::Pane(_)) | Show::Grid => "grid",
             Show::Grey => "grey",
         }
     }
@@ -156,6 +161,17 @@ impl Presentation {
                     }
                 }
             }
+            Arrangement::Grid => {
+                // A MUSHRA screen: every pane together, `playback_count` times, then the
+                // sliders open (the panes keep playing or hold, as side by side).
+                for _ in 0..plays {
+                    steps.push(Step {
+                        show: Show::Grid,
+                        label: None,
+                        duration_s: clip_s,
+                    });
+                }
+            }
             Arrangement::Single => {
                 // P.910 ACR: the stimulus alone (repeats with the grey between), then the vote.
                 for k in 0..plays {
@@ -234,8 +250,12 @@ impl Presentation {
         match self.arrangement {
             // Side by side: keep looping (if the study says so) or hold the last frame while
             // the subject answers.
-            Arrangement::SideBySide => Frame {
-                show: Show::Both,
+            Arrangement::SideBySide | Arrangement::Grid => Frame {
+                show: if self.arrangement == Arrangement::Grid {
+                    Show::Grid
+                } else {
+                    Show::Both
+                },
                 label: None,
                 clip_time_s: if self.loop_after {
                     t % last.duration_s.max(1e-3)

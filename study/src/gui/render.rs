@@ -23,7 +23,7 @@ const GLOBALS_BYTES: u64 = 112;
 
 /// First slot of the window's calibration load (two skeletons drawn while the refresh period
 /// is measured); viewports in slots below it are the screens' own and are counted.
-pub const LOAD_SLOT: usize = 8;
+pub const LOAD_SLOT: usize = 16;
 const VERTEX_BYTES: u64 = 24;
 
 /// Formats of the pass the renderer draws into.

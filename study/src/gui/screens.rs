@@ -9,7 +9,7 @@
 //! (`gap_ms`). Where the design tells the subject which motion is the reference (MOS), the
 //! study file's labels say it on screen; DSCQS and 2AFC never do.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, VecDeque};
 use std::sync::Arc;
 
 use egui::{Align, Color32, Key, Layout, RichText, Ui, Vec2};
@@ -90,9 +90,10 @@ pub enum Exit {
 struct TrialScreen {
     trial: Trial,
     presentation: Presentation,
-    /// What the panes at the arrangement's first and second position draw: a figure each, or
-    /// a crowd scene each.
-    stages: [Stage; 2],
+    /// What the panes draw: at the arrangement's first and second position a figure each, or
+    /// a crowd scene each; on a MUSHRA screen the labelled reference, then one per pane of
+    /// [`TrialScreen::panes`].
+    stages: Vec<Stage>,
     view: View,
     first: Position,
     rating: Option<f64>,
@@ -102,9 +103,25 @@ struct TrialScreen {
     gate_open_s: Option<f64>,
     /// The phase of every frame drawn since the trial's frame count started (`frames.csv`).
     phases: Vec<&'static str>,
-    shapes: [Arc<FrameShapes>; 2],
+    shapes: Vec<Arc<FrameShapes>>,
     /// How the test stimulus was encoded for this trial (live staircase).
     encoding: Option<StimulusEncoding>,
+    /// MUSHRA: the screen's trials not yet answered, in pane order (the pending one first);
+    /// empty for the other protocols.
+    panes: Vec<Trial>,
+    /// MUSHRA: each pane's rating, `None` until the subject has set its slider.
+    pane_ratings: Vec<Option<f64>>,
+}
+
+/// One answer of a MUSHRA screen waiting to be logged: its trial, the response, the screen's
+/// frame timing and frame phases (the first row of a screen carries them; the others show
+/// no frames of their own).
+struct Queued {
+    trial: Trial,
+    response: Response,
+    timing: Option<FrameTiming>,
+    intervals: Vec<f64>,
+    phases: Vec<&'static str>,
 }
 
 /// The subject's screens over one open session.
@@ -128,6 +145,8 @@ pub struct StudyUi {
     closed: bool,
     /// The stimulus check Begin waits for (`None`: nothing to wait for).
     preflight: Option<Preflight>,
+    /// A MUSHRA screen's answers still to be logged, one row each, in pane order.
+    queued: VecDeque<Queued>,
 }
 
 impl StudyUi {
@@ -185,6 +204,7 @@ impl StudyUi {
             end_since: None,
             closed: false,
             preflight: None,
+            queued: VecDeque::new(),
         }
     }
 
@@ -551,11 +571,14 @@ impl StudyUi {
     }
 
     fn load_trial(&mut self, trial: Trial, now: f64) -> lab::Result<TrialScreen> {
+        if trial.arrangement == Arrangement::Grid {
+            return self.load_grid(trial, now);
+        }
         let first = match trial.arrangement {
             Arrangement::SideBySide => Position::Left,
             // A single stimulus (ACR) is drawn from the first stage: the test (its reference
             // is `Position::Hidden`, never drawn).
-            Arrangement::Sequential | Arrangement::Single => Position::First,
+            Arrangement::Sequential | Arrangement::Single | Arrangement::Grid => Position::First,
             Arrangement::Abab => Position::A,
         };
         // A live trial's test stimulus is encoded now unless it was prepared (cached by
@@ -594,7 +617,7 @@ impl StudyUi {
                 )
             };
             let view = View::crowd(&scene.camera, &scene.light, far).with_shadow(shadow);
-            (view, [stage(first), stage(first.other())])
+            (view, vec![stage(first), stage(first.other())])
         } else {
             let view = *self
                 .views
@@ -604,7 +627,7 @@ impl StudyUi {
                 let clip = if is_reference(p) { &reference } else { &test };
                 Stage::single(Figure::new(clip, &view))
             };
-            (view, [stage(first), stage(first.other())])
+            (view, vec![stage(first), stage(first.other())])
         };
         let presentation = Presentation::new(
             &trial,
@@ -623,8 +646,63 @@ impl StudyUi {
             editing_b: false,
             gate_open_s: None,
             phases: Vec::new(),
-            shapes: [Arc::default(), Arc::default()],
+            shapes: vec![Arc::default(), Arc::default()],
             encoding,
+            panes: Vec::new(),
+            pane_ratings: Vec::new(),
+        })
+    }
+
+    /// A MUSHRA screen: the labelled reference and the screen's panes not yet answered (all
+    /// of them, unless a resumed session stopped inside the screen), each its own figure.
+    fn load_grid(&mut self, trial: Trial, now: f64) -> lab::Result<TrialScreen> {
+        let mut panes = self.recorder.screen();
+        if panes.first() != Some(&trial) {
+            panes = vec![trial.clone()];
+        }
+        let shadow = self.study.rendering.ground_shadow;
+        let mut clips = Vec::with_capacity(panes.len());
+        for p in &panes {
+            clips.push(self.stimuli.stimuli(p)?);
+        }
+        let Some(first) = clips.first() else {
+            return Err(lab::LabError::Refused(
+                "a MUSHRA screen without panes".into(),
+            ));
+        };
+        let reference = Arc::clone(&first.reference);
+        let view = *self
+            .views
+            .entry(trial.reference.clone())
+            .or_insert_with(|| View::framing(&reference).with_shadow(shadow));
+        let mut stages = vec![Stage::single(Figure::new(&reference, &view))];
+        stages.extend(
+            clips
+                .iter()
+                .map(|c| Stage::single(Figure::new(&c.test, &view))),
+        );
+        let presentation = Presentation::new(
+            &trial,
+            &self.study.presentation,
+            stages[0].duration_s(),
+            now,
+        );
+        let n = stages.len();
+        Ok(TrialScreen {
+            trial,
+            presentation,
+            stages,
+            view,
+            first: Position::Pane(0),
+            rating: None,
+            rating_b: None,
+            editing_b: false,
+            gate_open_s: None,
+            phases: Vec::new(),
+            shapes: vec![Arc::default(); n],
+            encoding: None,
+            pane_ratings: vec![None; panes.len()],
+            panes,
         })
     }
 
@@ -655,6 +733,7 @@ impl StudyUi {
                         Protocol::Dscqs => dscqs_answer(ui, t, &self.study.scale, open),
                         Protocol::Staircase => afc_answer(ui, t, AFC_QUESTION, open),
                         Protocol::PairComparison => afc_answer(ui, t, PC_QUESTION, open),
+                        Protocol::Mushra => mushra_answer(ui, t, &self.study.scale, open),
                     })
                     .inner;
                 (answer, replay_row(ui, t, active))
@@ -687,7 +766,40 @@ impl StudyUi {
         });
         let (trial, encoding) = (t.trial.clone(), t.encoding.take());
         let phases = std::mem::take(&mut t.phases);
-        match self.log_answer(trial, response, encoding, timing, clock, &phases) {
+        if trial.arrangement == Arrangement::Grid {
+            // One row per pane, in pane order; the first carries the screen's frames.
+            let ratings: Vec<f64> = t.pane_ratings.iter().map(|r| r.unwrap_or(0.0)).collect();
+            let panes = std::mem::take(&mut t.panes);
+            let intervals = clock.segment_intervals().to_vec();
+            let mut first = true;
+            for (trial, rating) in panes.into_iter().zip(ratings) {
+                let answer = Answer::Rating(rating);
+                self.queued.push_back(Queued {
+                    trial,
+                    response: Response {
+                        answer,
+                        dropped_frames: if first { response.dropped_frames } else { 0 },
+                        ..response
+                    },
+                    timing: timing.map(|tm| {
+                        if first {
+                            tm
+                        } else {
+                            FrameTiming {
+                                frames_shown: 0,
+                                interval_sd_ms: 0.0,
+                            }
+                        }
+                    }),
+                    intervals: if first { intervals.clone() } else { Vec::new() },
+                    phases: if first { phases.clone() } else { Vec::new() },
+                });
+                first = false;
+            }
+            return self.log_queued(now, clock);
+        }
+        let intervals = clock.segment_intervals().to_vec();
+        match self.log_answer(trial, response, encoding, timing, &intervals, &phases) {
             Ok(()) => self.answered(now, clock),
             Err(e) if lab::session::is_outage(&e) => {
                 self.screen = Screen::Waiting {
@@ -698,6 +810,42 @@ impl StudyUi {
             }
             Err(e) => self.fail(&e),
         }
+    }
+
+    /// Logs a MUSHRA screen's queued answers one row at a time (each committed before the
+    /// next is asked for); an outage waits with the rest queued, then goes on from there.
+    fn log_queued(&mut self, now: f64, clock: &mut FrameClock) {
+        while let Some(q) = self.queued.pop_front() {
+            // The engine's pending trial must be this pane's (the next of its screen).
+            match self.recorder.next_trial(self.recorder.elapsed_ms()) {
+                Ok(Some(t)) if t == q.trial => {}
+                Ok(other) => {
+                    let e = lab::LabError::Refused(format!(
+                        "MUSHRA pane {} (trial {}) answered, but the session's next trial is {:?}",
+                        q.trial.reference_position,
+                        q.trial.index,
+                        other.map(|t| t.index)
+                    ));
+                    return self.fail(&e);
+                }
+                Err(e) => return self.fail(&e),
+            }
+            let logged =
+                self.log_answer(q.trial, q.response, None, q.timing, &q.intervals, &q.phases);
+            match logged {
+                Ok(()) => {}
+                Err(e) if lab::session::is_outage(&e) => {
+                    self.screen = Screen::Waiting {
+                        since: now,
+                        retry_at: now + RETRY_S,
+                        message: lab::error::chain(&e),
+                    };
+                    return;
+                }
+                Err(e) => return self.fail(&e),
+            }
+        }
+        self.answered(now, clock);
     }
 
     /// After an answer is committed: the documented gap between trials, as a blank with the
@@ -742,7 +890,7 @@ impl StudyUi {
             return;
         }
         match self.recorder.commit_pending() {
-            Ok(()) => self.answered(now, clock),
+            Ok(()) => self.log_queued(now, clock),
             Err(e) if lab::session::is_outage(&e) => {
                 self.screen = Screen::Waiting {
                     since,
@@ -762,7 +910,7 @@ impl StudyUi {
         response: Response,
         encoding: Option<StimulusEncoding>,
         timing: Option<FrameTiming>,
-        clock: &FrameClock,
+        intervals: &[f64],
         phases: &[&str],
     ) -> lab::Result<()> {
         let elapsed = self.recorder.elapsed_ms();
@@ -777,13 +925,13 @@ impl StudyUi {
             // Kept with the answer until the database is back.
             if timing.is_some() {
                 self.recorder
-                    .append_frame_intervals(index, clock.segment_intervals(), phases)?;
+                    .append_frame_intervals(index, intervals, phases)?;
             }
             return Err(e);
         }
         if timing.is_some() {
             self.recorder
-                .append_frame_intervals(index, clock.segment_intervals(), phases)?;
+                .append_frame_intervals(index, intervals, phases)?;
         }
         Ok(())
     }
@@ -851,6 +999,7 @@ fn position_label(p: Position) -> &'static str {
         Position::A => "A",
         Position::B => "B",
         Position::Hidden => "Hidden",
+        Position::Pane(_) => "Pane",
     }
 }
 
@@ -1082,7 +1231,16 @@ fn keyboard_rating(ui: &Ui, scale: &RatingScale, value: &mut Option<f64>) -> boo
 fn progress_panel(ui: &mut Ui, t: &TrialScreen, done: u32, planned: Planned, ack: bool) {
     egui::Panel::top("progress").show(ui, |ui| {
         ui.horizontal(|ui| {
-            ui.label(planned.trial_text(done + 1));
+            if t.trial.arrangement == Arrangement::Grid {
+                // A MUSHRA screen rates several panes at once: count the ratings.
+                ui.label(format!(
+                    "{} This screen: {} lettered motions.",
+                    planned.done_text(done),
+                    t.panes.len()
+                ));
+            } else {
+                ui.label(planned.trial_text(done + 1));
+            }
             if t.trial.block == Block::Familiarization {
                 ui.label(RichText::new("(practice)").italics());
             }
@@ -1305,8 +1463,9 @@ fn afc_answer(ui: &mut Ui, t: &TrialScreen, question: &str, open: bool) -> Optio
     let (l, r, lk, rk) = match t.trial.arrangement {
         Arrangement::Sequential => (Position::First, Position::Second, Key::Num1, Key::Num2),
         Arrangement::Abab => (Position::A, Position::B, Key::A, Key::B),
-        // A 2AFC trial is never single (the study file refuses it); drawn as side by side.
-        Arrangement::SideBySide | Arrangement::Single => (
+        // A 2AFC trial is never single or a grid (the study file refuses them); drawn as side
+        // by side.
+        Arrangement::SideBySide | Arrangement::Single | Arrangement::Grid => (
             Position::Left,
             Position::Right,
             Key::ArrowLeft,
@@ -1389,6 +1548,7 @@ fn stimuli_panel(
             let mut names: Vec<(egui::Rect, &str)> = Vec::new();
             match frame.show {
                 Show::Grey => {}
+                Show::Grid => grid_panes(&painter, gpu, t, full, frame.clip_time_s, &mut names),
                 Show::Both => {
                     let gap = 12.0;
                     let band = if labels.is_some() { LABEL_BAND } else { 0.0 };
@@ -1439,7 +1599,7 @@ fn stimuli_panel(
             // schedule's ("A", "B", "1", "2").
             let label = match frame.show {
                 Show::One(p) => stimulus_label(t, p, labels).or(frame.label),
-                Show::Both | Show::Grey | Show::Test => frame.label,
+                Show::Both | Show::Grey | Show::Test | Show::Grid => frame.label,
             };
             if let Some(label) = label {
                 ui.with_layout(Layout::top_down(Align::Center), |ui| {
@@ -1461,6 +1621,157 @@ fn stimuli_panel(
                 });
             }
         });
+}
+
+/// Columns of a grid of `n` panes of aspect 4:3 in a `w` x `h` area that make them largest.
+fn grid_columns(n: usize, w: f32, h: f32) -> usize {
+    (1..=n.max(1))
+        .max_by(|&a, &b| {
+            let size = |c: usize| {
+                let rows = n.div_ceil(c) as f32;
+                (w / c as f32).min(h / rows * 4.0 / 3.0)
+            };
+            size(a).total_cmp(&size(b)).then(b.cmp(&a))
+        })
+        .unwrap_or(1)
+}
+
+/// A MUSHRA screen's panes in a grid: the labelled reference first, then the lettered panes
+/// (each labelled above its viewport, `names`).
+fn grid_panes(
+    painter: &egui::Painter,
+    gpu: bool,
+    t: &mut TrialScreen,
+    full: egui::Rect,
+    clip_time_s: f64,
+    names: &mut Vec<(egui::Rect, &str)>,
+) {
+    let n = t.stages.len();
+    let (gap, band) = (8.0, 26.0);
+    let cols = grid_columns(n, full.width(), full.height());
+    let rows = n.div_ceil(cols);
+    let cell = Vec2::new(
+        (full.width() - gap * (cols - 1) as f32) / cols as f32,
+        (full.height() - gap * (rows - 1) as f32) / rows as f32,
+    );
+    for k in 0..n {
+        let (c, r) = (k % cols, k / cols);
+        let min = full.min + Vec2::new(c as f32 * (cell.x + gap), r as f32 * (cell.y + gap));
+        let label = egui::Rect::from_min_size(min, Vec2::new(cell.x, band));
+        let rect = egui::Rect::from_min_size(
+            min + Vec2::new(0.0, band),
+            Vec2::new(cell.x, (cell.y - band).max(1.0)),
+        );
+        draw_viewport(painter, gpu, t, k, rect, clip_time_s);
+        let name = if k == 0 {
+            "Reference"
+        } else {
+            t.panes
+                .get(k - 1)
+                .and_then(|p| pane_name(p.reference_position))
+                .unwrap_or("?")
+        };
+        names.push((label, name));
+    }
+}
+
+/// The letter of a MUSHRA pane as the subject reads it.
+fn pane_name(p: Position) -> Option<&'static str> {
+    const LETTERS: [&str; protocols::MAX_PANES] =
+        ["A", "B", "C", "D", "E", "F", "G", "H", "I", "J", "K", "L"];
+    match p {
+        Position::Pane(i) => LETTERS.get(usize::from(i)).copied(),
+        _ => None,
+    }
+}
+
+/// MUSHRA (BS.1534): a 0-100 slider per lettered pane, opened once every pane has played;
+/// Tab moves from slider to slider, the arrow keys move the focused one by a step, Page Up
+/// and Page Down by 10. Continue once every pane has a rating; the answer returned is the
+/// first pane's (the caller logs every pane's from `pane_ratings`).
+fn mushra_answer(
+    ui: &mut Ui,
+    t: &mut TrialScreen,
+    scale: &RatingScale,
+    open: bool,
+) -> Option<Answer> {
+    ui.label(
+        RichText::new(
+            "Rate each lettered motion against the reference, from 0 (bad) to 100 (excellent)",
+        )
+        .size(18.0),
+    );
+    let step = scale.step.unwrap_or(1.0);
+    let n = t.panes.len();
+    let w = 64.0;
+    ui.horizontal(|ui| {
+        ui.add_space(((ui.available_width() - w * n as f32) * 0.5).max(0.0));
+        for (pane, rating) in t.panes.iter().zip(t.pane_ratings.iter_mut()) {
+            let name = pane_name(pane.reference_position).unwrap_or("?");
+            ui.allocate_ui_with_layout(
+                Vec2::new(w, 150.0),
+                Layout::top_down(Align::Center),
+                |ui| {
+                    ui.label(RichText::new(name).strong().size(18.0));
+                    mushra_slider(ui, scale, step, rating, open, name);
+                },
+            );
+        }
+    });
+    let missing: Vec<&str> = t
+        .panes
+        .iter()
+        .zip(&t.pane_ratings)
+        .filter(|(_, r)| r.is_none())
+        .filter_map(|(p, _)| pane_name(p.reference_position))
+        .collect();
+    let hint = format!("Rate {} to continue.", missing.join(", "));
+    if confirmed(ui, open, missing.is_empty() && n > 0, &hint) {
+        return t
+            .pane_ratings
+            .first()
+            .copied()
+            .flatten()
+            .map(Answer::Rating);
+    }
+    None
+}
+
+/// One pane's vertical slider and its value ("–" until set). A pane counts as rated once its
+/// slider is clicked, dragged or moved by a key while focused.
+fn mushra_slider(
+    ui: &mut Ui,
+    scale: &RatingScale,
+    step: f64,
+    rating: &mut Option<f64>,
+    open: bool,
+    name: &str,
+) {
+    let mut v = rating.unwrap_or(scale.min);
+    let r = ui
+        .add_enabled(
+            open,
+            egui::Slider::new(&mut v, scale.min..=scale.max)
+                .vertical()
+                .step_by(step)
+                .show_value(false),
+        )
+        .on_hover_text(format!("Rating of {name}"));
+    let mut set = r.changed() || r.clicked() || r.drag_started();
+    if open && r.has_focus() {
+        ui.input(|i| {
+            let page = i.num_presses(Key::PageUp) as f64 - i.num_presses(Key::PageDown) as f64;
+            if page != 0.0 {
+                v = (v + 10.0 * page).clamp(scale.min, scale.max);
+                set = true;
+            }
+            set |= i.key_pressed(Key::ArrowUp) || i.key_pressed(Key::ArrowDown);
+        });
+    }
+    if set && open {
+        *rating = Some(scale.snap(v));
+    }
+    ui.label(rating.map_or_else(|| "–".to_string(), format_rating));
 }
 
 fn draw_viewport(

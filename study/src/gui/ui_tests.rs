@@ -95,13 +95,22 @@ struct Run {
 }
 
 fn harness(fx: Fixture) -> (Harness<'static, (StudyUi, FrameClock)>, Run) {
+    harness_after(fx, |_| {})
+}
+
+/// [`harness`] over a session to which `before` has already logged some answers (a session
+/// stopped part way and resumed).
+fn harness_after(
+    fx: Fixture,
+    before: impl FnOnce(&mut Recorder),
+) -> (Harness<'static, (StudyUi, FrameClock)>, Run) {
     let file = StudyFile::load(&fx.study_path).unwrap();
     let stimuli = lab::source::open(&file).unwrap();
     let study = file.definition;
     let session_dir = fx.dir.join("results").join("S01_s1");
     std::fs::create_dir_all(session_dir.parent().unwrap()).unwrap();
     let manifest = fresh_manifest(&study);
-    let Opened::Ready { recorder, .. } = Recorder::open(
+    let Opened::Ready { mut recorder, .. } = Recorder::open(
         &study,
         0,
         &mut results::FolderStore::new(fx.dir.join("results")),
@@ -111,6 +120,7 @@ fn harness(fx: Fixture) -> (Harness<'static, (StudyUi, FrameClock)>, Run) {
     .unwrap() else {
         panic!("new session reported finished");
     };
+    before(&mut recorder);
     let ui = StudyUi::new(Arc::new(study), stimuli, recorder, false);
     let h = Harness::builder()
         .with_size(egui::vec2(1280.0, 720.0))
@@ -957,5 +967,164 @@ fn a_pair_comparison_trial_shows_two_versions_and_takes_a_side() {
     }
     watch(&mut h, 1.5);
     assert!(matches!(h.state().0.exit(), Some(Exit::Finished(_))));
+    drop(run.fx);
+}
+
+/// MUSHRA over the one-second walk: the test at 10:1, the hidden reference and the 20:1
+/// anchor on one screen.
+const MUSHRA: &str = "protocol = \"mushra\"\n\
+    [conditions]\nstimuli = [\"walk/spiht/cr10\"]\n\
+    [mushra]\nanchors = [\"walk/spiht/cr20\"]\n\
+    [presentation]\ngap_ms = 200\n";
+
+fn sliders(h: &Harness<'_, (StudyUi, FrameClock)>) -> Vec<(egui::Rect, bool)> {
+    let mut v: Vec<(egui::Rect, bool)> = h
+        .get_all_by_role(Role::Slider)
+        .map(|n| (n.rect(), n.accesskit_node().is_disabled()))
+        .collect();
+    v.sort_by(|a, b| a.0.left().total_cmp(&b.0.left()));
+    v
+}
+
+/// MUSHRA (BS.1534 adapted): the labelled reference and the lettered panes together, a
+/// slider per letter that stays shut (keys and clicks ignored) until every pane has played;
+/// then each is set from the keyboard (focus, arrows by one, Page Up by ten), Continue waits
+/// for every letter, and one row per pane is logged in pane order.
+#[test]
+fn a_mushra_screen_rates_every_pane_on_a_slider_after_the_play() {
+    let (mut h, run) = harness(fixture("mushra", MUSHRA));
+    begin(&mut h);
+    assert!(
+        h.query_by_label("Trials done: 0 of 3. This screen: 3 lettered motions.")
+            .is_some()
+    );
+    assert_eq!(label_rects(&h, "Reference").len(), 1);
+    for letter in ["A", "B", "C"] {
+        // Above its pane and above its slider.
+        assert_eq!(label_rects(&h, letter).len(), 2, "{letter}");
+    }
+    let shut = sliders(&h);
+    assert_eq!(shut.len(), 3);
+    assert!(shut.iter().all(|(_, disabled)| *disabled), "{shut:?}");
+    // Keys and Enter while the panes play: nothing.
+    h.get_all_by_role(Role::Slider).next().unwrap().focus();
+    h.run_steps(1);
+    h.key_press(Key::PageUp);
+    h.key_press(Key::Enter);
+    h.run_steps(2);
+    assert!(rows(&run.session_dir).is_empty());
+    assert_eq!(h.query_all_by_label("–").count(), 3, "still unrated");
+    watch(&mut h, 1.2);
+    assert!(sliders(&h).iter().all(|(_, disabled)| !*disabled));
+    let set = |h: &mut Harness<'_, (StudyUi, FrameClock)>, k: usize, keys: &[Key]| {
+        let rect = sliders(h)[k].0;
+        h.get_all_by_role(Role::Slider)
+            .find(|n| n.rect() == rect)
+            .unwrap()
+            .focus();
+        h.run_steps(1);
+        for key in keys {
+            h.key_press(*key);
+            h.run_steps(1);
+        }
+    };
+    set(
+        &mut h,
+        0,
+        &[Key::ArrowUp, Key::ArrowUp, Key::ArrowUp, Key::PageUp],
+    );
+    set(&mut h, 1, &[Key::PageUp; 5]);
+    set(&mut h, 1, &[Key::ArrowDown]);
+    // Two of three rated: Continue stays shut and says which letter is left.
+    assert!(h.query_by_label("Rate C to continue.").is_some());
+    h.key_press(Key::Enter);
+    h.run_steps(2);
+    assert!(rows(&run.session_dir).is_empty());
+    set(&mut h, 2, &[Key::ArrowUp]);
+    h.get_by_label("Continue").click();
+    h.run_steps(3);
+    let r = rows(&run.session_dir);
+    let got: Vec<(String, Answer)> = r
+        .iter()
+        .map(|r| (r.trial.reference_position.to_string(), r.response.answer))
+        .collect();
+    assert_eq!(
+        got,
+        [
+            ("pane_a".to_string(), Answer::Rating(13.0)),
+            ("pane_b".to_string(), Answer::Rating(49.0)),
+            ("pane_c".to_string(), Answer::Rating(1.0)),
+        ]
+    );
+    let mut shown: Vec<&str> = r.iter().map(|r| r.trial.stimulus.as_str()).collect();
+    shown.sort_unstable();
+    assert_eq!(
+        shown,
+        ["walk/reference", "walk/spiht/cr10", "walk/spiht/cr20"]
+    );
+    assert!(r.iter().all(|r| r.protocol == protocols::Protocol::Mushra
+        && r.trial.arrangement == protocols::Arrangement::Grid
+        && r.trial.reference == "walk/reference"));
+    watch(&mut h, 0.5);
+    assert!(matches!(h.state().0.exit(), Some(Exit::Finished(_))));
+    drop(run.fx);
+}
+
+/// A MUSHRA session stopped after the first pane of a screen was logged shows, on resume,
+/// the reference and the panes not yet rated (B and C, not A), and logs them after it.
+#[test]
+fn a_mushra_screen_resumed_part_way_shows_the_panes_left() {
+    let mut first = None;
+    let (mut h, run) = harness_after(fixture("mushra-resume", MUSHRA), |recorder| {
+        let t = recorder.next_trial(0).unwrap().unwrap();
+        let response = protocols::Response {
+            answer: Answer::Rating(70.0),
+            response_time_ms: 900,
+            replays: 0,
+            dropped_frames: 0,
+        };
+        recorder.record(t.clone(), response, 0, None, None).unwrap();
+        first = Some(t);
+    });
+    begin(&mut h);
+    assert!(
+        h.query_by_label("Trials done: 1 of 3. This screen: 2 lettered motions.")
+            .is_some()
+    );
+    assert_eq!(label_rects(&h, "Reference").len(), 1);
+    assert_eq!(h.query_all_by_label("A").count(), 0, "pane A was rated");
+    for letter in ["B", "C"] {
+        assert_eq!(label_rects(&h, letter).len(), 2, "{letter}");
+    }
+    watch(&mut h, 1.2);
+    for k in 0..2 {
+        let rect = sliders(&h)[k].0;
+        h.get_all_by_role(Role::Slider)
+            .find(|n| n.rect() == rect)
+            .unwrap()
+            .focus();
+        h.run_steps(1);
+        h.key_press(Key::PageUp);
+        h.run_steps(1);
+    }
+    h.key_press(Key::Enter);
+    h.run_steps(3);
+    let r = rows(&run.session_dir);
+    assert_eq!(r.len(), 3);
+    assert_eq!(Some(&r[0].trial), first.as_ref());
+    let panes: Vec<String> = r
+        .iter()
+        .map(|r| r.trial.reference_position.to_string())
+        .collect();
+    assert_eq!(panes, ["pane_a", "pane_b", "pane_c"]);
+    let answers: Vec<Answer> = r.iter().map(|r| r.response.answer).collect();
+    assert_eq!(
+        answers,
+        [
+            Answer::Rating(70.0),
+            Answer::Rating(10.0),
+            Answer::Rating(10.0)
+        ]
+    );
     drop(run.fx);
 }
