@@ -5,39 +5,9 @@
 
 mod common;
 
-use common::issues;
+use common::{QUEST, issues};
 use protocols::engine::EngineError;
 use protocols::{Answer, Response, Session, Trial, TrialRecord};
-
-const QUEST: &str = r#"
-format_version = 1
-name = "quest"
-protocol = "staircase"
-stimuli = "stimuli.json"
-seed = 11
-
-[staircase]
-method = "quest_plus"
-param = "t_l"
-codec = "primitive"
-min = 0.002
-max = 0.040
-step = 0.002
-max_trials = 24
-
-[staircase.quest]
-threshold = { min = 0.002, max = 0.06, count = 30, spacing = "log", prior = { kind = "log_normal", mean = -1.9, sd = 0.4 } }
-slope = [1.5, 2.5, 3.5, 5]
-lapse = { values = [0, 0.02, 0.04], prior = { kind = "beta", a = 1, b = 10 } }
-
-[[staircase.tracks]]
-name = "walk"
-clip = "walk"
-
-[[staircase.tracks]]
-name = "dance"
-clip = "dance"
-"#;
 
 fn answer(t: &Trial, correct: bool) -> Response {
     Response {

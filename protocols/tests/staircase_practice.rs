@@ -1,13 +1,14 @@
 //! Practice trials before a staircase (`[staircase] practice_trials`, `practice_level`): shown
 //! first at a fixed level, the tracks in turn, logged in block `familiarization`, and moving no
-//! staircase: each track's levels after them are those of the same study without practice.
+//! staircase: each track's levels after them are those of the same study without practice,
+//! for up-down staircases, QUEST+ tracks and a live (codec-in-the-loop) staircase alike.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
 
 mod common;
 
 use std::collections::BTreeMap;
 
-use common::{example_text, parse};
+use common::{LIVE, QUEST, example_text, parse};
 use protocols::{Answer, Block, Response, Session, StudyDefinition, Trial};
 
 fn with_practice(extra: &str) -> StudyDefinition {
@@ -77,6 +78,57 @@ fn practice_comes_first_at_its_level_and_moves_no_staircase() {
                     track_levels(&a),
                     track_levels(&b),
                     "{extra} subject {k} at {at}"
+                );
+            }
+        }
+    }
+}
+
+/// QUEST+ tracks (whose posterior a practice answer would move) and a live staircase: the
+/// practice trials come first at the practice level, the tracks in turn, and every track's
+/// levels after them equal those of the same study without practice, answered alike.
+#[test]
+fn practice_moves_no_quest_track_and_no_live_staircase() {
+    for (name, text, after, extra, level, thresholds) in [
+        (
+            "quest",
+            QUEST,
+            "max_trials = 24\n",
+            "practice_trials = 4\npractice_level = 0.03\n",
+            0.03,
+            [0.006, 0.012, 0.02],
+        ),
+        (
+            "live",
+            LIVE,
+            "max_trials = 50\n",
+            "practice_trials = 3\npractice_level = 60\n",
+            60.0,
+            [20.0, 36.0, 52.0],
+        ),
+    ] {
+        assert!(text.contains(after), "{name}");
+        let plain = parse(text).unwrap_or_else(|e| panic!("{name}: {e}"));
+        let practised = parse(&text.replace(after, &format!("{after}{extra}")))
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        let sc = practised.staircase.as_ref().unwrap();
+        let n = sc.practice_trials as usize;
+        let tracks: Vec<&str> = sc.tracks.iter().map(|t| t.name.as_str()).collect();
+        for k in 0..3 {
+            for at in thresholds {
+                let a = run(&practised, k, at);
+                for (i, t) in a.iter().take(n).enumerate() {
+                    assert_eq!(t.block, Block::Familiarization, "{name}");
+                    assert!((t.level.unwrap() - level).abs() < 1e-12, "{name}");
+                    assert_eq!(t.condition, tracks[i % tracks.len()], "{name}");
+                }
+                assert!(a[n..].iter().all(|t| t.block == Block::Test), "{name}");
+                let b = run(&plain, k, at);
+                assert!(b.len() > 10, "{name}: {} trials", b.len());
+                assert_eq!(
+                    track_levels(&a),
+                    track_levels(&b),
+                    "{name}: subject {k} at {at}"
                 );
             }
         }
