@@ -3,8 +3,9 @@
 //! study on the page, with WebGL drawn by SwiftShader, answering as `study simulate` (the
 //! real binary, `--subject` the id the browser got) answered for the same subject: the
 //! ratings, choices and replays of its `trials.csv`; each served session's rows equal the
-//! simulated session's column by column, timing columns aside. The MOS server is SIGKILLed mid-study and restarted: the page carries on and no
-//! answer is lost or logged twice. A second browser holding another participant's token is
+//! simulated session's column by column, timing columns aside; the staircase's practice trial
+//! comes first, marked on the page and logged as familiarization. The MOS server is SIGKILLed
+//! mid-study and restarted: the page carries on and no answer is lost or logged twice. A second browser holding another participant's token is
 //! refused A's session.
 //!
 //! Needs `chromium`, `chromedriver` and the built page (`scripts/build-page`, which needs
@@ -25,7 +26,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use protocols::record::{Answer, Position};
+use protocols::record::{Answer, Block, Position};
 use serde_json::{Value, json};
 
 fn have(tool: &str) -> bool {
@@ -371,7 +372,7 @@ const DSCQS: &str = "name = \"web-dscqs\"\nprotocol = \"dscqs\"\n[scale]\nstep =
 const STAIRCASE: &str = "name = \"web-stairs\"\nprotocol = \"staircase\"\n\
     [presentation]\nloop = true\ngap_ms = 100\nstimulus_duration_ms = 500\n\
     [staircase]\nparam = \"cr\"\ncodec = \"spiht\"\nstart = 20\nstep = 5\nmin = 10\nmax = 30\n\
-    max_trials = 4\n[[staircase.tracks]]\nname = \"walk\"\n\
+    max_trials = 4\npractice_trials = 1\npractice_level = 25\n[[staircase.tracks]]\nname = \"walk\"\n\
     [staircase.live]\nclips = [\"walk\"]\n";
 
 /// What the simulated observer answered, by trial index: the answer and the replays.
@@ -793,10 +794,42 @@ fn a_browser_completes_dscqs_and_a_live_staircase() {
             b.wait("!document.fullscreenElement", 10);
             answer_trials(&b, &script, None, &mut given);
         } else {
-            take_part(&b, Some(&url), &script, None, &mut given);
+            b.go(&url);
+            welcome(&b);
+            // The staircase's practice trial comes first, marked on the page.
+            b.wait("document.body.dataset.open === '1'", 60);
+            assert_eq!(
+                b.js("return !document.getElementById('practice').hidden;"),
+                Value::Bool(true),
+                "the practice trial is marked"
+            );
+            answer_trials(&b, &script, None, &mut given);
         }
         assert_eq!(b.screen(), "end");
         check_rows(&out, &subject, &simulated, &given);
+        if name == "stairs" {
+            // One practice trial at its own level, logged apart, then the staircase's four.
+            let rows = results::read_trials(&out.join(format!("{subject}_s1/trials.csv")))
+                .unwrap()
+                .records;
+            let blocks: Vec<Block> = rows.iter().map(|r| r.trial.block).collect();
+            assert_eq!(
+                blocks,
+                [
+                    Block::Familiarization,
+                    Block::Test,
+                    Block::Test,
+                    Block::Test,
+                    Block::Test
+                ]
+            );
+            assert_eq!(rows[0].trial.level, Some(25.0));
+            assert_eq!(
+                rows[1].trial.level,
+                Some(20.0),
+                "the staircase starts at its start"
+            );
+        }
         if fullscreen {
             let m = manifest(&out, &subject);
             let browser = m.browser.expect("the browser's measurements");
