@@ -768,3 +768,105 @@ fn a_crowd_trial_shows_three_figures_at_their_distances_in_the_window() {
         "front/back height {ratio:.2}, distances {ratio_of_distances:.2}: {figures:?}"
     );
 }
+
+/// `study run --measured-*` on a study with `[viewing]` (the MOS example with viewing targets):
+/// the window opens on the experimenter's confirmation screen with the measurements filled in;
+/// "Conditions confirmed" (Tab to it, Space) records them with the confirmation in
+/// `session.json`; after one answer the session is stopped, and `study report
+/// --allow-incomplete`'s Method section states what was measured and confirmed.
+#[test]
+fn measured_viewing_conditions_are_confirmed_recorded_and_reported() {
+    let Some(env) = setup("viewing") else { return };
+    let study = env.dir.join("viewing.toml");
+    let text = std::fs::read_to_string(examples().join("mos.toml"))
+        .unwrap()
+        .replace(
+            "stimuli = \"stimuli.json\"",
+            &format!("stimuli = {:?}", examples().join("stimuli.json")),
+        )
+        .replace(
+            "subject_fields = [\"age\", \"gender\", \"normal_vision\"]",
+            "",
+        )
+        + "\n[viewing]\ndistance_cm = 90\nscreen_diagonal_in = 24\nroom_illuminance_lux = 20\n";
+    std::fs::write(&study, text).unwrap();
+    let out = env.dir.join("results");
+    let session = out.join("S01_s1");
+    let mut child = env
+        .cmd(env!("CARGO_BIN_EXE_study"))
+        .arg("run")
+        .arg(&study)
+        .args(["--subject", "S01", "--window-size", "1280x720"])
+        .args([
+            "--measured-distance-cm",
+            "88.5",
+            "--measured-room-lux",
+            "17",
+        ])
+        .arg("-o")
+        .arg(&out)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let wid = find_window(&env, &mut child, "study: mos-paper-000");
+    let deadline = Instant::now() + Duration::from_secs(240);
+    let confirmed = || {
+        std::fs::read_to_string(session.join("session.json"))
+            .is_ok_and(|m| m.contains("\"confirmed\": true"))
+    };
+    // Four measurement fields, then the button; keys sent before the first frames are lost,
+    // so the round is repeated until the manifest records the confirmation.
+    while !confirmed() {
+        assert!(Instant::now() < deadline, "the confirmation never took");
+        press(&env, &wid, &["Escape"]);
+        for _ in 0..5 {
+            press(&env, &wid, &["Tab"]);
+        }
+        press(&env, &wid, &["space"]);
+        std::thread::sleep(Duration::from_secs(1));
+    }
+    // Then the subject's welcome (no fields): Enter begins; one trial answered (4, Enter), so
+    // the session is kept when the experimenter stops it.
+    while logged_rows(&session) == 0 {
+        assert!(Instant::now() < deadline, "no answer was recorded");
+        press(&env, &wid, &["Return", "4", "Return"]);
+        std::thread::sleep(Duration::from_millis(700));
+    }
+    let ok = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap()
+        .success();
+    assert!(ok);
+    let status = child.wait_with_output().unwrap();
+    assert!(
+        status.status.success(),
+        "{}",
+        String::from_utf8_lossy(&status.stderr)
+    );
+    let m: results::SessionManifest =
+        results::store::read_manifest(&session.join("session.json")).unwrap();
+    let v = m.viewing.expect("the viewing record");
+    assert!(v.confirmed && v.confirmed_ms.is_some());
+    assert_eq!(v.distance_cm, Some(88.5));
+    assert_eq!(v.room_illuminance_lux, Some(17.0));
+    assert_eq!(v.peak_luminance_cd_m2, None);
+    let report = env.dir.join("report");
+    study_ok(&[
+        "report".as_ref(),
+        out.as_os_str(),
+        "--no-png".as_ref(),
+        "--allow-incomplete".as_ref(),
+        "-o".as_ref(),
+        report.as_os_str(),
+    ]);
+    let md = std::fs::read_to_string(report.join("report.md")).unwrap();
+    for words in [
+        "measured 88.5 cm in 1 of 1 sessions",
+        "measured 17 lux in 1 of 1 sessions",
+        "Viewing conditions confirmed by the experimenter before 1 of 1 sessions.",
+    ] {
+        assert!(md.contains(words), "{words}: {md}");
+    }
+}
