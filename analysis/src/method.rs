@@ -241,6 +241,14 @@ fn design_line(study: &StudyDefinition) -> String {
             study.familiarization.len()
         ));
     }
+    if let Some(m) = &study.mushra
+        && m.training_screens > 0
+    {
+        design.push(format!(
+            "{} training screen(s) first (BS.1534-3's training phase), not analysed",
+            m.training_screens
+        ));
+    }
     format!("Design: {}.", design.join("; "))
 }
 

@@ -695,14 +695,15 @@ impl Session {
         next
     }
 
-    /// Whether plan trial `i` (> 0) begins a new MUSHRA screen: its clip differs from the one
-    /// before (a plan has one screen per clip).
+    /// Whether plan trial `i` (> 0) begins a new MUSHRA screen: its clip or its block differs
+    /// from the one before (a plan has one test screen per clip; a training screen of the
+    /// clip may come right before it).
     fn screen_start(&self, i: usize) -> bool {
         match (
             i.checked_sub(1).and_then(|p| self.plan.get(p)),
             self.plan.get(i),
         ) {
-            (Some(a), Some(b)) => a.reference != b.reference,
+            (Some(a), Some(b)) => a.reference != b.reference || a.block != b.block,
             _ => true,
         }
     }
@@ -757,22 +758,30 @@ impl Session {
 /// (or the subject's row of a balanced Latin square over the screens, `[design] order`); on
 /// each screen the clip's test conditions, its hidden reference and its anchor, shuffled over
 /// the panes A, B, C ... One trial per rated stimulus, in pane order; the labelled reference
-/// is every trial's `reference`.
+/// is every trial's `reference`. Training screens (BS.1534-3's training phase) come first:
+/// the screens of the first `training_screens` clips of `[conditions]` (the same for every
+/// subject, so a session's length is known up front), block `familiarization`, their panes
+/// shuffled by a draw of their own, so that the test screens are those of the same study
+/// without training.
 fn plan_mushra(study: &StudyDefinition, subject: u32) -> Vec<Trial> {
     let mut rng = StudyRng::new(study.seed, &[u64::from(subject), purpose::PLAN]);
+    let mut training_rng = StudyRng::new(study.seed, &[u64::from(subject), MUSHRA_TRAINING]);
     let screens = crate::study::mushra_screens(&study.conditions);
     let mut order: Vec<usize> = (0..screens.len()).collect();
     match study.design.order {
         ConditionOrder::Random => rng.shuffle(&mut order),
         ConditionOrder::LatinSquare => order = design::williams_row(order.len(), subject as usize),
     }
-    let anchors = study
+    let (anchors, training) = study
         .mushra
         .as_ref()
-        .map(|m| m.anchors.as_slice())
+        .map(|m| (m.anchors.as_slice(), m.training_screens as usize))
         .unwrap_or_default();
+    let shown = (0..training.min(screens.len()))
+        .map(|k| (k, Block::Familiarization))
+        .chain(order.iter().map(|&k| (k, Block::Test)));
     let mut plan = Vec::new();
-    for k in order {
+    for (k, block) in shown {
         let Some((reference, tests)) = screens.get(k) else {
             continue;
         };
@@ -784,11 +793,14 @@ fn plan_mushra(study: &StudyDefinition, subject: u32) -> Vec<Trial> {
                 .filter(|a| a.reference == *reference)
                 .map(|a| a.stimulus.as_str()),
         );
-        rng.shuffle(&mut rated);
+        match block {
+            Block::Familiarization => training_rng.shuffle(&mut rated),
+            _ => rng.shuffle(&mut rated),
+        }
         for (pane, stimulus) in rated.into_iter().enumerate() {
             plan.push(Trial {
                 index: plan.len() as u32,
-                block: Block::Test,
+                block,
                 condition: stimulus.to_string(),
                 stimulus: stimulus.to_string(),
                 reference: reference.clone(),
@@ -802,6 +814,9 @@ fn plan_mushra(study: &StudyDefinition, subject: u32) -> Vec<Trial> {
     }
     plan
 }
+
+/// Tag of the pane draws of a MUSHRA study's training screens.
+const MUSHRA_TRAINING: u64 = 0x7472_6169;
 
 /// Tags of the two balanced side draws of a rated plan.
 const SIDES_FAMILIARIZATION: u64 = 0x6661_6d69;

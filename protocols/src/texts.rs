@@ -273,12 +273,16 @@ pub fn planned_trials(study: &StudyDefinition) -> Planned {
         Protocol::PairComparison => {
             Planned::Exactly((study.pairs().len() + study.session.hidden_repeats as usize) as u32)
         }
-        // One row per rated pane: the conditions, and each screen's hidden reference and
-        // anchor.
-        Protocol::Mushra => Planned::Exactly(
-            (study.conditions.len() + study.mushra.as_ref().map_or(0, |m| 2 * m.anchors.len()))
-                as u32,
-        ),
+        // One row per rated pane: each screen's conditions, hidden reference and anchor, the
+        // training screens' first.
+        Protocol::Mushra => {
+            let training = study.mushra.as_ref().map_or(0, |m| m.training_screens) as usize;
+            let panes = |s: &(String, Vec<&crate::study::Condition>)| s.1.len() + 2;
+            let screens = crate::study::mushra_screens(&study.conditions);
+            let test: usize = screens.iter().map(panes).sum();
+            let trained: usize = screens.iter().take(training).map(panes).sum();
+            Planned::Exactly((test + trained) as u32)
+        }
         Protocol::Staircase => study
             .staircase
             .as_ref()

@@ -525,14 +525,17 @@ fn mushra_takes_bs1534_defaults_and_lists_every_misfit_key_at_once() {
         )
         .replace(
             "[mushra]",
-            "[presentation]\narrangement = \"side_by_side\"\n\n[scale]\nkind = \"categorical\"\nmin = 1\nmax = 5\nstep = 1\n\n[session]\nhidden_repeats = 1\nfamiliarization = 1\n\n[mushra]",
+            "[presentation]\narrangement = \"side_by_side\"\n\n[scale]\nkind = \"categorical\"\nmin = 1\nmax = 5\nstep = 1\n\n[session]\nhidden_repeats = 1\nfamiliarization = 3\n\n[mushra]",
         );
     let got = issues(&bad);
     for (key, words) in [
         ("presentation.arrangement", "grid"),
         ("scale", "continuous 0-100"),
         ("session.hidden_repeats", "remove hidden_repeats"),
-        ("session.familiarization", "no familiarization"),
+        (
+            "session.familiarization",
+            "3 training screens but only 2 screens",
+        ),
         ("mushra.max_fraction", "0..=1"),
         ("mushra.anchor_rule", "report, exclude"),
         ("mushra.anchors[0]", "also a test condition"),
@@ -581,6 +584,99 @@ fn mushra_takes_bs1534_defaults_and_lists_every_misfit_key_at_once() {
         "{MUSHRA}\n[[design.catch]]\nstimulus = \"walk/wavelet-perceptual/cr10\"\nmin = 50\n"
     ));
     assert!(has(&got, "design.catch", "MUSHRA screen"), "{got:#?}");
+    // Training is a count of whole screens, never a list of stimuli.
+    let got = issues(&format!(
+        "{MUSHRA}\n[session]\nfamiliarization_stimuli = [\"walk/wavelet-perceptual/cr10\"]\n"
+    ));
+    assert!(
+        has(&got, "session.familiarization_stimuli", "whole screens"),
+        "{got:#?}"
+    );
+}
+
+/// BS.1534-3's training phase: `[session] familiarization = 1` shows the first clip's screen
+/// before the test, its panes shuffled by a draw of their own, every row in block
+/// `familiarization` and one screen of its own (`screen()` stops at the block, also where
+/// the subject's first test screen is the same clip's); the test screens after it are
+/// exactly those of the same study without training, and the planned count holds them all.
+#[test]
+fn mushra_training_screens_come_first_and_leave_the_test_screens_alone() {
+    let plain = parse(MUSHRA).unwrap();
+    let trained = parse(&format!("{MUSHRA}\n[session]\nfamiliarization = 1\n")).unwrap();
+    assert_eq!(trained.mushra.as_ref().unwrap().training_screens, 1);
+    assert!(
+        trained.familiarization.is_empty(),
+        "no familiarization stimuli"
+    );
+    let mut same_panes = 0;
+    let mut firsts = std::collections::BTreeSet::new();
+    for subject in 0..40 {
+        let run = |study: &protocols::StudyDefinition| {
+            let mut s = Session::new(study, subject).unwrap();
+            let mut screens: Vec<Vec<protocols::Trial>> = Vec::new();
+            while let Some(t) = s.next_trial(0).unwrap() {
+                let screen = s.screen();
+                assert_eq!(screen[0], t);
+                for p in &screen {
+                    if p.index != t.index {
+                        assert_eq!(s.next_trial(0).unwrap().as_ref(), Some(p));
+                    }
+                    s.respond(&rating(50.0)).unwrap();
+                }
+                screens.push(screen);
+            }
+            screens
+        };
+        let a = run(&trained);
+        let b = run(&plain);
+        assert_eq!(a.len(), 3, "a training screen and the two test screens");
+        let training = &a[0];
+        assert!(training.iter().all(|t| t.block == Block::Familiarization));
+        assert!(a[1..].iter().flatten().all(|t| t.block == Block::Test));
+        // The training screen is the first clip's, all its panes.
+        let walk = b
+            .iter()
+            .find(|s| s[0].reference == "walk/reference")
+            .unwrap();
+        assert_eq!(training[0].reference, "walk/reference");
+        let stimuli = |s: &[protocols::Trial]| -> std::collections::BTreeSet<String> {
+            s.iter().map(|t| t.stimulus.clone()).collect()
+        };
+        assert_eq!(stimuli(training), stimuli(walk));
+        same_panes += usize::from(
+            training.iter().map(|t| &t.stimulus).collect::<Vec<_>>()
+                == walk.iter().map(|t| &t.stimulus).collect::<Vec<_>>(),
+        );
+        firsts.insert(b[0][0].reference.clone());
+        assert_eq!(
+            protocols::texts::planned_trials(&trained).exact(),
+            Some(a.iter().map(Vec::len).sum::<usize>() as u32)
+        );
+        // The test screens are those without training, trial indices shifted by its panes.
+        let shift = training.len() as u32;
+        let shifted: Vec<Vec<protocols::Trial>> = a[1..]
+            .iter()
+            .map(|s| {
+                s.iter()
+                    .map(|t| protocols::Trial {
+                        index: t.index - shift,
+                        ..t.clone()
+                    })
+                    .collect()
+            })
+            .collect();
+        assert_eq!(shifted, b, "subject {subject}");
+    }
+    // Five panes: the same order by chance 1 time in 120; 40 subjects rarely see it twice.
+    assert!(
+        same_panes <= 2,
+        "{same_panes} of 40 training screens in the test's order"
+    );
+    assert_eq!(
+        firsts.len(),
+        2,
+        "some subjects test the training clip first"
+    );
 }
 
 #[test]

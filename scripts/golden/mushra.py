@@ -1,10 +1,11 @@
 #!/usr/bin/env python3
 """Independent MUSHRA tables (ITU-R BS.1534-3, adapted to motion) from a results folder.
 
-Reads, with the standard library only (csv, json, tomllib), every session's trials.csv, the
-copy of the study file (study.toml: [mushra] anchors and post-screening rules) and of the
-stimulus manifest (stimuli.json) that the results folder holds, and computes with SciPy,
-without any of the project's code:
+Reads, with the standard library only (csv, json, tomllib), every session's trials.csv (the
+rows of training screens, block familiarization, left out), the copy of the study file
+(study.toml: [mushra] anchors and post-screening rules) and of the stimulus manifest
+(stimuli.json) that the results folder holds, and computes with SciPy, without any of the
+project's code:
 
 - BS.1534-3 post-screening: per subject, the screens rated (= hidden references rated, one
   per clip), how many hidden references were rated below reference_below (default 90), how
@@ -51,6 +52,8 @@ def read_rows(results):
             for r in csv.DictReader(f):
                 if r["protocol"] != "mushra":
                     raise SystemExit(f"{path}: protocol {r['protocol']} is not mushra")
+                if r["block"] == "familiarization":
+                    continue  # a training screen: not analysed
                 rows.append((r["subject"], r["stimulus"], r["reference"], float(r["response"])))
     return rows
 

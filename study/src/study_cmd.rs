@@ -296,6 +296,14 @@ fn describe_mushra(text: &mut String, study: &StudyDefinition) -> std::fmt::Resu
         "  screens per session: {} (one per clip), {rated} rated panes in all",
         screens.len()
     )?;
+    if m.training_screens > 0 {
+        writeln!(
+            text,
+            "  training (BS.1534-3): the screen(s) of the first {} clip(s) shown first, rated, \
+             not analysed",
+            m.training_screens
+        )?;
+    }
     for (reference, tests) in &screens {
         let anchor = m
             .anchors
@@ -321,7 +329,8 @@ fn describe_mushra(text: &mut String, study: &StudyDefinition) -> std::fmt::Resu
             AnchorRule::Exclude => "excluded",
         }
     )?;
-    let est_min = screens.len() as f64 * study.trial_presentation_ms() as f64 / 60_000.0;
+    let shown = screens.len() + m.training_screens as usize;
+    let est_min = shown as f64 * study.trial_presentation_ms() as f64 / 60_000.0;
     writeln!(
         text,
         "  presentation time: {est_min:.1} min without answers"

@@ -577,13 +577,19 @@ fn check_first_answers(name: &str, records: &[protocols::TrialRecord]) {
         assert_ne!(r.trial.stimulus, r.trial.reference, "two test versions");
     }
     if name == "mushra.toml" {
-        // The whole first screen: one row per pane, A to E, each rated from the keys,
-        // the first carrying the screen's frames.
+        // The whole first screen, the example's training screen: one row per pane, A to E,
+        // each rated from the keys, logged as familiarization, the first carrying the
+        // screen's frames.
         let panes: Vec<String> = records
             .iter()
             .map(|r| r.trial.reference_position.to_string())
             .collect();
         assert_eq!(panes, ["pane_a", "pane_b", "pane_c", "pane_d", "pane_e"]);
+        assert!(
+            records
+                .iter()
+                .all(|r| r.trial.block == protocols::Block::Familiarization)
+        );
         assert!(records.iter().all(|r| matches!(
             r.response.answer,
             protocols::Answer::Rating(v) if (1.0..=100.0).contains(&v)

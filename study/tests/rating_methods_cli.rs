@@ -209,7 +209,8 @@ fn golden_lines(g: &serde_json::Value, key: &str) -> Vec<String> {
 /// (tests, hidden references, anchors) equal `scripts/golden/mushra.py` (csv, tomllib and
 /// `scipy.stats.t`) row for row and cell for cell, in the same order. The anchor rule is
 /// tried both ways: listed only (the example), and excluding (a copy of the study with the
-/// anchor limit lowered so that assessors trip it).
+/// anchor limit lowered so that assessors trip it). The example's training screen counts in
+/// neither, and the Method section states it.
 #[test]
 fn mushra_report_equals_scipy() {
     let Some(python) = python() else { return };
@@ -250,6 +251,11 @@ fn mushra_report_equals_scipy() {
             "Subject,Screens,Hidden reference low,Anchor high,Excluded",
         );
         assert_eq!(screening.len(), 12);
+        // Two test screens each: the example's training screen is not screened.
+        assert!(
+            screening.iter().all(|r| r.split(',').nth(1) == Some("2")),
+            "{screening:?}"
+        );
         assert_eq!(
             screening,
             golden_lines(&g, "screening"),
@@ -273,6 +279,10 @@ fn mushra_report_equals_scipy() {
         );
         let md = std::fs::read_to_string(report.join("report.md")).unwrap();
         assert!(md.contains("BS.1534-3"), "the post-screening is named");
+        assert!(
+            md.contains("1 training screen(s) first (BS.1534-3's training phase), not analysed"),
+            "the Method section states the training"
+        );
     }
     // The screening excluded someone, and the excluding anchor rule did too: both paths ran.
     assert!(

@@ -32,7 +32,7 @@ fn simulate_writes_complete_results_for_every_protocol() {
         ("acr-hr.toml", Protocol::Acr, Some(14)),
         ("dcr.toml", Protocol::Dcr, Some(12)),
         ("pc.toml", Protocol::PairComparison, Some(22)),
-        ("mushra.toml", Protocol::Mushra, Some(10)),
+        ("mushra.toml", Protocol::Mushra, Some(15)),
     ] {
         let out = scratch(file);
         let st = study()
@@ -129,27 +129,33 @@ fn simulate_writes_complete_results_for_every_protocol() {
     }
 }
 
-/// A simulated MUSHRA session of the example: two screens of five panes (3 tests, hidden
-/// reference, anchor), each screen's panes lettered A-E in order; the hidden reference rated
-/// near the top and far above the anchor.
+/// A simulated MUSHRA session of the example: a training screen (familiarization) and then
+/// two screens of five panes (3 tests, hidden reference, anchor), each screen's panes
+/// lettered A-E in order, the training screen of the first clip (walk); the hidden
+/// reference rated near the top and far above the anchor.
 fn check_mushra(s: &results::SessionResults) {
-    // Two screens of five panes (3 tests, hidden reference, anchor), each
-    // screen's panes lettered A-E in order; the hidden reference rated near the
-    // top and far above the anchor.
-    let panes: Vec<String> = s
-        .trials
-        .records
+    let records = &s.trials.records;
+    let panes: Vec<String> = records
         .iter()
         .map(|r| r.trial.reference_position.to_string())
         .collect();
     let letters = ["pane_a", "pane_b", "pane_c", "pane_d", "pane_e"];
-    assert_eq!(panes, [letters, letters].concat());
+    assert_eq!(panes, [letters, letters, letters].concat());
+    let blocks: Vec<Block> = records.iter().map(|r| r.trial.block).collect();
+    assert_eq!(
+        blocks,
+        [
+            [Block::Familiarization; 5],
+            [Block::Test; 5],
+            [Block::Test; 5]
+        ]
+        .concat()
+    );
+    assert!(records[0].trial.reference.starts_with("walk/"));
     let score = |suffix: &str| {
-        let v: Vec<f64> = s
-            .trials
-            .records
+        let v: Vec<f64> = records
             .iter()
-            .filter(|r| r.trial.stimulus.ends_with(suffix))
+            .filter(|r| r.trial.block == Block::Test && r.trial.stimulus.ends_with(suffix))
             .map(|r| r.outcome.score)
             .collect();
         assert_eq!(v.len(), 2, "{suffix}: one per screen");

@@ -1,6 +1,7 @@
-//! `[mushra]`: a MUSHRA-style study's low anchors and BS.1534-3 post-screening rules, and the
-//! rules a MUSHRA study file must keep (one screen per clip, a bounded grid, no repeats or
-//! familiarization trials, no crowd scenes, catch trials or `[staircase]`).
+//! `[mushra]`: a MUSHRA-style study's low anchors and BS.1534-3 post-screening rules, its
+//! training screens (`[session] familiarization`, a count of screens), and the rules a MUSHRA
+//! study file must keep (one screen per clip, a bounded grid, no repeats, no crowd scenes,
+//! catch trials or `[staircase]`).
 //!
 //! A screen shows the clip's reference, labelled, and unlabelled in a shuffled grid every test
 //! condition of the clip, the reference again (hidden reference) and the clip's anchor. The
@@ -13,6 +14,7 @@ use serde::{Deserialize, Serialize};
 use toml::Table;
 
 use super::check::{Ctx, join};
+use super::session::FamSpec;
 use super::{Condition, SessionSettings};
 use crate::manifest::{REFERENCE_CODEC, StimulusManifest};
 use crate::record::MAX_PANES;
@@ -45,6 +47,12 @@ pub struct MushraSettings {
     pub max_fraction: f64,
     /// What rating the anchor too high does.
     pub anchor_rule: AnchorRule,
+    /// Training screens before the test (BS.1534-3's training phase): the screens of the
+    /// first this many clips of `[conditions]`, shown first with their panes shuffled anew,
+    /// rated, logged in block `familiarization` and left out of the analysis. `[session]
+    /// familiarization`.
+    #[serde(default)]
+    pub training_screens: u32,
 }
 
 impl MushraSettings {
@@ -68,11 +76,11 @@ pub fn screens(conditions: &[Condition]) -> Vec<(String, Vec<&Condition>)> {
 }
 
 /// `[mushra]` and the rules of a MUSHRA study; `None` when it cannot be built (the problems
-/// are in `cx`). `has_familiarization`: the session asks for familiarization trials.
+/// are in `cx`). `training`: what `[session]` asks for as familiarization.
 pub(super) fn parse_mushra(
     t: Option<&Table>,
     conditions: &[Condition],
-    has_familiarization: bool,
+    training: &FamSpec,
     session: &SessionSettings,
     manifest: Option<&StimulusManifest>,
     cx: &mut Ctx,
@@ -84,13 +92,8 @@ pub(super) fn parse_mushra(
              as its consistency check: remove hidden_repeats",
         );
     }
-    if has_familiarization {
-        cx.err(
-            "session.familiarization",
-            "a MUSHRA session has no familiarization trials in this build (BS.1534's training \
-             phase is not built; give subjects a practice study of their own): remove it",
-        );
-    }
+    let screens = screens(conditions);
+    let training_screens = training_screens(training, screens.len(), cx);
     let Some(t) = t else {
         cx.err(
             P,
@@ -134,7 +137,6 @@ pub(super) fn parse_mushra(
     let ids = cx.strings(t, P, "anchors");
     let ids = cx.required(ids, t, P, "anchors")?;
     let m = manifest?;
-    let screens = screens(conditions);
     let mut by_reference = parse_anchors(&ids, m, conditions, &screens, cx);
     let mut anchors = Vec::new();
     for (reference, tests) in &screens {
@@ -164,7 +166,36 @@ pub(super) fn parse_mushra(
         anchor_above,
         max_fraction,
         anchor_rule,
+        training_screens,
     })
+}
+
+/// The number of training screens `[session]` asks for, at most `screens` (whole screens,
+/// never a list of stimuli).
+fn training_screens(training: &FamSpec, screens: usize, cx: &mut Ctx) -> u32 {
+    match *training {
+        FamSpec::None => 0,
+        FamSpec::Count(n) => {
+            if n as usize > screens && screens > 0 {
+                cx.err(
+                    "session.familiarization",
+                    format!(
+                        "{n} training screens but only {screens} screens (one per clip): a \
+                         MUSHRA study trains on its own screens"
+                    ),
+                );
+            }
+            n
+        }
+        FamSpec::Stimuli(_) => {
+            cx.err(
+                "session.familiarization_stimuli",
+                "a MUSHRA study trains on whole screens (BS.1534-3's training phase): give \
+                 familiarization, the number of training screens, instead",
+            );
+            0
+        }
+    }
 }
 
 /// `anchors`: each id's anchor by its clip's reference, every problem named by its index.

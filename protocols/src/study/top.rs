@@ -107,14 +107,14 @@ pub(super) fn parse_table(
             conditions = pc_sections(t, &session, &familiarization_spec, scale_t, m, cx);
         }
         Some(p) if p != Protocol::Staircase => {
-            (conditions, familiarization) = rating_sections(
-                t,
-                &session,
-                familiarization_spec,
-                manifest.as_ref(),
-                References::of(p),
-                cx,
-            );
+            // A MUSHRA study's familiarization is a count of training screens, not stimuli.
+            let (spec, training) = if p == Protocol::Mushra {
+                (FamSpec::None, familiarization_spec)
+            } else {
+                (familiarization_spec, FamSpec::None)
+            };
+            (conditions, familiarization) =
+                rating_sections(t, &session, spec, manifest.as_ref(), References::of(p), cx);
             if let Some(m) = &manifest {
                 check_crowd_conditions(
                     &conditions,
@@ -126,9 +126,8 @@ pub(super) fn parse_table(
                 );
             }
             if p == Protocol::Mushra {
-                let fam = !familiarization.is_empty()
-                    || session_t.contains_key("familiarization_stimuli");
-                mushra = mushra_sections(t, &conditions, fam, &session, manifest.as_ref(), cx);
+                let m = manifest.as_ref();
+                mushra = mushra_sections(t, &conditions, &training, &session, m, cx);
             }
         }
         Some(Protocol::Staircase) => {
@@ -277,7 +276,7 @@ fn load_checked_manifest(
 fn mushra_sections(
     t: &Table,
     conditions: &[Condition],
-    fam: bool,
+    training: &FamSpec,
     session: &SessionSettings,
     manifest: Option<&StimulusManifest>,
     cx: &mut Ctx,
@@ -289,7 +288,7 @@ fn mushra_sections(
         );
     }
     let table = cx.table(t, "", "mushra");
-    parse_mushra(table, conditions, fam, session, manifest, cx)
+    parse_mushra(table, conditions, training, session, manifest, cx)
 }
 
 /// The sections of a rating study (MOS, DSCQS, ACR, DCR): no `[staircase]`, the

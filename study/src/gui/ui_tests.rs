@@ -1070,6 +1070,57 @@ fn a_mushra_screen_rates_every_pane_on_a_slider_after_the_play() {
     drop(run.fx);
 }
 
+/// A MUSHRA training screen (`[session] familiarization = 1`): the same clip's screen twice,
+/// first marked "(practice)" and logged in block familiarization, then the test screen on a
+/// screen of its own (its three panes, not six), unmarked, logged in block test.
+#[test]
+fn a_mushra_training_screen_is_marked_and_logged_apart_from_the_test() {
+    let study = format!("{MUSHRA}[session]\nfamiliarization = 1\n");
+    let (mut h, run) = harness(fixture("mushra-training", &study));
+    begin(&mut h);
+    assert!(
+        h.query_by_label("Trials done: 0 of 6. This screen: 3 lettered motions.")
+            .is_some()
+    );
+    for (screen, practice) in [(0, true), (1, false)] {
+        assert_eq!(
+            h.query_by_label("(practice)").is_some(),
+            practice,
+            "screen {screen}"
+        );
+        assert_eq!(sliders(&h).len(), 3, "screen {screen}");
+        watch(&mut h, 1.2);
+        for k in 0..3 {
+            let rect = sliders(&h)[k].0;
+            h.get_all_by_role(Role::Slider)
+                .find(|n| n.rect() == rect)
+                .unwrap()
+                .focus();
+            h.run_steps(1);
+            h.key_press(Key::PageUp);
+            h.run_steps(1);
+        }
+        h.key_press(Key::Enter);
+        h.run_steps(3);
+        assert_eq!(rows(&run.session_dir).len(), 3 * (screen + 1));
+        watch(&mut h, 0.5);
+    }
+    let blocks: Vec<protocols::Block> = rows(&run.session_dir)
+        .iter()
+        .map(|r| r.trial.block)
+        .collect();
+    assert_eq!(
+        blocks,
+        [
+            [protocols::Block::Familiarization; 3],
+            [protocols::Block::Test; 3]
+        ]
+        .concat()
+    );
+    assert!(matches!(h.state().0.exit(), Some(Exit::Finished(_))));
+    drop(run.fx);
+}
+
 /// A MUSHRA session stopped after the first pane of a screen was logged shows, on resume,
 /// the reference and the panes not yet rated (B and C, not A), and logs them after it.
 #[test]
