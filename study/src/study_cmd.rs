@@ -385,14 +385,26 @@ fn describe_live(
         names.join(", ")
     )?;
     for t in &sc.tracks {
-        writeln!(
-            text,
-            "  staircase {:?}: start {} in [{}, {}]",
-            t.name,
-            t.settings.start,
-            t.settings.min.unwrap_or(f64::NEG_INFINITY),
-            t.settings.max.unwrap_or(f64::INFINITY)
-        )?;
+        let lo = t.settings.min.unwrap_or(f64::NEG_INFINITY);
+        let hi = t.settings.max.unwrap_or(f64::INFINITY);
+        match &sc.quest {
+            // A Bayesian track has no start: it picks each level from its posterior.
+            Some(q) => writeln!(
+                text,
+                "  {} track {:?}: {} levels in [{lo}, {hi}], each chosen from the posterior",
+                match q.method {
+                    protocols::QuestMethod::QuestPlus => "QUEST+",
+                    protocols::QuestMethod::Psi => "Psi",
+                },
+                t.name,
+                q.levels.len()
+            )?,
+            None => writeln!(
+                text,
+                "  staircase {:?}: start {} in [{lo}, {hi}]",
+                t.name, t.settings.start
+            )?,
+        }
     }
     let Some(t) = sc.tracks.first() else {
         return Ok(());

@@ -292,3 +292,112 @@ fn simulated_live_staircase_recovers_the_observers_true_threshold() {
     );
     assert!(report.join("figures/jnd.svg").is_file());
 }
+
+/// QUEST+ live (codec-in-the-loop), with practice: the example's five clips in turn under a
+/// QUEST+ track over CR 8, 16, ... 80 and two practice trials at CR 10. Every row logs the
+/// encoding the codec really gave at its level (the error recomputed here, bit for bit); the
+/// practice rows come first at their level; each subject's test rows are exactly the levels a
+/// QUEST+ track fed with the logged answers asks for, one after the other (nothing else moved
+/// it), and its posterior mean is the threshold `session.json` records; `study check`
+/// describes the track by its levels and `study report` lists each subject's QUEST+ track.
+#[test]
+fn a_live_quest_plus_track_encodes_its_levels_and_replays_from_the_rows() {
+    let dir = scratch("quest");
+    std::fs::create_dir_all(&dir).unwrap();
+    let text = std::fs::read_to_string(examples().join("live-staircase.toml")).unwrap();
+    let up_down = "start = 64\nstep = 2\nmin = 8\nmax = 80\nn_up = 1\nn_down = 2\n\
+                   stop_reversals = 12\nmax_trials = 90\nthreshold_reversals = 6\n";
+    assert!(text.contains(up_down));
+    let quest = "method = \"quest_plus\"\nstep = 8\nmin = 8\nmax = 80\nmax_trials = 24\n\
+                 practice_trials = 2\npractice_level = 10\n";
+    let settings = "[staircase.quest]\nthreshold = { min = 5, max = 120, count = 40, \
+                    spacing = \"log\" }\nslope = [1.5, 2, 3, 4, 6]\nlapse = [0, 0.02, 0.04]\n";
+    let text = text
+        .replace(
+            "stimuli = \"live/stimuli.json\"",
+            &format!("stimuli = {:?}", examples().join("live/stimuli.json")),
+        )
+        .replace(up_down, quest)
+        .replace("[staircase.live]", &format!("{settings}\n[staircase.live]"));
+    let toml = dir.join("live-quest.toml");
+    std::fs::write(&toml, text).unwrap();
+    let check = study().arg("check").arg(&toml).output().unwrap();
+    let described = String::from_utf8_lossy(&check.stdout);
+    assert!(check.status.success(), "{described}");
+    assert!(
+        described.contains(
+            "QUEST+ track \"live\": 10 levels in [8, 80], each chosen from the posterior"
+        ),
+        "{described}"
+    );
+    let out = dir.join("results");
+    let sim = study()
+        .arg("simulate")
+        .arg(&toml)
+        .args(["--subjects", "4", "--seed", "2", "-o"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(
+        sim.status.success(),
+        "{}",
+        String::from_utf8_lossy(&sim.stderr)
+    );
+    let clips = source_clips();
+    let def = lab::StudyFile::load(&toml).unwrap().definition;
+    let q = def.staircase.as_ref().unwrap().quest.clone().unwrap();
+    let (_, sessions) = results::read_results_dir(&out).unwrap();
+    assert_eq!(sessions.len(), 4);
+    for s in &sessions {
+        let rows = &s.trials.records;
+        assert_eq!(rows.len(), 2 + 24, "{}", s.manifest.subject);
+        let mut track = protocols::QuestPlus::new(q.clone()).unwrap();
+        for (k, r) in rows.iter().enumerate() {
+            let level = r.trial.level.unwrap();
+            let clip = r.trial.reference.strip_suffix("/reference").unwrap();
+            let e = r.encoding.as_ref().expect("a live row logs its encoding");
+            assert_eq!(e.codec_params.get("cr"), Some(&level));
+            let (_, c) = clips.iter().find(|(n, _)| n == clip).unwrap();
+            assert_eq!(e.rms_cm.to_bits(), spiht_rms_cm(c, level).to_bits());
+            if k < 2 {
+                assert_eq!(r.trial.block, protocols::Block::Familiarization);
+                assert_eq!(level, 10.0);
+                continue;
+            }
+            assert_eq!(r.trial.block, protocols::Block::Test);
+            assert_eq!(track.next_level(), Some(level), "row {k}");
+            track.add_response(r.outcome.correct.unwrap()).unwrap();
+        }
+        let recorded = &s.manifest.thresholds;
+        assert_eq!(recorded.len(), 1);
+        assert_eq!(
+            recorded[0].1.map(f64::to_bits),
+            Some(track.threshold().mean.to_bits()),
+            "{}",
+            s.manifest.subject
+        );
+    }
+    let report = dir.join("report");
+    let rep = study()
+        .arg("report")
+        .arg(&out)
+        .args(["--no-png", "-o"])
+        .arg(&report)
+        .output()
+        .unwrap();
+    assert!(
+        rep.status.success(),
+        "{}",
+        String::from_utf8_lossy(&rep.stderr)
+    );
+    let tracks = std::fs::read_to_string(report.join("tables/adaptive_tracks.csv")).unwrap();
+    assert_eq!(
+        tracks
+            .lines()
+            .filter(|l| l.contains(",live,QUEST+/Psi,24,"))
+            .count(),
+        4,
+        "{tracks}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
