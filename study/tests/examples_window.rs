@@ -22,7 +22,7 @@ use codecs::primitives::{Database, SegmentParams, TrainParams};
 use motion::synth::{WalkParams, walking_clip};
 use protocols::manifest::{Stimulus, StimulusManifest, StimulusMetrics};
 
-use common::{Env, find_window, press, setup, study_ok};
+use common::{Env, find_window, interrupt, press, setup, study_ok};
 
 fn examples() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples")
@@ -534,19 +534,7 @@ fn each_example_records_its_first_answer_in_the_window() {
             }
             std::thread::sleep(Duration::from_millis(700));
         }
-        let ok = Command::new("kill")
-            .args(["-INT", &child.id().to_string()])
-            .status()
-            .unwrap()
-            .success();
-        assert!(ok);
-        let status = child.wait_with_output().unwrap();
-        let stdout = String::from_utf8_lossy(&status.stdout);
-        assert!(
-            status.status.success(),
-            "{name}: {stdout}{}",
-            String::from_utf8_lossy(&status.stderr)
-        );
+        interrupt(child);
         let trials = results::trials::read_trials(&session.join("trials.csv")).unwrap();
         assert!(!trials.records.is_empty(), "{name}");
         assert_eq!(trials.records[0].trial.index, 0, "{name}");
@@ -730,19 +718,7 @@ fn a_crowd_trial_shows_three_figures_at_their_distances_in_the_window() {
             std::thread::sleep(Duration::from_millis(450));
         }
     }
-    assert!(
-        Command::new("kill")
-            .args(["-INT", &child.id().to_string()])
-            .status()
-            .unwrap()
-            .success()
-    );
-    let status = child.wait_with_output().unwrap();
-    assert!(
-        status.status.success(),
-        "{}",
-        String::from_utf8_lossy(&status.stderr)
-    );
+    interrupt(child);
     let trials = results::trials::read_trials(&session.join("trials.csv")).unwrap();
     let r = &trials.records[0];
     assert_eq!(
@@ -839,18 +815,7 @@ fn measured_viewing_conditions_are_confirmed_recorded_and_reported() {
         press(&env, &wid, &["Return", "4", "Return"]);
         std::thread::sleep(Duration::from_millis(700));
     }
-    let ok = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .unwrap()
-        .success();
-    assert!(ok);
-    let status = child.wait_with_output().unwrap();
-    assert!(
-        status.status.success(),
-        "{}",
-        String::from_utf8_lossy(&status.stderr)
-    );
+    interrupt(child);
     let m: results::SessionManifest =
         results::store::read_manifest(&session.join("session.json")).unwrap();
     let v = m.viewing.expect("the viewing record");

@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Stdio};
 use std::time::{Duration, Instant};
 
-use common::{Env, find_window, press, setup};
+use common::{Env, find_window, interrupt, press, setup};
 
 /// The shared walk stimuli and a MOS study of 2 familiarization + 2 test + 2 hidden-repeat
 /// trials.
@@ -243,19 +243,7 @@ fn sigint_saves_the_session_and_resume_completes_it() {
     let mut child = spawn_run(&env, false);
     let wid = find_window(&env, &mut child, "study: e2e");
     answer_until(&env, &wid, &["Return", "4", "Return"], 2);
-    let ok = std::process::Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .unwrap()
-        .success();
-    assert!(ok);
-    let out = child.wait_with_output().unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{stdout}{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let (stdout, _) = interrupt(child);
     assert!(
         stdout.contains("interrupted by a signal after 2 trials") && stdout.contains("--resume"),
         "{stdout}"

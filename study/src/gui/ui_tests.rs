@@ -986,6 +986,20 @@ fn sliders(h: &Harness<'_, (StudyUi, FrameClock)>) -> Vec<(egui::Rect, bool)> {
     v
 }
 
+/// Focuses the `k`-th slider from the left and presses `keys` on it, a frame each.
+fn set_slider(h: &mut Harness<'_, (StudyUi, FrameClock)>, k: usize, keys: &[Key]) {
+    let rect = sliders(h)[k].0;
+    h.get_all_by_role(Role::Slider)
+        .find(|n| n.rect() == rect)
+        .unwrap()
+        .focus();
+    h.run_steps(1);
+    for key in keys {
+        h.key_press(*key);
+        h.run_steps(1);
+    }
+}
+
 /// MUSHRA (BS.1534 adapted): the labelled reference and the lettered panes together, a
 /// slider per letter that stays shut (keys and clicks ignored) until every pane has played;
 /// then each is set from the keyboard (focus, arrows by one, Page Up by ten), Continue waits
@@ -1016,31 +1030,19 @@ fn a_mushra_screen_rates_every_pane_on_a_slider_after_the_play() {
     assert_eq!(h.query_all_by_label("–").count(), 3, "still unrated");
     watch(&mut h, 1.2);
     assert!(sliders(&h).iter().all(|(_, disabled)| !*disabled));
-    let set = |h: &mut Harness<'_, (StudyUi, FrameClock)>, k: usize, keys: &[Key]| {
-        let rect = sliders(h)[k].0;
-        h.get_all_by_role(Role::Slider)
-            .find(|n| n.rect() == rect)
-            .unwrap()
-            .focus();
-        h.run_steps(1);
-        for key in keys {
-            h.key_press(*key);
-            h.run_steps(1);
-        }
-    };
-    set(
+    set_slider(
         &mut h,
         0,
         &[Key::ArrowUp, Key::ArrowUp, Key::ArrowUp, Key::PageUp],
     );
-    set(&mut h, 1, &[Key::PageUp; 5]);
-    set(&mut h, 1, &[Key::ArrowDown]);
+    set_slider(&mut h, 1, &[Key::PageUp; 5]);
+    set_slider(&mut h, 1, &[Key::ArrowDown]);
     // Two of three rated: Continue stays shut and says which letter is left.
     assert!(h.query_by_label("Rate C to continue.").is_some());
     h.key_press(Key::Enter);
     h.run_steps(2);
     assert!(rows(&run.session_dir).is_empty());
-    set(&mut h, 2, &[Key::ArrowUp]);
+    set_slider(&mut h, 2, &[Key::ArrowUp]);
     h.get_by_label("Continue").click();
     h.run_steps(3);
     let r = rows(&run.session_dir);
@@ -1091,14 +1093,7 @@ fn a_mushra_training_screen_is_marked_and_logged_apart_from_the_test() {
         assert_eq!(sliders(&h).len(), 3, "screen {screen}");
         watch(&mut h, 1.2);
         for k in 0..3 {
-            let rect = sliders(&h)[k].0;
-            h.get_all_by_role(Role::Slider)
-                .find(|n| n.rect() == rect)
-                .unwrap()
-                .focus();
-            h.run_steps(1);
-            h.key_press(Key::PageUp);
-            h.run_steps(1);
+            set_slider(&mut h, k, &[Key::PageUp]);
         }
         h.key_press(Key::Enter);
         h.run_steps(3);
@@ -1149,14 +1144,7 @@ fn a_mushra_screen_resumed_part_way_shows_the_panes_left() {
     }
     watch(&mut h, 1.2);
     for k in 0..2 {
-        let rect = sliders(&h)[k].0;
-        h.get_all_by_role(Role::Slider)
-            .find(|n| n.rect() == rect)
-            .unwrap()
-            .focus();
-        h.run_steps(1);
-        h.key_press(Key::PageUp);
-        h.run_steps(1);
+        set_slider(&mut h, k, &[Key::PageUp]);
     }
     h.key_press(Key::Enter);
     h.run_steps(3);

@@ -195,6 +195,24 @@ pub fn press(env: &Env, wid: &str, keys: &[&str]) {
     env.xdotool(&args);
 }
 
+/// Stops `child` (a `study run`) as the experimenter's Ctrl+C does, with SIGINT, and waits
+/// for it: it must exit successfully. Its standard output and error.
+pub fn interrupt(child: Child) -> (String, String) {
+    let sent = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap()
+        .success();
+    assert!(sent, "kill -INT");
+    let out = child.wait_with_output().unwrap();
+    let (stdout, stderr) = (
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    );
+    assert!(out.status.success(), "{stdout}{stderr}");
+    (stdout, stderr)
+}
+
 /// A screenshot of the whole X screen into `path` (ImageMagick's `import`).
 pub fn screenshot(env: &Env, path: &Path) {
     let ok = env
