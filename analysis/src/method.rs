@@ -198,10 +198,16 @@ fn viewing_lines(study: &StudyDefinition, displays: &[SessionDisplay], out: &mut
 fn design_line(study: &StudyDefinition) -> String {
     let mut design = Vec::new();
     let pc = study.protocol == Protocol::PairComparison;
+    let mushra = study.protocol == Protocol::Mushra;
     let (items, n) = if pc {
         (
             "pairs (every pair of a clip's conditions)",
             study.pairs().len(),
+        )
+    } else if mushra {
+        (
+            "screens (one per clip)",
+            protocols::study::mushra_screens(&study.conditions).len(),
         )
     } else {
         ("conditions", study.conditions.len())
@@ -221,6 +227,10 @@ fn design_line(study: &StudyDefinition) -> String {
         "reference position"
     };
     design.push(match study.presentation.reference_position {
+        // The labelled reference has a pane of its own; the rated stimuli are shuffled.
+        _ if mushra => "on each screen the tests, the hidden reference and the anchor in \
+                        lettered panes shuffled per screen and subject"
+            .to_string(),
         ReferencePlacement::Fixed(p) => format!("reference always {p}"),
         ReferencePlacement::Random => format!("{what} random per trial"),
         ReferencePlacement::Balanced => {

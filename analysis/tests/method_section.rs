@@ -21,18 +21,27 @@ impl CodecCatalog for NoCodecs {
     }
 }
 
-fn study(extra: &str) -> StudyDefinition {
+/// A study of `protocol` over `conditions` with the test data's manifest, then `extra`.
+fn parse(protocol: &str, conditions: &str, extra: &str) -> StudyDefinition {
     let path =
         Path::new(env!("CARGO_MANIFEST_DIR")).join("../protocols/tests/data/studies/stimuli.json");
     let m: StimulusManifest =
         serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
     let text = format!(
-        "format_version = 1\nname = \"m\"\nprotocol = \"mos\"\nstimuli = \"stimuli.json\"\n\
-         seed = 1\n[conditions]\nstimuli = [\"walk/wavelet-bone/cr10\", \
-         \"walk/wavelet-bone/cr20\", \"walk/wavelet-bone/cr30\"]\n{extra}"
+        "format_version = 1\nname = \"m\"\nprotocol = \"{protocol}\"\n\
+         stimuli = \"stimuli.json\"\nseed = 1\n[conditions]\n{conditions}\n{extra}"
     );
     StudyDefinition::parse(&text, Path::new("m.toml"), move |_| Ok(m), &NoCodecs)
         .unwrap_or_else(|e| panic!("{e}"))
+}
+
+fn study(extra: &str) -> StudyDefinition {
+    parse(
+        "mos",
+        "stimuli = [\"walk/wavelet-bone/cr10\", \"walk/wavelet-bone/cr20\", \
+         \"walk/wavelet-bone/cr30\"]",
+        extra,
+    )
 }
 
 fn session(name: &str, hz: Option<f64>, viewing: Option<ViewingRecord>) -> SessionDisplay {
@@ -124,5 +133,35 @@ fn a_study_without_viewing_conditions_says_so() {
     assert_eq!(
         text.last().unwrap(),
         "Design: conditions in a random order per subject; reference position random per trial."
+    );
+}
+
+/// A MUSHRA study's design: its screens (one per clip) in the subject's row of a Latin square
+/// over the screens, not over the conditions; the panes shuffled, not a reference position;
+/// and its training screens.
+#[test]
+fn a_mushra_study_states_its_screens_panes_and_training() {
+    let st = parse(
+        "mushra",
+        "clips = [\"walk\", \"dance\"]\ncodecs = [\"wavelet-perceptual\"]\ntarget_cr = [10, 30]",
+        "[mushra]\nanchors = [\"walk/wavelet-standard/cr70\", \"dance/wavelet-standard/cr70\"]\n\
+         [design]\norder = \"latin_square\"\n[session]\nfamiliarization = 1\n",
+    );
+    let text = method_text(
+        &st,
+        Observers {
+            sessions: 2,
+            subjects: 2,
+            excluded_sessions: 0,
+            rejected: None,
+        },
+        &[session("S1 session 1", None, None)],
+    );
+    assert_eq!(
+        text.last().unwrap(),
+        "Design: screens (one per clip) ordered by a balanced Latin square (Williams design, 2 \
+         rows); on each screen the tests, the hidden reference and the anchor in lettered panes \
+         shuffled per screen and subject; 1 training screen(s) first (BS.1534-3's training \
+         phase), not analysed."
     );
 }
