@@ -797,16 +797,17 @@ fn measured_viewing_conditions_are_confirmed_recorded_and_reported() {
         std::fs::read_to_string(session.join("session.json"))
             .is_ok_and(|m| m.contains("\"confirmed\": true"))
     };
-    // Four measurement fields, then the button; keys sent before the first frames are lost,
-    // so the round is repeated until the manifest records the confirmation.
+    // Four measurement fields, then the button. egui moves the focus once per frame, and
+    // software rendering on a busy machine draws a few frames a second: one key per 400 ms.
+    // Keys sent before the first frames are lost, so the round is repeated until the
+    // manifest records the confirmation.
     while !confirmed() {
         assert!(Instant::now() < deadline, "the confirmation never took");
-        press(&env, &wid, &["Escape"]);
-        for _ in 0..5 {
-            press(&env, &wid, &["Tab"]);
+        for key in ["Escape", "Tab", "Tab", "Tab", "Tab", "Tab", "space"] {
+            press(&env, &wid, &[key]);
+            std::thread::sleep(Duration::from_millis(400));
         }
-        press(&env, &wid, &["space"]);
-        std::thread::sleep(Duration::from_secs(1));
+        std::thread::sleep(Duration::from_millis(600));
     }
     // Then the subject's welcome (no fields): Enter begins; one trial answered (4, Enter), so
     // the session is kept when the experimenter stops it.
