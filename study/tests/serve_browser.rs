@@ -195,7 +195,7 @@ impl Browser {
             .to_string()
     }
 
-    /// Clicks the element `css` names; tried again (for up to about three seconds, a loaded
+    /// Clicks the element `css` names; tried again (for up to about ten seconds, a loaded
     /// machine lays out slowly) while the page is re-laying out under it (an intercepted
     /// click, a replaced element, one not yet interactable).
     fn click(&self, css: &str) {
@@ -221,7 +221,7 @@ impl Browser {
             });
             match clicked {
                 Some((200, _)) => return,
-                other if attempt >= 30 => panic!("click {css}: {found:?} {other:?}"),
+                other if attempt >= 100 => panic!("click {css}: {found:?} {other:?}"),
                 _ => std::thread::sleep(Duration::from_millis(100)),
             }
         }
