@@ -69,6 +69,17 @@ pub trait StimulusSource: Send {
     /// Waits until everything [`StimulusSource::prepare`] started has ended.
     fn settle(&mut self) {}
 
+    /// Reads the stimuli `ids` now (a server calls it with every stimulus the plan can show,
+    /// [`crate::preflight::shown`], before its first participant), so that no trial waits
+    /// for a file; returns their clips by id. Sources that make stimuli per trial have none
+    /// to read and return nothing.
+    ///
+    /// # Errors
+    /// As [`StimulusSource::stimuli`].
+    fn preload(&self, _ids: &[String]) -> Result<Vec<(String, Arc<Clip>)>> {
+        Ok(Vec::new())
+    }
+
     /// Stimuli ready to show without waiting (files read, levels encoded) so far.
     fn ready(&self) -> usize;
 
@@ -235,6 +246,12 @@ impl StimulusSource for ManifestStimuli {
 
     fn encoding(&self, trial: &Trial) -> Result<Option<StimulusEncoding>> {
         Ok(self.scene_encoding(trial))
+    }
+
+    fn preload(&self, ids: &[String]) -> Result<Vec<(String, Arc<Clip>)>> {
+        ids.iter()
+            .map(|id| Ok((id.clone(), self.clip(id)?)))
+            .collect()
     }
 
     fn ready(&self) -> usize {

@@ -61,8 +61,13 @@ pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
         limits: web::Limits::default(),
     };
     web::serve(options, |app, addr| {
+        // One line: a caller that reads only the first line may close the pipe after it.
+        let ready = match app.stimuli_ready() {
+            0 => String::new(),
+            n => format!("; {n} stimuli read and ready"),
+        };
         println!(
-            "serving {} ({}) on http://{addr}/ ; results in {}",
+            "serving {} ({}) on http://{addr}/ ; results in {}{ready}",
             app.definition().name,
             app.definition().protocol,
             output.display()

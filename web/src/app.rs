@@ -6,7 +6,7 @@
 
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
-use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
+use std::sync::{Arc, Mutex, MutexGuard, OnceLock, PoisonError};
 use std::time::Instant;
 
 use lab::session::{self, Opened, Recorder, SessionOf};
@@ -209,14 +209,21 @@ pub struct AnswerReply {
     pub answered: u32,
 }
 
+/// A stimulus' joint positions as served, made by whichever request needs them first.
+type ClipCell = Arc<OnceLock<Arc<Vec<u8>>>>;
+
 /// The study, its stimuli, participants and sessions.
 pub struct App {
     study: StudyFile,
     out: PathBuf,
     page: Page,
     stimuli: Mutex<Box<dyn StimulusSource>>,
-    clips: Mutex<HashMap<String, Arc<Vec<u8>>>>,
-    registry: Mutex<Registry>,
+    /// Stimulus id → its joint positions as served, each made once (the first request for
+    /// an id makes it; others for the same id wait for that one instead of making it too).
+    clips: Mutex<HashMap<String, ClipCell>>,
+    /// Stimuli read and made ready before the first participant.
+    preloaded: usize,
+    registry: Registry,
     limits: Limits,
     dashboard: Option<String>,
     joins: Mutex<Bucket>,
@@ -321,12 +328,29 @@ impl App {
         }
         let registry = Registry::open(&options.output)?;
         let stimuli = lab::source::open(&study)?;
+        // Every stimulus the plan can show is read and its joint positions made now, so
+        // that no participant's trial waits for a file or for the forward kinematics (200
+        // first trials at once would otherwise queue behind them).
+        let ids: Vec<String> = lab::preflight::shown(&study)
+            .into_iter()
+            .map(|(id, _)| id)
+            .collect();
+        let loaded = stimuli.preload(&ids)?;
+        let preloaded = loaded.len();
+        let clips = loaded
+            .into_iter()
+            .map(|(id, clip)| {
+                let bytes = OnceLock::from(Arc::new(clipdata::encode(&clip)));
+                (id, Arc::new(bytes))
+            })
+            .collect();
         Ok(App {
             out: options.output.clone(),
             page,
             stimuli: Mutex::new(stimuli),
-            clips: Mutex::default(),
-            registry: Mutex::new(registry),
+            clips: Mutex::new(clips),
+            preloaded,
+            registry,
             limits: options.limits,
             dashboard: options.dashboard_token.clone(),
             joins: Mutex::new(Bucket::new(options.limits.join_burst)),
@@ -338,6 +362,13 @@ impl App {
     /// The study.
     pub fn definition(&self) -> &StudyDefinition {
         &self.study.definition
+    }
+
+    /// How many stimuli were read, and their joint positions made, before the first
+    /// participant (every stimulus the plan can show; none for a live staircase, which
+    /// encodes per trial).
+    pub fn stimuli_ready(&self) -> usize {
+        self.preloaded
     }
 
     /// The results directory.
@@ -400,7 +431,6 @@ impl App {
             ));
         }
         let who = identity(params).map_err(|e| ApiError::new(400, e.to_string()))?;
-        let mut reg = lock(&self.registry);
         let crowd = &self.definition().crowdsourcing;
         let full = || {
             ApiError::new(
@@ -408,34 +438,36 @@ impl App {
                 "the study has all the participants it needs; thank you for your interest",
             )
         };
-        if reg.all().len() >= self.limits.max_participants {
-            return Err(full());
-        }
-        // Quotas: the group with the fewest participants so far takes the next one, so
-        // every group gets its share; a group (or, without groups, the study) at its quota
-        // takes no more.
-        let group = if let Some(n) = crowd.groups {
-            let mut counts = vec![0u32; n as usize];
-            for p in reg.all() {
-                if let Some(c) = p.group.and_then(|g| counts.get_mut(g as usize)) {
-                    *c += 1;
-                }
-            }
-            let (g, count) = counts
-                .iter()
-                .enumerate()
-                .min_by_key(|(_, c)| **c)
-                .map_or((0, 0), |(g, c)| (g as u32, *c));
-            if crowd.quota.is_some_and(|q| count >= q) {
+        let admit = |all: &[Arc<Participant>]| {
+            if all.len() >= self.limits.max_participants {
                 return Err(full());
             }
-            Some(g)
-        } else if crowd.quota.is_some_and(|q| reg.all().len() >= q as usize) {
-            return Err(full());
-        } else {
-            None
+            // Quotas: the group with the fewest participants so far takes the next one, so
+            // every group gets its share; a group (or, without groups, the study) at its
+            // quota takes no more.
+            if let Some(n) = crowd.groups {
+                let mut counts = vec![0u32; n as usize];
+                for p in all {
+                    if let Some(c) = p.group.and_then(|g| counts.get_mut(g as usize)) {
+                        *c += 1;
+                    }
+                }
+                let (g, count) = counts
+                    .iter()
+                    .enumerate()
+                    .min_by_key(|(_, c)| **c)
+                    .map_or((0, 0), |(g, c)| (g as u32, *c));
+                if crowd.quota.is_some_and(|q| count >= q) {
+                    return Err(full());
+                }
+                Ok(Some(g))
+            } else if crowd.quota.is_some_and(|q| all.len() >= q as usize) {
+                Err(full())
+            } else {
+                Ok(None)
+            }
         };
-        let (p, token) = reg.join(&who, group)?;
+        let (p, token) = self.registry.join(&who, admit)?;
         Ok((p.subject.clone(), token))
     }
 
@@ -444,18 +476,15 @@ impl App {
     /// # Errors
     /// 401 unknown token, 403 a token of another participant, 429 over the rate.
     pub fn authorize(&self, subject: &str, token: &str) -> ApiResult<Arc<Participant>> {
-        let p = {
-            let reg = lock(&self.registry);
-            match reg.by_token(token) {
-                Some(p) if p.subject == subject => Arc::clone(p),
-                Some(_) => {
-                    return Err(ApiError::new(
-                        403,
-                        "this link belongs to another participant",
-                    ));
-                }
-                None => return Err(ApiError::new(401, "unknown session link")),
+        let p = match self.registry.by_token(token) {
+            Some(p) if p.subject == subject => p,
+            Some(_) => {
+                return Err(ApiError::new(
+                    403,
+                    "this link belongs to another participant",
+                ));
             }
+            None => return Err(ApiError::new(401, "unknown session link")),
         };
         if !lock(&p.bucket).take(self.limits.participant_rate, self.limits.participant_burst) {
             return Err(ApiError::new(429, "too many requests; slow down"));
@@ -681,12 +710,8 @@ impl App {
 
     /// The clip bytes of stimulus `id` (decoded joint positions), made once.
     fn clip_bytes(&self, id: &str, clip: &motion::Clip) -> Arc<Vec<u8>> {
-        if let Some(b) = lock(&self.clips).get(id) {
-            return Arc::clone(b);
-        }
-        let bytes = Arc::new(clipdata::encode(clip));
-        lock(&self.clips).insert(id.to_string(), Arc::clone(&bytes));
-        bytes
+        let cell = Arc::clone(lock(&self.clips).entry(id.to_string()).or_default());
+        Arc::clone(cell.get_or_init(|| Arc::new(clipdata::encode(clip))))
     }
 
     /// The pending trial of `p` (asked for again after a reload: the same trial, played from
@@ -1005,7 +1030,7 @@ impl App {
     /// # Errors
     /// A session log that cannot be read.
     pub fn dashboard(&self) -> ApiResult<serde_json::Value> {
-        let participants: Vec<Arc<Participant>> = lock(&self.registry).all().to_vec();
+        let participants = self.registry.all();
         let mut rows = Vec::new();
         let mut scores: BTreeMap<String, (f64, u32)> = BTreeMap::new();
         for p in &participants {
@@ -1067,7 +1092,7 @@ impl App {
     /// # Errors
     /// A manifest that cannot be written (the others are still marked).
     pub fn interrupt_all(&self) -> Result<()> {
-        let participants: Vec<Arc<Participant>> = lock(&self.registry).all().to_vec();
+        let participants = self.registry.all();
         let mut first = Ok(());
         for p in participants {
             if let Slot::Live(l) = &mut *lock(&p.slot)

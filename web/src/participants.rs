@@ -11,7 +11,7 @@ use std::collections::{BTreeMap, HashMap};
 use std::fs::{File, OpenOptions};
 use std::io::{Read as _, Seek as _, Write as _};
 use std::path::{Path, PathBuf};
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, PoisonError, RwLock, RwLockReadGuard};
 
 use sha2::{Digest as _, Sha256};
 
@@ -153,13 +153,47 @@ fn unhex(s: &str) -> Option<[u8; 32]> {
     Some(out)
 }
 
-/// Every participant, by token hash and by subject, with the file they are appended to.
-pub struct Registry {
+/// Every participant, by token hash and by subject.
+#[derive(Default)]
+struct Index {
     by_hash: HashMap<[u8; 32], Arc<Participant>>,
     by_subject: HashMap<String, Arc<Participant>>,
     order: Vec<Arc<Participant>>,
+}
+
+impl Index {
+    fn insert(&mut self, hash: [u8; 32], p: Participant) -> Arc<Participant> {
+        let p = Arc::new(p);
+        self.by_hash.insert(hash, Arc::clone(&p));
+        self.by_subject.insert(p.subject.clone(), Arc::clone(&p));
+        self.order.push(Arc::clone(&p));
+        p
+    }
+}
+
+/// `participants.csv`, appended to by one join at a time.
+struct Appender {
     file: File,
     path: PathBuf,
+}
+
+impl Appender {
+    fn append(&mut self, text: &str) -> Result<()> {
+        self.file
+            .write_all(text.as_bytes())
+            .and_then(|()| self.file.sync_data())
+            .map_err(io(self.path.display().to_string()))
+    }
+}
+
+/// Every participant, found by token or subject, and the file they are appended to.
+///
+/// Two locks, so that finding a participant (every request does) never waits for a disk:
+/// the index is held only to look up or insert; the file is held by a join for its whole
+/// check, append and fsync, so joins take turns and a quota is never overrun.
+pub struct Registry {
+    index: RwLock<Index>,
+    file: Mutex<Appender>,
 }
 
 impl Registry {
@@ -171,16 +205,14 @@ impl Registry {
     /// The file cannot be read or written, or a complete row is malformed (named by line).
     pub fn open(dir: &Path) -> Result<Registry> {
         let path = dir.join(lab::results_dir::PARTICIPANTS_FILE);
+        let at_path = || io(path.display().to_string());
         let mut file = OpenOptions::new()
             .read(true)
             .append(true)
             .create(true)
             .open(&path)
-            .map_err(io(path.display().to_string()))?;
-        let len = file
-            .metadata()
-            .map_err(io(path.display().to_string()))?
-            .len();
+            .map_err(at_path())?;
+        let len = file.metadata().map_err(at_path())?.len();
         if len > MAX_FILE_BYTES {
             return Err(WebError::Refused(format!(
                 "{}: {len} bytes is over the {MAX_FILE_BYTES}-byte limit",
@@ -188,36 +220,30 @@ impl Registry {
             )));
         }
         let mut text = String::new();
-        file.read_to_string(&mut text)
-            .map_err(io(path.display().to_string()))?;
-        let mut reg = Registry {
-            by_hash: HashMap::new(),
-            by_subject: HashMap::new(),
-            order: Vec::new(),
+        file.read_to_string(&mut text).map_err(at_path())?;
+        let mut appender = Appender {
             file,
-            path,
+            path: path.clone(),
         };
         if text.is_empty() {
-            reg.append(&format!("{HEADER}\n"))?;
-            return Ok(reg);
+            appender.append(&format!("{HEADER}\n"))?;
         }
         let complete = text.rfind('\n').map_or(0, |i| i + 1);
         if complete < text.len() {
             eprintln!(
                 "warning: {}: a torn last row ({} bytes) was cut off; that participant never got a link",
-                reg.path.display(),
+                path.display(),
                 text.len() - complete
             );
-            reg.file
-                .set_len(complete as u64)
-                .and_then(|()| reg.file.sync_all())
-                .map_err(io(reg.path.display().to_string()))?;
-            reg.file
-                .seek(std::io::SeekFrom::End(0))
-                .map_err(io(reg.path.display().to_string()))?;
+            let f = &mut appender.file;
+            f.set_len(complete as u64)
+                .and_then(|()| f.sync_all())
+                .and_then(|()| f.seek(std::io::SeekFrom::End(0)).map(drop))
+                .map_err(at_path())?;
         }
+        let mut index = Index::default();
         for (i, line) in text[..complete].lines().enumerate() {
-            let at = || format!("{} line {}", reg.path.display(), i + 1);
+            let at = || format!("{} line {}", path.display(), i + 1);
             if i == 0 {
                 if line != HEADER {
                     return Err(WebError::Refused(format!(
@@ -229,72 +255,74 @@ impl Registry {
             }
             let (p, hash) =
                 parse_row(line).map_err(|e| WebError::Refused(format!("{}: {e}", at())))?;
-            reg.insert(hash, p);
+            index.insert(hash, p);
         }
-        Ok(reg)
+        Ok(Registry {
+            index: RwLock::new(index),
+            file: Mutex::new(appender),
+        })
     }
 
-    fn insert(&mut self, hash: [u8; 32], p: Participant) -> Arc<Participant> {
-        let p = Arc::new(p);
-        self.by_hash.insert(hash, Arc::clone(&p));
-        self.by_subject.insert(p.subject.clone(), Arc::clone(&p));
-        self.order.push(Arc::clone(&p));
-        p
-    }
-
-    fn append(&mut self, text: &str) -> Result<()> {
-        self.file
-            .write_all(text.as_bytes())
-            .and_then(|()| self.file.sync_data())
-            .map_err(io(self.path.display().to_string()))
+    fn index(&self) -> RwLockReadGuard<'_, Index> {
+        self.index.read().unwrap_or_else(PoisonError::into_inner)
     }
 
     /// The participant a token belongs to.
-    pub fn by_token(&self, token: &str) -> Option<&Arc<Participant>> {
-        self.by_hash.get(&token_hash(token))
+    pub fn by_token(&self, token: &str) -> Option<Arc<Participant>> {
+        self.index().by_hash.get(&token_hash(token)).cloned()
     }
 
     /// The participant of a subject id.
-    pub fn by_subject(&self, subject: &str) -> Option<&Arc<Participant>> {
-        self.by_subject.get(subject)
+    pub fn by_subject(&self, subject: &str) -> Option<Arc<Participant>> {
+        self.index().by_subject.get(subject).cloned()
     }
 
     /// Every participant, in the order they joined.
-    pub fn all(&self) -> &[Arc<Participant>] {
-        &self.order
+    pub fn all(&self) -> Vec<Arc<Participant>> {
+        self.index().order.clone()
     }
 
     /// Adds a participant of identity `who` (a generated id when no platform names one)
-    /// and returns it with its token, after its row is on disk.
+    /// and returns it with its token, after its row is on disk. `admit` sees every
+    /// participant so far (no other join can add one meanwhile) and gives the newcomer's
+    /// group, or refuses them.
     ///
     /// # Errors
-    /// The id already took part (one session per participant), or the row cannot be written.
-    pub fn join(
-        &mut self,
+    /// `admit` refuses, the id already took part (one session per participant), or the row
+    /// cannot be written.
+    pub fn join<E: From<WebError>>(
+        &self,
         who: &Identity,
-        group: Option<u32>,
-    ) -> Result<(Arc<Participant>, String)> {
-        let subject = match &who.subject {
-            Some(s) => {
-                if self.by_subject.contains_key(s) {
-                    return Err(WebError::Refused(format!(
-                        "participant {s} already has a session: continue it from its link"
-                    )));
+        admit: impl FnOnce(&[Arc<Participant>]) -> std::result::Result<Option<u32>, E>,
+    ) -> std::result::Result<(Arc<Participant>, String), E> {
+        let mut file = self.file.lock().unwrap_or_else(PoisonError::into_inner);
+        let (subject, group) = {
+            let index = self.index();
+            let group = admit(&index.order)?;
+            let subject = match &who.subject {
+                Some(s) => {
+                    if index.by_subject.contains_key(s) {
+                        return Err(WebError::Refused(format!(
+                            "participant {s} already has a session: continue it from its link"
+                        ))
+                        .into());
+                    }
+                    s.clone()
                 }
-                s.clone()
-            }
-            None => loop {
-                let t = new_token()?;
-                let s = format!("W{}", &t[..12]);
-                if !self.by_subject.contains_key(&s) {
-                    break s;
-                }
-            },
+                None => loop {
+                    let t = new_token()?;
+                    let s = format!("W{}", &t[..12]);
+                    if !index.by_subject.contains_key(&s) {
+                        break s;
+                    }
+                },
+            };
+            (subject, group)
         };
         let token = new_token()?;
         let hash = token_hash(&token);
         let ids: Vec<String> = who.ids.iter().map(|(k, v)| format!("{k}={v}")).collect();
-        self.append(&format!(
+        file.append(&format!(
             "{subject},{},{},{},{},{}\n",
             hex(&hash),
             who.source,
@@ -302,10 +330,14 @@ impl Registry {
             group.map(|g| g.to_string()).unwrap_or_default(),
             ids.join(";")
         ))?;
-        let p = self.insert(
-            hash,
-            Participant::new(subject, who.source.clone(), who.ids.clone(), group),
-        );
+        let p = self
+            .index
+            .write()
+            .unwrap_or_else(PoisonError::into_inner)
+            .insert(
+                hash,
+                Participant::new(subject, who.source.clone(), who.ids.clone(), group),
+            );
         Ok((p, token))
     }
 }
@@ -415,10 +447,12 @@ mod tests {
         let who = identity(&params(&[("workerId", "A1"), ("hitId", "H")]))
             .unwrap_or_else(|e| panic!("{e}"));
         let token = {
-            let mut reg = Registry::open(&dir).unwrap_or_else(|e| panic!("{e}"));
-            let (_, token) = reg.join(&who, Some(3)).unwrap_or_else(|e| panic!("{e}"));
+            let reg = Registry::open(&dir).unwrap_or_else(|e| panic!("{e}"));
+            let (_, token) = reg
+                .join::<WebError>(&who, |_| Ok(Some(3)))
+                .unwrap_or_else(|e| panic!("{e}"));
             // One session per participant.
-            assert!(reg.join(&who, Some(1)).is_err());
+            assert!(reg.join::<WebError>(&who, |_| Ok(Some(1))).is_err());
             token
         };
         // A crash in the middle of the next row.
@@ -436,6 +470,63 @@ mod tests {
         assert!(reg.by_token(&new_token().unwrap_or_default()).is_none());
         let text = std::fs::read_to_string(&path).unwrap_or_default();
         assert!(text.ends_with('\n') && !text.contains(&token), "{text}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn joins_at_once_keep_the_quota_and_lookups_never_wait_for_a_join() {
+        let dir = std::env::temp_dir().join(format!("web-reg-q-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap_or_else(|e| panic!("{e}"));
+        let reg = Registry::open(&dir).unwrap_or_else(|e| panic!("{e}"));
+        // 24 joins at once against a quota of 10: exactly 10 get in, each once.
+        let admitted: Vec<(String, String)> = std::thread::scope(|s| {
+            let joins: Vec<_> = (0..24)
+                .map(|k| {
+                    let reg = &reg;
+                    s.spawn(move || {
+                        let who = identity(&params(&[("PROLIFIC_PID", &format!("q{k}"))]))
+                            .unwrap_or_else(|e| panic!("{e}"));
+                        reg.join(&who, |all| {
+                            if all.len() >= 10 {
+                                Err(WebError::Refused("full".into()))
+                            } else {
+                                Ok(Some(u32::try_from(all.len()).unwrap_or(0)))
+                            }
+                        })
+                        .ok()
+                        .map(|(p, t)| (p.subject.clone(), t))
+                    })
+                })
+                .collect();
+            joins
+                .into_iter()
+                .filter_map(|j| j.join().unwrap_or_else(|_| panic!("a join panicked")))
+                .collect()
+        });
+        assert_eq!(admitted.len(), 10);
+        let mut groups: Vec<Option<u32>> = reg.all().iter().map(|p| p.group).collect();
+        groups.sort_unstable();
+        assert_eq!(groups, (0..10).map(Some).collect::<Vec<_>>());
+        let rows = std::fs::read_to_string(dir.join(lab::results_dir::PARTICIPANTS_FILE))
+            .unwrap_or_default()
+            .lines()
+            .count();
+        assert_eq!(rows, 11, "the header and one row per participant");
+
+        // While a join holds the file (its append and fsync), every participant is still
+        // found: a request never waits for another participant's disk write.
+        let (subject, token) = &admitted[0];
+        let held = reg.file.lock().unwrap_or_else(PoisonError::into_inner);
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::scope(|s| {
+            s.spawn(|| {
+                let _ = tx.send(reg.by_token(token).map(|p| p.subject.clone()));
+            });
+            let found = rx.recv_timeout(std::time::Duration::from_secs(10));
+            drop(held);
+            assert_eq!(found.ok().flatten().as_ref(), Some(subject));
+        });
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -90,6 +90,8 @@ fn answers_are_logged_once_and_only_by_their_participant() {
     let options = setup(&dir);
     let rt = tokio::runtime::Runtime::new().unwrap();
     let server = rt.block_on(web::start(options)).unwrap();
+    // Both conditions and their reference are read before the first participant.
+    assert_eq!(server.app().stimuli_ready(), 3);
     let addr = server.addr;
     let mut a = Client::new(addr);
     assert_eq!(
