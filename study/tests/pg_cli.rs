@@ -248,6 +248,21 @@ fn stations_share_one_database() {
         .args(["--store", "env", "--run", "copy"])
         .output()
         .unwrap());
+    // The import vacuumed what it loaded: its pages marked all-visible, statistics taken
+    // (a table never vacuumed nor analysed has no tuple count, -1).
+    let row = client
+        .query_one(
+            "SELECT c.relallvisible, c.reltuples, s.last_vacuum IS NOT NULL \
+             FROM pg_class c JOIN pg_stat_user_tables s ON s.relid = c.oid \
+             WHERE c.relname = 'study_trials'",
+            &[],
+        )
+        .unwrap();
+    let (visible, tuples, vacuumed): (i32, f32, bool) = (row.get(0), row.get(1), row.get(2));
+    assert!(
+        visible > 0 && tuples >= 84.0 && vacuumed,
+        "{visible} {tuples} {vacuumed}"
+    );
     export(&url, "copy", &tmp.join("copy"));
     assert_eq!(tree(&tmp.join("copy")), tree(&tmp.join("clean")));
 

@@ -666,10 +666,11 @@ impl PgStore {
     /// Database errors, a malformed manifest, more than [`MAX_SESSIONS`] sessions.
     pub fn sessions(&mut self) -> Result<Vec<SessionHead>, ResultsError> {
         let run_id = self.run_id;
+        // The manifest as text, parsed straight into its type (not through a JSON tree).
         let rows = self
             .conn()?
             .query(
-                "SELECT id, subject, session, manifest, trials_format_version \
+                "SELECT id, subject, session, manifest::text, trials_format_version \
                  FROM study_sessions WHERE run_id = $1",
                 &[&run_id],
             )
@@ -681,21 +682,41 @@ impl PgStore {
                 limit: MAX_SESSIONS as u64,
             });
         }
-        let mut heads = Vec::with_capacity(rows.len());
-        for r in &rows {
-            let err = || self.err("listing the sessions");
-            let subject: String = r.try_get(1).map_err(err())?;
-            let session: i32 = r.try_get(2).map_err(err())?;
+        let location = self.location();
+        let head = |r: &postgres::Row| -> Result<SessionHead, ResultsError> {
+            let err = |e: postgres::Error| db_error(&location, "listing the sessions", &e);
+            let subject: &str = r.try_get(1).map_err(err)?;
+            let session: i32 = r.try_get(2).map_err(err)?;
             let session = u32::try_from(session).unwrap_or(0);
-            let dir = self.session_path(&subject, session);
-            let version: i32 = r.try_get(4).map_err(err())?;
-            heads.push(SessionHead {
-                id: r.try_get(0).map_err(err())?,
+            let dir = Path::new(&location).join(session_name(subject, session));
+            let version: i32 = r.try_get(4).map_err(err)?;
+            let manifest: &str = r.try_get(3).map_err(err)?;
+            Ok(SessionHead {
+                id: r.try_get(0).map_err(err)?,
                 version: u32::try_from(version).unwrap_or(0),
-                manifest: from_json(r.try_get(3).map_err(err())?, &dir.join(SESSION_FILE))?,
+                manifest: serde_json::from_str(manifest).map_err(|e| ResultsError::Malformed {
+                    path: dir.join(SESSION_FILE),
+                    line: e.line(),
+                    column: e.column(),
+                    message: e.to_string(),
+                })?,
                 dir,
-            });
-        }
+            })
+        };
+        // Parsing the manifests is most of listing a large run: on every core.
+        let threads = std::thread::available_parallelism().map_or(1, std::num::NonZero::get);
+        let part = rows.len().div_ceil(threads).max(1);
+        let mut heads = std::thread::scope(|scope| {
+            let parts: Vec<_> = rows
+                .chunks(part)
+                .map(|rows| scope.spawn(|| rows.iter().map(head).collect::<Result<Vec<_>, _>>()))
+                .collect();
+            let mut heads = Vec::with_capacity(rows.len());
+            for p in parts {
+                heads.extend(p.join().unwrap_or_else(|e| std::panic::resume_unwind(e))?);
+            }
+            Ok::<_, ResultsError>(heads)
+        })?;
         heads.sort_by(|a, b| a.dir.as_os_str().cmp(b.dir.as_os_str()));
         Ok(heads)
     }
@@ -1582,7 +1603,25 @@ pub fn import(
     )
     .map_err(err)?;
     tx.commit().map_err(err)?;
+    vacuum_imported(&mut store, ids.len())?;
     Ok((name, ids.len()))
+}
+
+/// Vacuums and analyses the tables an import of `sessions` sessions loaded. A bulk load
+/// leaves each new row's visibility to be settled by its first reader (who then writes the
+/// page back) and the planner without statistics: the first report after an import paid
+/// for both. A role that does not own the tables gets a warning from the server, and
+/// nothing is vacuumed.
+///
+/// # Errors
+/// Database errors (the message says the import itself is committed).
+fn vacuum_imported(store: &mut PgStore, sessions: usize) -> Result<(), ResultsError> {
+    let op = format!("vacuuming after the import (its {sessions} sessions are committed)");
+    let err = store.err(&op);
+    store
+        .conn()?
+        .batch_execute("VACUUM (ANALYZE) study_trials, study_sessions, study_session_files")
+        .map_err(err)
 }
 
 /// Refuses an import whose sessions (`manifests`, of folders `dirs` in `dir`) are in the
