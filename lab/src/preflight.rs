@@ -23,6 +23,7 @@
 use std::collections::{HashMap, HashSet};
 use std::fmt;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use codecs::bitstream::Bitstream;
 use codecs::codec::{self, CodecContext, CodecError};
@@ -152,13 +153,28 @@ pub fn steps(study: &StudyFile) -> usize {
 /// Checks every stimulus the plan of `study` can show; `progress(done, total)` is called
 /// after each. Returns what was checked and every problem found.
 pub fn check(study: &StudyFile, progress: &dyn Fn(usize, usize)) -> (Checked, Vec<Problem>) {
+    let (checked, problems, _) = check_keeping(study, progress);
+    (checked, problems)
+}
+
+/// The clips a preflight read, by stimulus id, in [`shown`] order.
+pub type Clips = Vec<(String, Arc<Clip>)>;
+
+/// [`check`], keeping the clips it read (those that could be read; none for a live
+/// staircase, whose stimuli are made per trial): a runner that wants every stimulus in
+/// memory before its first trial need not read them a second time.
+pub fn check_keeping(
+    study: &StudyFile,
+    progress: &dyn Fn(usize, usize),
+) -> (Checked, Vec<Problem>, Clips) {
     if study
         .definition
         .staircase
         .as_ref()
         .is_some_and(|s| s.live.is_some())
     {
-        return check_live(study, progress);
+        let (checked, problems) = check_live(study, progress);
+        return (checked, problems, Vec::new());
     }
     let base = study.manifest_dir();
     let ids = shown(study);
@@ -166,7 +182,7 @@ pub fn check(study: &StudyFile, progress: &dyn Fn(usize, usize)) -> (Checked, Ve
     let mut checked = Checked::default();
     let mut problems = Vec::new();
     // Clips read so far (None: could not be read, already reported).
-    let mut clips: HashMap<String, Option<Clip>> = HashMap::new();
+    let mut clips: HashMap<String, Option<Arc<Clip>>> = HashMap::new();
     let ctx = CodecContext::default();
     for (done, (id, reference)) in ids.iter().enumerate() {
         let Some(st) = study.definition.manifest.get(id) else {
@@ -174,7 +190,7 @@ pub fn check(study: &StudyFile, progress: &dyn Fn(usize, usize)) -> (Checked, Ve
             continue;
         };
         checked.stimuli += 1;
-        let clip = read(&base, st, &mut problems);
+        let clip = read(&base, st, &mut problems).map(Arc::new);
         if let (Some(clip), Some(r)) = (&clip, reference)
             && let Some(Some(reference)) = clips.get(r)
         {
@@ -201,7 +217,14 @@ pub fn check(study: &StudyFile, progress: &dyn Fn(usize, usize)) -> (Checked, Ve
         clips.insert(id.clone(), clip);
         progress(done + 1, total);
     }
-    (checked, problems)
+    let kept = ids
+        .into_iter()
+        .filter_map(|(id, _)| {
+            let clip = clips.remove(&id).flatten()?;
+            Some((id, clip))
+        })
+        .collect();
+    (checked, problems, kept)
 }
 
 /// [`check`] as one result: what was checked, or every problem in one error that names the
@@ -210,9 +233,20 @@ pub fn check(study: &StudyFile, progress: &dyn Fn(usize, usize)) -> (Checked, Ve
 /// # Errors
 /// [`LabError::Refused`] listing every problem.
 pub fn verify(study: &StudyFile, progress: &dyn Fn(usize, usize)) -> Result<Checked> {
-    let (checked, problems) = check(study, progress);
+    verify_keeping(study, progress).map(|(checked, _)| checked)
+}
+
+/// [`verify`], keeping the clips it read ([`check_keeping`]).
+///
+/// # Errors
+/// As [`verify`].
+pub fn verify_keeping(
+    study: &StudyFile,
+    progress: &dyn Fn(usize, usize),
+) -> Result<(Checked, Clips)> {
+    let (checked, problems, clips) = check_keeping(study, progress);
     if problems.is_empty() {
-        return Ok(checked);
+        return Ok((checked, clips));
     }
     Err(refused(describe(study, &problems)))
 }

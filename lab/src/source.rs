@@ -69,15 +69,11 @@ pub trait StimulusSource: Send {
     /// Waits until everything [`StimulusSource::prepare`] started has ended.
     fn settle(&mut self) {}
 
-    /// Reads the stimuli `ids` now (a server calls it with every stimulus the plan can show,
-    /// [`crate::preflight::shown`], before its first participant), so that no trial waits
-    /// for a file; returns their clips by id. Sources that make stimuli per trial have none
-    /// to read and return nothing.
-    ///
-    /// # Errors
-    /// As [`StimulusSource::stimuli`].
-    fn preload(&self, _ids: &[String]) -> Result<Vec<(String, Arc<Clip>)>> {
-        Ok(Vec::new())
+    /// Keeps `clips`, already read by id (a server passes what its preflight read,
+    /// [`crate::preflight::verify_keeping`]), so that no trial waits for a file; returns how
+    /// many it kept. Sources that make stimuli per trial keep none.
+    fn keep(&self, _clips: &[(String, Arc<Clip>)]) -> usize {
+        0
     }
 
     /// Stimuli ready to show without waiting (files read, levels encoded) so far.
@@ -248,10 +244,12 @@ impl StimulusSource for ManifestStimuli {
         Ok(self.scene_encoding(trial))
     }
 
-    fn preload(&self, ids: &[String]) -> Result<Vec<(String, Arc<Clip>)>> {
-        ids.iter()
-            .map(|id| Ok((id.clone(), self.clip(id)?)))
-            .collect()
+    fn keep(&self, clips: &[(String, Arc<Clip>)]) -> usize {
+        let mut cache = self.cache();
+        for (id, clip) in clips {
+            cache.insert(id.clone(), Arc::clone(clip));
+        }
+        clips.len()
     }
 
     fn ready(&self) -> usize {

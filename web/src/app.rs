@@ -322,23 +322,19 @@ impl App {
                 options.study.display()
             )));
         }
-        lab::preflight::verify(&study, &|_, _| {})?;
+        // The clips the preflight read are kept: every stimulus the plan can show is in
+        // memory, its joint positions made, before the first participant (200 first trials
+        // at once would otherwise queue behind the file reads and the forward kinematics).
+        let (_, read) = lab::preflight::verify_keeping(&study, &|_, _| {})?;
         for note in lab::results_dir::open_for_subjects(&options.output, &study, false)? {
             eprintln!("{note}");
         }
         let registry = Registry::open(&options.output)?;
         let stimuli = lab::source::open(&study)?;
-        // Every stimulus the plan can show is read and its joint positions made now, so
-        // that no participant's trial waits for a file or for the forward kinematics (200
-        // first trials at once would otherwise queue behind them).
-        let ids: Vec<String> = lab::preflight::shown(&study)
+        let preloaded = stimuli.keep(&read);
+        let clips = read
             .into_iter()
-            .map(|(id, _)| id)
-            .collect();
-        let loaded = stimuli.preload(&ids)?;
-        let preloaded = loaded.len();
-        let clips = loaded
-            .into_iter()
+            .take(preloaded)
             .map(|(id, clip)| {
                 let bytes = OnceLock::from(Arc::new(clipdata::encode(&clip)));
                 (id, Arc::new(bytes))
