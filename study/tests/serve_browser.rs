@@ -221,7 +221,10 @@ impl Browser {
             });
             match clicked {
                 Some((200, _)) => return,
-                other if attempt >= 100 => panic!("click {css}: {found:?} {other:?}"),
+                other if attempt >= 100 => panic!(
+                    "click {css} on the screen {:?}: {found:?} {other:?}",
+                    self.screen()
+                ),
                 _ => std::thread::sleep(Duration::from_millis(100)),
             }
         }
@@ -501,6 +504,9 @@ fn answer_trials(b: &Browser, script: &Script, stop_after: Option<u32>, given: &
             "end" => return,
             "break" => {
                 b.click("#break-continue");
+                // The page leaves the break at once; read again before, the screen
+                // would still say "break" and a second click would find it hidden.
+                b.wait("document.body.dataset.screen !== 'break'", 30);
                 continue;
             }
             _ => {}

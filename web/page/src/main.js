@@ -16,6 +16,7 @@ const state = {
   stage: null,
   trial: null,
   firstTrial: true,
+  breakTaken: null,
 };
 
 function show(name) {
@@ -521,7 +522,9 @@ async function trials(info) {
   for (;;) {
     const t = await call('GET', api('trial'), undefined, { retry: true });
     if (t.done) return t;
-    if (t.break_before && !state.firstTrial) {
+    // A break is taken once before its trial, not again when that trial's answer is
+    // refused and the trial is shown again.
+    if (t.break_before && !state.firstTrial && state.breakTaken !== t.index) {
       show('break');
       $('break-done').textContent = p.done(t.answered);
       $('break-bar').hidden = !p.exact;
@@ -531,6 +534,9 @@ async function trials(info) {
         document.onkeydown = (e) => { if (e.key === 'Enter') go(); };
       });
       document.onkeydown = null;
+      state.breakTaken = t.index;
+      // The blank screen while the trial's clips load: the break has visibly ended.
+      show('gap');
     }
     state.firstTrial = false;
     const bufs = await Promise.all([0, 1].map((k) => call('GET', api(`clip/${t.index}/${k}`), undefined, { retry: true, binary: true })));
