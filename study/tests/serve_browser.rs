@@ -493,30 +493,34 @@ fn welcome(b: &Browser) {
     }
 }
 
-/// Answers trials (and breaks) until the end, or until `stop_after` answers in all.
+/// Answers trials (and breaks) until the end, or until `stop_after` answers in all. An
+/// answer the server refuses (the page shows the reason and the trial again) is given
+/// again once the trial has replayed.
 fn answer_trials(b: &Browser, script: &Script, stop_after: Option<u32>, given: &mut BTreeSet<u32>) {
     loop {
+        // Screen and trial read together: the page may move on between two reads.
         b.wait(
-            "['trial', 'break', 'end'].includes(document.body.dataset.screen)",
+            "['break', 'end'].includes(document.body.dataset.screen) || \
+             (document.body.dataset.screen === 'trial' && document.body.dataset.open === '1')",
             60,
         );
-        match b.screen().as_str() {
-            "end" => return,
-            "break" => {
+        let at = b.js("const d = document.body.dataset; \
+             return [d.screen, Number(d.trial), Number(d.refusals || 0)];");
+        match at[0].as_str() {
+            Some("end") => return,
+            Some("break") => {
                 b.click("#break-continue");
                 // The page leaves the break at once; read again before, the screen
                 // would still say "break" and a second click would find it hidden.
                 b.wait("document.body.dataset.screen !== 'break'", 30);
                 continue;
             }
-            _ => {}
+            Some("trial") => {}
+            // Moved on since the wait.
+            _ => continue,
         }
-        b.wait("document.body.dataset.open === '1'", 60);
-        let k: u32 = b
-            .js("return Number(document.body.dataset.trial);")
-            .as_u64()
-            .unwrap() as u32;
-        if given.contains(&k) && b.screen() == "trial" {
+        let k = at[1].as_u64().unwrap() as u32;
+        if given.contains(&k) {
             // Still showing a trial answered already (the acknowledgement is on its way).
             std::thread::sleep(Duration::from_millis(50));
             continue;
@@ -529,12 +533,19 @@ fn answer_trials(b: &Browser, script: &Script, stop_after: Option<u32>, given: &
         };
         given.insert(k);
         give(b, answer);
+        let refusals = &at[2];
         b.wait(
             &format!(
-                "document.body.dataset.screen !== 'trial' || document.body.dataset.trial !== '{k}'"
+                "document.body.dataset.screen !== 'trial' || document.body.dataset.trial !== '{k}' \
+                 || Number(document.body.dataset.refusals || 0) !== {refusals}"
             ),
             60,
         );
+        if b.js("return Number(document.body.dataset.refusals || 0);") != *refusals {
+            // Refused: the same trial again, from the start.
+            given.remove(&k);
+            continue;
+        }
         if stop_after.is_some_and(|n| given.len() as u32 >= n) {
             return;
         }
@@ -640,6 +651,71 @@ fn reload_mid_trial(b: &Browser, out: &Path, given: &BTreeSet<u32>) {
     );
 }
 
+/// From here on, the first answer the page posts after a break claims that nothing was
+/// played, which the server refuses (422); every change of screen, trial, open state and
+/// error text is traced as it happens.
+fn refuse_first_answer_after_a_break(b: &Browser) {
+    b.js(
+        "window.trace = []; window.refusedTrial = null; let last = ''; \
+         const note = () => { const d = document.body.dataset; \
+           const e = document.getElementById('trial-error').textContent; \
+           const s = [d.screen, d.trial, d.open, e].join('|'); \
+           if (s !== last) { last = s; window.trace.push([d.screen, d.trial, d.open, e].map(String)); } }; \
+         note(); \
+         new MutationObserver(note).observe(document.body, \
+           { attributes: true, childList: true, subtree: true, characterData: true }); \
+         const real = window.fetch; \
+         window.fetch = (path, init) => { \
+           if (window.refusedTrial === null && init && init.method === 'POST' \
+               && String(path).endsWith('/answer') && window.trace.some((t) => t[0] === 'break')) { \
+             const body = JSON.parse(init.body); body.played_ms = 0; \
+             window.refusedTrial = body.index; window.trace.push(['refusing', String(body.index), '', '']); \
+             init = { ...init, body: JSON.stringify(body) }; \
+           } \
+           return real(path, init); }; \
+         return null;",
+    );
+}
+
+/// The refused answer's trial was shown again at once, without its break, closed until
+/// it had played, with the server's reason on screen; then answered.
+fn check_refusal(b: &Browser) {
+    let k = b.js("return window.refusedTrial;");
+    let k = k
+        .as_u64()
+        .unwrap_or_else(|| panic!("no answer refused: {}", b.js("return window.trace;")))
+        .to_string();
+    let trace = b.js("return window.trace;");
+    let trace: Vec<Vec<String>> = serde_json::from_value(trace).unwrap();
+    let at = trace.iter().position(|t| t[0] == "refusing").unwrap();
+    let until_gap: Vec<&Vec<String>> = trace[at + 1..]
+        .iter()
+        .take_while(|t| t[0] != "gap")
+        .collect();
+    assert!(
+        until_gap.iter().all(|t| t[0] == "trial" && t[1] == k),
+        "only trial {k} between the refusal and the next blank: {until_gap:?}"
+    );
+    let reopened = until_gap
+        .iter()
+        .position(|t| t[2] == "1")
+        .expect("the answers opened again");
+    assert!(
+        until_gap[..reopened].iter().any(|t| t[2] == "0"),
+        "closed until the trial had played again: {until_gap:?}"
+    );
+    assert!(
+        until_gap[reopened][3].contains("answered before the stimuli had played"),
+        "the reason on screen: {until_gap:?}"
+    );
+    assert!(
+        trace[at + 1 + until_gap.len()..]
+            .iter()
+            .any(|t| t[0] == "gap"),
+        "then answered: {trace:?}"
+    );
+}
+
 /// The environment check of a study that asks for fullscreen and a 640×480 window, in a
 /// window too small: the page refuses with the reasons and offers no way on; the server
 /// refuses the same environment posted to it, and no participant or session is recorded.
@@ -722,8 +798,11 @@ fn a_browser_completes_mos_through_a_server_kill_and_a_foreign_token_is_refused(
     server.child.wait().unwrap();
     std::thread::sleep(Duration::from_millis(300));
     server = serve(&study, &out, port);
-    // The page carries on from where it was (it retries what it was sending).
+    // The page carries on from where it was (it retries what it was sending). The next
+    // answer after the break it reaches is refused, and given again.
+    refuse_first_answer_after_a_break(&b);
     take_part(&b, None, &script, Some(3), &mut given);
+    check_refusal(&b);
     reload_mid_trial(&b, &out, &given);
     take_part(&b, None, &script, None, &mut given);
     assert_eq!(b.screen(), "end");

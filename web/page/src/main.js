@@ -442,7 +442,6 @@ function runTrial(info, t, clips) {
   return new Promise((resolve) => {
     document.body.dataset.trial = String(t.index);
     show('trial');
-    $('trial-error').textContent = '';
     const stage = state.stage;
     stage.load(clips);
     const pres = new Presentation(t, info.presentation, t.clip_s);
@@ -456,6 +455,8 @@ function runTrial(info, t, clips) {
     const w = widgets(info, t, (answer) => {
       if (answered || !pres.shownOnce) return;
       answered = true;
+      // Closed once given; a refused answer opens again only after the trial replays.
+      document.body.dataset.open = '0';
       const now = performance.now();
       resolve({
         index: t.index,
@@ -548,12 +549,15 @@ async function trials(info) {
       reply = await call('POST', api('answer'), request, { retry: true });
     } catch (e) {
       if (e.status === 422) {
-        // Refused (played too briefly by the server's clock, or hidden): shown again.
+        // Refused (played too briefly by the server's clock, or hidden): shown again, the
+        // reason on screen until the trial is answered.
         $('trial-error').textContent = e.message;
+        document.body.dataset.refusals = String(Number(document.body.dataset.refusals || 0) + 1);
         continue;
       }
       throw e;
     }
+    $('trial-error').textContent = '';
     // The blank between trials, with the acknowledgement.
     show('gap');
     progress(info, { ...t, answered: reply.answered }, true);
