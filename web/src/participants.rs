@@ -272,11 +272,6 @@ impl Registry {
         self.index().by_hash.get(&token_hash(token)).cloned()
     }
 
-    /// The participant of a subject id.
-    pub fn by_subject(&self, subject: &str) -> Option<Arc<Participant>> {
-        self.index().by_subject.get(subject).cloned()
-    }
-
     /// Every participant, in the order they joined.
     pub fn all(&self) -> Vec<Arc<Participant>> {
         self.index().order.clone()
