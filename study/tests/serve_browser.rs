@@ -493,6 +493,9 @@ fn welcome(b: &Browser) {
     }
 }
 
+/// The page's count of answers the server refused, as a JS expression.
+const REFUSALS: &str = "Number(document.body.dataset.refusals || 0)";
+
 /// Answers trials (and breaks) until the end, or until `stop_after` answers in all. An
 /// answer the server refuses (the page shows the reason and the trial again) is given
 /// again once the trial has replayed.
@@ -504,8 +507,9 @@ fn answer_trials(b: &Browser, script: &Script, stop_after: Option<u32>, given: &
              (document.body.dataset.screen === 'trial' && document.body.dataset.open === '1')",
             60,
         );
-        let at = b.js("const d = document.body.dataset; \
-             return [d.screen, Number(d.trial), Number(d.refusals || 0)];");
+        let at = b.js(&format!(
+            "const d = document.body.dataset; return [d.screen, Number(d.trial), {REFUSALS}];"
+        ));
         match at[0].as_str() {
             Some("end") => return,
             Some("break") => {
@@ -520,11 +524,8 @@ fn answer_trials(b: &Browser, script: &Script, stop_after: Option<u32>, given: &
             _ => continue,
         }
         let k = at[1].as_u64().unwrap() as u32;
-        if given.contains(&k) {
-            // Still showing a trial answered already (the acknowledgement is on its way).
-            std::thread::sleep(Duration::from_millis(50));
-            continue;
-        }
+        // An answer closes the trial's widgets; only a refusal opens them again.
+        assert!(!given.contains(&k), "trial {k}, answered, is open again");
         let Some(&answer) = script.get(&k) else {
             panic!(
                 "trial {k} is not in the simulated session ({} rows)",
@@ -537,11 +538,11 @@ fn answer_trials(b: &Browser, script: &Script, stop_after: Option<u32>, given: &
         b.wait(
             &format!(
                 "document.body.dataset.screen !== 'trial' || document.body.dataset.trial !== '{k}' \
-                 || Number(document.body.dataset.refusals || 0) !== {refusals}"
+                 || {REFUSALS} !== {refusals}"
             ),
             60,
         );
-        if b.js("return Number(document.body.dataset.refusals || 0);") != *refusals {
+        if b.js(&format!("return {REFUSALS};")) != *refusals {
             // Refused: the same trial again, from the start.
             given.remove(&k);
             continue;

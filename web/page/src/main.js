@@ -15,8 +15,9 @@ const state = {
   env: null,
   stage: null,
   trial: null,
-  firstTrial: true,
-  breakTaken: null,
+  // The trial this page last asked for (none since it loaded): a break shows only before a
+  // trial after another, not after a reload nor when a refused answer's trial comes again.
+  reached: null,
 };
 
 function show(name) {
@@ -523,9 +524,7 @@ async function trials(info) {
   for (;;) {
     const t = await call('GET', api('trial'), undefined, { retry: true });
     if (t.done) return t;
-    // A break is taken once before its trial, not again when that trial's answer is
-    // refused and the trial is shown again.
-    if (t.break_before && !state.firstTrial && state.breakTaken !== t.index) {
+    if (t.break_before && state.reached !== null && state.reached !== t.index) {
       show('break');
       $('break-done').textContent = p.done(t.answered);
       $('break-bar').hidden = !p.exact;
@@ -535,11 +534,10 @@ async function trials(info) {
         document.onkeydown = (e) => { if (e.key === 'Enter') go(); };
       });
       document.onkeydown = null;
-      state.breakTaken = t.index;
       // The blank screen while the trial's clips load: the break has visibly ended.
       show('gap');
     }
-    state.firstTrial = false;
+    state.reached = t.index;
     const bufs = await Promise.all([0, 1].map((k) => call('GET', api(`clip/${t.index}/${k}`), undefined, { retry: true, binary: true })));
     const clips = bufs.map(parseClip);
     progress(info, t, false);
