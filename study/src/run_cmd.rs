@@ -472,6 +472,7 @@ fn run_screens(
             screens.stop(Exit::Signalled { logged });
         }
         screens.ui(ui, ctx.clock);
+        ctx.screen = screens.screen(ui.input(|i| i.time), ctx.clock);
         if let Some(e) = screens.exit() {
             *exit_seen.borrow_mut() = Some(e.clone());
             // The end screen stays until the subject closes it (or the window is closed);
@@ -612,6 +613,11 @@ pub fn display_test(args: &DisplayTestArgs) -> anyhow::Result<()> {
                     ));
             }
         });
+        ctx.screen = if measuring_since.is_some() {
+            "display-test/measuring".into()
+        } else {
+            "display-test/calibrating".into()
+        };
         if elapsed >= seconds || ctx.close_requested {
             Next::Close
         } else {

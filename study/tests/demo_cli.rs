@@ -1,12 +1,11 @@
 //! `study demo` from nothing: stimuli, three studies, three reports; without a display with
 //! simulated observers only (and saying so), with one (Xvfb + lavapipe) also your session of
-//! each study in the window, driven here by `xdotool`.
+//! each study in the window, driven here by a test input script.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
 
 mod common;
 
-use std::process::{Command, Stdio};
-use std::time::{Duration, Instant};
+use std::process::Command;
 
 #[test]
 fn demo_runs_every_protocol_and_says_observers_are_simulated() {
@@ -55,35 +54,30 @@ fn demo_with_a_display_adds_your_session_of_each_study_in_the_window() {
     let Some(env) = common::setup("demo-window") else {
         return;
     };
-    let mut child = env
-        .cmd(env!("CARGO_BIN_EXE_study"))
-        .args(["demo", "--subjects", "2", "-o"])
-        .arg(env.dir.join("demo"))
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    // One key sequence answers every screen: Enter begins, 4 4 Enter rates MOS (4) and DSCQS
-    // (A 4, B 4), Left answers 2AFC; keys a screen does not take are ignored.
-    let deadline = Instant::now() + Duration::from_secs(600);
-    let mut windows = 0;
-    while child.try_wait().unwrap().is_none() {
-        assert!(Instant::now() < deadline, "the demo did not finish");
-        let id = env.xdotool(&["search", "--name", "study: demo-"]);
-        if let Some(wid) = id.lines().next().filter(|l| !l.is_empty()) {
-            windows += 1;
-            common::press(&env, wid, &["Return", "4", "4", "Return", "Left"]);
-        }
-        std::thread::sleep(Duration::from_millis(400));
-    }
-    let out = child.wait_with_output().unwrap();
-    let text = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{text}\n{}",
-        String::from_utf8_lossy(&out.stderr)
+    // One script answers every window of the demo (each window reads it anew): Enter
+    // begins; once a trial's answers open, 4 4 Enter rates MOS (4) and DSCQS (A 4, B 4) and
+    // Left answers 2AFC (keys a screen does not take are ignored; the rest of a rule is
+    // dropped once the answer has moved the screen on); Enter closes the end screen.
+    let demo = env.dir.join("demo");
+    let run = common::Scripted::spawn(
+        &env,
+        "demo",
+        &[
+            "demo".as_ref(),
+            "--subjects".as_ref(),
+            "2".as_ref(),
+            "-o".as_ref(),
+            demo.as_os_str(),
+        ],
+        "welcome/ready: Enter\ntrial/open: 4 4 Enter Left\nend/ready: Enter\n",
     );
-    assert!(windows > 0);
+    let (status, text, stderr) = run.wait_exit();
+    assert!(status.success(), "{text}\n{stderr}");
+    assert_eq!(
+        stderr.matches("test input: screen end/ready").count(),
+        3,
+        "three windows closed by their end screens: {stderr}"
+    );
     assert!(text.contains("A display is available"), "{text}");
     for p in ["mos", "dscqs", "staircase"] {
         let (_, sessions) =

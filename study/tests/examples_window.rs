@@ -13,16 +13,16 @@ mod common;
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::Command;
 use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use codecs::codec::CodecContext;
 use codecs::primitives::{Database, SegmentParams, TrainParams};
 use motion::synth::{WalkParams, walking_clip};
 use protocols::manifest::{Stimulus, StimulusManifest, StimulusMetrics};
 
-use common::{Env, find_window, interrupt, press, setup, study_ok};
+use common::{Env, Scripted, setup, study_ok};
 
 fn examples() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples")
@@ -433,34 +433,45 @@ fn check_names_a_missing_and_a_corrupt_stimulus() {
     assert!(!dir.join("res").exists());
 }
 
-fn logged_rows(session: &Path) -> usize {
-    std::fs::read_to_string(session.join("trials.csv"))
-        .map_or(0, |s| s.lines().count().saturating_sub(1))
-}
-
-fn spawn_run(env: &Env, study: &Path, out: &Path) -> Child {
+/// `study run STUDY --subject S01 -o OUT` in a window that takes its keys from `script`.
+fn run_scripted(env: &Env, name: &str, study: &Path, out: &Path, script: &str) -> Scripted {
     // A MUSHRA screen draws six panes at once: a small window keeps lavapipe's frames quick.
     let size = if study.ends_with("mushra.toml") {
         "640x480"
     } else {
         "1280x720"
     };
-    env.cmd(env!("CARGO_BIN_EXE_study"))
-        .arg("run")
-        .arg(study)
-        .args(["--subject", "S01", "--window-size", size, "-o"])
-        .arg(out)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap()
+    let args: Vec<&std::ffi::OsStr> = vec![
+        "run".as_ref(),
+        study.as_os_str(),
+        "--subject".as_ref(),
+        "S01".as_ref(),
+        "--window-size".as_ref(),
+        size.as_ref(),
+        "-o".as_ref(),
+        out.as_os_str(),
+    ];
+    Scripted::spawn(env, name, &args, script)
+}
+
+/// The keys that answer an example's first trial (or MUSHRA screen) once its answers open:
+/// DSCQS's two continuous scales with the number keys (Backspace to A, 4 marks A Good, 2
+/// marks B Poor), MUSHRA's sliders A to E in the order they are drawn (Tab to each, Up sets
+/// it to 1), a grade for MOS, ACR and DCR (4), the left motion for 2AFC and pair comparison.
+fn first_answer_keys(name: &str) -> &'static str {
+    match name {
+        "dscqs.toml" => "Backspace 4 2 Enter",
+        "mushra.toml" => "Tab Up Tab Up Tab Up Tab Up Tab Up Enter",
+        "mos.toml" | "acr-hr.toml" | "dcr.toml" => "4 Enter",
+        _ => "Left",
+    }
 }
 
 /// Under Xvfb + lavapipe, `study run` of each example reaches its first answer and records
 /// it: the subject form is filled in (Tab to each field, typed), Begin pressed, the first
-/// trial watched and answered with the keyboard (DSCQS's two continuous scales with the
-/// number keys: Backspace to A, 4 marks A Good, 2 marks B Poor); then the experimenter stops
-/// the session with SIGINT, which saves it.
+/// trial watched and answered from the keyboard, all from a test input script (one key a
+/// frame, each once its screen shows); then the experimenter stops the session with SIGINT,
+/// which saves it.
 #[test]
 fn each_example_records_its_first_answer_in_the_window() {
     let Some(env) = setup("examples") else { return };
@@ -468,73 +479,28 @@ fn each_example_records_its_first_answer_in_the_window() {
         let started = Instant::now();
         let out = env.dir.join(format!("results-{name}"));
         let session = out.join("S01_s1");
-        let mut child = spawn_run(&env, &examples().join(name), &out);
-        let title = {
-            let text = std::fs::read_to_string(examples().join(name)).unwrap();
-            let line = text.lines().find(|l| l.starts_with("name = ")).unwrap();
-            format!(
-                "study: {}",
-                line.trim_start_matches("name = ").trim_matches('"')
-            )
-        };
-        let wid = find_window(&env, &mut child, &title);
         let fields = std::fs::read_to_string(examples().join(name))
             .unwrap()
             .lines()
             .find(|l| l.starts_with("subject_fields"))
             .map_or(0, |l| l.matches('"').count() / 2);
-        let deadline = Instant::now() + Duration::from_secs(360);
-        // Welcome: Tab to each field and type into it, then Enter begins (once the stimuli
-        // are checked and the display measured). Keys sent before the first frames are lost,
-        // so the round is repeated until the session records the fields.
-        let begun = || {
-            std::fs::read_to_string(session.join("session.json"))
-                .is_ok_and(|m| fields == 0 || m.contains("\"age\""))
-        };
-        while !begun() {
-            assert!(Instant::now() < deadline, "{name}: Begin never took");
-            press(&env, &wid, &["Escape"]);
-            for _ in 0..fields {
-                press(&env, &wid, &["Tab"]);
-                env.xdotool(&["type", "--delay", "60", "33"]);
-            }
-            press(&env, &wid, &["Escape", "Return"]);
-            std::thread::sleep(Duration::from_secs(1));
-        }
-        while logged_rows(&session) == 0 {
-            assert!(Instant::now() < deadline, "{name}: no answer was recorded");
-            match name {
-                // Once the vote is open: Backspace starts at A, 4 marks A (Good), 2 marks B
-                // (Poor), Enter continues. One key per frame (software rendering draws a few
-                // frames a second); a round cut short by the vote opening is completed by the
-                // next.
-                "dscqs.toml" => {
-                    for key in ["BackSpace", "4", "2", "Return"] {
-                        press(&env, &wid, &[key]);
-                        std::thread::sleep(Duration::from_millis(450));
-                    }
-                }
-                // MUSHRA: Tab to each slider in turn (A to E, the order they are drawn) and
-                // Up sets it to 1; Enter continues once every letter has a rating. A round
-                // begun before the sliders opened is completed by the next.
-                "mushra.toml" => {
-                    for _ in 0..5 {
-                        for key in ["Tab", "Up"] {
-                            press(&env, &wid, &[key]);
-                            std::thread::sleep(Duration::from_millis(300));
-                        }
-                    }
-                    press(&env, &wid, &["Return"]);
-                }
-                // MOS, ACR (one motion) and DCR (reference then test): 4, Enter.
-                "mos.toml" | "acr-hr.toml" | "dcr.toml" => press(&env, &wid, &["4", "Return"]),
-                // 2AFC and pair comparison: the left one; Enter first begins a study without
-                // subject fields.
-                _ => press(&env, &wid, &["Return", "Left"]),
-            }
-            std::thread::sleep(Duration::from_millis(700));
-        }
-        interrupt(child);
+        // Welcome: Tab to each field and type into it; Escape leaves the last field and Enter
+        // begins (the screen is `welcome/ready` once the stimuli are checked and the display
+        // measured). Line 2: the first trial's answer.
+        let script = format!(
+            "welcome/ready:{} Escape Enter\ntrial/open once: {}\n",
+            " Tab \"33\"".repeat(fields),
+            first_answer_keys(name)
+        );
+        let mut run = run_scripted(&env, name, &examples().join(name), &out, &script);
+        run.wait_line("done 2");
+        let (_, stderr) = run.interrupt();
+        assert!(!stderr.contains("test input: dropped"), "{name}: {stderr}");
+        let manifest = std::fs::read_to_string(session.join("session.json")).unwrap();
+        assert!(
+            fields == 0 || manifest.contains("\"age\": \"33\""),
+            "{name}: the typed fields are recorded: {manifest}"
+        );
         let trials = results::trials::read_trials(&session.join("trials.csv")).unwrap();
         assert!(!trials.records.is_empty(), "{name}");
         assert_eq!(trials.records[0].trial.index, 0, "{name}");
@@ -692,16 +658,23 @@ fn a_crowd_trial_shows_three_figures_at_their_distances_in_the_window() {
     let Some(env) = setup("crowd") else { return };
     let out = env.dir.join("results-crowd");
     let session = out.join("S01_s1");
-    let mut child = spawn_run(&env, &examples().join("crowd-run1.toml"), &out);
-    let wid = find_window(&env, &mut child, "study: crowd-run1");
-    let deadline = Instant::now() + Duration::from_secs(300);
-    // Enter begins (once the stimuli are checked and the display measured; until the vote it
-    // does nothing on a trial); screenshots until one shows a scene.
+    // Enter begins; once the vote opens, 4 for the first scene, 2 for the second, Enter.
+    let mut run = run_scripted(
+        &env,
+        "crowd",
+        &examples().join("crowd-run1.toml"),
+        &out,
+        "welcome/ready: Enter\ntrial/open once: Backspace 4 2 Enter\n",
+    );
+    // Screenshots while the first trial plays (its scenes, with greys between, for about
+    // 20 s) until one shows a scene; the state, not a sleep, ends the wait.
+    run.wait_screen("trial/playing #0");
     let shot = env.dir.join("crowd.png");
     let figures = loop {
-        assert!(Instant::now() < deadline, "no crowd scene appeared");
-        press(&env, &wid, &["Return"]);
-        std::thread::sleep(Duration::from_millis(600));
+        assert!(
+            !run.stderr().contains("screen trial/open #0"),
+            "the first trial ended without a screenshot showing its scene"
+        );
         common::screenshot(&env, &shot);
         // The stimulus area (the answer panel below it has no orange).
         let found = figures_in(&shot, 0.74);
@@ -710,15 +683,8 @@ fn a_crowd_trial_shows_three_figures_at_their_distances_in_the_window() {
             break found;
         }
     };
-    // The vote: 4 for the first scene, 2 for the second, Enter.
-    while logged_rows(&session) == 0 {
-        assert!(Instant::now() < deadline, "no answer was recorded");
-        for key in ["BackSpace", "4", "2", "Return"] {
-            press(&env, &wid, &[key]);
-            std::thread::sleep(Duration::from_millis(450));
-        }
-    }
-    interrupt(child);
+    run.wait_line("done 2");
+    run.interrupt();
     let trials = results::trials::read_trials(&session.join("trials.csv")).unwrap();
     let r = &trials.records[0];
     assert_eq!(
@@ -774,49 +740,31 @@ fn measured_viewing_conditions_are_confirmed_recorded_and_reported() {
     std::fs::write(&study, text).unwrap();
     let out = env.dir.join("results");
     let session = out.join("S01_s1");
-    let mut child = env
-        .cmd(env!("CARGO_BIN_EXE_study"))
-        .arg("run")
-        .arg(&study)
-        .args(["--subject", "S01", "--window-size", "1280x720"])
-        .args([
-            "--measured-distance-cm",
-            "88.5",
-            "--measured-room-lux",
-            "17",
-        ])
-        .arg("-o")
-        .arg(&out)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let wid = find_window(&env, &mut child, "study: mos-paper-000");
-    let deadline = Instant::now() + Duration::from_secs(240);
-    let confirmed = || {
-        std::fs::read_to_string(session.join("session.json"))
-            .is_ok_and(|m| m.contains("\"confirmed\": true"))
-    };
-    // Four measurement fields, then the button. egui moves the focus once per frame, and
-    // software rendering on a busy machine draws a few frames a second: one key per 400 ms.
-    // Keys sent before the first frames are lost, so the round is repeated until the
-    // manifest records the confirmation.
-    while !confirmed() {
-        assert!(Instant::now() < deadline, "the confirmation never took");
-        for key in ["Escape", "Tab", "Tab", "Tab", "Tab", "Tab", "space"] {
-            press(&env, &wid, &[key]);
-            std::thread::sleep(Duration::from_millis(400));
-        }
-        std::thread::sleep(Duration::from_millis(600));
-    }
-    // Then the subject's welcome (no fields): Enter begins; one trial answered (4, Enter), so
-    // the session is kept when the experimenter stops it.
-    while logged_rows(&session) == 0 {
-        assert!(Instant::now() < deadline, "no answer was recorded");
-        press(&env, &wid, &["Return", "4", "Return"]);
-        std::thread::sleep(Duration::from_millis(700));
-    }
-    interrupt(child);
+    // Four measurement fields, then the button (Tab to it, Space); then the subject's
+    // welcome (no fields): Enter begins; one trial answered (4, Enter), so the session is
+    // kept when the experimenter stops it.
+    let args: Vec<&std::ffi::OsStr> = vec![
+        "run".as_ref(),
+        study.as_os_str(),
+        "--subject".as_ref(),
+        "S01".as_ref(),
+        "--window-size".as_ref(),
+        "1280x720".as_ref(),
+        "--measured-distance-cm".as_ref(),
+        "88.5".as_ref(),
+        "--measured-room-lux".as_ref(),
+        "17".as_ref(),
+        "-o".as_ref(),
+        out.as_os_str(),
+    ];
+    let mut run = Scripted::spawn(
+        &env,
+        "viewing",
+        &args,
+        "viewing: Escape Tab Tab Tab Tab Tab Space\nwelcome/ready: Enter\ntrial/open once: 4 Enter\n",
+    );
+    run.wait_line("done 3");
+    run.interrupt();
     let m: results::SessionManifest =
         results::store::read_manifest(&session.join("session.json")).unwrap();
     let v = m.viewing.expect("the viewing record");

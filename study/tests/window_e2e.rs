@@ -1,7 +1,9 @@
 //! End to end in a real X server: `study run` on a 6-trial MOS study under Xvfb with Mesa's
-//! software Vulkan driver (lavapipe), driven by `xdotool` keystrokes. A screenshot of a trial
-//! shows both skeletons; the session is SIGKILLed mid-way and `--resume` completes it with
-//! every response kept exactly once.
+//! software Vulkan driver (lavapipe). The first test types real keys (`xdotool`): a screenshot
+//! of a trial shows both skeletons; the session is SIGKILLed mid-way and `--resume` completes
+//! it with every response kept exactly once. The others drive the window from a test input
+//! script (`study/src/gui/test_input.rs`) and wait for the screens it reports, so they do not
+//! depend on how fast software rendering draws.
 //!
 //! Needs `Xvfb`, `xdotool`, `import` (ImageMagick) and a Vulkan driver; `scripts/test`
 //! installs them. Without them the test fails under `CI` and is skipped elsewhere.
@@ -13,7 +15,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Stdio};
 use std::time::{Duration, Instant};
 
-use common::{Env, find_window, interrupt, press, setup};
+use common::{Env, Scripted, find_window, press, setup};
 
 /// The shared walk stimuli and a MOS study of 2 familiarization + 2 test + 2 hidden-repeat
 /// trials.
@@ -52,10 +54,33 @@ fn spawn_run(env: &Env, resume: bool) -> Child {
     c.spawn().unwrap()
 }
 
+/// `study run` of the study (resumed or not) with its keys from `script`.
+fn run_scripted(env: &Env, resume: bool, script: &str) -> Scripted {
+    let study = env.dir.join("study.toml");
+    let results = env.dir.join("results");
+    let mut args: Vec<&std::ffi::OsStr> = vec![
+        "run".as_ref(),
+        study.as_os_str(),
+        "--subject".as_ref(),
+        "S07".as_ref(),
+        "-o".as_ref(),
+        results.as_os_str(),
+    ];
+    if resume {
+        args.push("--resume".as_ref());
+    }
+    Scripted::spawn(env, if resume { "resume" } else { "run" }, &args, script)
+}
+
+/// Begins, answers every trial 3, and closes the end screen.
+const ANSWER_ALL_3: &str = "welcome/ready: Enter\ntrial/open: 3 Enter\nend/ready: Enter\n";
+
 /// Presses `keys` every half second until `rows` trials are logged (keys pressed while the
-/// stimulus plays are ignored by design, so repeating is safe).
+/// stimulus plays are ignored by design, so repeating is safe). Real X keys: a key can be
+/// lost (before the window's first frames, or when software rendering falls behind), so the
+/// wait is generous, [`common::STATE_WAIT`] for all of them.
 fn answer_until(env: &Env, wid: &str, keys: &[&str], rows: usize) {
-    let deadline = Instant::now() + Duration::from_secs(240);
+    let deadline = Instant::now() + common::STATE_WAIT;
     while logged_rows(env) < rows {
         assert!(
             Instant::now() < deadline,
@@ -70,7 +95,7 @@ fn answer_until(env: &Env, wid: &str, keys: &[&str], rows: usize) {
 /// Presses Enter on the end screen (it stays until the subject closes it) until the runner
 /// exits; returns its output.
 fn close_end_screen(env: &Env, wid: &str, mut child: Child) -> std::process::Output {
-    let deadline = Instant::now() + Duration::from_secs(60);
+    let deadline = Instant::now() + common::STATE_WAIT;
     while child.try_wait().unwrap().is_none() {
         assert!(Instant::now() < deadline, "the end screen did not close");
         std::thread::sleep(Duration::from_millis(700));
@@ -95,6 +120,8 @@ fn orange_per_half(png_path: &Path) -> [usize; 2] {
     halves
 }
 
+/// The one test that types real X keys (`xdotool`), as a subject's keyboard does: each key is
+/// repeated until the state it leads to is on disk, within [`common::STATE_WAIT`].
 #[test]
 fn study_run_under_xvfb_logs_every_trial_and_resumes_after_a_kill() {
     let Some(env) = setup("e2e") else { return };
@@ -102,7 +129,7 @@ fn study_run_under_xvfb_logs_every_trial_and_resumes_after_a_kill() {
     let mut child = spawn_run(&env, false);
     let wid = find_window(&env, &mut child, "study: e2e");
     // Welcome: Enter begins once the display is measured (~30 frames).
-    let deadline = Instant::now() + Duration::from_secs(60);
+    let deadline = Instant::now() + common::STATE_WAIT;
     while !session_dir(&env).join("session.json").exists() || logged_rows(&env) == 0 {
         press(&env, &wid, &["Return"]);
         std::thread::sleep(Duration::from_millis(700));
@@ -132,7 +159,6 @@ fn study_run_under_xvfb_logs_every_trial_and_resumes_after_a_kill() {
 
     let mut child = spawn_run(&env, true);
     let wid = find_window(&env, &mut child, "study: e2e");
-    std::thread::sleep(Duration::from_millis(500));
     answer_until(&env, &wid, &["Return", "3", "Return"], 6);
     let out = close_end_screen(&env, &wid, child);
     assert!(
@@ -240,10 +266,16 @@ fn without_a_display_run_says_so_and_writes_nothing() {
 fn sigint_saves_the_session_and_resume_completes_it() {
     let Some(env) = setup("sigint") else { return };
     write_study(&env.dir);
-    let mut child = spawn_run(&env, false);
-    let wid = find_window(&env, &mut child, "study: e2e");
-    answer_until(&env, &wid, &["Return", "4", "Return"], 2);
-    let (stdout, _) = interrupt(child);
+    // Two trials answered (4, Enter), then Ctrl+C.
+    let mut run = run_scripted(
+        &env,
+        false,
+        "welcome/ready: Enter\ntrial/open times 2: 4 Enter\n",
+    );
+    run.wait_until("two answers carried out", |r| {
+        r.stderr().matches("test input: done 2\n").count() == 2
+    });
+    let (stdout, _) = run.interrupt();
     assert!(
         stdout.contains("interrupted by a signal after 2 trials") && stdout.contains("--resume"),
         "{stdout}"
@@ -256,16 +288,10 @@ fn sigint_saves_the_session_and_resume_completes_it() {
     assert_eq!(m.trials_logged as usize, logged_rows(&env));
     assert_eq!(logged_rows(&env), 2);
 
-    let mut child = spawn_run(&env, true);
-    let wid = find_window(&env, &mut child, "study: e2e");
-    std::thread::sleep(Duration::from_millis(500));
-    answer_until(&env, &wid, &["Return", "3", "Return"], 6);
-    let out = close_end_screen(&env, &wid, child);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    // Resumed: every trial left answered 3, then the end screen closed.
+    let run = run_scripted(&env, true, ANSWER_ALL_3);
+    let (status, _, stderr) = run.wait_exit();
+    assert!(status.success(), "{stderr}");
     let trials = results::trials::read_trials(&session_dir(&env).join("trials.csv")).unwrap();
     let idx: Vec<u32> = trials.records.iter().map(|r| r.trial.index).collect();
     assert_eq!(idx, [0, 1, 2, 3, 4, 5], "every trial exactly once");
@@ -329,28 +355,15 @@ fn a_dscqs_trial_is_presented_as_bt500_says_in_the_frame_log() {
          codecs = [\"spiht\"]\ntarget_cr = [10]\n[presentation]\ngrey_ms = 700\n",
     )
     .unwrap();
-    let mut child = spawn_run(&env, false);
-    let wid = find_window(&env, &mut child, "study: e2e");
-    // Begin, then (once the vote is open) Backspace to start at A, 4 (A: Good, 70), 2 (B:
-    // Poor, 30) and Enter. One key per frame (software rendering draws a few frames a
-    // second); a round cut short by the vote opening is completed by the next.
-    let deadline = Instant::now() + Duration::from_secs(240);
-    while logged_rows(&env) < 1 {
-        assert!(
-            Instant::now() < deadline,
-            "the DSCQS trial was not answered"
-        );
-        for key in ["Return", "BackSpace", "4", "2"] {
-            press(&env, &wid, &[key]);
-            std::thread::sleep(Duration::from_millis(450));
-        }
-    }
-    let out = close_end_screen(&env, &wid, child);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    // Begin, then once the vote is open Backspace to start at A, 4 (A: Good, 70), 2 (B:
+    // Poor, 30) and Enter; Enter closes the end screen.
+    let run = run_scripted(
+        &env,
+        false,
+        "welcome/ready: Enter\ntrial/open: Backspace 4 2 Enter\nend/ready: Enter\n",
     );
+    let (status, _, stderr) = run.wait_exit();
+    assert!(status.success(), "{stderr}");
     let trials = results::trials::read_trials(&session_dir(&env).join("trials.csv")).unwrap();
     assert_eq!(
         trials.records[0].response.answer,
@@ -396,20 +409,14 @@ fn a_mos_trial_screenshot_shows_both_labels() {
         return;
     };
     write_study(&env.dir);
-    let mut child = spawn_run(&env, false);
-    let wid = find_window(&env, &mut child, "study: e2e");
+    // Enter begins; the first trial then holds its last frame, both motions and their
+    // labels, until it is answered (side by side, no loop): the screenshot is taken there.
+    let mut run = run_scripted(&env, false, "welcome/ready: Enter\n");
+    run.wait_screen("trial/open #0");
     let shot = env.dir.join("labels.png");
-    let deadline = Instant::now() + Duration::from_secs(90);
-    loop {
-        assert!(Instant::now() < deadline, "no labelled trial appeared");
-        press(&env, &wid, &["Return"]);
-        std::thread::sleep(Duration::from_millis(700));
-        common::screenshot(&env, &shot);
-        let joints = orange_per_half(&shot);
-        if joints[0] > 30 && joints[1] > 30 {
-            break;
-        }
-    }
+    common::screenshot(&env, &shot);
+    let joints = orange_per_half(&shot);
+    assert!(joints[0] > 30 && joints[1] > 30, "both motions: {joints:?}");
     let white = label_pixels_per_half(&shot);
     eprintln!("label pixels per half {white:?}");
     assert!(
@@ -461,6 +468,5 @@ fn a_mos_trial_screenshot_shows_both_labels() {
     } else {
         eprintln!("tesseract not installed: the labels were checked as pixels only");
     }
-    child.kill().unwrap();
-    child.wait().unwrap();
+    run.kill();
 }

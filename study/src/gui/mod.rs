@@ -4,12 +4,14 @@
 //! Layers, each testable on its own: [`scene`] (poses → shapes, camera; no GPU), [`render`]
 //! (wgpu pipelines, also offscreen), [`flow`] (a trial's presentation schedule), [`timing`]
 //! (frame intervals and drops), [`screens`] (egui screens over a session, driven by
-//! `egui_kittest` in tests) and [`window`] (the native window).
+//! `egui_kittest` in tests), [`window`] (the native window) and [`test_input`] (keys from a
+//! test's script, for the window's end-to-end tests).
 
 pub mod flow;
 pub mod render;
 pub mod scene;
 pub mod screens;
+pub mod test_input;
 pub mod timing;
 pub mod viewing;
 pub mod window;

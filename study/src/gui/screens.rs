@@ -302,6 +302,57 @@ impl StudyUi {
         false
     }
 
+    /// The screen shown, by a name a test's input script waits for
+    /// ([`super::test_input`]): `viewing`, `welcome` (Begin not yet possible: the display is
+    /// being measured or the stimuli checked), `welcome/ready` (Begin takes once the fields
+    /// and consent are done), `break`, `trial/playing #N` (trial N, answers not yet taken),
+    /// `trial/open #N` (answers taken), `gap`, `waiting` (the results database is away),
+    /// `end` (a stop, or the end before Enter may close it), `end/ready` (Enter closes it),
+    /// `failed`; `paused` or `confirm-quit` while the experimenter's dialog is open. `now`
+    /// is the presentation time of the frame just drawn.
+    pub fn screen(&self, now: f64, clock: &FrameClock) -> String {
+        match self.pause {
+            Pause::Paused => return "paused".into(),
+            Pause::ConfirmQuit => return "confirm-quit".into(),
+            Pause::None => {}
+        }
+        match &self.screen {
+            Screen::Viewing(_) => "viewing".into(),
+            Screen::Welcome => {
+                let measured = clock.calibrated() || !self.gpu;
+                let checked = self
+                    .preflight
+                    .as_ref()
+                    .is_none_or(|p| matches!(p.outcome, Some(Ok(()))));
+                if measured && checked {
+                    "welcome/ready".into()
+                } else {
+                    "welcome".into()
+                }
+            }
+            Screen::Break => "break".into(),
+            Screen::Trial(t) => {
+                let phase = if t.presentation.accepts_response() {
+                    "open"
+                } else {
+                    "playing"
+                };
+                format!("trial/{phase} #{}", t.trial.index)
+            }
+            Screen::Gap(_) => "gap".into(),
+            Screen::Waiting { .. } => "waiting".into(),
+            Screen::End(_) => {
+                let closable = matches!(self.exit, Some(Exit::Finished(_) | Exit::Failed(_)));
+                if closable && self.end_since.is_some_and(|s| now - s >= END_KEY_DELAY_S) {
+                    "end/ready".into()
+                } else {
+                    "end".into()
+                }
+            }
+            Screen::Failed(_) => "failed".into(),
+        }
+    }
+
     /// Draws the current screen and handles its input; `clock` is the window's frame clock
     /// (trial timing is read from it).
     pub fn ui(&mut self, ui: &mut Ui, clock: &mut FrameClock) {

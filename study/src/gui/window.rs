@@ -11,6 +11,7 @@ use eframe::egui_wgpu::{self, wgpu};
 
 use super::render::{LOAD_SLOT, SkeletonCallback, SkeletonRenderer, Targets};
 use super::scene::{Figure, FrameShapes, View};
+use super::test_input::TestInput;
 use super::timing::{FrameClock, IntervalStats, PeriodSource};
 
 /// Depth buffer bits asked of eframe (egui-wgpu makes it `Depth24Plus`).
@@ -106,6 +107,9 @@ pub struct FrameContext<'a> {
     pub facts: &'a DisplayFacts,
     /// True on the frame the user asked to close the window.
     pub close_requested: bool,
+    /// The screen the frame ended on, set by the screen closure (`welcome/ready`,
+    /// `trial/open #3`, ...): what a test input script waits for ([`TestInput`]).
+    pub screen: String,
 }
 
 /// What a screen closure answers each frame.
@@ -189,6 +193,8 @@ struct WindowApp<F> {
     /// Skeleton viewports the screens drew (load excluded), counted by the renderer.
     drawn: Arc<AtomicUsize>,
     load: Option<CalibrationLoad>,
+    /// Keys from a test's script (`STUDY_TEST_INPUT`).
+    script: Option<TestInput>,
 }
 
 impl<F> WindowApp<F> {
@@ -217,6 +223,12 @@ impl<F> WindowApp<F> {
 }
 
 impl<F: FnMut(&mut egui::Ui, &mut FrameContext<'_>) -> Next> eframe::App for WindowApp<F> {
+    fn raw_input_hook(&mut self, _ctx: &egui::Context, raw_input: &mut egui::RawInput) {
+        if let Some(script) = &mut self.script {
+            script.inject(raw_input);
+        }
+    }
+
     fn ui(&mut self, ui: &mut egui::Ui, frame: &mut eframe::Frame) {
         if self.first {
             self.first = false;
@@ -243,9 +255,17 @@ impl<F: FnMut(&mut egui::Ui, &mut FrameContext<'_>) -> Next> eframe::App for Win
             clock: &mut self.clock,
             facts: &self.facts,
             close_requested: close_requested && !self.closing,
+            screen: String::new(),
         };
         let next = (self.draw)(ui, &mut ctx);
+        let screen = ctx.screen;
         self.publish(frame.info().cpu_usage);
+        if let Some(script) = &mut self.script {
+            script.observe(&screen);
+            if script.pending() {
+                ui.ctx().request_repaint();
+            }
+        }
         match next {
             Next::Animate => ui.ctx().request_repaint(),
             // Still woken a few times a second, so a signal is noticed on an idle screen.
@@ -279,12 +299,16 @@ pub fn probe_adapter() -> Option<wgpu::AdapterInfo> {
 /// Opens the window and runs `draw` every frame until it answers [`Next::Close`] (or the
 /// window is closed while `draw` allows it). Returns what the window measured.
 ///
+/// With `STUDY_TEST_INPUT` set, the window also takes keys from that script
+/// ([`TestInput`]).
+///
 /// # Errors
-/// No display, no adapter, or eframe failed to start.
+/// No display, no adapter, eframe failed to start, or a test input script that cannot be read.
 pub fn run_window<F>(options: &WindowOptions, draw: F) -> anyhow::Result<WindowReport>
 where
     F: FnMut(&mut egui::Ui, &mut FrameContext<'_>) -> Next + 'static,
 {
+    let script = TestInput::from_env()?;
     // MSAA only where it is cheap: a software adapter rasterises every sample on the CPU.
     let software = probe_adapter().is_none_or(|i| i.device_type == wgpu::DeviceType::Cpu);
     let msaa: u32 = if software { 1 } else { 4 };
@@ -354,6 +378,7 @@ where
                 software,
                 drawn,
                 load: None,
+                script,
             }) as Box<dyn eframe::App>)
         }),
     );

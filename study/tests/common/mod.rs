@@ -185,6 +185,174 @@ pub fn find_window(env: &Env, child: &mut Child, title: &str) -> String {
     panic!("the window {title:?} never appeared");
 }
 
+/// How long a window test waits for one state (a screen, a rule carried out, a file) before it
+/// fails. Nothing here is a timing assumption: every wait ends on the state itself, and this
+/// only bounds a hang. Software rendering on a loaded two-core machine draws a frame in
+/// 50-500 ms, and a window's first frames (shader compilation, the refresh measurement's 30
+/// frames) take up to a minute there.
+pub const STATE_WAIT: Duration = Duration::from_secs(300);
+
+/// The script's lines on standard error (`study::gui::test_input`) start with this.
+pub const SCRIPT_PREFIX: &str = "test input:";
+
+/// A `study` process whose window takes its keys from a test input script
+/// (`STUDY_TEST_INPUT`, `study/src/gui/test_input.rs`): no X key events and no sleeps, so
+/// nothing depends on how many frames fit in a second. Its standard error and output are
+/// read as they come, so a test waits for the lines the script writes.
+pub struct Scripted {
+    child: Child,
+    stderr: std::sync::Arc<std::sync::Mutex<String>>,
+    readers: Vec<std::thread::JoinHandle<()>>,
+    stdout: std::sync::Arc<std::sync::Mutex<String>>,
+}
+
+impl Drop for Scripted {
+    /// A failed test leaves no window behind.
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// Collects `from` into `into` line by line on a thread of its own.
+fn collect(
+    from: impl std::io::Read + Send + 'static,
+    into: &std::sync::Arc<std::sync::Mutex<String>>,
+) -> std::thread::JoinHandle<()> {
+    let into = std::sync::Arc::clone(into);
+    std::thread::spawn(move || {
+        let mut lines = std::io::BufRead::lines(std::io::BufReader::new(from));
+        while let Some(Ok(line)) = lines.next() {
+            let mut s = into.lock().unwrap();
+            s.push_str(&line);
+            s.push('\n');
+        }
+    })
+}
+
+impl Scripted {
+    /// Runs `study ARGS` on `env`'s X server with `script` as its test input (written to
+    /// `env.dir/NAME.keys`).
+    pub fn spawn(env: &Env, name: &str, args: &[&std::ffi::OsStr], script: &str) -> Scripted {
+        let path = env.dir.join(format!("{name}.keys"));
+        std::fs::write(&path, script).unwrap();
+        let mut child = env
+            .cmd(env!("CARGO_BIN_EXE_study"))
+            .args(args)
+            .env("STUDY_TEST_INPUT", &path)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        let stderr = std::sync::Arc::default();
+        let stdout = std::sync::Arc::default();
+        let readers = vec![
+            collect(child.stderr.take().unwrap(), &stderr),
+            collect(child.stdout.take().unwrap(), &stdout),
+        ];
+        Scripted {
+            child,
+            stderr,
+            readers,
+            stdout,
+        }
+    }
+
+    /// Its standard error so far.
+    pub fn stderr(&self) -> String {
+        self.stderr.lock().unwrap().clone()
+    }
+
+    /// Waits until `ready()` holds, failing (with the process's standard error) if the
+    /// process exits first or [`STATE_WAIT`] passes; `what` names the state in the failure.
+    pub fn wait_until(&mut self, what: &str, mut ready: impl FnMut(&Scripted) -> bool) {
+        let deadline = Instant::now() + STATE_WAIT;
+        loop {
+            if ready(self) {
+                return;
+            }
+            if let Some(status) = self.child.try_wait().unwrap() {
+                // Whatever it wrote last, then once more: the state may have come with the exit.
+                std::thread::sleep(Duration::from_millis(100));
+                if ready(self) {
+                    return;
+                }
+                panic!(
+                    "waiting for {what}: the study process exited ({status}):\n{}",
+                    self.stderr()
+                );
+            }
+            assert!(
+                Instant::now() < deadline,
+                "waiting for {what}: not after {STATE_WAIT:?}:\n{}",
+                self.stderr()
+            );
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+
+    /// Waits for the script's line `test input: LINE` (`screen trial/open #0`, `done 2`).
+    pub fn wait_line(&mut self, line: &str) {
+        let want = format!("{SCRIPT_PREFIX} {line}");
+        self.wait_until(&format!("{want:?}"), |s| {
+            s.stderr().lines().any(|l| l == want)
+        });
+    }
+
+    /// Waits for a screen whose name starts with `prefix` (`trial/open`, `trial/playing #0`).
+    pub fn wait_screen(&mut self, prefix: &str) {
+        let want = format!("{SCRIPT_PREFIX} screen {prefix}");
+        self.wait_until(&format!("screen {prefix:?}"), |s| {
+            s.stderr().lines().any(|l| l.starts_with(&want))
+        });
+    }
+
+    /// Waits for the process to exit by itself; its status, standard output and error.
+    pub fn wait_exit(self) -> (std::process::ExitStatus, String, String) {
+        self.finish()
+    }
+
+    /// Stops the process as the experimenter's Ctrl+C does (SIGINT) and waits for it: it must
+    /// exit successfully. Its standard output and error.
+    pub fn interrupt(self) -> (String, String) {
+        let sent = Command::new("kill")
+            .args(["-INT", &self.child.id().to_string()])
+            .status()
+            .unwrap()
+            .success();
+        assert!(sent, "kill -INT");
+        let (status, stdout, stderr) = self.finish();
+        assert!(status.success(), "{stdout}{stderr}");
+        (stdout, stderr)
+    }
+
+    /// Kills the process (SIGKILL) and waits for it.
+    pub fn kill(mut self) {
+        self.child.kill().unwrap();
+        let _ = self.finish();
+    }
+
+    /// Waits for the exit (bounded by [`STATE_WAIT`]) and for the readers.
+    fn finish(mut self) -> (std::process::ExitStatus, String, String) {
+        let deadline = Instant::now() + STATE_WAIT;
+        let status = loop {
+            if let Some(s) = self.child.try_wait().unwrap() {
+                break s;
+            }
+            if Instant::now() >= deadline {
+                let _ = self.child.kill();
+                panic!("the study process did not exit:\n{}", self.stderr());
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        };
+        for r in self.readers.drain(..) {
+            r.join().unwrap();
+        }
+        let stdout = self.stdout.lock().unwrap().clone();
+        (status, stdout, self.stderr())
+    }
+}
+
 /// Bare Xvfb has no window manager: the window gets the keyboard focus before every press
 /// (until it is mapped a focus request is lost), then plain `xdotool key` reaches it
 /// (`key --window` events were seen to be dropped).
