@@ -91,9 +91,33 @@ const MUSHRA_INSTRUCTIONS: &str = "Each screen shows the original motion, labell
      Down by 10). The sliders open once every motion has played through; Replay shows \
      them again. Press Continue (Enter) when every letter has its rating.";
 
-/// The default instructions for `study` (used when `[session] instructions` is not given):
-/// they say which motion is the original where the screen labels it (MOS), and that nobody
-/// says so where the design hides it (DSCQS, 2AFC).
+/// The title subjects see when the study file gives none: the study's `name` is the
+/// experimenter's handle (`staircase-thesis-ch5`) and is never shown to a subject.
+pub const DEFAULT_TITLE: &str = "Motion study";
+
+/// " The first few trials show the range of {what} you will meet." where the session opens
+/// with familiarization trials (`[session] familiarization`), else nothing: the
+/// instructions promise no practice a study does not give.
+fn practice_sentence(study: &StudyDefinition, what: &str) -> String {
+    if study.familiarization.is_empty() {
+        String::new()
+    } else {
+        format!(" The first few trials show the range of {what} you will meet.")
+    }
+}
+
+/// Whether the original itself is among the versions a subject compares or rates unlabelled
+/// (`[conditions] hidden_reference`: a condition whose stimulus is its reference).
+fn original_among_versions(study: &StudyDefinition) -> bool {
+    study.conditions.iter().any(|c| c.stimulus == c.reference)
+}
+
+/// The default instructions for `study` (used when `[session] instructions` is not given),
+/// written from the design as it runs: they say which motion is the original where the screen
+/// labels it (MOS), that nobody says so where the design hides it (DSCQS, 2AFC), whether the
+/// original may be one of the versions compared (a pair comparison with hidden references),
+/// and mention practice trials only where the session has them. Hidden repeats are not
+/// mentioned: they are hidden by design.
 pub fn default_instructions(study: &StudyDefinition) -> String {
     let p = &study.presentation;
     match study.protocol {
@@ -113,9 +137,9 @@ pub fn default_instructions(study: &StudyDefinition) -> String {
                     .to_string(),
             };
             format!(
-                "Each trial shows {which}, {how}. {} The first few trials show the range of \
-                 qualities you will meet.",
-                scale_instructions(&study.scale, "the quality of the compressed motion")
+                "Each trial shows {which}, {how}. {}{}",
+                scale_instructions(&study.scale, "the quality of the compressed motion"),
+                practice_sentence(study, "qualities")
             )
         }
         Protocol::Dscqs => {
@@ -160,8 +184,9 @@ pub fn default_instructions(study: &StudyDefinition) -> String {
         }
         Protocol::Acr => format!(
             "Each trial shows one motion. {} Rate each motion on its own; there is no original \
-             to compare it with. The first few trials show the range of qualities you will meet.",
-            scale_instructions(&study.scale, "its quality")
+             to compare it with.{}",
+            scale_instructions(&study.scale, "its quality"),
+            practice_sentence(study, "qualities")
         ),
         Protocol::Dcr => {
             let label = |l: Option<&str>| l.map_or(String::new(), |l| format!(", labelled “{l}”"));
@@ -178,21 +203,34 @@ pub fn default_instructions(study: &StudyDefinition) -> String {
                 "Each trial shows the original motion{reference}, {how} a compressed version of \
                  it{test}. Rate how much the compression impairs the motion, from 5 \
                  (imperceptible) to 1 (very annoying), with the mouse or the number keys, then \
-                 press Continue (Enter). The first few trials show the range of impairments you \
-                 will meet."
+                 press Continue (Enter).{}",
+                practice_sentence(study, "impairments")
             )
         }
-        Protocol::PairComparison => pair_comparison_instructions(p.arrangement),
+        Protocol::PairComparison => {
+            pair_comparison_instructions(p.arrangement, original_among_versions(study))
+        }
         Protocol::Mushra => MUSHRA_INSTRUCTIONS.to_string(),
-        Protocol::Staircase => "Each trial shows two motions side by side. Choose the one that \
-                                looks more natural with the Left or Right arrow key (or click). \
-                                Answer even when you are unsure."
-            .to_string(),
+        Protocol::Staircase => staircase_instructions(study),
     }
 }
 
-/// The default instructions of a pair comparison shown in `arrangement`.
-fn pair_comparison_instructions(arrangement: Arrangement) -> String {
+/// The default instructions of a 2AFC staircase, with its practice trials where it has any.
+fn staircase_instructions(study: &StudyDefinition) -> String {
+    let practice = match study.staircase.as_ref().map_or(0, |s| s.practice_trials) {
+        0 => String::new(),
+        1 => " The first trial is for practice.".to_string(),
+        n => format!(" The first {n} trials are for practice."),
+    };
+    format!(
+        "Each trial shows two motions side by side. Choose the one that looks more natural \
+         with the Left or Right arrow key (or click). Answer even when you are unsure.{practice}"
+    )
+}
+
+/// The default instructions of a pair comparison shown in `arrangement`; `original`: the
+/// original itself is one of the versions compared (hidden references).
+fn pair_comparison_instructions(arrangement: Arrangement, original: bool) -> String {
     let (shows, keys) = if arrangement == Arrangement::Sequential {
         (
             "one after the other, with a grey screen between them",
@@ -201,10 +239,14 @@ fn pair_comparison_instructions(arrangement: Arrangement) -> String {
     } else {
         ("side by side", "the Left or Right arrow key")
     };
+    let original = if original {
+        "Either of them may be the original motion itself; you are not told which."
+    } else {
+        "Neither is the original."
+    };
     format!(
-        "Each trial shows two versions of the same motion {shows}. Neither is the original. \
-         Choose the one that looks better with {keys} (or click). Answer even when you are \
-         unsure."
+        "Each trial shows two versions of the same motion {shows}. {original} Choose the one \
+         that looks better with {keys} (or click). Answer even when you are unsure."
     )
 }
 

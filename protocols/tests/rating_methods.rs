@@ -399,8 +399,12 @@ fn pair_comparison_plans_every_pair_of_a_clip_once_and_scores_the_preferred() {
             assert_eq!(sides[&(s + 1, c.clone())], p.other(), "{c}");
         }
     }
+    // The originals are among the conditions: the instructions say either may be one.
     let text = default_instructions(&study);
-    assert!(text.contains("Neither is the original"), "{text}");
+    assert!(
+        text.contains("Either of them may be the original motion itself"),
+        "{text}"
+    );
     assert_eq!(
         protocols::texts::planned_trials(&study),
         protocols::texts::Planned::Exactly(15)
@@ -826,4 +830,32 @@ fn mushra_screens_follow_the_latin_square_when_asked() {
         };
         assert_eq!(first_screen(subject), want, "subject {subject}");
     }
+}
+
+/// The default instructions follow the design as it runs: practice is promised only where the
+/// session has familiarization trials, and a pair comparison says the original may be one of
+/// the two only where the original is among its conditions (`study check` of every example
+/// shows a title that is not the study's name: `study/tests/examples_window.rs`).
+#[test]
+fn instructions_follow_the_design() {
+    let practice = "The first few trials show the range";
+    let acr = default_instructions(&parse(ACR_HR).unwrap());
+    assert!(acr.contains(practice), "familiarization = 2: {acr}");
+    let dcr = default_instructions(&parse(DCR).unwrap());
+    assert!(!dcr.contains(practice), "no familiarization: {dcr}");
+    let hidden = parse(PC).unwrap();
+    assert!(hidden.conditions.iter().any(|c| c.stimulus == c.reference));
+    let text = default_instructions(&hidden);
+    assert!(
+        text.contains("Either of them may be the original motion itself")
+            && !text.contains("Neither is the original"),
+        "hidden references: {text}"
+    );
+    let plain = parse(&PC.replace("hidden_reference = true\n", "")).unwrap();
+    assert!(plain.conditions.iter().all(|c| c.stimulus != c.reference));
+    let text = default_instructions(&plain);
+    assert!(
+        text.contains("Neither is the original") && !text.contains("may be the original"),
+        "no hidden references: {text}"
+    );
 }

@@ -194,3 +194,17 @@ fn study_check_lists_practice_problems() {
         "{e}"
     );
 }
+
+/// The instructions mention practice trials only where the staircase has them, by number.
+#[test]
+fn the_instructions_say_how_many_practice_trials_come_first() {
+    let text = protocols::texts::default_instructions(&with_practice(""));
+    assert!(!text.contains("practice"), "{text}");
+    let text = protocols::texts::default_instructions(&with_practice("practice_trials = 3\n"));
+    assert!(
+        text.ends_with("The first 3 trials are for practice."),
+        "{text}"
+    );
+    let text = protocols::texts::default_instructions(&with_practice("practice_trials = 1\n"));
+    assert!(text.ends_with("The first trial is for practice."), "{text}");
+}

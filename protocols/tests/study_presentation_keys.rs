@@ -29,8 +29,8 @@ fn mos_labels_the_reference_by_default_and_the_file_can_rename_or_hide_them() {
     );
     assert_eq!(
         s.title(),
-        "mos-paper-000",
-        "no title: subjects see the name"
+        protocols::texts::DEFAULT_TITLE,
+        "no title: subjects see a neutral one, never the study's name"
     );
     let s = example("mos.toml");
     assert_eq!(s.title(), "Motion quality study");

@@ -68,6 +68,13 @@ pub fn check(args: &CheckArgs) -> anyhow::Result<()> {
     let mut text = String::new();
     writeln!(text, "{}: ok", args.study.display())?;
     writeln!(text, "  name: {}", study.name)?;
+    writeln!(text, "  title (subjects see): {}", study.title())?;
+    let instructions = study
+        .session
+        .instructions
+        .clone()
+        .unwrap_or_else(|| protocols::texts::default_instructions(study));
+    writeln!(text, "  instructions (subjects read): {instructions}")?;
     writeln!(text, "  protocol: {}", study.protocol)?;
     writeln!(text, "  seed: {}", study.seed)?;
     match study.protocol {

@@ -389,6 +389,25 @@ fn every_example_passes_check() {
             String::from_utf8_lossy(&out.stderr)
         );
         assert!(stdout.contains("stimuli:"), "{name}: {stdout}");
+        // What subjects read: a title that is not the study's internal name, and the
+        // instructions as the design makes them.
+        let line = |key: &str| {
+            stdout
+                .lines()
+                .find_map(|l| l.trim().strip_prefix(key))
+                .unwrap_or_else(|| panic!("{name}: no {key:?} in {stdout}"))
+                .trim()
+                .to_string()
+        };
+        let (study, title) = (line("name:"), line("title (subjects see):"));
+        assert_ne!(title, study, "{name}: subjects would see the internal name");
+        let instructions = line("instructions (subjects read):");
+        if name == "pc.toml" {
+            assert!(
+                instructions.contains("may be the original motion itself"),
+                "{name}: hidden references: {instructions}"
+            );
+        }
     }
 }
 

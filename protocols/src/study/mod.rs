@@ -611,9 +611,10 @@ impl StudyDefinition {
         pairs_of(&self.conditions)
     }
 
-    /// The title shown to subjects: `title` from the study file, or else its name.
+    /// The title shown to subjects: `title` from the study file, or else
+    /// [`crate::texts::DEFAULT_TITLE`] (never the study's `name`, the experimenter's handle).
     pub fn title(&self) -> &str {
-        self.title.as_deref().unwrap_or(&self.name)
+        self.title.as_deref().unwrap_or(crate::texts::DEFAULT_TITLE)
     }
 
     /// The study as a session of between-subject group `group` runs it: the test conditions
