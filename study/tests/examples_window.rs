@@ -452,24 +452,32 @@ fn check_names_a_missing_and_a_corrupt_stimulus() {
     assert!(!dir.join("res").exists());
 }
 
-/// `study run STUDY --subject S01 -o OUT` in a window that takes its keys from `script`.
-fn run_scripted(env: &Env, name: &str, study: &Path, out: &Path, script: &str) -> Scripted {
+/// `study run STUDY --subject S01 [EXTRA] -o OUT` in a window that takes its keys from
+/// `script`.
+fn run_scripted(
+    env: &Env,
+    name: &str,
+    study: &Path,
+    extra: &[&str],
+    out: &Path,
+    script: &str,
+) -> Scripted {
     // A MUSHRA screen draws six panes at once: a small window keeps lavapipe's frames quick.
     let size = if study.ends_with("mushra.toml") {
         "640x480"
     } else {
         "1280x720"
     };
-    let args: Vec<&std::ffi::OsStr> = vec![
+    let mut args: Vec<&std::ffi::OsStr> = vec![
         "run".as_ref(),
         study.as_os_str(),
         "--subject".as_ref(),
         "S01".as_ref(),
         "--window-size".as_ref(),
         size.as_ref(),
-        "-o".as_ref(),
-        out.as_os_str(),
     ];
+    args.extend(extra.iter().map(std::ffi::OsStr::new));
+    args.extend(["-o".as_ref(), out.as_os_str()]);
     Scripted::spawn(env, name, &args, script)
 }
 
@@ -511,7 +519,7 @@ fn each_example_records_its_first_answer_in_the_window() {
             " Tab \"33\"".repeat(fields),
             first_answer_keys(name)
         );
-        let mut run = run_scripted(&env, name, &examples().join(name), &out, &script);
+        let mut run = run_scripted(&env, name, &examples().join(name), &[], &out, &script);
         run.wait_line("done 2");
         let (_, stderr) = run.interrupt();
         assert!(!stderr.contains("test input: dropped"), "{name}: {stderr}");
@@ -682,6 +690,7 @@ fn a_crowd_trial_shows_three_figures_at_their_distances_in_the_window() {
         &env,
         "crowd",
         &examples().join("crowd-run1.toml"),
+        &[],
         &out,
         "welcome/ready: Enter\ntrial/open once: Backspace 4 2 Enter\n",
     );
@@ -762,24 +771,17 @@ fn measured_viewing_conditions_are_confirmed_recorded_and_reported() {
     // Four measurement fields, then the button (Tab to it, Space); then the subject's
     // welcome (no fields): Enter begins; one trial answered (4, Enter), so the session is
     // kept when the experimenter stops it.
-    let args: Vec<&std::ffi::OsStr> = vec![
-        "run".as_ref(),
-        study.as_os_str(),
-        "--subject".as_ref(),
-        "S01".as_ref(),
-        "--window-size".as_ref(),
-        "1280x720".as_ref(),
-        "--measured-distance-cm".as_ref(),
-        "88.5".as_ref(),
-        "--measured-room-lux".as_ref(),
-        "17".as_ref(),
-        "-o".as_ref(),
-        out.as_os_str(),
-    ];
-    let mut run = Scripted::spawn(
+    let mut run = run_scripted(
         &env,
         "viewing",
-        &args,
+        &study,
+        &[
+            "--measured-distance-cm",
+            "88.5",
+            "--measured-room-lux",
+            "17",
+        ],
+        &out,
         "viewing: Escape Tab Tab Tab Tab Tab Space\nwelcome/ready: Enter\ntrial/open once: 4 Enter\n",
     );
     run.wait_line("done 3");
