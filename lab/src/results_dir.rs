@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 
 use results::RunManifest;
 use results::backend::{GROUPS_FILE, GROUPS_LOCK_FILE};
+#[cfg(feature = "postgres")]
 use results::pg::{Archive, Database, PgStore};
 use results::store::{
     LOCK_FILE, MANIFEST_FORMAT_VERSION, RUN_FILE, SESSION_FILE, TRIALS_FILE, read_manifest,
@@ -276,6 +277,7 @@ pub enum Destination {
     /// A results folder.
     Folder(PathBuf),
     /// A database and the run's name in it (`None`: the study's name).
+    #[cfg(feature = "postgres")]
     Database {
         /// The database.
         db: Box<Database>,
@@ -285,10 +287,12 @@ pub enum Destination {
 }
 
 /// The run name `run` asks for, or the study's.
+#[cfg(feature = "postgres")]
 fn run_name(run: Option<&str>, study: &StudyFile) -> String {
     run.map_or_else(|| study.definition.name.clone(), str::to_owned)
 }
 
+#[cfg(feature = "postgres")]
 fn archive(study: &StudyFile) -> Result<Archive> {
     let (study_copy, manifest_copy) = study.archive_copies()?;
     Ok(Archive {
@@ -303,6 +307,7 @@ fn archive(study: &StudyFile) -> Result<Archive> {
 ///
 /// # Errors
 /// The run holds another study; database errors.
+#[cfg(feature = "postgres")]
 pub fn open_database_for_subjects(
     db: &Database,
     run: Option<&str>,
@@ -337,6 +342,7 @@ pub fn open_database_for_subjects(
 ///
 /// # Errors
 /// The run holds another study, or was begun with other files or settings; database errors.
+#[cfg(feature = "postgres")]
 pub fn open_database_for_simulation(
     db: &Database,
     run: Option<&str>,

@@ -5,12 +5,15 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use protocols::observer::Observer;
-use results::backend::{Found, Store};
-use results::pg::PgStore;
+use results::backend::Store;
 use results::store::DisplayInfo;
-use results::{FolderStore, ResultsError, SessionManifest};
+use results::{FolderStore, SessionManifest};
+#[cfg(feature = "postgres")]
+use results::{ResultsError, backend::Found, pg::PgStore};
 
-use crate::error::{Context as _, LabError, Result};
+#[cfg(feature = "postgres")]
+use crate::error::LabError;
+use crate::error::{Context as _, Result};
 use crate::results_dir::{self, Destination};
 use crate::session::{self, Opened, Recorder, SessionOf};
 use crate::source::{self, StimulusSource};
@@ -45,6 +48,7 @@ pub fn subject_id(index: u32) -> String {
 }
 
 /// The index `k` whose [`subject_id`] is `id`, if any.
+#[cfg(feature = "postgres")]
 fn subject_number(id: &str) -> Option<u32> {
     let k = id.strip_prefix('S')?.parse::<u32>().ok()?.checked_sub(1)?;
     (subject_id(k) == id).then_some(k)
@@ -81,10 +85,19 @@ pub fn simulate_subject(
     report: &mut dyn FnMut(&str),
 ) -> Result<()> {
     session::check_subject(id)?;
-    let Destination::Folder(out) = &options.output else {
-        return Err(crate::error::refused(
-            "--subject ID simulates into a results folder (-o DIR); a database numbers its subjects",
-        ));
+    // Without the `postgres` feature a folder is the only destination.
+    #[cfg_attr(
+        not(feature = "postgres"),
+        allow(clippy::infallible_destructuring_match)
+    )]
+    let out = match &options.output {
+        Destination::Folder(out) => out,
+        #[cfg(feature = "postgres")]
+        Destination::Database { .. } => {
+            return Err(crate::error::refused(
+                "--subject ID simulates into a results folder (-o DIR); a database numbers its subjects",
+            ));
+        }
     };
     let study = StudyFile::load(&options.study)?;
     let mut stimuli = source::open(&study)?;
@@ -144,6 +157,7 @@ pub fn simulate(options: &SimulateOptions, report: &mut dyn FnMut(&str)) -> Resu
                 report(&summary);
             }
         }
+        #[cfg(feature = "postgres")]
         Destination::Database { db, run } => {
             let mut store = results_dir::open_database_for_simulation(
                 db,
@@ -163,6 +177,7 @@ pub fn simulate(options: &SimulateOptions, report: &mut dyn FnMut(&str)) -> Resu
 
 /// Simulated sessions into a database run: with `resume` first the sessions no station holds
 /// any more, then new subjects numbered by the database until the run's count is given out.
+#[cfg(feature = "postgres")]
 fn simulate_into_database(
     study: &StudyFile,
     options: &SimulateOptions,

@@ -1,6 +1,6 @@
 //! Where a study's sessions are kept, behind one interface: a results folder
 //! ([`FolderStore`], the crash-safe files of [`crate::store`]) or a PostgreSQL database
-//! ([`crate::pg::PgStore`]). Both give the same session semantics:
+//! (`pg::PgStore`, with the cargo feature `postgres`). Both give the same session semantics:
 //! - one writer per session: the folder's kernel lock on `session.lock`, the database's
 //!   session-level advisory lock held on the writer's connection; a second writer is refused
 //!   with [`ResultsError::Locked`] or [`ResultsError::SessionBusy`];

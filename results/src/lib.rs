@@ -8,11 +8,13 @@
 //! Formats are versioned and documented in `docs/results-format.md`.
 //!
 //! The same sessions can be kept in a PostgreSQL database instead ([`pg`],
-//! `docs/postgres.md`); [`backend::Store`] is what both give a session recorder.
+//! `docs/postgres.md`; cargo feature `postgres`); [`backend::Store`] is what both give a
+//! session recorder.
 
 use std::path::PathBuf;
 
 pub mod backend;
+#[cfg(feature = "postgres")]
 pub mod pg;
 pub mod store;
 pub mod trials;

@@ -228,6 +228,57 @@ fn no_library_crate_reaches_a_gui_crate_through_any_path() {
     assert!(path_to(&g, study, &gui).is_some());
 }
 
+/// The packages `cargo tree -p CRATE` lists for `crate` built on its own (its own features,
+/// not the workspace's union), normal and build dependencies.
+fn tree(root: &Path, krate: &str) -> BTreeSet<String> {
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let out = Command::new(cargo)
+        .args([
+            "tree",
+            "--offline",
+            "--locked",
+            "-e",
+            "normal,build",
+            "--prefix",
+            "none",
+        ])
+        .args(["--format", "{p}", "-p", krate])
+        .current_dir(root)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "cargo tree -p {krate}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout)
+        .unwrap()
+        .lines()
+        .filter_map(|l| l.split_whitespace().next())
+        .map(str::to_owned)
+        .collect()
+}
+
+#[test]
+fn the_pure_libraries_compile_no_database_client() {
+    // The PostgreSQL store is behind `results`' feature `postgres`, which only the binary
+    // (through `lab`'s feature) turns on: the statistics and the protocols build without a
+    // database client or an async runtime.
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    for krate in ["analysis", "protocols", "results", "lab"] {
+        let deps = tree(&root, krate);
+        assert!(deps.contains(krate), "cargo tree -p {krate} lists {deps:?}");
+        for client in ["postgres", "tokio-postgres", "tokio"] {
+            assert!(
+                !deps.contains(client),
+                "cargo tree -p {krate} lists {client}"
+            );
+        }
+    }
+    // The check can fail: the binary has the database client.
+    assert!(tree(&root, "study").contains("postgres"));
+}
+
 #[test]
 fn every_file_the_architecture_names_exists() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
