@@ -61,23 +61,16 @@ pub fn test_kind(alternative: Alternative) -> &'static str {
     }
 }
 
-/// `s` as one RFC 4180 CSV field: quoted (quotes doubled) when it holds a comma, a quote or a
-/// line break.
+/// `s` as one RFC 4180 CSV field, quoted by the `csv` crate (quotes doubled) when it holds a
+/// comma, a quote or a line break: for cells made once and written on many rows.
 pub(crate) fn csv_field(s: &str) -> String {
-    let mut out = String::new();
-    push_csv_field(&mut out, s);
-    out
-}
-
-/// Appends [`csv_field`] of `s` to `out`.
-pub(crate) fn push_csv_field(out: &mut String, s: &str) {
-    if s.contains([',', '"', '\n', '\r']) {
-        out.push('"');
-        out.push_str(&s.replace('"', "\"\""));
-        out.push('"');
-    } else {
-        out.push_str(s);
-    }
+    let mut w = csv::WriterBuilder::new()
+        .buffer_capacity(2 * s.len() + 2)
+        .from_writer(Vec::new());
+    // Writing into memory cannot fail.
+    let _ = w.write_field(s);
+    let bytes = w.into_inner().unwrap_or_default();
+    String::from_utf8(bytes).unwrap_or_default()
 }
 
 /// Appends `s` as a Markdown table cell (`|` escaped, line breaks as spaces).
@@ -124,14 +117,17 @@ fn push_joined(out: &mut String, cells: &[String], between: &str, push: fn(&mut 
 }
 
 impl Table {
-    /// RFC 4180 CSV with a header row.
+    /// RFC 4180 CSV with a header row (written by the `csv` crate).
     pub fn to_csv(&self) -> String {
-        let mut out = String::new();
+        let mut w = csv::WriterBuilder::new()
+            .flexible(true)
+            .from_writer(Vec::new());
         for cells in std::iter::once(&self.columns).chain(&self.rows) {
-            push_joined(&mut out, cells, ",", push_csv_field);
-            out.push('\n');
+            // Writing into memory cannot fail.
+            let _ = w.write_record(cells);
         }
-        out
+        let bytes = w.into_inner().unwrap_or_default();
+        String::from_utf8(bytes).unwrap_or_default()
     }
 
     /// GitHub-flavoured Markdown with the caption in bold above.

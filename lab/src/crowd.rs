@@ -13,7 +13,6 @@
 //! a target within a byte, so the scene's streams add up to its budget within 0.1 %.
 
 use std::collections::{BTreeMap, BTreeSet};
-use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
@@ -30,7 +29,7 @@ use crate::clips::{self, ClipOptions};
 use crate::error::{Context as _, Result, refused};
 use crate::stimulus::{self, Request};
 use crate::sweep::{
-    Member, SweepClip, Target, csv_field, parallel, read_references, stimulus_id, write_made,
+    Member, SweepClip, Target, csv_record, parallel, read_references, stimulus_id, write_made,
     write_set,
 };
 
@@ -448,27 +447,28 @@ fn assemble(
                 .and_then(f)
                 .map_or_else(String::new, |v| format!("{v:.5}"))
         };
-        let _ = writeln!(
-            csv,
-            "{},{},{},{},{},{},{},{},{},{target},{:.4},{},{},{},{},{},{},{},{bytes},{scene_cr:.4}",
-            csv_field(&spec.id),
-            csv_field(level),
-            spec.allocation,
-            csv_field(&c.name),
-            csv_field(&c.group),
-            csv_field(&c.clip),
-            member.distance_cm,
+        csv.push_str(&csv_record(&[
+            spec.id.clone(),
+            level.clone(),
+            spec.allocation.to_string(),
+            c.name.clone(),
+            c.group.clone(),
+            c.clip.clone(),
+            member.distance_cm.to_string(),
             opt(member.score),
             cents(member.budget_bytes),
-            m.achieved_cr,
-            m.bytes,
+            target.to_string(),
+            format!("{:.4}", m.achieved_cr),
+            m.bytes.to_string(),
             metric(|x| Some(x.rms_cm)),
             metric(|x| Some(x.max_cm)),
             metric(|x| x.worst_window_rms_cm),
             metric(|x| Some(x.mean_angle_deg)),
-            csv_field(&m.id),
+            m.id.clone(),
             cents(spec.budget_bytes),
-        );
+            bytes.to_string(),
+            format!("{scene_cr:.4}"),
+        ]));
     }
     let sc = SceneStimulus {
         level: level.clone(),

@@ -697,9 +697,9 @@ impl RdRow {
             Target::MaxErrorCm(e) => (String::new(), e.to_string()),
         };
         let cells = [
-            csv_field(&self.clip),
-            csv_field(&self.codec),
-            csv_field(&self.params),
+            self.clip.clone(),
+            self.codec.clone(),
+            self.params.clone(),
             target_cr,
             bound,
             self.status.to_string(),
@@ -714,20 +714,19 @@ impl RdRow {
             num(self.foot_slide_cm_s, 5),
             num(self.encode_ms, 3),
             num(self.decode_ms, 3),
-            csv_field(&self.id),
-            csv_field(&self.reason),
+            self.id.clone(),
+            self.reason.clone(),
         ];
-        let mut line = cells.join(",");
-        line.push('\n');
-        line
+        csv_record(&cells)
     }
 }
 
-/// `s` as one CSV cell (RFC 4180: quoted when it holds a comma, quote or line break).
-pub(crate) fn csv_field(s: &str) -> String {
-    if s.contains([',', '"', '\n', '\r']) {
-        format!("\"{}\"", s.replace('"', "\"\""))
-    } else {
-        s.to_string()
-    }
+/// `cells` as one CSV record with its line break, quoted by the `csv` crate where a cell
+/// needs it (RFC 4180).
+pub(crate) fn csv_record(cells: &[String]) -> String {
+    let mut w = csv::Writer::from_writer(Vec::new());
+    // Writing into memory cannot fail.
+    let _ = w.write_record(cells);
+    let bytes = w.into_inner().unwrap_or_default();
+    String::from_utf8(bytes).unwrap_or_default()
 }
