@@ -4,7 +4,6 @@
 //! Missing samples are `None`, never zeros: in C3D a negative residual marks a sample invalid,
 //! and a sample at exactly (0, 0, 0) is the "zeroed" missing point of seed 003 (section 2.4).
 
-use std::fmt::Write as _;
 use std::path::Path;
 
 use super::{MarkerError, MarkerLimits};
@@ -166,25 +165,41 @@ pub fn read_csv_with(path: &Path, limits: &MarkerLimits) -> Result<MarkerSet, Ma
 /// [`MarkerError::Csv`] naming the line for a missing header, a wrong field count, a bad
 /// number, a duplicated sample; [`MarkerError::Limit`] when the shape exceeds `limits`.
 pub fn parse_csv(text: &str, path: &Path, limits: &MarkerLimits) -> Result<MarkerSet, MarkerError> {
-    let mut csv = CsvReader::new(path, limits);
-    for (i, raw) in text.lines().enumerate() {
-        let line_no = i + 1;
-        let line = raw.trim();
-        if line.is_empty() {
+    let mut state = CsvReader::new(path, limits);
+    let mut reader = csv::ReaderBuilder::new()
+        .has_headers(false)
+        .flexible(true)
+        .trim(csv::Trim::All)
+        .from_reader(text.as_bytes());
+    let mut record = csv::StringRecord::new();
+    loop {
+        let more = reader.read_record(&mut record).map_err(|e| {
+            let line = e.position().map_or(1, |p| p.line() as usize);
+            state.err(line, e.to_string())
+        })?;
+        if !more {
+            break;
+        }
+        let (line_no, line) = record.position().map_or((1, ""), |p| {
+            let start = (p.byte() as usize).min(text.len());
+            let rest = text.get(start..).unwrap_or("");
+            (p.line() as usize, rest.lines().next().unwrap_or("").trim())
+        });
+        let fields: Vec<&str> = record.iter().collect();
+        if fields.iter().all(|f| f.is_empty()) {
             continue;
         }
         if let Some(comment) = line.strip_prefix('#') {
-            csv.comment(line_no, comment)?;
+            state.comment(line_no, comment)?;
             continue;
         }
-        let fields: Vec<&str> = line.split(',').map(str::trim).collect();
-        if csv.header_seen {
-            csv.sample_row(line_no, &fields)?;
+        if state.header_seen {
+            state.sample_row(line_no, &fields)?;
         } else {
-            csv.header(line_no, line, &fields)?;
+            state.header(line_no, line, &fields)?;
         }
     }
-    csv.into_set()
+    state.into_set()
 }
 
 /// One CSV sample row as read: frame, marker index, position (`None`: a gap), line.
@@ -362,19 +377,27 @@ impl<'a> CsvReader<'a> {
     }
 }
 
-/// Formats a marker set as CSV (gaps are omitted rows); [`parse_csv`] reads it back exactly.
+/// Formats a marker set as CSV (gaps are omitted rows; a marker name is quoted by the `csv`
+/// crate where it needs it); [`parse_csv`] reads it back exactly.
 pub fn format_csv(set: &MarkerSet) -> String {
-    let mut out = String::with_capacity(32 * set.samples.len() + 64);
-    let _ = writeln!(out, "# frame_rate_hz = {}", set.frame_rate_hz);
-    out.push_str("frame,marker,x,y,z\n");
+    let mut w = csv::Writer::from_writer(Vec::with_capacity(32 * set.samples.len() + 64));
+    // Writing into memory cannot fail.
+    let _ = w.write_record(["frame", "marker", "x", "y", "z"]);
     for f in 0..set.frames {
         for (m, name) in set.names.iter().enumerate() {
             if let Some([x, y, z]) = set.get(f, m) {
-                let _ = writeln!(out, "{f},{name},{x},{y},{z}");
+                let _ = w.write_record([
+                    &f.to_string(),
+                    name,
+                    &x.to_string(),
+                    &y.to_string(),
+                    &z.to_string(),
+                ]);
             }
         }
     }
-    out
+    let rows = String::from_utf8(w.into_inner().unwrap_or_default()).unwrap_or_default();
+    format!("# frame_rate_hz = {}\n{rows}", set.frame_rate_hz)
 }
 
 /// Writes a marker set as CSV, whole or not at all ([`files::write`]); an existing file is

@@ -365,6 +365,27 @@ fn csv_round_trips_with_gaps() {
 }
 
 #[test]
+fn csv_round_trips_marker_names_with_commas_and_quotes() {
+    // C3D labels are free text; the CSV writer quotes what needs it and the reader undoes it.
+    let mut set = data::MarkerSet::new(
+        vec!["L,ASIS".into(), "say \"hi\"".into(), "RKNE".into()],
+        2,
+        100.0,
+    );
+    set.set(0, 0, Some([1.0, 2.0, 3.0]));
+    set.set(1, 1, Some([-4.5, 0.0, 1e-3]));
+    set.set(1, 2, Some([7.0, 8.0, 9.0]));
+    let text = data::format_csv(&set);
+    assert!(text.contains("0,\"L,ASIS\",1,2,3\n"), "{text}");
+    assert!(
+        text.contains("1,\"say \"\"hi\"\"\",-4.5,0,0.001\n"),
+        "{text}"
+    );
+    let back = data::parse_csv(&text, Path::new("x.csv"), &MarkerLimits::default()).unwrap();
+    assert_eq!(back, set);
+}
+
+#[test]
 fn c3d_round_trips_with_gaps() {
     let dir = std::env::temp_dir().join(format!("markers-test-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
