@@ -213,20 +213,20 @@ pub(crate) struct AssignedRow {
     pub(crate) ordinal: u32,
 }
 
-/// The text of [`GROUPS_FILE`] holding `rows`.
+/// The text of [`GROUPS_FILE`] holding `rows` (written by the `csv` crate).
 pub(crate) fn assignments_csv(rows: &[AssignedRow]) -> String {
-    use std::fmt::Write as _;
-    let mut text = String::with_capacity(32 * (rows.len() + 1));
-    text.push_str(GROUPS_HEADER);
-    text.push('\n');
+    let mut w = csv::Writer::from_writer(Vec::with_capacity(32 * (rows.len() + 1)));
+    // Writing into memory cannot fail.
+    let _ = w.write_record(GROUPS_HEADER);
     for r in rows {
-        let _ = writeln!(
-            text,
-            "{},{},{},{}",
-            r.subject, r.session, r.group, r.ordinal
-        );
+        let _ = w.write_record([
+            r.subject.as_str(),
+            &r.session.to_string(),
+            r.group.as_str(),
+            &r.ordinal.to_string(),
+        ]);
     }
-    text
+    String::from_utf8(w.into_inner().unwrap_or_default()).unwrap_or_default()
 }
 
 /// Reads [`GROUPS_FILE`] (absent: no assignments), refusing a malformed line by number.
@@ -235,20 +235,40 @@ pub(crate) fn read_assignments(path: &Path) -> Result<Vec<AssignedRow>, ResultsE
         return Ok(Vec::new());
     }
     let bytes = crate::store::read_limited(path, MAX_GROUPS_BYTES)?;
-    let bad = |line: usize, column: usize, message: String| ResultsError::Malformed {
+    let bad = |line: u64, column: usize, message: String| ResultsError::Malformed {
         path: path.to_path_buf(),
-        line,
+        line: line as usize,
         column,
         message,
     };
-    let text = String::from_utf8(bytes).map_err(|e| bad(1, 1, format!("not UTF-8 text: {e}")))?;
-    let mut lines = text.lines();
-    if lines.next() != Some(GROUPS_HEADER) {
-        return Err(bad(1, 1, format!("the header must be {GROUPS_HEADER:?}")));
-    }
+    let mut reader = csv::ReaderBuilder::new()
+        .has_headers(false)
+        .flexible(true)
+        .from_reader(bytes.as_slice());
+    let mut record = csv::StringRecord::new();
     let mut out = Vec::new();
-    for (i, l) in lines.enumerate() {
-        let line = i + 2;
+    let mut seen = std::collections::HashSet::new();
+    let mut header = true;
+    loop {
+        let more = reader.read_record(&mut record).map_err(|e| {
+            let line = e.position().map_or(1, csv::Position::line);
+            bad(line, 1, e.to_string())
+        })?;
+        let line = record.position().map_or(1, csv::Position::line);
+        if header {
+            if !more || record != GROUPS_HEADER[..] {
+                return Err(bad(
+                    1,
+                    1,
+                    format!("the header must be {:?}", GROUPS_HEADER.join(",")),
+                ));
+            }
+            header = false;
+            continue;
+        }
+        if !more {
+            break;
+        }
         if out.len() >= MAX_ASSIGNMENTS {
             return Err(bad(
                 line,
@@ -256,27 +276,24 @@ pub(crate) fn read_assignments(path: &Path) -> Result<Vec<AssignedRow>, ResultsE
                 format!("more than {MAX_ASSIGNMENTS} assignments"),
             ));
         }
-        let f: Vec<&str> = l.split(',').collect();
-        if f.len() != 4 {
-            return Err(bad(line, 1, format!("{} fields; 4 expected", f.len())));
+        if record.len() != 4 {
+            return Err(bad(line, 1, format!("{} fields; 4 expected", record.len())));
         }
+        let f = |k: usize| record.get(k).unwrap_or_default();
         let number = |k: usize| {
-            f[k].parse::<u32>()
-                .map_err(|_| bad(line, k + 1, format!("{:?} is not a whole number", f[k])))
+            f(k).parse::<u32>()
+                .map_err(|_| bad(line, k + 1, format!("{:?} is not a whole number", f(k))))
         };
         let row = AssignedRow {
-            subject: f[0].to_owned(),
+            subject: f(0).to_owned(),
             session: number(1)?,
-            group: f[2].to_owned(),
+            group: f(2).to_owned(),
             ordinal: number(3)?,
         };
         if row.subject.is_empty() || row.group.is_empty() {
             return Err(bad(line, 1, "an empty subject or group".to_owned()));
         }
-        if out
-            .iter()
-            .any(|o: &AssignedRow| o.subject == row.subject && o.session == row.session)
-        {
+        if !seen.insert((row.subject.clone(), row.session)) {
             return Err(bad(
                 line,
                 1,
@@ -292,7 +309,7 @@ pub(crate) fn read_assignments(path: &Path) -> Result<Vec<AssignedRow>, ResultsE
 }
 
 /// The header of [`GROUPS_FILE`].
-const GROUPS_HEADER: &str = "subject,session,group,ordinal";
+const GROUPS_HEADER: [&str; 4] = ["subject", "session", "group", "ordinal"];
 
 /// One session open for rows, holding its lock until dropped.
 pub trait SessionWriter: Send {
@@ -339,17 +356,18 @@ pub trait SessionWriter: Send {
 /// The rows [`FRAMES_FILE`] gets for trial `index`: `trial_index,interval_ms,phase` (or
 /// without the phase, `phased` false, for a file begun before the phase column).
 pub fn frame_rows(index: u32, intervals: &[f64], phases: &[&str], phased: bool) -> String {
-    use std::fmt::Write as _;
-    let mut text = String::with_capacity(intervals.len() * 20);
+    let mut w = csv::Writer::from_writer(Vec::with_capacity(intervals.len() * 20));
+    let index = index.to_string();
     for (k, ms) in intervals.iter().enumerate() {
-        if phased {
-            let phase = phases.get(k).copied().unwrap_or("");
-            let _ = writeln!(text, "{index},{ms:.3},{phase}");
+        let ms = format!("{ms:.3}");
+        // Writing into memory cannot fail.
+        let _ = if phased {
+            w.write_record([index.as_str(), &ms, phases.get(k).copied().unwrap_or("")])
         } else {
-            let _ = writeln!(text, "{index},{ms:.3}");
-        }
+            w.write_record([&index, &ms])
+        };
     }
-    text
+    String::from_utf8(w.into_inner().unwrap_or_default()).unwrap_or_default()
 }
 
 fn io(path: &Path) -> impl FnOnce(std::io::Error) -> ResultsError {
@@ -572,5 +590,83 @@ impl SessionWriter for FolderWriter {
         f.write_all(text.as_bytes())
             .and_then(|()| f.flush())
             .map_err(io(&path))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+
+    use super::*;
+
+    fn row(subject: &str, session: u32, group: &str, ordinal: u32) -> AssignedRow {
+        AssignedRow {
+            subject: subject.into(),
+            session,
+            group: group.into(),
+            ordinal,
+        }
+    }
+
+    fn read(dir: &Path, text: &str) -> Result<Vec<AssignedRow>, ResultsError> {
+        let path = dir.join(GROUPS_FILE);
+        fs::write(&path, text).unwrap();
+        read_assignments(&path)
+    }
+
+    #[test]
+    fn group_assignments_round_trip_and_bad_lines_are_named() {
+        let dir = std::env::temp_dir().join(format!("results-groups-{}", std::process::id()));
+        fs::create_dir_all(&dir).unwrap();
+        let rows = vec![row("S001", 1, "fast", 0), row("P, \"x\"", 2, "slow", 7)];
+        let text = assignments_csv(&rows);
+        assert_eq!(
+            text,
+            "subject,session,group,ordinal\nS001,1,fast,0\n\"P, \"\"x\"\"\",2,slow,7\n"
+        );
+        assert_eq!(read(&dir, &text).unwrap(), rows);
+        assert!(
+            read(&dir, "")
+                .unwrap_err()
+                .to_string()
+                .contains("the header must be")
+        );
+        let e = read(&dir, "subject,session,group,ordinal\nS001,1,fast\n").unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("line 2, column 1: 3 fields; 4 expected"),
+            "{e}"
+        );
+        let e = read(
+            &dir,
+            "subject,session,group,ordinal\nS001,1,a,0\nS002,1,a,1\nS001,1,b,0\n",
+        )
+        .unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("line 4, column 1: session 1 of \"S001\" is assigned twice"),
+            "{e}"
+        );
+        let e = read(&dir, "subject,session,group,ordinal\nS001,one,a,0\n").unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("line 2, column 2: \"one\" is not a whole number"),
+            "{e}"
+        );
+        fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn frame_rows_carry_the_phase_when_the_file_has_its_column() {
+        let phases = ["stimulus", "gap"];
+        assert_eq!(
+            frame_rows(3, &[16.6667, 16.5], &phases, true),
+            "3,16.667,stimulus\n3,16.500,gap\n"
+        );
+        assert_eq!(frame_rows(0, &[8.0], &[], true), "0,8.000,\n");
+        assert_eq!(
+            frame_rows(0, &[8.0, 9.25], &phases, false),
+            "0,8.000\n0,9.250\n"
+        );
     }
 }
