@@ -534,21 +534,23 @@ fn base64(bytes: &[u8]) -> String {
 }
 
 fn positions_csv(pos: &fk::Positions, scale: f64) -> String {
-    let mut s = String::with_capacity(pos.frames() * pos.joint_count() * 48);
-    s.push_str("frame,joint,x,y,z\n");
+    let mut w = csv::Writer::from_writer(Vec::with_capacity(pos.frames() * pos.joint_count() * 48));
+    // Writing into memory cannot fail.
+    let _ = w.write_record(["frame", "joint", "x", "y", "z"]);
     for f in 0..pos.frames() {
+        let frame = f.to_string();
         for (j, name) in pos.names.iter().enumerate() {
             let p = pos.point(f, j);
-            let _ = writeln!(
-                s,
-                "{f},{name},{},{},{}",
-                p[0] * scale,
-                p[1] * scale,
-                p[2] * scale
-            );
+            let _ = w.write_record([
+                frame.as_str(),
+                name,
+                &(p[0] * scale).to_string(),
+                &(p[1] * scale).to_string(),
+                &(p[2] * scale).to_string(),
+            ]);
         }
     }
-    s
+    String::from_utf8(w.into_inner().unwrap_or_default()).unwrap_or_default()
 }
 
 /// A NumPy v1.0 `.npy` file of little-endian float64, shape (frames, joints, 3).
