@@ -345,8 +345,8 @@ fn render_scenes(
     study: &Path,
     scenes: &[String],
     still: &Still<'_>,
-) -> Result<crate::gui::render::Image> {
-    use crate::gui::scene::{Stage, View};
+) -> Result<window::render::Image> {
+    use window::scene::{Stage, View};
     let file = lab::StudyFile::load(study)?;
     let Some(settings) = file.definition.scene.as_ref() else {
         bail!("{}: has no [scene] to draw", study.display());
@@ -387,8 +387,8 @@ fn render_scenes(
 
 /// Draws every clip (columns) at every time (rows) with the first clip's camera at that time,
 /// so a reference and its stimuli are framed alike.
-fn render(clips: &[Loaded], still: &Still<'_>) -> Result<crate::gui::render::Image> {
-    use crate::gui::scene::{Figure, Stage, View};
+fn render(clips: &[Loaded], still: &Still<'_>) -> Result<window::render::Image> {
+    use window::scene::{Figure, Stage, View};
     let Some(first) = clips.first() else {
         bail!("no clip to render");
     };
@@ -402,12 +402,12 @@ fn render(clips: &[Loaded], still: &Still<'_>) -> Result<crate::gui::render::Ima
 
 /// Draws `stages` (columns) at every time of `still` (rows) with `view`, offscreen.
 fn draw_panes(
-    mut stages: Vec<crate::gui::scene::Stage>,
-    view: &crate::gui::scene::View,
+    mut stages: Vec<window::scene::Stage>,
+    view: &window::scene::View,
     still: &Still<'_>,
-) -> Result<crate::gui::render::Image> {
-    use crate::gui::render::{Offscreen, Pane};
-    use crate::gui::scene::FrameShapes;
+) -> Result<window::render::Image> {
+    use window::render::{Offscreen, Pane};
+    use window::scene::FrameShapes;
     let (times, pane) = (still.times, still.pane);
     if stages.is_empty() {
         bail!("nothing to render");
@@ -451,7 +451,7 @@ fn draw_panes(
 /// An SVG of `image` (embedded as PNG) with each pane's name and time written over it as
 /// text, so a paper's figure keeps its labels sharp and editable.
 fn labelled_svg(
-    image: &crate::gui::render::Image,
+    image: &window::render::Image,
     names: &[String],
     still: &Still<'_>,
 ) -> Result<String> {

@@ -196,7 +196,7 @@ fn choose_mode(args: &DemoArgs) -> Mode {
             args.subjects
         );
         Mode::Simulated
-    } else if crate::gui::window::display_available() {
+    } else if window::native::display_available() {
         println!(
             "A display is available: each study runs {} simulated observers, then one session of \
              yours in the study window (subject `you`; Ctrl+Shift+P pauses or quits).",

@@ -11,7 +11,6 @@ mod clip_cmd;
 mod codec_cmd;
 mod db_cmd;
 mod demo_cmd;
-mod gui;
 mod markers_cmd;
 mod primitives_cmd;
 mod report_cmd;

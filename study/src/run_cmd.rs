@@ -4,21 +4,18 @@
 use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::AtomicBool;
 
 use anyhow::{Context as _, bail};
 use clap::Args;
 use lab::StudyFile;
 use lab::results_dir::Destination;
 use lab::session::{self, Opened, Recorder, SessionOf};
-use results::store::DisplayInfo;
 use results::{FolderStore, Store};
 
-use crate::gui::render::BACKGROUND;
-use crate::gui::scene::{Figure, FrameShapes, View};
-use crate::gui::screens::{Exit, Preflight, StudyUi};
-use crate::gui::timing::FrameClock;
-use crate::gui::window::{self, Next, WindowOptions, WindowReport};
+use window::native::{self, WindowOptions, WindowReport};
+use window::run;
+use window::screens::{Exit, Preflight, StudyUi};
 
 /// Window size `WxH`.
 fn parse_size(s: &str) -> Result<[f32; 2], String> {
@@ -210,7 +207,7 @@ pub fn run(args: &RunArgs) -> anyhow::Result<()> {
         // Before anything is shown or written: the results folder is this study's.
         lab::results_dir::check_for_subjects(out, &file, args.force)?;
     }
-    if !window::display_available() {
+    if !native::display_available() {
         bail!(
             "no display (DISPLAY and WAYLAND_DISPLAY are unset): `study run` shows stimuli to a \
              subject in a window. Run it on the lab machine's display, or dry-run the study with \
@@ -239,7 +236,7 @@ pub fn run(args: &RunArgs) -> anyhow::Result<()> {
     let screens =
         StudyUi::new(Arc::clone(&study), stimuli, recorder, true).with_preflight(preflight);
     let options = args.window.options(format!("study: {}", study.name));
-    let (report, exit) = match run_screens(&options, screens, &signalled) {
+    let (report, exit) = match run::session(&options, screens, &signalled) {
         Ok(r) => r,
         Err(e) => {
             // A window that never opened leaves no session behind (a resumed one is kept).
@@ -436,115 +433,8 @@ fn open_session(
     )
 }
 
-/// Runs the window over `screens` until the session ends or the window closes; returns the
-/// frame timing and how the session ended (`None`: the window closed first).
-fn run_screens(
-    options: &WindowOptions,
-    mut screens: StudyUi,
-    signalled: &Arc<AtomicBool>,
-) -> anyhow::Result<(WindowReport, Option<Exit>)> {
-    let signalled = Arc::clone(signalled);
-    let exit = std::rc::Rc::new(std::cell::RefCell::new(None::<Exit>));
-    let exit_seen = std::rc::Rc::clone(&exit);
-    // The clock's revision the manifest's display information was written at (rewritten
-    // when a drift re-checked the period).
-    let mut display_logged = None;
-    let report = window::run_window(options, move |ui, ctx| {
-        if ctx.close_requested {
-            // Mid-session this opens the quit confirmation instead of closing.
-            screens.close_requested();
-        }
-        if ctx.clock.calibrated() && display_logged != Some(ctx.clock.revision()) {
-            display_logged = Some(ctx.clock.revision());
-            let info = display_info(ctx.facts, ctx.clock);
-            if let Err(e) = screens
-                .recorder_mut()
-                .update_manifest(|m| m.display = Some(info))
-            {
-                eprintln!(
-                    "warning: writing the display information: {}",
-                    lab::error::chain(&e)
-                );
-            }
-        }
-        if signalled.load(Ordering::Relaxed) {
-            let logged = screens.recorder_mut().answered();
-            screens.stop(Exit::Signalled { logged });
-        }
-        screens.ui(ui, ctx.clock);
-        ctx.screen = screens.screen(ui.input(|i| i.time), ctx.clock);
-        if let Some(e) = screens.exit() {
-            *exit_seen.borrow_mut() = Some(e.clone());
-            // The end screen stays until the subject closes it (or the window is closed);
-            // a quit or a signal closes at once.
-            return if screens.may_close() || ctx.close_requested {
-                Next::Close
-            } else {
-                Next::Idle
-            };
-        }
-        // Idle screens still need frames to measure the display before the first trial.
-        if screens.animating() || screens.checking() || !ctx.clock.calibrated() {
-            Next::Animate
-        } else {
-            Next::Idle
-        }
-    })?;
-    let exit = exit.borrow().clone();
-    Ok((report, exit))
-}
-
-fn display_info(facts: &window::DisplayFacts, clock: &FrameClock) -> DisplayInfo {
-    let period = clock.period();
-    DisplayInfo {
-        description: clock.drift_note().map_or_else(
-            || facts.describe(period),
-            |d| format!("{}; {d}", facts.describe(period)),
-        ),
-        width_px: facts.width_px,
-        height_px: facts.height_px,
-        refresh_hz: period.map_or(0.0, |(p, _)| 1000.0 / p),
-    }
-}
-
-fn percentile(sorted: &[f64], q: f64) -> f64 {
-    if sorted.is_empty() {
-        return 0.0;
-    }
-    let i = ((sorted.len() - 1) as f64 * q).round() as usize;
-    sorted[i.min(sorted.len() - 1)]
-}
-
-fn timing_text(report: &WindowReport) -> String {
-    let mut cpu = report.cpu_ms.clone();
-    cpu.sort_by(f64::total_cmp);
-    let s = report.session;
-    let mut t = String::new();
-    let _ = writeln!(t, "display: {}", report.facts.describe(report.period));
-    let _ = writeln!(
-        t,
-        "frames: {} presented, interval mean {:.2} ms, SD {:.3} ms, max {:.2} ms, {} dropped (> 1.5 periods)",
-        s.frames, s.mean_ms, s.sd_ms, s.max_ms, s.dropped
-    );
-    let _ = writeln!(
-        t,
-        "CPU per frame (update + record + submit): p50 {:.2} ms, p99 {:.2} ms, max {:.2} ms over {} frames",
-        percentile(&cpu, 0.5),
-        percentile(&cpu, 0.99),
-        cpu.last().copied().unwrap_or(0.0),
-        cpu.len()
-    );
-    if report.facts.device_type == "Cpu" {
-        let _ = writeln!(
-            t,
-            "note: a software (Cpu) adapter: these are software-rendering figures, not a lab monitor's"
-        );
-    }
-    t
-}
-
 fn print_timing(report: &WindowReport) {
-    print!("{}", timing_text(report));
+    print!("{}", run::timing_text(report));
 }
 
 /// `study display-test`: two animated skeletons side by side for `--seconds`, then the
@@ -553,7 +443,7 @@ fn print_timing(report: &WindowReport) {
 /// # Errors
 /// No display or adapter, an unreadable clip, or the JSON cannot be written.
 pub fn display_test(args: &DisplayTestArgs) -> anyhow::Result<()> {
-    if !window::display_available() {
+    if !native::display_available() {
         bail!("no display (DISPLAY and WAYLAND_DISPLAY are unset): nothing to measure");
     }
     if !(args.seconds.is_finite() && args.seconds > 0.0 && args.seconds <= 3600.0) {
@@ -568,63 +458,9 @@ pub fn display_test(args: &DisplayTestArgs) -> anyhow::Result<()> {
         Some(p) => motion::io::read_clip(args.asf.as_deref(), p)?,
         None => motion::synth::walking_clip(&motion::synth::WalkParams::default()),
     };
-    let view = View::framing(&clip);
-    let mut figures = [Figure::new(&clip, &view), Figure::new(&clip, &view)];
-    let duration = figures[0].duration_s().max(0.1);
     let options = args.window.options("study: display test".into());
-    let seconds = args.seconds;
-    let mut measuring_since: Option<f64> = None;
-    let bg = egui::Color32::from_rgb(
-        (BACKGROUND[0] * 255.0) as u8,
-        (BACKGROUND[1] * 255.0) as u8,
-        (BACKGROUND[2] * 255.0) as u8,
-    );
-    let report = window::run_window(&options, move |ui, ctx| {
-        let now = ui.input(|i| i.time);
-        if ctx.clock.calibrated() && measuring_since.is_none() {
-            measuring_since = Some(now);
-            ctx.clock.start_segment();
-        }
-        let elapsed = measuring_since.map_or(0.0, |s| now - s);
-        egui::CentralPanel::default().show(ui, |ui| {
-            ui.label(match measuring_since {
-                None => "Estimating the refresh period…".to_string(),
-                Some(_) => format!("Measuring: {elapsed:.1} / {seconds:.0} s"),
-            });
-            let full = ui.available_rect_before_wrap();
-            let w = (full.width() - 12.0) * 0.5;
-            for (k, fig) in figures.iter_mut().enumerate() {
-                let rect = egui::Rect::from_min_size(
-                    egui::pos2(full.left() + k as f32 * (w + 12.0), full.top()),
-                    egui::vec2(w, full.height()),
-                );
-                ui.painter().rect_filled(rect, 0.0, bg);
-                let mut shapes = FrameShapes::default();
-                fig.shapes_at(now % duration, &mut shapes);
-                ui.painter()
-                    .add(eframe::egui_wgpu::Callback::new_paint_callback(
-                        rect,
-                        crate::gui::render::SkeletonCallback {
-                            slot: k,
-                            view,
-                            aspect: rect.width() / rect.height().max(1.0),
-                            shapes: Arc::new(shapes),
-                        },
-                    ));
-            }
-        });
-        ctx.screen = if measuring_since.is_some() {
-            "display-test/measuring".into()
-        } else {
-            "display-test/calibrating".into()
-        };
-        if elapsed >= seconds || ctx.close_requested {
-            Next::Close
-        } else {
-            Next::Animate
-        }
-    })?;
-    let text = timing_text(&report);
+    let report = run::display_test(&options, &clip, args.seconds)?;
+    let text = run::timing_text(&report);
     print!("{text}");
     if let Some(path) = &args.json {
         let mut cpu = report.cpu_ms.clone();
@@ -644,8 +480,8 @@ pub fn display_test(args: &DisplayTestArgs) -> anyhow::Result<()> {
             "interval_mean_ms": s.mean_ms,
             "interval_sd_ms": s.sd_ms,
             "interval_max_ms": s.max_ms,
-            "cpu_p50_ms": percentile(&cpu, 0.5),
-            "cpu_p99_ms": percentile(&cpu, 0.99),
+            "cpu_p50_ms": run::percentile(&cpu, 0.5),
+            "cpu_p99_ms": run::percentile(&cpu, 0.99),
         });
         files::write(path, serde_json::to_vec_pretty(&json)?, mode)?;
     }

@@ -2,7 +2,7 @@
 //! software Vulkan driver (lavapipe). The first test types real keys (`xdotool`): a screenshot
 //! of a trial shows both skeletons; the session is SIGKILLed mid-way and `--resume` completes
 //! it with every response kept exactly once. The others drive the window from a test input
-//! script (`study/src/gui/test_input.rs`) and wait for the screens it reports, so they do not
+//! script (`window/src/test_input.rs`) and wait for the screens it reports, so they do not
 //! depend on how fast software rendering draws.
 //!
 //! Needs `Xvfb`, `xdotool`, `import` (ImageMagick) and a Vulkan driver; `scripts/test`

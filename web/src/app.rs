@@ -266,7 +266,7 @@ fn read_page(dir: &Path) -> Result<Page> {
     Ok(page)
 }
 
-/// The presentation of one trial as the window schedules it (`study/src/gui/flow.rs`), ms:
+/// The presentation of one trial as the window schedules it (`window/src/flow.rs`), ms:
 /// side by side `playback_count` plays; sequential first, grey, second per play; DSCQS A,
 /// grey, B, grey, A, grey, B.
 pub fn presentation_ms(study: &StudyDefinition, arrangement: Arrangement, clip_s: f64) -> f64 {

@@ -192,11 +192,11 @@ pub fn find_window(env: &Env, child: &mut Child, title: &str) -> String {
 /// frames) take up to a minute there.
 pub const STATE_WAIT: Duration = Duration::from_secs(300);
 
-/// The script's lines on standard error (`study::gui::test_input`) start with this.
+/// The script's lines on standard error (`window::test_input`) start with this.
 pub const SCRIPT_PREFIX: &str = "test input:";
 
 /// A `study` process whose window takes its keys from a test input script
-/// (`STUDY_TEST_INPUT`, `study/src/gui/test_input.rs`): no X key events and no sleeps, so
+/// (`STUDY_TEST_INPUT`, `window/src/test_input.rs`): no X key events and no sleeps, so
 /// nothing depends on how many frames fit in a second. Its standard error and output are
 /// read as they come, so a test waits for the lines the script writes.
 pub struct Scripted {

@@ -1,4 +1,4 @@
-// A trial's presentation schedule, as the study window runs it (study/src/gui/flow.rs):
+// A trial's presentation schedule, as the study window runs it (window/src/flow.rs):
 // side by side, both clips `playback_count` times; sequential, first, grey, second; DSCQS
 // (BT.500), A, grey, B, grey, A, grey, B, then the vote on grey. Answers count once the whole
 // schedule has been shown; the server checks the time too.

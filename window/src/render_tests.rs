@@ -1,5 +1,5 @@
 //! The renderer offscreen: a known pose drawn into a texture must match the stored reference
-//! image (`study/tests/data/render-reference.png`) within a small per-pixel tolerance.
+//! image (`window/tests/data/render-reference.png`) within a small per-pixel tolerance.
 //!
 //! Needs a Vulkan driver (Mesa's lavapipe on a machine without a GPU: `scripts/test` installs
 //! it). Without one the test fails under `CI` and is skipped with a message elsewhere.

@@ -13,7 +13,7 @@
 //! end/ready: Enter
 //! ```
 //!
-//! - Before the colon, the screen the rule is for ([`crate::gui::screens::StudyUi::screen`]
+//! - Before the colon, the screen the rule is for ([`crate::screens::StudyUi::screen`]
 //!   lists the names), then optionally how many times it may fire: `once`, or `times N`;
 //!   without it, every time the screen is entered.
 //! - After it, the events: a key by egui's name (`Enter`, `Tab`, `Escape`, `Backspace`,

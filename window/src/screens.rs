@@ -210,6 +210,7 @@ impl StudyUi {
 
     /// Begin waits for `preflight` (every stimulus of the plan checked), with a progress bar
     /// once it takes over a second; problems end the session before its first trial.
+    #[must_use]
     pub fn with_preflight(mut self, preflight: Preflight) -> StudyUi {
         self.preflight = Some(preflight);
         self
@@ -357,7 +358,7 @@ impl StudyUi {
     /// (trial timing is read from it).
     pub fn ui(&mut self, ui: &mut Ui, clock: &mut FrameClock) {
         let now = ui.input(|i| i.time);
-        let chord = ui.input(|i| super::window::ctrl_shift_pressed(i, Key::P));
+        let chord = ui.input(|i| super::native::ctrl_shift_pressed(i, Key::P));
         if chord && self.pause == Pause::None && self.exit.is_none() {
             self.pause = Pause::Paused;
         }

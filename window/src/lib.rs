@@ -1,20 +1,23 @@
 //! The study window: a wgpu skeleton renderer, the subject's screens in egui, frame timing,
-//! and the eframe (winit + wgpu) window that hosts them.
+//! and the eframe (winit + wgpu) window that hosts them. The only crate with GUI
+//! dependencies besides the `study` binary, which opens it (ARCHITECTURE.md).
 //!
 //! Layers, each testable on its own: [`scene`] (poses → shapes, camera; no GPU), [`render`]
 //! (wgpu pipelines, also offscreen), [`flow`] (a trial's presentation schedule), [`timing`]
 //! (frame intervals and drops), [`screens`] (egui screens over a session, driven by
-//! `egui_kittest` in tests), [`window`] (the native window) and [`test_input`] (keys from a
-//! test's script, for the window's end-to-end tests).
+//! `egui_kittest` in tests), [`native`] (the native window), [`run`] (a session's screens and
+//! the display test in that window) and [`test_input`] (keys from a test's script, for the
+//! window's end-to-end tests).
 
 pub mod flow;
+pub mod native;
 pub mod render;
+pub mod run;
 pub mod scene;
 pub mod screens;
 pub mod test_input;
 pub mod timing;
 pub mod viewing;
-pub mod window;
 
 #[cfg(test)]
 mod render_tests;
