@@ -235,7 +235,8 @@ pub fn run(args: &RunArgs) -> anyhow::Result<()> {
     let study = Arc::new(file.definition);
     let screens =
         StudyUi::new(Arc::clone(&study), stimuli, recorder, true).with_preflight(preflight);
-    let options = args.window.options(format!("study: {}", study.name));
+    // The title bar shows what subjects may read: the study's title, not its internal name.
+    let options = args.window.options(study.title().to_owned());
     let (report, exit) = match run::session(&options, screens, &signalled) {
         Ok(r) => r,
         Err(e) => {

@@ -127,7 +127,9 @@ fn study_run_under_xvfb_logs_every_trial_and_resumes_after_a_kill() {
     let Some(env) = setup("e2e") else { return };
     write_study(&env.dir);
     let mut child = spawn_run(&env, false);
-    let wid = find_window(&env, &mut child, "study: e2e");
+    // The study has no title: the window shows the neutral default, never the internal name.
+    let wid = find_window(&env, &mut child, protocols::texts::DEFAULT_TITLE);
+    assert_eq!(env.xdotool(&["search", "--name", "e2e"]).trim(), "");
     // Welcome: Enter begins once the display is measured (~30 frames).
     let deadline = Instant::now() + common::STATE_WAIT;
     while !session_dir(&env).join("session.json").exists() || logged_rows(&env) == 0 {
@@ -158,7 +160,7 @@ fn study_run_under_xvfb_logs_every_trial_and_resumes_after_a_kill() {
     assert_eq!(logged_rows(&env), 3);
 
     let mut child = spawn_run(&env, true);
-    let wid = find_window(&env, &mut child, "study: e2e");
+    let wid = find_window(&env, &mut child, protocols::texts::DEFAULT_TITLE);
     answer_until(&env, &wid, &["Return", "3", "Return"], 6);
     let out = close_end_screen(&env, &wid, child);
     assert!(
