@@ -120,8 +120,16 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     };
     let s = |p: &Path| p.display().to_string();
     let rates: Vec<String> = RATES.iter().map(f64::to_string).collect();
+    // Each study and the report section the terminal shows of it (its headline result).
+    let studies = [
+        ("mos", "## Mean opinion scores"),
+        ("dscqs", "## Differential MOS"),
+        ("staircase", "## Staircase thresholds"),
+    ];
+    let protocols = studies.map(|(p, _)| p);
+    let steps = protocols.len() + 2;
     println!(
-        "\n[1/3] stimuli: codecs {} at CR {}",
+        "\n[1/{steps}] stimuli: codecs {} at CR {}",
         CODECS.join(","),
         rates.join(",")
     );
@@ -136,12 +144,13 @@ pub fn run(args: &DemoArgs) -> Result<()> {
 
     let subjects = args.subjects.to_string();
     let seed = args.seed.to_string();
-    for protocol in ["mos", "dscqs", "staircase"] {
+    for (k, (protocol, headline)) in studies.into_iter().enumerate() {
         let study = out.join(format!("{protocol}.toml"));
         files::write(&study, study_text(protocol, mode), files::Mode::New)?;
         let results = out.join(format!("results-{protocol}"));
         println!(
-            "\n[2/3] {protocol}: simulated sessions into {}",
+            "\n[{}/{steps}] {protocol}: simulated sessions into {}",
+            k + 2,
             results.display()
         );
         let sim: study_cmd::SimulateArgs = parse(&[
@@ -179,12 +188,15 @@ pub fn run(args: &DemoArgs) -> Result<()> {
             "--allow-incomplete",
         ])?;
         report_cmd::run(&rep).with_context(|| format!("reporting the {protocol} study"))?;
-        print_tables(&report_dir)?;
+        print_tables(&report_dir, headline)?;
     }
-    println!(
-        "\n[3/3] done: open {}",
-        out.join("report-mos/report.html").display()
-    );
+    println!("\n[{steps}/{steps}] done: the reports (tables, figures, findings) are");
+    for protocol in protocols {
+        println!(
+            "  {}",
+            out.join(format!("report-{protocol}/report.html")).display()
+        );
+    }
     Ok(())
 }
 
@@ -213,19 +225,57 @@ fn choose_mode(args: &DemoArgs) -> Mode {
     }
 }
 
-/// Prints the Markdown tables of a report (the part a reader wants first).
-fn print_tables(report_dir: &Path) -> Result<()> {
+/// Prints the tables of one section of a report (its headline result; the rest is in
+/// `report.html` and `report.md`).
+fn print_tables(report_dir: &Path, section: &str) -> Result<()> {
     let md = fs::read_to_string(report_dir.join("report.md"))
         .with_context(|| format!("reading {}", report_dir.join("report.md").display()))?;
+    println!("{}", tables_of(&md, section).trim_end());
+    Ok(())
+}
+
+/// The tables under heading `section` of `md` (up to the next heading of its level or
+/// above), after the heading itself; empty when there is no such section.
+fn tables_of(md: &str, section: &str) -> String {
+    let level = |h: &str| h.chars().take_while(|&c| c == '#').count();
+    let mut out = String::new();
+    let mut inside = None;
     let mut in_table = false;
     for line in md.lines() {
-        let table = line.starts_with('|');
-        if line.starts_with('#') || table || (in_table && !line.is_empty()) {
-            println!("{line}");
+        if line.starts_with('#') {
+            match inside {
+                Some(l) if level(line) <= l => break,
+                None if line == section => {
+                    inside = Some(level(line));
+                    out.push_str(line);
+                    out.push('\n');
+                }
+                _ => {}
+            }
+        } else if inside.is_some() && line.starts_with('|') {
+            out.push_str(line);
+            out.push('\n');
+            in_table = true;
         } else if in_table {
-            println!();
+            out.push('\n');
+            in_table = false;
         }
-        in_table = table;
     }
-    Ok(())
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::tables_of;
+
+    #[test]
+    fn the_tables_of_one_section_are_printed() {
+        let md = "# Report\n\n## Method\n\nSix subjects.\n\n## Thresholds\n\n| a | b |\n| - | - |\n| 1 | 2 |\nNote.\n\n### Pooled\n\n| t |\n| - |\n\n## Display\n\n| d |\n";
+        assert_eq!(
+            tables_of(md, "## Thresholds"),
+            "## Thresholds\n| a | b |\n| - | - |\n| 1 | 2 |\n\n| t |\n| - |\n\n"
+        );
+        assert_eq!(tables_of(md, "## Method"), "## Method\n");
+        assert_eq!(tables_of(md, "## Nothing"), "");
+    }
 }

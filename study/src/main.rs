@@ -32,7 +32,7 @@ enum Command {
     /// Run a short study on generated motion end to end (no files needed): stimuli, MOS,
     /// DSCQS and staircase sessions with simulated observers, reports.
     Demo(demo_cmd::DemoArgs),
-    /// Run one subject's session in the study window (MOS, DSCQS or 2AFC staircase).
+    /// Run one subject's session in the study window (any method a study file can name).
     Run(run_cmd::RunArgs),
     /// Serve a study to participants' browsers (HTTP; the engine and results stay here).
     Serve(serve_cmd::ServeArgs),
