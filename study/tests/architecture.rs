@@ -69,21 +69,27 @@ fn rules(text: &str) -> BTreeMap<String, Rule> {
     out
 }
 
-/// `cargo metadata` of the workspace at `root` with `args`, offline.
-fn metadata(root: &Path, args: &[&str]) -> serde_json::Value {
+/// The standard output of `cargo ARGS` run in the workspace at `root`, which must succeed.
+fn cargo(root: &Path, args: &[&str]) -> Vec<u8> {
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     let out = Command::new(cargo)
-        .args(["metadata", "--format-version", "1", "--offline"])
         .args(args)
         .current_dir(root)
         .output()
         .unwrap();
     assert!(
         out.status.success(),
-        "{}",
+        "cargo {}: {}",
+        args.join(" "),
         String::from_utf8_lossy(&out.stderr)
     );
-    serde_json::from_slice(&out.stdout).unwrap()
+    out.stdout
+}
+
+/// `cargo metadata` of the workspace at `root` with `args`, offline.
+fn metadata(root: &Path, args: &[&str]) -> serde_json::Value {
+    let args = [&["metadata", "--format-version", "1", "--offline"], args].concat();
+    serde_json::from_slice(&cargo(root, &args)).unwrap()
 }
 
 #[test]
@@ -231,27 +237,20 @@ fn no_library_crate_reaches_a_gui_crate_through_any_path() {
 /// The packages `cargo tree -p CRATE` lists for `crate` built on its own (its own features,
 /// not the workspace's union), normal and build dependencies.
 fn tree(root: &Path, krate: &str) -> BTreeSet<String> {
-    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    let out = Command::new(cargo)
-        .args([
-            "tree",
-            "--offline",
-            "--locked",
-            "-e",
-            "normal,build",
-            "--prefix",
-            "none",
-        ])
-        .args(["--format", "{p}", "-p", krate])
-        .current_dir(root)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "cargo tree -p {krate}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8(out.stdout)
+    let args = [
+        "tree",
+        "--offline",
+        "--locked",
+        "-e",
+        "normal,build",
+        "--prefix",
+        "none",
+        "--format",
+        "{p}",
+        "-p",
+        krate,
+    ];
+    String::from_utf8(cargo(root, &args))
         .unwrap()
         .lines()
         .filter_map(|l| l.split_whitespace().next())
