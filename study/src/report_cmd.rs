@@ -809,6 +809,9 @@ fn open_source(args: &ReportArgs) -> Result<(Source, Sessions, lab::StudyFile)> 
         }
         let mut store = results::pg::PgStore::open(&db, args.store.run.as_deref())?;
         let heads = store.sessions()?;
+        if heads.is_empty() {
+            bail!("{}: no sessions yet; nothing to report", store.location());
+        }
         let (study_file, archived) = match &args.study {
             Some(path) => (
                 lab::StudyFile::load(path)
@@ -836,7 +839,24 @@ fn open_source(args: &ReportArgs) -> Result<(Source, Sessions, lab::StudyFile)> 
         (None, Some(f)) => PathBuf::from(f),
         _ => bail!("name the results once: a folder, or --store"),
     };
+    if !folder.is_dir() {
+        bail!("{}: no such results folder", folder.display());
+    }
+    if !folder.join(results::store::RUN_FILE).is_file() {
+        bail!(
+            "{}: not a results folder (it has no {}); `study run`, `study simulate` and `study serve` write one",
+            folder.display(),
+            results::store::RUN_FILE
+        );
+    }
     let (run, dirs) = results::session_dirs(&folder)?;
+    if dirs.is_empty() {
+        bail!(
+            "{}: no sessions yet (no session folder holds a {}); nothing to report",
+            folder.display(),
+            results::store::SESSION_FILE
+        );
+    }
     let study_path = args
         .study
         .clone()

@@ -48,6 +48,56 @@ fn report_finds_the_archived_study_and_manifest() {
     assert!(dir.join("rep/report.md").is_file());
 }
 
+/// A folder that is not a results folder, or one with no session yet, is refused with its
+/// path and the reason, said once, and no report is written.
+#[test]
+fn report_names_a_folder_without_results() {
+    let examples = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples");
+    let dir = std::env::temp_dir().join(format!("study-report-empty-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(dir.join("empty")).unwrap();
+    let refused = |results: &Path, reason: &str| {
+        let rep = dir.join("rep");
+        let out = study(&[
+            "report",
+            &results.display().to_string(),
+            "-o",
+            &rep.display().to_string(),
+        ]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{err}");
+        let said = format!("{}: {reason}", results.display());
+        assert_eq!(err.matches(&said).count(), 1, "{err}");
+        assert!(!rep.join("report.md").exists());
+    };
+    refused(&dir.join("nowhere"), "no such results folder");
+    refused(
+        &dir.join("empty"),
+        "not a results folder (it has no run.json)",
+    );
+    // A run begun and no session recorded: simulate made it, then its sessions are gone.
+    let res = dir.join("res");
+    let out = study(&[
+        "simulate",
+        &examples.join("mos.toml").display().to_string(),
+        "--subjects",
+        "1",
+        "-o",
+        &res.display().to_string(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    std::fs::remove_dir_all(res.join("S001_s1")).unwrap();
+    refused(
+        &res,
+        "no sessions yet (no session folder holds a session.json)",
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 /// Staircase levels lie on an exact grid: the log holds one value per grid point, and no
 /// staircase table lists a level twice (accumulated steps once gave 0.0020 twice, and
 /// 0.0100 twice with different answers).
