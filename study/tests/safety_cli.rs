@@ -327,10 +327,15 @@ fn messages_name_their_file_and_say_their_cause_once() {
     let err = stderr(&o);
     assert!(err.contains("stimuli.json"), "{err}");
     assert_eq!(err.matches("No such file or directory").count(), 1, "{err}");
+    // A results folder that is not there: its path and the reason, once.
     let o = study(&["report", p(&dir.join("nowhere")), "-o", p(&dir.join("r"))]);
     let err = stderr(&o);
-    assert!(err.contains("nowhere"), "{err}");
-    assert_eq!(err.matches("No such file or directory").count(), 1, "{err}");
+    assert!(!o.status.success());
+    assert_eq!(
+        err.matches("nowhere: no such results folder").count(),
+        1,
+        "{err}"
+    );
 }
 
 /// A level edited to 0 (which the Weibull fit could not take either) is not what the study
