@@ -17,9 +17,9 @@ use crate::scene::{Figure, FrameShapes, View};
 use crate::screens::{Exit, StudyUi};
 use crate::timing::FrameClock;
 
-/// Runs the window over a subject's `screens` until the session ends or the window closes; returns the
-/// frame timing and how the session ended (`None`: the window closed first). A set
-/// `signalled` (SIGINT, SIGTERM) stops the session as "Quit and save" does.
+/// Runs the window over a subject's `screens` until the session ends or the window closes;
+/// returns the frame timing and how the session ended (`None`: the window closed first). A
+/// set `signalled` (SIGINT, SIGTERM) stops the session as "Quit and save" does.
 ///
 /// # Errors
 /// The window or its adapter cannot be opened.
