@@ -180,23 +180,32 @@ pub fn parse_csv(text: &str, path: &Path, limits: &MarkerLimits) -> Result<Marke
         if !more {
             break;
         }
-        let (line_no, line) = record.position().map_or((1, ""), |p| {
-            let start = (p.byte() as usize).min(text.len());
-            let rest = text.get(start..).unwrap_or("");
-            (p.line() as usize, rest.lines().next().unwrap_or("").trim())
-        });
+        let position = record.position();
+        let line_no = position.map_or(1, |p| p.line() as usize);
+        // The record's line as written: looked up only for a comment and for the header's
+        // message, not for every sample row.
+        let line = || {
+            position.map_or("", |p| {
+                let start = (p.byte() as usize).min(text.len());
+                let rest = text.get(start..).unwrap_or("");
+                rest.lines().next().unwrap_or("").trim()
+            })
+        };
         let fields: Vec<&str> = record.iter().collect();
         if fields.iter().all(|f| f.is_empty()) {
             continue;
         }
-        if let Some(comment) = line.strip_prefix('#') {
+        // A comment line's first field starts with `#` too (it is the trimmed line's start).
+        if fields[0].starts_with('#')
+            && let Some(comment) = line().strip_prefix('#')
+        {
             state.comment(line_no, comment)?;
             continue;
         }
         if state.header_seen {
             state.sample_row(line_no, &fields)?;
         } else {
-            state.header(line_no, line, &fields)?;
+            state.header(line_no, line(), &fields)?;
         }
     }
     state.into_set()
