@@ -11,27 +11,33 @@ fn study(args: &[&str]) -> Output {
         .unwrap()
 }
 
+/// `study simulate examples/EXAMPLE -o OUT ARGS...`, which must succeed.
+fn simulate(example: &str, out: &Path, args: &[&str]) {
+    let study_file = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../examples")
+        .join(example);
+    let mut all = vec![
+        "simulate".to_owned(),
+        study_file.display().to_string(),
+        "-o".to_owned(),
+        out.display().to_string(),
+    ];
+    all.extend(args.iter().map(|a| (*a).to_owned()));
+    let all: Vec<&str> = all.iter().map(String::as_str).collect();
+    let o = study(&all);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+}
+
 #[test]
 fn report_finds_the_archived_study_and_manifest() {
-    let examples = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples");
     let dir = std::env::temp_dir().join(format!("study-report-cli-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     let res = dir.join("res").display().to_string();
-    let out = study(&[
-        "simulate",
-        &examples.join("mos.toml").display().to_string(),
-        "--subjects",
-        "3",
-        "--seed",
-        "5",
-        "-o",
-        &res,
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    simulate(
+        "mos.toml",
+        Path::new(&res),
+        &["--subjects", "3", "--seed", "5"],
     );
     // The copy's manifest names the clip files by absolute path, so they still resolve.
     let copy: serde_json::Value =
@@ -52,7 +58,6 @@ fn report_finds_the_archived_study_and_manifest() {
 /// path and the reason, said once, and no report is written.
 #[test]
 fn report_names_a_folder_without_results() {
-    let examples = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples");
     let dir = std::env::temp_dir().join(format!("study-report-empty-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(dir.join("empty")).unwrap();
@@ -77,19 +82,7 @@ fn report_names_a_folder_without_results() {
     );
     // A run begun and no session recorded: simulate made it, then its sessions are gone.
     let res = dir.join("res");
-    let out = study(&[
-        "simulate",
-        &examples.join("mos.toml").display().to_string(),
-        "--subjects",
-        "1",
-        "-o",
-        &res.display().to_string(),
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    simulate("mos.toml", &res, &["--subjects", "1"]);
     std::fs::remove_dir_all(res.join("S001_s1")).unwrap();
     refused(
         &res,
@@ -103,26 +96,15 @@ fn report_names_a_folder_without_results() {
 /// 0.0100 twice with different answers).
 #[test]
 fn staircase_tables_list_each_level_once() {
-    let examples = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples");
     let dir = std::env::temp_dir().join(format!("study-report-grid-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     let res = dir.join("res").display().to_string();
     let rep = dir.join("rep");
-    let out = study(&[
-        "simulate",
-        &examples.join("staircase.toml").display().to_string(),
-        "--subjects",
-        "15",
-        "--seed",
-        "1",
-        "-o",
-        &res,
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    simulate(
+        "staircase.toml",
+        Path::new(&res),
+        &["--subjects", "15", "--seed", "1"],
     );
     let out = study(&["report", &res, "-o", &rep.display().to_string()]);
     assert!(
@@ -202,26 +184,11 @@ type Damage = (&'static str, fn(&Path), &'static str, Option<usize>);
     reason = "one damaged copy per case, side by side"
 )]
 fn report_refuses_logs_it_cannot_trust_naming_file_and_row() {
-    let examples = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples");
     let dir = std::env::temp_dir().join(format!("study-report-integrity-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     let clean = dir.join("clean");
-    let out = study(&[
-        "simulate",
-        &examples.join("mos.toml").display().to_string(),
-        "--subjects",
-        "3",
-        "--seed",
-        "5",
-        "-o",
-        &clean.display().to_string(),
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    simulate("mos.toml", &clean, &["--subjects", "3", "--seed", "5"]);
     let report = |res: &Path, name: &str, extra: &[&str]| {
         let rep = dir.join(format!("{name}-report")).display().to_string();
         let mut args = vec!["report", res.to_str().unwrap(), "-o", &rep, "--no-png"];
@@ -417,26 +384,15 @@ fn col(header: &[String], name: &str) -> usize {
     reason = "one study per protocol, each table read"
 )]
 fn report_tables_agree_and_say_what_they_are() {
-    let examples = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples");
     let dir = std::env::temp_dir().join(format!("study-report-agree-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
-    let simulate = |name: &str, subjects: &str| {
+    let simulated = |name: &str, subjects: &str| {
         let res = dir.join(format!("{name}-res"));
-        let out = study(&[
-            "simulate",
-            &examples.join(format!("{name}.toml")).display().to_string(),
-            "--subjects",
-            subjects,
-            "--seed",
-            "7",
-            "-o",
-            &res.display().to_string(),
-        ]);
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
+        simulate(
+            &format!("{name}.toml"),
+            &res,
+            &["--subjects", subjects, "--seed", "7"],
         );
         res
     };
@@ -461,7 +417,7 @@ fn report_tables_agree_and_say_what_they_are() {
     };
     // MOS with 8 hidden repeats: the MOS table's mean of every tested condition is the mean
     // its t-test row prints, and n is the number of subjects.
-    let mos_res = simulate("mos", "6");
+    let mos_res = simulated("mos", "6");
     let rep = report(&mos_res, "mos-report", &[]);
     let (h, rows) = table(&rep, "mos");
     let (codec, clip, cr, n, mean) = (
@@ -540,7 +496,7 @@ fn report_tables_agree_and_say_what_they_are() {
     );
     // DSCQS on 0-100: limits default to the scale (87.5 and 5), printed with it; the t-tests
     // and the screening are on reference − test differences.
-    let dscqs_res = simulate("dscqs", "8");
+    let dscqs_res = simulated("dscqs", "8");
     let rep = report(&dscqs_res, "dscqs-report", &[]);
     let md = std::fs::read_to_string(rep.join("report.md")).unwrap();
     assert!(md.contains("DMOS 5 (scale 0–100)"), "{md}");
