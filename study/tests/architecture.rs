@@ -264,7 +264,7 @@ fn the_pure_libraries_compile_no_database_client() {
     // (through `lab`'s feature) turns on: the statistics and the protocols build without a
     // database client or an async runtime.
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    for krate in ["analysis", "protocols", "results", "lab"] {
+    for krate in ["analysis", "protocols", "results", "lab", "report"] {
         let deps = tree(&root, krate);
         assert!(deps.contains(krate), "cargo tree -p {krate} lists {deps:?}");
         for client in ["postgres", "tokio-postgres", "tokio"] {
