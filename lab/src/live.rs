@@ -179,6 +179,76 @@ impl LiveStimuli {
             .map(|(c, r, _)| (c.as_str(), r.as_str()))
     }
 
+    /// `study check`'s lines of a live staircase (in place of
+    /// [`protocols::describe::method`]'s): its codec, clips and tracks, and every clip encoded
+    /// once at the first start level (proves the codec takes the settings and shows what a
+    /// trial will look like).
+    ///
+    /// # Errors
+    /// A codec error at that level.
+    pub fn describe(&self, study: &protocols::StudyDefinition) -> Result<String> {
+        use std::fmt::Write as _;
+        let mut text = String::new();
+        let (Some(sc), Some(live)) = (
+            &study.staircase,
+            study.staircase.as_ref().and_then(|s| s.live.as_ref()),
+        ) else {
+            return Ok(text);
+        };
+        let names: Vec<&str> = live.clips.iter().map(|c| c.clip.as_str()).collect();
+        // Writing into a String cannot fail.
+        let _ = writeln!(
+            text,
+            "  live staircase: codec {} encodes {} = level on the fly; clips {}: {}",
+            self.codec_name(),
+            sc.param,
+            match live.order {
+                protocols::ClipOrder::InTurn => "in turn",
+                protocols::ClipOrder::Shuffled => "in turn, order shuffled per subject",
+            },
+            names.join(", ")
+        );
+        for t in &sc.tracks {
+            let lo = t.settings.min.unwrap_or(f64::NEG_INFINITY);
+            let hi = t.settings.max.unwrap_or(f64::INFINITY);
+            let _ = match &sc.quest {
+                // A Bayesian track has no start: it picks each level from its posterior.
+                Some(q) => writeln!(
+                    text,
+                    "  {} track {:?}: {} levels in [{lo}, {hi}], each chosen from the posterior",
+                    match q.method {
+                        protocols::QuestMethod::QuestPlus => "QUEST+",
+                        protocols::QuestMethod::Psi => "Psi",
+                    },
+                    t.name,
+                    q.levels.len()
+                ),
+                None => writeln!(
+                    text,
+                    "  staircase {:?}: start {} in [{lo}, {hi}]",
+                    t.name, t.settings.start
+                ),
+            };
+        }
+        let Some(t) = sc.tracks.first() else {
+            return Ok(text);
+        };
+        let level = t.settings.start;
+        for (i, (clip, _)) in self.clips().enumerate() {
+            let s = self.at_level(i, level)?;
+            let _ = writeln!(
+                text,
+                "  clip {clip:?}: {} frames; at {} = {level}: CR {:.2}:1, RMS {:.3} cm ({} decoded frames)",
+                s.reference.frames(),
+                sc.param,
+                s.achieved_cr,
+                s.rms_cm,
+                s.test.frames()
+            );
+        }
+        Ok(text)
+    }
+
     /// Clip `index` (in [`Self::clips`] order) encoded at `level` (cached), without a trial:
     /// what a check shows of the settings before any session.
     ///

@@ -21,6 +21,7 @@
 //! ```
 
 pub mod catalog;
+pub mod describe;
 pub mod design;
 pub mod engine;
 pub mod manifest;
