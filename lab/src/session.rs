@@ -219,6 +219,66 @@ pub fn assign_group(
     Ok((Some(a.group), subject_index.unwrap_or(a.ordinal)))
 }
 
+/// Whose session [`open_subject`] opens, and how.
+#[derive(Debug, Clone, Copy)]
+pub struct SessionFor<'a> {
+    /// The subject's id.
+    pub subject: &'a str,
+    /// The subject's session number.
+    pub session: u32,
+    /// The between-subject group asked for (`study run --group`); `None`: the store assigns
+    /// one in a study with groups.
+    pub group: Option<&'a str>,
+    /// The plan's subject index when the caller fixes it (`--subject-index`, a participant's
+    /// plan group, a simulated subject's number); `None`: the session's place in its group,
+    /// or in a study without groups one derived from the id ([`subject_index`]).
+    pub subject_index: Option<u32>,
+    /// The simulated observer's seed; `None` for a real subject.
+    pub observer_seed: Option<u64>,
+    /// Continue the session if it was begun (a finished one is returned as such).
+    pub resume: bool,
+}
+
+/// Opens `who`'s session of `study` in `store`, the one way the window, `study serve` and
+/// simulation open a session: the between-subject group assigned ([`assign_group`]), then
+/// the session created, or resumed by replay ([`Recorder::open`]). `fill` completes the
+/// manifest of a new session (what a simulated subject states). Returns the session and its
+/// group.
+///
+/// # Errors
+/// As [`assign_group`] and [`Recorder::open`].
+pub fn open_subject(
+    study: &crate::StudyFile,
+    store: &mut dyn Store,
+    who: &SessionFor<'_>,
+    fill: &dyn Fn(&mut SessionManifest),
+) -> Result<(Opened, Option<String>)> {
+    let def = &study.definition;
+    let (group, index) = assign_group(
+        def,
+        store,
+        who.subject,
+        who.session,
+        who.group,
+        who.subject_index,
+    )?;
+    let mut fresh = new_manifest(
+        def,
+        SessionOf {
+            study_hash: &study.hash,
+            manifest_hash: &study.manifest_hash,
+            subject: who.subject.to_owned(),
+            subject_index: index,
+            session: who.session,
+            observer_seed: who.observer_seed,
+            group: group.clone(),
+        },
+    );
+    fill(&mut fresh);
+    let opened = Recorder::open(def, index, store, who.resume, fresh)?;
+    Ok((opened, group))
+}
+
 /// Refuses to resume the session recorded in `path` (`old`) as the one `fresh` describes
 /// when they are not the same session of the same study: study name and file hash, stimulus
 /// manifest hash, protocol, subject, plan and seeds.

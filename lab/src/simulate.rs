@@ -15,7 +15,7 @@ use results::{ResultsError, backend::Found, pg::PgStore};
 use crate::error::LabError;
 use crate::error::{Context as _, Result};
 use crate::results_dir::{self, Destination};
-use crate::session::{self, Opened, Recorder, SessionOf};
+use crate::session::{self, Opened};
 use crate::source::{self, StimulusSource};
 use crate::study::StudyFile;
 
@@ -256,27 +256,9 @@ fn simulate_into_database(
     Ok(())
 }
 
-/// The manifest of a new simulated session of `group` with plan index `plan_index`.
-fn new_manifest(
-    study: &StudyFile,
-    seed: u64,
-    subject: &Subject,
-    group: Option<String>,
-    plan_index: u32,
-) -> SessionManifest {
-    let def = &study.definition;
-    let mut m = session::new_manifest(
-        def,
-        SessionOf {
-            study_hash: &study.hash,
-            manifest_hash: &study.manifest_hash,
-            subject: subject.id.clone(),
-            subject_index: plan_index,
-            session: 1,
-            observer_seed: Some(seed),
-            group,
-        },
-    );
+/// What a simulated subject states in a new session's manifest: "simulated" for every
+/// subject field and the display.
+fn simulated(def: &protocols::StudyDefinition, m: &mut SessionManifest) {
     m.subject_fields = def
         .session
         .subject_fields
@@ -289,7 +271,6 @@ fn new_manifest(
         height_px: 0,
         refresh_hz: 0.0,
     });
-    m
 }
 
 /// One simulated subject's session in `store`; returns its one-line summary.
@@ -307,15 +288,18 @@ fn run_subject(
     let def = &study.definition;
     // In a study with between-subject groups the store assigns the group (the one with the
     // fewest sessions), and the plan index is the session's place in it, so each group's
-    // Latin square fills in turn; the observer stays the subject's.
-    let own_index = def.design.groups.is_empty().then_some(subject.index);
-    let (group, plan_index) = session::retry_outage(options.patience, report, || {
-        session::assign_group(def, &mut *store, &subject.id, 1, None, own_index)
-    })
-    .context(at)?;
-    let fresh = new_manifest(study, options.seed, subject, group, plan_index);
-    let opened = session::retry_outage(options.patience, report, || {
-        Recorder::open(def, plan_index, &mut *store, resume, fresh.clone())
+    // Latin square fills in turn; the observer stays the subject's. Assigning again after an
+    // outage gives the same group.
+    let who = session::SessionFor {
+        subject: &subject.id,
+        session: 1,
+        group: None,
+        subject_index: def.design.groups.is_empty().then_some(subject.index),
+        observer_seed: Some(options.seed),
+        resume,
+    };
+    let (opened, _) = session::retry_outage(options.patience, report, || {
+        session::open_subject(study, &mut *store, &who, &|m| simulated(def, m))
     })
     .context(at)?;
     let mut rec = match opened {

@@ -10,7 +10,7 @@ use anyhow::{Context as _, bail};
 use clap::Args;
 use lab::StudyFile;
 use lab::results_dir::Destination;
-use lab::session::{self, Opened, Recorder, SessionOf};
+use lab::session::{self, Opened, Recorder};
 use results::{FolderStore, Store};
 
 use window::native::{self, WindowOptions, WindowReport};
@@ -381,57 +381,44 @@ fn open_session(
     store: &mut dyn Store,
     subject: &str,
 ) -> anyhow::Result<Option<Box<Recorder>>> {
-    let (group, index) = session::assign_group(
-        &file.definition,
-        store,
+    let who = session::SessionFor {
         subject,
-        args.session,
-        args.group.as_deref(),
-        args.subject_index,
-    )?;
+        session: args.session,
+        group: args.group.as_deref(),
+        subject_index: args.subject_index,
+        observer_seed: None,
+        resume: args.resume,
+    };
+    let (opened, group) = session::open_subject(file, store, &who, &|_| {})?;
     if let Some(g) = &group {
         println!("{subject} session {}: group {g}", args.session);
     }
-    let fresh = session::new_manifest(
-        &file.definition,
-        SessionOf {
-            study_hash: &file.hash,
-            manifest_hash: &file.manifest_hash,
-            subject: subject.to_owned(),
-            subject_index: index,
-            session: args.session,
-            observer_seed: None,
-            group,
-        },
-    );
     let dir = store.session_path(subject, args.session);
-    Ok(
-        match Recorder::open(&file.definition, index, store, args.resume, fresh)? {
-            Opened::Finished(m) => {
-                println!(
-                    "{}: session already {:?} with {} trials; nothing to do",
-                    dir.display(),
-                    m.status,
-                    m.trials_logged
-                );
-                None
+    Ok(match opened {
+        Opened::Finished(m) => {
+            println!(
+                "{}: session already {:?} with {} trials; nothing to do",
+                dir.display(),
+                m.status,
+                m.trials_logged
+            );
+            None
+        }
+        Opened::Ready {
+            mut recorder,
+            resumed,
+        } => {
+            if args.measured.any() {
+                recorder.update_manifest(|m| {
+                    args.measured.apply(m.viewing.get_or_insert_default());
+                })?;
             }
-            Opened::Ready {
-                mut recorder,
-                resumed,
-            } => {
-                if args.measured.any() {
-                    recorder.update_manifest(|m| {
-                        args.measured.apply(m.viewing.get_or_insert_default());
-                    })?;
-                }
-                if resumed > 0 {
-                    println!("{}: resuming after {resumed} logged trials", dir.display());
-                }
-                Some(recorder)
+            if resumed > 0 {
+                println!("{}: resuming after {resumed} logged trials", dir.display());
             }
-        },
-    )
+            Some(recorder)
+        }
+    })
 }
 
 fn print_timing(report: &WindowReport) {

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex, MutexGuard, OnceLock, PoisonError};
 use std::time::Instant;
 
-use lab::session::{self, Opened, Recorder, SessionOf};
+use lab::session::{self, Opened, Recorder};
 use lab::source::StimulusSource;
 use lab::{LabError, StudyFile};
 use protocols::record::{Answer, Arrangement, Block, Position, Protocol, Response, Trial};
@@ -492,28 +492,6 @@ impl App {
         session::session_dir(&self.out, &p.subject, 1)
     }
 
-    /// The participant's subject index: their plan group, or else from their id as
-    /// `study run` derives it.
-    fn subject_index(p: &Participant) -> u32 {
-        p.group
-            .unwrap_or_else(|| session::subject_index(&p.subject, 1))
-    }
-
-    fn fresh_manifest(&self, p: &Participant) -> SessionManifest {
-        session::new_manifest(
-            &self.study.definition,
-            SessionOf {
-                study_hash: &self.study.hash,
-                manifest_hash: &self.study.manifest_hash,
-                subject: p.subject.clone(),
-                subject_index: Self::subject_index(p),
-                session: 1,
-                observer_seed: None,
-                group: None,
-            },
-        )
-    }
-
     /// Opens (resuming from disk) the session of `p` if it was begun and is not open.
     fn ensure_open(&self, p: &Participant, slot: &mut Slot) -> ApiResult<()> {
         if !matches!(slot, Slot::NotStarted) {
@@ -521,40 +499,52 @@ impl App {
         }
         let dir = self.session_dir(p);
         if dir.exists() {
-            *slot = self.open_session(p, self.fresh_manifest(p))?;
+            *slot = self.open_session(p, &|_| {})?;
         }
         Ok(())
     }
 
-    fn open_session(&self, p: &Participant, fresh: SessionManifest) -> ApiResult<Slot> {
+    /// Opens `p`'s session (one per participant): resumed from disk when it was begun, else
+    /// a new one whose manifest `fill` completes. Their plan group, if the study spreads
+    /// participants over groups, is their subject index.
+    fn open_session(
+        &self,
+        p: &Participant,
+        fill: &dyn Fn(&mut SessionManifest),
+    ) -> ApiResult<Slot> {
         let dir = self.session_dir(p);
-        let index = Self::subject_index(p);
-        Ok(
-            match Recorder::open(
-                &self.study.definition,
-                index,
-                &mut results::FolderStore::new(&self.out),
-                true,
-                fresh,
-            )? {
-                Opened::Finished(m) => Slot::Finished(m),
-                Opened::Ready { recorder, resumed } => {
-                    let last = if resumed > 0 {
-                        let path = dir.join(results::store::TRIALS_FILE);
-                        let t = results::read_trials(&path)
-                            .map_err(|e| ApiError::new(500, e.to_string()))?;
-                        t.records.last().map(|r| (r.trial.index, r.response.answer))
-                    } else {
-                        None
-                    };
-                    Slot::Live(Box::new(Live {
-                        rec: recorder,
-                        pending: None,
-                        last,
-                    }))
-                }
-            },
-        )
+        let who = session::SessionFor {
+            subject: &p.subject,
+            session: 1,
+            group: None,
+            subject_index: p.group,
+            observer_seed: None,
+            resume: true,
+        };
+        let (opened, _) = session::open_subject(
+            &self.study,
+            &mut results::FolderStore::new(&self.out),
+            &who,
+            fill,
+        )?;
+        Ok(match opened {
+            Opened::Finished(m) => Slot::Finished(m),
+            Opened::Ready { recorder, resumed } => {
+                let last = if resumed > 0 {
+                    let path = dir.join(results::store::TRIALS_FILE);
+                    let t = results::read_trials(&path)
+                        .map_err(|e| ApiError::new(500, e.to_string()))?;
+                    t.records.last().map(|r| (r.trial.index, r.response.answer))
+                } else {
+                    None
+                };
+                Slot::Live(Box::new(Live {
+                    rec: recorder,
+                    pending: None,
+                    last,
+                }))
+            }
+        })
     }
 
     /// What the page needs for the welcome, trial and end screens of `p`'s session.
@@ -676,20 +666,18 @@ impl App {
         }
         fields.insert("source".into(), p.source.clone());
         fields.extend(p.ids.clone());
-        let mut fresh = self.fresh_manifest(p);
-        fresh.subject_fields = fields;
         let dpr = if env.device_pixel_ratio.is_finite() && env.device_pixel_ratio > 0.0 {
             env.device_pixel_ratio.min(16.0)
         } else {
             1.0
         };
-        fresh.display = Some(DisplayInfo {
+        let display = DisplayInfo {
             description: format!("browser: {}", clip_text(&env.webgl_renderer, 200)),
             width_px: (f64::from(env.window_px[0]) * dpr) as u32,
             height_px: (f64::from(env.window_px[1]) * dpr) as u32,
             refresh_hz: env.refresh_hz,
-        });
-        fresh.browser = Some(BrowserInfo {
+        };
+        let browser = BrowserInfo {
             user_agent: clip_text(&env.user_agent, 400),
             webgl_renderer: clip_text(&env.webgl_renderer, 200),
             screen_px: env.screen_px,
@@ -699,8 +687,12 @@ impl App {
             fullscreen: env.fullscreen,
             hidden_trials: Vec::new(),
             windowed_trials: Vec::new(),
-        });
-        *slot = self.open_session(p, fresh)?;
+        };
+        *slot = self.open_session(p, &|fresh| {
+            fresh.subject_fields.clone_from(&fields);
+            fresh.display = Some(display.clone());
+            fresh.browser = Some(browser.clone());
+        })?;
         Ok(())
     }
 
