@@ -27,6 +27,7 @@ pub mod convert;
 pub mod data;
 pub mod error;
 pub mod fk;
+pub mod info;
 pub mod io;
 pub mod math;
 pub mod pairing;

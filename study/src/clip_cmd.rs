@@ -175,7 +175,7 @@ pub fn run(cmd: ClipCommand) -> Result<()> {
         ClipCommand::Info(input) => {
             let mut stdout = std::io::stdout().lock();
             for loaded in input.load()? {
-                stdout.write_all(info_text(&loaded.name, &loaded.clip).as_bytes())?;
+                stdout.write_all(motion::info::describe(&loaded.name, &loaded.clip).as_bytes())?;
             }
             Ok(())
         }
@@ -466,7 +466,7 @@ fn labelled_svg(
     let _ = writeln!(
         s,
         r#"<image x="0" y="0" width="{w}" height="{h}" xlink:href="data:image/png;base64,{}"/>"#,
-        base64(&png)
+        base64::Engine::encode(&base64::engine::general_purpose::STANDARD, &png)
     );
     let _ = writeln!(
         s,
@@ -506,28 +506,6 @@ fn xml_escape(text: &str) -> String {
             '\'' => out.push_str("&apos;"),
             c if c.is_control() => out.push(' '),
             c => out.push(c),
-        }
-    }
-    out
-}
-
-/// Standard base64 with padding (RFC 4648).
-fn base64(bytes: &[u8]) -> String {
-    const ALPHABET: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-    let mut out = String::with_capacity(bytes.len().div_ceil(3) * 4);
-    for chunk in bytes.chunks(3) {
-        let b = [
-            chunk[0],
-            chunk.get(1).copied().unwrap_or(0),
-            chunk.get(2).copied().unwrap_or(0),
-        ];
-        let n = (u32::from(b[0]) << 16) | (u32::from(b[1]) << 8) | u32::from(b[2]);
-        for k in 0..4 {
-            if k <= chunk.len() {
-                out.push(char::from(ALPHABET[((n >> (18 - 6 * k)) & 63) as usize]));
-            } else {
-                out.push('=');
-            }
         }
     }
     out
@@ -579,110 +557,9 @@ fn npy_bytes(pos: &fk::Positions, scale: f64) -> Result<Vec<u8>> {
     Ok(bytes)
 }
 
-/// The report of `study clip info` for one clip.
-pub fn info_text(name: &str, clip: &Clip) -> String {
-    let sk = &clip.skeleton;
-    let u = sk.units;
-    let mut s = String::new();
-    let fmt = match sk.format {
-        SkeletonFormat::Asf => "ASF/AMC",
-        SkeletonFormat::Bvh => "BVH",
-    };
-    let _ = writeln!(s, "{name}");
-    let _ = writeln!(s, "  format      {fmt} (skeleton `{}`)", sk.name);
-    let points = sk.joints.len();
-    let end_sites = sk.joints.iter().filter(|j| j.end_site).count();
-    let _ = writeln!(s, "  joints      {points} points ({end_sites} end sites)");
-    let _ = writeln!(s, "  DOF         {} channels", clip.channel_count());
-    let _ = writeln!(s, "  frames      {}", clip.frames());
-    let _ = writeln!(s, "  frame rate  {:.4} Hz", clip.frame_rate_hz);
-    let _ = writeln!(s, "  duration    {:.3} s", clip.duration_s());
-    let _ = writeln!(
-        s,
-        "  units       1 unit = {:.4} cm ({}), angles in degrees",
-        u.cm_per_unit,
-        if u.declared {
-            "declared by the file"
-        } else {
-            "inferred from the skeleton's height"
-        }
-    );
-    let _ = writeln!(s, "  bones       name  part  depth  length_cm");
-    for j in sk.joints.iter().filter(|j| j.parent.is_some()) {
-        let _ = writeln!(
-            s,
-            "    {:<14} {:<10} {:>2} {:>9.3}",
-            j.name,
-            j.body_part.name(),
-            j.chain_depth,
-            j.rest.length() * u.cm_per_unit
-        );
-    }
-    let _ = writeln!(s, "  channels    name  min  max");
-    let mut warnings = Vec::new();
-    for c in 0..clip.channel_count() {
-        let v = clip.channel(c);
-        let (lo, hi) = v
-            .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| {
-                (l.min(x), h.max(x))
-            });
-        let cname = clip.channel_name(c);
-        let _ = writeln!(s, "    {cname:<22} {lo:>11.4} {hi:>11.4}");
-        let ch = clip.channels()[c];
-        #[expect(clippy::float_cmp, reason = "constant means every value is identical")]
-        let constant = lo == hi;
-        if clip.frames() > 1 && constant {
-            warnings.push(format!("{cname} is constant ({lo})"));
-        }
-        if ch.kind.is_rotation() {
-            let wraps = v.windows(2).filter(|w| (w[1] - w[0]).abs() > 180.0).count();
-            if wraps > 0 {
-                warnings.push(format!(
-                    "{cname} jumps by more than 180° between frames {wraps} times (Euler wrap)"
-                ));
-            }
-        }
-        let joint = &sk.joints[ch.joint];
-        let k = joint.dofs.iter().position(|d| *d == ch.kind);
-        if let Some((min, max)) = k.and_then(|k| joint.limits.get(k)) {
-            let out = v.iter().filter(|&&x| x < *min || x > *max).count();
-            if out > 0 {
-                warnings.push(format!(
-                    "{cname} is outside its ASF limits ({min}, {max}) in {out} frames"
-                ));
-            }
-        }
-    }
-    if warnings.is_empty() {
-        let _ = writeln!(s, "  warnings    none");
-    } else {
-        let _ = writeln!(s, "  warnings    {}", warnings.len());
-        for w in warnings {
-            let _ = writeln!(s, "    - {w}");
-        }
-    }
-    s
-}
-
 #[cfg(test)]
 mod tests {
-    use super::{base64, xml_escape};
-
-    #[test]
-    fn base64_matches_rfc_4648_vectors() {
-        for (plain, coded) in [
-            ("", ""),
-            ("f", "Zg=="),
-            ("fo", "Zm8="),
-            ("foo", "Zm9v"),
-            ("foob", "Zm9vYg=="),
-            ("fooba", "Zm9vYmE="),
-            ("foobar", "Zm9vYmFy"),
-        ] {
-            assert_eq!(base64(plain.as_bytes()), coded, "{plain:?}");
-        }
-    }
+    use super::xml_escape;
 
     #[test]
     fn labels_are_escaped_for_xml() {
