@@ -311,3 +311,36 @@ fn the_rule_parser_sees_a_forbidden_dependency() {
     assert!(t["codecs"].forbidden.contains("wgpu"));
     assert!(t["codecs"].allowed.is_empty());
 }
+
+/// The lines of the Rust files under `dir`, each file with its count.
+fn rust_lines(dir: &Path) -> Vec<(String, usize)> {
+    let mut out = Vec::new();
+    for entry in std::fs::read_dir(dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.is_dir() {
+            out.extend(rust_lines(&path));
+        } else if path.extension().is_some_and(|e| e == "rs") {
+            let text = std::fs::read_to_string(&path).unwrap();
+            out.push((path.display().to_string(), text.lines().count()));
+        }
+    }
+    out
+}
+
+#[test]
+fn the_binary_stays_thin() {
+    // Every command is a short function over the libraries (ARCHITECTURE.md): what a
+    // command does beyond parsing its arguments and printing belongs in a library crate,
+    // where the window, `study serve` and tests can call it too.
+    const MOST: usize = 3_000;
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let mut files = rust_lines(&src);
+    let total: usize = files.iter().map(|(_, n)| n).sum();
+    files.sort_by_key(|(_, n)| std::cmp::Reverse(*n));
+    assert!(files.len() >= 10, "{files:?}");
+    assert!(
+        total <= MOST,
+        "study/src has {total} lines (at most {MOST}); the largest: {:?}",
+        &files[..3]
+    );
+}
