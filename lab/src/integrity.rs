@@ -20,7 +20,7 @@ use std::path::{Path, PathBuf};
 use std::sync::{Mutex, PoisonError};
 
 use protocols::engine::{Session, SessionStatus};
-use protocols::{Protocol, StudyDefinition};
+use protocols::StudyDefinition;
 use results::store::{SESSION_FILE, SessionState, TRIALS_FILE};
 use results::{RunManifest, SessionResults};
 
@@ -456,7 +456,7 @@ fn replayed_in_full(
 /// How many trials the plan still holds after the logged rows, as words (" of N planned"),
 /// or "" when the plan has no fixed length (a staircase).
 fn remaining(study: &StudyDefinition, s: &SessionResults, engine: &Session) -> String {
-    if study.protocol == Protocol::Staircase {
+    if study.method().adaptive() {
         return String::new();
     }
     let left = engine.not_shown().len();
@@ -469,7 +469,7 @@ fn remaining(study: &StudyDefinition, s: &SessionResults, engine: &Session) -> S
 /// What the plan still holds after the rows of a session marked complete, if anything.
 fn unfinished_plan(study: &StudyDefinition, engine: &mut Session) -> Option<String> {
     match engine.next_trial(0) {
-        Ok(Some(t)) => Some(if study.protocol == Protocol::Staircase {
+        Ok(Some(t)) => Some(if study.method().adaptive() {
             format!("more staircase trials (trial {} is due)", t.index)
         } else {
             format!("{} more trials", engine.not_shown().len() + 1)
@@ -485,9 +485,8 @@ mod tests {
     use std::collections::BTreeMap;
     use std::path::Path;
 
-    use protocols::{
-        Answer, Arrangement, Block, Position, Protocol, Response, Session, TrialRecord,
-    };
+    use protocols::methods::AnswerKind;
+    use protocols::{Answer, Arrangement, Block, Position, Response, Session, TrialRecord};
     use results::store::{SessionManifest, SessionState};
     use results::{SessionResults, TrialsFile};
 
@@ -508,20 +507,16 @@ mod tests {
                 while let Some(trial) = engine.next_trial(0).unwrap() {
                     let k = records.len();
                     let end = if k % 2 == 0 { d.scale.min } else { d.scale.max };
-                    let answer = match d.protocol {
-                        Protocol::Mos | Protocol::Acr | Protocol::Dcr | Protocol::Mushra => {
-                            Answer::Rating(end)
-                        }
-                        Protocol::Dscqs => Answer::Pair {
+                    let answer = match d.method().answer_kind() {
+                        AnswerKind::Rating => Answer::Rating(end),
+                        AnswerKind::RatingPair => Answer::Pair {
                             a: end,
                             b: d.scale.max,
                         },
-                        Protocol::Staircase | Protocol::PairComparison if k % 3 == 2 => {
+                        AnswerKind::Choice if k % 3 == 2 => {
                             Answer::Choice(flip(trial.reference_position))
                         }
-                        Protocol::Staircase | Protocol::PairComparison => {
-                            Answer::Choice(trial.reference_position)
-                        }
+                        AnswerKind::Choice => Answer::Choice(trial.reference_position),
                     };
                     let response = Response {
                         answer,

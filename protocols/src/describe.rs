@@ -5,7 +5,7 @@
 
 use std::fmt::Write as _;
 
-use crate::{Protocol, StudyDefinition};
+use crate::StudyDefinition;
 
 /// The study's name, the title and instructions its subjects read, its protocol and seed.
 pub fn header(study: &StudyDefinition) -> String {
@@ -25,18 +25,11 @@ pub fn header(study: &StudyDefinition) -> String {
 }
 
 /// What a session of the study's method holds: its trials (or screens, or staircases) and
-/// presentation time.
+/// presentation time ([`crate::methods::Method::describe`]).
 pub fn method(study: &StudyDefinition) -> String {
     let mut text = String::new();
     // Writing into a String cannot fail.
-    let _ = match study.protocol {
-        Protocol::Mos | Protocol::Dscqs | Protocol::Acr | Protocol::Dcr => {
-            describe_ratings(&mut text, study)
-        }
-        Protocol::PairComparison => describe_pairs(&mut text, study),
-        Protocol::Mushra => describe_mushra(&mut text, study),
-        Protocol::Staircase => describe_staircase(&mut text, study),
-    };
+    let _ = study.method().describe(study, &mut text);
     text
 }
 
@@ -52,20 +45,14 @@ pub fn design(study: &StudyDefinition) -> String {
     text
 }
 
-/// The trials of a session of between-subject group `group`.
-fn group_trials(study: &StudyDefinition, group: &str) -> Option<u32> {
-    let of_group = study.for_group(Some(group)).ok()?;
-    crate::texts::planned_trials(&of_group).exact()
-}
-
 /// Counterbalancing: the order of the conditions and where the reference goes.
 fn describe_design(text: &mut String, study: &StudyDefinition) -> std::fmt::Result {
-    use crate::study::{ConditionOrder, ReferencePlacement};
+    use crate::study::ConditionOrder;
     for g in &study.design.groups {
         let quota = g
             .quota
             .map_or_else(|| "no quota".into(), |q| format!("quota {q}"));
-        let trials = group_trials(study, &g.name).unwrap_or(0);
+        let trials = crate::methods::common::group_trials(study, &g.name).unwrap_or(0);
         writeln!(
             text,
             "  group {}: {} condition(s), {trials} trials per session, {quota}",
@@ -82,11 +69,7 @@ fn describe_design(text: &mut String, study: &StudyDefinition) -> std::fmt::Resu
     } else if study.design.order == ConditionOrder::LatinSquare {
         // A pair comparison orders its pairs, a MUSHRA study its screens (one per clip), the
         // others their conditions.
-        let items = match study.protocol {
-            Protocol::PairComparison => study.pairs().len(),
-            Protocol::Mushra => crate::study::mushra_screens(&study.conditions).len(),
-            _ => study.conditions.len(),
-        };
+        let items = study.method().ordered_items(study);
         let rows = crate::design::williams_rows(items);
         writeln!(
             text,
@@ -94,24 +77,9 @@ fn describe_design(text: &mut String, study: &StudyDefinition) -> std::fmt::Resu
              k mod {rows}; a complete block is {rows} subjects"
         )?;
     }
-    let side = match study.presentation.reference_position {
-        _ if study.protocol == Protocol::Mushra => {
-            "a pane of its own, labelled; the rated stimuli shuffled over the lettered panes \
-             per screen and subject"
-                .to_string()
-        }
-        ReferencePlacement::Fixed(p) => format!("always {p}"),
-        ReferencePlacement::Random => "random per trial".to_string(),
-        ReferencePlacement::Balanced => match study.protocol {
-            Protocol::Staircase => "balanced (each block of 4 trials, mirrored for the next \
-                                    subject)"
-                .to_string(),
-            Protocol::PairComparison => {
-                "balanced (per pair, mirrored for the next subject)".to_string()
-            }
-            _ => "balanced (per condition, mirrored for the next subject)".to_string(),
-        },
-    };
+    let side = study
+        .method()
+        .describe_reference(study.presentation.reference_position);
     writeln!(text, "  reference position: {side}")?;
     if let Some(sc) = &study.staircase
         && sc.practice_trials > 0
@@ -132,165 +100,6 @@ fn describe_design(text: &mut String, study: &StudyDefinition) -> std::fmt::Resu
             text,
             "  viewing conditions (confirmed before each session): {}",
             stated.join(", ")
-        )?;
-    }
-    Ok(())
-}
-
-/// A MOS or DSCQS study's trials and presentation time.
-fn describe_ratings(text: &mut String, study: &StudyDefinition) -> std::fmt::Result {
-    let n = study.familiarization.len()
-        + study.conditions.len()
-        + study.session.hidden_repeats as usize;
-    if study.design.groups.is_empty() {
-        writeln!(
-            text,
-            "  trials per session: {n} ({} familiarization, {} conditions, {} hidden repeats)",
-            study.familiarization.len(),
-            study.conditions.len(),
-            study.session.hidden_repeats
-        )?;
-    } else {
-        writeln!(
-            text,
-            "  conditions: {} in {} between-subject groups (each session sees its group's; \
-             {} familiarization, {} hidden repeats)",
-            study.conditions.len(),
-            study.design.groups.len(),
-            study.familiarization.len(),
-            study.session.hidden_repeats
-        )?;
-    }
-    let hidden = study
-        .conditions
-        .iter()
-        .filter(|c| c.stimulus == c.reference)
-        .count();
-    if hidden > 0 {
-        writeln!(
-            text,
-            "  hidden references: {hidden} (ACR-HR: DMOS = test - hidden reference + 5)"
-        )?;
-    }
-    // A session of a between-subject group shows its group's trials: the largest group's.
-    let n = if study.design.groups.is_empty() {
-        n
-    } else {
-        study
-            .design
-            .groups
-            .iter()
-            .filter_map(|g| group_trials(study, &g.name))
-            .max()
-            .map_or(n, |t| t as usize)
-    };
-    let est_min = n as f64 * study.trial_presentation_ms() as f64 / 60_000.0;
-    writeln!(
-        text,
-        "  presentation time: {est_min:.1} min without answers"
-    )
-}
-
-/// A pair comparison's pairs, trials and presentation time.
-fn describe_pairs(text: &mut String, study: &StudyDefinition) -> std::fmt::Result {
-    let pairs = study.pairs().len();
-    let n = pairs + study.session.hidden_repeats as usize;
-    writeln!(
-        text,
-        "  trials per session: {n} ({pairs} pairs of {} conditions, {} hidden repeats with \
-         the sides swapped)",
-        study.conditions.len(),
-        study.session.hidden_repeats
-    )?;
-    let anchors = study
-        .conditions
-        .iter()
-        .filter(|c| c.stimulus == c.reference)
-        .count();
-    if anchors > 0 {
-        writeln!(
-            text,
-            "  originals compared: {anchors} (unlabelled; each clip's scale is anchored at its \
-             original)"
-        )?;
-    }
-    let est_min = n as f64 * study.trial_presentation_ms() as f64 / 60_000.0;
-    writeln!(
-        text,
-        "  presentation time: {est_min:.1} min without answers"
-    )
-}
-
-/// A MUSHRA study: its screens (one per clip) with their panes, the anchors and the
-/// post-screening rules.
-fn describe_mushra(text: &mut String, study: &StudyDefinition) -> std::fmt::Result {
-    use crate::study::AnchorRule;
-    let Some(m) = &study.mushra else {
-        return Ok(());
-    };
-    let screens = crate::study::mushra_screens(&study.conditions);
-    let rated: usize = screens.iter().map(|(_, c)| c.len() + 2).sum();
-    writeln!(
-        text,
-        "  screens per session: {} (one per clip), {rated} rated panes in all",
-        screens.len()
-    )?;
-    if m.training_screens > 0 {
-        writeln!(
-            text,
-            "  training (BS.1534-3): the screen(s) of the first {} clip(s) shown first, rated, \
-             not analysed",
-            m.training_screens
-        )?;
-    }
-    for (reference, tests) in &screens {
-        let anchor = m
-            .anchors
-            .iter()
-            .find(|a| a.reference == *reference)
-            .map_or("?", |a| a.stimulus.as_str());
-        writeln!(
-            text,
-            "  screen {reference:?}: {} test conditions + hidden reference + anchor {anchor:?}",
-            tests.len()
-        )?;
-    }
-    writeln!(
-        text,
-        "  post-screening (BS.1534-3): excluded when the hidden reference is rated below {} on \
-         more than {}% of the screens; the anchor rated above {} on more than {}%: {}",
-        m.reference_below,
-        100.0 * m.max_fraction,
-        m.anchor_above,
-        100.0 * m.max_fraction,
-        match m.anchor_rule {
-            AnchorRule::Report => "reported, kept",
-            AnchorRule::Exclude => "excluded",
-        }
-    )?;
-    let shown = screens.len() + m.training_screens as usize;
-    let est_min = shown as f64 * study.trial_presentation_ms() as f64 / 60_000.0;
-    writeln!(
-        text,
-        "  presentation time: {est_min:.1} min without answers"
-    )
-}
-
-/// A staircase over the manifest's stimuli: each track's clip and levels.
-fn describe_staircase(text: &mut String, study: &StudyDefinition) -> std::fmt::Result {
-    let Some(sc) = &study.staircase else {
-        return Ok(());
-    };
-    for t in &sc.tracks {
-        writeln!(
-            text,
-            "  staircase {:?}: clip {:?}, {} stimulus levels of {} from {} to {}",
-            t.name,
-            t.clip,
-            t.levels.len(),
-            sc.param,
-            t.levels.first().map_or(0.0, |l| l.0),
-            t.levels.last().map_or(0.0, |l| l.0)
         )?;
     }
     Ok(())

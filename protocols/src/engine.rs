@@ -659,21 +659,7 @@ impl Session {
         let Some(trial) = &self.pending else {
             return Vec::new();
         };
-        let answers = match self.protocol {
-            Protocol::Mos | Protocol::Acr | Protocol::Dcr | Protocol::Mushra => {
-                vec![Answer::Rating(self.scale.min)]
-            }
-            Protocol::Dscqs => vec![Answer::Pair {
-                a: self.scale.min,
-                b: self.scale.min,
-            }],
-            // The plan does not depend on which stimulus was preferred.
-            Protocol::PairComparison => vec![Answer::Choice(trial.reference_position)],
-            Protocol::Staircase => vec![
-                Answer::Choice(trial.reference_position),
-                Answer::Choice(trial.reference_position.other()),
-            ],
-        };
+        let answers = crate::methods::of(self.protocol).distinct_answers(trial, &self.scale);
         let mut next: Vec<Trial> = Vec::with_capacity(answers.len());
         for answer in answers {
             let mut branch = self.clone();

@@ -25,6 +25,7 @@ pub mod describe;
 pub mod design;
 pub mod engine;
 pub mod manifest;
+pub mod methods;
 pub mod observer;
 pub mod quest;
 pub mod record;

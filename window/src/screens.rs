@@ -13,7 +13,8 @@ use std::collections::{HashMap, VecDeque};
 use std::sync::Arc;
 
 use egui::{Align, Color32, Key, Layout, RichText, Ui, Vec2};
-use protocols::record::{Answer, Arrangement, Block, Position, Protocol, Response, Trial};
+use protocols::methods::AnswerWidget;
+use protocols::record::{Answer, Arrangement, Block, Position, Response, Trial};
 use protocols::study::{RatingScale, ScaleKind, StimulusLabels};
 use protocols::{FrameTiming, StimulusEncoding, StudyDefinition};
 
@@ -24,7 +25,7 @@ use super::timing::FrameClock;
 use super::viewing::ViewingForm;
 use lab::session::Recorder;
 use lab::source::StimulusSource;
-pub use protocols::texts::{AFC_QUESTION, ANSWER_RECORDED, PC_QUESTION, default_instructions};
+pub use protocols::texts::{ANSWER_RECORDED, default_instructions};
 use protocols::texts::{
     Planned, categories, dscqs_names, format_rating, grade_labels, planned_trials, quality_label,
 };
@@ -136,6 +137,8 @@ pub struct StudyUi {
     consent: bool,
     views: HashMap<String, View>,
     planned: Planned,
+    /// What the subject answers each trial with, and its words (the study's method's).
+    widget: AnswerWidget,
     gpu: bool,
     /// Until when "Answer recorded" stays up.
     ack_until: Option<f64>,
@@ -188,6 +191,7 @@ impl StudyUi {
             ))),
             _ => Screen::Welcome,
         };
+        let widget = study.method().answer_widget(&study);
         StudyUi {
             study,
             stimuli,
@@ -199,6 +203,7 @@ impl StudyUi {
             consent: false,
             views: HashMap::new(),
             planned,
+            widget,
             gpu,
             ack_until: None,
             end_since: None,
@@ -772,21 +777,14 @@ impl StudyUi {
         let ack = self.ack_until.is_some_and(|u| now < u);
         progress_panel(ui, t, self.recorder.answered(), self.planned, ack);
         let labels = self.study.presentation.labels.as_ref();
+        let scale = &self.study.scale;
         let (answer, replay) = egui::Panel::bottom("answer")
             .min_size(150.0)
             .resizable(false)
             .show(ui, |ui| {
                 ui.add_space(8.0);
                 let answer = ui
-                    .vertical_centered(|ui| match self.study.protocol {
-                        Protocol::Mos => mos_answer(ui, t, &self.study.scale, labels, open),
-                        Protocol::Acr => acr_answer(ui, t, &self.study.scale, open),
-                        Protocol::Dcr => dcr_answer(ui, t, &self.study.scale, labels, open),
-                        Protocol::Dscqs => dscqs_answer(ui, t, &self.study.scale, open),
-                        Protocol::Staircase => afc_answer(ui, t, AFC_QUESTION, open),
-                        Protocol::PairComparison => afc_answer(ui, t, PC_QUESTION, open),
-                        Protocol::Mushra => mushra_answer(ui, t, &self.study.scale, open),
-                    })
+                    .vertical_centered(|ui| answer(ui, &self.widget, t, scale, open))
                     .inner;
                 (answer, replay_row(ui, t, active))
             })
@@ -1339,26 +1337,25 @@ fn rate_hint(scale: &RatingScale, what: &str) -> String {
     }
 }
 
-/// MOS: one rating of the compressed motion (named by its label where labels are shown).
-fn mos_answer(
+/// The widget the study's method answers with ([`AnswerWidget`]), drawn with its words;
+/// the answer once the subject confirms it.
+fn answer(
     ui: &mut Ui,
+    widget: &AnswerWidget,
     t: &mut TrialScreen,
     scale: &RatingScale,
-    labels: Option<&StimulusLabels>,
     open: bool,
 ) -> Option<Answer> {
-    let (question, what) = match labels {
-        Some(l) => (
-            format!("Rate the quality of the motion labelled “{}”", l.test),
-            format!("“{}”", l.test),
-        ),
-        None => (
-            "Rate the quality of the compressed motion".to_string(),
-            "the compressed motion".to_string(),
-        ),
-    };
-    let name = labels.map_or("Quality", |l| l.test.as_str());
-    single_rating(ui, t, scale, open, (&question, &what, name))
+    match widget {
+        AnswerWidget::Rating {
+            question,
+            missing,
+            name,
+        } => single_rating(ui, t, scale, open, (question, missing, name)),
+        AnswerWidget::RatingPair => dscqs_answer(ui, t, scale, open),
+        AnswerWidget::Choice { question } => afc_answer(ui, t, question, open),
+        AnswerWidget::SliderGrid { question } => mushra_answer(ui, t, scale, question, open),
+    }
 }
 
 /// One rating on a scale under `question`: buttons for a categorical scale, a vertical
@@ -1386,42 +1383,6 @@ fn single_rating(
         return t.rating.map(Answer::Rating);
     }
     None
-}
-
-/// ACR (P.910): one rating of the one motion shown, on the quality scale.
-fn acr_answer(ui: &mut Ui, t: &mut TrialScreen, scale: &RatingScale, open: bool) -> Option<Answer> {
-    single_rating(
-        ui,
-        t,
-        scale,
-        open,
-        ("Rate the quality of the motion", "the motion", "Quality"),
-    )
-}
-
-/// DCR (P.910, BT.500 DSIS): one rating of the test's impairment against the reference, on
-/// the five impairment categories.
-fn dcr_answer(
-    ui: &mut Ui,
-    t: &mut TrialScreen,
-    scale: &RatingScale,
-    labels: Option<&StimulusLabels>,
-    open: bool,
-) -> Option<Answer> {
-    let question = match labels {
-        Some(l) => format!(
-            "How impaired is “{}” compared with “{}”?",
-            l.test, l.reference
-        ),
-        None => "How impaired is the compressed motion compared with the original?".to_string(),
-    };
-    single_rating(
-        ui,
-        t,
-        scale,
-        open,
-        (&question, "the impairment", "Impairment"),
-    )
 }
 
 /// DSCQS: a rating of A and one of B (of 1 and 2 when shown one after the other). On a
@@ -1745,14 +1706,10 @@ fn mushra_answer(
     ui: &mut Ui,
     t: &mut TrialScreen,
     scale: &RatingScale,
+    question: &str,
     open: bool,
 ) -> Option<Answer> {
-    ui.label(
-        RichText::new(
-            "Rate each lettered motion against the reference, from 0 (bad) to 100 (excellent)",
-        )
-        .size(18.0),
-    );
+    ui.label(RichText::new(question).size(18.0));
     let step = scale.step.unwrap_or(1.0);
     let n = t.panes.len();
     let w = 64.0;

@@ -5,6 +5,7 @@
 use std::path::Path;
 
 use postgres::types::ToSql;
+use protocols::methods::AnswerKind;
 use protocols::{
     Answer, Block, FrameTiming, Outcome, Protocol, Response, StimulusEncoding, Trial, TrialRecord,
 };
@@ -492,15 +493,13 @@ fn csv_column(i: usize) -> usize {
 
 fn decode(row: &Tuple<'_>) -> Field<TrialRecord> {
     let protocol: Protocol = row.named(7)?;
-    let answer = match protocol {
-        Protocol::Mos | Protocol::Acr | Protocol::Dcr | Protocol::Mushra => {
-            Answer::Rating(row.finite(16)?)
-        }
-        Protocol::Dscqs => Answer::Pair {
+    let answer = match protocols::methods::of(protocol).answer_kind() {
+        AnswerKind::Rating => Answer::Rating(row.finite(16)?),
+        AnswerKind::RatingPair => Answer::Pair {
             a: row.finite(17)?,
             b: row.finite(18)?,
         },
-        Protocol::Staircase | Protocol::PairComparison => Answer::Choice(row.named(19)?),
+        AnswerKind::Choice => Answer::Choice(row.named(19)?),
     };
     let encoding = match row.opt_str(31)? {
         None => None,

@@ -1,0 +1,129 @@
+//! What several methods share: the words of a rating scale in the instructions, the
+//! practice sentence, the rating methods' `study check` lines.
+
+use std::fmt::{self, Write as _};
+
+use crate::study::{RatingScale, ReferencePlacement, ScaleKind, StudyDefinition};
+use crate::texts::{Planned, format_rating};
+
+/// How the rating is given, for the instructions.
+pub(super) fn scale_instructions(scale: &RatingScale, what: &str) -> String {
+    match scale.kind {
+        ScaleKind::Categorical => format!(
+            "Rate {what} from {} (worst) to {} (best), with the mouse or the number keys \
+             (the Up and Down arrow keys move by one step), then press Continue (Enter).",
+            format_rating(scale.min),
+            format_rating(scale.max)
+        ),
+        ScaleKind::Continuous => format!(
+            "Rate {what} by placing a mark on the scale, from Bad at the bottom to Excellent at \
+             the top: click or drag, or press 1 (Bad) to 5 (Excellent) and move the mark with \
+             the Up and Down arrow keys (Page Up and Page Down for larger steps). Then press \
+             Continue (Enter)."
+        ),
+    }
+}
+
+/// " The first few trials show the range of {what} you will meet." where the session opens
+/// with familiarization trials (`[session] familiarization`), else nothing: the
+/// instructions promise no practice a study does not give.
+pub(super) fn practice_sentence(study: &StudyDefinition, what: &str) -> String {
+    if study.familiarization.is_empty() {
+        String::new()
+    } else {
+        format!(" The first few trials show the range of {what} you will meet.")
+    }
+}
+
+/// Whether the original itself is among the versions a subject compares or rates unlabelled
+/// (`[conditions] hidden_reference`: a condition whose stimulus is its reference).
+pub(super) fn original_among_versions(study: &StudyDefinition) -> bool {
+    study.conditions.iter().any(|c| c.stimulus == c.reference)
+}
+
+/// The trials of a rating method's session: familiarization, conditions, hidden repeats.
+pub(super) fn rating_trials(study: &StudyDefinition) -> Planned {
+    Planned::Exactly(
+        (study.familiarization.len()
+            + study.conditions.len()
+            + study.session.hidden_repeats as usize) as u32,
+    )
+}
+
+/// The trials of a session of between-subject group `group`.
+pub(crate) fn group_trials(study: &StudyDefinition, group: &str) -> Option<u32> {
+    let of_group = study.for_group(Some(group)).ok()?;
+    of_group.method().planned_trials(&of_group).exact()
+}
+
+/// Where the reference goes; a balanced placement balances `per` ("per condition").
+pub(super) fn describe_reference(placement: ReferencePlacement, per: &str) -> String {
+    match placement {
+        ReferencePlacement::Fixed(p) => format!("always {p}"),
+        ReferencePlacement::Random => "random per trial".to_string(),
+        ReferencePlacement::Balanced => format!("balanced ({per}, mirrored for the next subject)"),
+    }
+}
+
+/// A rating method's (MOS, DSCQS, ACR, DCR) trials and presentation time.
+pub(super) fn describe_ratings(text: &mut String, study: &StudyDefinition) -> fmt::Result {
+    let n = study.familiarization.len()
+        + study.conditions.len()
+        + study.session.hidden_repeats as usize;
+    if study.design.groups.is_empty() {
+        writeln!(
+            text,
+            "  trials per session: {n} ({} familiarization, {} conditions, {} hidden repeats)",
+            study.familiarization.len(),
+            study.conditions.len(),
+            study.session.hidden_repeats
+        )?;
+    } else {
+        writeln!(
+            text,
+            "  conditions: {} in {} between-subject groups (each session sees its group's; \
+             {} familiarization, {} hidden repeats)",
+            study.conditions.len(),
+            study.design.groups.len(),
+            study.familiarization.len(),
+            study.session.hidden_repeats
+        )?;
+    }
+    let hidden = study
+        .conditions
+        .iter()
+        .filter(|c| c.stimulus == c.reference)
+        .count();
+    if hidden > 0 {
+        writeln!(
+            text,
+            "  hidden references: {hidden} (ACR-HR: DMOS = test - hidden reference + 5)"
+        )?;
+    }
+    // A session of a between-subject group shows its group's trials: the largest group's.
+    let n = if study.design.groups.is_empty() {
+        n
+    } else {
+        study
+            .design
+            .groups
+            .iter()
+            .filter_map(|g| group_trials(study, &g.name))
+            .max()
+            .map_or(n, |t| t as usize)
+    };
+    presentation_time(text, study, n)
+}
+
+/// "presentation time: … min without answers" for `shown` trials (or screens).
+pub(super) fn presentation_time(
+    text: &mut String,
+    study: &StudyDefinition,
+    shown: usize,
+) -> fmt::Result {
+    let est_min = shown as f64 * study.trial_presentation_ms() as f64 / 60_000.0;
+    writeln!(
+        text,
+        "  presentation time: {est_min:.1} min without answers"
+    )
+}

@@ -1,0 +1,84 @@
+//! DSCQS (ITU-R BT.500; thesis 6.5 shows the two one after the other): two motions, one of
+//! them possibly the original, both rated; the score is reference minus test.
+
+use std::fmt;
+
+use super::common::{describe_ratings, rating_trials, scale_instructions};
+use super::{AnswerKind, AnswerWidget, Method};
+use crate::record::{Answer, Arrangement, Position, Protocol, Trial};
+use crate::study::{RatingScale, ReferencePlacement, ScaleKind, StudyDefinition};
+use crate::texts::{Planned, dscqs_names};
+
+/// Double-stimulus continuous quality scale.
+pub(super) struct Dscqs;
+
+impl Method for Dscqs {
+    fn protocol(&self) -> Protocol {
+        Protocol::Dscqs
+    }
+
+    fn answer_kind(&self) -> AnswerKind {
+        AnswerKind::RatingPair
+    }
+
+    fn answer_widget(&self, _study: &StudyDefinition) -> AnswerWidget {
+        AnswerWidget::RatingPair
+    }
+
+    fn instructions(&self, study: &StudyDefinition) -> String {
+        let p = &study.presentation;
+        let [a, b] = dscqs_names(p.arrangement);
+        let keys = if study.scale.kind == ScaleKind::Continuous {
+            format!(
+                " The number keys mark {a} first, then {b}; the Left and Right arrow keys \
+                 choose which scale the keys move."
+            )
+        } else {
+            format!(
+                " The number keys rate {a} first, then {b}; the Left and Right arrow keys \
+                 choose which row the keys change."
+            )
+        };
+        let shows = if p.arrangement == Arrangement::Sequential {
+            let which = match p.reference_position {
+                ReferencePlacement::Fixed(Position::First) => {
+                    "The first is the original, the second a compressed version of it."
+                }
+                ReferencePlacement::Fixed(_) => {
+                    "The second is the original, the first a compressed version of it."
+                }
+                ReferencePlacement::Random | ReferencePlacement::Balanced => {
+                    "One of them may be the original; you are not told which."
+                }
+            };
+            format!(
+                "Each trial shows two motions one after the other, {a} then {b}, with a grey \
+                 screen between them. {which} Then rate both."
+            )
+        } else {
+            "Each trial shows two motions, A and B, twice, with a grey screen between them: \
+             A, B, A, B. One of them may be the original; you are not told which. After the \
+             second B, rate both."
+                .to_string()
+        };
+        format!(
+            "{shows} {}{keys}",
+            scale_instructions(&study.scale, &format!("the quality of {a} and of {b}"))
+        )
+    }
+
+    fn planned_trials(&self, study: &StudyDefinition) -> Planned {
+        rating_trials(study)
+    }
+
+    fn describe(&self, study: &StudyDefinition, text: &mut String) -> fmt::Result {
+        describe_ratings(text, study)
+    }
+
+    fn distinct_answers(&self, _trial: &Trial, scale: &RatingScale) -> Vec<Answer> {
+        vec![Answer::Pair {
+            a: scale.min,
+            b: scale.min,
+        }]
+    }
+}

@@ -1,0 +1,96 @@
+//! 2AFC staircases (thesis ch. 5: two-down-one-up; QUEST+ and Psi; live, with the codec in
+//! the loop): two motions side by side, the more natural one chosen. The tracks are
+//! `staircase`'s and `quest`'s, the study file's `[staircase]` `study::staircase`'s.
+
+use std::fmt::{self, Write as _};
+
+use super::common::describe_reference;
+use super::{AnswerKind, AnswerWidget, Method};
+use crate::record::{Answer, Protocol, Trial};
+use crate::study::{RatingScale, ReferencePlacement, StudyDefinition};
+use crate::texts::{AFC_QUESTION, Planned};
+
+/// Two-alternative forced choice on staircases.
+pub(super) struct Staircase;
+
+impl Method for Staircase {
+    fn protocol(&self) -> Protocol {
+        Protocol::Staircase
+    }
+
+    fn answer_kind(&self) -> AnswerKind {
+        AnswerKind::Choice
+    }
+
+    fn answer_widget(&self, _study: &StudyDefinition) -> AnswerWidget {
+        AnswerWidget::Choice {
+            question: AFC_QUESTION.to_string(),
+        }
+    }
+
+    /// The instructions, with its practice trials where it has any.
+    fn instructions(&self, study: &StudyDefinition) -> String {
+        let practice = match study.staircase.as_ref().map_or(0, |s| s.practice_trials) {
+            0 => String::new(),
+            1 => " The first trial is for practice.".to_string(),
+            n => format!(" The first {n} trials are for practice."),
+        };
+        format!(
+            "Each trial shows two motions side by side. Choose the one that looks more natural \
+             with the Left or Right arrow key (or click). Answer even when you are unsure.\
+             {practice}"
+        )
+    }
+
+    /// An upper bound when every interleaved staircase has `max_trials`.
+    fn planned_trials(&self, study: &StudyDefinition) -> Planned {
+        study
+            .staircase
+            .as_ref()
+            .and_then(|s| {
+                s.tracks
+                    .iter()
+                    .map(|t| t.settings.max_trials)
+                    .sum::<Option<u32>>()
+                    .map(|n| n + s.practice_trials)
+            })
+            .map_or(Planned::Unknown, Planned::AtMost)
+    }
+
+    /// Each track's clip and levels (a live staircase's lines come from its stimulus
+    /// source, which encodes).
+    fn describe(&self, study: &StudyDefinition, text: &mut String) -> fmt::Result {
+        let Some(sc) = &study.staircase else {
+            return Ok(());
+        };
+        for t in &sc.tracks {
+            writeln!(
+                text,
+                "  staircase {:?}: clip {:?}, {} stimulus levels of {} from {} to {}",
+                t.name,
+                t.clip,
+                t.levels.len(),
+                sc.param,
+                t.levels.first().map_or(0.0, |l| l.0),
+                t.levels.last().map_or(0.0, |l| l.0)
+            )?;
+        }
+        Ok(())
+    }
+
+    fn describe_reference(&self, placement: ReferencePlacement) -> String {
+        describe_reference(placement, "each block of 4 trials")
+    }
+
+    fn adaptive(&self) -> bool {
+        true
+    }
+
+    fn distinct_answers(&self, trial: &Trial, _scale: &RatingScale) -> Vec<Answer> {
+        // A correct and a wrong choice move the staircase differently.
+        vec![
+            Answer::Choice(trial.reference_position),
+            Answer::Choice(trial.reference_position.other()),
+        ]
+    }
+}
