@@ -19,8 +19,8 @@ use std::fmt;
 use std::path::{Path, PathBuf};
 use std::sync::{Mutex, PoisonError};
 
-use protocols::engine::{Session, SessionStatus};
 use protocols::StudyDefinition;
+use protocols::engine::{Session, SessionStatus};
 use results::store::{SESSION_FILE, SessionState, TRIALS_FILE};
 use results::{RunManifest, SessionResults};
 
