@@ -1,18 +1,21 @@
 //! `trials.csv` format versions 1 and 2: one row per trial, written and read here.
 //!
-//! Plain RFC 4180 CSV with a fixed header ([`HEADER`]); the first column repeats the format
-//! version on every row so a row taken out of its file still says how to read it. Fields that
-//! contain a comma or a quote are quoted; line breaks inside fields are refused, so every row is
-//! exactly one line and a row cut short by a power failure is the last line without its `\n`.
+//! Plain RFC 4180 CSV with a fixed header ([`HEADER`]), written and read with the `csv` crate;
+//! the first column repeats the format version on every row so a row taken out of its file
+//! still says how to read it. Fields that contain a comma or a quote are quoted (rows written
+//! before the csv crate also quoted a field that starts or ends with a space; both read the
+//! same); line breaks inside fields are refused, so every row is exactly one line
+//! and a row cut short by a power failure is the last line without its `\n`. A stray quote is
+//! refused on reading, naming its column.
 //! Version 2 appends three optional columns for stimuli the runner encodes on the fly (live
 //! staircase): `codec_params`, `achieved_cr`, `rms_cm`. Version 1 files still read, and a
 //! session resumed into a version 1 file keeps appending version 1 rows. Documented in
 //! `docs/results-format.md`.
 
-use std::borrow::Cow;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+use protocols::methods::AnswerKind;
 use protocols::{
     Answer, Arrangement, Block, FrameTiming, Outcome, Position, Protocol, Response,
     StimulusEncoding, Trial, TrialRecord,
@@ -100,18 +103,36 @@ pub const MAX_ROW_BYTES: usize = 64 * 1024;
 /// Largest `trials.csv` accepted by the reader, bytes (checked before reading).
 pub const MAX_TRIALS_BYTES: u64 = 1 << 30;
 
-fn push_field(out: &mut String, v: &str) -> Result<(), String> {
+/// Refuses a line break in a field: every row stays one line, so a row cut short by a power
+/// failure is the last line without its `\n`.
+fn check_field(v: &str) -> Result<(), String> {
     if v.contains(['\n', '\r']) {
         return Err(format!("field {v:?} contains a line break"));
     }
-    if v.contains([',', '"']) || v.starts_with(' ') || v.ends_with(' ') {
-        out.push('"');
-        out.push_str(&v.replace('"', "\"\""));
-        out.push('"');
-    } else {
-        out.push_str(v);
-    }
     Ok(())
+}
+
+/// A CSV writer into memory with lines ending in `\n` alone.
+fn csv_writer(style: csv::QuoteStyle) -> csv::Writer<Vec<u8>> {
+    csv::WriterBuilder::new()
+        .quote_style(style)
+        .terminator(csv::Terminator::Any(b'\n'))
+        .buffer_capacity(1024)
+        .from_writer(Vec::with_capacity(256))
+}
+
+/// The bytes a CSV writer holds, its records written.
+fn written(w: csv::Writer<Vec<u8>>) -> Result<Vec<u8>, String> {
+    w.into_inner().map_err(|e| e.error().to_string())
+}
+
+/// One row of `fields` (free of line breaks) with its `\n`, written by the csv crate: a field
+/// with a comma or a quote is quoted, a quote in it doubled (`QuoteStyle::Necessary`).
+fn write_row<S: AsRef<str>>(fields: &[S]) -> Result<String, String> {
+    let mut w = csv_writer(csv::QuoteStyle::Necessary);
+    w.write_record(fields.iter().map(AsRef::as_ref))
+        .map_err(|e| e.to_string())?;
+    String::from_utf8(written(w)?).map_err(|e| e.to_string())
 }
 
 fn opt<T: ToString>(v: Option<T>) -> String {
@@ -305,125 +326,29 @@ pub fn encode_row_as(r: &TrialRecord, version: u32) -> Result<String, ResultsErr
         frames_shown,
         interval_sd,
     ];
-    let mut line = String::with_capacity(256);
-    for (i, f) in fields.iter().take(column_count(version)).enumerate() {
-        if i > 0 {
-            line.push(',');
-        }
-        push_field(&mut line, f).map_err(|reason| ResultsError::Unwritable {
+    let fields = &fields[..column_count(version)];
+    for (i, f) in fields.iter().enumerate() {
+        check_field(f).map_err(|reason| ResultsError::Unwritable {
             column: COLUMNS[i],
             reason,
         })?;
     }
-    line.push('\n');
-    Ok(line)
+    write_row(fields).map_err(|reason| ResultsError::Unwritable {
+        column: "row",
+        reason,
+    })
 }
 
-/// Splits one CSV line into at most `max` fields, put in `fields` (emptied first; one vector
-/// serves every row of a file); `Err((column, message))` with a 1-based column. Fields borrow
-/// from `line` unless a doubled quote had to be undone.
-fn split_line<'a>(
-    line: &'a str,
-    max: usize,
-    fields: &mut Vec<Cow<'a, str>>,
-) -> Result<(), (usize, String)> {
-    fields.clear();
-    let bytes = line.as_bytes();
-    let mut start = 0;
-    loop {
-        let col = fields.len() + 1;
-        if fields.len() == max {
-            return Err((col, format!("more than {max} fields")));
-        }
-        let (field, next) = if bytes.get(start) == Some(&b'"') {
-            quoted_field(line, start + 1).map_err(|m| (col, m.into()))?
-        } else {
-            let rest = &line[start..];
-            let end = field_end(rest.as_bytes());
-            if rest.as_bytes().get(end) == Some(&b'"') {
-                return Err((col, "quote inside an unquoted field".into()));
-            }
-            (Cow::Borrowed(&rest[..end]), start + end)
-        };
-        fields.push(field);
-        if next >= line.len() {
-            return Ok(());
-        }
-        // `next` is at the comma that ends the field; a comma that ends the line leaves an
-        // empty last field, which the next turn reads.
-        start = next + 1;
-    }
-}
-
-/// The index of the first `,` or `"` in `bytes` (its length when there is none), eight bytes
-/// at a time: both are ASCII, so no UTF-8 sequence holds them, and a word test per eight
-/// bytes is several times faster than a loop over bytes or chars.
-fn field_end(bytes: &[u8]) -> usize {
-    const ONES: u64 = u64::from_le_bytes([1; 8]);
-    const HIGH: u64 = u64::from_le_bytes([0x80; 8]);
-    // The high bit of each byte of `word` that equals `b` (and maybe of bytes after the
-    // first such byte, never before it).
-    let equal = |word: u64, b: u8| {
-        let x = word ^ (ONES * u64::from(b));
-        x.wrapping_sub(ONES) & !x & HIGH
-    };
-    let mut words = bytes.chunks_exact(8);
-    for (k, chunk) in words.by_ref().enumerate() {
-        let mut word = [0; 8];
-        word.copy_from_slice(chunk);
-        let word = u64::from_le_bytes(word);
-        let found = equal(word, b',') | equal(word, b'"');
-        if found != 0 {
-            return 8 * k + found.trailing_zeros() as usize / 8;
-        }
-    }
-    let tail = words.remainder();
-    let done = bytes.len() - tail.len();
-    done + tail
-        .iter()
-        .position(|&b| b == b',' || b == b'"')
-        .unwrap_or(tail.len())
-}
-
-/// The quoted field whose text starts at byte `from` (just after its opening quote), and the
-/// index just past its closing quote (the end of the line or a comma).
-fn quoted_field(line: &str, from: usize) -> Result<(Cow<'_, str>, usize), &'static str> {
-    let mut owned: Option<String> = None;
-    let mut pos = from;
-    loop {
-        let Some(q) = line[pos..].find('"').map(|i| pos + i) else {
-            return Err("unterminated quoted field");
-        };
-        if line.as_bytes().get(q + 1) == Some(&b'"') {
-            owned
-                .get_or_insert_with(String::new)
-                .push_str(&line[pos..=q]);
-            pos = q + 2;
-            continue;
-        }
-        if !matches!(line.as_bytes().get(q + 1), None | Some(b',')) {
-            return Err("text after a closing quote");
-        }
-        let field = match owned {
-            Some(mut s) => {
-                s.push_str(&line[pos..q]);
-                Cow::Owned(s)
-            }
-            None => Cow::Borrowed(&line[from..q]),
-        };
-        return Ok((field, q + 1));
-    }
-}
-
+/// A row's fields, read by the csv crate.
 struct Row<'a> {
-    fields: &'a [Cow<'a, str>],
+    fields: &'a csv::StringRecord,
 }
 
 type FieldResult<T> = Result<T, (usize, String)>;
 
 impl Row<'_> {
     fn text(&self, i: usize) -> &str {
-        self.fields.get(i).map_or("", |f| f)
+        self.fields.get(i).unwrap_or("")
     }
     fn nonempty(&self, i: usize) -> FieldResult<&str> {
         let s = self.text(i);
@@ -536,21 +461,90 @@ impl Row<'_> {
     }
 }
 
-/// Decodes one CSV line (without its line break) of a file of format `file_version`, its
-/// fields split into `fields`; `Err((column, message))`.
-fn decode_fields<'a>(
-    line: &'a str,
-    file_version: u32,
-    fields: &mut Vec<Cow<'a, str>>,
-) -> FieldResult<TrialRecord> {
-    let n = column_count(file_version);
-    split_line(line, n, fields)?;
-    if fields.len() != n {
-        return Err((
-            fields.len().min(n),
-            format!("{} fields, expected {n}", fields.len()),
-        ));
+/// Checks the quotes of a row that holds one, in field order, up to field `max`: the csv
+/// crate reads a stray quote as text (`a"b`, `"a"b`), where this format refuses it, naming the
+/// field; `Err((column, message))`. A row that passes reads as RFC 4180 says.
+fn check_quotes(line: &[u8], max: usize) -> FieldResult<()> {
+    let mut at = 0;
+    let mut col = 1;
+    loop {
+        if col > max {
+            return Err((col, format!("more than {max} fields")));
+        }
+        if line.get(at) == Some(&b'"') {
+            // A quoted field: quotes doubled inside, then a comma or the end of the line.
+            at += 1;
+            loop {
+                let Some(q) = line[at..].iter().position(|&b| b == b'"') else {
+                    return Err((col, "unterminated quoted field".into()));
+                };
+                at += q + 1;
+                if line.get(at) != Some(&b'"') {
+                    break;
+                }
+                at += 1;
+            }
+            match line.get(at) {
+                None => return Ok(()),
+                Some(b',') => at += 1,
+                Some(_) => return Err((col, "text after a closing quote".into())),
+            }
+        } else {
+            match line[at..].iter().position(|&b| b == b',' || b == b'"') {
+                None => return Ok(()),
+                Some(k) if line[at + k] == b',' => at += k + 1,
+                Some(_) => return Err((col, "quote inside an unquoted field".into())),
+            }
+        }
+        col += 1;
     }
+}
+
+/// Reads the row `line` (without its line end; `cr`: that was `\r\n`) from `reader`, which
+/// stands at its start, into `fields`; `max` fields are expected. `Err((column, message))`.
+///
+/// The reader takes only `\n` as a line end, so that a `\r` inside a field is text as in
+/// any other place; a row's fields never hold a line break (the writer refuses them), so the
+/// row read is exactly `line` once its quotes are checked.
+fn read_fields(
+    reader: &mut csv::Reader<&[u8]>,
+    line: &str,
+    cr: bool,
+    max: usize,
+    fields: &mut csv::StringRecord,
+) -> FieldResult<()> {
+    if line.as_bytes().contains(&b'"') {
+        check_quotes(line.as_bytes(), max)?;
+    }
+    // The reader skips an empty line; here it is a row of one empty field.
+    if line.is_empty() {
+        return Err((1, format!("1 fields, expected {max}")));
+    }
+    match reader.read_record(fields) {
+        Ok(true) => {}
+        Ok(false) => return Err((1, "the CSV reader found no row here".into())),
+        Err(e) => return Err((1, e.to_string())),
+    }
+    if cr && let Some(last) = fields.iter().next_back() {
+        // The last field ends with the `\r` that is no part of it.
+        let last = last.strip_suffix('\r').unwrap_or(last).to_string();
+        fields.truncate(fields.len() - 1);
+        fields.push_field(&last);
+    }
+    let n = fields.len();
+    if n > max {
+        return Err((max + 1, format!("more than {max} fields")));
+    }
+    if n < max {
+        return Err((n, format!("{n} fields, expected {max}")));
+    }
+    Ok(())
+}
+
+/// Decodes one row of a file of format `file_version`, its fields read; `Err((column,
+/// message))`.
+fn decode_fields(fields: &csv::StringRecord, file_version: u32) -> FieldResult<TrialRecord> {
+    let n = column_count(file_version);
     let r = Row { fields };
     let version: u32 = r.parse(0)?;
     if version != file_version {
@@ -572,15 +566,13 @@ fn decode_fields<'a>(
             ),
         ));
     }
-    let answer = match protocol {
-        Protocol::Mos | Protocol::Acr | Protocol::Dcr | Protocol::Mushra => {
-            Answer::Rating(r.float(15)?)
-        }
-        Protocol::Dscqs => Answer::Pair {
+    let answer = match protocols::methods::of(protocol).answer_kind() {
+        AnswerKind::Rating => Answer::Rating(r.float(15)?),
+        AnswerKind::RatingPair => Answer::Pair {
             a: r.float(16)?,
             b: r.float(17)?,
         },
-        Protocol::Staircase | Protocol::PairComparison => Answer::Choice(r.named(15)?),
+        AnswerKind::Choice => Answer::Choice(r.named(15)?),
     };
     let trial = Trial {
         index: r.parse(4)?,
@@ -645,6 +637,28 @@ pub struct TrialsFile {
     pub torn: Option<TornRow>,
 }
 
+/// The format version whose header `text` is; `Err((column, message))` naming the first
+/// column that differs.
+fn header_version(text: &str) -> FieldResult<u32> {
+    if text == HEADER {
+        Ok(TRIALS_FORMAT_VERSION)
+    } else if text == HEADER_V1 {
+        Ok(1)
+    } else {
+        let col = text
+            .split(',')
+            .zip(COLUMNS)
+            .position(|(a, b)| a != b)
+            .map_or(COLUMNS_V1 + 1, |i| i + 1);
+        Err((
+            col,
+            format!(
+                "header is not a trials.csv header (versions {OLDEST_TRIALS_FORMAT_VERSION} to {TRIALS_FORMAT_VERSION})"
+            ),
+        ))
+    }
+}
+
 /// Parses the bytes of a `trials.csv` (named `path` in errors).
 ///
 /// The last line counts as torn when it lacks its line break or holds NUL bytes (what a
@@ -660,7 +674,14 @@ pub fn parse_trials(bytes: &[u8], path: &Path) -> Result<TrialsFile, ResultsErro
         message,
     };
     let mut records = Vec::new();
-    let mut fields = Vec::with_capacity(COLUMNS.len());
+    // One reader over the file, a row read each time the loop below has checked its line
+    // (a check that fails ends the read, so the two never part), and one record for all.
+    let mut reader = csv::ReaderBuilder::new()
+        .has_headers(false)
+        .flexible(true)
+        .terminator(csv::Terminator::Any(b'\n'))
+        .from_reader(bytes);
+    let mut fields = csv::StringRecord::with_capacity(256, COLUMNS.len());
     let mut offset = 0_usize;
     let mut line_no = 0_usize;
     let mut torn = None;
@@ -715,28 +736,18 @@ pub fn parse_trials(bytes: &[u8], path: &Path) -> Result<TrialsFile, ResultsErro
                 format!("invalid UTF-8 at byte {}", e.valid_up_to()),
             )
         })?;
-        let text = text.strip_suffix('\r').unwrap_or(text);
+        let (text, cr) = match text.strip_suffix('\r') {
+            Some(t) => (t, true),
+            None => (text, false),
+        };
         if line_no == 1 {
-            if text == HEADER {
-                version = TRIALS_FORMAT_VERSION;
-            } else if text == HEADER_V1 {
-                version = 1;
-            } else {
-                let col = text
-                    .split(',')
-                    .zip(COLUMNS)
-                    .position(|(a, b)| a != b)
-                    .map_or(COLUMNS_V1 + 1, |i| i + 1);
-                return Err(bad(
-                    1,
-                    col,
-                    format!(
-                        "header is not a trials.csv header (versions {OLDEST_TRIALS_FORMAT_VERSION} to {TRIALS_FORMAT_VERSION})"
-                    ),
-                ));
-            }
+            version = header_version(text).map_err(|(col, msg)| bad(1, col, msg))?;
+            // The reader passes the header by.
+            read_fields(&mut reader, text, cr, column_count(version), &mut fields)
+                .map_err(|(col, msg)| bad(1, col, msg))?;
         } else {
-            let rec = decode_fields(text, version, &mut fields)
+            let rec = read_fields(&mut reader, text, cr, column_count(version), &mut fields)
+                .and_then(|()| decode_fields(&fields, version))
                 .map_err(|(col, msg)| bad(line_no, col, msg))?;
             records.push(rec);
         }
@@ -777,71 +788,342 @@ pub fn torn_path(trials: &Path) -> PathBuf {
 
 #[cfg(test)]
 mod tests {
-    use super::split_line;
+    use std::path::Path;
 
-    fn split(line: &str, max: usize) -> Result<Vec<String>, (usize, String)> {
-        let mut fields = Vec::new();
-        split_line(line, max, &mut fields).map(|()| {
-            fields
-                .into_iter()
-                .map(std::borrow::Cow::into_owned)
-                .collect()
-        })
+    use protocols::{
+        Answer, Arrangement, Block, FrameTiming, Outcome, Position, Protocol, Response, Trial,
+        TrialRecord,
+    };
+
+    use super::{HEADER, HEADER_V1, TrialsFile, encode_row, encode_row_as, parse_trials};
+    use crate::ResultsError;
+
+    /// A MOS row whose text columns hold placeholders (`STUDYX`, `SUBJX`, `CONDX`, `STIMX`,
+    /// `REFX`) that a test swaps for the text it needs, raw or quoted.
+    fn sample() -> TrialRecord {
+        TrialRecord {
+            study: "STUDYX".into(),
+            subject: "SUBJX".into(),
+            session: 1,
+            protocol: Protocol::Mos,
+            trial: Trial {
+                index: 3,
+                block: Block::Test,
+                condition: "CONDX".into(),
+                stimulus: "STIMX".into(),
+                reference: "REFX".into(),
+                arrangement: Arrangement::SideBySide,
+                reference_position: Position::Left,
+                staircase: None,
+                level: None,
+                break_before: false,
+            },
+            response: Response {
+                answer: Answer::Rating(4.5),
+                response_time_ms: 1200,
+                replays: 0,
+                dropped_frames: 0,
+            },
+            outcome: Outcome {
+                score: 4.5,
+                score_reference: None,
+                score_test: None,
+                correct: None,
+                reversal: None,
+            },
+            elapsed_ms: 5000,
+            wall_clock_ms: 1_795_000_000_000,
+            monotonic_ms: 4999,
+            encoding: None,
+            timing: None,
+        }
     }
 
-    #[test]
-    fn splits_plain_quoted_and_empty_fields() {
-        assert_eq!(split("", 3).unwrap(), [""]);
-        assert_eq!(split("a,,b", 3).unwrap(), ["a", "", "b"]);
-        assert_eq!(split("a,", 3).unwrap(), ["a", ""]);
-        assert_eq!(split(",", 3).unwrap(), ["", ""]);
-        assert_eq!(
-            split(r#""x, ""y""",z,"""""#, 3).unwrap(),
-            [r#"x, "y""#, "z", "\""]
-        );
-        assert_eq!(split(r#""",a"#, 3).unwrap(), ["", "a"]);
-        assert_eq!(split("é,ü", 2).unwrap(), ["é", "ü"]);
+    /// The sample row (without its `\n`) with `STUDYX` replaced by `raw`, as it would stand
+    /// in the file.
+    fn row_with_study(raw: &str) -> String {
+        let line = encode_row(&sample()).unwrap();
+        line.trim_end_matches('\n').replacen("STUDYX", raw, 1)
     }
 
-    /// The word test finds the first comma or quote at every place in a word and across
-    /// words, bytes above 0x80 (UTF-8) and bytes just below and above the two included.
+    fn parse(text: &str) -> Result<TrialsFile, ResultsError> {
+        parse_trials(text.as_bytes(), Path::new("s/trials.csv"))
+    }
+
+    /// The records of a file holding the header and `rows` (each without its `\n`).
+    fn parse_rows(rows: &[&str]) -> Vec<TrialRecord> {
+        let mut text = format!("{HEADER}\n");
+        for r in rows {
+            text.push_str(r);
+            text.push('\n');
+        }
+        parse(&text).unwrap_or_else(|e| panic!("{e}")).records
+    }
+
+    /// `(line, column, message)` of the error a file of the header and `rows` gives.
+    fn error_of(rows: &[&str]) -> (usize, usize, String) {
+        let mut text = format!("{HEADER}\n");
+        for r in rows {
+            text.push_str(r);
+            text.push('\n');
+        }
+        match parse(&text) {
+            Err(ResultsError::Malformed {
+                path,
+                line,
+                column,
+                message,
+            }) => {
+                assert_eq!(path, Path::new("s/trials.csv"));
+                (line, column, message)
+            }
+            other => panic!("{other:?}"),
+        }
+    }
+
+    /// RFC 4180's quoting, written out independently of the csv crate: a field with a comma
+    /// or a quote is quoted, its quotes doubled.
+    fn quoted(v: &str) -> String {
+        if v.contains([',', '"']) {
+            format!("\"{}\"", v.replace('"', "\"\""))
+        } else {
+            v.to_string()
+        }
+    }
+
+    /// Every text column, alone and together, written with the format's quoting rule (the
+    /// same bytes as ever) and read back unchanged, version 2 and version 1.
     #[test]
-    fn field_end_finds_the_first_comma_or_quote() {
-        let filler = [
-            b'a', b'+', b'-', b'!', b'#', 0xC3, 0xA9, 0x80, 0xFF, 0x00, 0x2B, 0x21,
+    fn rows_are_written_with_the_formats_quoting_and_read_back() {
+        let texts = [
+            "a", "", " a", "a ", " ", "a b", "a,b", "a\"b", "\"", "\"\"", ",", " a,b ", "x, \"y\"",
+            "é ü,ß", "a\tb", "k=1;q=2", "'a'",
         ];
-        for len in 0..40 {
+        let plain = encode_row(&sample()).unwrap();
+        let plain_v1 = encode_row_as(&sample(), 1).unwrap();
+        for (k, &t) in texts.iter().enumerate() {
+            // The same text in study, then four different ones at once (a spaced field
+            // beside others that need quotes or none).
+            let others = [texts[(k + 3) % texts.len()], texts[(k + 7) % texts.len()]];
+            let mut r = sample();
+            r.study = t.into();
+            r.subject = format!("S{}", others[0]);
+            r.trial.condition = others[1].into();
+            r.trial.stimulus = format!("{t}/x");
+            r.trial.reference = "walk".into();
+            for (version, plain) in [(2, &plain), (1, &plain_v1)] {
+                let want = plain
+                    .replacen("STUDYX", &quoted(&r.study), 1)
+                    .replacen("SUBJX", &quoted(&r.subject), 1)
+                    .replacen("CONDX", &quoted(&r.trial.condition), 1)
+                    .replacen("STIMX", &quoted(&r.trial.stimulus), 1)
+                    .replacen("REFX", "walk", 1);
+                let line = encode_row_as(&r, version).unwrap();
+                assert_eq!(line, want, "{t:?}");
+                let header = if version == 1 { HEADER_V1 } else { HEADER };
+                let file = parse(&format!("{header}\n{line}")).unwrap();
+                assert_eq!(file.format_version, version);
+                assert_eq!(file.records, [r.clone()], "{t:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn a_line_break_in_a_field_is_refused_naming_its_column() {
+        for (text, column) in [("a\nb", "study"), ("\r", "condition")] {
+            let mut r = sample();
+            if column == "study" {
+                r.study = text.into();
+            } else {
+                r.trial.condition = text.into();
+            }
+            match encode_row(&r) {
+                Err(ResultsError::Unwritable { column: c, reason }) => {
+                    assert_eq!(c, column);
+                    assert!(reason.contains("line break"), "{reason}");
+                }
+                other => panic!("{other:?}"),
+            }
+        }
+    }
+
+    /// Quoted fields lose their quotes and their doubled quotes; empty fields, quoted or
+    /// not, are empty; text beyond ASCII is kept.
+    #[test]
+    fn reads_plain_quoted_and_empty_fields() {
+        let row = encode_row(&sample()).unwrap();
+        let row = row.trim_end_matches('\n');
+        let cases = [
+            (r#""x, ""y""""#, r#"x, "y""#),
+            (r#""""""#, "\""),
+            (r#""""#, ""),
+            (r#""a""#, "a"),
+            ("é", "é"),
+            ("", ""),
+            // A field with spaces at its ends, quoted (as rows were once written) or not.
+            (r#"" a ""#, " a "),
+            (" a ", " a "),
+        ];
+        for (raw, want) in cases {
+            let line = row
+                .replacen("STUDYX", raw, 1)
+                .replacen("CONDX", raw, 1)
+                .replacen("SUBJX", "ü", 1);
+            let records = parse_rows(&[&line]);
+            assert_eq!(records[0].study, want, "{raw}");
+            assert_eq!(records[0].trial.condition, want, "{raw}");
+            assert_eq!(records[0].subject, "ü");
+        }
+        // An empty last field (no frame timing), and the same quoted.
+        assert!(row.ends_with(','), "{row}");
+        assert_eq!(
+            parse_rows(&[row, &format!("{row}\"\"")]),
+            [sample(), sample()]
+        );
+    }
+
+    /// A comma or a quote at every place of a field, beside text of one to three bytes a
+    /// character, is found: the row reads back as written, and a stray quote in an unquoted
+    /// field is refused at its column.
+    #[test]
+    fn a_comma_or_quote_anywhere_in_a_field_is_found() {
+        let filler = ['a', '+', '-', 'é', '€', '#', '\t', '\u{7f}', 'ÿ'];
+        for len in 0..20 {
             for at in 0..=len {
-                for mark in [b',', b'"'] {
-                    let mut bytes: Vec<u8> = (0..len)
+                for mark in [',', '"'] {
+                    let mut chars: Vec<char> = (0..len)
                         .map(|i| filler[(i * 7 + len) % filler.len()])
                         .collect();
                     if at < len {
-                        bytes[at] = mark;
-                        // A second mark later must not be the one found.
+                        chars[at] = mark;
                         if at + 3 < len {
-                            bytes[at + 3] = b',';
+                            chars[at + 3] = ',';
                         }
                     }
-                    let want = bytes
-                        .iter()
-                        .position(|&b| b == b',' || b == b'"')
-                        .unwrap_or(len);
-                    assert_eq!(super::field_end(&bytes), want, "{bytes:?}");
+                    let text: String = chars.iter().collect();
+                    let mut r = sample();
+                    r.study.clone_from(&text);
+                    let file = parse(&format!("{HEADER}\n{}", encode_row(&r).unwrap())).unwrap();
+                    assert_eq!(file.records, [r], "{text:?}");
+                    if at > 0 && at < len && mark == '"' && !text.contains(',') {
+                        // Written as it is, unquoted (not at its start, which opens a quoted
+                        // field): the quote is refused.
+                        let (line, col, msg) = error_of(&[&row_with_study(&text)]);
+                        assert_eq!(
+                            (line, col, msg.as_str()),
+                            (2, 2, "quote inside an unquoted field")
+                        );
+                    }
                 }
             }
         }
     }
 
     #[test]
-    fn refuses_bad_quotes_and_extra_fields_naming_the_column() {
-        assert_eq!(split("a,b,c", 2).unwrap_err().0, 3);
-        assert_eq!(split("a,b,", 2).unwrap_err().0, 3);
-        let (col, msg) = split(r#"a,b"c"#, 3).unwrap_err();
-        assert_eq!((col, msg.as_str()), (2, "quote inside an unquoted field"));
-        let (col, msg) = split(r#"a,"b"c"#, 3).unwrap_err();
-        assert_eq!((col, msg.as_str()), (2, "text after a closing quote"));
-        let (col, msg) = split(r#"a,"b,c"#, 3).unwrap_err();
-        assert_eq!((col, msg.as_str()), (2, "unterminated quoted field"));
+    fn refuses_bad_quotes_and_extra_or_missing_fields_naming_the_column() {
+        let row = encode_row(&sample()).unwrap();
+        let row = row.trim_end_matches('\n');
+        let cases: [(String, usize, &str); 10] = [
+            (format!("{row},x"), 35, "more than 34 fields"),
+            (format!("{row},"), 35, "more than 34 fields"),
+            (format!("{row},\"x\""), 35, "more than 34 fields"),
+            // The quotes of a field past the last are not looked at.
+            (format!("{row},x\"y"), 35, "more than 34 fields"),
+            (row_with_study("a\"b"), 2, "quote inside an unquoted field"),
+            (row_with_study("\"b\"c"), 2, "text after a closing quote"),
+            (row_with_study("\"b,c"), 2, "unterminated quoted field"),
+            (row_with_study("\"b\"\""), 2, "unterminated quoted field"),
+            (
+                row[..row.len() - 1].to_string(),
+                33,
+                "33 fields, expected 34",
+            ),
+            (String::new(), 1, "1 fields, expected 34"),
+        ];
+        for (line, col, msg) in cases {
+            assert_eq!(error_of(&[row, &line]), (3, col, msg.to_string()), "{line}");
+        }
+        // A row of version 2 in a version 1 file has too many fields.
+        let text = format!("{HEADER_V1}\n{row}\n");
+        match parse(&text) {
+            Err(ResultsError::Malformed {
+                line: 2,
+                column: 30,
+                message,
+                ..
+            }) => assert_eq!(message, "more than 29 fields"),
+            other => panic!("{other:?}"),
+        }
+    }
+
+    /// Lines that end in `\r\n` read as those ending in `\n`; a `\r` inside a line is text.
+    #[test]
+    fn crlf_line_ends_and_a_carriage_return_inside_a_field() {
+        let row = encode_row(&sample()).unwrap();
+        let row = row.trim_end_matches('\n');
+        let lf = parse(&format!("{HEADER}\n{row}\n{row}\n")).unwrap();
+        let crlf = parse(&format!("{HEADER}\r\n{row}\r\n{row}\r\n")).unwrap();
+        assert_eq!(lf.records, crlf.records);
+        assert_eq!(crlf.records.len(), 2);
+        let quoted_cr = row_with_study("\"a\r\"");
+        let records = parse_rows(&[&row_with_study("a\rb"), &quoted_cr]);
+        assert_eq!(records[0].study, "a\rb");
+        assert_eq!(records[1].study, "a\r");
+        // The last field (frame timing's interval_sd_ms) ends before a `\r\n`, quoted or
+        // not; a `\r` inside its quotes is its own.
+        let mut timed = sample();
+        timed.timing = Some(FrameTiming {
+            frames_shown: 120,
+            interval_sd_ms: 0.25,
+        });
+        let row = encode_row(&timed).unwrap();
+        let row = row.trim_end_matches('\n');
+        assert!(row.ends_with(",120,0.25"), "{row}");
+        let quoted = row.replace(",0.25", ",\"0.25\"");
+        let text = format!("{HEADER}\r\n{row}\r\n{quoted}\r\n{row}\n");
+        assert_eq!(
+            parse(&text).unwrap().records,
+            [timed.clone(), timed.clone(), timed]
+        );
+        let cr_inside = row.replace(",0.25", ",\"0.25\r\"");
+        let (line, col, msg) = error_of(&[&cr_inside]);
+        assert_eq!((line, col), (2, 34));
+        assert!(msg.contains("interval_sd_ms \"0.25\\r\""), "{msg}");
+    }
+
+    /// A last line without its `\n`, or holding NUL bytes, is torn: kept aside with its line
+    /// and offset, and the rows before it read.
+    #[test]
+    fn a_torn_last_row_is_kept_aside() {
+        let row = encode_row(&sample()).unwrap();
+        let head = format!("{HEADER}\n{row}");
+        for (tail, torn) in [
+            (&row[..40], &row[..40]),
+            ("2,\"a,b", "2,\"a,b"),
+            ("\0\0\0\n", "\0\0\0\n"),
+            ("", ""),
+        ] {
+            let text = format!("{head}{tail}");
+            let f = parse(&text).unwrap();
+            assert_eq!(f.records.len(), 1);
+            assert_eq!(f.complete_bytes, head.len() as u64);
+            match &f.torn {
+                None => assert!(torn.is_empty()),
+                Some(t) => {
+                    assert_eq!(t.line, 3);
+                    assert_eq!(t.offset, head.len() as u64);
+                    assert_eq!(t.bytes, torn.as_bytes());
+                }
+            }
+        }
+        match parse(&HEADER[..20]) {
+            Err(ResultsError::Malformed {
+                line: 1,
+                column: 1,
+                message,
+                ..
+            }) => assert_eq!(message, "header line is incomplete"),
+            other => panic!("{other:?}"),
+        }
     }
 }

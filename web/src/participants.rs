@@ -242,6 +242,7 @@ impl Registry {
                 .map_err(at_path())?;
         }
         let mut index = Index::default();
+        let reader = row_reader();
         for (i, line) in text[..complete].lines().enumerate() {
             let at = || format!("{} line {}", path.display(), i + 1);
             if i == 0 {
@@ -253,8 +254,9 @@ impl Registry {
                 }
                 continue;
             }
-            let (p, hash) =
-                parse_row(line).map_err(|e| WebError::Refused(format!("{}: {e}", at())))?;
+            let (p, hash) = read_fields(&reader, line)
+                .and_then(|fields| parse_row(&fields))
+                .map_err(|e| WebError::Refused(format!("{}: {e}", at())))?;
             index.insert(hash, p);
         }
         Ok(Registry {
@@ -317,14 +319,14 @@ impl Registry {
         let token = new_token()?;
         let hash = token_hash(&token);
         let ids: Vec<String> = who.ids.iter().map(|(k, v)| format!("{k}={v}")).collect();
-        file.append(&format!(
-            "{subject},{},{},{},{},{}\n",
-            hex(&hash),
-            who.source,
-            lab::session::now_ms(),
-            group.map(|g| g.to_string()).unwrap_or_default(),
-            ids.join(";")
-        ))?;
+        file.append(&encode_row(&[
+            &subject,
+            &hex(&hash),
+            &who.source,
+            &lab::session::now_ms().to_string(),
+            &group.map(|g| g.to_string()).unwrap_or_default(),
+            &ids.join(";"),
+        ])?)?;
         let p = self
             .index
             .write()
@@ -355,8 +357,63 @@ impl Participant {
     }
 }
 
-fn parse_row(line: &str) -> std::result::Result<(Participant, [u8; 32]), String> {
-    let f: Vec<&str> = line.split(',').collect();
+/// One `participants.csv` row with its `\n`, written by the csv crate: a value that holds a
+/// comma or a quote is quoted, its quotes doubled (none of today's values has either: ids,
+/// hex, numbers). A line break is refused, so that every row stays one line and a torn last
+/// row is what follows the last `\n`.
+///
+/// # Errors
+/// A value holds a line break.
+fn encode_row(fields: &[&str; 6]) -> Result<String> {
+    if let Some(f) = fields.iter().find(|f| f.contains(['\n', '\r'])) {
+        return Err(WebError::Refused(format!(
+            "{}: the value {f:?} holds a line break",
+            lab::results_dir::PARTICIPANTS_FILE
+        )));
+    }
+    let failed = |e: &dyn std::fmt::Display| {
+        WebError::Refused(format!(
+            "{}: cannot write a row: {e}",
+            lab::results_dir::PARTICIPANTS_FILE
+        ))
+    };
+    let mut w = csv::WriterBuilder::new()
+        .terminator(csv::Terminator::Any(b'\n'))
+        .buffer_capacity(512)
+        .from_writer(Vec::with_capacity(160));
+    w.write_record(fields).map_err(|e| failed(&e))?;
+    let bytes = w.into_inner().map_err(|e| failed(e.error()))?;
+    String::from_utf8(bytes).map_err(|e| failed(&e))
+}
+
+/// The CSV reader of one line of `participants.csv` (its line end taken off): only `\n`
+/// ends a row, so a `\r` inside one is text.
+fn row_reader() -> csv::ReaderBuilder {
+    let mut b = csv::ReaderBuilder::new();
+    b.has_headers(false)
+        .flexible(true)
+        .terminator(csv::Terminator::Any(b'\n'))
+        .buffer_capacity(512);
+    b
+}
+
+/// The fields of one line (without its line end), read by the csv crate; an empty line is
+/// one empty field.
+fn read_fields(
+    reader: &csv::ReaderBuilder,
+    line: &str,
+) -> std::result::Result<csv::StringRecord, String> {
+    let mut fields = csv::StringRecord::new();
+    match reader.from_reader(line.as_bytes()).read_record(&mut fields) {
+        Ok(true) => Ok(fields),
+        // The reader skips an empty line.
+        Ok(false) => Ok(csv::StringRecord::from(vec![""])),
+        Err(e) => Err(e.to_string()),
+    }
+}
+
+fn parse_row(fields: &csv::StringRecord) -> std::result::Result<(Participant, [u8; 32]), String> {
+    let f: Vec<&str> = fields.iter().collect();
     let [subject, hash, source, created, group, ids] = f[..] else {
         return Err(format!("expected 6 fields, found {}", f.len()));
     };
@@ -432,6 +489,82 @@ mod tests {
         ] {
             assert!(identity(&bad).is_err(), "{bad:?}");
         }
+    }
+
+    /// Today's values (ids, hex, numbers) are written as they are, the same bytes as ever.
+    #[test]
+    fn a_row_of_plain_values_is_written_as_it_is() {
+        let hash = hex(&token_hash("t"));
+        let fields = [
+            "A1",
+            hash.as_str(),
+            "mturk",
+            "1795000000000",
+            "",
+            "mturk_assignment_id=X;mturk_hit_id=H",
+        ];
+        let row = encode_row(&fields).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(row, format!("{}\n", fields.join(",")));
+        let read = read_fields(&row_reader(), row.trim_end_matches('\n'))
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(read, csv::StringRecord::from(fields.to_vec()));
+        let (p, h) = parse_row(&read).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(
+            (p.subject.as_str(), p.group, h),
+            ("A1", None, token_hash("t"))
+        );
+        assert_eq!(p.ids.len(), 2);
+    }
+
+    /// A value with a comma or a quote is quoted and reads back as it was, in its own
+    /// column, instead of splitting the row; a line break is refused.
+    #[test]
+    fn values_with_commas_and_quotes_round_trip() {
+        let fields = ["a,b", "say \"hi\"", "\"", ",", "", "k=v;x=\"1,2\""];
+        let row = encode_row(&fields).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(
+            row,
+            "\"a,b\",\"say \"\"hi\"\"\",\"\"\"\",\",\",,\"k=v;x=\"\"1,2\"\"\"\n"
+        );
+        assert_eq!(row.lines().count(), 1);
+        let read = read_fields(&row_reader(), row.trim_end_matches('\n'))
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(read, csv::StringRecord::from(fields.to_vec()));
+        // Six fields: the row is refused for its values, not for its shape.
+        let err = parse_row(&read).err().unwrap_or_default();
+        assert_eq!(err, "subject \"a,b\" is not an id");
+        assert!(encode_row(&["a\nb", "", "", "", "", ""]).is_err());
+        assert!(encode_row(&["a", "", "", "", "", "\r"]).is_err());
+        // A line of other than six fields, an empty one included, is named by its count.
+        for (line, n) in [("", 1), ("a,b", 2), ("a,b,c,d,e,f,g", 7), ("\"a,b\",c", 2)] {
+            let read = read_fields(&row_reader(), line).unwrap_or_else(|e| panic!("{e}"));
+            let err = parse_row(&read).err().unwrap_or_default();
+            assert_eq!(err, format!("expected 6 fields, found {n}"), "{line:?}");
+        }
+    }
+
+    /// A malformed complete row is an error naming the file and the line.
+    #[test]
+    fn a_bad_row_is_named_by_file_and_line() {
+        let dir = std::env::temp_dir().join(format!("web-reg-bad-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap_or_else(|e| panic!("{e}"));
+        let path = dir.join(lab::results_dir::PARTICIPANTS_FILE);
+        let good = format!("A1,{},mturk,5,,\n", hex(&token_hash("t")));
+        for (rows, want) in [
+            ("a,b\n", "line 3: expected 6 fields, found 2"),
+            ("\n", "line 3: expected 6 fields, found 1"),
+            (
+                "\"a,b\",x,mturk,5,,\n",
+                "line 3: subject \"a,b\" is not an id",
+            ),
+        ] {
+            std::fs::write(&path, format!("{HEADER}\n{good}{rows}"))
+                .unwrap_or_else(|e| panic!("{e}"));
+            let err = Registry::open(&dir).err().map(|e| e.to_string());
+            assert_eq!(err, Some(format!("{} {want}", path.display())));
+        }
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]
