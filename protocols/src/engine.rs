@@ -11,6 +11,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::design;
+use crate::methods::Refusal;
 use crate::quest::{QuestError, QuestPlus};
 use crate::record::{Answer, Arrangement, Block, Outcome, Position, Protocol, Response, Trial};
 use crate::rng::{StudyRng, purpose};
@@ -162,6 +163,41 @@ struct Stairs {
 }
 
 impl Stairs {
+    /// The adaptive tracks of subject `subject`'s session of `study` (`None`: the study has no
+    /// `[staircase]`).
+    fn of(study: &StudyDefinition, subject: u32) -> Result<Option<Self>, EngineError> {
+        let Some(sc) = &study.staircase else {
+            return Ok(None);
+        };
+        let staircases = sc
+            .tracks
+            .iter()
+            .map(|t| match &sc.quest {
+                None => Ok(Procedure::UpDown(Staircase::new(t.settings.clone())?)),
+                Some(q) => Ok(Procedure::Bayesian(QuestPlus::new(q.clone())?)),
+            })
+            .collect::<Result<Vec<_>, EngineError>>()?;
+        let live = sc.live.as_ref().map(|l| {
+            let mut clips = l.clips.clone();
+            if l.order == ClipOrder::Shuffled {
+                let mut rng = StudyRng::new(study.seed, &[u64::from(subject), purpose::LIVE_CLIPS]);
+                rng.shuffle(&mut clips);
+            }
+            LiveRun {
+                study: sc.clone(),
+                clips,
+            }
+        });
+        Ok(Some(Stairs {
+            tracks: sc.tracks.clone(),
+            staircases,
+            tolerance: sc.level_tolerance,
+            live,
+            practice: sc.practice_trials,
+            practice_level: sc.practice_level,
+        }))
+    }
+
     /// The test stimulus and reference of trial `index` of `track` at `level`. Live: the clips
     /// take turns across the session's trials, and the stimulus is named, not looked up; the
     /// runner encodes it.
@@ -253,65 +289,14 @@ impl Session {
     pub fn new(study: &StudyDefinition, subject: u32) -> Result<Self, EngineError> {
         let arrangement = study.presentation.arrangement;
         let placement = study.presentation.reference_position;
-        let mut plan = Vec::new();
-        let mut stairs = None;
-        match study.protocol {
-            Protocol::Mos | Protocol::Dscqs | Protocol::Acr | Protocol::Dcr => {
-                let items = |list: &[Condition]| -> Vec<PlanItem> {
-                    list.iter().map(PlanItem::condition).collect()
-                };
-                let (fam, test) = (items(&study.familiarization), items(&study.conditions));
-                plan = plan_trials(study, &fam, &test, subject, arrangement, placement);
-            }
-            Protocol::PairComparison => {
-                let test: Vec<PlanItem> = study
-                    .pairs()
-                    .into_iter()
-                    .filter_map(|(i, j)| {
-                        Some(PlanItem::pair(
-                            study.conditions.get(i)?,
-                            study.conditions.get(j)?,
-                        ))
-                    })
-                    .collect();
-                plan = plan_trials(study, &[], &test, subject, arrangement, placement);
-            }
-            Protocol::Mushra => plan = plan_mushra(study, subject),
-            Protocol::Staircase => {
-                if let Some(sc) = &study.staircase {
-                    let staircases = sc
-                        .tracks
-                        .iter()
-                        .map(|t| match &sc.quest {
-                            None => Ok(Procedure::UpDown(Staircase::new(t.settings.clone())?)),
-                            Some(q) => Ok(Procedure::Bayesian(QuestPlus::new(q.clone())?)),
-                        })
-                        .collect::<Result<Vec<_>, EngineError>>()?;
-                    let live = sc.live.as_ref().map(|l| {
-                        let mut clips = l.clips.clone();
-                        if l.order == ClipOrder::Shuffled {
-                            let mut rng = StudyRng::new(
-                                study.seed,
-                                &[u64::from(subject), purpose::LIVE_CLIPS],
-                            );
-                            rng.shuffle(&mut clips);
-                        }
-                        LiveRun {
-                            study: sc.clone(),
-                            clips,
-                        }
-                    });
-                    stairs = Some(Stairs {
-                        tracks: sc.tracks.clone(),
-                        staircases,
-                        tolerance: sc.level_tolerance,
-                        live,
-                        practice: sc.practice_trials,
-                        practice_level: sc.practice_level,
-                    });
-                }
-            }
-        }
+        let method = study.method();
+        // A method plans its trials up front; an adaptive one's tracks pick each trial.
+        let plan = method.plan(study, subject);
+        let stairs = if method.adaptive() {
+            Stairs::of(study, subject)?
+        } else {
+            None
+        };
         Ok(Self {
             protocol: study.protocol,
             subject,
@@ -435,7 +420,7 @@ impl Session {
         };
         // A MUSHRA screen is shown whole: the time limit and breaks fall between screens, and
         // `break_every_trials` counts screens.
-        let (starts_screen, count) = if self.protocol == Protocol::Mushra {
+        let (starts_screen, count) = if crate::methods::of(self.protocol).screens() {
             let starts = index == 0 || self.screen_start(index as usize);
             let screen = self.plan[..=(index as usize).min(self.plan.len() - 1)]
                 .iter()
@@ -485,85 +470,30 @@ impl Session {
             expected,
             got: response.answer,
         };
-        let on_scale = |v: f64| {
-            if self.scale.accepts(v) {
-                Ok(v)
-            } else {
-                Err(EngineError::OffScale {
-                    trial: trial.index,
-                    value: v,
-                    min: self.scale.min,
-                    max: self.scale.max,
-                    step: self.scale.step,
-                })
-            }
+        let off_scale = |v: f64| EngineError::OffScale {
+            trial: trial.index,
+            value: v,
+            min: self.scale.min,
+            max: self.scale.max,
+            step: self.scale.step,
         };
-        let outcome = match (self.protocol, response.answer) {
-            (
-                Protocol::Mos | Protocol::Acr | Protocol::Dcr | Protocol::Mushra,
-                Answer::Rating(v),
-            ) => Outcome {
-                score: on_scale(v)?,
-                score_reference: None,
-                score_test: None,
-                correct: None,
-                reversal: None,
-            },
-            (Protocol::Mos | Protocol::Acr | Protocol::Dcr | Protocol::Mushra, _) => {
-                return Err(wrong("a rating"));
-            }
-            (Protocol::Dscqs, Answer::Pair { a, b }) => {
-                let (a, b) = (on_scale(a)?, on_scale(b)?);
-                // `a` rates what was shown first: slot A, or the first interval.
-                let (r, t) = if matches!(trial.reference_position, Position::A | Position::First) {
-                    (a, b)
-                } else {
-                    (b, a)
-                };
-                // BT.500 DSCQS: the difference reference minus test is the per-trial score.
-                Outcome {
-                    score: r - t,
-                    score_reference: Some(r),
-                    score_test: Some(t),
-                    correct: None,
-                    reversal: None,
-                }
-            }
-            (Protocol::Dscqs, _) => return Err(wrong("ratings of both stimuli")),
-            (Protocol::Staircase, Answer::Choice(p)) if p.fits(trial.arrangement) => {
-                // Thesis ch. 5: picking the original motion is the correct answer.
-                let correct = p == trial.reference_position;
-                let k = trial.staircase.unwrap_or(0) as usize;
-                let reversal = match self.stairs.as_mut().and_then(|s| s.staircases.get_mut(k)) {
-                    // A practice trial is scored for the log and moves no staircase.
-                    Some(_) if trial.block == Block::Familiarization => None,
-                    Some(sc) => sc.add_response(correct)?,
-                    None => return Err(EngineError::NoPendingTrial),
-                };
-                Outcome {
-                    score: if correct { 1.0 } else { 0.0 },
-                    score_reference: None,
-                    score_test: None,
-                    correct: Some(correct),
-                    reversal,
-                }
-            }
-            (Protocol::PairComparison, Answer::Choice(p)) if p.fits(trial.arrangement) => {
-                // The `reference` column holds the pair's other test stimulus, shown at the
-                // reference position: picking the other position prefers `stimulus`.
-                let preferred_stimulus = p != trial.reference_position;
-                Outcome {
-                    score: if preferred_stimulus { 1.0 } else { 0.0 },
-                    score_reference: None,
-                    score_test: None,
-                    correct: None,
-                    reversal: None,
-                }
-            }
-            (Protocol::Staircase | Protocol::PairComparison, _) => {
-                return Err(wrong("a choice of a position of this arrangement"));
-            }
-        };
+        let mut outcome = crate::methods::of(self.protocol)
+            .score(trial, response.answer, &self.scale)
+            .map_err(|refusal| match refusal {
+                Refusal::Expected(expected) => wrong(expected),
+                Refusal::OffScale(v) => off_scale(v),
+            })?;
+        // An adaptive method's answer moves its track (thesis ch. 5: picking the original
+        // motion is correct); a practice trial is scored for the log and moves none.
+        if let Some(stairs) = &mut self.stairs {
+            let correct = outcome.correct.unwrap_or(false);
+            let k = trial.staircase.unwrap_or(0) as usize;
+            outcome.reversal = match stairs.staircases.get_mut(k) {
+                Some(_) if trial.block == Block::Familiarization => None,
+                Some(sc) => sc.add_response(correct)?,
+                None => return Err(EngineError::NoPendingTrial),
+            };
+        }
         self.pending = None;
         self.next_index += 1;
         Ok(outcome)
@@ -704,7 +634,7 @@ impl Session {
             return Vec::new();
         };
         let mut out = vec![pending.clone()];
-        if self.protocol != Protocol::Mushra {
+        if !crate::methods::of(self.protocol).screens() {
             return out;
         }
         let mut i = pending.index as usize + 1;
@@ -740,84 +670,20 @@ impl Session {
     }
 }
 
-/// MUSHRA plan (ITU-R BS.1534-3, adapted): one screen per clip, in a random order per subject
-/// (or the subject's row of a balanced Latin square over the screens, `[design] order`); on
-/// each screen the clip's test conditions, its hidden reference and its anchor, shuffled over
-/// the panes A, B, C ... One trial per rated stimulus, in pane order; the labelled reference
-/// is every trial's `reference`. Training screens (BS.1534-3's training phase) come first:
-/// the screens of the first `training_screens` clips of `[conditions]` (the same for every
-/// subject, so a session's length is known up front), block `familiarization`, their panes
-/// shuffled by a draw of their own, so that the test screens are those of the same study
-/// without training.
-fn plan_mushra(study: &StudyDefinition, subject: u32) -> Vec<Trial> {
-    let mut rng = StudyRng::new(study.seed, &[u64::from(subject), purpose::PLAN]);
-    let mut training_rng = StudyRng::new(study.seed, &[u64::from(subject), MUSHRA_TRAINING]);
-    let screens = crate::study::mushra_screens(&study.conditions);
-    let mut order: Vec<usize> = (0..screens.len()).collect();
-    match study.design.order {
-        ConditionOrder::Random => rng.shuffle(&mut order),
-        ConditionOrder::LatinSquare => order = design::williams_row(order.len(), subject as usize),
-    }
-    let (anchors, training) = study
-        .mushra
-        .as_ref()
-        .map(|m| (m.anchors.as_slice(), m.training_screens as usize))
-        .unwrap_or_default();
-    let shown = (0..training.min(screens.len()))
-        .map(|k| (k, Block::Familiarization))
-        .chain(order.iter().map(|&k| (k, Block::Test)));
-    let mut plan = Vec::new();
-    for (k, block) in shown {
-        let Some((reference, tests)) = screens.get(k) else {
-            continue;
-        };
-        let mut rated: Vec<&str> = tests.iter().map(|c| c.stimulus.as_str()).collect();
-        rated.push(reference);
-        rated.extend(
-            anchors
-                .iter()
-                .filter(|a| a.reference == *reference)
-                .map(|a| a.stimulus.as_str()),
-        );
-        match block {
-            Block::Familiarization => training_rng.shuffle(&mut rated),
-            _ => rng.shuffle(&mut rated),
-        }
-        for (pane, stimulus) in rated.into_iter().enumerate() {
-            plan.push(Trial {
-                index: plan.len() as u32,
-                block,
-                condition: stimulus.to_string(),
-                stimulus: stimulus.to_string(),
-                reference: reference.clone(),
-                arrangement: Arrangement::Grid,
-                reference_position: Position::pane(pane).unwrap_or(Position::Pane(0)),
-                staircase: None,
-                level: None,
-                break_before: false,
-            });
-        }
-    }
-    plan
-}
-
-/// Tag of the pane draws of a MUSHRA study's training screens.
-const MUSHRA_TRAINING: u64 = 0x7472_6169;
-
 /// Tags of the two balanced side draws of a rated plan.
 const SIDES_FAMILIARIZATION: u64 = 0x6661_6d69;
 const SIDES_CONDITIONS: u64 = 0x636f_6e64;
 
 /// One thing a rated plan shows in a trial: a condition (its test stimulus, and its
 /// reference where the arrangement shows one), or a pair of a pair comparison.
-struct PlanItem {
+pub(crate) struct PlanItem {
     condition: String,
     stimulus: String,
     reference: String,
 }
 
 impl PlanItem {
-    fn condition(c: &Condition) -> Self {
+    pub(crate) fn condition(c: &Condition) -> Self {
         Self {
             condition: c.stimulus.clone(),
             stimulus: c.stimulus.clone(),
@@ -827,7 +693,7 @@ impl PlanItem {
 
     /// P.910 PC: two conditions of one clip; `b` goes in the trial's reference column and is
     /// shown at its reference position, `a` at the other.
-    fn pair(a: &Condition, b: &Condition) -> Self {
+    pub(crate) fn pair(a: &Condition, b: &Condition) -> Self {
         Self {
             condition: format!("{} vs {}", a.stimulus, b.stimulus),
             stimulus: a.stimulus.clone(),
@@ -836,11 +702,26 @@ impl PlanItem {
     }
 }
 
+/// The plan of a method that rates the study's conditions (MOS, DSCQS, ACR, DCR):
+/// [`plan_trials`] over the familiarization conditions and the test conditions.
+pub(crate) fn plan_rated_conditions(study: &StudyDefinition, subject: u32) -> Vec<Trial> {
+    let items =
+        |list: &[Condition]| -> Vec<PlanItem> { list.iter().map(PlanItem::condition).collect() };
+    plan_trials(
+        study,
+        &items(&study.familiarization),
+        &items(&study.conditions),
+        subject,
+        study.presentation.arrangement,
+        study.presentation.reference_position,
+    )
+}
+
 /// MOS / DSCQS / ACR / DCR / pair comparison plan (paper 000 section IV): familiarization
 /// spanning the quality range first (shuffled), then the test items (conditions, or a pair
 /// comparison's pairs) shuffled per subject (or in the subject's row of a balanced Latin
 /// square, `[design] order`) with hidden repeats inserted.
-fn plan_trials(
+pub(crate) fn plan_trials(
     study: &StudyDefinition,
     fam: &[PlanItem],
     items: &[PlanItem],

@@ -12,7 +12,7 @@
 //! depend on how many answers came before it in this process (resume gives the same answers).
 
 use crate::manifest::{REFERENCE_CODEC, SceneStimulus};
-use crate::record::{Answer, Position, Protocol, Response, Trial};
+use crate::record::{Protocol, Response, Trial};
 use crate::rng::{StudyRng, purpose};
 use crate::study::{
     Detection, Metric, Psychometric, RatingScale, SimulationSettings, StudyDefinition,
@@ -199,7 +199,19 @@ impl Observer {
         self.scale.min + range * (-error.max(0.0) / self.settings.quality_scale).exp()
     }
 
-    fn rate(&self, error: f64, rng: &mut StudyRng) -> f64 {
+    /// The normal noise of each judgement (`[simulation] noise_sd`), in scale units.
+    pub fn noise_sd(&self) -> f64 {
+        self.settings.noise_sd
+    }
+
+    /// What a 2AFC observer's detection depends on (`[simulation] detection`).
+    pub fn detection(&self) -> Detection {
+        self.settings.detection
+    }
+
+    /// A rating of a stimulus whose objective error is `error`: its latent quality, the
+    /// subject's bias and the judgement's noise, snapped to the scale.
+    pub fn rate(&self, error: f64, rng: &mut StudyRng) -> f64 {
         let q = self.quality_of_error(error) + self.bias + self.settings.noise_sd * rng.normal();
         self.scale.snap(q)
     }
@@ -239,54 +251,8 @@ impl Observer {
                 u64::from(trial.index),
             ],
         );
-        let answer = match self.protocol {
-            // ACR rates the stimulus shown (a hidden reference's error is 0); DCR rates the
-            // test's impairment on the same latent quality, with the reference shown.
-            // MUSHRA rates each pane on its own row, the same way (a hidden reference's error
-            // is 0, the anchor's the largest).
-            Protocol::Mos | Protocol::Acr | Protocol::Dcr | Protocol::Mushra => {
-                Answer::Rating(self.rate(test_error()?, &mut rng))
-            }
-            Protocol::Dscqs => {
-                let r = self.rate(self.manifest_error(&trial.reference)?, &mut rng);
-                let t = self.rate(test_error()?, &mut rng);
-                if matches!(trial.reference_position, Position::A | Position::First) {
-                    Answer::Pair { a: r, b: t }
-                } else {
-                    Answer::Pair { a: t, b: r }
-                }
-            }
-            // A Thurstone case V observer: each stimulus' latent quality plus its own
-            // normal noise (`noise_sd`), the better-looking one picked; the subject's bias
-            // shifts both alike and cancels. P(stimulus preferred) = Φ((q_s - q_r) / (σ√2)).
-            Protocol::PairComparison => {
-                let q = |e: f64, rng: &mut StudyRng| {
-                    self.quality_of_error(e) + self.settings.noise_sd * rng.normal()
-                };
-                let qs = q(test_error()?, &mut rng);
-                let qr = q(self.manifest_error(&trial.reference)?, &mut rng);
-                Answer::Choice(if qs > qr {
-                    trial.reference_position.other()
-                } else {
-                    trial.reference_position
-                })
-            }
-            Protocol::Staircase => {
-                let level = trial
-                    .level
-                    .ok_or(ObserverError::NoLevel { trial: trial.index })?;
-                let x = match self.settings.detection {
-                    Detection::Level => level,
-                    Detection::Error => test_error()?,
-                };
-                let correct = rng.unit_f64() < self.psychometric().p_correct(x);
-                Answer::Choice(if correct {
-                    trial.reference_position
-                } else {
-                    trial.reference_position.other()
-                })
-            }
-        };
+        let answer =
+            crate::methods::of(self.protocol).simulate(self, trial, &test_error, &mut rng)?;
         let base = self.settings.response_time_ms as f64;
         let response_time_ms = (base * (0.5 + rng.unit_f64())).round() as u64;
         let replays = u32::from(self.allow_replay && rng.below(10) == 0);

@@ -3,6 +3,10 @@
 
 use std::fmt::{self, Write as _};
 
+use super::Refusal;
+use crate::observer::{Observer, ObserverError};
+use crate::record::{Answer, Outcome, Position, Trial};
+use crate::rng::StudyRng;
 use crate::study::{RatingScale, ReferencePlacement, ScaleKind, StudyDefinition};
 use crate::texts::{Planned, format_rating};
 
@@ -126,4 +130,47 @@ pub(super) fn presentation_time(
         text,
         "  presentation time: {est_min:.1} min without answers"
     )
+}
+
+/// `v` if the study's scale takes it.
+pub(super) fn on_scale(v: f64, scale: &RatingScale) -> Result<f64, Refusal> {
+    if scale.accepts(v) {
+        Ok(v)
+    } else {
+        Err(Refusal::OffScale(v))
+    }
+}
+
+/// A one-rating method's outcome: the rating is the score.
+pub(super) fn score_rating(answer: Answer, scale: &RatingScale) -> Result<Outcome, Refusal> {
+    let Answer::Rating(v) = answer else {
+        return Err(Refusal::Expected("a rating"));
+    };
+    Ok(Outcome {
+        score: on_scale(v, scale)?,
+        score_reference: None,
+        score_test: None,
+        correct: None,
+        reversal: None,
+    })
+}
+
+/// The position a forced choice picked, if it is one of the trial's arrangement.
+pub(super) fn choice(trial: &Trial, answer: Answer) -> Result<Position, Refusal> {
+    match answer {
+        Answer::Choice(p) if p.fits(trial.arrangement) => Ok(p),
+        _ => Err(Refusal::Expected(
+            "a choice of a position of this arrangement",
+        )),
+    }
+}
+
+/// A one-rating method's simulated answer: the test stimulus rated on its own (a hidden
+/// reference's error is 0, a MUSHRA anchor's the largest).
+pub(super) fn simulate_rating(
+    observer: &Observer,
+    test_error: &dyn Fn() -> Result<f64, ObserverError>,
+    rng: &mut StudyRng,
+) -> Result<Answer, ObserverError> {
+    Ok(Answer::Rating(observer.rate(test_error()?, rng)))
 }

@@ -3,9 +3,11 @@
 
 use std::fmt;
 
-use super::common::{describe_ratings, rating_trials, scale_instructions};
-use super::{AnswerKind, AnswerWidget, Method};
-use crate::record::{Answer, Arrangement, Position, Protocol, Trial};
+use super::common::{describe_ratings, on_scale, rating_trials, scale_instructions};
+use super::{AnswerKind, AnswerWidget, Method, Refusal};
+use crate::observer::{Observer, ObserverError};
+use crate::record::{Answer, Arrangement, Outcome, Position, Protocol, Trial};
+use crate::rng::StudyRng;
 use crate::study::{RatingScale, ReferencePlacement, ScaleKind, StudyDefinition};
 use crate::texts::{Planned, dscqs_names};
 
@@ -73,6 +75,55 @@ impl Method for Dscqs {
 
     fn describe(&self, study: &StudyDefinition, text: &mut String) -> fmt::Result {
         describe_ratings(text, study)
+    }
+
+    fn plan(&self, study: &StudyDefinition, subject: u32) -> Vec<Trial> {
+        crate::engine::plan_rated_conditions(study, subject)
+    }
+
+    /// BT.500 DSCQS: the difference reference minus test is the trial's score.
+    fn score(
+        &self,
+        trial: &Trial,
+        answer: Answer,
+        scale: &RatingScale,
+    ) -> Result<Outcome, Refusal> {
+        let Answer::Pair { a, b } = answer else {
+            return Err(Refusal::Expected("ratings of both stimuli"));
+        };
+        let (a, b) = (on_scale(a, scale)?, on_scale(b, scale)?);
+        // `a` rates what was shown first: slot A, or the first interval.
+        let (r, t) = if matches!(trial.reference_position, Position::A | Position::First) {
+            (a, b)
+        } else {
+            (b, a)
+        };
+        Ok(Outcome {
+            score: r - t,
+            score_reference: Some(r),
+            score_test: Some(t),
+            correct: None,
+            reversal: None,
+        })
+    }
+
+    /// Both stimuli rated, each on its own latent quality.
+    fn simulate(
+        &self,
+        observer: &Observer,
+        trial: &Trial,
+        test_error: &dyn Fn() -> Result<f64, ObserverError>,
+        rng: &mut StudyRng,
+    ) -> Result<Answer, ObserverError> {
+        let r = observer.rate(observer.manifest_error(&trial.reference)?, rng);
+        let t = observer.rate(test_error()?, rng);
+        Ok(
+            if matches!(trial.reference_position, Position::A | Position::First) {
+                Answer::Pair { a: r, b: t }
+            } else {
+                Answer::Pair { a: t, b: r }
+            },
+        )
     }
 
     fn distinct_answers(&self, _trial: &Trial, scale: &RatingScale) -> Vec<Answer> {

@@ -5,8 +5,11 @@
 //! asks the study's method ([`StudyDefinition::method`]) instead of matching on the
 //! protocol's name; `study/tests/architecture.rs` counts the matches left.
 //!
-//! A method's trial plan and answer scoring are still `engine`'s, its simulated observer
-//! `observer`'s and its analysis `analysis`'s: they move behind this trait next.
+//! Each method also plans its session (shared planning in `engine`: shuffles, Latin
+//! squares, hidden repeats, balanced sides), scores its answers, and answers as a simulated
+//! observer (`observer` models the observer; the method says what it answers). Adaptive
+//! tracks (staircases, QUEST+, Psi) are the engine's. The study file's per-method checks and
+//! the analysis still match on names; they move behind this trait next.
 
 mod acr;
 pub(crate) mod common;
@@ -21,7 +24,9 @@ use std::fmt;
 
 use serde::Serialize;
 
-use crate::record::{Answer, Protocol, Trial};
+use crate::observer::{Observer, ObserverError};
+use crate::record::{Answer, Outcome, Protocol, Trial};
+use crate::rng::StudyRng;
 use crate::study::{RatingScale, ReferencePlacement, StudyDefinition};
 use crate::texts::Planned;
 
@@ -66,6 +71,15 @@ pub enum AnswerWidget {
     },
 }
 
+/// Why a method refused an answer (the engine names the trial and the protocol).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Refusal {
+    /// The answer is not of the kind the method takes; what it takes, in words.
+    Expected(&'static str),
+    /// A rating that is not on the study's scale.
+    OffScale(f64),
+}
+
 /// A study method: one implementation per [`Protocol`], found by [`of`].
 pub trait Method: Sync {
     /// The protocol this method runs (its name in study files and result rows).
@@ -101,6 +115,37 @@ pub trait Method: Sync {
     /// Where the reference goes, for `study check`.
     fn describe_reference(&self, placement: ReferencePlacement) -> String {
         common::describe_reference(placement, "per condition")
+    }
+
+    /// The trials of subject `subject`'s session (0-based), planned up front from the
+    /// study's seed; none for an adaptive method, whose tracks pick each trial (`engine`).
+    fn plan(&self, study: &StudyDefinition, subject: u32) -> Vec<Trial>;
+
+    /// Scores `answer` to `trial` on `scale`: the outcome its row logs. An adaptive method's
+    /// `correct` moves its track, which adds the reversal.
+    ///
+    /// # Errors
+    /// An answer of another kind, or a rating off the scale.
+    fn score(&self, trial: &Trial, answer: Answer, scale: &RatingScale)
+    -> Result<Outcome, Refusal>;
+
+    /// A simulated observer's answer to `trial`: `test_error` gives the objective error of
+    /// the trial's test stimulus (measured, or the manifest's), `rng` the trial's draws.
+    ///
+    /// # Errors
+    /// A stimulus without the error the observer needs.
+    fn simulate(
+        &self,
+        observer: &Observer,
+        trial: &Trial,
+        test_error: &dyn Fn() -> Result<f64, ObserverError>,
+        rng: &mut StudyRng,
+    ) -> Result<Answer, ObserverError>;
+
+    /// Whether its trials come in screens shown whole (a MUSHRA screen's panes, one trial
+    /// each): the time limit and breaks fall between screens.
+    fn screens(&self) -> bool {
+        false
     }
 
     /// Whether the next trial depends on the answers (an adaptive track), so that a session

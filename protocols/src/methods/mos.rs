@@ -4,8 +4,11 @@
 use std::fmt;
 
 use super::common::{describe_ratings, practice_sentence, rating_trials, scale_instructions};
-use super::{AnswerKind, AnswerWidget, Method};
-use crate::record::{Answer, Arrangement, Protocol, Trial};
+use super::common::{score_rating, simulate_rating};
+use super::{AnswerKind, AnswerWidget, Method, Refusal};
+use crate::observer::{Observer, ObserverError};
+use crate::record::{Answer, Arrangement, Outcome, Protocol, Trial};
+use crate::rng::StudyRng;
 use crate::study::{RatingScale, StimulusLabels, StudyDefinition};
 use crate::texts::Planned;
 
@@ -70,6 +73,29 @@ impl Method for Mos {
 
     fn describe(&self, study: &StudyDefinition, text: &mut String) -> fmt::Result {
         describe_ratings(text, study)
+    }
+
+    fn plan(&self, study: &StudyDefinition, subject: u32) -> Vec<Trial> {
+        crate::engine::plan_rated_conditions(study, subject)
+    }
+
+    fn score(
+        &self,
+        _trial: &Trial,
+        answer: Answer,
+        scale: &RatingScale,
+    ) -> Result<Outcome, Refusal> {
+        score_rating(answer, scale)
+    }
+
+    fn simulate(
+        &self,
+        observer: &Observer,
+        _trial: &Trial,
+        test_error: &dyn Fn() -> Result<f64, ObserverError>,
+        rng: &mut StudyRng,
+    ) -> Result<Answer, ObserverError> {
+        simulate_rating(observer, test_error, rng)
     }
 
     fn distinct_answers(&self, _trial: &Trial, scale: &RatingScale) -> Vec<Answer> {

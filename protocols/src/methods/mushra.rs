@@ -1,14 +1,19 @@
 //! MUSHRA-style multi-stimulus rating (ITU-R BS.1534-3 adapted): one screen per clip with
 //! its reference, the hidden reference and a low anchor among the lettered versions, each
-//! rated 0-100 on its own slider. The screens and pane order are `engine`'s (`plan_mushra`),
-//! the study file's `[mushra]` is `study::mushra`'s, post-screening `analysis::mushra`'s.
+//! rated 0-100 on its own slider. The study file's `[mushra]` is `study::mushra`'s,
+//! post-screening `analysis::mushra`'s.
 
 use std::fmt::{self, Write as _};
 
-use super::common::presentation_time;
-use super::{AnswerKind, AnswerWidget, Method};
-use crate::record::{Answer, Protocol, Trial};
-use crate::study::{AnchorRule, RatingScale, ReferencePlacement, StudyDefinition, mushra_screens};
+use super::common::{presentation_time, score_rating, simulate_rating};
+use super::{AnswerKind, AnswerWidget, Method, Refusal};
+use crate::design;
+use crate::observer::{Observer, ObserverError};
+use crate::record::{Answer, Arrangement, Block, Outcome, Position, Protocol, Trial};
+use crate::rng::{StudyRng, purpose};
+use crate::study::{
+    AnchorRule, ConditionOrder, RatingScale, ReferencePlacement, StudyDefinition, mushra_screens,
+};
 use crate::texts::Planned;
 
 /// MUSHRA screens.
@@ -114,7 +119,99 @@ impl Method for Mushra {
             .to_string()
     }
 
+    fn plan(&self, study: &StudyDefinition, subject: u32) -> Vec<Trial> {
+        plan_screens(study, subject)
+    }
+
+    fn score(
+        &self,
+        _trial: &Trial,
+        answer: Answer,
+        scale: &RatingScale,
+    ) -> Result<Outcome, Refusal> {
+        score_rating(answer, scale)
+    }
+
+    /// Each pane rated on its own row.
+    fn simulate(
+        &self,
+        observer: &Observer,
+        _trial: &Trial,
+        test_error: &dyn Fn() -> Result<f64, ObserverError>,
+        rng: &mut StudyRng,
+    ) -> Result<Answer, ObserverError> {
+        simulate_rating(observer, test_error, rng)
+    }
+
+    fn screens(&self) -> bool {
+        true
+    }
+
     fn distinct_answers(&self, _trial: &Trial, scale: &RatingScale) -> Vec<Answer> {
         vec![Answer::Rating(scale.min)]
     }
+}
+
+/// Tag of the pane draws of a MUSHRA study's training screens.
+const MUSHRA_TRAINING: u64 = 0x7472_6169;
+
+/// MUSHRA plan (ITU-R BS.1534-3, adapted): one screen per clip, in a random order per subject
+/// (or the subject's row of a balanced Latin square over the screens, `[design] order`); on
+/// each screen the clip's test conditions, its hidden reference and its anchor, shuffled over
+/// the panes A, B, C ... One trial per rated stimulus, in pane order; the labelled reference
+/// is every trial's `reference`. Training screens (BS.1534-3's training phase) come first:
+/// the screens of the first `training_screens` clips of `[conditions]` (the same for every
+/// subject, so a session's length is known up front), block `familiarization`, their panes
+/// shuffled by a draw of their own, so that the test screens are those of the same study
+/// without training.
+fn plan_screens(study: &StudyDefinition, subject: u32) -> Vec<Trial> {
+    let mut rng = StudyRng::new(study.seed, &[u64::from(subject), purpose::PLAN]);
+    let mut training_rng = StudyRng::new(study.seed, &[u64::from(subject), MUSHRA_TRAINING]);
+    let screens = mushra_screens(&study.conditions);
+    let mut order: Vec<usize> = (0..screens.len()).collect();
+    match study.design.order {
+        ConditionOrder::Random => rng.shuffle(&mut order),
+        ConditionOrder::LatinSquare => order = design::williams_row(order.len(), subject as usize),
+    }
+    let (anchors, training) = study
+        .mushra
+        .as_ref()
+        .map(|m| (m.anchors.as_slice(), m.training_screens as usize))
+        .unwrap_or_default();
+    let shown = (0..training.min(screens.len()))
+        .map(|k| (k, Block::Familiarization))
+        .chain(order.iter().map(|&k| (k, Block::Test)));
+    let mut plan = Vec::new();
+    for (k, block) in shown {
+        let Some((reference, tests)) = screens.get(k) else {
+            continue;
+        };
+        let mut rated: Vec<&str> = tests.iter().map(|c| c.stimulus.as_str()).collect();
+        rated.push(reference);
+        rated.extend(
+            anchors
+                .iter()
+                .filter(|a| a.reference == *reference)
+                .map(|a| a.stimulus.as_str()),
+        );
+        match block {
+            Block::Familiarization => training_rng.shuffle(&mut rated),
+            _ => rng.shuffle(&mut rated),
+        }
+        for (pane, stimulus) in rated.into_iter().enumerate() {
+            plan.push(Trial {
+                index: plan.len() as u32,
+                block,
+                condition: stimulus.to_string(),
+                stimulus: stimulus.to_string(),
+                reference: reference.clone(),
+                arrangement: Arrangement::Grid,
+                reference_position: Position::pane(pane).unwrap_or(Position::Pane(0)),
+                staircase: None,
+                level: None,
+                break_before: false,
+            });
+        }
+    }
+    plan
 }

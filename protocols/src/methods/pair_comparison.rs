@@ -3,9 +3,12 @@
 
 use std::fmt::{self, Write as _};
 
-use super::common::{describe_reference, original_among_versions, presentation_time};
-use super::{AnswerKind, AnswerWidget, Method};
-use crate::record::{Answer, Arrangement, Protocol, Trial};
+use super::common::{choice, describe_reference, original_among_versions, presentation_time};
+use super::{AnswerKind, AnswerWidget, Method, Refusal};
+use crate::engine::{PlanItem, plan_trials};
+use crate::observer::{Observer, ObserverError};
+use crate::record::{Answer, Arrangement, Outcome, Protocol, Trial};
+use crate::rng::StudyRng;
 use crate::study::{RatingScale, ReferencePlacement, StudyDefinition};
 use crate::texts::{PC_QUESTION, Planned};
 
@@ -83,6 +86,69 @@ impl Method for PairComparison {
 
     fn describe_reference(&self, placement: ReferencePlacement) -> String {
         describe_reference(placement, "per pair")
+    }
+
+    /// Each pair of the study's pairs a trial ([`crate::engine::plan_trials`]), no
+    /// familiarization.
+    fn plan(&self, study: &StudyDefinition, subject: u32) -> Vec<Trial> {
+        let pairs: Vec<PlanItem> = study
+            .pairs()
+            .into_iter()
+            .filter_map(|(i, j)| {
+                Some(PlanItem::pair(
+                    study.conditions.get(i)?,
+                    study.conditions.get(j)?,
+                ))
+            })
+            .collect();
+        plan_trials(
+            study,
+            &[],
+            &pairs,
+            subject,
+            study.presentation.arrangement,
+            study.presentation.reference_position,
+        )
+    }
+
+    /// The `reference` column holds the pair's other test stimulus, shown at the reference
+    /// position: picking the other position prefers `stimulus` (score 1).
+    fn score(
+        &self,
+        trial: &Trial,
+        answer: Answer,
+        _scale: &RatingScale,
+    ) -> Result<Outcome, Refusal> {
+        let preferred_stimulus = choice(trial, answer)? != trial.reference_position;
+        Ok(Outcome {
+            score: if preferred_stimulus { 1.0 } else { 0.0 },
+            score_reference: None,
+            score_test: None,
+            correct: None,
+            reversal: None,
+        })
+    }
+
+    /// A Thurstone case V observer: each stimulus' latent quality plus its own normal noise
+    /// (`noise_sd`), the better-looking one picked; the subject's bias shifts both alike and
+    /// cancels. P(stimulus preferred) = Φ((q_s - q_r) / (σ√2)).
+    fn simulate(
+        &self,
+        observer: &Observer,
+        trial: &Trial,
+        test_error: &dyn Fn() -> Result<f64, ObserverError>,
+        rng: &mut StudyRng,
+    ) -> Result<Answer, ObserverError> {
+        let q = |e: f64, rng: &mut StudyRng| {
+            observer.quality_of_error(e) + observer.noise_sd() * rng.normal()
+        };
+        let qs = q(test_error()?, rng);
+        let qr = q(observer.manifest_error(&trial.reference)?, rng);
+        Ok(Answer::Choice(if qs > qr {
+            trial.reference_position.other()
+        } else {
+            trial.reference_position
+        }))
     }
 
     fn distinct_answers(&self, trial: &Trial, _scale: &RatingScale) -> Vec<Answer> {

@@ -4,10 +4,12 @@
 
 use std::fmt::{self, Write as _};
 
-use super::common::describe_reference;
-use super::{AnswerKind, AnswerWidget, Method};
-use crate::record::{Answer, Protocol, Trial};
-use crate::study::{RatingScale, ReferencePlacement, StudyDefinition};
+use super::common::{choice, describe_reference};
+use super::{AnswerKind, AnswerWidget, Method, Refusal};
+use crate::observer::{Observer, ObserverError};
+use crate::record::{Answer, Outcome, Protocol, Trial};
+use crate::rng::StudyRng;
+use crate::study::{Detection, RatingScale, ReferencePlacement, StudyDefinition};
 use crate::texts::{AFC_QUESTION, Planned};
 
 /// Two-alternative forced choice on staircases.
@@ -80,6 +82,53 @@ impl Method for Staircase {
 
     fn describe_reference(&self, placement: ReferencePlacement) -> String {
         describe_reference(placement, "each block of 4 trials")
+    }
+
+    /// No plan: the tracks pick each trial (`engine`).
+    fn plan(&self, _study: &StudyDefinition, _subject: u32) -> Vec<Trial> {
+        Vec::new()
+    }
+
+    /// Thesis ch. 5: picking the original motion is the correct answer (score 1); the
+    /// engine's track takes `correct` and adds the reversal.
+    fn score(
+        &self,
+        trial: &Trial,
+        answer: Answer,
+        _scale: &RatingScale,
+    ) -> Result<Outcome, Refusal> {
+        let correct = choice(trial, answer)? == trial.reference_position;
+        Ok(Outcome {
+            score: if correct { 1.0 } else { 0.0 },
+            score_reference: None,
+            score_test: None,
+            correct: Some(correct),
+            reversal: None,
+        })
+    }
+
+    /// The original picked with the observer's psychometric probability at the trial's
+    /// level (or, with `[simulation] detection = "error"`, at the test's measured error).
+    fn simulate(
+        &self,
+        observer: &Observer,
+        trial: &Trial,
+        test_error: &dyn Fn() -> Result<f64, ObserverError>,
+        rng: &mut StudyRng,
+    ) -> Result<Answer, ObserverError> {
+        let level = trial
+            .level
+            .ok_or(ObserverError::NoLevel { trial: trial.index })?;
+        let x = match observer.detection() {
+            Detection::Level => level,
+            Detection::Error => test_error()?,
+        };
+        let correct = rng.unit_f64() < observer.psychometric().p_correct(x);
+        Ok(Answer::Choice(if correct {
+            trial.reference_position
+        } else {
+            trial.reference_position.other()
+        }))
     }
 
     fn adaptive(&self) -> bool {
