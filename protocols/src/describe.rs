@@ -69,7 +69,7 @@ fn describe_design(text: &mut String, study: &StudyDefinition) -> std::fmt::Resu
     } else if study.design.order == ConditionOrder::LatinSquare {
         // A pair comparison orders its pairs, a MUSHRA study its screens (one per clip), the
         // others their conditions.
-        let items = study.method().ordered_items(study);
+        let items = study.method().ordered_items(&study.conditions);
         let rows = crate::design::williams_rows(items);
         writeln!(
             text,

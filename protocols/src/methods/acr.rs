@@ -5,11 +5,11 @@ use std::fmt;
 
 use super::common::{describe_ratings, practice_sentence, rating_trials, scale_instructions};
 use super::common::{score_rating, simulate_rating};
-use super::{AnswerKind, AnswerWidget, Method, Refusal};
+use super::{AnswerKind, AnswerWidget, Method, ReferenceRule, Refusal};
 use crate::observer::{Observer, ObserverError};
-use crate::record::{Answer, Outcome, Protocol, Trial};
+use crate::record::{Answer, Arrangement, Outcome, Position, Protocol, Trial};
 use crate::rng::StudyRng;
-use crate::study::{RatingScale, StudyDefinition};
+use crate::study::{RatingScale, ReferencePlacement, StudyDefinition};
 use crate::texts::Planned;
 
 /// Absolute category rating.
@@ -70,6 +70,30 @@ impl Method for Acr {
         rng: &mut StudyRng,
     ) -> Result<Answer, ObserverError> {
         simulate_rating(observer, test_error, rng)
+    }
+
+    /// P.910 ACR: one stimulus at a time.
+    fn arrangements(&self) -> &'static [(&'static str, Arrangement)] {
+        &[("single", Arrangement::Single)]
+    }
+
+    fn reference_rule(&self) -> ReferenceRule {
+        ReferenceRule::None {
+            why: "ACR shows no reference (P.910 single stimulus): remove it",
+            placement: ReferencePlacement::Fixed(Position::Hidden),
+        }
+    }
+
+    fn labels_hidden(&self) -> Option<&'static str> {
+        Some("ACR shows one motion and no reference (ITU-T P.910)")
+    }
+
+    fn hidden_references(&self) -> bool {
+        true
+    }
+
+    fn gold_trials(&self) -> bool {
+        true
     }
 
     fn distinct_answers(&self, _trial: &Trial, scale: &RatingScale) -> Vec<Answer> {

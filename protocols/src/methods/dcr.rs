@@ -5,11 +5,11 @@ use std::fmt;
 
 use super::common::{describe_ratings, practice_sentence, rating_trials};
 use super::common::{score_rating, simulate_rating};
-use super::{AnswerKind, AnswerWidget, Method, Refusal};
+use super::{AnswerKind, AnswerWidget, Method, ReferenceRule, Refusal};
 use crate::observer::{Observer, ObserverError};
 use crate::record::{Answer, Arrangement, Outcome, Protocol, Trial};
 use crate::rng::StudyRng;
-use crate::study::{RatingScale, StudyDefinition};
+use crate::study::{RatingScale, ScaleKind, ScaleWords, StudyDefinition};
 use crate::texts::Planned;
 
 /// Degradation category rating.
@@ -90,6 +90,51 @@ impl Method for Dcr {
     ) -> Result<Answer, ObserverError> {
         // The test's impairment, on the same latent quality, with the reference shown.
         simulate_rating(observer, test_error, rng)
+    }
+
+    /// P.910 DCR: the reference, then the test (or both at once, side by side).
+    fn arrangements(&self) -> &'static [(&'static str, Arrangement)] {
+        &[
+            ("sequential", Arrangement::Sequential),
+            ("side_by_side", Arrangement::SideBySide),
+        ]
+    }
+
+    fn reference_rule(&self) -> ReferenceRule {
+        ReferenceRule::ShownFirst
+    }
+
+    /// P.910 DCR: five impairment categories, 5 (imperceptible) to 1 (very annoying).
+    fn check_scale(
+        &self,
+        kind: ScaleKind,
+        min: f64,
+        max: f64,
+        step: Option<f64>,
+    ) -> Option<String> {
+        let five_categories = kind == ScaleKind::Categorical
+            && [(min, 1.0), (max, 5.0), (step.unwrap_or(0.0), 1.0)]
+                .iter()
+                .all(|(v, want)| (v - want).abs() < 1e-12);
+        (!five_categories).then(|| {
+            format!(
+                "DCR rates five impairment categories (P.910): use kind = \"categorical\", min = \
+                 1, max = 5, step = 1 (or omit [scale]), not {} {min}..{max} step {step:?}",
+                if kind == ScaleKind::Categorical {
+                    "categorical"
+                } else {
+                    "continuous"
+                }
+            )
+        })
+    }
+
+    fn scale_words(&self) -> ScaleWords {
+        ScaleWords::Impairment
+    }
+
+    fn gold_trials(&self) -> bool {
+        true
     }
 
     fn distinct_answers(&self, _trial: &Trial, scale: &RatingScale) -> Vec<Answer> {

@@ -126,6 +126,26 @@ impl Method for Dscqs {
         )
     }
 
+    /// BT.500's A B A B, or thesis 6.5's reference then test, once each.
+    fn arrangements(&self) -> &'static [(&'static str, Arrangement)] {
+        &[
+            ("abab", Arrangement::Abab),
+            ("sequential", Arrangement::Sequential),
+        ]
+    }
+
+    fn labels_hidden(&self) -> Option<&'static str> {
+        Some("DSCQS does not tell the subject which of A and B is the reference (ITU-R BT.500)")
+    }
+
+    fn default_scale_kind(&self) -> ScaleKind {
+        ScaleKind::Continuous
+    }
+
+    fn gold_trials(&self) -> bool {
+        true
+    }
+
     fn distinct_answers(&self, _trial: &Trial, scale: &RatingScale) -> Vec<Answer> {
         vec![Answer::Pair {
             a: scale.min,

@@ -25,9 +25,11 @@ use std::fmt;
 use serde::Serialize;
 
 use crate::observer::{Observer, ObserverError};
-use crate::record::{Answer, Outcome, Protocol, Trial};
+use crate::record::{Answer, Arrangement, Outcome, Protocol, Trial};
 use crate::rng::StudyRng;
-use crate::study::{RatingScale, ReferencePlacement, StudyDefinition};
+use crate::study::{
+    Condition, RatingScale, ReferencePlacement, ScaleKind, ScaleWords, StudyDefinition,
+};
 use crate::texts::Planned;
 
 /// What an answer to a method's trial is (how a result row holds it).
@@ -80,6 +82,48 @@ pub enum Refusal {
     OffScale(f64),
 }
 
+/// What a study file may say of the reference's position (`[presentation]
+/// reference_position`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ReferenceRule {
+    /// A position of the arrangement, `"random"` (the default) or `"balanced"`.
+    Any,
+    /// `"random"` or `"balanced"` only: the method places two test stimuli, and a fixed side
+    /// would confound the side with the condition.
+    NotFixed,
+    /// The reference is shown first (P.910 DCR), or on the side the study names.
+    ShownFirst,
+    /// Not the study's to say: `why` refuses the key; the placement is `placement`.
+    None {
+        /// The refusal, naming the method's reason.
+        why: &'static str,
+        /// Where the reference goes.
+        placement: ReferencePlacement,
+    },
+}
+
+/// The sections of a study file that describe what a method shows (checked by
+/// `study::top`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Sections {
+    /// `[conditions]` (test conditions, hidden references where the method takes them) and
+    /// `[session] familiarization`.
+    RatedConditions,
+    /// `[conditions]` compared in pairs: every pair of one clip's conditions.
+    Pairs,
+    /// `[conditions]` grouped in screens, one per clip, and `[mushra]` (anchors, training
+    /// screens, post-screening).
+    Screens,
+    /// `[staircase]`: the tracks and their levels (or a live codec).
+    Tracks,
+}
+
+/// The `(name, arrangement)` pairs of side by side (the default) or sequential.
+pub(crate) const SIDE_BY_SIDE_OR_SEQUENTIAL: &[(&str, Arrangement)] = &[
+    ("side_by_side", Arrangement::SideBySide),
+    ("sequential", Arrangement::Sequential),
+];
+
 /// A study method: one implementation per [`Protocol`], found by [`of`].
 pub trait Method: Sync {
     /// The protocol this method runs (its name in study files and result rows).
@@ -106,10 +150,72 @@ pub trait Method: Sync {
     /// Only the formatter's (never, into a `String`).
     fn describe(&self, study: &StudyDefinition, text: &mut String) -> fmt::Result;
 
-    /// How many items a balanced Latin square orders: the conditions, unless the method
-    /// orders something else (pairs, screens).
-    fn ordered_items(&self, study: &StudyDefinition) -> usize {
-        study.conditions.len()
+    /// How many items a balanced Latin square orders over `conditions`: the conditions,
+    /// unless the method orders something else (pairs, screens).
+    fn ordered_items(&self, conditions: &[Condition]) -> usize {
+        conditions.len()
+    }
+
+    /// The study file's sections that say what the method shows.
+    fn sections(&self) -> Sections {
+        Sections::RatedConditions
+    }
+
+    /// The arrangements a study file may ask for (`[presentation] arrangement`), by name;
+    /// the first is the default.
+    fn arrangements(&self) -> &'static [(&'static str, Arrangement)] {
+        SIDE_BY_SIDE_OR_SEQUENTIAL
+    }
+
+    /// What a study file may say of the reference's position.
+    fn reference_rule(&self) -> ReferenceRule {
+        ReferenceRule::Any
+    }
+
+    /// Why the stimuli cannot carry labels naming the reference and the test, where the
+    /// design hides which is which (`None`: they are shown unless the study says no).
+    fn labels_hidden(&self) -> Option<&'static str> {
+        None
+    }
+
+    /// The rating scale's kind when the study file does not name one.
+    fn default_scale_kind(&self) -> ScaleKind {
+        ScaleKind::Categorical
+    }
+
+    /// The default step of a scale of `kind` (categorical 1-5, continuous 0-100).
+    fn default_scale_step(&self, kind: ScaleKind) -> Option<f64> {
+        match kind {
+            ScaleKind::Categorical => Some(1.0),
+            ScaleKind::Continuous => None,
+        }
+    }
+
+    /// A scale the method cannot rate on, said as the study file's problem (`None`: fine).
+    fn check_scale(
+        &self,
+        _kind: ScaleKind,
+        _min: f64,
+        _max: f64,
+        _step: Option<f64>,
+    ) -> Option<String> {
+        None
+    }
+
+    /// The words of its grades.
+    fn scale_words(&self) -> ScaleWords {
+        ScaleWords::Quality
+    }
+
+    /// Whether a condition may be its own reference (`[conditions] hidden_reference`: ACR-HR,
+    /// a pair comparison's anchor).
+    fn hidden_references(&self) -> bool {
+        false
+    }
+
+    /// Whether it takes catch (gold) trials: rated conditions of one-stimulus screens.
+    fn gold_trials(&self) -> bool {
+        false
     }
 
     /// Where the reference goes, for `study check`.

@@ -9,7 +9,7 @@ use super::{AnswerKind, AnswerWidget, Method, Refusal};
 use crate::observer::{Observer, ObserverError};
 use crate::record::{Answer, Arrangement, Outcome, Protocol, Trial};
 use crate::rng::StudyRng;
-use crate::study::{RatingScale, StimulusLabels, StudyDefinition};
+use crate::study::{RatingScale, ScaleKind, StimulusLabels, StudyDefinition};
 use crate::texts::Planned;
 
 /// Mean opinion score of the compressed motion beside (or after) its original.
@@ -96,6 +96,18 @@ impl Method for Mos {
         rng: &mut StudyRng,
     ) -> Result<Answer, ObserverError> {
         simulate_rating(observer, test_error, rng)
+    }
+
+    /// Paper 000's 1-5 in half steps.
+    fn default_scale_step(&self, kind: ScaleKind) -> Option<f64> {
+        match kind {
+            ScaleKind::Categorical => Some(0.5),
+            ScaleKind::Continuous => None,
+        }
+    }
+
+    fn gold_trials(&self) -> bool {
+        true
     }
 
     fn distinct_answers(&self, _trial: &Trial, scale: &RatingScale) -> Vec<Answer> {

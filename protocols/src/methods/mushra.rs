@@ -6,13 +6,14 @@
 use std::fmt::{self, Write as _};
 
 use super::common::{presentation_time, score_rating, simulate_rating};
-use super::{AnswerKind, AnswerWidget, Method, Refusal};
+use super::{AnswerKind, AnswerWidget, Method, ReferenceRule, Refusal, Sections};
 use crate::design;
 use crate::observer::{Observer, ObserverError};
 use crate::record::{Answer, Arrangement, Block, Outcome, Position, Protocol, Trial};
 use crate::rng::{StudyRng, purpose};
 use crate::study::{
-    AnchorRule, ConditionOrder, RatingScale, ReferencePlacement, StudyDefinition, mushra_screens,
+    AnchorRule, Condition, ConditionOrder, RatingScale, ReferencePlacement, ScaleKind,
+    StudyDefinition, mushra_screens,
 };
 use crate::texts::Planned;
 
@@ -109,8 +110,8 @@ impl Method for Mushra {
         presentation_time(text, study, screens.len() + m.training_screens as usize)
     }
 
-    fn ordered_items(&self, study: &StudyDefinition) -> usize {
-        mushra_screens(&study.conditions).len()
+    fn ordered_items(&self, conditions: &[Condition]) -> usize {
+        mushra_screens(conditions).len()
     }
 
     fn describe_reference(&self, _placement: ReferencePlacement) -> String {
@@ -145,6 +146,55 @@ impl Method for Mushra {
 
     fn screens(&self) -> bool {
         true
+    }
+
+    /// BS.1534 (adapted): the reference and every rated stimulus at once, in a grid.
+    fn arrangements(&self) -> &'static [(&'static str, Arrangement)] {
+        &[("grid", Arrangement::Grid)]
+    }
+
+    fn reference_rule(&self) -> ReferenceRule {
+        ReferenceRule::None {
+            why: "a MUSHRA screen shows the labelled reference in a pane of its own and \
+                  shuffles the rated stimuli over the others per screen: remove it",
+            placement: ReferencePlacement::Random,
+        }
+    }
+
+    fn labels_hidden(&self) -> Option<&'static str> {
+        Some("a MUSHRA screen labels its panes itself: Reference, then A, B, C ...")
+    }
+
+    fn default_scale_kind(&self) -> ScaleKind {
+        ScaleKind::Continuous
+    }
+
+    /// BS.1534: a 0-100 slider; whole points keep it keyboard-friendly.
+    fn default_scale_step(&self, _kind: ScaleKind) -> Option<f64> {
+        Some(1.0)
+    }
+
+    fn check_scale(
+        &self,
+        kind: ScaleKind,
+        min: f64,
+        max: f64,
+        _step: Option<f64>,
+    ) -> Option<String> {
+        let zero_to_hundred = kind == ScaleKind::Continuous
+            && (min - 0.0).abs() < 1e-12
+            && (max - 100.0).abs() < 1e-12;
+        (!zero_to_hundred).then(|| {
+            format!(
+                "MUSHRA rates on BS.1534's continuous 0-100 scale (its post-screening limits \
+                 are on it): use kind = \"continuous\", min = 0, max = 100 (or omit [scale]), \
+                 not {min}..{max}"
+            )
+        })
+    }
+
+    fn sections(&self) -> Sections {
+        Sections::Screens
     }
 
     fn distinct_answers(&self, _trial: &Trial, scale: &RatingScale) -> Vec<Answer> {

@@ -4,12 +4,12 @@
 use std::fmt::{self, Write as _};
 
 use super::common::{choice, describe_reference, original_among_versions, presentation_time};
-use super::{AnswerKind, AnswerWidget, Method, Refusal};
+use super::{AnswerKind, AnswerWidget, Method, ReferenceRule, Refusal, Sections};
 use crate::engine::{PlanItem, plan_trials};
 use crate::observer::{Observer, ObserverError};
 use crate::record::{Answer, Arrangement, Outcome, Protocol, Trial};
 use crate::rng::StudyRng;
-use crate::study::{RatingScale, ReferencePlacement, StudyDefinition};
+use crate::study::{Condition, RatingScale, ReferencePlacement, StudyDefinition};
 use crate::texts::{PC_QUESTION, Planned};
 
 /// Pair comparison of the study's conditions.
@@ -80,8 +80,8 @@ impl Method for PairComparison {
         presentation_time(text, study, n)
     }
 
-    fn ordered_items(&self, study: &StudyDefinition) -> usize {
-        study.pairs().len()
+    fn ordered_items(&self, conditions: &[Condition]) -> usize {
+        crate::study::pair_count(conditions)
     }
 
     fn describe_reference(&self, placement: ReferencePlacement) -> String {
@@ -149,6 +149,25 @@ impl Method for PairComparison {
         } else {
             trial.reference_position
         }))
+    }
+
+    /// A pair comparison places each pair's two test stimuli; a fixed side would put one
+    /// condition of every pair on one side and confound the side with the condition.
+    fn reference_rule(&self) -> ReferenceRule {
+        ReferenceRule::NotFixed
+    }
+
+    fn labels_hidden(&self) -> Option<&'static str> {
+        Some("a pair comparison shows two test motions and no labelled reference (ITU-T P.910)")
+    }
+
+    /// An original among the versions anchors each clip's scale.
+    fn hidden_references(&self) -> bool {
+        true
+    }
+
+    fn sections(&self) -> Sections {
+        Sections::Pairs
     }
 
     fn distinct_answers(&self, trial: &Trial, _scale: &RatingScale) -> Vec<Answer> {

@@ -5,7 +5,7 @@
 use std::fmt::{self, Write as _};
 
 use super::common::{choice, describe_reference};
-use super::{AnswerKind, AnswerWidget, Method, Refusal};
+use super::{AnswerKind, AnswerWidget, Method, Refusal, Sections};
 use crate::observer::{Observer, ObserverError};
 use crate::record::{Answer, Outcome, Protocol, Trial};
 use crate::rng::StudyRng;
@@ -133,6 +133,14 @@ impl Method for Staircase {
 
     fn adaptive(&self) -> bool {
         true
+    }
+
+    fn labels_hidden(&self) -> Option<&'static str> {
+        Some("in a 2AFC trial the reference's position is what the subject must find")
+    }
+
+    fn sections(&self) -> Sections {
+        Sections::Tracks
     }
 
     fn distinct_answers(&self, trial: &Trial, _scale: &RatingScale) -> Vec<Answer> {

@@ -27,10 +27,10 @@ pub(super) enum References {
 }
 
 impl References {
-    /// What `protocol` allows: hidden references in ACR and pair comparison only.
-    pub(super) fn of(protocol: crate::record::Protocol) -> Self {
-        use crate::record::Protocol;
-        if matches!(protocol, Protocol::Acr | Protocol::PairComparison) {
+    /// What a method allows: hidden references where it takes them
+    /// ([`crate::methods::Method::hidden_references`]: ACR and pair comparison).
+    pub(super) fn of(hidden_references: bool) -> Self {
+        if hidden_references {
             Self::Hidden
         } else {
             Self::Refused

@@ -240,10 +240,7 @@ pub(super) fn parse_gold(
         );
         return Vec::new();
     };
-    if matches!(
-        protocol,
-        Some(Protocol::Staircase | Protocol::PairComparison | Protocol::Mushra)
-    ) {
+    if protocol.is_some_and(|p| !crate::methods::of(p).gold_trials()) {
         cx.err(
             join(table, key),
             "catch (gold) trials are rated conditions of one-stimulus screens: MOS, DSCQS, ACR \

@@ -8,6 +8,7 @@ use super::crowdsourcing::parse_gold;
 use super::{
     Condition, ConditionOrder, CrowdsourcingSettings, DesignSettings, GoldTrial, SubjectGroup,
 };
+use crate::methods::Method;
 use crate::record::Protocol;
 
 const D: &str = "design";
@@ -55,7 +56,9 @@ pub(super) fn parse_design(
             ],
         )
         .unwrap_or(ConditionOrder::Random);
-    if order == ConditionOrder::LatinSquare && protocol == Some(Protocol::Staircase) {
+    let method = protocol.map(crate::methods::of);
+    let adaptive = method.is_some_and(Method::adaptive);
+    if order == ConditionOrder::LatinSquare && adaptive {
         cx.err(
             "design.order",
             "a staircase decides each trial from the answers; a Latin square orders the \
@@ -65,12 +68,8 @@ pub(super) fn parse_design(
     if order == ConditionOrder::LatinSquare
         && let Some(g) = crowd.groups
     {
-        // A pair comparison's square orders its pairs.
-        let items = if protocol == Some(Protocol::PairComparison) {
-            super::pair_count(conditions)
-        } else {
-            conditions.len()
-        };
+        // A pair comparison's square orders its pairs, a MUSHRA study's its screens.
+        let items = method.map_or(conditions.len(), |m| m.ordered_items(conditions));
         let rows = crate::design::williams_rows(items);
         if !(g as usize).is_multiple_of(rows) {
             cx.err(
@@ -110,7 +109,7 @@ fn parse_groups(
         cx.wrong(D, "groups", "an array of tables ([[design.groups]])", v);
         return Vec::new();
     };
-    if protocol == Some(Protocol::Staircase) {
+    if protocol.is_some_and(|p| crate::methods::of(p).adaptive()) {
         cx.err(
             K,
             "between-subject groups divide a rated study's conditions (mos, dscqs, acr, dcr); \

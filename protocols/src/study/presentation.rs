@@ -5,6 +5,7 @@ use toml::Table;
 
 use super::check::{Ctx, join};
 use super::{PresentationSettings, ReferencePlacement, StimulusLabels};
+use crate::methods::{Method, ReferenceRule, SIDE_BY_SIDE_OR_SEQUENTIAL};
 use crate::record::{Arrangement, Position, Protocol};
 
 pub(super) fn parse_presentation(
@@ -30,39 +31,13 @@ pub(super) fn parse_presentation(
             "test_label",
         ],
     );
-    let arrangement = match protocol {
-        // BT.500's A B A B, or thesis 6.5's reference then test, once each.
-        Some(Protocol::Dscqs) => pick_arrangement(
-            t,
-            &[
-                ("abab", Arrangement::Abab),
-                ("sequential", Arrangement::Sequential),
-            ],
-            cx,
-        )?,
-        // P.910 ACR: one stimulus at a time.
-        Some(Protocol::Acr) => pick_arrangement(t, &[("single", Arrangement::Single)], cx)?,
-        // BS.1534 (adapted): the reference and every rated stimulus at once, in a grid.
-        Some(Protocol::Mushra) => pick_arrangement(t, &[("grid", Arrangement::Grid)], cx)?,
-        // P.910 DCR: the reference, then the test (or both at once, side by side).
-        Some(Protocol::Dcr) => pick_arrangement(
-            t,
-            &[
-                ("sequential", Arrangement::Sequential),
-                ("side_by_side", Arrangement::SideBySide),
-            ],
-            cx,
-        )?,
-        _ => pick_arrangement(
-            t,
-            &[
-                ("side_by_side", Arrangement::SideBySide),
-                ("sequential", Arrangement::Sequential),
-            ],
-            cx,
-        )?,
-    };
-    let reference_position = parse_reference_position(t, protocol, arrangement, cx);
+    let method = protocol.map(crate::methods::of);
+    let arrangement = pick_arrangement(
+        t,
+        method.map_or(SIDE_BY_SIDE_OR_SEQUENTIAL, |m| m.arrangements()),
+        cx,
+    )?;
+    let reference_position = parse_reference_position(t, method, arrangement, cx);
     let playback_count = cx.uint(t, P, "playback_count", 100).unwrap_or(1);
     if playback_count == 0 {
         cx.err(join(P, "playback_count"), "must be at least 1");
@@ -72,7 +47,7 @@ pub(super) fn parse_presentation(
     let gap_given = cx.uint(t, P, "gap_ms", 600_000);
     let gap_ms = gap_given.unwrap_or(500);
     let grey_ms = parse_grey(t, arrangement, gap_given, cx);
-    let labels = parse_labels(t, protocol, cx);
+    let labels = parse_labels(t, method, cx);
     let stimulus_duration_ms = cx
         .uint(t, P, "stimulus_duration_ms", 3_600_000)
         .unwrap_or(5000);
@@ -109,33 +84,21 @@ fn pick_arrangement(
 /// position of a pair's second stimulus).
 fn parse_reference_position(
     t: &Table,
-    protocol: Option<Protocol>,
+    method: Option<&dyn Method>,
     arrangement: Arrangement,
     cx: &mut Ctx,
 ) -> ReferencePlacement {
     const P: &str = "presentation";
     let given = cx.string(t, P, "reference_position");
-    match protocol {
-        Some(Protocol::Acr) => {
+    let rule = method.map_or(ReferenceRule::Any, Method::reference_rule);
+    match rule {
+        ReferenceRule::None { why, placement } => {
             if given.is_some() {
-                cx.err(
-                    join(P, "reference_position"),
-                    "ACR shows no reference (P.910 single stimulus): remove it",
-                );
+                cx.err(join(P, "reference_position"), why);
             }
-            return ReferencePlacement::Fixed(Position::Hidden);
+            return placement;
         }
-        Some(Protocol::Mushra) => {
-            if given.is_some() {
-                cx.err(
-                    join(P, "reference_position"),
-                    "a MUSHRA screen shows the labelled reference in a pane of its own and \
-                     shuffles the rated stimuli over the others per screen: remove it",
-                );
-            }
-            return ReferencePlacement::Random;
-        }
-        Some(Protocol::Dcr) => {
+        ReferenceRule::ShownFirst => {
             let default = if arrangement == Arrangement::Sequential {
                 Position::First
             } else {
@@ -165,14 +128,12 @@ fn parse_reference_position(
                 },
             };
         }
-        _ => {}
+        ReferenceRule::Any | ReferenceRule::NotFixed => {}
     }
     match given.as_deref() {
         None | Some("random") => ReferencePlacement::Random,
         Some("balanced") => ReferencePlacement::Balanced,
-        // A pair comparison places a pair's two test stimuli; a fixed side would put one
-        // condition of every pair on one side and confound the side with the condition.
-        Some(s) if protocol == Some(Protocol::PairComparison) => {
+        Some(s) if rule == ReferenceRule::NotFixed => {
             cx.err(
                 join(P, "reference_position"),
                 format!(
@@ -250,29 +211,15 @@ fn parse_grey(t: &Table, arrangement: Arrangement, gap_given: Option<u32>, cx: &
 /// which stimulus is the reference (MOS, paper 000: "compare side by side the original and
 /// compressed motions"). DSCQS (BT.500: the subject is not told which of A and B is the
 /// reference) and 2AFC (the reference's side is what the subject must find) refuse them.
-fn parse_labels(t: &Table, protocol: Option<Protocol>, cx: &mut Ctx) -> Option<StimulusLabels> {
+fn parse_labels(t: &Table, method: Option<&dyn Method>, cx: &mut Ctx) -> Option<StimulusLabels> {
     const P: &str = "presentation";
     let asked = cx.boolean(t, P, "labels");
-    let hidden_by_design = match protocol {
-        Some(Protocol::Dscqs) => {
-            Some("DSCQS does not tell the subject which of A and B is the reference (ITU-R BT.500)")
-        }
-        Some(Protocol::Staircase) => {
-            Some("in a 2AFC trial the reference's position is what the subject must find")
-        }
-        Some(Protocol::Acr) => Some("ACR shows one motion and no reference (ITU-T P.910)"),
-        Some(Protocol::PairComparison) => {
-            Some("a pair comparison shows two test motions and no labelled reference (ITU-T P.910)")
-        }
-        Some(Protocol::Mushra) => {
-            Some("a MUSHRA screen labels its panes itself: Reference, then A, B, C ...")
-        }
-        Some(Protocol::Mos | Protocol::Dcr) | None => None,
-    };
+    let hidden_by_design = method.and_then(Method::labels_hidden);
     if let (Some(true), Some(why)) = (asked, hidden_by_design) {
         cx.err(join(P, "labels"), format!("cannot be true: {why}"));
     }
-    let shown = asked.unwrap_or(matches!(protocol, Some(Protocol::Mos | Protocol::Dcr)))
+    // Shown by default where the design tells the subject which is the reference (MOS, DCR).
+    let shown = asked.unwrap_or(method.is_some() && hidden_by_design.is_none())
         && hidden_by_design.is_none();
     let mut text = |key: &str, default: &str| -> String {
         let Some(v) = cx.string(t, P, key) else {

@@ -4,6 +4,7 @@ use toml::Table;
 
 use super::check::{Ctx, join};
 use super::{RatingScale, ScaleKind, ScaleWords};
+use crate::methods::Method;
 use crate::record::Protocol;
 
 pub(super) fn parse_scale(
@@ -12,6 +13,7 @@ pub(super) fn parse_scale(
     cx: &mut Ctx,
 ) -> Option<RatingScale> {
     const P: &str = "scale";
+    let method = protocol.map(crate::methods::of);
     cx.known(t, P, &["kind", "min", "max", "step"]);
     let kind = cx.pick(
         t,
@@ -25,24 +27,15 @@ pub(super) fn parse_scale(
     let kind = match kind {
         Some(k) => k,
         None if t.contains_key("kind") => return None,
-        None if matches!(protocol, Some(Protocol::Dscqs | Protocol::Mushra)) => {
-            ScaleKind::Continuous
-        }
-        None => ScaleKind::Categorical,
+        None => method.map_or(ScaleKind::Categorical, Method::default_scale_kind),
     };
-    let (dmin, dmax, dstep) = match kind {
-        ScaleKind::Categorical => (
-            1.0,
-            5.0,
-            Some(if protocol == Some(Protocol::Mos) {
-                0.5
-            } else {
-                1.0
-            }),
-        ),
-        // BS.1534: a 0-100 slider; whole points keep it keyboard-friendly.
-        ScaleKind::Continuous if protocol == Some(Protocol::Mushra) => (0.0, 100.0, Some(1.0)),
-        ScaleKind::Continuous => (0.0, 100.0, None),
+    let (dmin, dmax) = match kind {
+        ScaleKind::Categorical => (1.0, 5.0),
+        ScaleKind::Continuous => (0.0, 100.0),
+    };
+    let dstep = match method {
+        Some(m) => m.default_scale_step(kind),
+        None => (kind == ScaleKind::Categorical).then_some(1.0),
     };
     let min = cx.float(t, P, "min").unwrap_or(dmin);
     let max = cx.float(t, P, "max").unwrap_or(dmax);
@@ -67,42 +60,10 @@ pub(super) fn parse_scale(
     } else if kind == ScaleKind::Categorical {
         cx.err(join(P, "step"), "a categorical scale needs a step");
     }
-    // P.910 DCR: five impairment categories, 5 (imperceptible) to 1 (very annoying).
-    let five_categories = kind == ScaleKind::Categorical
-        && [(min, 1.0), (max, 5.0), (step.unwrap_or(0.0), 1.0)]
-            .iter()
-            .all(|(v, want)| (v - want).abs() < 1e-12);
-    if protocol == Some(Protocol::Dcr) && !five_categories {
-        cx.err(
-            P,
-            format!(
-                "DCR rates five impairment categories (P.910): use kind = \"categorical\", min = \
-                 1, max = 5, step = 1 (or omit [scale]), not {} {min}..{max} step {step:?}",
-                if kind == ScaleKind::Categorical {
-                    "categorical"
-                } else {
-                    "continuous"
-                }
-            ),
-        );
+    if let Some(problem) = method.and_then(|m| m.check_scale(kind, min, max, step)) {
+        cx.err(P, problem);
     }
-    let zero_to_hundred =
-        kind == ScaleKind::Continuous && (min - 0.0).abs() < 1e-12 && (max - 100.0).abs() < 1e-12;
-    if protocol == Some(Protocol::Mushra) && !zero_to_hundred {
-        cx.err(
-            P,
-            format!(
-                "MUSHRA rates on BS.1534's continuous 0-100 scale (its post-screening limits are \
-                 on it): use kind = \"continuous\", min = 0, max = 100 (or omit [scale]), not \
-                 {min}..{max}"
-            ),
-        );
-    }
-    let words = if protocol == Some(Protocol::Dcr) {
-        ScaleWords::Impairment
-    } else {
-        ScaleWords::Quality
-    };
+    let words = method.map_or(ScaleWords::Quality, Method::scale_words);
     Some(RatingScale {
         kind,
         min,

@@ -24,6 +24,7 @@ use super::{
 };
 use crate::catalog::CodecCatalog;
 use crate::manifest::StimulusManifest;
+use crate::methods::{Method, Sections};
 use crate::record::Protocol;
 
 /// Longest title shown to subjects, characters.
@@ -101,20 +102,23 @@ pub(super) fn parse_table(
     let mut familiarization = Vec::new();
     let mut staircase = None;
     let mut mushra = None;
-    match protocol {
-        Some(Protocol::PairComparison) => {
+    let method = protocol.map(crate::methods::of);
+    match method.map(Method::sections) {
+        Some(Sections::Pairs) => {
             let m = manifest.as_ref();
             conditions = pc_sections(t, &session, &familiarization_spec, scale_t, m, cx);
         }
-        Some(p) if p != Protocol::Staircase => {
+        Some(sections @ (Sections::RatedConditions | Sections::Screens)) => {
+            let screens = sections == Sections::Screens;
             // A MUSHRA study's familiarization is a count of training screens, not stimuli.
-            let (spec, training) = if p == Protocol::Mushra {
+            let (spec, training) = if screens {
                 (FamSpec::None, familiarization_spec)
             } else {
                 (familiarization_spec, FamSpec::None)
             };
+            let references = References::of(method.is_some_and(Method::hidden_references));
             (conditions, familiarization) =
-                rating_sections(t, &session, spec, manifest.as_ref(), References::of(p), cx);
+                rating_sections(t, &session, spec, manifest.as_ref(), references, cx);
             if let Some(m) = &manifest {
                 check_crowd_conditions(
                     &conditions,
@@ -125,12 +129,12 @@ pub(super) fn parse_table(
                     cx,
                 );
             }
-            if p == Protocol::Mushra {
+            if screens {
                 let m = manifest.as_ref();
                 mushra = mushra_sections(t, &conditions, &training, &session, m, cx);
             }
         }
-        Some(Protocol::Staircase) => {
+        Some(Sections::Tracks) => {
             staircase = staircase_sections(
                 t,
                 &session,
@@ -142,7 +146,7 @@ pub(super) fn parse_table(
             );
             check_live_metric(t, &simulation, cx);
         }
-        Some(_) | None => {}
+        None => {}
     }
 
     let mut crowdsourcing = parse_crowdsourcing(
@@ -233,7 +237,9 @@ fn parse_header(t: &Table, cx: &mut Ctx) -> Header {
     });
     let protocol: Option<Protocol> = cx.parse_enum(t, "", "protocol");
     let protocol = cx.required(protocol, t, "", "protocol");
-    if protocol.is_some_and(|p| p != Protocol::Mushra) && t.contains_key("mushra") {
+    if protocol.is_some_and(|p| crate::methods::of(p).sections() != Sections::Screens)
+        && t.contains_key("mushra")
+    {
         cx.err(
             "mushra",
             "only a MUSHRA study (protocol = \"mushra\") has a [mushra] table",
@@ -383,14 +389,8 @@ fn pc_sections(
     cx: &mut Ctx,
 ) -> Vec<Condition> {
     pair_comparison_rules(t, familiarization, scale.is_some(), cx);
-    let (conditions, _) = rating_sections(
-        t,
-        session,
-        FamSpec::None,
-        manifest,
-        References::of(Protocol::PairComparison),
-        cx,
-    );
+    let (conditions, _) =
+        rating_sections(t, session, FamSpec::None, manifest, References::Hidden, cx);
     if manifest.is_some() {
         check_pairs(&conditions, session.hidden_repeats, cx);
     }
