@@ -6,20 +6,16 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use protocols::manifest::{REFERENCE_CODEC, StimulusManifest};
-use protocols::{Answer, Block, Protocol, TrialRecord};
+use protocols::{Block, Protocol, TrialRecord};
 use results::SessionResults;
 use results::store::{SESSION_FILE, TRIALS_FILE};
 
-use crate::bradley_terry::PairChoice;
 use crate::crowd::CrowdDesign;
-use crate::descriptive::Rating;
-use crate::dmos::DscqsPair;
 use crate::error::AnalysisError;
 use crate::findings::ConditionInfo;
 use crate::hashing::FastMap;
 use crate::jnd::EncodedLevel;
-use crate::psychometric::TwoAfcTrial;
-use crate::staircase::{StaircaseStep, StaircaseTrack};
+use crate::staircase::StaircaseTrack;
 use crate::study::StudyData;
 
 /// A results directory turned into analysis inputs.
@@ -34,7 +30,7 @@ pub struct ConvertedResults {
     pub stimuli: Vec<String>,
 }
 
-struct Interner {
+pub(crate) struct Interner {
     ids: FastMap<String, u32>,
     names: Vec<String>,
 }
@@ -47,7 +43,7 @@ impl Interner {
         }
     }
 
-    fn id(&mut self, name: &str) -> u32 {
+    pub(crate) fn id(&mut self, name: &str) -> u32 {
         if let Some(&id) = self.ids.get(name) {
             return id;
         }
@@ -58,7 +54,7 @@ impl Interner {
     }
 }
 
-fn bad(
+pub(crate) fn bad(
     path: &Path,
     index: usize,
     column: &'static str,
@@ -73,7 +69,7 @@ fn bad(
     }
 }
 
-fn check_scale(
+pub(crate) fn check_scale(
     path: &Path,
     index: usize,
     column: &'static str,
@@ -94,6 +90,24 @@ fn check_scale(
         ));
     }
     Ok(())
+}
+
+/// One trial row of a session, where it is, and the study's scale (min, max) its scores must
+/// lie on.
+pub(crate) struct Row<'a> {
+    pub(crate) record: &'a TrialRecord,
+    pub(crate) path: &'a Path,
+    /// Its place among the session's rows (line `index + 2` of `trials.csv`).
+    pub(crate) index: usize,
+    pub(crate) subject: u32,
+    pub(crate) scale: Option<(f64, f64)>,
+}
+
+/// What the rows convert into: the stimuli by id, the analysis inputs, the staircases.
+pub(crate) struct Inputs<'a> {
+    pub(crate) stimuli: &'a mut Interner,
+    pub(crate) data: &'a mut StudyData,
+    pub(crate) tracks: &'a mut BTreeMap<(u32, u32, u32), StaircaseTrack>,
 }
 
 /// Converts every session of a results directory. Familiarization trials are dropped; hidden
@@ -175,15 +189,20 @@ impl<'a> Converter<'a> {
             if record.trial.block == Block::Familiarization {
                 continue;
             }
-            convert_record(
+            let row = Row {
                 record,
-                &path,
+                path: &path,
                 index,
                 subject,
-                &mut self.stimuli,
-                &mut self.data,
-                &mut self.tracks,
-                self.scale,
+                scale: self.scale,
+            };
+            crate::methods::of(record.protocol).add(
+                &row,
+                &mut Inputs {
+                    stimuli: &mut self.stimuli,
+                    data: &mut self.data,
+                    tracks: &mut self.tracks,
+                },
             )?;
             if let Some(e) = encoded_level(record, self.manifest) {
                 self.data.encoded_levels.push(e);
@@ -270,7 +289,7 @@ impl<'a> Converter<'a> {
         }
         // A test whose clip's reference was rated as a condition too (P.910 ACR-HR; a MOS
         // study with hidden references) gets its DMOS against that reference.
-        if matches!(protocol, Protocol::Mos | Protocol::Acr) {
+        if crate::methods::of(protocol).dmos_against_hidden_reference() {
             for c in &data.conditions {
                 if c.compression_ratio.is_some()
                     && let Some(r) = manifest.reference_of(&c.clip)
@@ -288,152 +307,6 @@ impl<'a> Converter<'a> {
             stimuli: stimuli.names,
         })
     }
-}
-
-#[expect(
-    clippy::too_many_arguments,
-    reason = "one record's context; a struct would only rename the same eight values"
-)]
-fn convert_record(
-    record: &TrialRecord,
-    path: &Path,
-    index: usize,
-    subject: u32,
-    stimuli: &mut Interner,
-    data: &mut StudyData,
-    tracks: &mut BTreeMap<(u32, u32, u32), StaircaseTrack>,
-    scale: Option<(f64, f64)>,
-) -> Result<(), AnalysisError> {
-    match record.protocol {
-        // A MUSHRA row rates one pane: a test condition, the hidden reference or the anchor.
-        Protocol::Mos | Protocol::Acr | Protocol::Dcr | Protocol::Mushra => {
-            let Answer::Rating(score) = record.response.answer else {
-                return Err(bad(
-                    path,
-                    index,
-                    "response",
-                    format!("a {} trial needs one rating", record.protocol),
-                ));
-            };
-            check_scale(path, index, "score", score, scale)?;
-            let condition = stimuli.id(&record.trial.stimulus);
-            data.ratings.push(Rating {
-                subject,
-                condition,
-                score,
-            });
-        }
-        Protocol::Dscqs => {
-            let reference_score = record
-                .outcome
-                .score_reference
-                .ok_or_else(|| bad(path, index, "score_reference", "missing"))?;
-            let test_score = record
-                .outcome
-                .score_test
-                .ok_or_else(|| bad(path, index, "score_test", "missing"))?;
-            check_scale(path, index, "score_reference", reference_score, scale)?;
-            check_scale(path, index, "score_test", test_score, scale)?;
-            let condition = stimuli.id(&record.trial.stimulus);
-            data.dscqs.push(DscqsPair {
-                subject,
-                condition,
-                reference_score,
-                test_score,
-            });
-            // The absolute test ratings also give a MOS table, screening and repeats.
-            data.ratings.push(Rating {
-                subject,
-                condition,
-                score: test_score,
-            });
-        }
-        Protocol::PairComparison => {
-            let choice = pair_choice(record, path, index, subject, stimuli)?;
-            data.pair_choices.push(choice);
-        }
-        Protocol::Staircase => {
-            let staircase = record
-                .trial
-                .staircase
-                .ok_or_else(|| bad(path, index, "staircase", "missing staircase index"))?;
-            // Logs written before the exact level grid hold accumulated levels
-            // (0.003999999999999993 beside 0.004): every table keys them on the grid.
-            let level = record
-                .trial
-                .level
-                .map(protocols::staircase::canonical_level)
-                .ok_or_else(|| bad(path, index, "level", "missing staircase level"))?;
-            if !level.is_finite() {
-                return Err(bad(
-                    path,
-                    index,
-                    "level",
-                    format!("level {level} is not finite"),
-                ));
-            }
-            let correct = record
-                .outcome
-                .correct
-                .ok_or_else(|| bad(path, index, "correct", "missing"))?;
-            // A QUEST+ or Psi trial logs no reversal flag (an up-down staircase's always
-            // does).
-            let track = tracks
-                .entry((subject, record.session, staircase))
-                .or_insert_with(|| StaircaseTrack {
-                    subject,
-                    label: record.trial.condition.clone(),
-                    steps: Vec::new(),
-                    bayesian: record.outcome.reversal.is_none(),
-                    logged_threshold: None,
-                });
-            track.bayesian &= record.outcome.reversal.is_none();
-            track.steps.push(StaircaseStep {
-                level,
-                correct,
-                reversal: record.outcome.reversal.unwrap_or(false),
-            });
-            data.two_afc.push(TwoAfcTrial { level, correct });
-        }
-    }
-    Ok(())
-}
-
-/// A pair comparison row as the choice it logs: the `reference` column holds the pair's
-/// other test stimulus, shown at the reference position.
-fn pair_choice(
-    record: &TrialRecord,
-    path: &Path,
-    index: usize,
-    subject: u32,
-    stimuli: &mut Interner,
-) -> Result<PairChoice, AnalysisError> {
-    let t = &record.trial;
-    let choice = match record.response.answer {
-        Answer::Choice(p) if p.fits(t.arrangement) => p,
-        other => {
-            return Err(bad(
-                path,
-                index,
-                "response",
-                format!(
-                    "a pair_comparison trial needs a position of arrangement {}, got {other:?}",
-                    t.arrangement
-                ),
-            ));
-        }
-    };
-    let (a, b) = (stimuli.id(&t.stimulus), stimuli.id(&t.reference));
-    let (winner, loser) = if choice == t.reference_position {
-        (b, a)
-    } else {
-        (a, b)
-    };
-    Ok(PairChoice {
-        subject,
-        winner,
-        loser,
-    })
 }
 
 /// The CR (and error) a staircase trial's stimulus reached at its level: logged in the row by

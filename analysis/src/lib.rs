@@ -40,6 +40,7 @@ pub mod from_results;
 mod hashing;
 pub mod jnd;
 pub mod method;
+mod methods;
 pub mod mle;
 pub mod mushra;
 mod panel;

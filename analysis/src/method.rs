@@ -6,8 +6,7 @@
 //! (order of conditions, reference placement, between-subject groups) and practice trials.
 
 use protocols::StudyDefinition;
-use protocols::record::Protocol;
-use protocols::study::{ConditionOrder, ReferencePlacement};
+use protocols::study::ConditionOrder;
 
 use crate::display::SessionDisplay;
 use crate::report::Report;
@@ -68,19 +67,15 @@ pub fn method_text(
         );
     }
     out.push(who);
-    out.push(match (study.protocol, observers.rejected) {
-        (Protocol::Staircase, _) => {
-            "Screening: none (2AFC thresholds; BT.500 screening applies to ratings).".into()
-        }
-        (Protocol::PairComparison, _) => "Screening: none (pair comparison choices; BT.500 \
-                                          screening applies to ratings)."
-            .into(),
-        (_, Some(r)) => format!(
+    let no_screening = crate::methods::of(study.protocol).no_screening();
+    out.push(match (no_screening, observers.rejected) {
+        (Some(why), _) => format!("Screening: none ({why})."),
+        (None, Some(r)) => format!(
             "Screening: ITU-R BT.500 observer screening (β2 kurtosis test on every \
              presentation); {r} observer(s) rejected, {} retained.",
             observers.subjects.saturating_sub(r)
         ),
-        (_, None) => "Screening: BT.500 observer screening not applicable (too few \
+        (None, None) => "Screening: BT.500 observer screening not applicable (too few \
                       observers or presentations)."
             .into(),
     });
@@ -197,22 +192,12 @@ fn viewing_lines(study: &StudyDefinition, displays: &[SessionDisplay], out: &mut
 /// The order of the conditions, the reference placement, and the trials not analysed.
 fn design_line(study: &StudyDefinition) -> String {
     let mut design = Vec::new();
-    let pc = study.protocol == Protocol::PairComparison;
-    let mushra = study.protocol == Protocol::Mushra;
-    let (items, n) = if pc {
-        (
-            "pairs (every pair of a clip's conditions)",
-            study.pairs().len(),
-        )
-    } else if mushra {
-        (
-            "screens (one per clip)",
-            protocols::study::mushra_screens(&study.conditions).len(),
-        )
-    } else {
-        ("conditions", study.conditions.len())
-    };
-    if study.protocol != Protocol::Staircase {
+    let method = study.method();
+    let (items, n) = (
+        method.ordered_item_name(),
+        method.ordered_items(&study.conditions),
+    );
+    if !method.adaptive() {
         design.push(match study.design.order {
             ConditionOrder::Random => format!("{items} in a random order per subject"),
             ConditionOrder::LatinSquare => format!(
@@ -221,22 +206,8 @@ fn design_line(study: &StudyDefinition) -> String {
             ),
         });
     }
-    let what = if pc {
-        "the side of each pair's versions"
-    } else {
-        "reference position"
-    };
-    design.push(match study.presentation.reference_position {
-        // The labelled reference has a pane of its own; the rated stimuli are shuffled.
-        _ if mushra => "on each screen the tests, the hidden reference and the anchor in \
-                        lettered panes shuffled per screen and subject"
-            .to_string(),
-        ReferencePlacement::Fixed(p) => format!("reference always {p}"),
-        ReferencePlacement::Random => format!("{what} random per trial"),
-        ReferencePlacement::Balanced => {
-            format!("{what} counterbalanced within and across subjects")
-        }
-    });
+    design
+        .push(crate::methods::of(study.protocol).placement(study.presentation.reference_position));
     if let Some(sc) = &study.staircase
         && sc.practice_trials > 0
     {

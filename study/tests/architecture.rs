@@ -346,7 +346,8 @@ fn the_binary_stays_thin() {
 }
 
 /// Where production code names a protocol (`Protocol::Mos`, ...) outside the method modules
-/// (`protocols/src/methods/`) and the enum's own file: each file with its count. Test code
+/// (`protocols/src/methods/`, their analysis in `analysis/src/methods/`) and the enum's own
+/// file: each file with its count. Test code
 /// (after `#[cfg(test)]`, `*_tests.rs`, `tests/`) is not counted.
 fn protocol_names_outside_methods(root: &Path) -> Vec<(String, usize)> {
     const VARIANTS: [&str; 7] = [
@@ -368,6 +369,7 @@ fn protocol_names_outside_methods(root: &Path) -> Vec<(String, usize)> {
             .unwrap_or(&path)
             .to_owned();
         if relative.starts_with("protocols/src/methods/")
+            || relative.starts_with("analysis/src/methods/")
             || relative == "protocols/src/record.rs"
             || relative.ends_with("_tests.rs")
         {
@@ -397,9 +399,10 @@ fn protocol_names_outside_methods(root: &Path) -> Vec<(String, usize)> {
 fn code_outside_the_method_modules_names_protocols_less_and_less() {
     // Issue 35's seam: a method's code lives in its module under protocols/src/methods/,
     // and the rest of the workspace asks the study's method (`study.method()`) instead of
-    // matching on the protocol's name. The analysis and the browser page still branch on
-    // names; this ceiling only goes down as they move behind the trait, to 0.
-    const CEILING: usize = 19;
+    // matching on the protocol's name; a method's analysis is registered the same way in
+    // analysis/src/methods/. Only the browser page's server (web/src/app.rs, which runs 3
+    // of the methods, issue 36) still branches on names; the ceiling goes to 0 with it.
+    const CEILING: usize = 5;
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     let root = root.canonicalize().unwrap();
     let found = protocol_names_outside_methods(&root);

@@ -161,6 +161,11 @@ pub trait Method: Sync {
         Sections::RatedConditions
     }
 
+    /// What a balanced Latin square orders, in the report's words.
+    fn ordered_item_name(&self) -> &'static str {
+        "conditions"
+    }
+
     /// The arrangements a study file may ask for (`[presentation] arrangement`), by name;
     /// the first is the default.
     fn arrangements(&self) -> &'static [(&'static str, Arrangement)] {

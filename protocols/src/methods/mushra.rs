@@ -110,6 +110,10 @@ impl Method for Mushra {
         presentation_time(text, study, screens.len() + m.training_screens as usize)
     }
 
+    fn ordered_item_name(&self) -> &'static str {
+        "screens (one per clip)"
+    }
+
     fn ordered_items(&self, conditions: &[Condition]) -> usize {
         mushra_screens(conditions).len()
     }

@@ -80,6 +80,10 @@ impl Method for PairComparison {
         presentation_time(text, study, n)
     }
 
+    fn ordered_item_name(&self) -> &'static str {
+        "pairs (every pair of a clip's conditions)"
+    }
+
     fn ordered_items(&self, conditions: &[Condition]) -> usize {
         crate::study::pair_count(conditions)
     }
