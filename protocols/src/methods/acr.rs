@@ -1,16 +1,10 @@
 //! ACR and ACR-HR (ITU-T P.910): one motion at a time, rated on its own; hidden references
 //! make it ACR-HR.
 
-use std::fmt;
-
-use super::common::{describe_ratings, practice_sentence, rating_trials, scale_instructions};
-use super::common::{score_rating, simulate_rating};
-use super::{AnswerKind, AnswerWidget, Method, ReferenceRule, Refusal};
-use crate::observer::{Observer, ObserverError};
-use crate::record::{Answer, Arrangement, Outcome, Position, Protocol, Trial};
-use crate::rng::StudyRng;
-use crate::study::{RatingScale, ReferencePlacement, StudyDefinition};
-use crate::texts::Planned;
+use super::common::{practice_sentence, scale_instructions};
+use super::{AnswerWidget, Method, ReferenceRule};
+use crate::record::{Arrangement, Position, Protocol};
+use crate::study::{ReferencePlacement, StudyDefinition};
 
 /// Absolute category rating.
 pub(super) struct Acr;
@@ -18,10 +12,6 @@ pub(super) struct Acr;
 impl Method for Acr {
     fn protocol(&self) -> Protocol {
         Protocol::Acr
-    }
-
-    fn answer_kind(&self) -> AnswerKind {
-        AnswerKind::Rating
     }
 
     fn answer_widget(&self, _study: &StudyDefinition) -> AnswerWidget {
@@ -39,37 +29,6 @@ impl Method for Acr {
             scale_instructions(&study.scale, "its quality"),
             practice_sentence(study, "qualities")
         )
-    }
-
-    fn planned_trials(&self, study: &StudyDefinition) -> Planned {
-        rating_trials(study)
-    }
-
-    fn describe(&self, study: &StudyDefinition, text: &mut String) -> fmt::Result {
-        describe_ratings(text, study)
-    }
-
-    fn plan(&self, study: &StudyDefinition, subject: u32) -> Vec<Trial> {
-        crate::engine::plan_rated_conditions(study, subject)
-    }
-
-    fn score(
-        &self,
-        _trial: &Trial,
-        answer: Answer,
-        scale: &RatingScale,
-    ) -> Result<Outcome, Refusal> {
-        score_rating(answer, scale)
-    }
-
-    fn simulate(
-        &self,
-        observer: &Observer,
-        _trial: &Trial,
-        test_error: &dyn Fn() -> Result<f64, ObserverError>,
-        rng: &mut StudyRng,
-    ) -> Result<Answer, ObserverError> {
-        simulate_rating(observer, test_error, rng)
     }
 
     /// P.910 ACR: one stimulus at a time.
@@ -94,9 +53,5 @@ impl Method for Acr {
 
     fn gold_trials(&self) -> bool {
         true
-    }
-
-    fn distinct_answers(&self, _trial: &Trial, scale: &RatingScale) -> Vec<Answer> {
-        vec![Answer::Rating(scale.min)]
     }
 }

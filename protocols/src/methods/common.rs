@@ -146,13 +146,18 @@ pub(super) fn score_rating(answer: Answer, scale: &RatingScale) -> Result<Outcom
     let Answer::Rating(v) = answer else {
         return Err(Refusal::Expected("a rating"));
     };
-    Ok(Outcome {
-        score: on_scale(v, scale)?,
+    Ok(scored(on_scale(v, scale)?))
+}
+
+/// An outcome that is a score and nothing else.
+pub(super) fn scored(score: f64) -> Outcome {
+    Outcome {
+        score,
         score_reference: None,
         score_test: None,
         correct: None,
         reversal: None,
-    })
+    }
 }
 
 /// The position a forced choice picked, if it is one of the trial's arrangement.

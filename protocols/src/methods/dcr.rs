@@ -1,16 +1,10 @@
 //! DCR (ITU-T P.910, BT.500 DSIS): the original, then (or beside) a compressed version,
 //! the impairment rated on the five categories.
 
-use std::fmt;
-
-use super::common::{describe_ratings, practice_sentence, rating_trials};
-use super::common::{score_rating, simulate_rating};
-use super::{AnswerKind, AnswerWidget, Method, ReferenceRule, Refusal};
-use crate::observer::{Observer, ObserverError};
-use crate::record::{Answer, Arrangement, Outcome, Protocol, Trial};
-use crate::rng::StudyRng;
-use crate::study::{RatingScale, ScaleKind, ScaleWords, StudyDefinition};
-use crate::texts::Planned;
+use super::common::practice_sentence;
+use super::{AnswerWidget, Method, ReferenceRule};
+use crate::record::{Arrangement, Protocol};
+use crate::study::{ScaleKind, ScaleWords, StudyDefinition};
 
 /// Degradation category rating.
 pub(super) struct Dcr;
@@ -18,10 +12,6 @@ pub(super) struct Dcr;
 impl Method for Dcr {
     fn protocol(&self) -> Protocol {
         Protocol::Dcr
-    }
-
-    fn answer_kind(&self) -> AnswerKind {
-        AnswerKind::Rating
     }
 
     fn answer_widget(&self, study: &StudyDefinition) -> AnswerWidget {
@@ -58,38 +48,6 @@ impl Method for Dcr {
              press Continue (Enter).{}",
             practice_sentence(study, "impairments")
         )
-    }
-
-    fn planned_trials(&self, study: &StudyDefinition) -> Planned {
-        rating_trials(study)
-    }
-
-    fn describe(&self, study: &StudyDefinition, text: &mut String) -> fmt::Result {
-        describe_ratings(text, study)
-    }
-
-    fn plan(&self, study: &StudyDefinition, subject: u32) -> Vec<Trial> {
-        crate::engine::plan_rated_conditions(study, subject)
-    }
-
-    fn score(
-        &self,
-        _trial: &Trial,
-        answer: Answer,
-        scale: &RatingScale,
-    ) -> Result<Outcome, Refusal> {
-        score_rating(answer, scale)
-    }
-
-    fn simulate(
-        &self,
-        observer: &Observer,
-        _trial: &Trial,
-        test_error: &dyn Fn() -> Result<f64, ObserverError>,
-        rng: &mut StudyRng,
-    ) -> Result<Answer, ObserverError> {
-        // The test's impairment, on the same latent quality, with the reference shown.
-        simulate_rating(observer, test_error, rng)
     }
 
     /// P.910 DCR: the reference, then the test (or both at once, side by side).
@@ -135,9 +93,5 @@ impl Method for Dcr {
 
     fn gold_trials(&self) -> bool {
         true
-    }
-
-    fn distinct_answers(&self, _trial: &Trial, scale: &RatingScale) -> Vec<Answer> {
-        vec![Answer::Rating(scale.min)]
     }
 }

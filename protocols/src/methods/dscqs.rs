@@ -1,15 +1,13 @@
 //! DSCQS (ITU-R BT.500; thesis 6.5 shows the two one after the other): two motions, one of
 //! them possibly the original, both rated; the score is reference minus test.
 
-use std::fmt;
-
-use super::common::{describe_ratings, on_scale, rating_trials, scale_instructions};
+use super::common::{on_scale, scale_instructions};
 use super::{AnswerKind, AnswerWidget, Method, Refusal};
 use crate::observer::{Observer, ObserverError};
 use crate::record::{Answer, Arrangement, Outcome, Position, Protocol, Trial};
 use crate::rng::StudyRng;
 use crate::study::{RatingScale, ReferencePlacement, ScaleKind, StudyDefinition};
-use crate::texts::{Planned, dscqs_names};
+use crate::texts::dscqs_names;
 
 /// Double-stimulus continuous quality scale.
 pub(super) struct Dscqs;
@@ -67,18 +65,6 @@ impl Method for Dscqs {
             "{shows} {}{keys}",
             scale_instructions(&study.scale, &format!("the quality of {a} and of {b}"))
         )
-    }
-
-    fn planned_trials(&self, study: &StudyDefinition) -> Planned {
-        rating_trials(study)
-    }
-
-    fn describe(&self, study: &StudyDefinition, text: &mut String) -> fmt::Result {
-        describe_ratings(text, study)
-    }
-
-    fn plan(&self, study: &StudyDefinition, subject: u32) -> Vec<Trial> {
-        crate::engine::plan_rated_conditions(study, subject)
     }
 
     /// BT.500 DSCQS: the difference reference minus test is the trial's score.

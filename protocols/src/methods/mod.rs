@@ -125,12 +125,18 @@ pub(crate) const SIDE_BY_SIDE_OR_SEQUENTIAL: &[(&str, Arrangement)] = &[
 ];
 
 /// A study method: one implementation per [`Protocol`], found by [`of`].
+///
+/// The provided methods are those of a method that rates one stimulus (or one pane) per
+/// trial on the study's scale over a plan of the study's conditions, with familiarization
+/// and hidden repeats (MOS, ACR, DCR); the others override what differs.
 pub trait Method: Sync {
     /// The protocol this method runs (its name in study files and result rows).
     fn protocol(&self) -> Protocol;
 
     /// What an answer to one of its trials is.
-    fn answer_kind(&self) -> AnswerKind;
+    fn answer_kind(&self) -> AnswerKind {
+        AnswerKind::Rating
+    }
 
     /// The widget a subject answers with, and its words, for `study` as run.
     fn answer_widget(&self, study: &StudyDefinition) -> AnswerWidget;
@@ -141,14 +147,18 @@ pub trait Method: Sync {
     fn instructions(&self, study: &StudyDefinition) -> String;
 
     /// How many trials a session has, as far as the subject can be told.
-    fn planned_trials(&self, study: &StudyDefinition) -> Planned;
+    fn planned_trials(&self, study: &StudyDefinition) -> Planned {
+        common::rating_trials(study)
+    }
 
     /// `study check`'s lines about a session: its trials (or screens, or staircases) and
     /// presentation time.
     ///
     /// # Errors
     /// Only the formatter's (never, into a `String`).
-    fn describe(&self, study: &StudyDefinition, text: &mut String) -> fmt::Result;
+    fn describe(&self, study: &StudyDefinition, text: &mut String) -> fmt::Result {
+        common::describe_ratings(text, study)
+    }
 
     /// How many items a balanced Latin square orders over `conditions`: the conditions,
     /// unless the method orders something else (pairs, screens).
@@ -230,15 +240,23 @@ pub trait Method: Sync {
 
     /// The trials of subject `subject`'s session (0-based), planned up front from the
     /// study's seed; none for an adaptive method, whose tracks pick each trial (`engine`).
-    fn plan(&self, study: &StudyDefinition, subject: u32) -> Vec<Trial>;
+    fn plan(&self, study: &StudyDefinition, subject: u32) -> Vec<Trial> {
+        crate::engine::plan_rated_conditions(study, subject)
+    }
 
     /// Scores `answer` to `trial` on `scale`: the outcome its row logs. An adaptive method's
     /// `correct` moves its track, which adds the reversal.
     ///
     /// # Errors
     /// An answer of another kind, or a rating off the scale.
-    fn score(&self, trial: &Trial, answer: Answer, scale: &RatingScale)
-    -> Result<Outcome, Refusal>;
+    fn score(
+        &self,
+        _trial: &Trial,
+        answer: Answer,
+        scale: &RatingScale,
+    ) -> Result<Outcome, Refusal> {
+        common::score_rating(answer, scale)
+    }
 
     /// A simulated observer's answer to `trial`: `test_error` gives the objective error of
     /// the trial's test stimulus (measured, or the manifest's), `rng` the trial's draws.
@@ -248,10 +266,12 @@ pub trait Method: Sync {
     fn simulate(
         &self,
         observer: &Observer,
-        trial: &Trial,
+        _trial: &Trial,
         test_error: &dyn Fn() -> Result<f64, ObserverError>,
         rng: &mut StudyRng,
-    ) -> Result<Answer, ObserverError>;
+    ) -> Result<Answer, ObserverError> {
+        common::simulate_rating(observer, test_error, rng)
+    }
 
     /// Whether its trials come in screens shown whole (a MUSHRA screen's panes, one trial
     /// each): the time limit and breaks fall between screens.
@@ -268,7 +288,9 @@ pub trait Method: Sync {
     /// The answers to `trial` that can lead to different next trials (a runner prepares
     /// each one's next stimulus while the subject watches): one when the plan does not
     /// depend on the answer.
-    fn distinct_answers(&self, trial: &Trial, scale: &RatingScale) -> Vec<Answer>;
+    fn distinct_answers(&self, _trial: &Trial, scale: &RatingScale) -> Vec<Answer> {
+        vec![Answer::Rating(scale.min)]
+    }
 }
 
 /// The method of `protocol`: the one place a protocol's name picks its code.

@@ -1,16 +1,10 @@
 //! MOS (thesis ch. 3, BT.500 adapted): the original and a compressed version, the compressed
 //! one rated on the study's scale.
 
-use std::fmt;
-
-use super::common::{describe_ratings, practice_sentence, rating_trials, scale_instructions};
-use super::common::{score_rating, simulate_rating};
-use super::{AnswerKind, AnswerWidget, Method, Refusal};
-use crate::observer::{Observer, ObserverError};
-use crate::record::{Answer, Arrangement, Outcome, Protocol, Trial};
-use crate::rng::StudyRng;
-use crate::study::{RatingScale, ScaleKind, StimulusLabels, StudyDefinition};
-use crate::texts::Planned;
+use super::common::{practice_sentence, scale_instructions};
+use super::{AnswerWidget, Method};
+use crate::record::{Arrangement, Protocol};
+use crate::study::{ScaleKind, StimulusLabels, StudyDefinition};
 
 /// Mean opinion score of the compressed motion beside (or after) its original.
 pub(super) struct Mos;
@@ -18,10 +12,6 @@ pub(super) struct Mos;
 impl Method for Mos {
     fn protocol(&self) -> Protocol {
         Protocol::Mos
-    }
-
-    fn answer_kind(&self) -> AnswerKind {
-        AnswerKind::Rating
     }
 
     fn answer_widget(&self, study: &StudyDefinition) -> AnswerWidget {
@@ -67,37 +57,6 @@ impl Method for Mos {
         )
     }
 
-    fn planned_trials(&self, study: &StudyDefinition) -> Planned {
-        rating_trials(study)
-    }
-
-    fn describe(&self, study: &StudyDefinition, text: &mut String) -> fmt::Result {
-        describe_ratings(text, study)
-    }
-
-    fn plan(&self, study: &StudyDefinition, subject: u32) -> Vec<Trial> {
-        crate::engine::plan_rated_conditions(study, subject)
-    }
-
-    fn score(
-        &self,
-        _trial: &Trial,
-        answer: Answer,
-        scale: &RatingScale,
-    ) -> Result<Outcome, Refusal> {
-        score_rating(answer, scale)
-    }
-
-    fn simulate(
-        &self,
-        observer: &Observer,
-        _trial: &Trial,
-        test_error: &dyn Fn() -> Result<f64, ObserverError>,
-        rng: &mut StudyRng,
-    ) -> Result<Answer, ObserverError> {
-        simulate_rating(observer, test_error, rng)
-    }
-
     /// Paper 000's 1-5 in half steps.
     fn default_scale_step(&self, kind: ScaleKind) -> Option<f64> {
         match kind {
@@ -108,9 +67,5 @@ impl Method for Mos {
 
     fn gold_trials(&self) -> bool {
         true
-    }
-
-    fn distinct_answers(&self, _trial: &Trial, scale: &RatingScale) -> Vec<Answer> {
-        vec![Answer::Rating(scale.min)]
     }
 }

@@ -5,15 +5,14 @@
 
 use std::fmt::{self, Write as _};
 
-use super::common::{presentation_time, score_rating, simulate_rating};
-use super::{AnswerKind, AnswerWidget, Method, ReferenceRule, Refusal, Sections};
+use super::common::presentation_time;
+use super::{AnswerWidget, Method, ReferenceRule, Sections};
 use crate::design;
-use crate::observer::{Observer, ObserverError};
-use crate::record::{Answer, Arrangement, Block, Outcome, Position, Protocol, Trial};
+use crate::record::{Arrangement, Block, Position, Protocol, Trial};
 use crate::rng::{StudyRng, purpose};
 use crate::study::{
-    AnchorRule, Condition, ConditionOrder, RatingScale, ReferencePlacement, ScaleKind,
-    StudyDefinition, mushra_screens,
+    AnchorRule, Condition, ConditionOrder, ReferencePlacement, ScaleKind, StudyDefinition,
+    mushra_screens,
 };
 use crate::texts::Planned;
 
@@ -32,10 +31,6 @@ const INSTRUCTIONS: &str = "Each screen shows the original motion, labelled “R
 impl Method for Mushra {
     fn protocol(&self) -> Protocol {
         Protocol::Mushra
-    }
-
-    fn answer_kind(&self) -> AnswerKind {
-        AnswerKind::Rating
     }
 
     fn answer_widget(&self, _study: &StudyDefinition) -> AnswerWidget {
@@ -128,26 +123,6 @@ impl Method for Mushra {
         plan_screens(study, subject)
     }
 
-    fn score(
-        &self,
-        _trial: &Trial,
-        answer: Answer,
-        scale: &RatingScale,
-    ) -> Result<Outcome, Refusal> {
-        score_rating(answer, scale)
-    }
-
-    /// Each pane rated on its own row.
-    fn simulate(
-        &self,
-        observer: &Observer,
-        _trial: &Trial,
-        test_error: &dyn Fn() -> Result<f64, ObserverError>,
-        rng: &mut StudyRng,
-    ) -> Result<Answer, ObserverError> {
-        simulate_rating(observer, test_error, rng)
-    }
-
     fn screens(&self) -> bool {
         true
     }
@@ -199,10 +174,6 @@ impl Method for Mushra {
 
     fn sections(&self) -> Sections {
         Sections::Screens
-    }
-
-    fn distinct_answers(&self, _trial: &Trial, scale: &RatingScale) -> Vec<Answer> {
-        vec![Answer::Rating(scale.min)]
     }
 }
 

@@ -3,7 +3,9 @@
 
 use std::fmt::{self, Write as _};
 
-use super::common::{choice, describe_reference, original_among_versions, presentation_time};
+use super::common::{
+    choice, describe_reference, original_among_versions, presentation_time, scored,
+};
 use super::{AnswerKind, AnswerWidget, Method, ReferenceRule, Refusal, Sections};
 use crate::engine::{PlanItem, plan_trials};
 use crate::observer::{Observer, ObserverError};
@@ -124,13 +126,7 @@ impl Method for PairComparison {
         _scale: &RatingScale,
     ) -> Result<Outcome, Refusal> {
         let preferred_stimulus = choice(trial, answer)? != trial.reference_position;
-        Ok(Outcome {
-            score: if preferred_stimulus { 1.0 } else { 0.0 },
-            score_reference: None,
-            score_test: None,
-            correct: None,
-            reversal: None,
-        })
+        Ok(scored(if preferred_stimulus { 1.0 } else { 0.0 }))
     }
 
     /// A Thurstone case V observer: each stimulus' latent quality plus its own normal noise

@@ -4,7 +4,7 @@
 
 use std::fmt::{self, Write as _};
 
-use super::common::{choice, describe_reference};
+use super::common::{choice, describe_reference, scored};
 use super::{AnswerKind, AnswerWidget, Method, Refusal, Sections};
 use crate::observer::{Observer, ObserverError};
 use crate::record::{Answer, Outcome, Protocol, Trial};
@@ -99,11 +99,8 @@ impl Method for Staircase {
     ) -> Result<Outcome, Refusal> {
         let correct = choice(trial, answer)? == trial.reference_position;
         Ok(Outcome {
-            score: if correct { 1.0 } else { 0.0 },
-            score_reference: None,
-            score_test: None,
             correct: Some(correct),
-            reversal: None,
+            ..scored(if correct { 1.0 } else { 0.0 })
         })
     }
 
