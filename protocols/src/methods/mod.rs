@@ -8,8 +8,9 @@
 //! Each method also plans its session (shared planning in `engine`: shuffles, Latin
 //! squares, hidden repeats, balanced sides), scores its answers, and answers as a simulated
 //! observer (`observer` models the observer; the method says what it answers). Adaptive
-//! tracks (staircases, QUEST+, Psi) are the engine's. The study file's per-method checks and
-//! the analysis still match on names; they move behind this trait next.
+//! tracks (staircases, QUEST+, Psi) are the engine's. The study file's checks ask the method
+//! what it allows (its sections, arrangements, reference rule, labels, scale), and its
+//! analysis is registered the same way in the `analysis` crate (`analysis/src/methods/`).
 
 mod acr;
 pub(crate) mod common;
