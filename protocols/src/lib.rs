@@ -30,6 +30,7 @@ pub mod observer;
 pub mod quest;
 pub mod record;
 pub mod rng;
+pub mod screen;
 pub mod staircase;
 pub mod study;
 pub mod texts;

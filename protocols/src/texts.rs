@@ -3,7 +3,7 @@
 //! the default instructions of each protocol as the study's presentation settings make them.
 
 use crate::record::Arrangement;
-use crate::study::{RatingScale, ScaleWords, StudyDefinition};
+use crate::study::{RatingScale, ScaleKind, StudyDefinition};
 
 /// The BT.500 five-grade quality labels, best first.
 pub const QUALITY_LABELS: [&str; 5] = ["Excellent", "Good", "Fair", "Poor", "Bad"];
@@ -17,14 +17,6 @@ pub const IMPAIRMENT_LABELS: [&str; 5] = [
     "Annoying",
     "Very annoying",
 ];
-
-/// The five grade labels of `scale`, best first.
-pub fn grade_labels(scale: &RatingScale) -> [&'static str; 5] {
-    match scale.words {
-        ScaleWords::Quality => QUALITY_LABELS,
-        ScaleWords::Impairment => IMPAIRMENT_LABELS,
-    }
-}
 
 /// The 2AFC question of thesis ch. 5.
 pub const AFC_QUESTION: &str = "Which motion looks more natural?";
@@ -44,15 +36,36 @@ pub fn format_rating(v: f64) -> String {
     }
 }
 
-/// Label of an integer rating on a five-grade scale: BT.500's quality grades, or P.910 DCR's
-/// impairment categories on a DCR study's scale.
-pub fn quality_label(scale: &RatingScale, v: f64) -> Option<&'static str> {
-    if (scale.max - scale.min - 4.0).abs() > 1e-9 || v.fract().abs() > 1e-9 {
+/// The word of rating `v` on `scale`, where its method names the grades with `words` (best
+/// first: BT.500's quality grades, P.910 DCR's impairment categories, P.910 CCR's
+/// comparison words): the scale's whole numbers, one word each, from `max` down. `None`
+/// between grades (MOS's half steps) or where the scale has another number of grades than
+/// words.
+pub fn grade_word<'a, S: AsRef<str>>(
+    words: &'a [S],
+    scale: &RatingScale,
+    v: f64,
+) -> Option<&'a str> {
+    let span = words.len().checked_sub(1)? as f64;
+    if (scale.max - scale.min - span).abs() > 1e-9 || v.fract().abs() > 1e-9 {
         return None;
     }
-    grade_labels(scale)
+    words
         .get((scale.max - v).round() as usize)
-        .copied()
+        .map(AsRef::as_ref)
+}
+
+/// The words of `study`'s grades, best first ([`crate::methods::Method::grade_words`]): on
+/// a continuous scale every word, each naming an equal section (BT.500's quality scale); on a
+/// categorical one where it has one whole-number grade per word, else none (a 1-10 scale).
+pub fn scale_words(study: &StudyDefinition) -> Vec<String> {
+    let words = study.method().grade_words();
+    let s = &study.scale;
+    let fits = (s.max - s.min - words.len().saturating_sub(1) as f64).abs() < 1e-9;
+    if s.kind == ScaleKind::Categorical && !fits {
+        return Vec::new();
+    }
+    words.iter().map(|w| (*w).to_owned()).collect()
 }
 
 /// The rating values of a categorical scale, low to high.

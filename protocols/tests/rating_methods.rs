@@ -14,8 +14,8 @@ use common::{has, issues, parse};
 use protocols::Session;
 use protocols::record::{Answer, Arrangement, Block, Position, Protocol, Response};
 use protocols::rng::StudyRng;
-use protocols::study::{ReferencePlacement, ScaleWords};
-use protocols::texts::{default_instructions, quality_label};
+use protocols::study::ReferencePlacement;
+use protocols::texts::{default_instructions, grade_word, scale_words};
 
 const ACR_HR: &str = r#"
 format_version = 1
@@ -73,7 +73,10 @@ fn acr_hr_rates_each_clips_reference_as_a_condition() {
         (s.scale.min, s.scale.max, s.scale.step),
         (1.0, 5.0, Some(1.0))
     );
-    assert_eq!(s.scale.words, ScaleWords::Quality);
+    assert_eq!(
+        scale_words(&s),
+        ["Excellent", "Good", "Fair", "Poor", "Bad"]
+    );
     let ids: Vec<&str> = s.conditions.iter().map(|c| c.stimulus.as_str()).collect();
     assert_eq!(ids.len(), 8, "{ids:?}");
     // The grid's six tests, then each clip's reference once, in the order the clips come.
@@ -154,13 +157,14 @@ fn dcr_shows_the_labelled_reference_first_on_five_impairment_categories() {
         ReferencePlacement::Fixed(Position::First)
     );
     assert!(s.presentation.labels.is_some(), "DCR labels the reference");
-    assert_eq!(s.scale.words, ScaleWords::Impairment);
-    assert_eq!(quality_label(&s.scale, 5.0), Some("Imperceptible"));
+    let words = scale_words(&s);
+    assert_eq!(grade_word(&words, &s.scale, 5.0), Some("Imperceptible"));
     assert_eq!(
-        quality_label(&s.scale, 4.0),
+        grade_word(&words, &s.scale, 4.0),
         Some("Perceptible but not annoying")
     );
-    assert_eq!(quality_label(&s.scale, 1.0), Some("Very annoying"));
+    assert_eq!(grade_word(&words, &s.scale, 1.0), Some("Very annoying"));
+    assert_eq!(grade_word(&words, &s.scale, 4.5), None, "between grades");
     let text = default_instructions(&s);
     assert!(
         text.contains("labelled “Original”, then a compressed version"),

@@ -562,6 +562,7 @@ impl App {
         drop(slot);
         let def = self.definition();
         let scale = &def.scale;
+        let words = texts::scale_words(def);
         let categories: Vec<serde_json::Value> = if scale.kind == ScaleKind::Categorical {
             texts::categories(scale)
                 .into_iter()
@@ -569,7 +570,7 @@ impl App {
                     serde_json::json!({
                         "value": v,
                         "text": texts::format_rating(v),
-                        "label": texts::quality_label(scale, v),
+                        "label": texts::grade_word(&words, scale, v),
                     })
                 })
                 .collect()
@@ -592,7 +593,7 @@ impl App {
                 "max": scale.max,
                 "step": scale.step,
                 "categories": categories,
-                "bt500": texts::QUALITY_LABELS,
+                "bt500": words,
             },
             "presentation": {
                 "playback_count": p_settings.playback_count,

@@ -9,53 +9,7 @@
 //! then the sliders open while the panes loop or hold. The grey lasts `grey_ms`. Each frame names its phase
 //! ([`Frame::phase`]), which the session's frame log records.
 
-use protocols::record::{Arrangement, Position, Trial};
-use protocols::study::PresentationSettings;
-
-/// What one step shows.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Show {
-    /// Both stimuli side by side: left and right.
-    Both,
-    /// One stimulus, full width: the one at this position.
-    One(Position),
-    /// The test stimulus alone, full width (a single-stimulus trial: ACR).
-    Test,
-    /// A mid-grey field (between sequential stimuli).
-    Grey,
-    /// Every pane of a MUSHRA screen at once: the labelled reference and the lettered
-    /// stimuli.
-    Grid,
-}
-
-/// One timed step of a presentation.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Step {
-    /// What is shown.
-    pub show: Show,
-    /// Label drawn above the stimulus ("A", "B"), if any.
-    pub label: Option<&'static str>,
-    /// Duration, seconds.
-    pub duration_s: f64,
-}
-
-impl Show {
-    /// The phase name of a frame showing this (`frames.csv`).
-    pub fn phase(self) -> &'static str {
-        match self {
-            Show::Both => "both",
-            Show::One(Position::A) => "a",
-            Show::One(Position::B) => "b",
-            Show::One(Position::First) => "first",
-            Show::One(Position::Second) => "second",
-            Show::One(Position::Left) => "left",
-            Show::One(Position::Right) => "right",
-            Show::One(Position::Hidden) | Show::Test => "test",
-            Show::One(Position::Pane(_)) | Show::Grid => "grid",
-            Show::Grey => "grey",
-        }
-    }
-}
+pub use protocols::screen::{After, Schedule, Show, Step};
 
 /// The phase name of frames after the required presentation, while the subject answers.
 pub const ANSWER_PHASE: &str = "answer";
@@ -91,125 +45,24 @@ impl Frame {
 #[derive(Debug, Clone, PartialEq)]
 pub struct Presentation {
     steps: Vec<Step>,
-    arrangement: Arrangement,
-    loop_after: bool,
+    after: After,
     start_s: f64,
     shown_once: bool,
     replays: u32,
     max_replays: Option<u32>,
 }
 
-/// The stimulus id shown at `position` of `trial`.
-pub fn stimulus_at(trial: &Trial, position: Position) -> &str {
-    if position == trial.reference_position {
-        &trial.reference
-    } else {
-        &trial.stimulus
-    }
-}
-
 impl Presentation {
-    /// The schedule of `trial` for clips of `clip_s` seconds, starting at presentation time
-    /// `now_s`.
-    pub fn new(
-        trial: &Trial,
-        settings: &PresentationSettings,
-        clip_s: f64,
-        now_s: f64,
-    ) -> Presentation {
-        let clip_s = if clip_s.is_finite() && clip_s > 0.0 {
-            clip_s
-        } else {
-            1.0
-        };
-        let gap = settings.grey_ms as f64 / 1e3;
-        let plays = settings.playback_count.max(1);
-        let mut steps = Vec::new();
-        let grey = |steps: &mut Vec<Step>| {
-            if gap > 0.0 {
-                steps.push(Step {
-                    show: Show::Grey,
-                    label: None,
-                    duration_s: gap,
-                });
-            }
-        };
-        match trial.arrangement {
-            Arrangement::SideBySide => {
-                for _ in 0..plays {
-                    steps.push(Step {
-                        show: Show::Both,
-                        label: None,
-                        duration_s: clip_s,
-                    });
-                }
-            }
-            Arrangement::Sequential => {
-                for k in 0..plays {
-                    if k > 0 {
-                        grey(&mut steps);
-                    }
-                    for (i, p) in [Position::First, Position::Second].into_iter().enumerate() {
-                        if i > 0 {
-                            grey(&mut steps);
-                        }
-                        steps.push(Step {
-                            show: Show::One(p),
-                            label: Some(if i == 0 { "1" } else { "2" }),
-                            duration_s: clip_s,
-                        });
-                    }
-                }
-            }
-            Arrangement::Grid => {
-                // A MUSHRA screen: every pane together, `playback_count` times, then the
-                // sliders open (the panes keep playing or hold, as side by side).
-                for _ in 0..plays {
-                    steps.push(Step {
-                        show: Show::Grid,
-                        label: None,
-                        duration_s: clip_s,
-                    });
-                }
-            }
-            Arrangement::Single => {
-                // P.910 ACR: the stimulus alone (repeats with the grey between), then the vote.
-                for k in 0..plays {
-                    if k > 0 {
-                        grey(&mut steps);
-                    }
-                    steps.push(Step {
-                        show: Show::Test,
-                        label: None,
-                        duration_s: clip_s,
-                    });
-                }
-            }
-            Arrangement::Abab => {
-                // BT.500 DSCQS: A, grey, B, grey, A, grey, B, then the vote (on grey).
-                for (i, p) in [Position::A, Position::B, Position::A, Position::B]
-                    .into_iter()
-                    .enumerate()
-                {
-                    if i > 0 {
-                        grey(&mut steps);
-                    }
-                    steps.push(Step {
-                        show: Show::One(p),
-                        label: Some(if p == Position::A { "A" } else { "B" }),
-                        duration_s: clip_s,
-                    });
-                }
-            }
-        }
+    /// `schedule` ([`Schedule`], the trial's from its [`protocols::screen::Screen`]), starting
+    /// at presentation time `now_s`.
+    pub fn new(schedule: Schedule, now_s: f64) -> Presentation {
         Presentation {
-            steps,
-            arrangement: trial.arrangement,
-            loop_after: settings.loop_playback,
+            steps: schedule.steps,
+            after: schedule.after,
             start_s: now_s,
             shown_once: false,
             replays: 0,
-            max_replays: settings.max_replays,
+            max_replays: schedule.max_replays,
         }
     }
 
@@ -247,32 +100,20 @@ impl Presentation {
             label: None,
             duration_s: 0.0,
         });
-        match self.arrangement {
-            // Side by side: keep looping (if the study says so) or hold the last frame while
-            // the subject answers.
-            Arrangement::SideBySide | Arrangement::Grid => Frame {
-                show: if self.arrangement == Arrangement::Grid {
-                    Show::Grid
-                } else {
-                    Show::Both
-                },
-                label: None,
-                clip_time_s: if self.loop_after {
-                    t % last.duration_s.max(1e-3)
-                } else {
-                    last.duration_s
-                },
-                finished: true,
-                past_end: true,
-            },
+        let (show, clip_time_s) = match self.after {
+            // Side by side and grids: keep looping (if the study says so) or hold the last
+            // frame while the subject answers.
+            After::Loop => (last.show, t % last.duration_s.max(1e-3)),
+            After::Hold => (last.show, last.duration_s),
             // Sequential, single and DSCQS: a grey field with the voting question.
-            Arrangement::Sequential | Arrangement::Abab | Arrangement::Single => Frame {
-                show: Show::Grey,
-                label: None,
-                clip_time_s: 0.0,
-                finished: true,
-                past_end: true,
-            },
+            After::Grey => (Show::Grey, 0.0),
+        };
+        Frame {
+            show,
+            label: None,
+            clip_time_s,
+            finished: true,
+            past_end: true,
         }
     }
 
@@ -311,8 +152,13 @@ impl Presentation {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use protocols::record::Block;
-    use protocols::study::ReferencePlacement;
+    use protocols::record::{Arrangement, Block, Position, Trial};
+    use protocols::screen::stimulus_at;
+    use protocols::study::{PresentationSettings, ReferencePlacement};
+
+    fn presentation(t: &Trial, s: &PresentationSettings, clip_s: f64, now_s: f64) -> Presentation {
+        Presentation::new(Schedule::of(t.arrangement, s, clip_s), now_s)
+    }
 
     fn trial(arrangement: Arrangement, reference_position: Position) -> Trial {
         Trial {
@@ -346,7 +192,7 @@ mod tests {
     #[test]
     fn dscqs_shows_a_grey_b_grey_a_grey_b_then_asks() {
         let t = trial(Arrangement::Abab, Position::B);
-        let mut p = Presentation::new(&t, &settings(Arrangement::Abab, 500, 1), 2.0, 10.0);
+        let mut p = presentation(&t, &settings(Arrangement::Abab, 500, 1), 2.0, 10.0);
         let shows: Vec<(Show, Option<&str>)> =
             p.steps().iter().map(|s| (s.show, s.label)).collect();
         assert_eq!(
@@ -390,7 +236,7 @@ mod tests {
     #[test]
     fn side_by_side_plays_the_required_count_then_holds() {
         let t = trial(Arrangement::SideBySide, Position::Left);
-        let mut p = Presentation::new(&t, &settings(Arrangement::SideBySide, 0, 2), 1.5, 0.0);
+        let mut p = presentation(&t, &settings(Arrangement::SideBySide, 0, 2), 1.5, 0.0);
         assert_eq!(p.steps().len(), 2);
         assert!(!p.at(2.9).finished);
         assert!(!p.accepts_response());
@@ -409,7 +255,7 @@ mod tests {
     #[test]
     fn sequential_inserts_grey_between_the_intervals() {
         let t = trial(Arrangement::Sequential, Position::Second);
-        let p = Presentation::new(&t, &settings(Arrangement::Sequential, 300, 1), 1.0, 0.0);
+        let p = presentation(&t, &settings(Arrangement::Sequential, 300, 1), 1.0, 0.0);
         let shows: Vec<Show> = p.steps().iter().map(|s| s.show).collect();
         assert_eq!(
             shows,
@@ -425,7 +271,7 @@ mod tests {
     #[test]
     fn single_shows_the_test_alone_then_asks_on_grey() {
         let t = trial(Arrangement::Single, Position::Hidden);
-        let mut p = Presentation::new(&t, &settings(Arrangement::Single, 400, 2), 1.5, 0.0);
+        let mut p = presentation(&t, &settings(Arrangement::Single, 400, 2), 1.5, 0.0);
         let shows: Vec<Show> = p.steps().iter().map(|s| s.show).collect();
         assert_eq!(shows, [Show::Test, Show::Grey, Show::Test]);
         assert!((p.duration_s() - 3.4).abs() < 1e-12);

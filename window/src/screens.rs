@@ -13,21 +13,22 @@ use std::collections::{HashMap, VecDeque};
 use std::sync::Arc;
 
 use egui::{Align, Color32, Key, Layout, RichText, Ui, Vec2};
-use protocols::methods::AnswerWidget;
+use protocols::methods::{AnswerWidget, ChoiceOption};
 use protocols::record::{Answer, Arrangement, Block, Position, Response, Trial};
-use protocols::study::{RatingScale, ScaleKind, StimulusLabels};
+use protocols::study::{RatingScale, ScaleKind};
 use protocols::{FrameTiming, StimulusEncoding, StudyDefinition};
 
-use super::flow::{Frame, Presentation, Show, stimulus_at};
+use super::flow::{Frame, Presentation, Show};
 use super::render::{BACKGROUND, SkeletonCallback};
 use super::scene::{Figure, FrameShapes, Stage, View};
 use super::timing::FrameClock;
 use super::viewing::ViewingForm;
 use lab::session::Recorder;
 use lab::source::StimulusSource;
+use protocols::screen::stimulus_at;
 pub use protocols::texts::{ANSWER_RECORDED, default_instructions};
 use protocols::texts::{
-    Planned, categories, dscqs_names, format_rating, grade_labels, planned_trials, quality_label,
+    Planned, categories, dscqs_names, format_rating, grade_word, planned_trials,
 };
 
 /// How long the acknowledgement stays up at least, seconds (into the next trial when the
@@ -90,6 +91,9 @@ pub enum Exit {
 
 struct TrialScreen {
     trial: Trial,
+    /// What the subject sees, as described once for every front end: the panes' labels,
+    /// the schedule (run by `presentation`) and the answer widget.
+    described: Arc<protocols::screen::Screen>,
     presentation: Presentation,
     /// What the panes draw: at the arrangement's first and second position a figure each, or
     /// a crowd scene each; on a MUSHRA screen the labelled reference, then one per pane of
@@ -137,8 +141,6 @@ pub struct StudyUi {
     consent: bool,
     views: HashMap<String, View>,
     planned: Planned,
-    /// What the subject answers each trial with, and its words (the study's method's).
-    widget: AnswerWidget,
     gpu: bool,
     /// Until when "Answer recorded" stays up.
     ack_until: Option<f64>,
@@ -191,7 +193,6 @@ impl StudyUi {
             ))),
             _ => Screen::Welcome,
         };
-        let widget = study.method().answer_widget(&study);
         StudyUi {
             study,
             stimuli,
@@ -203,7 +204,6 @@ impl StudyUi {
             consent: false,
             views: HashMap::new(),
             planned,
-            widget,
             gpu,
             ack_until: None,
             end_since: None,
@@ -686,14 +686,15 @@ impl StudyUi {
             };
             (view, vec![stage(first), stage(first.other())])
         };
-        let presentation = Presentation::new(
+        let described = Arc::new(protocols::screen::Screen::of(
+            &self.study,
             &trial,
-            &self.study.presentation,
             stages[0].duration_s(),
-            now,
-        );
+        ));
+        let presentation = Presentation::new(described.schedule.clone(), now);
         Ok(TrialScreen {
             trial,
+            described,
             presentation,
             stages,
             view,
@@ -738,15 +739,16 @@ impl StudyUi {
                 .iter()
                 .map(|c| Stage::single(Figure::new(&c.test, &view))),
         );
-        let presentation = Presentation::new(
+        let described = Arc::new(protocols::screen::Screen::of(
+            &self.study,
             &trial,
-            &self.study.presentation,
             stages[0].duration_s(),
-            now,
-        );
+        ));
+        let presentation = Presentation::new(described.schedule.clone(), now);
         let n = stages.len();
         Ok(TrialScreen {
             trial,
+            described,
             presentation,
             stages,
             view,
@@ -776,7 +778,6 @@ impl StudyUi {
         let open = active && t.presentation.accepts_response();
         let ack = self.ack_until.is_some_and(|u| now < u);
         progress_panel(ui, t, self.recorder.answered(), self.planned, ack);
-        let labels = self.study.presentation.labels.as_ref();
         let scale = &self.study.scale;
         let (answer, replay) = egui::Panel::bottom("answer")
             .min_size(150.0)
@@ -784,12 +785,15 @@ impl StudyUi {
             .show(ui, |ui| {
                 ui.add_space(8.0);
                 let answer = ui
-                    .vertical_centered(|ui| answer(ui, &self.widget, t, scale, open))
+                    .vertical_centered(|ui| {
+                        let described = Arc::clone(&t.described);
+                        answer(ui, &described.answer, t, scale, open)
+                    })
                     .inner;
                 (answer, replay_row(ui, t, active))
             })
             .inner;
-        stimuli_panel(ui, t, &frame, labels, self.gpu);
+        stimuli_panel(ui, t, &frame, self.gpu);
         // One phase per frame, as the clock keeps one interval per frame (frames.csv).
         t.phases.push(frame.phase());
         if replay {
@@ -1040,21 +1044,15 @@ impl StudyUi {
 }
 
 /// How a position is named on an answer button.
-fn position_label(p: Position) -> &'static str {
-    match p {
-        Position::Left => "Left",
-        Position::Right => "Right",
-        Position::First => "First",
-        Position::Second => "Second",
-        Position::A => "A",
-        Position::B => "B",
-        Position::Hidden => "Hidden",
-        Position::Pane(_) => "Pane",
-    }
-}
-
 /// Rating buttons of a categorical scale, or a slider for a continuous one.
-fn rating_row(ui: &mut Ui, scale: &RatingScale, value: &mut Option<f64>, open: bool, id: &str) {
+fn rating_row(
+    ui: &mut Ui,
+    scale: &RatingScale,
+    words: &[String],
+    value: &mut Option<f64>,
+    open: bool,
+    id: &str,
+) {
     match scale.kind {
         ScaleKind::Categorical => {
             let cats = categories(scale);
@@ -1070,7 +1068,7 @@ fn rating_row(ui: &mut Ui, scale: &RatingScale, value: &mut Option<f64>, open: b
                         if ui.add_enabled(open, button).clicked() {
                             *value = Some(v);
                         }
-                        if let Some(label) = quality_label(scale, v) {
+                        if let Some(label) = grade_word(words, scale, v) {
                             ui.label(RichText::new(label).small());
                         }
                     });
@@ -1078,7 +1076,7 @@ fn rating_row(ui: &mut Ui, scale: &RatingScale, value: &mut Option<f64>, open: b
             });
         }
         ScaleKind::Continuous => {
-            vertical_scale(ui, scale, value, open, false, id);
+            vertical_scale(ui, scale, words, value, open, false, id);
         }
     }
 }
@@ -1110,6 +1108,7 @@ fn scale_value_at(scale: &RatingScale, y: f32, top: f32, bottom: f32) -> f64 {
 fn vertical_scale(
     ui: &mut Ui,
     scale: &RatingScale,
+    words: &[String],
     value: &mut Option<f64>,
     open: bool,
     active: bool,
@@ -1146,8 +1145,8 @@ fn vertical_scale(
         };
         let painter = ui.painter();
         painter.rect_filled(bar, 2.0, visuals.extreme_bg_color);
-        let section = h / 5.0;
-        for (k, label) in grade_labels(scale).iter().enumerate() {
+        let section = h / words.len().max(1) as f32;
+        for (k, label) in words.iter().enumerate() {
             let y = bar.top() + section * k as f32;
             if k > 0 {
                 painter.hline(bar.x_range(), y, egui::Stroke::new(1.0, text));
@@ -1155,7 +1154,7 @@ fn vertical_scale(
             painter.text(
                 egui::pos2(bar.left() - 10.0, y + section * 0.5),
                 egui::Align2::RIGHT_CENTER,
-                *label,
+                label,
                 egui::FontId::proportional(16.0),
                 text,
             );
@@ -1351,9 +1350,10 @@ fn answer(
             question,
             missing,
             name,
-        } => single_rating(ui, t, scale, open, (question, missing, name)),
-        AnswerWidget::RatingPair => dscqs_answer(ui, t, scale, open),
-        AnswerWidget::Choice { question } => afc_answer(ui, t, question, open),
+            words,
+        } => single_rating(ui, t, (scale, words), open, (question, missing, name)),
+        AnswerWidget::RatingPair { words } => dscqs_answer(ui, t, (scale, words), open),
+        AnswerWidget::Choice { question, options } => choice(ui, question, options, open),
         AnswerWidget::SliderGrid { question } => mushra_answer(ui, t, scale, question, open),
     }
 }
@@ -1363,7 +1363,7 @@ fn answer(
 fn single_rating(
     ui: &mut Ui,
     t: &mut TrialScreen,
-    scale: &RatingScale,
+    (scale, words): (&RatingScale, &[String]),
     open: bool,
     (question, what, name): (&str, &str, &str),
 ) -> Option<Answer> {
@@ -1371,10 +1371,10 @@ fn single_rating(
     if scale.kind == ScaleKind::Continuous {
         ui.horizontal(|ui| {
             ui.add_space(((ui.available_width() - 190.0) * 0.5).max(0.0));
-            vertical_scale(ui, scale, &mut t.rating, open, true, name);
+            vertical_scale(ui, scale, words, &mut t.rating, open, true, name);
         });
     } else {
-        rating_row(ui, scale, &mut t.rating, open, name);
+        rating_row(ui, scale, words, &mut t.rating, open, name);
     }
     if open {
         keyboard_rating(ui, scale, &mut t.rating);
@@ -1391,7 +1391,7 @@ fn single_rating(
 fn dscqs_answer(
     ui: &mut Ui,
     t: &mut TrialScreen,
-    scale: &RatingScale,
+    (scale, words): (&RatingScale, &[String]),
     open: bool,
 ) -> Option<Answer> {
     let [name_a, name_b] = dscqs_names(t.trial.arrangement);
@@ -1403,11 +1403,25 @@ fn dscqs_answer(
                     .horizontal(|ui| {
                         let w = 2.0 * 190.0 + 60.0;
                         ui.add_space(((ui.available_width() - w) * 0.5).max(0.0));
-                        let a =
-                            vertical_scale(ui, scale, &mut t.rating, open, !t.editing_b, name_a);
+                        let a = vertical_scale(
+                            ui,
+                            scale,
+                            words,
+                            &mut t.rating,
+                            open,
+                            !t.editing_b,
+                            name_a,
+                        );
                         ui.add_space(60.0);
-                        let b =
-                            vertical_scale(ui, scale, &mut t.rating_b, open, t.editing_b, name_b);
+                        let b = vertical_scale(
+                            ui,
+                            scale,
+                            words,
+                            &mut t.rating_b,
+                            open,
+                            t.editing_b,
+                            name_b,
+                        );
                         let used = |r: &egui::Response| r.clicked() || r.dragged();
                         [used(&a), used(&b)]
                     })
@@ -1432,7 +1446,7 @@ fn dscqs_answer(
                     } else {
                         text
                     });
-                    rating_row(ui, scale, row, open, name);
+                    rating_row(ui, scale, words, row, open, name);
                 });
             }
         }
@@ -1469,41 +1483,30 @@ fn dscqs_answer(
     None
 }
 
-/// 2AFC: which of the two is the distorted one; pair comparison: which of two versions is
-/// better; by button or key.
-fn afc_answer(ui: &mut Ui, t: &TrialScreen, question: &str, open: bool) -> Option<Answer> {
+/// A choice (2AFC: which of the two is the original; pair comparison: which of two versions
+/// is better, or no preference where the study allows it): one button per option, in
+/// order, and each option's key, which answers at once.
+fn choice(ui: &mut Ui, question: &str, options: &[ChoiceOption], open: bool) -> Option<Answer> {
     ui.label(RichText::new(question).size(20.0));
-    let (l, r, lk, rk) = match t.trial.arrangement {
-        Arrangement::Sequential => (Position::First, Position::Second, Key::Num1, Key::Num2),
-        Arrangement::Abab => (Position::A, Position::B, Key::A, Key::B),
-        // A 2AFC trial is never single or a grid (the study file refuses them); drawn as side
-        // by side.
-        Arrangement::SideBySide | Arrangement::Single | Arrangement::Grid => (
-            Position::Left,
-            Position::Right,
-            Key::ArrowLeft,
-            Key::ArrowRight,
-        ),
-    };
     let mut answer = None;
     ui.horizontal(|ui| {
         let w = 140.0;
-        ui.add_space(((ui.available_width() - 2.0 * w - 24.0) * 0.5).max(0.0));
-        for p in [l, r] {
-            let b = egui::Button::new(RichText::new(position_label(p)).size(18.0))
-                .min_size(Vec2::new(w, 40.0));
+        let n = options.len() as f32;
+        ui.add_space(((ui.available_width() - n * w - (n - 1.0) * 12.0) * 0.5).max(0.0));
+        for o in options {
+            let b =
+                egui::Button::new(RichText::new(&o.label).size(18.0)).min_size(Vec2::new(w, 40.0));
             if ui.add_enabled(open, b).clicked() {
-                answer = Some(Answer::Choice(p));
+                answer = Some(Answer::Choice(o.answer));
             }
         }
     });
     if open {
-        // Arrow keys (or 1/2, A/B) answer at once.
         ui.input(|i| {
-            if i.key_pressed(lk) {
-                answer = Some(Answer::Choice(l));
-            } else if i.key_pressed(rk) {
-                answer = Some(Answer::Choice(r));
+            for o in options {
+                if Key::from_name(&o.key).is_some_and(|k| i.key_pressed(k)) {
+                    answer = Some(Answer::Choice(o.answer));
+                }
             }
         });
     }
@@ -1525,46 +1528,27 @@ fn replay_row(ui: &mut Ui, t: &TrialScreen, active: bool) -> bool {
     .inner
 }
 
-/// The label of the stimulus at `p` where the study labels the reference, else `None`.
-fn stimulus_label<'a>(
-    t: &TrialScreen,
-    p: Position,
-    labels: Option<&'a StimulusLabels>,
-) -> Option<&'a str> {
-    labels.map(|l| {
-        if p == t.trial.reference_position {
-            l.reference.as_str()
-        } else {
-            l.test.as_str()
-        }
-    })
-}
-
 /// Height of the band above side-by-side viewports that holds their labels, points.
 const LABEL_BAND: f32 = 44.0;
 
 /// The stimuli as the presentation schedule shows them now: both side by side, one of them,
 /// or the grey between, with the position's label; where the study labels the reference
 /// (MOS), "Original" and "Compressed" (its texts) above or before the motions instead.
-fn stimuli_panel(
-    ui: &mut Ui,
-    t: &mut TrialScreen,
-    frame: &Frame,
-    labels: Option<&StimulusLabels>,
-    gpu: bool,
-) {
+fn stimuli_panel(ui: &mut Ui, t: &mut TrialScreen, frame: &Frame, gpu: bool) {
     egui::CentralPanel::default()
         .frame(egui::Frame::new().fill(Color32::from_gray(96)))
         .show(ui, |ui| {
             let full = ui.available_rect_before_wrap();
             let painter = ui.painter().clone();
+            let described = Arc::clone(&t.described);
+            let labelled = described.panes.iter().any(|p| p.label.is_some());
             let mut names: Vec<(egui::Rect, &str)> = Vec::new();
             match frame.show {
                 Show::Grey => {}
                 Show::Grid => grid_panes(&painter, gpu, t, full, frame.clip_time_s, &mut names),
                 Show::Both => {
                     let gap = 12.0;
-                    let band = if labels.is_some() { LABEL_BAND } else { 0.0 };
+                    let band = if labelled { LABEL_BAND } else { 0.0 };
                     let w = (full.width() - gap) * 0.5;
                     let h = w.min(full.height() - band);
                     let top = full.center().y - (h - band) * 0.5;
@@ -1574,7 +1558,7 @@ fn stimuli_panel(
                             egui::Rect::from_min_size(egui::pos2(left, top), Vec2::new(w, h));
                         draw_viewport(&painter, gpu, t, k, rect, frame.clip_time_s);
                         let p = if k == 0 { t.first } else { t.first.other() };
-                        if let Some(name) = stimulus_label(t, p, labels) {
+                        if let Some(name) = described.label(p) {
                             let above = egui::Rect::from_min_max(
                                 egui::pos2(rect.left(), top - band),
                                 egui::pos2(rect.right(), top),
@@ -1611,7 +1595,7 @@ fn stimuli_panel(
             // One stimulus at a time: its label (MOS: which is the original), else the
             // schedule's ("A", "B", "1", "2").
             let label = match frame.show {
-                Show::One(p) => stimulus_label(t, p, labels).or(frame.label),
+                Show::One(p) => described.label(p).or(frame.label),
                 Show::Both | Show::Grey | Show::Test | Show::Grid => frame.label,
             };
             if let Some(label) = label {

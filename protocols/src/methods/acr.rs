@@ -5,6 +5,7 @@ use super::common::{practice_sentence, scale_instructions};
 use super::{AnswerWidget, Method, ReferenceRule};
 use crate::record::{Arrangement, Position, Protocol};
 use crate::study::{ReferencePlacement, StudyDefinition};
+use crate::texts::scale_words;
 
 /// Absolute category rating.
 pub(super) struct Acr;
@@ -14,11 +15,12 @@ impl Method for Acr {
         Protocol::Acr
     }
 
-    fn answer_widget(&self, _study: &StudyDefinition) -> AnswerWidget {
+    fn answer_widget(&self, study: &StudyDefinition) -> AnswerWidget {
         AnswerWidget::Rating {
             question: "Rate the quality of the motion".to_string(),
             missing: "the motion".to_string(),
             name: "Quality".to_string(),
+            words: scale_words(study),
         }
     }
 

@@ -4,7 +4,8 @@
 use super::common::practice_sentence;
 use super::{AnswerWidget, Method, ReferenceRule};
 use crate::record::{Arrangement, Protocol};
-use crate::study::{ScaleKind, ScaleWords, StudyDefinition};
+use crate::study::{ScaleKind, StudyDefinition};
+use crate::texts::scale_words;
 
 /// Degradation category rating.
 pub(super) struct Dcr;
@@ -26,6 +27,7 @@ impl Method for Dcr {
             question,
             missing: "the impairment".to_string(),
             name: "Impairment".to_string(),
+            words: scale_words(study),
         }
     }
 
@@ -87,8 +89,8 @@ impl Method for Dcr {
         })
     }
 
-    fn scale_words(&self) -> ScaleWords {
-        ScaleWords::Impairment
+    fn grade_words(&self) -> &'static [&'static str] {
+        &crate::texts::IMPAIRMENT_LABELS
     }
 
     fn gold_trials(&self) -> bool {

@@ -7,7 +7,7 @@ use crate::observer::{Observer, ObserverError};
 use crate::record::{Answer, Arrangement, Outcome, Position, Protocol, Trial};
 use crate::rng::StudyRng;
 use crate::study::{RatingScale, ReferencePlacement, ScaleKind, StudyDefinition};
-use crate::texts::dscqs_names;
+use crate::texts::{dscqs_names, scale_words};
 
 /// Double-stimulus continuous quality scale.
 pub(super) struct Dscqs;
@@ -21,8 +21,10 @@ impl Method for Dscqs {
         AnswerKind::RatingPair
     }
 
-    fn answer_widget(&self, _study: &StudyDefinition) -> AnswerWidget {
-        AnswerWidget::RatingPair
+    fn answer_widget(&self, study: &StudyDefinition) -> AnswerWidget {
+        AnswerWidget::RatingPair {
+            words: scale_words(study),
+        }
     }
 
     fn instructions(&self, study: &StudyDefinition) -> String {

@@ -23,14 +23,13 @@ mod staircase;
 
 use std::fmt;
 
+use schemars::JsonSchema;
 use serde::Serialize;
 
 use crate::observer::{Observer, ObserverError};
-use crate::record::{Answer, Arrangement, Outcome, Protocol, Trial};
+use crate::record::{Answer, Arrangement, Outcome, Position, Protocol, Trial};
 use crate::rng::StudyRng;
-use crate::study::{
-    Condition, RatingScale, ReferencePlacement, ScaleKind, ScaleWords, StudyDefinition,
-};
+use crate::study::{Condition, RatingScale, ReferencePlacement, ScaleKind, StudyDefinition};
 use crate::texts::Planned;
 
 /// What an answer to a method's trial is (how a result row holds it).
@@ -46,7 +45,7 @@ pub enum AnswerKind {
 
 /// The widget a subject answers a trial with, with the words it shows: what every front end
 /// draws below the stimuli.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, JsonSchema)]
 #[serde(tag = "kind", rename_all = "snake_case")]
 pub enum AnswerWidget {
     /// One rating on the study's scale: grade buttons (categorical) or one vertical scale
@@ -58,20 +57,79 @@ pub enum AnswerWidget {
         missing: String,
         /// The scale's name beside it.
         name: String,
+        /// The grades' words, best first ([`crate::texts::scale_words`]).
+        words: Vec<String>,
     },
     /// A rating of each of the two stimuli (A and B, or 1 and 2, as the arrangement names
     /// them): two rows of grades or BT.500's pair of vertical scales.
-    RatingPair,
-    /// A forced choice between the two positions shown.
+    RatingPair {
+        /// The grades' words, best first ([`crate::texts::scale_words`]).
+        words: Vec<String>,
+    },
+    /// A choice of one of the buttons.
     Choice {
-        /// The question above the two buttons.
+        /// The question above the buttons.
         question: String,
+        /// The buttons, left to right.
+        options: Vec<ChoiceOption>,
     },
     /// One slider per lettered pane (a MUSHRA screen).
     SliderGrid {
         /// The question above the sliders.
         question: String,
     },
+}
+
+/// One button of a choice: its label, its key, and the answer it gives.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, JsonSchema)]
+pub struct ChoiceOption {
+    /// What the button says ("Left", "No preference").
+    pub label: String,
+    /// The key that answers with it, by its name on a keyboard ("ArrowLeft", "1", "A",
+    /// "ArrowDown"), as both the window and a browser name keys.
+    pub key: String,
+    /// The position it answers with.
+    pub answer: Position,
+}
+
+impl ChoiceOption {
+    /// The two positions of `arrangement` (left and right, 1 and 2, or A and B), as buttons
+    /// with their keys: what a forced choice between the two stimuli offers.
+    pub fn positions(arrangement: Arrangement) -> Vec<ChoiceOption> {
+        let (a, b, ka, kb, la, lb) = match arrangement {
+            Arrangement::Sequential => (
+                Position::First,
+                Position::Second,
+                "1",
+                "2",
+                "First",
+                "Second",
+            ),
+            Arrangement::Abab => (Position::A, Position::B, "A", "B", "A", "B"),
+            // A choice is never between a single stimulus or a grid's panes (the study file
+            // refuses them); they are offered as side by side.
+            Arrangement::SideBySide | Arrangement::Single | Arrangement::Grid => (
+                Position::Left,
+                Position::Right,
+                "ArrowLeft",
+                "ArrowRight",
+                "Left",
+                "Right",
+            ),
+        };
+        vec![
+            ChoiceOption {
+                label: la.to_owned(),
+                key: ka.to_owned(),
+                answer: a,
+            },
+            ChoiceOption {
+                label: lb.to_owned(),
+                key: kb.to_owned(),
+                answer: b,
+            },
+        ]
+    }
 }
 
 /// Why a method refused an answer (the engine names the trial and the protocol).
@@ -199,6 +257,14 @@ pub trait Method: Sync {
         ScaleKind::Categorical
     }
 
+    /// The default range of a scale of `kind` (categorical 1-5, continuous 0-100).
+    fn default_scale_range(&self, kind: ScaleKind) -> (f64, f64) {
+        match kind {
+            ScaleKind::Categorical => (1.0, 5.0),
+            ScaleKind::Continuous => (0.0, 100.0),
+        }
+    }
+
     /// The default step of a scale of `kind` (categorical 1-5, continuous 0-100).
     fn default_scale_step(&self, kind: ScaleKind) -> Option<f64> {
         match kind {
@@ -218,9 +284,11 @@ pub trait Method: Sync {
         None
     }
 
-    /// The words of its grades.
-    fn scale_words(&self) -> ScaleWords {
-        ScaleWords::Quality
+    /// The words of its grades, best first (BT.500's five quality grades unless the method
+    /// names others): beside a categorical scale's whole numbers from the top, or naming the
+    /// equal sections of a continuous scale ([`crate::texts::scale_words`]).
+    fn grade_words(&self) -> &'static [&'static str] {
+        &crate::texts::QUALITY_LABELS
     }
 
     /// Whether a condition may be its own reference (`[conditions] hidden_reference`: ACR-HR,

@@ -5,6 +5,7 @@ use super::common::{practice_sentence, scale_instructions};
 use super::{AnswerWidget, Method};
 use crate::record::{Arrangement, Protocol};
 use crate::study::{ScaleKind, StimulusLabels, StudyDefinition};
+use crate::texts::scale_words;
 
 /// Mean opinion score of the compressed motion beside (or after) its original.
 pub(super) struct Mos;
@@ -31,6 +32,7 @@ impl Method for Mos {
             question,
             missing,
             name: labels.map_or("Quality", |l| l.test.as_str()).to_string(),
+            words: scale_words(study),
         }
     }
 

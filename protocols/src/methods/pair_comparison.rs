@@ -6,7 +6,7 @@ use std::fmt::{self, Write as _};
 use super::common::{
     choice, describe_reference, original_among_versions, presentation_time, scored,
 };
-use super::{AnswerKind, AnswerWidget, Method, ReferenceRule, Refusal, Sections};
+use super::{AnswerKind, AnswerWidget, ChoiceOption, Method, ReferenceRule, Refusal, Sections};
 use crate::engine::{PlanItem, plan_trials};
 use crate::observer::{Observer, ObserverError};
 use crate::record::{Answer, Arrangement, Outcome, Protocol, Trial};
@@ -26,9 +26,10 @@ impl Method for PairComparison {
         AnswerKind::Choice
     }
 
-    fn answer_widget(&self, _study: &StudyDefinition) -> AnswerWidget {
+    fn answer_widget(&self, study: &StudyDefinition) -> AnswerWidget {
         AnswerWidget::Choice {
             question: PC_QUESTION.to_string(),
+            options: ChoiceOption::positions(study.presentation.arrangement),
         }
     }
 

@@ -5,7 +5,7 @@
 use std::fmt::{self, Write as _};
 
 use super::common::{choice, describe_reference, scored};
-use super::{AnswerKind, AnswerWidget, Method, Refusal, Sections};
+use super::{AnswerKind, AnswerWidget, ChoiceOption, Method, Refusal, Sections};
 use crate::observer::{Observer, ObserverError};
 use crate::record::{Answer, Outcome, Protocol, Trial};
 use crate::rng::StudyRng;
@@ -24,9 +24,10 @@ impl Method for Staircase {
         AnswerKind::Choice
     }
 
-    fn answer_widget(&self, _study: &StudyDefinition) -> AnswerWidget {
+    fn answer_widget(&self, study: &StudyDefinition) -> AnswerWidget {
         AnswerWidget::Choice {
             question: AFC_QUESTION.to_string(),
+            options: ChoiceOption::positions(study.presentation.arrangement),
         }
     }
 

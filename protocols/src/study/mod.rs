@@ -227,17 +227,6 @@ pub enum ScaleKind {
     Continuous,
 }
 
-/// Which words name a five-grade scale's grades.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum ScaleWords {
-    /// Quality: Excellent, Good, Fair, Poor, Bad (BT.500, P.910 ACR; MOS, DSCQS).
-    #[default]
-    Quality,
-    /// Impairment: Imperceptible ... Very annoying (P.910 DCR, BT.500 DSIS).
-    Impairment,
-}
-
 /// Rating scale (`[scale]`).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct RatingScale {
@@ -249,9 +238,6 @@ pub struct RatingScale {
     pub max: f64,
     /// Category step (categorical) or slider resolution (continuous, optional).
     pub step: Option<f64>,
-    /// The words of its five grades (DCR: impairment; quality otherwise).
-    #[serde(default)]
-    pub words: ScaleWords,
 }
 
 impl RatingScale {

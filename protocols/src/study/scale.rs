@@ -3,7 +3,7 @@
 use toml::Table;
 
 use super::check::{Ctx, join};
-use super::{RatingScale, ScaleKind, ScaleWords};
+use super::{RatingScale, ScaleKind};
 use crate::methods::Method;
 use crate::record::Protocol;
 
@@ -29,9 +29,10 @@ pub(super) fn parse_scale(
         None if t.contains_key("kind") => return None,
         None => method.map_or(ScaleKind::Categorical, Method::default_scale_kind),
     };
-    let (dmin, dmax) = match kind {
-        ScaleKind::Categorical => (1.0, 5.0),
-        ScaleKind::Continuous => (0.0, 100.0),
+    let (dmin, dmax) = match method {
+        Some(m) => m.default_scale_range(kind),
+        None if kind == ScaleKind::Categorical => (1.0, 5.0),
+        None => (0.0, 100.0),
     };
     let dstep = match method {
         Some(m) => m.default_scale_step(kind),
@@ -63,12 +64,10 @@ pub(super) fn parse_scale(
     if let Some(problem) = method.and_then(|m| m.check_scale(kind, min, max, step)) {
         cx.err(P, problem);
     }
-    let words = method.map_or(ScaleWords::Quality, Method::scale_words);
     Some(RatingScale {
         kind,
         min,
         max,
         step,
-        words,
     })
 }
