@@ -581,11 +581,11 @@ mod tests {
         (study, sessions)
     }
 
-    /// The other side, interval or slot.
+    /// The other side, interval or slot (a side for no preference).
     fn flip(p: Position) -> Position {
         match p {
             Position::Left => Position::Right,
-            Position::Right => Position::Left,
+            Position::Right | Position::Neither => Position::Left,
             Position::First => Position::Second,
             Position::Second => Position::First,
             Position::A => Position::B,

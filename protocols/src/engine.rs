@@ -11,7 +11,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::design;
-use crate::methods::Refusal;
+use crate::methods::{AnswerWidget, Refusal};
 use crate::quest::{QuestError, QuestPlus};
 use crate::record::{Answer, Arrangement, Block, Outcome, Position, Protocol, Response, Trial};
 use crate::rng::{StudyRng, purpose};
@@ -248,6 +248,8 @@ pub struct Session {
     time_limit_ms: Option<u64>,
     break_every: Option<u32>,
     max_replays: Option<u32>,
+    /// The answers a choice screen offers (its buttons); empty for other answer widgets.
+    offered: Vec<Position>,
     plan: Vec<Trial>,
     stairs: Option<Stairs>,
     next_index: u32,
@@ -297,6 +299,10 @@ impl Session {
         } else {
             None
         };
+        let offered = match method.answer_widget(study) {
+            AnswerWidget::Choice { options, .. } => options.iter().map(|o| o.answer).collect(),
+            _ => Vec::new(),
+        };
         Ok(Self {
             protocol: study.protocol,
             subject,
@@ -307,6 +313,7 @@ impl Session {
             time_limit_ms: study.session.time_limit_ms,
             break_every: study.session.break_every_trials,
             max_replays: study.presentation.max_replays,
+            offered,
             plan,
             stairs,
             next_index: 0,
@@ -477,6 +484,13 @@ impl Session {
             max: self.scale.max,
             step: self.scale.step,
         };
+        // Only a button the screen showed answers a choice (no "no preference" unless offered).
+        if let Answer::Choice(p) = response.answer
+            && !self.offered.is_empty()
+            && !self.offered.contains(&p)
+        {
+            return Err(wrong("one of the choices its screen offered"));
+        }
         let mut outcome = crate::methods::of(self.protocol)
             .score(trial, response.answer, &self.scale)
             .map_err(|refusal| match refusal {

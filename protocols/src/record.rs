@@ -75,6 +75,9 @@ pub enum Position {
     /// MUSHRA: the pane of the grid the rated stimulus was shown in, 0 = the pane lettered A
     /// (below [`MAX_PANES`]); the labelled reference has a pane of its own.
     Pane(u8),
+    /// No position: the answer "no preference" where the screen offers it (a pair
+    /// comparison with ties); never where a stimulus is shown.
+    Neither,
 }
 
 /// Most unlabelled panes (rated stimuli) a MUSHRA screen may show, lettered A to L.
@@ -135,7 +138,7 @@ text_enum!(Arrangement, Arrangement::SideBySide => "side_by_side", Arrangement::
     Arrangement::Abab => "abab", Arrangement::Single => "single", Arrangement::Grid => "grid");
 
 /// The fixed names of [`Position`] (the panes are `pane_a` ... `pane_l`).
-const POSITION_NAMES: [(Position, &str); 7] = [
+const POSITION_NAMES: [(Position, &str); 8] = [
     (Position::Left, "left"),
     (Position::Right, "right"),
     (Position::First, "first"),
@@ -143,6 +146,7 @@ const POSITION_NAMES: [(Position, &str); 7] = [
     (Position::A, "a"),
     (Position::B, "b"),
     (Position::Hidden, "hidden"),
+    (Position::Neither, "neither"),
 ];
 
 impl Position {
@@ -208,10 +212,12 @@ impl Position {
             Self::B => Self::A,
             Self::Hidden => Self::Hidden,
             Self::Pane(i) => Self::Pane(i),
+            Self::Neither => Self::Neither,
         }
     }
 
-    /// Whether this position belongs to `arrangement`.
+    /// Whether this position belongs to `arrangement` ([`Position::Neither`] belongs to
+    /// none).
     pub fn fits(self, arrangement: Arrangement) -> bool {
         matches!(
             (arrangement, self),

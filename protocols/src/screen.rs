@@ -45,7 +45,8 @@ impl Show {
             Show::One(Position::Right) => "right",
             Show::One(Position::Hidden) | Show::Test => "test",
             Show::One(Position::Pane(_)) | Show::Grid => "grid",
-            Show::Grey => "grey",
+            // Nothing is shown at Neither; a schedule never holds it.
+            Show::Grey | Show::One(Position::Neither) => "grey",
         }
     }
 }

@@ -133,3 +133,26 @@ fn the_grey_between_intervals_defaults_to_bt500_or_the_older_gap() {
     let s = parse(&seq.replace("gap_ms = 500\n", "gap_ms = 500\ngrey_ms = 250\n")).unwrap();
     assert_eq!((s.presentation.grey_ms, s.presentation.gap_ms), (250, 500));
 }
+
+#[test]
+fn no_preference_is_refused_where_the_method_offers_none() {
+    for example_file in ["mos.toml", "dscqs.toml", "staircase.toml"] {
+        let text = example_text(example_file)
+            .replace("[presentation]\n", "[presentation]\nno_preference = true\n");
+        let got = issues(&text);
+        assert!(
+            has(
+                &got,
+                "presentation.no_preference",
+                "offers no \"no preference\""
+            ),
+            "{example_file}: {got:#?}"
+        );
+        // Saying no is always fine.
+        let off = example_text(example_file).replace(
+            "[presentation]\n",
+            "[presentation]\nno_preference = false\n",
+        );
+        assert!(!parse(&off).unwrap().presentation.no_preference);
+    }
+}

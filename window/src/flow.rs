@@ -186,6 +186,7 @@ mod tests {
             grey_ms: gap_ms,
             labels: None,
             stimulus_duration_ms: 2000,
+            no_preference: false,
         }
     }
 

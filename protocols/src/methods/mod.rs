@@ -291,6 +291,12 @@ pub trait Method: Sync {
         &crate::texts::QUALITY_LABELS
     }
 
+    /// Whether its screen may offer a "no preference" answer ([`crate::Position::Neither`])
+    /// beside its choices, where the study asks for one (`[presentation] no_preference`).
+    fn offers_no_preference(&self) -> bool {
+        false
+    }
+
     /// Whether a condition may be its own reference (`[conditions] hidden_reference`: ACR-HR,
     /// a pair comparison's anchor).
     fn hidden_references(&self) -> bool {

@@ -205,6 +205,10 @@ pub struct PresentationSettings {
     pub labels: Option<StimulusLabels>,
     /// Duration of one playback, ms (session time estimates, simulation clock).
     pub stimulus_duration_ms: u64,
+    /// Whether the screen offers "no preference" beside the choices (a tie), where the
+    /// method takes one ([`crate::methods::Method::offers_no_preference`]).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub no_preference: bool,
 }
 
 /// What the reference and the test stimulus are called on screen (`[presentation]

@@ -29,6 +29,7 @@ pub(super) fn parse_presentation(
             "labels",
             "reference_label",
             "test_label",
+            "no_preference",
         ],
     );
     let method = protocol.map(crate::methods::of);
@@ -51,6 +52,20 @@ pub(super) fn parse_presentation(
     let stimulus_duration_ms = cx
         .uint(t, P, "stimulus_duration_ms", 3_600_000)
         .unwrap_or(5000);
+    let no_preference = cx.boolean(t, P, "no_preference").unwrap_or(false);
+    if no_preference
+        && let Some(m) = method
+        && !m.offers_no_preference()
+    {
+        cx.err(
+            join(P, "no_preference"),
+            format!(
+                "{} offers no \"no preference\" answer: its answers are rated or have a right \
+                 one (a pair comparison takes it)",
+                m.protocol()
+            ),
+        );
+    }
     Some(PresentationSettings {
         arrangement,
         reference_position,
@@ -61,6 +76,7 @@ pub(super) fn parse_presentation(
         grey_ms: u64::from(grey_ms),
         labels,
         stimulus_duration_ms: u64::from(stimulus_duration_ms),
+        no_preference,
     })
 }
 
