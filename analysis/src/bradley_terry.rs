@@ -901,15 +901,19 @@ pub fn fit_with_ties(
     }))
 }
 
-/// One answer of a pair comparison: which condition the subject preferred over which.
+/// One answer of a pair comparison: which condition the subject preferred over which, or
+/// that it preferred neither.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 pub struct PairChoice {
     /// Subject.
     pub subject: u32,
-    /// The preferred condition.
+    /// The preferred condition (with `tie`, one of the two).
     pub winner: u32,
     /// The other condition.
     pub loser: u32,
+    /// No preference: the two tied (a screen with "No preference").
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub tie: bool,
 }
 
 /// One item of a fit: a condition of a clip, or in the pooled fit a method at a ratio over
@@ -934,8 +938,21 @@ pub struct BtGroup {
     pub items: Vec<BtItem>,
     /// Who was preferred over whom.
     pub matrix: WinMatrix,
-    /// The scale values (the anchor, item 0, at 0).
+    /// The scale values (the anchor, item 0, at 0) of the preferences, ties left out.
     pub outcome: BtOutcome,
+    /// Where the study offered "no preference": the ties and Davidson's fit of preferences
+    /// and ties together, which the report gives instead.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ties: Option<TiedFit>,
+}
+
+/// Davidson's fit of one group's preferences and ties ([`fit_with_ties`]).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct TiedFit {
+    /// Who tied with whom.
+    pub matrix: TieMatrix,
+    /// The scale values and the tie parameter.
+    pub outcome: TiesOutcome,
 }
 
 /// Bradley-Terry analysis of a pair comparison study.
@@ -943,6 +960,9 @@ pub struct BtGroup {
 pub struct PairComparisonAnalysis {
     /// Answers (scored trials: hidden repeats included, familiarization left out).
     pub choices: usize,
+    /// Of them, "no preference" answers (0 where the study offered none).
+    #[serde(skip_serializing_if = "is_zero")]
+    pub ties: usize,
     /// Subjects who answered.
     pub subjects: usize,
     /// One fit per clip, in clip order.
@@ -959,8 +979,14 @@ fn item_order(a: &BtItem, b: &BtItem) -> std::cmp::Ordering {
         .then_with(|| a.method.cmp(&b.method))
 }
 
+#[allow(clippy::trivially_copy_pass_by_ref)] // serde's skip_serializing_if passes a reference
+fn is_zero(n: &usize) -> bool {
+    *n == 0
+}
+
 /// Fits the choices of every clip, and of all clips pooled (items: method and ratio), with
-/// item 0 of each (see [`BtGroup::items`]) as the anchor.
+/// item 0 of each (see [`BtGroup::items`]) as the anchor; where any answer was "no
+/// preference", Davidson's model of the preferences and the ties of every group as well.
 ///
 /// # Errors
 /// [`AnalysisError::InvalidParameter`] when a fit has more than [`MAX_ITEMS`] items.
@@ -970,6 +996,7 @@ pub fn analyze_pairs(
     confidence: Confidence,
 ) -> Result<PairComparisonAnalysis, AnalysisError> {
     use std::collections::{BTreeMap, BTreeSet};
+    let with_ties = choices.iter().any(|c| c.tie);
     let info: BTreeMap<u32, &crate::findings::ConditionInfo> =
         conditions.iter().map(|c| (c.id, c)).collect();
     let key = |id: u32| {
@@ -1007,17 +1034,32 @@ pub fn analyze_pairs(
             .flat_map(|(i, it)| it.conditions.iter().map(move |&c| (c, i)))
             .collect();
         let mut matrix = WinMatrix::new(items.len());
+        let mut tie_matrix = TieMatrix::new(items.len());
         for c in choices {
             if let (Some(&w), Some(&l)) = (index.get(&c.winner), index.get(&c.loser)) {
-                matrix.add(w, l);
+                if c.tie {
+                    tie_matrix.add(w, l);
+                } else {
+                    matrix.add(w, l);
+                }
             }
         }
         let outcome = fit(&matrix, 0, confidence)?;
+        let ties = if with_ties {
+            let outcome = fit_with_ties(&matrix, &tie_matrix, 0, confidence)?;
+            Some(TiedFit {
+                matrix: tie_matrix,
+                outcome,
+            })
+        } else {
+            None
+        };
         Ok(Some(BtGroup {
             clip: clip.map(str::to_owned),
             items,
             matrix,
             outcome,
+            ties,
         }))
     };
     let mut clips: Vec<&str> = Vec::new();
@@ -1037,6 +1079,7 @@ pub fn analyze_pairs(
     let subjects: BTreeSet<u32> = choices.iter().map(|c| c.subject).collect();
     Ok(PairComparisonAnalysis {
         choices: choices.len(),
+        ties: choices.iter().filter(|c| c.tie).count(),
         subjects: subjects.len(),
         per_clip,
         pooled,
@@ -1073,56 +1116,141 @@ pub fn report_section(
          a ratio as one item across clips.",
         pc.choices, pc.subjects
     ));
+    let with_ties = pc.ties > 0;
+    if with_ties {
+        s.text(format!(
+            "{} of the choices were \"no preference\" (ties). With ties the scale values are \
+             Davidson's (1970) by maximum likelihood (Newton-Raphson on the scale values and \
+             ln ν): P(i over j) = p_i / (p_i + p_j + ν √(p_i p_j)), P(tie) = ν √(p_i p_j) / \
+             (p_i + p_j + ν √(p_i p_j)), s = ln p; at equal strengths a tie has probability \
+             ν / (2 + ν). Comparisons counts preferences and ties; {conf} % intervals of ν are \
+             exp(ln ν ± z·SE(ln ν)).",
+            pc.ties
+        ));
+    }
     let groups: Vec<&BtGroup> = pc.per_clip.iter().chain(&pc.pooled).collect();
     let mut rows = Vec::new();
     for g in &groups {
         let clip = g.clip.clone().unwrap_or_else(|| "all".to_owned());
+        let estimate = group_estimate(g);
         for (i, item) in g.items.iter().enumerate() {
-            let (scale, se, lo, hi) = match &g.outcome {
-                BtOutcome::Fitted(e) => (
-                    Some(e.scale[i]),
-                    Some(e.se[i]),
-                    Some(e.lower[i]),
-                    Some(e.upper[i]),
-                ),
-                BtOutcome::NoFiniteEstimate { .. } => (None, None, None, None),
-            };
-            rows.push(vec![
+            let at = |v: Option<&Vec<f64>>| v.and_then(|v| v.get(i).copied());
+            let tied = g.ties.as_ref().map_or(0, |t| t.matrix.ties_of(i));
+            let mut row = vec![
                 clip.clone(),
                 item.method.clone(),
                 item.compression_ratio
                     .map_or_else(|| "ref".to_owned(), |cr| format!("{cr}:1")),
                 g.matrix.wins_of(i).to_string(),
-                g.matrix.comparisons_of(i).to_string(),
-                fmt_opt(scale, 6),
-                fmt_opt(se, 6),
-                fmt_opt(lo, 6),
-                fmt_opt(hi, 6),
+            ];
+            if with_ties {
+                row.push(tied.to_string());
+            }
+            row.extend([
+                (g.matrix.comparisons_of(i) + tied).to_string(),
+                fmt_opt(at(estimate.map(|e| e.0)), 6),
+                fmt_opt(at(estimate.map(|e| e.1)), 6),
+                fmt_opt(at(estimate.map(|e| e.2)), 6),
+                fmt_opt(at(estimate.map(|e| e.3)), 6),
             ]);
+            rows.push(row);
         }
     }
+    let mut columns = vec!["Clip", "Codec", "CR", "Wins"];
+    if with_ties {
+        columns.push("Ties");
+    }
+    columns.extend(["Comparisons", "Scale", "SE", "Lower", "Upper"]);
+    let model = if with_ties {
+        "Davidson (Bradley-Terry with ties)"
+    } else {
+        "Bradley-Terry"
+    };
     s.table(Table {
         name: "pc_scale".to_owned(),
         caption: format!(
-            "Bradley-Terry scale values per clip and pooled (\"all\"); the first row of each \
-             is the anchor; {conf} % CI from the Fisher information"
+            "{model} scale values per clip and pooled (\"all\"); the first row of each is the \
+             anchor; {conf} % CI from the Fisher information"
+        ),
+        columns: columns.into_iter().map(str::to_owned).collect(),
+        rows,
+    });
+    if with_ties {
+        tie_parameter_table(s, &groups, &conf);
+    }
+    wins_tables(s, &groups);
+}
+
+/// The scale values the report gives for a group (scale, SE, lower, upper): Davidson's where
+/// the group was fitted with ties and that fit has a finite estimate (Bradley-Terry's where
+/// it had no tie), else Bradley-Terry's; `None` when there is no finite estimate.
+#[allow(clippy::type_complexity)]
+fn group_estimate(g: &BtGroup) -> Option<(&Vec<f64>, &Vec<f64>, &Vec<f64>, &Vec<f64>)> {
+    match (&g.ties, &g.outcome) {
+        (Some(t), _) => match &t.outcome {
+            TiesOutcome::Fitted(e) => Some((&e.scale, &e.se, &e.lower, &e.upper)),
+            TiesOutcome::NoTies(e) => Some((&e.scale, &e.se, &e.lower, &e.upper)),
+            TiesOutcome::NoFiniteEstimate { .. } | TiesOutcome::TieParameterInfinite { .. } => None,
+        },
+        (None, BtOutcome::Fitted(e)) => Some((&e.scale, &e.se, &e.lower, &e.upper)),
+        (None, BtOutcome::NoFiniteEstimate { .. }) => None,
+    }
+}
+
+/// Davidson's tie parameter of each group (`pc_tie_parameter`), after a sentence for each
+/// group without a full estimate.
+fn tie_parameter_table(s: &mut crate::report::Section, groups: &[&BtGroup], conf: &str) {
+    use crate::tables::{Table, fmt_opt};
+    let mut rows = Vec::new();
+    for g in groups {
+        let Some(t) = &g.ties else { continue };
+        let clip = g.clip.clone().unwrap_or_else(|| "all".to_owned());
+        if let Some(why) = t
+            .outcome
+            .explanation(|i| g.items.get(i).map(item_label).unwrap_or_default())
+        {
+            s.text(format!("{clip}: {why}"));
+        }
+        let e = match &t.outcome {
+            TiesOutcome::Fitted(e) => Some(e),
+            _ => None,
+        };
+        if let Some(e) = e.filter(|e| !e.converged) {
+            s.text(format!(
+                "{clip}: the Newton iteration stopped after {} iterations without meeting its \
+                 tolerance; the estimates are approximate.",
+                e.iterations
+            ));
+        }
+        rows.push(vec![
+            clip,
+            t.matrix.total().to_string(),
+            fmt_opt(e.map(|e| e.tie_parameter), 6),
+            fmt_opt(e.map(|e| e.tie_se), 6),
+            fmt_opt(e.map(|e| e.tie_lower), 6),
+            fmt_opt(e.map(|e| e.tie_upper), 6),
+            fmt_opt(e.map(|e| e.tie_parameter / (2.0 + e.tie_parameter)), 6),
+        ]);
+    }
+    s.table(Table {
+        name: "pc_tie_parameter".to_owned(),
+        caption: format!(
+            "Davidson's tie parameter ν per clip and pooled (\"all\"), {conf} % CI; P(tie) at \
+             equal strengths is ν / (2 + ν)"
         ),
         columns: [
             "Clip",
-            "Codec",
-            "CR",
-            "Wins",
-            "Comparisons",
-            "Scale",
+            "Ties",
+            "ν",
             "SE",
             "Lower",
             "Upper",
+            "P(tie | equal)",
         ]
         .map(str::to_owned)
         .to_vec(),
         rows,
     });
-    wins_tables(s, &groups);
 }
 
 /// Each fit's win matrix (`pc_wins_<k>`), after a note where the fit has no finite scale or
@@ -1131,22 +1259,25 @@ fn wins_tables(s: &mut crate::report::Section, groups: &[&BtGroup]) {
     use crate::tables::Table;
     for (k, g) in groups.iter().enumerate() {
         let clip = g.clip.as_deref().unwrap_or("all clips");
-        if let BtOutcome::NoFiniteEstimate { item, how } = &g.outcome {
-            let name = g.items.get(*item).map(item_label).unwrap_or_default();
-            let anchor = g.items.first().map(item_label).unwrap_or_default();
-            s.text(format!(
-                "{clip}: no finite Bradley-Terry scale: {name} {how} the items connected to \
-                 {anchor} (the maximum-likelihood scale value would be infinite); compare more \
-                 pairs or more subjects."
-            ));
-        } else if let BtOutcome::Fitted(e) = &g.outcome
-            && !e.converged
-        {
-            s.text(format!(
-                "{clip}: the MM iteration stopped after {} iterations without meeting its \
-                 tolerance; the scale values are approximate.",
-                e.iterations
-            ));
+        // With ties the report gives Davidson's fit, whose notes come with its table.
+        match (&g.ties, &g.outcome) {
+            (None, BtOutcome::NoFiniteEstimate { item, how }) => {
+                let name = g.items.get(*item).map(item_label).unwrap_or_default();
+                let anchor = g.items.first().map(item_label).unwrap_or_default();
+                s.text(format!(
+                    "{clip}: no finite Bradley-Terry scale: {name} {how} the items connected \
+                     to {anchor} (the maximum-likelihood scale value would be infinite); \
+                     compare more pairs or more subjects."
+                ));
+            }
+            (None, BtOutcome::Fitted(e)) if !e.converged => {
+                s.text(format!(
+                    "{clip}: the MM iteration stopped after {} iterations without meeting its \
+                     tolerance; the scale values are approximate.",
+                    e.iterations
+                ));
+            }
+            _ => {}
         }
         let labels: Vec<String> = g.items.iter().map(item_label).collect();
         let mut columns = vec!["Preferred over".to_owned()];
@@ -1168,9 +1299,35 @@ fn wins_tables(s: &mut crate::report::Section, groups: &[&BtGroup]) {
                 "Pair comparison wins, {clip}: how often the row's version was preferred over \
                  the column's"
             ),
-            columns,
+            columns: columns.clone(),
             rows,
         });
+        if let Some(t) = &g.ties {
+            let rows = t
+                .matrix
+                .ties
+                .iter()
+                .zip(&labels)
+                .map(|(row, l)| {
+                    let mut r = vec![l.clone()];
+                    r.extend(row.iter().map(u64::to_string));
+                    r
+                })
+                .collect();
+            let mut columns = columns;
+            if let Some(first) = columns.first_mut() {
+                "Tied with".clone_into(first);
+            }
+            s.table(Table {
+                name: format!("pc_ties_{}", k + 1),
+                caption: format!(
+                    "Pair comparison ties, {clip}: how often the row's and the column's \
+                     versions were answered \"no preference\""
+                ),
+                columns,
+                rows,
+            });
+        }
     }
 }
 

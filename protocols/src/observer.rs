@@ -122,6 +122,11 @@ impl Observer {
         }
     }
 
+    /// The study this observer takes part in.
+    pub fn study(&self) -> &StudyDefinition {
+        &self.study
+    }
+
     /// The psychometric function of the 2AFC observer.
     pub fn psychometric(&self) -> PsychometricFunction {
         PsychometricFunction {

@@ -358,7 +358,7 @@ fn crowd_example_stimuli_are_the_generated_ones() {
     std::fs::remove_dir_all(&root).unwrap();
 }
 
-const EXAMPLES: [&str; 9] = [
+const EXAMPLES: [&str; 10] = [
     "mos.toml",
     "dscqs.toml",
     "staircase.toml",
@@ -367,6 +367,7 @@ const EXAMPLES: [&str; 9] = [
     "acr-hr.toml",
     "dcr.toml",
     "pc.toml",
+    "pc-ties.toml",
     "mushra.toml",
 ];
 
@@ -484,12 +485,14 @@ fn run_scripted(
 /// The keys that answer an example's first trial (or MUSHRA screen) once its answers open:
 /// DSCQS's two continuous scales with the number keys (Backspace to A, 4 marks A Good, 2
 /// marks B Poor), MUSHRA's sliders A to E in the order they are drawn (Tab to each, Up sets
-/// it to 1), a grade for MOS, ACR and DCR (4), the left motion for 2AFC and pair comparison.
+/// it to 1), a grade for MOS, ACR and DCR (4), "No preference" (N) where a pair comparison
+/// offers it, the left motion for 2AFC and pair comparison.
 fn first_answer_keys(name: &str) -> &'static str {
     match name {
         "dscqs.toml" => "Backspace 4 2 Enter",
         "mushra.toml" => "Tab Up Tab Up Tab Up Tab Up Tab Up Enter",
         "mos.toml" | "acr-hr.toml" | "dcr.toml" => "4 Enter",
+        "pc-ties.toml" => "N",
         _ => "Left",
     }
 }
@@ -556,6 +559,15 @@ fn check_first_answers(name: &str, records: &[protocols::TrialRecord]) {
             protocols::Answer::Choice(protocols::Position::Left)
         );
         assert_ne!(r.trial.stimulus, r.trial.reference, "two test versions");
+    }
+    if name == "pc-ties.toml" {
+        // The third button the screen offered: no preference, a tie scored 1/2.
+        let r = &records[0];
+        assert_eq!(
+            r.response.answer,
+            protocols::Answer::Choice(protocols::Position::Neither)
+        );
+        assert!((r.outcome.score - 0.5).abs() < 1e-12, "{:?}", r.outcome);
     }
     if name == "mushra.toml" {
         // The whole first screen, the example's training screen: one row per pane, A to E,

@@ -293,31 +293,47 @@ fn mushra_report_equals_scipy() {
 }
 
 /// The report's `pc_scale.csv` rows and the golden script's agree: clip, codec, ratio, wins
-/// and comparisons exactly, scale value, SE and bounds to 2e-6 (the table prints six
-/// decimals; choix iterates to 1e-12).
-fn assert_pc_equal(report: &Path, g: &serde_json::Value) {
+/// (ties) and comparisons exactly, scale value, SE and bounds to 2e-6 (the table prints six
+/// decimals; choix iterates to 1e-12, the Davidson reference to a gradient below 1e-9).
+fn assert_pc_equal(report: &Path, g: &serde_json::Value, ties: bool) {
     let text = std::fs::read_to_string(report.join("tables/pc_scale.csv")).unwrap();
     let mut lines = text.lines();
-    assert_eq!(
-        lines.next(),
-        Some("Clip,Codec,CR,Wins,Comparisons,Scale,SE,Lower,Upper")
-    );
+    let (header, counts) = if ties {
+        (
+            "Clip,Codec,CR,Wins,Ties,Comparisons,Scale,SE,Lower,Upper",
+            3..6,
+        )
+    } else {
+        ("Clip,Codec,CR,Wins,Comparisons,Scale,SE,Lower,Upper", 3..5)
+    };
+    assert_eq!(lines.next(), Some(header));
     let ours: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
     let theirs = g["rows"].as_array().unwrap();
     assert_eq!(ours.len(), theirs.len());
     for (o, t) in ours.iter().zip(theirs) {
         let t = t.as_array().unwrap();
+        assert_eq!(o.len(), t.len(), "{o:?} vs {t:?}");
         for k in 0..3 {
             assert_eq!(o[k], t[k].as_str().unwrap(), "{o:?} vs {t:?}");
         }
-        for k in 3..5 {
+        for k in counts.clone() {
             assert_eq!(o[k], t[k].as_u64().unwrap().to_string(), "{o:?} vs {t:?}");
         }
-        for k in 5..9 {
+        for k in counts.end..o.len() {
             let (a, b): (f64, f64) = (o[k].parse().unwrap(), t[k].as_f64().unwrap());
             assert!((a - b).abs() < 2e-6, "column {k}: {o:?} vs {t:?}");
         }
     }
+}
+
+/// The report's square count table `tables/<name>.csv` (first column the row's name).
+fn count_table(report: &Path, name: &str) -> Vec<Vec<u64>> {
+    std::fs::read_to_string(report.join(format!("tables/{name}.csv")))
+        .unwrap()
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').skip(1).map(|c| c.parse().unwrap()).collect())
+        .collect()
 }
 
 /// Pair comparison (P.910 PC): two simulated panels of 16; every clip's fit and the pooled
@@ -345,7 +361,7 @@ fn pair_comparison_report_equals_choix() {
             String::from_utf8_lossy(&out.stderr)
         );
         let g: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-        assert_pc_equal(&report, &g);
+        assert_pc_equal(&report, &g, false);
         // Two clips of five conditions and the pool: fifteen rows, anchored at the originals.
         let rows = g["rows"].as_array().unwrap();
         assert_eq!(rows.len(), 15);
@@ -363,19 +379,76 @@ fn pair_comparison_report_equals_choix() {
                 "seed {seed}, {clip}"
             );
             // The win matrix as the report writes it.
-            let wins =
-                std::fs::read_to_string(report.join(format!("tables/pc_wins_{}.csv", k + 1)))
-                    .unwrap();
-            let counts: Vec<Vec<u64>> = wins
-                .lines()
-                .skip(1)
-                .map(|l| l.split(',').skip(1).map(|c| c.parse().unwrap()).collect())
-                .collect();
+            let counts = count_table(&report, &format!("pc_wins_{}", k + 1));
             let want: Vec<Vec<u64>> = serde_json::from_value(g["wins"][*clip].clone()).unwrap();
             assert_eq!(counts, want, "seed {seed}, {clip}");
         }
         let md = std::fs::read_to_string(report.join("report.md")).unwrap();
         assert!(md.contains("Pair comparison (Bradley-Terry)"));
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Pair comparison with ties (`examples/pc-ties.toml`: a "No preference" button): two
+/// simulated panels of 16; every clip's Davidson fit and the pooled one equal the SciPy fit
+/// of scripts/reference/davidson_reference.py on the counts scripts/golden/pair_comparison.py
+/// reads from the rows itself (scale values, SEs and bounds to 2e-6; the tie parameter ν, its
+/// SE and interval to 2e-6), the win and tie matrices equal its counts, and the ties are a
+/// share the simulated observer's indifference band gives (a tie when two versions' perceived
+/// qualities differ by less than half the noise SD: between 15 % and 45 % of the choices).
+#[test]
+fn pair_comparison_with_ties_report_equals_scipy_davidson() {
+    let Some(python) = bayes_python::python("choix", "pair comparison golden") else {
+        return;
+    };
+    let dir = scratch("pc-ties");
+    for seed in [3, 8] {
+        let (results, report) = simulate_and_report(&dir, "pc-ties.toml", 16, seed);
+        let out = Command::new(&python)
+            .arg(repo().join("scripts/golden/pair_comparison.py"))
+            .arg(&results)
+            .arg(repo().join("examples/stimuli.json"))
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let g: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        assert_pc_equal(&report, &g, true);
+        for (k, clip) in ["march", "walk", "all"].iter().enumerate() {
+            let wins = count_table(&report, &format!("pc_wins_{}", k + 1));
+            let want: Vec<Vec<u64>> = serde_json::from_value(g["wins"][*clip].clone()).unwrap();
+            assert_eq!(wins, want, "seed {seed}, {clip}");
+            let ties = count_table(&report, &format!("pc_ties_{}", k + 1));
+            let want: Vec<Vec<u64>> = serde_json::from_value(g["ties"][*clip].clone()).unwrap();
+            assert_eq!(ties, want, "seed {seed}, {clip}");
+        }
+        let nu = std::fs::read_to_string(report.join("tables/pc_tie_parameter.csv")).unwrap();
+        let mut lines = nu.lines();
+        assert_eq!(
+            lines.next(),
+            Some("Clip,Ties,ν,SE,Lower,Upper,P(tie | equal)")
+        );
+        let mut ties_all = 0;
+        for line in lines {
+            let o: Vec<&str> = line.split(',').collect();
+            let t = g["nu"][o[0]].as_array().unwrap();
+            assert_eq!(o[1], t[0].as_u64().unwrap().to_string(), "{line}");
+            for k in 2..6 {
+                let (a, b): (f64, f64) = (o[k].parse().unwrap(), t[k - 1].as_f64().unwrap());
+                assert!((a - b).abs() < 2e-6, "column {k}: {line} vs {t:?}");
+            }
+            if o[0] == "all" {
+                ties_all = t[0].as_u64().unwrap();
+            }
+        }
+        // 16 subjects x 22 trials.
+        let share = ties_all as f64 / 352.0;
+        assert!((0.15..0.45).contains(&share), "seed {seed}: {share}");
+        let md = std::fs::read_to_string(report.join("report.md")).unwrap();
+        assert!(md.contains("Davidson (Bradley-Terry with ties)"));
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -5,7 +5,7 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use protocols::{Block, Protocol};
+use protocols::{Answer, Block, Position, Protocol};
 use results::store::SessionState;
 
 fn examples() -> PathBuf {
@@ -32,6 +32,7 @@ fn simulate_writes_complete_results_for_every_protocol() {
         ("acr-hr.toml", Protocol::Acr, Some(14)),
         ("dcr.toml", Protocol::Dcr, Some(12)),
         ("pc.toml", Protocol::PairComparison, Some(22)),
+        ("pc-ties.toml", Protocol::PairComparison, Some(22)),
         ("mushra.toml", Protocol::Mushra, Some(15)),
     ] {
         let out = scratch(file);
@@ -103,7 +104,7 @@ fn simulate_writes_complete_results_for_every_protocol() {
                         .iter()
                         .all(|r| r.outcome.score_reference.is_some())
                 ),
-                Protocol::PairComparison => pair_comparison_session(s),
+                Protocol::PairComparison => pair_comparison_session(s, file == "pc-ties.toml"),
                 Protocol::Mushra => check_mushra(s),
                 Protocol::Staircase => {
                     assert_eq!(s.manifest.thresholds.len(), 2);
@@ -172,8 +173,8 @@ fn check_mushra(s: &results::SessionResults) {
 
 /// A simulated pair comparison session of the example: every pair of a clip's five
 /// conditions once, then two again with the sides swapped; each row's two stimuli are of one
-/// clip, and the score says which column's version won.
-fn pair_comparison_session(s: &results::SessionResults) {
+/// clip, and the score says which column's version won (1/2 for no preference).
+fn pair_comparison_session(s: &results::SessionResults, ties_offered: bool) {
     let mut pairs: Vec<&str> = s
         .trials
         .records
@@ -188,7 +189,11 @@ fn pair_comparison_session(s: &results::SessionResults) {
         let clip = |id: &str| id.split('/').next().unwrap_or("").to_owned();
         assert_eq!(clip(&r.trial.stimulus), clip(&r.trial.reference));
         assert_ne!(r.trial.stimulus, r.trial.reference);
-        assert!(matches!(r.outcome.score, 0.0 | 1.0));
+        // A tie (no preference) scores 1/2, and only where the screen offered it.
+        let tie = r.response.answer == Answer::Choice(Position::Neither);
+        let want: &[f64] = if tie { &[0.5] } else { &[0.0, 1.0] };
+        assert!(want.contains(&r.outcome.score), "{r:?}");
+        assert!(!tie || ties_offered, "{r:?}");
     }
     let repeats = s
         .trials

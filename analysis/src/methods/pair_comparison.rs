@@ -1,9 +1,10 @@
-//! Pair comparison rows: each the choice it logs, for the Bradley-Terry scale values.
+//! Pair comparison rows: each the choice it logs (a preference, or no preference: a tie),
+//! for the Bradley-Terry (Davidson's, with ties) scale values.
 
 use std::path::Path;
 
 use protocols::study::ReferencePlacement;
-use protocols::{Answer, TrialRecord};
+use protocols::{Answer, Position, TrialRecord};
 
 use super::MethodAnalysis;
 use crate::bradley_terry::PairChoice;
@@ -30,7 +31,7 @@ impl MethodAnalysis for PairComparison {
 }
 
 /// A pair comparison row as the choice it logs: the `reference` column holds the pair's
-/// other test stimulus, shown at the reference position.
+/// other test stimulus, shown at the reference position; "neither" is a tie of the two.
 fn pair_choice(
     record: &TrialRecord,
     path: &Path,
@@ -40,14 +41,15 @@ fn pair_choice(
 ) -> Result<PairChoice, AnalysisError> {
     let t = &record.trial;
     let choice = match record.response.answer {
-        Answer::Choice(p) if p.fits(t.arrangement) => p,
+        Answer::Choice(p) if p.fits(t.arrangement) || p == Position::Neither => p,
         other => {
             return Err(bad(
                 path,
                 index,
                 "response",
                 format!(
-                    "a pair_comparison trial needs a position of arrangement {}, got {other:?}",
+                    "a pair_comparison trial needs a position of arrangement {} or \"neither\", \
+                     got {other:?}",
                     t.arrangement
                 ),
             ));
@@ -63,5 +65,6 @@ fn pair_choice(
         subject,
         winner,
         loser,
+        tie: choice == Position::Neither,
     })
 }

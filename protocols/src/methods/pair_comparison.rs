@@ -1,5 +1,6 @@
-//! Pair comparison (ITU-T P.910 PC): two versions of the same motion, the better one chosen;
-//! Bradley-Terry scale values in the analysis.
+//! Pair comparison (ITU-T P.910 PC): two versions of the same motion, the better one chosen
+//! (or, with `[presentation] no_preference`, neither: a tie); Bradley-Terry scale values in
+//! the analysis, Davidson's model where there are ties.
 
 use std::fmt::{self, Write as _};
 
@@ -9,10 +10,17 @@ use super::common::{
 use super::{AnswerKind, AnswerWidget, ChoiceOption, Method, ReferenceRule, Refusal, Sections};
 use crate::engine::{PlanItem, plan_trials};
 use crate::observer::{Observer, ObserverError};
-use crate::record::{Answer, Arrangement, Outcome, Protocol, Trial};
+use crate::record::{Answer, Arrangement, Outcome, Position, Protocol, Trial};
 use crate::rng::StudyRng;
 use crate::study::{Condition, RatingScale, ReferencePlacement, StudyDefinition};
 use crate::texts::{PC_QUESTION, Planned};
+
+/// The key of the "No preference" button.
+const NO_PREFERENCE_KEY: &str = "N";
+
+/// The simulated observer's indifference band, in units of its noise SD: a perceived quality
+/// difference below it is answered "no preference" where the screen offers that.
+const INDIFFERENCE: f64 = 0.5;
 
 /// Pair comparison of the study's conditions.
 pub(super) struct PairComparison;
@@ -26,11 +34,28 @@ impl Method for PairComparison {
         AnswerKind::Choice
     }
 
+    /// The two positions' buttons, and "No preference" (key N) between them where the study
+    /// offers it.
     fn answer_widget(&self, study: &StudyDefinition) -> AnswerWidget {
+        let mut options = ChoiceOption::positions(study.presentation.arrangement);
+        if study.presentation.no_preference {
+            options.insert(
+                1,
+                ChoiceOption {
+                    label: "No preference".to_owned(),
+                    key: NO_PREFERENCE_KEY.to_owned(),
+                    answer: Position::Neither,
+                },
+            );
+        }
         AnswerWidget::Choice {
             question: PC_QUESTION.to_string(),
-            options: ChoiceOption::positions(study.presentation.arrangement),
+            options,
         }
+    }
+
+    fn offers_no_preference(&self) -> bool {
+        true
     }
 
     fn instructions(&self, study: &StudyDefinition) -> String {
@@ -48,9 +73,14 @@ impl Method for PairComparison {
         } else {
             "Neither is the original."
         };
+        let answer = if study.presentation.no_preference {
+            "If neither looks better to you, answer \"No preference\" with the N key."
+        } else {
+            "Answer even when you are unsure."
+        };
         format!(
             "Each trial shows two versions of the same motion {shows}. {original} Choose the one \
-             that looks better with {keys} (or click). Answer even when you are unsure."
+             that looks better with {keys} (or click). {answer}"
         )
     }
 
@@ -119,20 +149,27 @@ impl Method for PairComparison {
     }
 
     /// The `reference` column holds the pair's other test stimulus, shown at the reference
-    /// position: picking the other position prefers `stimulus` (score 1).
+    /// position: picking the other position prefers `stimulus` (score 1), picking the reference
+    /// position the other (0); no preference scores 1/2 (the engine takes it only where the
+    /// screen offered it).
     fn score(
         &self,
         trial: &Trial,
         answer: Answer,
         _scale: &RatingScale,
     ) -> Result<Outcome, Refusal> {
+        if answer == Answer::Choice(Position::Neither) {
+            return Ok(scored(0.5));
+        }
         let preferred_stimulus = choice(trial, answer)? != trial.reference_position;
         Ok(scored(if preferred_stimulus { 1.0 } else { 0.0 }))
     }
 
     /// A Thurstone case V observer: each stimulus' latent quality plus its own normal noise
-    /// (`noise_sd`), the better-looking one picked; the subject's bias shifts both alike and
-    /// cancels. P(stimulus preferred) = Φ((q_s - q_r) / (σ√2)).
+    /// (`noise_sd` σ), the better-looking one picked; the subject's bias shifts both alike and
+    /// cancels. P(stimulus preferred) = Φ((q_s - q_r) / (σ√2)). Where the screen offers no
+    /// preference, a perceived difference below σ/2 is answered with it (an indifference
+    /// band: P(tie) = Φ((σ/2 - Δ) / (σ√2)) - Φ((-σ/2 - Δ) / (σ√2)), Δ = q_s - q_r).
     fn simulate(
         &self,
         observer: &Observer,
@@ -145,6 +182,11 @@ impl Method for PairComparison {
         };
         let qs = q(test_error()?, rng);
         let qr = q(observer.manifest_error(&trial.reference)?, rng);
+        if observer.study().presentation.no_preference
+            && (qs - qr).abs() < INDIFFERENCE * observer.noise_sd()
+        {
+            return Ok(Answer::Choice(Position::Neither));
+        }
         Ok(Answer::Choice(if qs > qr {
             trial.reference_position.other()
         } else {
