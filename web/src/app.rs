@@ -12,7 +12,7 @@ use std::time::Instant;
 use lab::session::{self, Opened, Recorder};
 use lab::source::StimulusSource;
 use lab::{LabError, StudyFile};
-use protocols::record::{Answer, Arrangement, Block, Position, Protocol, Response, Trial};
+use protocols::record::{Answer, Arrangement, Block, Position, Response, Trial};
 use protocols::study::{CrowdsourcingSettings, HiddenRule, ScaleKind, StudyDefinition};
 use protocols::{FrameTiming, StimulusEncoding, texts};
 use results::SessionManifest;
@@ -301,11 +301,8 @@ impl App {
     pub fn open(options: &ServeOptions) -> Result<App> {
         let page = read_page(&options.page)?;
         let study = StudyFile::load(&options.study)?;
-        // The page has the answer widgets of MOS, DSCQS and 2AFC only.
-        if matches!(
-            study.definition.protocol,
-            Protocol::Acr | Protocol::Dcr | Protocol::PairComparison | Protocol::Mushra
-        ) {
+        // The page has the screens of some methods only (MOS, DSCQS and 2AFC).
+        if !study.definition.method().browser_page() {
             return Err(WebError::Refused(format!(
                 "{}: protocol {} runs in the study window (study run); the browser page of \
                  study serve runs mos, dscqs and staircase studies",
@@ -1044,7 +1041,10 @@ impl App {
                 if crowd.gold_verdict(r).is_some_and(|(_, passed)| !passed) {
                     gold_failed += 1;
                 }
-                if r.trial.block != Block::Familiarization && r.protocol != Protocol::Staircase {
+                // A track's scores are right or wrong, not a condition's quality.
+                if r.trial.block != Block::Familiarization
+                    && !protocols::methods::of(r.protocol).adaptive()
+                {
                     let e = scores.entry(r.trial.condition.clone()).or_insert((0.0, 0));
                     e.0 += r.outcome.score;
                     e.1 += 1;

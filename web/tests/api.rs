@@ -272,3 +272,43 @@ fn requests_over_the_rate_are_refused() {
     rt.block_on(server.stop()).unwrap();
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The page draws the screens of some methods only (MOS, DSCQS and 2AFC, until issue 36):
+/// the server asks the study's method and refuses the others' studies before it listens,
+/// naming the file and the protocol; the MOS study itself opens.
+#[test]
+fn studies_whose_screens_the_page_lacks_are_refused() {
+    let dir = temp_dir("refused");
+    let options = setup(&dir);
+    let mos = std::fs::read_to_string(&options.study).unwrap();
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    for (protocol, extra) in [
+        ("acr", ""),
+        ("dcr", ""),
+        ("pair_comparison", "hidden_reference = false\n"),
+    ] {
+        let text = mos
+            .replace("protocol = \"mos\"", &format!("protocol = \"{protocol}\""))
+            .replace(
+                "target_cr = [10, 20]\n",
+                &format!("target_cr = [10, 20]\n{extra}"),
+            );
+        let path = dir.join(format!("{protocol}.toml"));
+        std::fs::write(&path, text).unwrap();
+        let err = match rt.block_on(web::start(ServeOptions {
+            study: path.clone(),
+            ..options.clone()
+        })) {
+            Ok(_) => panic!("{protocol}: served"),
+            Err(e) => e.to_string(),
+        };
+        assert!(
+            err.contains(&format!("protocol {protocol} runs in the study window"))
+                && err.contains(&path.display().to_string()),
+            "{protocol}: {err}"
+        );
+    }
+    let server = rt.block_on(web::start(options)).unwrap();
+    rt.block_on(server.stop()).unwrap();
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -21,6 +21,10 @@ impl Method for Dscqs {
         AnswerKind::RatingPair
     }
 
+    fn browser_page(&self) -> bool {
+        true
+    }
+
     fn answer_widget(&self, study: &StudyDefinition) -> AnswerWidget {
         AnswerWidget::RatingPair {
             words: scale_words(study),

@@ -297,6 +297,13 @@ pub trait Method: Sync {
         false
     }
 
+    /// Whether the browser page of `study serve` has its screen. The page draws MOS, DSCQS
+    /// and the 2AFC tracks' screens itself until it renders every [`crate::screen::Screen`]
+    /// (issue 36); the server refuses the other methods' studies.
+    fn browser_page(&self) -> bool {
+        false
+    }
+
     /// Whether a condition may be its own reference (`[conditions] hidden_reference`: ACR-HR,
     /// a pair comparison's anchor).
     fn hidden_references(&self) -> bool {
