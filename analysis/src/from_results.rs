@@ -248,6 +248,7 @@ impl<'a> Converter<'a> {
                 got: 0,
             });
         };
+        data.protocol = Some(protocol);
         for (id, name) in stimuli.names.iter().enumerate() {
             let Some(s) = manifest.get(name) else {
                 return Err(AnalysisError::BadRecord {

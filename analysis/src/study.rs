@@ -53,6 +53,27 @@ pub struct StudyData {
     pub crowd: Option<CrowdDesign>,
     /// Pair comparison answers (P.910 PC).
     pub pair_choices: Vec<PairChoice>,
+    /// Ratings of one version against the other shown with it (P.910 CCR).
+    pub comparison_ratings: Vec<ComparisonRating>,
+    /// The protocol the sessions ran (`None` for data not read from results); its method's
+    /// analysis adds the report sections only it has.
+    pub protocol: Option<protocols::Protocol>,
+}
+
+/// A rating on a comparison scale (P.910 CCR: -3 "Much worse" to +3 "Much better") of the
+/// second (or right) version of a trial against the first (or left), as the subject gave it;
+/// one of the two is the reference, the other the test condition.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct ComparisonRating {
+    /// Subject.
+    pub subject: u32,
+    /// The test condition (its id in [`StudyData::conditions`]).
+    pub condition: u32,
+    /// Whether the reference was shown first (or on the left): the rating is then of the test
+    /// against the reference, else of the reference against the test.
+    pub reference_first: bool,
+    /// The rating as given.
+    pub score: f64,
 }
 
 impl StudyData {
@@ -678,6 +699,9 @@ impl StudyAnalysis {
         }
         if let Some(pc) = &self.pair_comparison {
             crate::bradley_terry::report_section(&mut report, pc, options.confidence);
+        }
+        if let Some(protocol) = data.protocol {
+            crate::methods::of(protocol).report_sections(&mut report, data, options);
         }
         if let Some(crowd) = &data.crowd {
             self.crowd_section(&mut report, crowd, data, options, title);

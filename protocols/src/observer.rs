@@ -127,6 +127,12 @@ impl Observer {
         &self.study
     }
 
+    /// This subject's constant bias (drawn with SD `[simulation] bias_sd`), scale units: it
+    /// shifts every rating alike (a comparison scale's: towards the second version).
+    pub fn bias(&self) -> f64 {
+        self.bias
+    }
+
     /// The psychometric function of the 2AFC observer.
     pub fn psychometric(&self) -> PsychometricFunction {
         PsychometricFunction {

@@ -115,14 +115,18 @@ pub struct Summary {
     pub two_afc: usize,
     /// Pair comparison choices.
     pub pair_choices: usize,
+    /// Comparison ratings (CCR).
+    pub comparison_ratings: usize,
 }
 
 impl std::fmt::Display for Summary {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let choices = match self.pair_choices {
+        let counted = |n: usize, what: &str| match n {
             0 => String::new(),
-            n => format!(", {n} pair comparison choices"),
+            n => format!(", {n} {what}"),
         };
+        let choices = counted(self.pair_choices, "pair comparison choices")
+            + &counted(self.comparison_ratings, "comparison ratings");
         write!(
             f,
             "{}: {} files ({} ratings, {} DSCQS pairs, {} staircases, {} 2AFC trials{choices}); open {}",
@@ -335,5 +339,6 @@ pub fn report(request: &Request, warn: &mut dyn FnMut(&str)) -> Result<Summary> 
         staircases: converted.data.staircases.len(),
         two_afc: converted.data.two_afc.len(),
         pair_choices: converted.data.pair_choices.len(),
+        comparison_ratings: converted.data.comparison_ratings.len(),
     })
 }

@@ -14,6 +14,8 @@ use protocols::study::ReferencePlacement;
 
 use crate::error::AnalysisError;
 use crate::from_results::{Inputs, Row};
+use crate::report::Report;
+use crate::study::{ReportOptions, StudyData};
 
 /// A method's analysis.
 pub(crate) trait MethodAnalysis: Sync {
@@ -40,6 +42,11 @@ pub(crate) trait MethodAnalysis: Sync {
     fn no_screening(&self) -> Option<&'static str> {
         None
     }
+
+    /// Adds the report sections only this method has, from the inputs its rows gave
+    /// ([`MethodAnalysis::add`]); the sections every method shares come from
+    /// [`crate::StudyAnalysis::to_report`]. None by default.
+    fn report_sections(&self, _report: &mut Report, _data: &StudyData, _options: &ReportOptions) {}
 }
 
 /// The analysis of `protocol`'s method: the one place in this crate a protocol's name picks

@@ -147,9 +147,12 @@ pub enum Refusal {
 pub enum ReferenceRule {
     /// A position of the arrangement, `"random"` (the default) or `"balanced"`.
     Any,
-    /// `"random"` or `"balanced"` only: the method places two test stimuli, and a fixed side
-    /// would confound the side with the condition.
-    NotFixed,
+    /// `"random"` or `"balanced"` only: a fixed side or order would confound it with the
+    /// condition (two test stimuli), or leave an effect unmeasured (CCR's order).
+    NotFixed {
+        /// The refusal of a fixed position, naming the method's reason.
+        why: &'static str,
+    },
     /// The reference is shown first (P.910 DCR), or on the side the study names.
     ShownFirst,
     /// Not the study's to say: `why` refuses the key; the placement is `placement`.

@@ -197,7 +197,11 @@ impl Method for PairComparison {
     /// A pair comparison places each pair's two test stimuli; a fixed side would put one
     /// condition of every pair on one side and confound the side with the condition.
     fn reference_rule(&self) -> ReferenceRule {
-        ReferenceRule::NotFixed
+        ReferenceRule::NotFixed {
+            why: "a pair comparison places each pair's two motions by \"random\" (the default) \
+                  or \"balanced\" (each subject sees each condition of a pair on each side \
+                  equally often), never on a fixed side",
+        }
     }
 
     fn labels_hidden(&self) -> Option<&'static str> {

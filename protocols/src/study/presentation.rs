@@ -144,23 +144,16 @@ fn parse_reference_position(
                 },
             };
         }
-        ReferenceRule::Any | ReferenceRule::NotFixed => {}
+        ReferenceRule::Any | ReferenceRule::NotFixed { .. } => {}
     }
-    match given.as_deref() {
-        None | Some("random") => ReferencePlacement::Random,
-        Some("balanced") => ReferencePlacement::Balanced,
-        Some(s) if rule == ReferenceRule::NotFixed => {
-            cx.err(
-                join(P, "reference_position"),
-                format!(
-                    "{s:?}: a pair comparison places each pair's two motions by \"random\" (the \
-                     default) or \"balanced\" (each subject sees each condition of a pair on \
-                     each side equally often), never on a fixed side"
-                ),
-            );
+    match (given.as_deref(), rule) {
+        (None | Some("random"), _) => ReferencePlacement::Random,
+        (Some("balanced"), _) => ReferencePlacement::Balanced,
+        (Some(s), ReferenceRule::NotFixed { why }) => {
+            cx.err(join(P, "reference_position"), format!("{s:?}: {why}"));
             ReferencePlacement::Random
         }
-        Some(s) => match s.parse::<Position>() {
+        (Some(s), _) => match s.parse::<Position>() {
             Ok(p) if p.fits(arrangement) => ReferencePlacement::Fixed(p),
             Ok(p) => {
                 cx.err(
