@@ -101,7 +101,8 @@ pub(super) fn describe_ratings(text: &mut String, study: &StudyDefinition) -> fm
     if hidden > 0 {
         writeln!(
             text,
-            "  hidden references: {hidden} (ACR-HR: DMOS = test - hidden reference + 5)"
+            "  hidden references: {hidden} ({})",
+            study.method().hidden_reference_use()
         )?;
     }
     // A session of a between-subject group shows its group's trials: the largest group's.

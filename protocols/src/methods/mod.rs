@@ -313,6 +313,11 @@ pub trait Method: Sync {
         false
     }
 
+    /// What its analysis makes of a hidden reference, for `study check`.
+    fn hidden_reference_use(&self) -> &'static str {
+        "ACR-HR: DMOS = test - hidden reference + 5"
+    }
+
     /// Whether it takes catch (gold) trials: rated conditions of one-stimulus screens.
     fn gold_trials(&self) -> bool {
         false
