@@ -37,6 +37,10 @@ pub enum Protocol {
     /// condition of the clip, a hidden reference and a low anchor, each rated 0-100. One row
     /// per rated stimulus.
     Mushra,
+    /// Comparison category rating (ITU-T P.910 CCR): the reference and a test stimulus in
+    /// either order, unlabelled, the second rated against the first on seven categories from
+    /// +3 (much better) to -3 (much worse); analysed with the order folded out.
+    Ccr,
 }
 
 /// Which part of a session a trial belongs to.
@@ -132,7 +136,7 @@ macro_rules! text_enum {
 
 text_enum!(Protocol, Protocol::Mos => "mos", Protocol::Dscqs => "dscqs", Protocol::Staircase => "staircase",
     Protocol::Acr => "acr", Protocol::Dcr => "dcr", Protocol::PairComparison => "pair_comparison",
-    Protocol::Mushra => "mushra");
+    Protocol::Mushra => "mushra", Protocol::Ccr => "ccr");
 text_enum!(Block, Block::Familiarization => "familiarization", Block::Test => "test", Block::HiddenRepeat => "hidden_repeat");
 text_enum!(Arrangement, Arrangement::SideBySide => "side_by_side", Arrangement::Sequential => "sequential",
     Arrangement::Abab => "abab", Arrangement::Single => "single", Arrangement::Grid => "grid");

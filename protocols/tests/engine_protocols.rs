@@ -20,7 +20,7 @@ fn random_response(study: &StudyDefinition, trial: &Trial, rng: &mut StudyRng) -
     let s = study.scale;
     let rating = |rng: &mut StudyRng| s.snap(s.min + (s.max - s.min) * rng.unit_f64());
     let answer = match study.protocol {
-        Protocol::Mos | Protocol::Acr | Protocol::Dcr | Protocol::Mushra => {
+        Protocol::Mos | Protocol::Acr | Protocol::Dcr | Protocol::Mushra | Protocol::Ccr => {
             Answer::Rating(rating(rng))
         }
         Protocol::Dscqs => Answer::Pair {

@@ -65,21 +65,30 @@ fn rating_arrangement(protocol: Protocol) -> Arrangement {
     }
 }
 
+/// A one-rating row's parts: `rating` given, `score` logged.
+fn rating_parts(arrangement: Arrangement, rating: f64, score: f64) -> Parts {
+    let outcome = Outcome {
+        score,
+        score_reference: None,
+        score_test: None,
+        correct: None,
+        reversal: None,
+    };
+    (arrangement, Answer::Rating(rating), outcome, None, None)
+}
+
+/// Arrangement, answer, outcome, level and staircase of a row.
+type Parts = (Arrangement, Answer, Outcome, Option<f64>, Option<u32>);
+
 fn record(i: u32, protocol: Protocol, rng: &mut StudyRng) -> TrialRecord {
     let (arrangement, answer, outcome, level, staircase) = match protocol {
-        Protocol::Mos | Protocol::Acr | Protocol::Dcr | Protocol::Mushra => (
+        Protocol::Mos | Protocol::Acr | Protocol::Dcr | Protocol::Mushra => rating_parts(
             rating_arrangement(protocol),
-            Answer::Rating(1.0 + 0.5 * rng.below(9) as f64),
-            Outcome {
-                score: 3.5,
-                score_reference: None,
-                score_test: None,
-                correct: None,
-                reversal: None,
-            },
-            None,
-            None,
+            1.0 + 0.5 * rng.below(9) as f64,
+            3.5,
         ),
+        // A CCR rating of the second version against the first, -3 … 3.
+        Protocol::Ccr => rating_parts(Arrangement::Sequential, rng.below(7) as f64 - 3.0, -2.0),
         Protocol::Dscqs => (
             Arrangement::Abab,
             Answer::Pair {
@@ -205,7 +214,7 @@ fn manifest(trials: u32) -> SessionManifest {
 proptest! {
     #![proptest_config(ProptestConfig { cases: 200, ..ProptestConfig::default() })]
     #[test]
-    fn rows_round_trip(seed in any::<u64>(), which in 0_usize..7, n in 1_u32..20) {
+    fn rows_round_trip(seed in any::<u64>(), which in 0_usize..8, n in 1_u32..20) {
         let protocol = [
             Protocol::Mos,
             Protocol::Dscqs,
@@ -214,6 +223,7 @@ proptest! {
             Protocol::Dcr,
             Protocol::PairComparison,
             Protocol::Mushra,
+            Protocol::Ccr,
         ][which];
         let mut rng = StudyRng::new(seed, &[]);
         let recs: Vec<TrialRecord> = (0..n).map(|i| record(i, protocol, &mut rng)).collect();
@@ -433,6 +443,7 @@ fn mutated_results_files_give_errors_never_panics() {
         Protocol::Dcr,
         Protocol::PairComparison,
         Protocol::Mushra,
+        Protocol::Ccr,
     ]
     .into_iter()
     .cycle()

@@ -358,7 +358,7 @@ fn crowd_example_stimuli_are_the_generated_ones() {
     std::fs::remove_dir_all(&root).unwrap();
 }
 
-const EXAMPLES: [&str; 10] = [
+const EXAMPLES: [&str; 11] = [
     "mos.toml",
     "dscqs.toml",
     "staircase.toml",
@@ -369,6 +369,7 @@ const EXAMPLES: [&str; 10] = [
     "pc.toml",
     "pc-ties.toml",
     "mushra.toml",
+    "ccr.toml",
 ];
 
 /// The two runs of the crowd study (thesis 6.5).
@@ -485,14 +486,15 @@ fn run_scripted(
 /// The keys that answer an example's first trial (or MUSHRA screen) once its answers open:
 /// DSCQS's two continuous scales with the number keys (Backspace to A, 4 marks A Good, 2
 /// marks B Poor), MUSHRA's sliders A to E in the order they are drawn (Tab to each, Up sets
-/// it to 1), a grade for MOS, ACR and DCR (4), "No preference" (N) where a pair comparison
-/// offers it, the left motion for 2AFC and pair comparison.
+/// it to 1), a grade for MOS, ACR and DCR (4), CCR's "Better" (2), "No preference" (N)
+/// where a pair comparison offers it, the left motion for 2AFC and pair comparison.
 fn first_answer_keys(name: &str) -> &'static str {
     match name {
         "dscqs.toml" => "Backspace 4 2 Enter",
         "mushra.toml" => "Tab Up Tab Up Tab Up Tab Up Tab Up Enter",
         "mos.toml" | "acr-hr.toml" | "dcr.toml" => "4 Enter",
         "pc-ties.toml" => "N",
+        "ccr.toml" => "2 Enter",
         _ => "Left",
     }
 }
@@ -544,6 +546,11 @@ fn each_example_records_its_first_answer_in_the_window() {
 
 /// What each example's first answers must be, as the keys gave them.
 fn check_first_answers(name: &str, records: &[protocols::TrialRecord]) {
+    if name == "ccr.toml" {
+        // The second version rated "Better" than the first, on -3 … +3.
+        assert_eq!(records[0].protocol, protocols::Protocol::Ccr);
+        assert_eq!(records[0].response.answer, protocols::Answer::Rating(2.0));
+    }
     if matches!(name, "acr-hr.toml" | "dcr.toml") {
         assert_eq!(
             records[0].response.answer,

@@ -452,3 +452,117 @@ fn pair_comparison_with_ties_report_equals_scipy_davidson() {
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// The report's CSV table `name` as rows of cells, the header checked against `columns`.
+fn csv_rows(report: &Path, name: &str, columns: &str) -> Vec<Vec<String>> {
+    let text = std::fs::read_to_string(report.join(format!("tables/{name}.csv"))).unwrap();
+    let mut lines = text.lines();
+    assert_eq!(lines.next(), Some(columns), "{name}");
+    lines
+        .map(|l| l.split(',').map(str::to_owned).collect())
+        .collect()
+}
+
+/// Our row `o` against the script's `t`: the first `labels` cells as text, the rest as
+/// numbers (integers exactly, the others to 2e-6: the tables print six decimals), "n/a"
+/// for the script's null.
+fn assert_row(o: &[String], t: &serde_json::Value, labels: usize, what: &str) {
+    let t = t.as_array().unwrap();
+    assert_eq!(o.len(), t.len(), "{what}: {o:?} vs {t:?}");
+    for (k, (o, t)) in o.iter().zip(t).enumerate() {
+        if k < labels {
+            assert_eq!(o, t.as_str().unwrap(), "{what}");
+        } else if t.is_null() {
+            assert_eq!(o, "n/a", "{what} column {k}");
+        } else if let Some(n) = t.as_u64() {
+            assert_eq!(o, &n.to_string(), "{what} column {k}");
+        } else {
+            let (a, b): (f64, f64) = (o.parse().unwrap(), t.as_f64().unwrap());
+            assert!((a - b).abs() < 2e-6, "{what} column {k}: {o} vs {b}");
+        }
+    }
+}
+
+/// CCR (P.910 comparison category rating, `examples/ccr.toml`): two simulated panels of 16;
+/// the report's CMOS per condition (folded order, mean of subject means, t interval), the
+/// folded means by order and the order effect's paired t-test equal scripts/golden/ccr.py,
+/// which reads the rows itself and computes with NumPy and SciPy (scipy.stats.ttest_rel).
+/// The simulated observer's clearly worst version (standard wavelet at 30:1, by far the
+/// largest error) has the lowest CMOS of its clip, below 0 with its whole interval.
+#[test]
+fn ccr_report_equals_scipy() {
+    let Some(python) = bayes_python::python("scipy", "CCR golden") else {
+        return;
+    };
+    let dir = scratch("ccr");
+    for seed in [3, 8] {
+        let (results, report) = simulate_and_report(&dir, "ccr.toml", 16, seed);
+        let out = Command::new(&python)
+            .arg(repo().join("scripts/golden/ccr.py"))
+            .arg(&results)
+            .arg(repo().join("examples/stimuli.json"))
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let g: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        let cmos = csv_rows(
+            &report,
+            "ccr_cmos",
+            "Clip,Codec,CR,Subjects,Ratings,CMOS,SD,Lower,Upper",
+        );
+        let want = g["cmos"].as_array().unwrap();
+        assert_eq!(cmos.len(), 10, "two clips of four codecs and the original");
+        assert_eq!(cmos.len(), want.len());
+        for (o, t) in cmos.iter().zip(want) {
+            assert_row(o, t, 3, &format!("seed {seed} ccr_cmos"));
+        }
+        let order = csv_rows(
+            &report,
+            "ccr_order",
+            "Clip,Codec,CR,Original first,Mean,Original second,Mean,Difference",
+        );
+        let want = g["order"].as_array().unwrap();
+        assert_eq!(order.len(), want.len());
+        for (o, t) in order.iter().zip(want) {
+            assert_row(o, t, 3, &format!("seed {seed} ccr_order"));
+        }
+        let effect = csv_rows(
+            &report,
+            "ccr_order_effect",
+            "Subjects,Difference,SD,Lower,Upper,t,df,p",
+        );
+        assert_eq!(effect.len(), 1);
+        assert_row(
+            &effect[0],
+            &g["order_effect"],
+            0,
+            &format!("seed {seed} order effect"),
+        );
+        for clip in ["march", "walk"] {
+            let rows: Vec<&Vec<String>> = cmos.iter().filter(|r| r[0] == clip).collect();
+            let worst = rows
+                .iter()
+                .min_by(|a, b| {
+                    let v = |r: &Vec<String>| r[5].parse::<f64>().unwrap();
+                    v(a).total_cmp(&v(b))
+                })
+                .unwrap();
+            assert_eq!(
+                (worst[1].as_str(), worst[2].as_str()),
+                ("wavelet-standard", "30:1"),
+                "seed {seed}, {clip}"
+            );
+            assert!(
+                worst[8].parse::<f64>().unwrap() < 0.0,
+                "seed {seed}: {worst:?}"
+            );
+        }
+        let md = std::fs::read_to_string(report.join("report.md")).unwrap();
+        assert!(md.contains("Comparison category rating (CCR)"));
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -34,6 +34,7 @@ fn simulate_writes_complete_results_for_every_protocol() {
         ("pc.toml", Protocol::PairComparison, Some(22)),
         ("pc-ties.toml", Protocol::PairComparison, Some(22)),
         ("mushra.toml", Protocol::Mushra, Some(15)),
+        ("ccr.toml", Protocol::Ccr, Some(16)),
     ] {
         let out = scratch(file);
         let st = study()
@@ -105,6 +106,7 @@ fn simulate_writes_complete_results_for_every_protocol() {
                         .all(|r| r.outcome.score_reference.is_some())
                 ),
                 Protocol::PairComparison => pair_comparison_session(s, file == "pc-ties.toml"),
+                Protocol::Ccr => ccr_session(s),
                 Protocol::Mushra => check_mushra(s),
                 Protocol::Staircase => {
                     assert_eq!(s.manifest.thresholds.len(), 2);
@@ -461,4 +463,46 @@ fn a_study_whose_groups_are_full_refuses_the_next_subject() {
         "{err}"
     );
     assert!(results.join("S004_s1").is_dir() && !results.join("S005_s1").exists());
+}
+
+/// A simulated CCR session of the example: every condition (the originals compared with
+/// themselves among them) in both orders over the session's trials, each rating one of the
+/// seven categories -3 … 3 and logged as its own score; the standard wavelet at 30:1, the
+/// worst version, is rated worse than the original once the order is folded (a rating with
+/// the original second counts negated).
+fn ccr_session(s: &results::SessionResults) {
+    let test: Vec<&protocols::TrialRecord> = s
+        .trials
+        .records
+        .iter()
+        .filter(|r| r.trial.block != Block::Familiarization)
+        .collect();
+    for r in &s.trials.records {
+        let Answer::Rating(v) = r.response.answer else {
+            panic!("{r:?}")
+        };
+        assert!((-3.0..=3.0).contains(&v) && v.fract() == 0.0, "{r:?}");
+        assert!((r.outcome.score - v).abs() < 1e-12, "{r:?}");
+        assert!(matches!(
+            r.trial.reference_position,
+            Position::First | Position::Second
+        ));
+    }
+    for order in [Position::First, Position::Second] {
+        assert!(test.iter().any(|r| r.trial.reference_position == order));
+    }
+    assert!(test.iter().any(|r| r.trial.stimulus == r.trial.reference));
+    let folded: Vec<f64> = test
+        .iter()
+        .filter(|r| r.trial.stimulus.ends_with("standard/cr30"))
+        .map(|r| match r.trial.reference_position {
+            Position::First => r.outcome.score,
+            _ => -r.outcome.score,
+        })
+        .collect();
+    assert!(!folded.is_empty());
+    assert!(
+        folded.iter().sum::<f64>() / (folded.len() as f64) < -0.5,
+        "{folded:?}"
+    );
 }

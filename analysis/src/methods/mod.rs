@@ -3,6 +3,7 @@
 //! depends on it. One module per method (the rating methods share one); nothing else in
 //! this crate matches on a protocol's name.
 
+mod ccr;
 mod dscqs;
 mod mushra;
 mod pair_comparison;
@@ -63,6 +64,7 @@ pub(crate) fn of(protocol: Protocol) -> &'static dyn MethodAnalysis {
         Protocol::Dscqs => &dscqs::Dscqs,
         Protocol::PairComparison => &pair_comparison::PairComparison,
         Protocol::Staircase => &staircase::Staircase,
+        Protocol::Ccr => &ccr::Ccr,
     }
 }
 

@@ -13,6 +13,7 @@
 //! analysis is registered the same way in the `analysis` crate (`analysis/src/methods/`).
 
 mod acr;
+mod ccr;
 pub(crate) mod common;
 mod dcr;
 mod dscqs;
@@ -393,6 +394,7 @@ pub fn of(protocol: Protocol) -> &'static dyn Method {
         Protocol::PairComparison => &pair_comparison::PairComparison,
         Protocol::Mushra => &mushra::Mushra,
         Protocol::Staircase => &staircase::Staircase,
+        Protocol::Ccr => &ccr::Ccr,
     }
 }
 
@@ -418,6 +420,7 @@ mod tests {
             Protocol::PairComparison,
             Protocol::Mushra,
             Protocol::Staircase,
+            Protocol::Ccr,
         ] {
             assert_eq!(of(p).protocol(), p);
         }
