@@ -13,7 +13,7 @@ use serde::Serialize;
 
 use crate::methods::AnswerWidget;
 use crate::record::{Arrangement, Position, Trial};
-use crate::study::{PresentationSettings, StudyDefinition};
+use crate::study::{PresentationSettings, SceneCamera, SceneLight, StudyDefinition};
 
 /// What one step of a trial's schedule shows.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, JsonSchema)]
@@ -86,6 +86,9 @@ pub struct Schedule {
     pub after: After,
     /// Replays allowed after the first pass (`None`: any number).
     pub max_replays: Option<u32>,
+    /// When answers open, seconds from the start of the first pass: once every step has
+    /// been shown.
+    pub answers_open_s: f64,
 }
 
 impl Schedule {
@@ -164,10 +167,12 @@ impl Schedule {
             Arrangement::SideBySide | Arrangement::Grid => After::Hold,
             Arrangement::Sequential | Arrangement::Abab | Arrangement::Single => After::Grey,
         };
+        let answers_open_s = steps.iter().map(|s| s.duration_s).sum();
         Schedule {
             steps,
             after,
             max_replays: settings.max_replays,
+            answers_open_s,
         }
     }
 
@@ -178,22 +183,78 @@ impl Schedule {
 }
 
 /// What a pane shows.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, JsonSchema)]
+#[derive(Debug, Clone, PartialEq, Serialize, JsonSchema)]
 #[serde(tag = "kind", rename_all = "snake_case")]
 pub enum PaneContent {
     /// One figure: the stimulus' skeleton, framed to the pane.
     Figure,
-    /// A crowd scene (`[scene]`, thesis 6.5): every character of the study's scene, placed,
-    /// lit and seen through its camera as the study file says, each character's clip the
-    /// stimulus' (the reference's where the pane shows the reference).
-    CrowdScene {
-        /// How many characters the scene places.
-        characters: usize,
-    },
+    /// A crowd scene (`[scene]`, thesis 6.5): the pane's scene of the stimulus manifest,
+    /// every character placed on one ground, lit and seen through the study's camera.
+    CrowdScene(CrowdScene),
+}
+
+/// A crowd scene as a pane shows it.
+#[derive(Debug, Clone, PartialEq, Serialize, JsonSchema)]
+pub struct CrowdScene {
+    /// The distance level it was made for (`[scene] levels`).
+    pub level: String,
+    /// The camera every pane looks through.
+    pub camera: SceneCamera,
+    /// The light of every pane.
+    pub light: SceneLight,
+    /// The characters, in the scene's order.
+    pub characters: Vec<CrowdCharacter>,
+}
+
+/// One character of a crowd scene: the stimulus it performs and where it stands.
+#[derive(Debug, Clone, PartialEq, Serialize, JsonSchema)]
+pub struct CrowdCharacter {
+    /// Its name in the `[scene]`.
+    pub name: String,
+    /// The stimulus (an id of the manifest) it performs in this pane's scene.
+    pub stimulus: String,
+    /// Across the view, cm to the right of the camera's axis.
+    pub x_cm: f64,
+    /// Ahead of the camera, cm, on the scene's level.
+    pub distance_cm: f64,
+    /// Turn about the vertical, degrees, counter-clockwise seen from above.
+    pub facing_deg: f64,
+}
+
+impl CrowdScene {
+    /// The crowd scene `stimulus` of the study's manifest under its `[scene]`; `None` when
+    /// the study has no scene or the stimulus is not one of its scenes (on a level it has,
+    /// with its characters).
+    pub fn of(study: &StudyDefinition, stimulus: &str) -> Option<Self> {
+        let settings = study.scene.as_ref()?;
+        let scene = study.manifest.get(stimulus)?.scene.as_ref()?;
+        let level = settings.level_index(&scene.level)?;
+        let characters = scene
+            .characters
+            .iter()
+            .map(|m| {
+                let c = settings.character(&m.name)?;
+                let at = settings.placement(c, level);
+                Some(CrowdCharacter {
+                    name: m.name.clone(),
+                    stimulus: m.stimulus.clone(),
+                    x_cm: at.x_cm,
+                    distance_cm: at.distance_cm,
+                    facing_deg: at.facing_deg,
+                })
+            })
+            .collect::<Option<Vec<_>>>()?;
+        Some(CrowdScene {
+            level: scene.level.clone(),
+            camera: settings.camera,
+            light: settings.light,
+            characters,
+        })
+    }
 }
 
 /// One pane of a trial: where it is, what the subject reads above it, and what it shows.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, JsonSchema)]
+#[derive(Debug, Clone, PartialEq, Serialize, JsonSchema)]
 pub struct Pane {
     /// Its position (left/right, first/second, A/B, the test alone, a MUSHRA pane).
     pub position: Position,
@@ -209,12 +270,17 @@ pub struct Pane {
     pub content: PaneContent,
 }
 
-/// What a subject sees in one trial: the study's title, the panes, the schedule and the
-/// answer widget.
+/// What a subject sees in one trial: the study's title and instructions, whether a break
+/// comes first, the panes, the schedule and the answer widget.
 #[derive(Debug, Clone, PartialEq, Serialize, JsonSchema)]
 pub struct Screen {
     /// The study's title (never its internal name).
     pub title: String,
+    /// The instructions the session opens with ([`crate::texts::instructions`]).
+    pub instructions: String,
+    /// Whether the session pauses for a break before this trial (`[session]
+    /// break_every_trials`).
+    pub break_before: bool,
     /// The panes the schedule's steps show, in position order; a single-stimulus trial has
     /// one, a MUSHRA screen's rated panes come with the trials of its screen.
     pub panes: Vec<Pane>,
@@ -235,10 +301,8 @@ impl Screen {
             Arrangement::Single => &[Position::Hidden],
             Arrangement::Grid => &[],
         };
-        let content = match &study.scene {
-            Some(scene) => PaneContent::CrowdScene {
-                characters: scene.characters.len(),
-            },
+        let content = |stimulus: &str| match CrowdScene::of(study, stimulus) {
+            Some(scene) => PaneContent::CrowdScene(scene),
             None => PaneContent::Figure,
         };
         let mut panes: Vec<Pane> = positions
@@ -252,12 +316,13 @@ impl Screen {
                         l.test.clone()
                     }
                 });
+                let stimulus = stimulus_at(trial, position);
                 Pane {
                     position,
-                    stimulus: stimulus_at(trial, position).to_owned(),
+                    stimulus: stimulus.to_owned(),
                     reference,
                     label,
-                    content: content.clone(),
+                    content: content(stimulus),
                 }
             })
             .collect();
@@ -265,9 +330,12 @@ impl Screen {
             // The test alone: its reference is never drawn.
             panes[0].stimulus.clone_from(&trial.stimulus);
             panes[0].reference = false;
+            panes[0].content = content(&trial.stimulus);
         }
         Screen {
             title: study.title().to_owned(),
+            instructions: crate::texts::instructions(study),
+            break_before: trial.break_before,
             panes,
             schedule: Schedule::of(trial.arrangement, &study.presentation, clip_s),
             answer: study.method().answer_widget(study),

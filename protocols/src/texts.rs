@@ -86,6 +86,16 @@ pub fn default_instructions(study: &StudyDefinition) -> String {
     study.method().instructions(study)
 }
 
+/// The instructions subjects read: `[session] instructions` where the study gives them, else
+/// [`default_instructions`].
+pub fn instructions(study: &StudyDefinition) -> String {
+    study
+        .session
+        .instructions
+        .clone()
+        .unwrap_or_else(|| default_instructions(study))
+}
+
 /// What the two stimuli of a DSCQS trial are called on screen: A and B (BT.500's A B A B),
 /// or 1 and 2 (one after the other, thesis 6.5), as the presentation labels them.
 pub fn dscqs_names(arrangement: Arrangement) -> [&'static str; 2] {

@@ -54,7 +54,7 @@ fn required<'a>(root: &'a Value, node: &'a Value) -> Vec<&'a str> {
 fn every_example_screen_has_what_the_schema_requires() {
     let schema = schema();
     let top = required(&schema, &schema);
-    assert_eq!(top.len(), 4, "{top:?}");
+    assert_eq!(top.len(), 6, "{top:?}");
     let mut seen = 0;
     for entry in std::fs::read_dir(repo().join("examples")).unwrap() {
         let path = entry.unwrap().path();
@@ -89,4 +89,77 @@ fn every_example_screen_has_what_the_schema_requires() {
         seen += 1;
     }
     assert!(seen >= 8, "only {seen} example studies planned a trial");
+}
+
+/// A crowd study's screens place every character of its `[scene]` as the study file says
+/// (read here with the toml crate, not the study parser): the camera and light of the file,
+/// each character at its `x_cm` and at its distance on the pane's level, performing the
+/// stimulus the manifest's scene names for it, in the reference scene and in the compressed
+/// one.
+#[test]
+fn crowd_screens_place_the_scene_the_study_file_describes() {
+    use protocols::screen::PaneContent;
+    let path = repo().join("examples/crowd-run1.toml");
+    let file: toml::Table = std::fs::read_to_string(&path).unwrap().parse().unwrap();
+    let scene = file["scene"].as_table().unwrap();
+    let num = |v: &toml::Value| v.as_float().or(v.as_integer().map(|i| i as f64)).unwrap();
+    let levels: Vec<&str> = scene["levels"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|l| l.as_str().unwrap())
+        .collect();
+    let study = StudyDefinition::load(&path, &common::TestCodecs).unwrap();
+    let trials = study.method().plan(&study, 0);
+    assert!(trials.len() >= 12);
+    for trial in &trials {
+        let screen = Screen::of(&study, trial, 2.0);
+        assert_eq!(screen.panes.len(), 2);
+        for pane in &screen.panes {
+            let PaneContent::CrowdScene(crowd) = &pane.content else {
+                panic!("{}: not a crowd scene", pane.stimulus)
+            };
+            let level = levels.iter().position(|l| *l == crowd.level).unwrap();
+            let same = |a: f64, b: f64| (a - b).abs() < 1e-12;
+            assert!(same(
+                crowd.camera.height_cm,
+                num(&scene["camera"]["height_cm"])
+            ));
+            assert!(same(
+                crowd.camera.pitch_deg,
+                num(&scene["camera"]["pitch_deg"])
+            ));
+            assert!(same(
+                crowd.light.azimuth_deg,
+                num(&scene["light"]["azimuth_deg"])
+            ));
+            let characters = scene["characters"].as_array().unwrap();
+            assert_eq!(crowd.characters.len(), characters.len());
+            let members = &study.manifest.get(&pane.stimulus).unwrap().scene;
+            let members = &members.as_ref().unwrap().characters;
+            for ((c, want), member) in crowd.characters.iter().zip(characters).zip(members) {
+                assert_eq!(c.name, want["name"].as_str().unwrap());
+                assert!(same(c.x_cm, num(&want["x_cm"])), "{}", c.name);
+                let distance = match &want["distance_cm"] {
+                    toml::Value::Array(d) => num(&d[level]),
+                    d => num(d),
+                };
+                assert!(
+                    same(c.distance_cm, distance),
+                    "{} on {}",
+                    c.name,
+                    crowd.level
+                );
+                assert_eq!(c.stimulus, member.stimulus);
+                // The compressed scene's characters are compressed versions, the reference
+                // scene's the clips themselves.
+                assert_eq!(
+                    pane.reference,
+                    study.manifest.get(&c.stimulus).unwrap().codec == "reference",
+                    "{}",
+                    c.stimulus
+                );
+            }
+        }
+    }
 }

@@ -580,8 +580,7 @@ impl App {
             "subject": p.subject,
             "title": def.title(),
             "protocol": def.protocol,
-            "instructions": def.session.instructions.clone()
-                .unwrap_or_else(|| texts::default_instructions(def)),
+            "instructions": texts::instructions(def),
             "consent": def.session.consent,
             "fields": def.session.subject_fields,
             "scale": {

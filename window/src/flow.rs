@@ -1,12 +1,9 @@
-//! How a trial is presented, as a schedule of timed steps, and when its response is accepted.
+//! Plays a trial's [`Schedule`] (built once, for every front end, by
+//! `protocols::screen::Schedule::of`) and says when its response is accepted.
 //!
 //! Pure (no drawing): the window asks [`Presentation::at`] what to show at the current
-//! presentation time and [`Presentation::accepts_response`] whether an answer counts yet.
-//! Side by side (MOS, 2AFC): both clips together, `playback_count` times. Sequential: first,
-//! grey, second. DSCQS (ITU-R BT.500): A, grey, B, grey, A, grey, B, each labelled "A" or
-//! "B", then the vote on grey. Single (ACR, P.910): the test stimulus alone, `playback_count`
-//! times, then the vote on grey. Grid (MUSHRA): every pane together, `playback_count` times,
-//! then the sliders open while the panes loop or hold. The grey lasts `grey_ms`. Each frame names its phase
+//! presentation time and [`Presentation::accepts_response`] whether an answer counts yet
+//! (once every step has been shown, and through replays). Each frame names its phase
 //! ([`Frame::phase`]), which the session's frame log records.
 
 pub use protocols::screen::{After, Schedule, Show, Step};

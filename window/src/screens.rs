@@ -416,12 +416,7 @@ impl StudyUi {
                 }
             });
             ui.add_space(12.0);
-            let instructions = self
-                .study
-                .session
-                .instructions
-                .clone()
-                .unwrap_or_else(|| default_instructions(&self.study));
+            let instructions = protocols::texts::instructions(&self.study);
             ui.label(RichText::new(instructions).size(18.0));
             ui.add_space(16.0);
             if !self.fields.is_empty() {

@@ -27,7 +27,7 @@ pub const MAX_LEVELS: usize = 16;
 
 /// The fixed camera of every pane of a scene: at `height_cm` above the ground at the origin,
 /// looking along −z (the characters stand at negative z), tilted down by `pitch_deg`.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct SceneCamera {
     /// Eye height above the ground, cm.
     pub height_cm: f64,
@@ -48,7 +48,7 @@ impl Default for SceneCamera {
 }
 
 /// The scene's light: a directional light and an ambient share.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct SceneLight {
     /// Direction the light comes from, degrees about the vertical: 0 from behind the camera,
     /// positive from the camera's right.
