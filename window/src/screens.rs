@@ -23,9 +23,11 @@ use super::render::{BACKGROUND, SkeletonCallback};
 use super::scene::{Figure, FrameShapes, Stage, View};
 use super::timing::FrameClock;
 use super::viewing::ViewingForm;
+use lab::error::Context as _;
 use lab::session::Recorder;
 use lab::source::StimulusSource;
-use protocols::screen::stimulus_at;
+use protocols::screen::{CrowdScene, PaneContent, stimulus_at};
+use protocols::study::Placement;
 pub use protocols::texts::{ANSWER_RECORDED, default_instructions};
 use protocols::texts::{
     Planned, categories, dscqs_names, format_rating, grade_word, planned_trials,
@@ -643,34 +645,10 @@ impl StudyUi {
         let (reference, test, encoding) = (shown.reference, shown.test, shown.encoding);
         let shadow = self.study.rendering.ground_shadow;
         let is_reference = |p: Position| stimulus_at(&trial, p) == trial.reference;
-        let crowd = self
-            .study
-            .scene
-            .as_ref()
-            .filter(|_| !shown.crowd.is_empty());
-        let (view, stages) = if let Some(scene) = crowd {
-            // A crowd scene: every character placed on one ground, the study's camera.
-            let far = shown
-                .crowd
-                .iter()
-                .map(|c| c.placement.distance_cm)
-                .fold(0.0, f64::max);
-            let stage = |p: Position| {
-                Stage::crowd(
-                    shown.crowd.iter().map(|c| {
-                        let clip = if is_reference(p) {
-                            &c.reference
-                        } else {
-                            &c.test
-                        };
-                        (clip.as_ref(), c.reference.as_ref(), c.placement)
-                    }),
-                    shadow,
-                )
-            };
-            let view = View::crowd(&scene.camera, &scene.light, far).with_shadow(shadow);
-            (view, vec![stage(first), stage(first.other())])
-        } else {
+        // What the subject sees, as every front end is told it; the schedule is timed below
+        // from the clips' length.
+        let mut described = protocols::screen::Screen::of(&self.study, &trial, 0.0);
+        let (view, stages) = if shown.crowd.is_empty() {
             let view = *self
                 .views
                 .entry(trial.reference.clone())
@@ -680,12 +658,15 @@ impl StudyUi {
                 Stage::single(Figure::new(clip, &view))
             };
             (view, vec![stage(first), stage(first.other())])
+        } else {
+            crowd_stages(&trial, &described, &shown.crowd, first, shadow)?
         };
-        let described = Arc::new(protocols::screen::Screen::of(
-            &self.study,
-            &trial,
+        described.schedule = protocols::screen::Schedule::of(
+            trial.arrangement,
+            &self.study.presentation,
             stages[0].duration_s(),
-        ));
+        );
+        let described = Arc::new(described);
         let presentation = Presentation::new(described.schedule.clone(), now);
         Ok(TrialScreen {
             trial,
@@ -1222,6 +1203,68 @@ fn keyboard_continuous(ui: &Ui, scale: &RatingScale, value: &mut Option<f64>) ->
         }
     });
     digit
+}
+
+/// The two stages of a crowd trial (the one shown `first`, then the other) and their view:
+/// every character where the trial's screen description places it, on one ground, through
+/// the study's camera and light; its clips as the stimulus source read them (`crowd`, by
+/// character name).
+fn crowd_stages(
+    trial: &Trial,
+    described: &protocols::screen::Screen,
+    crowd: &[lab::source::CrowdCharacter],
+    first: Position,
+    shadow: bool,
+) -> lab::Result<(View, Vec<Stage>)> {
+    let stage = |p: Position| -> lab::Result<(Stage, &CrowdScene)> {
+        let stimulus = stimulus_at(trial, p);
+        let scene = described
+            .panes
+            .iter()
+            .find(|pane| pane.stimulus == stimulus)
+            .and_then(|pane| match &pane.content {
+                PaneContent::CrowdScene(scene) => Some(scene),
+                PaneContent::Figure => None,
+            })
+            .context(|| {
+                format!(
+                    "trial {}: {stimulus:?} is not a crowd scene of the study's [scene]",
+                    trial.index
+                )
+            })?;
+        let reference = stimulus == trial.reference;
+        let figures = scene
+            .characters
+            .iter()
+            .map(|c| {
+                let loaded = crowd
+                    .iter()
+                    .find(|l| l.name == c.name)
+                    .context(|| format!("crowd character {:?} not loaded", c.name))?;
+                let clip = if reference {
+                    &loaded.reference
+                } else {
+                    &loaded.test
+                };
+                let placement = Placement {
+                    x_cm: c.x_cm,
+                    distance_cm: c.distance_cm,
+                    facing_deg: c.facing_deg,
+                };
+                Ok((clip.as_ref(), loaded.reference.as_ref(), placement))
+            })
+            .collect::<lab::Result<Vec<_>>>()?;
+        Ok((Stage::crowd(figures, shadow), scene))
+    };
+    let (a, scene) = stage(first)?;
+    let (b, _) = stage(first.other())?;
+    let far = scene
+        .characters
+        .iter()
+        .map(|c| c.distance_cm)
+        .fold(0.0, f64::max);
+    let view = View::crowd(&scene.camera, &scene.light, far).with_shadow(shadow);
+    Ok((view, vec![a, b]))
 }
 
 /// The number keys 1-9.
