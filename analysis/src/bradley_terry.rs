@@ -189,27 +189,7 @@ pub fn fit(
     confidence: Confidence,
 ) -> Result<BtOutcome, AnalysisError> {
     let n = wins.len();
-    if n < 2 {
-        return Err(AnalysisError::TooFew {
-            what: "Bradley-Terry items",
-            needed: 2,
-            got: n,
-        });
-    }
-    if n > MAX_ITEMS {
-        return Err(AnalysisError::InvalidParameter {
-            name: "Bradley-Terry items",
-            value: n as f64,
-            reason: "at most 2000 items per fit",
-        });
-    }
-    if anchor >= n {
-        return Err(AnalysisError::InvalidParameter {
-            name: "anchor",
-            value: anchor as f64,
-            reason: "the anchor must be one of the items",
-        });
-    }
+    check_items("Bradley-Terry items", n, anchor)?;
     if let Some((item, how)) = wins.unconnected() {
         return Ok(BtOutcome::NoFiniteEstimate { item, how });
     }
@@ -686,23 +666,19 @@ fn davidson_newton(
     (s, theta, iterations, converged)
 }
 
-/// The input checks of [`fit_with_ties`] (its errors).
-fn check_tied_input(
-    wins: &WinMatrix,
-    ties: &TieMatrix,
-    anchor: usize,
-) -> Result<(), AnalysisError> {
-    let n = wins.len();
+/// A fit's item count `n` (named `what`) and anchor: 2 to [`MAX_ITEMS`] items, the anchor
+/// one of them.
+fn check_items(what: &'static str, n: usize, anchor: usize) -> Result<(), AnalysisError> {
     if n < 2 {
         return Err(AnalysisError::TooFew {
-            what: "Davidson items",
+            what,
             needed: 2,
             got: n,
         });
     }
     if n > MAX_ITEMS {
         return Err(AnalysisError::InvalidParameter {
-            name: "Davidson items",
+            name: what,
             value: n as f64,
             reason: "at most 2000 items per fit",
         });
@@ -714,6 +690,17 @@ fn check_tied_input(
             reason: "the anchor must be one of the items",
         });
     }
+    Ok(())
+}
+
+/// The input checks of [`fit_with_ties`] (its errors).
+fn check_tied_input(
+    wins: &WinMatrix,
+    ties: &TieMatrix,
+    anchor: usize,
+) -> Result<(), AnalysisError> {
+    let n = wins.len();
+    check_items("Davidson items", n, anchor)?;
     for (what, rows) in [("win matrix", &wins.wins), ("tie matrix", &ties.ties)] {
         if rows.len() != n {
             return Err(AnalysisError::LengthMismatch {

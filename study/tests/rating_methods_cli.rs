@@ -326,6 +326,23 @@ fn assert_pc_equal(report: &Path, g: &serde_json::Value, ties: bool) {
     }
 }
 
+/// The JSON that `scripts/golden/<script>` prints for the results folder `results` (and the
+/// examples' manifest).
+fn run_golden(python: &Path, script: &str, results: &Path) -> serde_json::Value {
+    let out = Command::new(python)
+        .arg(repo().join("scripts/golden").join(script))
+        .arg(results)
+        .arg(repo().join("examples/stimuli.json"))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{script}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
 /// The report's square count table `tables/<name>.csv` (first column the row's name).
 fn count_table(report: &Path, name: &str) -> Vec<Vec<u64>> {
     std::fs::read_to_string(report.join(format!("tables/{name}.csv")))
@@ -349,18 +366,7 @@ fn pair_comparison_report_equals_choix() {
     let dir = scratch("pc");
     for seed in [3, 8] {
         let (results, report) = simulate_and_report(&dir, "pc.toml", 16, seed);
-        let out = Command::new(&python)
-            .arg(repo().join("scripts/golden/pair_comparison.py"))
-            .arg(&results)
-            .arg(repo().join("examples/stimuli.json"))
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        let g: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        let g = run_golden(&python, "pair_comparison.py", &results);
         assert_pc_equal(&report, &g, false);
         // Two clips of five conditions and the pool: fifteen rows, anchored at the originals.
         let rows = g["rows"].as_array().unwrap();
@@ -404,18 +410,7 @@ fn pair_comparison_with_ties_report_equals_scipy_davidson() {
     let dir = scratch("pc-ties");
     for seed in [3, 8] {
         let (results, report) = simulate_and_report(&dir, "pc-ties.toml", 16, seed);
-        let out = Command::new(&python)
-            .arg(repo().join("scripts/golden/pair_comparison.py"))
-            .arg(&results)
-            .arg(repo().join("examples/stimuli.json"))
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        let g: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        let g = run_golden(&python, "pair_comparison.py", &results);
         assert_pc_equal(&report, &g, true);
         for (k, clip) in ["march", "walk", "all"].iter().enumerate() {
             let wins = count_table(&report, &format!("pc_wins_{}", k + 1));
@@ -497,18 +492,7 @@ fn ccr_report_equals_scipy() {
     let dir = scratch("ccr");
     for seed in [3, 8] {
         let (results, report) = simulate_and_report(&dir, "ccr.toml", 16, seed);
-        let out = Command::new(&python)
-            .arg(repo().join("scripts/golden/ccr.py"))
-            .arg(&results)
-            .arg(repo().join("examples/stimuli.json"))
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        let g: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        let g = run_golden(&python, "ccr.py", &results);
         let cmos = csv_rows(
             &report,
             "ccr_cmos",

@@ -4,7 +4,7 @@
 //! order (a rating with the compressed version first counts negated) and reports the order
 //! effect.
 
-use super::common::{original_among_versions, practice_sentence};
+use super::common::{only_categories, original_among_versions, practice_sentence};
 use super::{AnswerWidget, Method, ReferenceRule};
 use crate::observer::{Observer, ObserverError};
 use crate::record::{Answer, Arrangement, Position, Protocol, Trial};
@@ -119,22 +119,12 @@ impl Method for Ccr {
         max: f64,
         step: Option<f64>,
     ) -> Option<String> {
-        let seven = kind == ScaleKind::Categorical
-            && [(min, -3.0), (max, 3.0), (step.unwrap_or(0.0), 1.0)]
-                .iter()
-                .all(|(v, want)| (v - want).abs() < 1e-12);
-        (!seven).then(|| {
-            format!(
-                "CCR rates seven comparison categories (P.910): use kind = \"categorical\", \
-                 min = -3, max = 3, step = 1 (or omit [scale]), not {} {min}..{max} step \
-                 {step:?}",
-                if kind == ScaleKind::Categorical {
-                    "categorical"
-                } else {
-                    "continuous"
-                }
-            )
-        })
+        only_categories(
+            (kind, min, max, step),
+            -3.0,
+            3.0,
+            "CCR rates seven comparison categories",
+        )
     }
 
     fn grade_words(&self) -> &'static [&'static str] {

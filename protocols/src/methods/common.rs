@@ -180,3 +180,30 @@ pub(super) fn simulate_rating(
 ) -> Result<Answer, ObserverError> {
     Ok(Answer::Rating(observer.rate(test_error()?, rng)))
 }
+
+/// The check of a method that rates on one categorical scale only, `lowest..=highest` in
+/// whole steps (`rates`: "DCR rates five impairment categories"): `None` for that scale,
+/// else the refusal naming it.
+pub(super) fn only_categories(
+    scale: (ScaleKind, f64, f64, Option<f64>),
+    lowest: f64,
+    highest: f64,
+    rates: &str,
+) -> Option<String> {
+    let (kind, min, max, step) = scale;
+    let fits = kind == ScaleKind::Categorical
+        && [(min, lowest), (max, highest), (step.unwrap_or(0.0), 1.0)]
+            .iter()
+            .all(|(v, want)| (v - want).abs() < 1e-12);
+    (!fits).then(|| {
+        format!(
+            "{rates} (P.910): use kind = \"categorical\", min = {lowest}, max = {highest}, step \
+             = 1 (or omit [scale]), not {} {min}..{max} step {step:?}",
+            if kind == ScaleKind::Categorical {
+                "categorical"
+            } else {
+                "continuous"
+            }
+        )
+    })
+}

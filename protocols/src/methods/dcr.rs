@@ -1,7 +1,7 @@
 //! DCR (ITU-T P.910, BT.500 DSIS): the original, then (or beside) a compressed version,
 //! the impairment rated on the five categories.
 
-use super::common::practice_sentence;
+use super::common::{only_categories, practice_sentence};
 use super::{AnswerWidget, Method, ReferenceRule};
 use crate::record::{Arrangement, Protocol};
 use crate::study::{ScaleKind, StudyDefinition};
@@ -72,21 +72,12 @@ impl Method for Dcr {
         max: f64,
         step: Option<f64>,
     ) -> Option<String> {
-        let five_categories = kind == ScaleKind::Categorical
-            && [(min, 1.0), (max, 5.0), (step.unwrap_or(0.0), 1.0)]
-                .iter()
-                .all(|(v, want)| (v - want).abs() < 1e-12);
-        (!five_categories).then(|| {
-            format!(
-                "DCR rates five impairment categories (P.910): use kind = \"categorical\", min = \
-                 1, max = 5, step = 1 (or omit [scale]), not {} {min}..{max} step {step:?}",
-                if kind == ScaleKind::Categorical {
-                    "categorical"
-                } else {
-                    "continuous"
-                }
-            )
-        })
+        only_categories(
+            (kind, min, max, step),
+            1.0,
+            5.0,
+            "DCR rates five impairment categories",
+        )
     }
 
     fn grade_words(&self) -> &'static [&'static str] {
