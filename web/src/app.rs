@@ -310,6 +310,15 @@ impl App {
                 study.definition.protocol
             )));
         }
+        // The page draws one figure per pane: a crowd scene would play its front character
+        // alone while the rows log the whole scene's ratios.
+        if study.definition.scene.is_some() {
+            return Err(WebError::Refused(format!(
+                "{}: [scene] (crowd scenes, several characters per pane) runs in the study \
+                 window (study run); the browser page of study serve draws one figure per pane",
+                options.study.display()
+            )));
+        }
         // Participants are spread over plan groups here ([crowdsourcing] groups and quota).
         if !study.definition.design.groups.is_empty() {
             return Err(WebError::Refused(format!(

@@ -273,9 +273,10 @@ fn requests_over_the_rate_are_refused() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// The page draws the screens of some methods only (MOS, DSCQS and 2AFC, until issue 36):
-/// the server asks the study's method and refuses the others' studies before it listens,
-/// naming the file and the protocol; the MOS study itself opens.
+/// The page draws the screens of some methods only (MOS, DSCQS and 2AFC, until issue 36),
+/// one figure per pane: the server asks the study's method and refuses the others' studies,
+/// and crowd scenes, before it listens, naming the file and what the page lacks; the MOS
+/// study itself opens.
 #[test]
 fn studies_whose_screens_the_page_lacks_are_refused() {
     let dir = temp_dir("refused");
@@ -308,6 +309,20 @@ fn studies_whose_screens_the_page_lacks_are_refused() {
             "{protocol}: {err}"
         );
     }
+    // A crowd study (a DSCQS, which the page has) is refused for its [scene]: the page would
+    // play one character while the rows log the scene's.
+    let crowd = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/crowd-run1.toml");
+    let err = match rt.block_on(web::start(ServeOptions {
+        study: crowd.clone(),
+        ..options.clone()
+    })) {
+        Ok(_) => panic!("crowd scenes served"),
+        Err(e) => e.to_string(),
+    };
+    assert!(
+        err.contains("[scene]") && err.contains("crowd-run1.toml"),
+        "{err}"
+    );
     let server = rt.block_on(web::start(options)).unwrap();
     rt.block_on(server.stop()).unwrap();
     std::fs::remove_dir_all(&dir).unwrap();
