@@ -12,7 +12,7 @@ use protocols::study::ReferencePlacement;
 use protocols::{Answer, Position};
 
 use super::MethodAnalysis;
-use crate::descriptive::summarize;
+use crate::descriptive::{CiMethod, summarize};
 use crate::error::AnalysisError;
 use crate::findings::ConditionInfo;
 use crate::from_results::{Inputs, Row, bad, check_scale};
@@ -82,10 +82,13 @@ impl MethodAnalysis for Ccr {
              from +3 \"Much better\" to -3 \"Much worse\"). Folded as P.910 asks: a rating given \
              with the compressed version first is negated, so every folded score rates the \
              compressed version against the original (negative: worse). CMOS is the mean of \
-             each subject's mean folded score (n = subjects), with its {conf} % Student t \
-             interval.",
+             each subject's mean folded score (n = subjects), with its {conf} % {} interval.",
             data.comparison_ratings.len(),
-            subjects(&data.comparison_ratings).len()
+            subjects(&data.comparison_ratings).len(),
+            match options.ci_method {
+                CiMethod::StudentT => "Student t",
+                CiMethod::NormalZ => "normal (z)",
+            }
         ));
         cmos_table(s, data, options);
         order_tables(s, data, options);
@@ -293,4 +296,76 @@ fn order_tables(s: &mut Section, data: &StudyData, options: &ReportOptions) {
             fmt_opt(test.as_ref().map(|t| t.p), 6),
         ]],
     });
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used, clippy::expect_used)]
+
+    use std::collections::BTreeMap;
+
+    use super::*;
+
+    /// Three subjects rate one condition once in each order. The test is one category worse
+    /// than the original (Δ = -1) and subject k leans towards the second version by
+    /// b_k = 1, 1, 2: with the original first they answer Δ + b, with it second -Δ + b.
+    /// Folded, each subject's mean is exactly Δ (CMOS -1), the means by order are Δ + mean b
+    /// and Δ - mean b, and the order effect per subject is 2 b_k = 2, 2, 4: mean 8/3, SD
+    /// sqrt(4/3), t = (8/3) / (sqrt(4/3) / sqrt(3)) = 4 on 2 df, two-sided p 0.057191 and the
+    /// interval 8/3 ± t(0.975, 2) · 2/3 (t quantile 4.302653), as SciPy gives them.
+    #[test]
+    fn folding_and_the_order_effect_by_hand() {
+        let mut data = StudyData {
+            conditions: vec![ConditionInfo {
+                id: 0,
+                codec: "x".to_owned(),
+                params: BTreeMap::new(),
+                clip: "walk".to_owned(),
+                compression_ratio: Some(10.0),
+            }],
+            ..StudyData::default()
+        };
+        for (subject, b) in [(0, 1.0), (1, 1.0), (2, 2.0)] {
+            for (reference_first, score) in [(true, -1.0 + b), (false, 1.0 + b)] {
+                data.comparison_ratings.push(ComparisonRating {
+                    subject,
+                    condition: 0,
+                    reference_first,
+                    score,
+                });
+            }
+        }
+        let mut report = Report::new("t");
+        Ccr.report_sections(&mut report, &data, &ReportOptions::default());
+        let table = |name: &str| {
+            report
+                .tables()
+                .find(|t| t.name == name)
+                .unwrap()
+                .rows
+                .clone()
+        };
+        let cmos = table("ccr_cmos");
+        assert_eq!(cmos.len(), 1);
+        assert_eq!(&cmos[0][..6], ["walk", "x", "10:1", "3", "6", "-1.000000"]);
+        let order = table("ccr_order");
+        assert_eq!(
+            &order[0][3..],
+            ["3", "0.333333", "3", "-2.333333", "2.666667"]
+        );
+        let effect = table("ccr_order_effect");
+        assert_eq!(
+            effect[0],
+            [
+                "3",
+                "2.666667",
+                "1.154701",
+                "-0.201768",
+                "5.535102",
+                "4.000000",
+                "2",
+                "0.057191"
+            ]
+        );
+    }
 }
