@@ -26,7 +26,7 @@ use super::viewing::ViewingForm;
 use lab::error::Context as _;
 use lab::session::Recorder;
 use lab::source::StimulusSource;
-use protocols::screen::{CrowdScene, PaneContent, stimulus_at};
+use protocols::screen::{CrowdScene, stimulus_at};
 use protocols::study::Placement;
 pub use protocols::texts::{ANSWER_RECORDED, default_instructions};
 use protocols::texts::{
@@ -645,9 +645,6 @@ impl StudyUi {
         let (reference, test, encoding) = (shown.reference, shown.test, shown.encoding);
         let shadow = self.study.rendering.ground_shadow;
         let is_reference = |p: Position| stimulus_at(&trial, p) == trial.reference;
-        // What the subject sees, as every front end is told it; the schedule is timed below
-        // from the clips' length.
-        let mut described = protocols::screen::Screen::of(&self.study, &trial, 0.0);
         let (view, stages) = if shown.crowd.is_empty() {
             let view = *self
                 .views
@@ -659,14 +656,14 @@ impl StudyUi {
             };
             (view, vec![stage(first), stage(first.other())])
         } else {
-            crowd_stages(&trial, &described, &shown.crowd, first, shadow)?
+            crowd_stages(&self.study, &trial, &shown.crowd, first, shadow)?
         };
-        described.schedule = protocols::screen::Schedule::of(
-            trial.arrangement,
-            &self.study.presentation,
+        // What the subject sees, as every front end is told it, timed by the clips' length.
+        let described = Arc::new(protocols::screen::Screen::of(
+            &self.study,
+            &trial,
             stages[0].duration_s(),
-        );
-        let described = Arc::new(described);
+        ));
         let presentation = Presentation::new(described.schedule.clone(), now);
         Ok(TrialScreen {
             trial,
@@ -1019,7 +1016,6 @@ impl StudyUi {
     }
 }
 
-/// How a position is named on an answer button.
 /// Rating buttons of a categorical scale, or a slider for a continuous one.
 fn rating_row(
     ui: &mut Ui,
@@ -1206,32 +1202,24 @@ fn keyboard_continuous(ui: &Ui, scale: &RatingScale, value: &mut Option<f64>) ->
 }
 
 /// The two stages of a crowd trial (the one shown `first`, then the other) and their view:
-/// every character where the trial's screen description places it, on one ground, through
-/// the study's camera and light; its clips as the stimulus source read them (`crowd`, by
-/// character name).
+/// every character where the trial's screen description places it (`CrowdScene::of`, the
+/// pane content of `protocols::screen::Screen`), on one ground, through the study's camera
+/// and light; its clips as the stimulus source read them (`crowd`, by character name).
 fn crowd_stages(
+    study: &StudyDefinition,
     trial: &Trial,
-    described: &protocols::screen::Screen,
     crowd: &[lab::source::CrowdCharacter],
     first: Position,
     shadow: bool,
 ) -> lab::Result<(View, Vec<Stage>)> {
-    let stage = |p: Position| -> lab::Result<(Stage, &CrowdScene)> {
+    let stage = |p: Position| -> lab::Result<(Stage, CrowdScene)> {
         let stimulus = stimulus_at(trial, p);
-        let scene = described
-            .panes
-            .iter()
-            .find(|pane| pane.stimulus == stimulus)
-            .and_then(|pane| match &pane.content {
-                PaneContent::CrowdScene(scene) => Some(scene),
-                PaneContent::Figure => None,
-            })
-            .context(|| {
-                format!(
-                    "trial {}: {stimulus:?} is not a crowd scene of the study's [scene]",
-                    trial.index
-                )
-            })?;
+        let scene = CrowdScene::of(study, stimulus).context(|| {
+            format!(
+                "trial {}: {stimulus:?} is not a crowd scene of the study's [scene]",
+                trial.index
+            )
+        })?;
         let reference = stimulus == trial.reference;
         let figures = scene
             .characters
