@@ -99,18 +99,7 @@ fn simulate_and_report(dir: &Path, study: &str, subjects: u32, seed: u64) -> (Pa
 
 /// The golden script's rows for `results`: ("mos", "dmos") → CSV lines.
 fn golden(python: &Path, results: &Path) -> serde_json::Value {
-    let out = Command::new(python)
-        .arg(repo().join("scripts/golden/rating_methods.py"))
-        .arg(results)
-        .arg(repo().join("examples/stimuli.json"))
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    serde_json::from_slice(&out.stdout).unwrap()
+    run_golden(python, "rating_methods.py", results)
 }
 
 /// The data rows of a report table, as lines.
