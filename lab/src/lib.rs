@@ -31,6 +31,7 @@ pub mod integrity;
 pub mod live;
 pub mod preflight;
 pub mod results_dir;
+pub mod scene;
 pub mod session;
 pub mod simulate;
 pub mod source;

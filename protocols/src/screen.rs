@@ -256,8 +256,9 @@ impl CrowdScene {
 /// One pane of a trial: where it is, what the subject reads above it, and what it shows.
 #[derive(Debug, Clone, PartialEq, Serialize, JsonSchema)]
 pub struct Pane {
-    /// Its position (left/right, first/second, A/B, the test alone, a MUSHRA pane).
-    pub position: Position,
+    /// Its position (left/right, first/second, A/B, the test alone, a lettered MUSHRA
+    /// pane); `None` for the labelled reference of a MUSHRA screen, which no answer names.
+    pub position: Option<Position>,
     /// The stimulus id it shows.
     pub stimulus: String,
     /// Whether it shows the trial's reference (never told to the subject unless `label`
@@ -318,7 +319,7 @@ impl Screen {
                 });
                 let stimulus = stimulus_at(trial, position);
                 Pane {
-                    position,
+                    position: Some(position),
                     stimulus: stimulus.to_owned(),
                     reference,
                     label,
@@ -342,12 +343,48 @@ impl Screen {
         }
     }
 
+    /// The screen of a MUSHRA screen's `panes` (its trials, in pane order; [`Screen::of`]
+    /// for any other trial): the labelled reference first, then each pane lettered as the
+    /// subject reads it ("A", "B", ...), every pane shown at once.
+    pub fn of_screen(study: &StudyDefinition, panes: &[Trial], clip_s: f64) -> Option<Self> {
+        let first = panes.first()?;
+        let mut screen = Self::of(study, first, clip_s);
+        if first.arrangement == Arrangement::Grid {
+            let reference = Pane {
+                position: None,
+                stimulus: first.reference.clone(),
+                reference: true,
+                label: Some(crate::texts::MUSHRA_REFERENCE.to_owned()),
+                content: PaneContent::Figure,
+            };
+            let lettered = panes.iter().map(|t| Pane {
+                position: Some(t.reference_position),
+                stimulus: t.stimulus.clone(),
+                reference: false,
+                label: pane_letter(t.reference_position).map(str::to_owned),
+                content: PaneContent::Figure,
+            });
+            screen.panes = std::iter::once(reference).chain(lettered).collect();
+        }
+        Some(screen)
+    }
+
     /// The label above the stimulus at `position`, where the design names the stimuli.
     pub fn label(&self, position: Position) -> Option<&str> {
         self.panes
             .iter()
-            .find(|p| p.position == position)
+            .find(|p| p.position == Some(position))
             .and_then(|p| p.label.as_deref())
+    }
+}
+
+/// The letter of a MUSHRA pane as the subject reads it ("A" for `Position::Pane(0)`).
+pub fn pane_letter(p: Position) -> Option<&'static str> {
+    const LETTERS: [&str; crate::record::MAX_PANES] =
+        ["A", "B", "C", "D", "E", "F", "G", "H", "I", "J", "K", "L"];
+    match p {
+        Position::Pane(i) => LETTERS.get(usize::from(i)).copied(),
+        _ => None,
     }
 }
 

@@ -27,6 +27,9 @@ pub const PC_QUESTION: &str = "Which motion looks better?";
 /// Shown after an answer was logged, over the blank gap before the next trial.
 pub const ANSWER_RECORDED: &str = "Answer recorded";
 
+/// The label above a MUSHRA screen's open reference (BS.1534).
+pub const MUSHRA_REFERENCE: &str = "Reference";
+
 /// A rating as a subject reads it: `3`, `3.5`.
 pub fn format_rating(v: f64) -> String {
     if v.fract().abs() < 1e-9 {

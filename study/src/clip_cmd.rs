@@ -346,7 +346,7 @@ fn render_scenes(
     scenes: &[String],
     still: &Still<'_>,
 ) -> Result<window::render::Image> {
-    use window::scene::{Stage, View};
+    use window::scene::{Cast, Stage, View};
     let file = lab::StudyFile::load(study)?;
     let Some(settings) = file.definition.scene.as_ref() else {
         bail!("{}: has no [scene] to draw", study.display());
@@ -374,12 +374,11 @@ fn render_scenes(
     let stages: Vec<Stage> = crowds
         .iter()
         .map(|crowd| {
-            Stage::crowd(
-                crowd
-                    .iter()
-                    .map(|c| (c.test.as_ref(), c.reference.as_ref(), c.placement)),
-                still.shadow,
-            )
+            let casts: Vec<Cast> = crowd
+                .iter()
+                .map(|c| Cast::in_crowd(&c.name, &c.test, &c.reference, &c.placement, still.shadow))
+                .collect();
+            Stage::of(&casts)
         })
         .collect();
     draw_panes(stages, &view, still)

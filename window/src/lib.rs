@@ -13,7 +13,7 @@ pub mod flow;
 pub mod native;
 pub mod render;
 pub mod run;
-pub mod scene;
+pub use lab::scene;
 pub mod screens;
 pub mod test_input;
 pub mod timing;

@@ -20,18 +20,13 @@ use protocols::{FrameTiming, StimulusEncoding, StudyDefinition};
 
 use super::flow::{Frame, Presentation, Show};
 use super::render::{BACKGROUND, SkeletonCallback};
-use super::scene::{Figure, FrameShapes, Stage, View};
+use super::scene::{Casting, FrameShapes, Stage, View};
 use super::timing::FrameClock;
 use super::viewing::ViewingForm;
-use lab::error::Context as _;
 use lab::session::Recorder;
 use lab::source::StimulusSource;
-use protocols::screen::{CrowdScene, stimulus_at};
-use protocols::study::Placement;
 pub use protocols::texts::{ANSWER_RECORDED, default_instructions};
-use protocols::texts::{
-    Planned, categories, dscqs_names, format_rating, grade_word, planned_trials,
-};
+use protocols::texts::{Planned, categories, format_rating, grade_word, planned_trials};
 
 /// How long the acknowledgement stays up at least, seconds (into the next trial when the
 /// gap is shorter).
@@ -628,13 +623,7 @@ impl StudyUi {
         if trial.arrangement == Arrangement::Grid {
             return self.load_grid(trial, now);
         }
-        let first = match trial.arrangement {
-            Arrangement::SideBySide => Position::Left,
-            // A single stimulus (ACR) is drawn from the first stage: the test (its reference
-            // is `Position::Hidden`, never drawn).
-            Arrangement::Sequential | Arrangement::Single | Arrangement::Grid => Position::First,
-            Arrangement::Abab => Position::A,
-        };
+        let first = Casting::first(trial.arrangement);
         // A live trial's test stimulus is encoded now unless it was prepared (cached by
         // level); others are files.
         let shown = self.stimuli.stimuli(&trial)?;
@@ -642,22 +631,13 @@ impl StudyUi {
         // answer lead to, so the next trial starts without waiting for the codec.
         self.stimuli
             .prepare(&self.recorder.lookahead(self.recorder.elapsed_ms()));
-        let (reference, test, encoding) = (shown.reference, shown.test, shown.encoding);
-        let shadow = self.study.rendering.ground_shadow;
-        let is_reference = |p: Position| stimulus_at(&trial, p) == trial.reference;
-        let (view, stages) = if shown.crowd.is_empty() {
-            let view = *self
-                .views
-                .entry(trial.reference.clone())
-                .or_insert_with(|| View::framing(&reference).with_shadow(shadow));
-            let stage = |p: Position| {
-                let clip = if is_reference(p) { &reference } else { &test };
-                Stage::single(Figure::new(clip, &view))
-            };
-            (view, vec![stage(first), stage(first.other())])
-        } else {
-            crowd_stages(&self.study, &trial, &shown.crowd, first, shadow)?
-        };
+        let views = &mut self.views;
+        let cast = Casting::of(&self.study, &trial, &shown, &mut |id, clip| {
+            *views
+                .entry(id.to_owned())
+                .or_insert_with(|| View::framing(clip))
+        })?;
+        let (view, stages, encoding) = (cast.view, cast.stages(), shown.encoding);
         // What the subject sees, as every front end is told it, timed by the clips' length.
         let described = Arc::new(protocols::screen::Screen::of(
             &self.study,
@@ -691,32 +671,29 @@ impl StudyUi {
         if panes.first() != Some(&trial) {
             panes = vec![trial.clone()];
         }
-        let shadow = self.study.rendering.ground_shadow;
+        let mut reference = None;
         let mut clips = Vec::with_capacity(panes.len());
         for p in &panes {
-            clips.push(self.stimuli.stimuli(p)?);
+            let shown = self.stimuli.stimuli(p)?;
+            reference.get_or_insert(shown.reference);
+            clips.push((p.stimulus.as_str(), shown.test));
         }
-        let Some(first) = clips.first() else {
+        let Some(reference) = reference else {
             return Err(lab::LabError::Refused(
                 "a MUSHRA screen without panes".into(),
             ));
         };
-        let reference = Arc::clone(&first.reference);
         let view = *self
             .views
             .entry(trial.reference.clone())
-            .or_insert_with(|| View::framing(&reference).with_shadow(shadow));
-        let mut stages = vec![Stage::single(Figure::new(&reference, &view))];
-        stages.extend(
-            clips
-                .iter()
-                .map(|c| Stage::single(Figure::new(&c.test, &view))),
-        );
-        let described = Arc::new(protocols::screen::Screen::of(
-            &self.study,
-            &trial,
-            stages[0].duration_s(),
-        ));
+            .or_insert_with(|| View::framing(&reference));
+        let clips: Vec<(&str, &Arc<motion::Clip>)> = clips.iter().map(|(id, c)| (*id, c)).collect();
+        let cast = Casting::grid(&self.study, view, (&trial.reference, &reference), &clips);
+        let (view, stages) = (cast.view, cast.stages());
+        let described =
+            protocols::screen::Screen::of_screen(&self.study, &panes, stages[0].duration_s())
+                .map(Arc::new)
+                .ok_or_else(|| lab::LabError::Refused("a MUSHRA screen without panes".into()))?;
         let presentation = Presentation::new(described.schedule.clone(), now);
         let n = stages.len();
         Ok(TrialScreen {
@@ -1201,60 +1178,6 @@ fn keyboard_continuous(ui: &Ui, scale: &RatingScale, value: &mut Option<f64>) ->
     digit
 }
 
-/// The two stages of a crowd trial (the one shown `first`, then the other) and their view:
-/// every character where the trial's screen description places it (`CrowdScene::of`, the
-/// pane content of `protocols::screen::Screen`), on one ground, through the study's camera
-/// and light; its clips as the stimulus source read them (`crowd`, by character name).
-fn crowd_stages(
-    study: &StudyDefinition,
-    trial: &Trial,
-    crowd: &[lab::source::CrowdCharacter],
-    first: Position,
-    shadow: bool,
-) -> lab::Result<(View, Vec<Stage>)> {
-    let stage = |p: Position| -> lab::Result<(Stage, CrowdScene)> {
-        let stimulus = stimulus_at(trial, p);
-        let scene = CrowdScene::of(study, stimulus).context(|| {
-            format!(
-                "trial {}: {stimulus:?} is not a crowd scene of the study's [scene]",
-                trial.index
-            )
-        })?;
-        let reference = stimulus == trial.reference;
-        let figures = scene
-            .characters
-            .iter()
-            .map(|c| {
-                let loaded = crowd
-                    .iter()
-                    .find(|l| l.name == c.name)
-                    .context(|| format!("crowd character {:?} not loaded", c.name))?;
-                let clip = if reference {
-                    &loaded.reference
-                } else {
-                    &loaded.test
-                };
-                let placement = Placement {
-                    x_cm: c.x_cm,
-                    distance_cm: c.distance_cm,
-                    facing_deg: c.facing_deg,
-                };
-                Ok((clip.as_ref(), loaded.reference.as_ref(), placement))
-            })
-            .collect::<lab::Result<Vec<_>>>()?;
-        Ok((Stage::crowd(figures, shadow), scene))
-    };
-    let (a, scene) = stage(first)?;
-    let (b, _) = stage(first.other())?;
-    let far = scene
-        .characters
-        .iter()
-        .map(|c| c.distance_cm)
-        .fold(0.0, f64::max);
-    let view = View::crowd(&scene.camera, &scene.light, far).with_shadow(shadow);
-    Ok((view, vec![a, b]))
-}
-
 /// The number keys 1-9.
 const DIGITS: [Key; 9] = [
     Key::Num1,
@@ -1378,7 +1301,11 @@ fn answer(
             name,
             words,
         } => single_rating(ui, t, (scale, words), open, (question, missing, name)),
-        AnswerWidget::RatingPair { words } => dscqs_answer(ui, t, (scale, words), open),
+        AnswerWidget::RatingPair {
+            question,
+            names,
+            words,
+        } => dscqs_answer(ui, t, (scale, words), open, (question, names)),
         AnswerWidget::Choice { question, options } => choice(ui, question, options, open),
         AnswerWidget::SliderGrid { question } => mushra_answer(ui, t, scale, question, open),
     }
@@ -1419,9 +1346,9 @@ fn dscqs_answer(
     t: &mut TrialScreen,
     (scale, words): (&RatingScale, &[String]),
     open: bool,
+    (question, [name_a, name_b]): (&str, &[String; 2]),
 ) -> Option<Answer> {
-    let [name_a, name_b] = dscqs_names(t.trial.arrangement);
-    ui.label(RichText::new(format!("Rate the quality of {name_a} and of {name_b}")).size(18.0));
+    ui.label(RichText::new(question).size(18.0));
     match scale.kind {
         ScaleKind::Continuous => {
             if t.presentation.accepts_response() {
@@ -1500,8 +1427,8 @@ fn dscqs_answer(
     let both = t.rating.zip(t.rating_b);
     let missing = match (t.rating, t.rating_b) {
         (None, None) => format!("{name_a} and {name_b}"),
-        (None, Some(_)) => name_a.to_string(),
-        _ => name_b.to_string(),
+        (None, Some(_)) => name_a.clone(),
+        _ => name_b.clone(),
     };
     if confirmed(ui, open, both.is_some(), &rate_hint(scale, &missing)) {
         return both.map(|(a, b)| Answer::Pair { a, b });
@@ -1571,7 +1498,17 @@ fn stimuli_panel(ui: &mut Ui, t: &mut TrialScreen, frame: &Frame, gpu: bool) {
             let mut names: Vec<(egui::Rect, &str)> = Vec::new();
             match frame.show {
                 Show::Grey => {}
-                Show::Grid => grid_panes(&painter, gpu, t, full, frame.clip_time_s, &mut names),
+                Show::Grid => {
+                    grid_panes(
+                        &painter,
+                        gpu,
+                        t,
+                        &described,
+                        full,
+                        frame.clip_time_s,
+                        &mut names,
+                    );
+                }
                 Show::Both => {
                     let gap = 12.0;
                     let band = if labelled { LABEL_BAND } else { 0.0 };
@@ -1661,13 +1598,14 @@ fn grid_columns(n: usize, w: f32, h: f32) -> usize {
 
 /// A MUSHRA screen's panes in a grid: the labelled reference first, then the lettered panes
 /// (each labelled above its viewport, `names`).
-fn grid_panes(
+fn grid_panes<'a>(
     painter: &egui::Painter,
     gpu: bool,
     t: &mut TrialScreen,
+    described: &'a protocols::screen::Screen,
     full: egui::Rect,
     clip_time_s: f64,
-    names: &mut Vec<(egui::Rect, &str)>,
+    names: &mut Vec<(egui::Rect, &'a str)>,
 ) {
     let n = t.stages.len();
     let (gap, band) = (8.0, 26.0);
@@ -1686,25 +1624,12 @@ fn grid_panes(
             Vec2::new(cell.x, (cell.y - band).max(1.0)),
         );
         draw_viewport(painter, gpu, t, k, rect, clip_time_s);
-        let name = if k == 0 {
-            "Reference"
-        } else {
-            t.panes
-                .get(k - 1)
-                .and_then(|p| pane_name(p.reference_position))
-                .unwrap_or("?")
-        };
+        let name = described
+            .panes
+            .get(k)
+            .and_then(|p| p.label.as_deref())
+            .unwrap_or("");
         names.push((label, name));
-    }
-}
-
-/// The letter of a MUSHRA pane as the subject reads it.
-fn pane_name(p: Position) -> Option<&'static str> {
-    const LETTERS: [&str; protocols::MAX_PANES] =
-        ["A", "B", "C", "D", "E", "F", "G", "H", "I", "J", "K", "L"];
-    match p {
-        Position::Pane(i) => LETTERS.get(usize::from(i)).copied(),
-        _ => None,
     }
 }
 
@@ -1726,7 +1651,7 @@ fn mushra_answer(
     ui.horizontal(|ui| {
         ui.add_space(((ui.available_width() - w * n as f32) * 0.5).max(0.0));
         for (pane, rating) in t.panes.iter().zip(t.pane_ratings.iter_mut()) {
-            let name = pane_name(pane.reference_position).unwrap_or("?");
+            let name = protocols::screen::pane_letter(pane.reference_position).unwrap_or("?");
             ui.allocate_ui_with_layout(
                 Vec2::new(w, 150.0),
                 Layout::top_down(Align::Center),
@@ -1742,7 +1667,7 @@ fn mushra_answer(
         .iter()
         .zip(&t.pane_ratings)
         .filter(|(_, r)| r.is_none())
-        .filter_map(|(p, _)| pane_name(p.reference_position))
+        .filter_map(|(p, _)| protocols::screen::pane_letter(p.reference_position))
         .collect();
     let hint = format!("Rate {} to continue.", missing.join(", "));
     if confirmed(ui, open, missing.is_empty() && n > 0, &hint) {

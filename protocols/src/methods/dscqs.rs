@@ -21,12 +21,11 @@ impl Method for Dscqs {
         AnswerKind::RatingPair
     }
 
-    fn browser_page(&self) -> bool {
-        true
-    }
-
     fn answer_widget(&self, study: &StudyDefinition) -> AnswerWidget {
+        let [a, b] = dscqs_names(study.presentation.arrangement);
         AnswerWidget::RatingPair {
+            question: format!("Rate the quality of {a} and of {b}"),
+            names: [a.to_owned(), b.to_owned()],
             words: scale_words(study),
         }
     }

@@ -64,6 +64,11 @@ pub enum AnswerWidget {
     /// A rating of each of the two stimuli (A and B, or 1 and 2, as the arrangement names
     /// them): two rows of grades or BT.500's pair of vertical scales.
     RatingPair {
+        /// The question above them.
+        question: String,
+        /// What the two stimuli are called ("A" and "B", or "1" and "2"), in the order
+        /// the schedule first shows them.
+        names: [String; 2],
         /// The grades' words, best first ([`crate::texts::scale_words`]).
         words: Vec<String>,
     },
@@ -298,13 +303,6 @@ pub trait Method: Sync {
     /// Whether its screen may offer a "no preference" answer ([`crate::Position::Neither`])
     /// beside its choices, where the study asks for one (`[presentation] no_preference`).
     fn offers_no_preference(&self) -> bool {
-        false
-    }
-
-    /// Whether the browser page of `study serve` has its screen. The page draws MOS, DSCQS
-    /// and the 2AFC tracks' screens itself until it renders every [`crate::screen::Screen`]
-    /// (issue 36); the server refuses the other methods' studies.
-    fn browser_page(&self) -> bool {
         false
     }
 

@@ -15,10 +15,6 @@ impl Method for Mos {
         Protocol::Mos
     }
 
-    fn browser_page(&self) -> bool {
-        true
-    }
-
     fn answer_widget(&self, study: &StudyDefinition) -> AnswerWidget {
         // The compressed motion, named by its label where labels are shown.
         let labels = study.presentation.labels.as_ref();

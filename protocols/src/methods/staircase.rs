@@ -24,10 +24,6 @@ impl Method for Staircase {
         AnswerKind::Choice
     }
 
-    fn browser_page(&self) -> bool {
-        true
-    }
-
     fn answer_widget(&self, study: &StudyDefinition) -> AnswerWidget {
         AnswerWidget::Choice {
             question: AFC_QUESTION.to_string(),

@@ -14,10 +14,17 @@
 //! [`Placed`] on one ground and seen by the fixed camera and light of the study's `[scene]`
 //! ([`View::crowd`]). The renderer knows nothing of trials; this module knows nothing of wgpu.
 
+use std::sync::Arc;
+
 use motion::clip::Clip;
 use motion::math::Vec3;
 use motion::playback::{EndMode, Sampler};
-use protocols::study::{Placement, SceneCamera, SceneLight};
+use protocols::record::{Arrangement, Position, Trial};
+use protocols::screen::{CrowdScene, stimulus_at};
+use protocols::study::{Placement, SceneCamera, SceneLight, StudyDefinition};
+
+use crate::error::{Context as _, Result};
+use crate::source::{CrowdCharacter, TrialStimuli};
 
 /// A column-major 4×4 matrix (`m[column][row]`), as WGSL reads it.
 pub type Mat4 = [[f32; 4]; 4];
@@ -159,13 +166,13 @@ impl Figure {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Placed {
     /// The clip's start point on its ground, file units.
-    origin: [f32; 3],
+    pub origin: [f32; 3],
     /// Centimetres per file unit.
-    scale: f32,
+    pub scale: f32,
     /// Turn about +y (unit quaternion x, y, z, w).
-    turn: [f32; 4],
+    pub turn: [f32; 4],
     /// Where the start point goes, cm.
-    at: [f32; 3],
+    pub at: [f32; 3],
 }
 
 impl Placed {
@@ -224,23 +231,13 @@ impl Stage {
         }
     }
 
-    /// A crowd pane: for each character the clip drawn, the clip that frames it (its
-    /// reference, so that a character is drawn alike in the reference and the compressed
-    /// scene: bone radius, ground, start point) and where it stands.
-    pub fn crowd<'a>(
-        characters: impl IntoIterator<Item = (&'a Clip, &'a Clip, Placement)>,
-        shadow: bool,
-    ) -> Stage {
-        let figures = characters
-            .into_iter()
-            .map(|(shown, framing, placement)| {
-                let own = View::framing(framing).with_shadow(shadow);
-                let placed = Placed::new(&own, framing.skeleton.units.cm_per_unit, &placement);
-                (Figure::new(shown, &own), Some(placed))
-            })
-            .collect();
+    /// The figures `casts` of one pane.
+    pub fn of(casts: &[Cast]) -> Stage {
         Stage {
-            figures,
+            figures: casts
+                .iter()
+                .map(|c| (Figure::new(&c.clip, &c.own), c.placed))
+                .collect(),
             scratch: FrameShapes::default(),
         }
     }
@@ -277,6 +274,196 @@ impl Stage {
     }
 }
 
+/// One figure of a pane as it is cast: the clip it performs, the view that sizes it (bone
+/// radius, ground, figure height: its reference's framing, so the reference and the test are
+/// drawn alike) and, in a crowd scene, where it stands.
+#[derive(Debug, Clone)]
+pub struct Cast {
+    /// The stimulus id of the clip (a crowd character's own stimulus).
+    pub id: String,
+    /// The clip drawn.
+    pub clip: Arc<Clip>,
+    /// The framing of the clip's reference.
+    pub own: View,
+    /// Where it stands in a crowd pane; `None`: alone in its pane, seen by its own view.
+    pub placed: Option<Placed>,
+}
+
+impl Cast {
+    /// A crowd character performing `clip` at `placement`, framed by its `reference` (so
+    /// that it is drawn alike in the reference and the compressed scene: bone radius,
+    /// ground, start point).
+    pub fn in_crowd(
+        id: &str,
+        clip: &Arc<Clip>,
+        reference: &Clip,
+        placement: &Placement,
+        shadow: bool,
+    ) -> Cast {
+        let own = View::framing(reference).with_shadow(shadow);
+        let placed = Placed::new(&own, reference.skeleton.units.cm_per_unit, placement);
+        Cast {
+            id: id.to_owned(),
+            clip: Arc::clone(clip),
+            own,
+            placed: Some(placed),
+        }
+    }
+}
+
+/// What a trial's panes draw and the camera they share: the window draws it
+/// ([`Casting::stages`]), and the study server sends it to the page, so both show the same
+/// figures, framed, lit and placed alike.
+///
+/// `panes[0]` is the first position (left, first, A, the test of a single-stimulus trial;
+/// a MUSHRA screen's labelled reference), `panes[1]` the other (a MUSHRA screen's lettered
+/// panes follow in order).
+#[derive(Debug, Clone)]
+pub struct Casting {
+    /// The camera, ground and light of every pane: the reference's framing, or the crowd
+    /// scene's fixed camera.
+    pub view: View,
+    /// Each pane's figures.
+    pub panes: Vec<Vec<Cast>>,
+}
+
+impl Casting {
+    /// The position of the first pane of a trial laid out as `arrangement`: left, A, or the
+    /// first (a single stimulus, whose reference is never drawn, shows its test there).
+    pub fn first(arrangement: Arrangement) -> Position {
+        match arrangement {
+            Arrangement::SideBySide => Position::Left,
+            Arrangement::Abab => Position::A,
+            Arrangement::Sequential | Arrangement::Single | Arrangement::Grid => Position::First,
+        }
+    }
+
+    /// The figures of `trial` with its clips `shown`, the first pane at
+    /// [`Casting::first`], the second at the other position. `framing`
+    /// gives the view of a reference clip by its stimulus id (a front end keeps them, as
+    /// the framing walks every frame). Crowd scenes place each character as the study's
+    /// `[scene]` says.
+    ///
+    /// # Errors
+    /// A crowd trial whose scene or characters are not the study's.
+    pub fn of(
+        study: &StudyDefinition,
+        trial: &Trial,
+        shown: &TrialStimuli,
+        framing: &mut dyn FnMut(&str, &Clip) -> View,
+    ) -> Result<Casting> {
+        let shadow = study.rendering.ground_shadow;
+        let first = Casting::first(trial.arrangement);
+        if !shown.crowd.is_empty() {
+            return crowd(study, trial, &shown.crowd, first, shadow);
+        }
+        let view = framing(&trial.reference, &shown.reference).with_shadow(shadow);
+        let pane = |p: Position| {
+            let id = stimulus_at(trial, p);
+            let clip = if id == trial.reference {
+                &shown.reference
+            } else {
+                &shown.test
+            };
+            vec![Cast {
+                id: id.to_owned(),
+                clip: Arc::clone(clip),
+                own: view,
+                placed: None,
+            }]
+        };
+        Ok(Casting {
+            view,
+            panes: vec![pane(first), pane(first.other())],
+        })
+    }
+
+    /// A MUSHRA screen: the labelled `reference` first, then each lettered pane's clip, all
+    /// framed by the reference's `view`.
+    pub fn grid(
+        study: &StudyDefinition,
+        view: View,
+        reference: (&str, &Arc<Clip>),
+        panes: &[(&str, &Arc<Clip>)],
+    ) -> Casting {
+        let view = view.with_shadow(study.rendering.ground_shadow);
+        let cast = |&(id, clip): &(&str, &Arc<Clip>)| {
+            vec![Cast {
+                id: id.to_owned(),
+                clip: Arc::clone(clip),
+                own: view,
+                placed: None,
+            }]
+        };
+        Casting {
+            view,
+            panes: std::iter::once(&reference).chain(panes).map(cast).collect(),
+        }
+    }
+
+    /// The window's stages, one per pane.
+    pub fn stages(&self) -> Vec<Stage> {
+        self.panes.iter().map(|casts| Stage::of(casts)).collect()
+    }
+}
+
+/// A crowd trial: each pane the characters of its scene, placed on one ground and seen by
+/// the scene's fixed camera.
+fn crowd(
+    study: &StudyDefinition,
+    trial: &Trial,
+    loaded: &[CrowdCharacter],
+    first: Position,
+    shadow: bool,
+) -> Result<Casting> {
+    let pane = |p: Position| -> Result<(Vec<Cast>, CrowdScene)> {
+        let stimulus = stimulus_at(trial, p);
+        let scene = CrowdScene::of(study, stimulus).context(|| {
+            format!(
+                "trial {}: {stimulus:?} is not a crowd scene of the study's [scene]",
+                trial.index
+            )
+        })?;
+        let reference = stimulus == trial.reference;
+        let casts = scene
+            .characters
+            .iter()
+            .map(|c| {
+                let l = loaded
+                    .iter()
+                    .find(|l| l.name == c.name)
+                    .context(|| format!("crowd character {:?} not loaded", c.name))?;
+                let clip = if reference { &l.reference } else { &l.test };
+                let placement = Placement {
+                    x_cm: c.x_cm,
+                    distance_cm: c.distance_cm,
+                    facing_deg: c.facing_deg,
+                };
+                Ok(Cast::in_crowd(
+                    &c.stimulus,
+                    clip,
+                    &l.reference,
+                    &placement,
+                    shadow,
+                ))
+            })
+            .collect::<Result<Vec<_>>>()?;
+        Ok((casts, scene))
+    };
+    let (a, scene) = pane(first)?;
+    let (b, _) = pane(first.other())?;
+    let far = scene
+        .characters
+        .iter()
+        .map(|c| c.distance_cm)
+        .fold(0.0, f64::max);
+    let view = View::crowd(&scene.camera, &scene.light, far).with_shadow(shadow);
+    Ok(Casting {
+        view,
+        panes: vec![a, b],
+    })
+}
+
 /// The shadow disc under point `p`: the nearer the ground (height `ground.0`), the smaller
 /// and darker, so contact reads as a dark spot; a point a figure height (`ground.1`) up
 /// leaves a faint wide one.
@@ -309,6 +496,16 @@ pub struct Track {
 }
 
 impl Track {
+    /// The knots the path runs through, at equal times from 0 to [`Track::end_s`].
+    pub fn knots(&self) -> &[[f32; 2]] {
+        &self.knots[..self.count.clamp(1, TRACK_KNOTS)]
+    }
+
+    /// Time of the last knot, s.
+    pub fn end_s(&self) -> f32 {
+        self.end_s
+    }
+
     /// A path standing still at `xz`.
     fn still(xz: [f32; 2]) -> Track {
         Track {
@@ -843,7 +1040,9 @@ mod tests {
         let mut heights = Vec::new();
         for (x, d) in [(0.0, 350.0), (-150.0, 600.0), (150.0, 1300.0)] {
             for facing in [0.0, 180.0] {
-                let mut stage = Stage::crowd([(&clip, &clip, place(x, d, facing))], true);
+                let shown = Arc::new(clip.clone());
+                let cast = Cast::in_crowd("walk", &shown, &clip, &place(x, d, facing), true);
+                let mut stage = Stage::of(&[cast]);
                 let mut s = FrameShapes::default();
                 stage.shapes_at(0.0, &mut s);
                 let ys: Vec<f32> = s.joints.iter().map(|j| j.position[1]).collect();
