@@ -72,6 +72,10 @@ pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
             app.definition().protocol,
             output.display()
         );
+        if app.has_dashboard() {
+            // The token is the experimenter's to add; it stays out of logs.
+            println!("dashboard: http://{addr}/dashboard.html#<the --dashboard-token>");
+        }
         if !addr.ip().is_loopback() {
             println!(
                 "note: listening beyond this machine; serve participants through a TLS reverse proxy (docs/serve.md)"

@@ -425,6 +425,14 @@ fn give(b: &Browser, (answer, replays): (Answer, u32)) {
             b.click(&format!(".rating[data-value=\"{v}\"]"));
             b.click("#continue");
         }
+        Answer::Pair { a, b: bv }
+            if b.js("return !!document.querySelector('.rating');") == Value::Bool(true) =>
+        {
+            // Two rows of grade buttons (a categorical scale), by mouse.
+            b.click(&format!(".rating[data-row=\"0\"][data-value=\"{a}\"]"));
+            b.click(&format!(".rating[data-row=\"1\"][data-value=\"{bv}\"]"));
+            b.click("#continue");
+        }
         Answer::Pair { a, b: bv } => {
             // Digit d marks the middle of grade d on BT.500's 0-100 scale, (d - 0.5) x 20;
             // Up/Down move by the scale's step (1).
@@ -449,8 +457,26 @@ fn give(b: &Browser, (answer, replays): (Answer, u32)) {
             b.keys(&all);
         }
         Answer::Choice(Position::Left) => b.keys(&["\u{E012}"]),
-        Answer::Choice(_) => b.click("#choice-right"),
+        Answer::Choice(p) => {
+            let name = serde_json::to_value(p).unwrap();
+            b.click(&format!("#choice-{}", name.as_str().unwrap()));
+        }
     }
+}
+
+/// Rates every pane of an open MUSHRA screen as the script says (each slider moved to its
+/// value), then Continue.
+fn give_screen(b: &Browser, script: &Script, panes: &[u32]) {
+    for (k, index) in panes.iter().enumerate() {
+        let Some((Answer::Rating(v), _)) = script.get(index) else {
+            panic!("pane trial {index} has no rating in the simulated session");
+        };
+        b.js(&format!(
+            "const i = document.querySelector('input[data-pane=\"{k}\"]'); \
+             i.value = {v}; i.dispatchEvent(new Event('input')); return null;"
+        ));
+    }
+    b.click("#continue");
 }
 
 /// Joins from a Prolific link, passes the welcome screen and answers trials until the
@@ -486,6 +512,10 @@ fn welcome(b: &Browser) {
         if b.js("return !!document.querySelector('input[name=age]');") == Value::Bool(true) {
             b.type_into("input[name=age]", "31");
         }
+        // An example's other fields, whatever they are called.
+        b.js("for (const i of document.querySelectorAll('#welcome-fields input')) { \
+              if (!i.value) { i.value = 'x'; i.dispatchEvent(new Event('input', { bubbles: true })); } } \
+              return null;");
         if b.js("return !document.getElementById('welcome-consent').hidden;") == Value::Bool(true) {
             b.click("#consent");
         }
@@ -532,8 +562,21 @@ fn answer_trials(b: &Browser, script: &Script, stop_after: Option<u32>, given: &
                 script.len()
             );
         };
-        given.insert(k);
-        give(b, answer);
+        // The trials this screen answers (a MUSHRA screen's panes).
+        let panes = b.js("return document.body.dataset.trials;");
+        let panes: Vec<u32> = panes
+            .as_str()
+            .unwrap_or("")
+            .split(',')
+            .filter_map(|i| i.parse().ok())
+            .collect();
+        if panes.len() > 1 {
+            given.extend(&panes);
+            give_screen(b, script, &panes);
+        } else {
+            given.insert(k);
+            give(b, answer);
+        }
         let refusals = &at[2];
         b.wait(
             &format!(
@@ -545,6 +588,9 @@ fn answer_trials(b: &Browser, script: &Script, stop_after: Option<u32>, given: &
         if b.js(&format!("return {REFUSALS};")) != *refusals {
             // Refused: the same trial again, from the start.
             given.remove(&k);
+            for p in &panes {
+                given.remove(p);
+            }
             continue;
         }
         if stop_after.is_some_and(|n| given.len() as u32 >= n) {
@@ -927,6 +973,83 @@ fn a_browser_completes_dscqs_and_a_live_staircase() {
                 "trials answered outside fullscreen"
             );
         }
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}
+
+/// Trials (screens) each example study is taken through in the browser: every example's
+/// screen, widget and figures on the real page, within CI's time (the examples' 4-second
+/// clips make their whole sessions about half an hour of playback together; the MOS, DSCQS
+/// and staircase tests above run sessions to their end).
+const EXAMPLE_SCREENS: u32 = 2;
+
+/// Every example study `study serve` is given runs in Chromium as a participant takes it,
+/// and its rows equal `study simulate --subject` for the same subject, answer for answer:
+/// each method's screen (ratings, pairs, choices with and without "no preference",
+/// MUSHRA's sliders, crowd scenes) comes from the one description the window draws.
+#[test]
+fn every_example_study_runs_in_the_browser_as_simulated() {
+    if !ready() {
+        return;
+    }
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap();
+    let mut examples: Vec<PathBuf> = std::fs::read_dir(root.join("examples"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+        .collect();
+    examples.sort();
+    assert!(examples.len() >= 14, "{examples:?}");
+    let driver = Driver::start();
+    for study in &examples {
+        let name = study.file_stem().unwrap().to_string_lossy().into_owned();
+        let dir = temp_dir(&format!("example-{name}"));
+        let out = dir.join("results");
+        let port = free_port();
+        let subject = format!("ex{}", name.replace('-', ""));
+        let (simulated, script) = simulate(study, &dir, &subject, 3);
+        let _server = serve(study, &out, port);
+        let b = driver.browser(&dir.join("profile"));
+        b.go(&format!("http://127.0.0.1:{port}/?PROLIFIC_PID={subject}"));
+        welcome(&b);
+        let mut given = BTreeSet::new();
+        let mut screens = 0;
+        while screens < EXAMPLE_SCREENS && b.screen() != "end" {
+            let before = given.len() as u32;
+            answer_trials(&b, &script, Some(before + 1), &mut given);
+            screens += 1;
+        }
+        let served = results::read_trials(&out.join(format!("{subject}_s1/trials.csv")))
+            .unwrap()
+            .records;
+        assert_eq!(
+            served.len(),
+            given.len(),
+            "{name}: one row per answer given"
+        );
+        assert!(!served.is_empty(), "{name}: nothing answered");
+        for (got, want) in served.iter().zip(&simulated) {
+            let at = format!("{name} trial {}", want.trial.index);
+            assert_eq!(got.trial, want.trial, "{at}");
+            assert_eq!(got.encoding, want.encoding, "{at}");
+            // A continuous scale without a step (the DSCQS example's BT.500 0-100) takes
+            // marks to a hundredth of its range by keyboard: the simulated observer's
+            // fraction is given to the nearest of them, and its score follows from it.
+            let (a, b) = (got.response.answer, want.response.answer);
+            match (a, b) {
+                (Answer::Pair { a: ga, b: gb }, Answer::Pair { a: wa, b: wb }) if a != b => {
+                    assert!(
+                        (ga - wa).abs() <= 0.5 && (gb - wb).abs() <= 0.5,
+                        "{at}: {a:?} {b:?}"
+                    );
+                }
+                _ => {
+                    assert_eq!(a, b, "{at}");
+                    assert_eq!(got.outcome, want.outcome, "{at}");
+                }
+            }
+        }
+        drop(b);
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -62,6 +62,12 @@ fn setup(dir: &Path, clip_s: f64) -> ServeOptions {
     .unwrap();
     std::fs::create_dir_all(dir.join("page")).unwrap();
     std::fs::write(dir.join("page/index.html"), "<!doctype html>").unwrap();
+    // What the real page says it draws (the server checks the study against it).
+    std::fs::copy(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("page/src/capabilities.json"),
+        dir.join("page/capabilities.json"),
+    )
+    .unwrap();
     ServeOptions {
         study: dir.join("study.toml"),
         output: dir.join("results"),

@@ -9,10 +9,12 @@ use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex, MutexGuard, OnceLock, PoisonError};
 use std::time::Instant;
 
+use lab::scene::{Casting, View};
 use lab::session::{self, Opened, Recorder};
 use lab::source::StimulusSource;
 use lab::{LabError, StudyFile};
-use protocols::record::{Answer, Arrangement, Block, Position, Response, Trial};
+use protocols::record::{Answer, Arrangement, Block, Response, Trial};
+use protocols::screen::Screen;
 use protocols::study::{CrowdsourcingSettings, HiddenRule, ScaleKind, StudyDefinition};
 use protocols::{FrameTiming, StimulusEncoding, texts};
 use results::SessionManifest;
@@ -21,7 +23,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::limits::{Bucket, Limits, MAX_INTERVALS};
 use crate::participants::{Participant, Registry, identity};
-use crate::{Result, ServeOptions, WebError, clipdata, io, timing};
+use crate::{Result, ServeOptions, WebError, clipdata, io, staging, timing};
 
 /// A refused request: the HTTP status and the reason the page shows.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -81,14 +83,20 @@ pub(crate) struct Live {
 
 struct Pending {
     trial: Trial,
+    /// The trials the screen answers: a MUSHRA screen's panes in order (the ones not yet
+    /// answered), else `trial` alone.
+    panes: Vec<Trial>,
     /// When the page last asked for it: it cannot have played the stimuli for longer.
     /// `None` for a trial this process never served (the page had it from a server that
     /// was restarted since): then only the page's own account of the time counts.
     served: Option<Instant>,
-    /// The clips at the arrangement's first and second position.
-    clips: [Arc<Vec<u8>>; 2],
+    /// The clips the page draws, in the order the scene's figures name them.
+    clips: Vec<Arc<Vec<u8>>>,
+    /// What the page shows: the screen (`protocols::screen::Screen`) and the scene.
+    screen: Arc<serde_json::Value>,
     encoding: Option<StimulusEncoding>,
-    clip_s: f64,
+    /// When answers open, ms from the start of the first pass (the schedule's).
+    answers_open_ms: f64,
 }
 
 /// What the page checked before the participant could join, and reports when the session
@@ -190,6 +198,10 @@ pub struct AnswerRequest {
     pub response_time_ms: u64,
     /// How long the page showed the stimuli before the answer, ms.
     pub played_ms: f64,
+    /// A MUSHRA screen's rating of each pane, in pane order (`answer` is the first's);
+    /// empty for any other trial.
+    #[serde(default)]
+    pub pane_ratings: Vec<f64>,
     /// The `requestAnimationFrame` intervals of the trial, ms.
     pub intervals: Vec<f64>,
     /// What each frame showed (`both`, `a`, `grey`, `answer`, ...).
@@ -218,6 +230,10 @@ pub struct App {
     out: PathBuf,
     page: Page,
     stimuli: Mutex<Box<dyn StimulusSource>>,
+    /// Reference stimulus id → the view that frames it (every frame of it walked once).
+    views: Mutex<HashMap<String, View>>,
+    /// Held while a session is opened (created or resumed).
+    opening: Mutex<()>,
     /// Stimulus id → its joint positions as served, each made once (the first request for
     /// an id makes it; others for the same id wait for that one instead of making it too).
     clips: Mutex<HashMap<String, ClipCell>>,
@@ -266,30 +282,51 @@ fn read_page(dir: &Path) -> Result<Page> {
     Ok(page)
 }
 
-/// The presentation of one trial as the window schedules it (`window/src/flow.rs`), ms:
-/// side by side `playback_count` plays; sequential first, grey, second per play; DSCQS A,
-/// grey, B, grey, A, grey, B.
-pub fn presentation_ms(study: &StudyDefinition, arrangement: Arrangement, clip_s: f64) -> f64 {
-    let p = &study.presentation;
-    let clip = clip_s * 1e3;
-    let grey = p.grey_ms as f64;
-    let plays = f64::from(p.playback_count.max(1));
-    match arrangement {
-        Arrangement::SideBySide | Arrangement::Single | Arrangement::Grid => plays * clip,
-        Arrangement::Sequential => plays * 2.0 * clip + (2.0 * plays - 1.0) * grey,
-        Arrangement::Abab => 4.0 * clip + 3.0 * grey,
+/// What the built page cannot draw of `study`'s screens, as "answer rating_pair" and the
+/// like: its first trial's [`Screen`] (every trial of a study has the same answer widget,
+/// pane content and schedule kinds) against the page's `capabilities.json`.
+fn unsupported(study: &StudyDefinition, page: &Page) -> Result<Vec<String>> {
+    let caps: serde_json::Value = page
+        .get("capabilities.json")
+        .and_then(|(_, bytes)| serde_json::from_slice(bytes).ok())
+        .ok_or_else(|| {
+            WebError::Refused(
+                "the study page has no readable capabilities.json; run scripts/build-page".into(),
+            )
+        })?;
+    let mut engine = protocols::engine::Session::new(study, 0)
+        .map_err(|e| WebError::Refused(format!("the study's plan: {e}")))?;
+    let Some(trial) = engine
+        .next_trial(0)
+        .map_err(|e| WebError::Refused(format!("the study's plan: {e}")))?
+    else {
+        return Ok(Vec::new());
+    };
+    let screen = serde_json::to_value(Screen::of(study, &trial, 1.0))
+        .map_err(|e| WebError::Refused(format!("the study's screen: {e}")))?;
+    let mut wanted: Vec<(&str, serde_json::Value)> =
+        vec![("answer", screen["answer"]["kind"].clone())];
+    if let Some(panes) = screen["panes"].as_array() {
+        wanted.extend(
+            panes
+                .iter()
+                .map(|p| ("content", p["content"]["kind"].clone())),
+        );
     }
-}
-
-/// The first position of an arrangement (left, first, A).
-fn first_position(a: Arrangement) -> Position {
-    match a {
-        Arrangement::SideBySide => Position::Left,
-        Arrangement::Sequential => Position::First,
-        Arrangement::Abab => Position::A,
-        Arrangement::Single => Position::Hidden,
-        Arrangement::Grid => Position::Pane(0),
+    if let Some(steps) = screen["schedule"]["steps"].as_array() {
+        wanted.extend(steps.iter().map(|s| ("show", s["show"].clone())));
     }
+    let mut missing: Vec<String> = wanted
+        .into_iter()
+        .filter(|(what, kind)| {
+            !caps[*what]
+                .as_array()
+                .is_some_and(|known| known.contains(kind))
+        })
+        .map(|(what, kind)| format!("{what} {}", kind.as_str().unwrap_or("?")))
+        .collect();
+    missing.dedup();
+    Ok(missing)
 }
 
 impl App {
@@ -301,31 +338,14 @@ impl App {
     pub fn open(options: &ServeOptions) -> Result<App> {
         let page = read_page(&options.page)?;
         let study = StudyFile::load(&options.study)?;
-        // The page has the screens of some methods only (MOS, DSCQS and 2AFC).
-        if !study.definition.method().browser_page() {
+        // A study whose screens the page cannot draw is refused before anyone joins.
+        let missing = unsupported(&study.definition, &page)?;
+        if !missing.is_empty() {
             return Err(WebError::Refused(format!(
-                "{}: protocol {} runs in the study window (study run); the browser page of \
-                 study serve runs mos, dscqs and staircase studies",
+                "{}: the browser page cannot show this study's screens ({}); run it in the \
+                 study window (study run)",
                 options.study.display(),
-                study.definition.protocol
-            )));
-        }
-        // The page draws one figure per pane: a crowd scene would play its front character
-        // alone while the rows log the whole scene's ratios.
-        if study.definition.scene.is_some() {
-            return Err(WebError::Refused(format!(
-                "{}: [scene] (crowd scenes, several characters per pane) runs in the study \
-                 window (study run); the browser page of study serve draws one figure per pane",
-                options.study.display()
-            )));
-        }
-        // Participants are spread over plan groups here ([crowdsourcing] groups and quota).
-        if !study.definition.design.groups.is_empty() {
-            return Err(WebError::Refused(format!(
-                "{}: [[design.groups]] (between-subject groups) are assigned by study run and \
-                 study simulate; study serve spreads participants over [crowdsourcing] groups \
-                 with a quota",
-                options.study.display()
+                missing.join(", ")
             )));
         }
         // The clips the preflight read are kept: every stimulus the plan can show is in
@@ -350,6 +370,8 @@ impl App {
             out: options.output.clone(),
             page,
             stimuli: Mutex::new(stimuli),
+            views: Mutex::new(HashMap::new()),
+            opening: Mutex::new(()),
             clips: Mutex::new(clips),
             preloaded,
             registry,
@@ -386,6 +408,11 @@ impl App {
     /// A file of the built page: content type and bytes.
     pub fn page_file(&self, name: &str) -> Option<(&'static str, Arc<Vec<u8>>)> {
         self.page.get(name).map(|(k, b)| (*k, Arc::clone(b)))
+    }
+
+    /// Whether the experimenter's dashboard is served (a token was given).
+    pub fn has_dashboard(&self) -> bool {
+        self.dashboard.is_some()
     }
 
     /// Whether `token` is the dashboard's (compared in constant time).
@@ -527,6 +554,9 @@ impl App {
             observer_seed: None,
             resume: true,
         };
+        // One session opened at a time: a study with between-subject groups assigns each new
+        // one from those already in the results folder.
+        let _opening = lock(&self.opening);
         let (opened, _) = session::open_subject(
             &self.study,
             &mut results::FolderStore::new(&self.out),
@@ -588,7 +618,6 @@ impl App {
         Ok(serde_json::json!({
             "subject": p.subject,
             "title": def.title(),
-            "protocol": def.protocol,
             "instructions": texts::instructions(def),
             "consent": def.session.consent,
             "fields": def.session.subject_fields,
@@ -600,15 +629,7 @@ impl App {
                 "categories": categories,
                 "bt500": words,
             },
-            "presentation": {
-                "playback_count": p_settings.playback_count,
-                "max_replays": p_settings.max_replays,
-                "loop": p_settings.loop_playback,
-                "gap_ms": p_settings.gap_ms,
-                "grey_ms": p_settings.grey_ms,
-                "labels": p_settings.labels,
-            },
-            "afc_question": texts::AFC_QUESTION,
+            "presentation": { "gap_ms": p_settings.gap_ms },
             "answer_recorded": texts::ANSWER_RECORDED,
             "planned": { "kind": planned_kind, "n": planned_n },
             "state": state,
@@ -734,32 +755,15 @@ impl App {
         };
         pending.served = Some(Instant::now());
         let t = &pending.trial;
-        let first = first_position(t.arrangement);
-        let labels = self.definition().presentation.labels.as_ref();
-        let slots: Vec<serde_json::Value> = [first, first.other()]
-            .into_iter()
-            .map(|pos| {
-                let label = labels.map(|l| {
-                    if pos == t.reference_position {
-                        l.reference.clone()
-                    } else {
-                        l.test.clone()
-                    }
-                });
-                serde_json::json!({ "position": pos, "label": label })
-            })
-            .collect();
         Ok(serde_json::json!({
             "done": false,
             "index": t.index,
             "practice": t.block == Block::Familiarization,
-            "arrangement": t.arrangement,
-            // What a DSCQS pair is called on screen (A and B, or 1 and 2 one after the other).
-            "names": texts::dscqs_names(t.arrangement),
-            "break_before": t.break_before,
-            "slots": slots,
-            "clip_s": pending.clip_s,
-            "presentation_ms": presentation_ms(self.definition(), t.arrangement, pending.clip_s),
+            "page": &*pending.screen,
+            "clips": pending.clips.len(),
+            // The trials the screen answers (a MUSHRA screen's panes), in pane order.
+            "indices": pending.panes.iter().map(|t| t.index).collect::<Vec<_>>(),
+            "presentation_ms": pending.answers_open_ms,
             "answered": answered,
         }))
     }
@@ -774,24 +778,59 @@ impl App {
         let Some(trial) = live.rec.next_trial(elapsed)? else {
             return Ok(false);
         };
-        let shown = lock(&self.stimuli).stimuli(&trial)?;
+        let study = self.definition();
+        // A MUSHRA screen shows the panes not yet answered (all, unless a resumed session
+        // stopped inside it), every one of them at once.
+        let mut panes = vec![trial.clone()];
+        if trial.arrangement == Arrangement::Grid {
+            let screen = live.rec.screen();
+            if screen.first() == Some(&trial) {
+                panes = screen;
+            }
+        }
+        let mut shown = Vec::with_capacity(panes.len());
+        for t in &panes {
+            shown.push(lock(&self.stimuli).stimuli(t)?);
+        }
         let lookahead = live.rec.lookahead(live.rec.elapsed_ms());
         lock(&self.stimuli).prepare(&lookahead);
-        let first = first_position(trial.arrangement);
-        let clip_at = |pos: Position| {
-            if pos == trial.reference_position {
-                self.clip_bytes(&trial.reference, &shown.reference)
-            } else {
-                self.clip_bytes(&trial.stimulus, &shown.test)
-            }
+        let first = &shown[0];
+        let mut framing = |id: &str, clip: &motion::Clip| {
+            *lock(&self.views)
+                .entry(id.to_owned())
+                .or_insert_with(|| View::framing(clip))
         };
-        let clips = [clip_at(first), clip_at(first.other())];
+        let cast = if trial.arrangement == Arrangement::Grid {
+            let view = framing(&trial.reference, &first.reference);
+            let tests: Vec<(&str, &Arc<motion::Clip>)> = panes
+                .iter()
+                .zip(&shown)
+                .map(|(t, s)| (t.stimulus.as_str(), &s.test))
+                .collect();
+            Casting::grid(study, view, (&trial.reference, &first.reference), &tests)
+        } else {
+            Casting::of(study, &trial, first, &mut framing)?
+        };
+        let clip_s = cast
+            .stages()
+            .first()
+            .map_or(first.reference.duration_s(), lab::scene::Stage::duration_s);
+        let screen = Screen::of_screen(study, &panes, clip_s)
+            .ok_or_else(|| ApiError::new(500, "a screen without trials"))?;
+        let (scene, clips) = staging::scene(&cast);
+        let clips = clips
+            .iter()
+            .map(|(id, clip)| self.clip_bytes(id, clip))
+            .collect();
+        let encoding = shown.swap_remove(0).encoding;
         live.pending = Some(Pending {
-            clip_s: shown.reference.duration_s(),
+            answers_open_ms: screen.schedule.answers_open_s * 1e3,
+            screen: Arc::new(serde_json::json!({ "screen": screen, "scene": scene })),
             trial,
+            panes,
             served: None,
             clips,
-            encoding: shown.encoding,
+            encoding,
         });
         Ok(true)
     }
@@ -814,10 +853,10 @@ impl App {
         })
     }
 
-    /// The clip at `slot` (0: left, first or A; 1: the other) of `p`'s pending trial `index`.
+    /// Clip `slot_no` of the scene of `p`'s pending trial `index` (the figures' `clip`).
     ///
     /// # Errors
-    /// 404 when that trial is not pending or the slot is not 0 or 1.
+    /// 404 when that trial is not pending or it has no such clip.
     pub fn clip(&self, p: &Participant, index: u32, slot_no: usize) -> ApiResult<Arc<Vec<u8>>> {
         let mut slot = lock(&p.slot);
         self.ensure_open(p, &mut slot)?;
@@ -826,11 +865,11 @@ impl App {
         };
         self.ensure_pending(live)?;
         match &live.pending {
-            Some(pd) if pd.trial.index == index => pd
-                .clips
-                .get(slot_no)
-                .cloned()
-                .ok_or_else(|| ApiError::new(404, "a trial has two clips, 0 and 1")),
+            Some(pd) if pd.trial.index == index => {
+                pd.clips.get(slot_no).cloned().ok_or_else(|| {
+                    ApiError::new(404, format!("trial {index} has {} clips", pd.clips.len()))
+                })
+            }
             _ => Err(ApiError::new(404, format!("trial {index} is not pending"))),
         }
     }
@@ -901,12 +940,10 @@ impl App {
         });
         let (trial, encoding) = (pending.trial.clone(), pending.encoding.clone());
         let index = trial.index;
-        let elapsed = live.rec.elapsed_ms();
-        match live
-            .rec
-            .record(trial, response, elapsed, encoding, frame_timing)
-        {
-            Ok(_) => {}
+        let panes = pending.panes.clone();
+        let logged = Self::record(live, trial, &panes, encoding, req, response, frame_timing);
+        match logged {
+            Ok(()) => {}
             Err(e @ LabError::Engine(_)) => return Err(e.into()),
             Err(e) => {
                 // The engine moved on but the row may not be on disk: reopen from the log.
@@ -947,6 +984,61 @@ impl App {
         })
     }
 
+    /// Logs the answer to `trial`, or a MUSHRA screen's: one row per pane, in pane order,
+    /// each its pane's rating, the first carrying the screen's frames (every rating was
+    /// checked before, so a refused screen logs nothing).
+    fn record(
+        live: &mut Live,
+        trial: Trial,
+        panes: &[Trial],
+        encoding: Option<StimulusEncoding>,
+        req: &AnswerRequest,
+        response: Response,
+        timing: Option<FrameTiming>,
+    ) -> std::result::Result<(), LabError> {
+        if trial.arrangement != Arrangement::Grid {
+            let elapsed = live.rec.elapsed_ms();
+            return live
+                .rec
+                .record(trial, response, elapsed, encoding, timing)
+                .map(|_| ());
+        }
+        for (k, (t, r)) in panes.iter().zip(&req.pane_ratings).enumerate() {
+            let first = k == 0;
+            // Since the first is logged, the engine's next trial is this pane's.
+            if !first {
+                let next = live.rec.next_trial(live.rec.elapsed_ms())?;
+                if next.as_ref() != Some(t) {
+                    return Err(LabError::Refused(format!(
+                        "MUSHRA pane {} (trial {}) answered, but the session's next trial is {:?}",
+                        t.reference_position,
+                        t.index,
+                        next.map(|n| n.index)
+                    )));
+                }
+            }
+            let response = Response {
+                answer: Answer::Rating(*r),
+                dropped_frames: if first { response.dropped_frames } else { 0 },
+                ..response
+            };
+            let timing = timing.map(|tm| {
+                if first {
+                    tm
+                } else {
+                    FrameTiming {
+                        frames_shown: 0,
+                        interval_sd_ms: 0.0,
+                    }
+                }
+            });
+            let elapsed = live.rec.elapsed_ms();
+            live.rec
+                .record(t.clone(), response, elapsed, None, timing)?;
+        }
+        Ok(())
+    }
+
     /// After the end only a repeat of a logged answer can come (acknowledged as a
     /// duplicate); anything else is refused.
     fn repeat_after_end(
@@ -971,7 +1063,7 @@ impl App {
     /// or a hidden page where the study shows the trial again.
     fn check_answer(&self, pending: &Pending, req: &AnswerRequest) -> ApiResult<()> {
         let def = &self.study.definition;
-        let need_ms = presentation_ms(def, pending.trial.arrangement, pending.clip_s);
+        let need_ms = pending.answers_open_ms;
         let since_served = pending
             .served
             .map_or(f64::INFINITY, |t| t.elapsed().as_secs_f64() * 1e3);
@@ -984,6 +1076,33 @@ impl App {
                     "answered before the stimuli had played ({:.0} ms of {need_ms:.0} ms)",
                     req.played_ms.min(since_served)
                 ),
+            ));
+        }
+        let method = protocols::methods::of(def.protocol);
+        if pending.trial.arrangement == Arrangement::Grid {
+            if req.pane_ratings.len() != pending.panes.len()
+                || req.answer != Answer::Rating(req.pane_ratings[0])
+            {
+                return Err(ApiError::new(
+                    422,
+                    format!(
+                        "the screen has {} panes: rate each of them (the answer is the first's)",
+                        pending.panes.len()
+                    ),
+                ));
+            }
+            for (t, r) in pending.panes.iter().zip(&req.pane_ratings) {
+                if method.score(t, Answer::Rating(*r), &def.scale).is_err() {
+                    return Err(ApiError::new(
+                        422,
+                        format!("{r} is not a rating on the study's scale"),
+                    ));
+                }
+            }
+        } else if !req.pane_ratings.is_empty() {
+            return Err(ApiError::new(
+                422,
+                "pane ratings answer a MUSHRA screen only",
             ));
         }
         if def
@@ -1027,6 +1146,8 @@ impl App {
         let participants = self.registry.all();
         let mut rows = Vec::new();
         let mut scores: BTreeMap<String, (f64, u32)> = BTreeMap::new();
+        let mut states: BTreeMap<&str, u32> = BTreeMap::new();
+        let mut last_answer_ms: Option<u64> = None;
         for p in &participants {
             let dir = self.session_dir(p);
             let (state, manifest) = match &*lock(&p.slot) {
@@ -1043,6 +1164,8 @@ impl App {
             } else {
                 Vec::new()
             };
+            *states.entry(state).or_default() += 1;
+            last_answer_ms = last_answer_ms.max(records.iter().map(|r| r.wall_clock_ms).max());
             let crowd = &self.definition().crowdsourcing;
             let mut gold_failed = 0u32;
             for r in &records {
@@ -1078,6 +1201,15 @@ impl App {
         Ok(serde_json::json!({
             "study": self.definition().name,
             "protocol": self.definition().protocol,
+            "states": states,
+            // Share of participants whose session is complete.
+            "complete_share": if participants.is_empty() {
+                0.0
+            } else {
+                f64::from(states.get("finished").copied().unwrap_or(0)) / participants.len() as f64
+            },
+            // When the last answer was logged, ms since the Unix epoch.
+            "last_answer_ms": last_answer_ms,
             "participants": rows,
             "conditions": conditions,
         }))

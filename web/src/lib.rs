@@ -29,6 +29,7 @@ pub mod clipdata;
 mod http;
 pub mod limits;
 pub mod participants;
+mod staging;
 pub mod timing;
 
 use std::net::SocketAddr;

@@ -46,6 +46,8 @@ fn setup(dir: &Path) -> ServeOptions {
         "<!doctype html><title>t</title>",
     )
     .unwrap();
+    // What the real page says it draws (the server checks the study against it).
+    std::fs::copy(capabilities(), dir.join("page/capabilities.json")).unwrap();
     ServeOptions {
         study: dir.join("study.toml"),
         output: dir.join("results"),
@@ -229,6 +231,15 @@ fn answers_are_logged_once_and_only_by_their_participant() {
         Some(2),
         "{dash}"
     );
+    // Counts per state (A answering, B begun or joined), none complete, and when A's
+    // answer was logged.
+    assert_eq!(dash["states"]["running"], json!(1), "{dash}");
+    assert_eq!(dash["complete_share"], json!(0.0), "{dash}");
+    assert_eq!(
+        dash["last_answer_ms"].as_u64(),
+        Some(rec.wall_clock_ms),
+        "{dash}"
+    );
     rt.block_on(server.stop()).unwrap();
     let _ = std::fs::remove_dir_all(&dir);
 }
@@ -273,20 +284,30 @@ fn requests_over_the_rate_are_refused() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// The page draws the screens of some methods only (MOS, DSCQS and 2AFC, until issue 36),
-/// one figure per pane: the server asks the study's method and refuses the others' studies,
-/// and crowd scenes, before it listens, naming the file and what the page lacks; the MOS
-/// study itself opens.
+fn capabilities() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("page/src/capabilities.json")
+}
+
+/// The page says what it draws (`capabilities.json`): every method's screen and crowd
+/// scenes open with the real page's list; a page that lacks an answer widget or a pane
+/// content a study needs is refused before the server listens, naming the file and what is
+/// missing; a page without the list is refused.
 #[test]
 fn studies_whose_screens_the_page_lacks_are_refused() {
     let dir = temp_dir("refused");
     let options = setup(&dir);
     let mos = std::fs::read_to_string(&options.study).unwrap();
     let rt = tokio::runtime::Runtime::new().unwrap();
-    for (protocol, extra) in [
-        ("acr", ""),
-        ("dcr", ""),
-        ("pair_comparison", "hidden_reference = false\n"),
+    let crowd = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/crowd-run1.toml");
+    let mut studies = vec![(crowd, "content crowd_scene")];
+    for (protocol, extra, lacking) in [
+        ("acr", "", "answer rating"),
+        ("dcr", "", "answer rating"),
+        (
+            "pair_comparison",
+            "hidden_reference = false\n",
+            "answer choice",
+        ),
     ] {
         let text = mos
             .replace("protocol = \"mos\"", &format!("protocol = \"{protocol}\""))
@@ -296,33 +317,47 @@ fn studies_whose_screens_the_page_lacks_are_refused() {
             );
         let path = dir.join(format!("{protocol}.toml"));
         std::fs::write(&path, text).unwrap();
-        let err = match rt.block_on(web::start(ServeOptions {
-            study: path.clone(),
-            ..options.clone()
-        })) {
-            Ok(_) => panic!("{protocol}: served"),
+        studies.push((path, lacking));
+    }
+    let real = std::fs::read_to_string(capabilities()).unwrap();
+    for (path, lacking) in &studies {
+        let open = |page: &str| {
+            std::fs::write(dir.join("page/capabilities.json"), page).unwrap();
+            rt.block_on(web::start(ServeOptions {
+                study: path.clone(),
+                output: dir.join(format!("results-{}", path.display().to_string().len())),
+                ..options.clone()
+            }))
+        };
+        let server = open(&real).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        rt.block_on(server.stop()).unwrap();
+        // The same page without what this study needs.
+        let (what, kind) = lacking.split_once(' ').unwrap();
+        let mut less: serde_json::Value = serde_json::from_str(&real).unwrap();
+        less[what]
+            .as_array_mut()
+            .unwrap()
+            .retain(|k| k.as_str() != Some(kind));
+        let err = match open(&less.to_string()) {
+            Ok(_) => panic!("{}: served without {lacking}", path.display()),
             Err(e) => e.to_string(),
         };
         assert!(
-            err.contains(&format!("protocol {protocol} runs in the study window"))
-                && err.contains(&path.display().to_string()),
-            "{protocol}: {err}"
+            err.contains(lacking) && err.contains(&path.display().to_string()),
+            "{err}"
         );
     }
-    // A crowd study (a DSCQS, which the page has) is refused for its [scene]: the page would
-    // play one character while the rows log the scene's.
-    let crowd = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/crowd-run1.toml");
-    let err = match rt.block_on(web::start(ServeOptions {
-        study: crowd.clone(),
-        ..options.clone()
-    })) {
-        Ok(_) => panic!("crowd scenes served"),
-        Err(e) => e.to_string(),
-    };
+    std::fs::remove_file(dir.join("page/capabilities.json")).unwrap();
+    let err = rt
+        .block_on(web::start(options.clone()))
+        .err()
+        .map(|e| e.to_string());
     assert!(
-        err.contains("[scene]") && err.contains("crowd-run1.toml"),
-        "{err}"
+        err.as_deref()
+            .is_some_and(|e| e.contains("capabilities.json")),
+        "{err:?}"
     );
+    std::fs::copy(capabilities(), dir.join("page/capabilities.json")).unwrap();
     let server = rt.block_on(web::start(options)).unwrap();
     rt.block_on(server.stop()).unwrap();
     std::fs::remove_dir_all(&dir).unwrap();

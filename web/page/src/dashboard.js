@@ -20,7 +20,10 @@ async function refresh() {
   }
   const d = await r.json();
   document.getElementById('title').textContent = `${d.study} (${d.protocol})`;
-  document.getElementById('status').textContent = `${d.participants.length} participants; updated ${new Date().toLocaleTimeString()}`;
+  const states = Object.entries(d.states).map(([s, n]) => `${n} ${s}`).join(', ');
+  const last = d.last_answer_ms === null ? 'no answer yet' : `last answer ${new Date(d.last_answer_ms).toLocaleString()}`;
+  document.getElementById('status').textContent = `${d.participants.length} participants (${states || 'none'}); ` +
+    `${(100 * d.complete_share).toFixed(0)} % complete; ${last}; updated ${new Date().toLocaleTimeString()}`;
   fill(document.getElementById('participants'),
     ['Subject', 'Source', 'State', 'Answered', 'Gold failed', 'Excluded', 'Hidden trials', 'Not fullscreen', 'Refresh (Hz)'],
     d.participants.map((p) => [p.subject, p.source, p.state, p.answered, p.gold_failed, p.excluded ? 'yes' : '', p.hidden_trials, p.windowed_trials,

@@ -1,9 +1,12 @@
 // The participant's study page: the study window's screens (welcome, consent, instructions,
-// familiarization, MOS / DSCQS / 2AFC trials, breaks, end) over the server's API. Every rule
-// of the protocol (which trial comes next, scoring, staircase levels) stays on the server;
-// the page plays the two clips by time, measures its frames and posts the answer.
+// familiarization, trials, breaks, end) over the server's API. A trial is drawn from the
+// server's description of it (protocols::screen::Screen: panes, schedule, answer widget;
+// lab::scene: the figures), the same the window draws; the page holds no method's name.
+// Every rule of a method (which trial comes next, scoring, staircase levels) stays on the
+// server; the page plays the clips by time, measures its frames and posts the answer.
 import { Stage, parseClip, webglInfo } from './render.js';
 import { Presentation } from './presentation.js';
+import CAPABILITIES from './capabilities.json';
 
 const $ = (id) => document.getElementById(id);
 const SCREENS = ['message', 'check', 'welcome', 'break', 'trial', 'gap', 'end'];
@@ -256,14 +259,19 @@ function progress(info, t, ack) {
   if (p.exact) bar.value = t.answered / p.exact;
 }
 
-function fmt(v) {
-  return Number.isInteger(v) ? String(v) : String(v);
-}
-
-/** The answer widgets of `info`'s protocol; returns { answer(), key(e), enable(open) }. */
-function widgets(info, t, onChange) {
+/**
+ * The answer widget the screen describes (protocols::methods::AnswerWidget) on the study's
+ * scale; returns { enable(open), key(e) }. `onChange(answer, paneRatings)` posts.
+ */
+function widgets(info, screen, onChange) {
   const box = $('answer-widgets');
   box.replaceChildren();
+  const w = screen.answer;
+  if (!CAPABILITIES.answer.includes(w.kind)) throw new Error(`this page cannot show a ${w.kind} answer`);
+  $('question').textContent = w.question || '';
+  $('continue').hidden = w.kind === 'choice';
+  if (w.kind === 'choice') return choice(w, onChange);
+  if (w.kind === 'slider_grid') return sliders(info, screen, onChange);
   const scale = info.scale;
   const cats = scale.categories.map((c) => c.value);
   const range = scale.max - scale.min;
@@ -305,7 +313,7 @@ function widgets(info, t, onChange) {
     bar.dataset.row = k;
     bar.setAttribute('role', 'slider');
     bar.setAttribute('aria-label', name);
-    for (const label of scale.bt500) bar.append(Object.assign(document.createElement('div'), { className: 'sec', textContent: label }));
+    for (const label of w.words) bar.append(Object.assign(document.createElement('div'), { className: 'sec', textContent: label }));
     const mark = document.createElement('div');
     mark.className = 'mark';
     bar.append(mark);
@@ -332,42 +340,13 @@ function widgets(info, t, onChange) {
     };
   };
 
-  let question;
   let names;
-  if (info.protocol === 'staircase') {
-    question = info.afc_question;
-    const row = document.createElement('div');
-    row.className = 'row';
-    const pos = t.slots.map((s) => s.position);
-    const text = { left: 'Left', right: 'Right', first: 'First', second: 'Second', a: 'A', b: 'B' };
-    const choices = pos.map((p) => {
-      const b = Object.assign(document.createElement('button'), { type: 'button', textContent: text[p], id: `choice-${p}` });
-      b.onclick = () => onChange({ Choice: p });
-      row.append(b);
-      return b;
-    });
-    box.append(row);
-    $('question').textContent = question;
-    const keys = t.arrangement === 'sequential' ? ['1', '2'] : t.arrangement === 'abab' ? ['a', 'b'] : ['ArrowLeft', 'ArrowRight'];
-    return {
-      complete: false,
-      enable: (o) => { open = o; choices.forEach((b) => { b.disabled = !o; }); },
-      key: (e) => {
-        const i = keys.indexOf(e.key);
-        if (open && i >= 0) onChange({ Choice: pos[i] });
-      },
-    };
-  }
-  if (info.protocol === 'mos') {
-    const labels = info.presentation.labels;
-    question = labels ? `Rate the quality of the motion labelled “${labels.test}”` : 'Rate the quality of the compressed motion';
-    names = [labels ? `“${labels.test}”` : 'the compressed motion'];
-    const name = labels ? labels.test : 'Quality';
-    rows.push(scale.kind === 'continuous' ? continuous(0, name) : categorical(0));
+  if (w.kind === 'rating') {
+    names = [w.missing];
+    rows.push(scale.kind === 'continuous' ? continuous(0, w.name) : categorical(0));
     box.append(rows[0].el);
   } else {
-    names = t.names;
-    question = `Rate the quality of ${names[0]} and of ${names[1]}`;
+    names = w.names;
     if (scale.kind === 'continuous') {
       const both = document.createElement('div');
       both.className = 'scales';
@@ -385,10 +364,13 @@ function widgets(info, t, onChange) {
       }
     }
   }
-  $('question').textContent = question;
+  // BT.500's pair of scales appears at the vote, as in the window; until then the
+  // stimuli have the screen.
+  const atVote = w.kind === 'rating_pair' && scale.kind === 'continuous';
   const n = rows.length;
   const render = () => {
     rows.forEach((r) => r.render());
+    box.hidden = atVote && !open;
     const done = values.slice(0, n).every((v) => v !== null);
     $('continue').disabled = !(open && done);
     let what;
@@ -401,7 +383,7 @@ function widgets(info, t, onChange) {
   $('continue').onclick = () => { if (open && values.slice(0, n).every((v) => v !== null)) onChange(answer()); };
   render();
   return {
-    enable: (o) => { open = o; render(); },
+    enable: (o) => { if (o !== open) { open = o; render(); } },
     key: (e) => {
       if (!open) return;
       const k = e.key;
@@ -438,22 +420,160 @@ function widgets(info, t, onChange) {
   };
 }
 
+/** The name a position's answer has in the DOM (`choice-left`, `choice-neither`). */
+function positionName(p) {
+  return typeof p === 'string' ? p : `pane-${p.pane}`;
+}
+
+/** Buttons of a choice, each with its key (the window's keys, by the same names). */
+function choice(w, onChange) {
+  let open = false;
+  const row = document.createElement('div');
+  row.className = 'row';
+  const buttons = w.options.map((o) => {
+    const b = Object.assign(document.createElement('button'), { type: 'button', textContent: o.label, id: `choice-${positionName(o.answer)}` });
+    b.onclick = () => { if (open) onChange({ Choice: o.answer }); };
+    row.append(b);
+    return b;
+  });
+  $('answer-widgets').append(row);
+  $('missing').textContent = '';
+  // A browser names letter keys by the character typed: "a" and "A" both answer A.
+  const same = (key, name) => key === name || (name.length === 1 && key.toLowerCase() === name.toLowerCase());
+  return {
+    enable: (o) => { open = o; buttons.forEach((b) => { b.disabled = !o; }); },
+    key: (e) => {
+      const o = w.options.find((x) => same(e.key, x.key));
+      if (open && o) onChange({ Choice: o.answer });
+    },
+  };
+}
+
+/** MUSHRA: a slider per lettered pane on the study's scale; Continue once each is set. */
+function sliders(info, screen, onChange) {
+  const scale = info.scale;
+  const step = scale.step || 1;
+  const panes = screen.panes.filter((p) => p.position !== null);
+  const values = panes.map(() => null);
+  let open = false;
+  const box = document.createElement('div');
+  box.className = 'sliders';
+  const inputs = panes.map((p, k) => {
+    const col = document.createElement('label');
+    col.className = 'slider';
+    const input = Object.assign(document.createElement('input'), { type: 'range', min: scale.min, max: scale.max, step, value: (scale.min + scale.max) / 2 });
+    input.dataset.pane = k;
+    input.setAttribute('aria-label', p.label || '');
+    const shown = document.createElement('output');
+    input.oninput = () => { values[k] = Number(input.value); render(); };
+    col.append(Object.assign(document.createElement('strong'), { textContent: p.label || '' }), input, shown);
+    box.append(col);
+    return { input, shown };
+  });
+  $('answer-widgets').append(box);
+  const render = () => {
+    inputs.forEach(({ input, shown }, k) => {
+      input.disabled = !open;
+      input.classList.toggle('unset', values[k] === null);
+      shown.textContent = values[k] === null ? '–' : String(values[k]);
+    });
+    const left = panes.filter((_, k) => values[k] === null).map((p) => p.label);
+    $('continue').disabled = !(open && left.length === 0);
+    $('missing').textContent = open && left.length ? `Rate ${left.join(', ')} to continue.` : '';
+  };
+  $('continue').onclick = () => {
+    if (open && values.every((v) => v !== null)) onChange({ Rating: values[0] }, values.slice());
+  };
+  render();
+  return {
+    enable: (o) => { if (o !== open) { open = o; render(); } },
+    key: (e) => { if (open && e.key === 'Enter') $('continue').click(); },
+  };
+}
+
+/** Columns of a grid of `n` panes of aspect 4:3 in a `w` × `h` area that make them largest. */
+function gridColumns(n, w, h) {
+  let best = 1;
+  let size = -1;
+  for (let c = 1; c <= Math.max(1, n); c++) {
+    const s = Math.min(w / c, (h / Math.ceil(n / c)) * 4 / 3);
+    if (s > size) { size = s; best = c; }
+  }
+  return best;
+}
+
+/**
+ * Where the panes go in a `w` × `h` stage for what a frame shows, as the window lays them
+ * out (window/src/screens.rs stimuli_panel): side by side two squares, one stimulus 16:9,
+ * a grid of 4:3 cells each with its name above. Returns [{ pane, x, y, w, h, name }].
+ */
+function layout(screen, show, w, h) {
+  const labelled = screen.panes.some((p) => p.label);
+  if (show.show === 'both') {
+    const gap = 12;
+    const band = labelled ? 44 : 0;
+    const pw = (w - gap) / 2;
+    const ph = Math.min(pw, h - band);
+    const top = h / 2 - (ph - band) / 2;
+    return [0, 1].map((k) => ({ pane: k, x: k * (pw + gap), y: top, w: pw, h: ph, name: screen.panes[k] && screen.panes[k].label }));
+  }
+  if (show.show === 'one' || show.show === 'test') {
+    const k = show.show === 'one' && screen.panes[0] && positionName(show.position) !== positionName(screen.panes[0].position) ? 1 : 0;
+    const ph = h - 40;
+    const pw = Math.min(ph * 16 / 9, w);
+    return [{ pane: k, x: (w - pw) / 2, y: h / 2 + 20 - ph / 2, w: pw, h: ph, name: null }];
+  }
+  if (show.show === 'grid') {
+    const n = screen.panes.length;
+    const [gap, band] = [8, 26];
+    const cols = gridColumns(n, w, h);
+    const rows = Math.ceil(n / cols);
+    const cw = (w - gap * (cols - 1)) / cols;
+    const ch = (h - gap * (rows - 1)) / rows;
+    return screen.panes.map((p, k) => {
+      const [c, r] = [k % cols, Math.floor(k / cols)];
+      return { pane: k, x: c * (cw + gap), y: r * (ch + gap) + band, w: cw, h: Math.max(1, ch - band), name: p.label, band };
+    });
+  }
+  return [];
+}
+
+/** The names above the panes, and the step's or pane's label over a single stimulus. */
+function drawLabels(screen, frame, rects) {
+  const labels = $('labels');
+  const out = rects.filter((r) => r.name).map((r) => [r.name, r.x, r.y - (r.band || 44), r.w]);
+  if (frame.step.show === 'one') {
+    const pane = screen.panes.find((p) => positionName(p.position) === positionName(frame.step.position));
+    const text = (pane && pane.label) || frame.label;
+    if (text) out.push([text, 0, 0, labels.clientWidth]);
+  } else if (frame.label) out.push([frame.label, 0, 0, labels.clientWidth]);
+  const key = JSON.stringify(out);
+  if (labels.dataset.text === key) return;
+  labels.dataset.text = key;
+  labels.replaceChildren(...out.map(([text, x, y, w]) => {
+    const d = Object.assign(document.createElement('div'), { textContent: text });
+    Object.assign(d.style, { left: `${x}px`, top: `${Math.max(0, y)}px`, width: `${w}px` });
+    return d;
+  }));
+}
+
 /** Plays trial `t` until the participant answers; resolves with the request to post. */
 function runTrial(info, t, clips) {
+  const { screen, scene } = t.page;
   return new Promise((resolve) => {
     document.body.dataset.trial = String(t.index);
+    document.body.dataset.trials = t.indices.join(',');
     show('trial');
     const stage = state.stage;
-    stage.load(clips);
-    const pres = new Presentation(t, info.presentation, t.clip_s);
-    const labels = $('labels');
+    stage.load(scene, clips);
+    const pres = new Presentation(screen.schedule);
     let intervals = [];
     let phases = [];
     let last = null;
     let hidden = false;
     let answered = false;
     let gateOpen = null;
-    const w = widgets(info, t, (answer) => {
+    const w = widgets(info, screen, (answer, paneRatings) => {
       if (answered || !pres.shownOnce) return;
       answered = true;
       // Closed once given; a refused answer opens again only after the trial replays.
@@ -465,6 +585,7 @@ function runTrial(info, t, clips) {
         replays: pres.replays,
         response_time_ms: Math.max(0, Math.round(now - gateOpen)),
         played_ms: now - pres.firstStart,
+        pane_ratings: paneRatings || [],
         intervals,
         phases,
         hidden,
@@ -489,6 +610,7 @@ function runTrial(info, t, clips) {
         else restart();
       }
     };
+    const canvas = $('view');
     const frame = (now) => {
       if (answered) { document.onkeydown = null; document.onvisibilitychange = null; return; }
       const f = pres.at(now);
@@ -498,21 +620,17 @@ function runTrial(info, t, clips) {
       }
       last = now;
       if (f.finished && gateOpen === null) gateOpen = now;
-      stage.draw(f.show, f.clipTime);
+      const rects = layout(screen, f.step, canvas.clientWidth, canvas.clientHeight);
+      stage.draw(rects, f.clipTime);
+      drawLabels(screen, f, rects);
       const open = pres.shownOnce;
       w.enable(open);
       document.body.dataset.open = open ? '1' : '0';
       document.body.dataset.trial = String(t.index);
+      document.body.dataset.show = f.step.show;
       replay.hidden = !pres.canReplay();
       $('watch').hidden = open;
-      $('vote').hidden = !(f.past && f.show === 'grey');
-      const names = f.show === 'both' ? t.slots.map((s) => s.label || '') :
-        typeof f.show === 'number' ? [t.slots[f.show].label || f.label || ''] : [];
-      const text = names.join('|');
-      if (labels.dataset.text !== text) {
-        labels.dataset.text = text;
-        labels.replaceChildren(...names.map((n) => Object.assign(document.createElement('div'), { textContent: n })));
-      }
+      $('vote').hidden = !(f.past && f.step.show === 'grey');
       requestAnimationFrame(frame);
     };
     requestAnimationFrame(frame);
@@ -538,7 +656,7 @@ async function trials(info) {
       show('gap');
     }
     state.reached = t.index;
-    const bufs = await Promise.all([0, 1].map((k) => call('GET', api(`clip/${t.index}/${k}`), undefined, { retry: true, binary: true })));
+    const bufs = await Promise.all([...Array(t.clips).keys()].map((k) => call('GET', api(`clip/${t.index}/${k}`), undefined, { retry: true, binary: true })));
     const clips = bufs.map(parseClip);
     progress(info, t, false);
     const request = await runTrial(info, t, clips);

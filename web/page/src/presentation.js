@@ -1,43 +1,30 @@
-// A trial's presentation schedule, as the study window runs it (window/src/flow.rs):
-// side by side, both clips `playback_count` times; sequential, first, grey, second; DSCQS
-// (BT.500), A, grey, B, grey, A, grey, B, then the vote on grey. Answers count once the whole
-// schedule has been shown; the server checks the time too.
+// A trial's schedule as the server describes it (protocols::screen::Schedule, the one the
+// study window plays in window/src/flow.rs): its steps in order, what shows after them while
+// the subject answers (hold, loop or grey), the replays allowed. Answers count once every
+// step has been shown; the server checks the time too.
 
-const PHASE = { both: 'both', grey: 'grey' };
+/** The phase a frame showing `step` belongs to (frames.csv), as Show::phase names it. */
+function phaseOf(step) {
+  if (step.show === 'one') return typeof step.position === 'string' ? step.position : 'grid';
+  return step.show;
+}
 
 export class Presentation {
-  constructor(trial, settings, clipS) {
-    const clip = clipS > 0 && Number.isFinite(clipS) ? clipS : 1;
-    const grey = settings.grey_ms / 1000;
-    const plays = Math.max(1, settings.playback_count);
-    const steps = [];
-    const addGrey = () => { if (grey > 0) steps.push({ show: 'grey', label: null, d: grey, phase: PHASE.grey }); };
-    if (trial.arrangement === 'side_by_side') {
-      for (let k = 0; k < plays; k++) steps.push({ show: 'both', label: null, d: clip, phase: PHASE.both });
-    } else if (trial.arrangement === 'sequential') {
-      for (let k = 0; k < plays; k++) {
-        if (k > 0) addGrey();
-        steps.push({ show: 0, label: '1', d: clip, phase: 'first' });
-        addGrey();
-        steps.push({ show: 1, label: '2', d: clip, phase: 'second' });
-      }
-    } else {
-      ['a', 'b', 'a', 'b'].forEach((p, i) => {
-        if (i > 0) addGrey();
-        steps.push({ show: p === 'a' ? 0 : 1, label: p.toUpperCase(), d: clip, phase: p });
-      });
-    }
-    this.steps = steps;
-    this.arrangement = trial.arrangement;
-    this.loop = settings.loop;
-    this.maxReplays = settings.max_replays;
+  constructor(schedule) {
+    this.steps = schedule.steps;
+    this.after = schedule.after;
+    this.maxReplays = schedule.max_replays;
     this.replays = 0;
     this.shownOnce = false;
     this.start = null;
     this.firstStart = null;
   }
 
-  /** What to draw at `now` (ms, performance clock). */
+  /**
+   * What to draw at `now` (ms, performance clock): the step (`show`, `position`, `label`),
+   * the clip time in seconds, whether the schedule has been shown once (`finished`) and
+   * whether this frame is past its end (`past`), and the frame's phase.
+   */
   at(now) {
     if (this.start === null) {
       this.start = now;
@@ -45,15 +32,17 @@ export class Presentation {
     }
     let t = Math.max(0, (now - this.start) / 1000);
     for (const s of this.steps) {
-      if (t < s.d) return { show: s.show, label: s.label, clipTime: t, finished: this.shownOnce, past: false, phase: s.phase };
-      t -= s.d;
+      if (t < s.duration_s) {
+        return { step: s, label: s.label, clipTime: t, finished: this.shownOnce, past: false, phase: phaseOf(s) };
+      }
+      t -= s.duration_s;
     }
     this.shownOnce = true;
-    const last = this.steps[this.steps.length - 1];
-    if (this.arrangement === 'side_by_side') {
-      return { show: 'both', label: null, clipTime: this.loop ? t % Math.max(1e-3, last.d) : last.d, finished: true, past: true, phase: 'answer' };
-    }
-    return { show: 'grey', label: null, clipTime: 0, finished: true, past: true, phase: 'answer' };
+    const last = this.steps[this.steps.length - 1] || { show: 'grey', label: null, duration_s: 0 };
+    const grey = { show: 'grey', label: null, duration_s: 0 };
+    const [step, clipTime] = this.after === 'loop' ? [last, t % Math.max(1e-3, last.duration_s)]
+      : this.after === 'hold' ? [last, last.duration_s] : [grey, 0];
+    return { step, label: null, clipTime, finished: true, past: true, phase: 'answer' };
   }
 
   canReplay() {
