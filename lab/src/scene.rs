@@ -401,6 +401,17 @@ impl Casting {
         }
     }
 
+    /// Seconds from the first frame to one frame past the last of the first pane's longest
+    /// clip: what one step of the trial's schedule lasts.
+    pub fn duration_s(&self) -> f64 {
+        self.panes
+            .first()
+            .into_iter()
+            .flatten()
+            .map(|c| c.clip.duration_s())
+            .fold(0.0, f64::max)
+    }
+
     /// The window's stages, one per pane.
     pub fn stages(&self) -> Vec<Stage> {
         self.panes.iter().map(|casts| Stage::of(casts)).collect()

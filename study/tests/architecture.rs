@@ -401,8 +401,8 @@ fn code_outside_the_method_modules_names_no_protocol() {
     // Issue 35's seam: a method's code lives in its module under protocols/src/methods/,
     // and the rest of the workspace asks the study's method (`study.method()`) instead of
     // matching on the protocol's name; a method's analysis is registered the same way in
-    // analysis/src/methods/. Nothing else branches on a name (the browser page's server
-    // asks the method whether the page has its screen).
+    // analysis/src/methods/. Nothing else branches on a name (the browser page draws the
+    // Screen it is sent).
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     let root = root.canonicalize().unwrap();
     let found = protocol_names_outside_methods(&root);
@@ -422,4 +422,41 @@ fn code_outside_the_method_modules_names_no_protocol() {
     let seen = protocol_names_outside_methods(&scratch.canonicalize().unwrap());
     std::fs::remove_dir_all(&scratch).unwrap();
     assert_eq!(seen, [("x/src/a.rs".to_owned(), 1)]);
+}
+
+/// The participant's page draws the `Screen` it is sent: no script of it names a protocol
+/// (as a string the server's JSON would carry: `'mos'`, `"pair_comparison"`, ...).
+#[test]
+fn the_browser_page_names_no_protocol() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../web/page/src");
+    let names = [
+        "mos",
+        "dscqs",
+        "acr",
+        "dcr",
+        "pair_comparison",
+        "mushra",
+        "staircase",
+        "ccr",
+    ];
+    let mut scripts = 0;
+    for entry in std::fs::read_dir(&root).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_none_or(|e| e != "js") {
+            continue;
+        }
+        scripts += 1;
+        let text = std::fs::read_to_string(&path).unwrap();
+        for name in names {
+            for quote in ['\'', '"', '`'] {
+                let literal = format!("{quote}{name}{quote}");
+                assert!(
+                    !text.contains(&literal),
+                    "{}: names the protocol {literal}",
+                    path.display()
+                );
+            }
+        }
+    }
+    assert!(scripts >= 4, "the page's scripts in {}", root.display());
 }

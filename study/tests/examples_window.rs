@@ -525,6 +525,14 @@ fn each_example_records_its_first_answer_in_the_window() {
             first_answer_keys(name)
         );
         let mut run = run_scripted(&env, name, &examples().join(name), &[], &out, &script);
+        // `SCREENSHOTS=DIR` (scripts/screenshots): the first trial as it plays, for
+        // docs/serve.md beside the browser's.
+        if let Some(shots) = std::env::var_os("SCREENSHOTS") {
+            run.wait_screen("trial/playing");
+            std::thread::sleep(std::time::Duration::from_millis(1500));
+            let stem = name.trim_end_matches(".toml");
+            common::screenshot(&env, &Path::new(&shots).join(format!("{stem}-window.png")));
+        }
         run.wait_line("done 2");
         let (_, stderr) = run.interrupt();
         assert!(!stderr.contains("test input: dropped"), "{name}: {stderr}");
@@ -730,6 +738,9 @@ fn a_crowd_trial_shows_three_figures_at_their_distances_in_the_window() {
             break found;
         }
     };
+    if let Some(shots) = std::env::var_os("SCREENSHOTS") {
+        std::fs::copy(&shot, Path::new(&shots).join("crowd-run1-window.png")).unwrap();
+    }
     run.wait_line("done 2");
     run.interrupt();
     let trials = results::trials::read_trials(&session.join("trials.csv")).unwrap();

@@ -27,6 +27,9 @@ use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use protocols::record::{Answer, Block, Position};
+
+mod common;
+use common::Rgb;
 use serde_json::{Value, json};
 
 fn have(tool: &str) -> bool {
@@ -282,6 +285,16 @@ impl Browser {
                 "args": [],
             })),
         )
+    }
+
+    /// The viewport as the participant sees it, as a PNG at `path`.
+    fn screenshot(&self, path: &Path) {
+        use base64::Engine as _;
+        let png = self.cmd("GET", "screenshot", None);
+        let bytes = base64::engine::general_purpose::STANDARD
+            .decode(png.as_str().unwrap())
+            .unwrap();
+        std::fs::write(path, bytes).unwrap();
     }
 
     fn resize(&self, width: u32, height: u32) {
@@ -1012,6 +1025,16 @@ fn every_example_study_runs_in_the_browser_as_simulated() {
         let b = driver.browser(&dir.join("profile"));
         b.go(&format!("http://127.0.0.1:{port}/?PROLIFIC_PID={subject}"));
         welcome(&b);
+        // `SCREENSHOTS=DIR` (scripts/screenshots): the first trial as it plays, for
+        // docs/serve.md beside the window's.
+        if let Some(shots) = std::env::var_os("SCREENSHOTS") {
+            b.wait(
+                "document.body.dataset.screen === 'trial' && document.body.dataset.show !== 'grey' \
+                 && (Number(document.body.dataset.clipTime) > 1.5 || document.body.dataset.open === '1')",
+                60,
+            );
+            b.screenshot(&Path::new(&shots).join(format!("{name}-page.png")));
+        }
         let mut given = BTreeSet::new();
         let mut screens = 0;
         while screens < EXAMPLE_SCREENS && b.screen() != "end" {
@@ -1050,6 +1073,314 @@ fn every_example_study_runs_in_the_browser_as_simulated() {
             }
         }
         drop(b);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}
+
+/// A pane of an image: its top-left corner and size, pixels.
+#[derive(Debug, Clone, Copy)]
+struct Rect {
+    x: f64,
+    y: f64,
+    w: f64,
+    h: f64,
+}
+
+/// Where the figures of a pane are, measured from its pixels (the joints' orange), in pane
+/// heights from the pane's centre (so that panes of different widths compare): each
+/// figure's horizontal centre, top and bottom, and whether each of its feet has a dark
+/// shadow on the ground below it.
+#[derive(Debug)]
+struct Seen {
+    figures: Vec<Figure>,
+}
+
+#[derive(Debug)]
+struct Figure {
+    x: f64,
+    top: f64,
+    bottom: f64,
+    /// Per foot (the lowest joints, split where they are apart): a shadow under it.
+    shadows: Vec<bool>,
+}
+
+fn luminance(img: &Rgb, x: usize, y: usize) -> f64 {
+    let [r, g, b] = img.pixel(x, y);
+    0.299 * f64::from(r) + 0.587 * f64::from(g) + 0.114 * f64::from(b)
+}
+
+/// Intervals of `xs` (sorted) separated by gaps wider than `gap`.
+fn runs(xs: &[usize], gap: usize) -> Vec<(usize, usize)> {
+    let mut out: Vec<(usize, usize)> = Vec::new();
+    for &x in xs {
+        match out.last_mut() {
+            Some((_, hi)) if x <= *hi + gap => *hi = x,
+            _ => out.push((x, x)),
+        }
+    }
+    out
+}
+
+fn look(img: &Rgb, pane: Rect) -> Seen {
+    let (x0, y0) = (pane.x.round() as usize, pane.y.round() as usize);
+    let (x1, y1) = (
+        ((pane.x + pane.w).round() as usize).min(img.width),
+        ((pane.y + pane.h).round() as usize).min(img.height),
+    );
+    let orange: Vec<(usize, usize)> = (y0..y1)
+        .flat_map(|y| (x0..x1).map(move |x| (x, y)))
+        .filter(|&(x, y)| img.is_orange(x, y))
+        .collect();
+    let mut xs: Vec<usize> = orange.iter().map(|p| p.0).collect();
+    xs.sort_unstable();
+    xs.dedup();
+    // Figures stand apart across the pane; a gap of 3 % of its height parts them.
+    let gap = (0.03 * pane.h) as usize;
+    let (cx, cy) = (pane.x + 0.5 * pane.w, pane.y + 0.5 * pane.h);
+    let figures = runs(&xs, gap)
+        .into_iter()
+        .map(|(lo, hi)| {
+            let mine: Vec<(usize, usize)> = orange
+                .iter()
+                .copied()
+                .filter(|p| (lo..=hi).contains(&p.0))
+                .collect();
+            let top = mine.iter().map(|p| p.1).min().unwrap();
+            let bottom = mine.iter().map(|p| p.1).max().unwrap();
+            let tall = (bottom - top).max(1);
+            // The feet: the joints in the lowest 6 % of the figure, parted where apart.
+            let mut feet: Vec<usize> = mine
+                .iter()
+                .filter(|p| p.1 + tall * 6 / 100 >= bottom)
+                .map(|p| p.0)
+                .collect();
+            feet.sort_unstable();
+            feet.dedup();
+            let shadows = runs(&feet, (0.02 * pane.h) as usize)
+                .into_iter()
+                .map(|(a, b)| {
+                    // The ground beside the figure at the feet's height, against the ground
+                    // under the foot: a shadow is clearly darker.
+                    let band = (bottom.saturating_sub(tall / 50))..(bottom + tall / 25).min(y1);
+                    let reach = (0.04 * pane.h) as usize;
+                    let beside: Vec<f64> = band
+                        .clone()
+                        .flat_map(|y| [x0 + 2, x1 - 3].into_iter().map(move |x| (x, y)))
+                        .map(|(x, y)| luminance(img, x, y))
+                        .collect();
+                    let ground = beside.iter().sum::<f64>() / beside.len().max(1) as f64;
+                    let under = band
+                        .flat_map(|y| {
+                            (a.saturating_sub(reach)..(b + reach).min(x1)).map(move |x| (x, y))
+                        })
+                        .filter(|&(x, y)| {
+                            !img.is_orange(x, y) && luminance(img, x, y) < ground - 25.0
+                        })
+                        .count();
+                    under >= 6
+                })
+                .collect();
+            Figure {
+                x: ((lo + hi) as f64 * 0.5 - cx) / pane.h,
+                top: (top as f64 - cy) / pane.h,
+                bottom: (bottom as f64 - cy) / pane.h,
+                shadows,
+            }
+        })
+        .collect();
+    Seen { figures }
+}
+
+/// The browser's figures against the window's: as many, each within 5 % of the pane's
+/// height in place and size, and a shadow under every foot in both.
+fn same_figures(what: &str, page: &Seen, window: &Seen) {
+    assert_eq!(
+        page.figures.len(),
+        window.figures.len(),
+        "{what}: figures\npage {page:?}\nwindow {window:?}"
+    );
+    for (p, w) in page.figures.iter().zip(&window.figures) {
+        for (name, a, b) in [
+            ("centre", p.x, w.x),
+            ("top", p.top, w.top),
+            ("bottom", p.bottom, w.bottom),
+        ] {
+            assert!(
+                (a - b).abs() <= 0.05,
+                "{what}: {name} {a:.3} in the page, {b:.3} in the window\npage {page:?}\nwindow {window:?}"
+            );
+        }
+        for (seen, s) in [("page", p), ("window", w)] {
+            assert!(
+                !s.shadows.is_empty() && s.shadows.iter().all(|&x| x),
+                "{what}: a foot without a shadow in the {seen}: {s:?}"
+            );
+        }
+    }
+}
+
+/// Stops the page's drawing during the first trial's stimuli (its animation frames no
+/// longer come), takes the screenshot, and returns the clip time of the frame left on
+/// screen and the panes drawn.
+fn freeze(b: &Browser, show: &str, path: &Path) -> (f64, Vec<(usize, Rect)>) {
+    b.wait(
+        &format!(
+            "document.body.dataset.screen === 'trial' && document.body.dataset.show === '{show}' \
+             && document.body.dataset.trial === '0' && Number(document.body.dataset.clipTime) > 0.8"
+        ),
+        60,
+    );
+    b.js("window.requestAnimationFrame = () => 0; return null;");
+    std::thread::sleep(Duration::from_millis(400));
+    let v = b.js(
+        "const r = document.getElementById('view').getBoundingClientRect(); \
+         const d = document.body.dataset; \
+         return [Number(d.clipTime), d.layout, d.trial, r.left, r.top, d.show];",
+    );
+    assert_eq!(
+        v[5].as_str(),
+        Some(show),
+        "the frame left on screen shows {show}"
+    );
+    assert_eq!(v[2].as_str(), Some("0"), "the first trial is on screen");
+    b.screenshot(path);
+    let (left, top) = (v[3].as_f64().unwrap(), v[4].as_f64().unwrap());
+    let layout: Vec<Vec<f64>> = serde_json::from_str(v[1].as_str().unwrap()).unwrap();
+    let panes = layout
+        .iter()
+        .map(|r| {
+            (
+                r[0] as usize,
+                Rect {
+                    x: left + r[1],
+                    y: top + r[2],
+                    w: r[3],
+                    h: r[4],
+                },
+            )
+        })
+        .collect();
+    (v[0].as_f64().unwrap(), panes)
+}
+
+/// The page draws what the window draws: the MOS example's trial and the crowd example's
+/// scene, drawn by the page in headless Chromium and by the window's renderer offscreen
+/// (`study clip render`, lavapipe) at the same clip time: as many figures, each as tall and
+/// in the same place in its pane (within 5 % of its height), a shadow under each foot.
+#[test]
+fn the_page_draws_the_figures_the_window_draws() {
+    if !ready() {
+        return;
+    }
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap();
+    let driver = Driver::start();
+    let dir = temp_dir("same-figures");
+    for (example, show) in [("mos", "both"), ("crowd-run1", "one")] {
+        let study = root.join(format!("examples/{example}.toml"));
+        let out = dir.join(format!("results-{example}"));
+        let port = free_port();
+        let _server = serve(&study, &out, port);
+        let b = driver.browser(&dir.join(format!("profile-{example}")));
+        let subject = format!("look{}", example.len());
+        b.go(&format!("http://127.0.0.1:{port}/?PROLIFIC_PID={subject}"));
+        welcome(&b);
+        let shot = dir.join(format!("{example}-page.png"));
+        let (t, panes) = freeze(&b, show, &shot);
+        // What each pane shows (the page is not told): the same subject's plan, simulated.
+        let (rows, _) = simulate(&study, &dir, &subject, example.len() as u64);
+        let first = &rows[0].trial;
+        let positions = if show == "both" {
+            [Position::Left, Position::Right]
+        } else {
+            [Position::First, Position::Second]
+        };
+        let stimuli: Vec<&str> = positions
+            .iter()
+            .map(|&p| {
+                if p == first.reference_position {
+                    first.reference.as_str()
+                } else {
+                    first.stimulus.as_str()
+                }
+            })
+            .collect();
+        let page = Rgb::read(&shot);
+        let drawn = dir.join(format!("{example}-window.png"));
+        for (k, rect) in panes {
+            let size = rect.h.round().to_string();
+            let time = t.to_string();
+            let stimulus = stimuli[k];
+            let mut args: Vec<std::ffi::OsString> = [
+                "clip", "render", "--times", &time, "--pane", &size, "--force", "-o",
+            ]
+            .into_iter()
+            .map(Into::into)
+            .collect();
+            args.push(drawn.clone().into());
+            if example == "mos" {
+                // Both panes framed by the reference, as a trial draws them: the reference
+                // first, the pane's stimulus second.
+                let manifest: Value = serde_json::from_str(
+                    &std::fs::read_to_string(root.join("examples/stimuli.json")).unwrap(),
+                )
+                .unwrap();
+                let file = |id: &str| {
+                    let entry = manifest["stimuli"]
+                        .as_array()
+                        .unwrap()
+                        .iter()
+                        .find(|s| s["id"] == id)
+                        .unwrap_or_else(|| panic!("{id} in the manifest"));
+                    root.join("examples").join(entry["file"].as_str().unwrap())
+                };
+                let clip = stimulus.split('/').next().unwrap();
+                args.push(file(&format!("{clip}/reference")).into());
+                args.push(file(stimulus).into());
+            } else {
+                args.extend([
+                    "--study".into(),
+                    study.clone().into(),
+                    "--scenes".into(),
+                    stimulus.into(),
+                ]);
+            }
+            let run = Command::new(env!("CARGO_BIN_EXE_study"))
+                .args(&args)
+                .output()
+                .unwrap();
+            assert!(
+                run.status.success(),
+                "study clip render: {}",
+                String::from_utf8_lossy(&run.stderr)
+            );
+            let window = Rgb::read(&drawn);
+            // The pane's stimulus: the second column for two clips, the only one for a scene.
+            let col = if example == "mos" { 1.0 } else { 0.0 };
+            let w_pane = Rect {
+                x: col * window.width as f64 / if example == "mos" { 2.0 } else { 1.0 },
+                y: 0.0,
+                w: if example == "mos" {
+                    window.width as f64 / 2.0
+                } else {
+                    window.width as f64
+                },
+                h: window.height as f64,
+            };
+            let what = format!("{example} pane {k} ({stimulus}) at {t:.3} s");
+            let (p, w) = (look(&page, rect), look(&window, w_pane));
+            eprintln!("{what}:\n  page   {p:?}\n  window {w:?}");
+            if example == "crowd-run1" {
+                assert_eq!(
+                    p.figures.len(),
+                    3,
+                    "{what}: the scene's three characters {p:?}"
+                );
+            }
+            same_figures(&what, &p, &w);
+        }
+        drop(b);
+    }
+    if std::env::var_os("KEEP_SCREENSHOTS").is_none() {
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -627,7 +627,6 @@ impl App {
                 "max": scale.max,
                 "step": scale.step,
                 "categories": categories,
-                "bt500": words,
             },
             "presentation": { "gap_ms": p_settings.gap_ms },
             "answer_recorded": texts::ANSWER_RECORDED,
@@ -811,11 +810,7 @@ impl App {
         } else {
             Casting::of(study, &trial, first, &mut framing)?
         };
-        let clip_s = cast
-            .stages()
-            .first()
-            .map_or(first.reference.duration_s(), lab::scene::Stage::duration_s);
-        let screen = Screen::of_screen(study, &panes, clip_s)
+        let screen = Screen::of_screen(study, &panes, cast.duration_s())
             .ok_or_else(|| ApiError::new(500, "a screen without trials"))?;
         let (scene, clips) = staging::scene(&cast);
         let clips = clips
@@ -825,7 +820,10 @@ impl App {
         let encoding = shown.swap_remove(0).encoding;
         live.pending = Some(Pending {
             answers_open_ms: screen.schedule.answers_open_s * 1e3,
-            screen: Arc::new(serde_json::json!({ "screen": screen, "scene": scene })),
+            screen: Arc::new(serde_json::json!({
+                "screen": staging::blind(serde_json::to_value(&screen).map_err(|e| ApiError::new(500, e.to_string()))?),
+                "scene": scene,
+            })),
             trial,
             panes,
             served: None,

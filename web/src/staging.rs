@@ -21,7 +21,8 @@ fn scaled(p: [f32; 3], k: f32) -> [f32; 3] {
 }
 
 /// The page's scene of `cast` and the stimulus id of each clip it draws, in the order the
-/// figures' `clip` indices name them (each id once).
+/// figures' `clip` indices name them (each id once per pane: that two panes show the same
+/// stimulus, a hidden reference, is not told by their indices).
 pub fn scene(cast: &Casting) -> (Value, Vec<(String, Arc<motion::Clip>)>) {
     let mut clips: Vec<(String, Arc<motion::Clip>)> = Vec::new();
     // A crowd camera is in centimetres already; a one-figure view is in its clip's units.
@@ -34,16 +35,20 @@ pub fn scene(cast: &Casting) -> (Value, Vec<(String, Arc<motion::Clip>)>) {
         .panes
         .iter()
         .map(|figures| {
+            let pane_start = clips.len();
             let figures: Vec<Value> = figures
                 .iter()
                 .map(|c| {
-                    let index = clips
+                    let index = clips[pane_start..]
                         .iter()
                         .position(|(id, _)| *id == c.id)
-                        .unwrap_or_else(|| {
-                            clips.push((c.id.clone(), Arc::clone(&c.clip)));
-                            clips.len() - 1
-                        });
+                        .map_or_else(
+                            || {
+                                clips.push((c.id.clone(), Arc::clone(&c.clip)));
+                                clips.len() - 1
+                            },
+                            |i| pane_start + i,
+                        );
                     let own = cm(&c.clip);
                     json!({
                         "clip": index,
@@ -88,4 +93,51 @@ fn view(v: &View, k: f32, panes: &[Value]) -> Value {
         "shadow": v.shadow,
         "panes": panes,
     })
+}
+
+/// `screen` (a serialized `Screen`) as the participant's browser may see it: without the
+/// stimulus ids and the reference flags of its panes and characters, so nothing the page
+/// is sent tells which pane holds the original in a blind design.
+pub fn blind(mut screen: Value) -> Value {
+    if let Some(panes) = screen["panes"].as_array_mut() {
+        for pane in panes {
+            if let Some(p) = pane.as_object_mut() {
+                p.remove("stimulus");
+                p.remove("reference");
+            }
+            if let Some(characters) = pane["content"]["characters"].as_array_mut() {
+                for c in characters.iter_mut().filter_map(Value::as_object_mut) {
+                    c.remove("stimulus");
+                }
+            }
+        }
+    }
+    screen
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_blind_screen_names_no_stimulus_and_no_reference() {
+        let screen = json!({
+            "title": "t",
+            "panes": [
+                { "position": "left", "stimulus": "walk/reference", "reference": true,
+                  "label": null, "content": { "kind": "figure" } },
+                { "position": "right", "stimulus": "walk/spiht/cr10", "reference": false,
+                  "label": null, "content": { "kind": "crowd_scene", "characters": [
+                      { "name": "front", "stimulus": "walk/reference", "x_cm": 0.0 } ] } },
+            ],
+        });
+        let text = blind(screen).to_string();
+        for word in ["walk/", "reference", "stimulus"] {
+            assert!(!text.contains(word), "{word} in {text}");
+        }
+        assert!(
+            text.contains("\"front\"") && text.contains("\"left\""),
+            "{text}"
+        );
+    }
 }

@@ -642,7 +642,7 @@ impl StudyUi {
         let described = Arc::new(protocols::screen::Screen::of(
             &self.study,
             &trial,
-            stages[0].duration_s(),
+            cast.duration_s(),
         ));
         let presentation = Presentation::new(described.schedule.clone(), now);
         Ok(TrialScreen {
@@ -691,7 +691,7 @@ impl StudyUi {
         let cast = Casting::grid(&self.study, view, (&trial.reference, &reference), &clips);
         let (view, stages) = (cast.view, cast.stages());
         let described =
-            protocols::screen::Screen::of_screen(&self.study, &panes, stages[0].duration_s())
+            protocols::screen::Screen::of_screen(&self.study, &panes, cast.duration_s())
                 .map(Arc::new)
                 .ok_or_else(|| lab::LabError::Refused("a MUSHRA screen without panes".into()))?;
         let presentation = Presentation::new(described.schedule.clone(), now);

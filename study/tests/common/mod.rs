@@ -420,6 +420,15 @@ impl Rgb {
         }
     }
 
+    /// The colour at (x, y) (grey repeated for a grayscale image).
+    pub fn pixel(&self, x: usize, y: usize) -> [u8; 3] {
+        let i = y * self.line + x * self.channels;
+        if self.channels < 3 {
+            return [self.buf[i]; 3];
+        }
+        [self.buf[i], self.buf[i + 1], self.buf[i + 2]]
+    }
+
     /// Whether the pixel at (x, y) is the joints' orange (red well above blue); never in a
     /// grayscale image.
     pub fn is_orange(&self, x: usize, y: usize) -> bool {

@@ -622,6 +622,11 @@ function runTrial(info, t, clips) {
       if (f.finished && gateOpen === null) gateOpen = now;
       const rects = layout(screen, f.step, canvas.clientWidth, canvas.clientHeight);
       stage.draw(rects, f.clipTime);
+      // The clip time and the panes' places of the frame drawn (tests compare them with
+      // the window's drawing of the same).
+      document.body.dataset.clipTime = String(f.clipTime);
+      const placed = JSON.stringify(rects.map((r) => [r.pane, r.x, r.y, r.w, r.h]));
+      if (document.body.dataset.layout !== placed) document.body.dataset.layout = placed;
       drawLabels(screen, f, rects);
       const open = pres.shownOnce;
       w.enable(open);

@@ -5,7 +5,7 @@
 // server's joint positions in cm (format MCJP, web/src/clipdata.rs); the scene (camera,
 // ground, light, panes and their figures) comes with the trial. shapes.js holds the math.
 import * as THREE from 'three';
-import { INSTANCE_FLOATS, Posed, cameraAt, clipDuration, cylinderMesh, project, sphereMesh } from './shapes.js';
+import { INSTANCE_FLOATS, Posed, cameraAt, cylinderMesh, sphereMesh } from './shapes.js';
 
 // Colours are written to the canvas as they are, like the window's non-sRGB (Unorm) target:
 // no colour management anywhere (output colour space linear = no encoding, raw shaders).
@@ -305,12 +305,6 @@ export class Stage {
     this.uniforms.grid.value = grid > 0 ? grid : 100;
   }
 
-  /** Seconds from the first frame to one frame past the last of the pane's longest figure. */
-  duration(pane) {
-    const figs = this.panes[pane] || [];
-    return figs.reduce((m, f) => Math.max(m, clipDuration(f.clip)), 0);
-  }
-
   /** The canvas' size in CSS pixels, its backing store resized to device pixels if needed. */
   resize() {
     const w = this.canvas.clientWidth;
@@ -381,46 +375,6 @@ export class Stage {
     m.ground.visible = (Number(g.half) || 0) > 0;
     for (const mat of Object.values(this.materials)) mat.uniformsNeedUpdate = true;
     this.renderer.render(this.scene3, this.camera);
-  }
-
-  /**
-   * Where pane `pane`'s figures appear at `t` in a rectangle `rect` ({ w, h }, CSS pixels),
-   * computed with draw's camera (no pixels read): per figure the bounding box [x0, y0, x1,
-   * y1] of its joints and `feet`, its two lowest end joints, with `feet_ground`, the points on
-   * the ground under them; and `ground_y_px`, the ground under the camera's target. Pixels
-   * from the rectangle's top-left.
-   */
-  probe(pane, t, rect) {
-    if (!this.scene) return { figures: [], ground_y_px: NaN };
-    const w = rect.w;
-    const h = rect.h;
-    const cam = cameraAt(this.scene.camera, w / Math.max(h, 1e-6), t);
-    const px = (p) => {
-      const n = project(cam.viewProj, p);
-      return [((n[0] + 1) / 2) * w, ((1 - n[1]) / 2) * h];
-    };
-    const gy = Number(this.scene.ground && this.scene.ground.y) || 0;
-    const figures = (this.panes[pane] || []).map((f) => {
-      const p = f.pointsAt(t);
-      const box = [Infinity, Infinity, -Infinity, -Infinity];
-      for (let j = 0; j < f.clip.joints; j++) {
-        const [x, y] = px([p[3 * j], p[3 * j + 1], p[3 * j + 2]]);
-        box[0] = Math.min(box[0], x);
-        box[1] = Math.min(box[1], y);
-        box[2] = Math.max(box[2], x);
-        box[3] = Math.max(box[3], y);
-      }
-      const lowest = f.leaves
-        .slice()
-        .sort((a, b) => p[3 * a + 1] - p[3 * b + 1])
-        .slice(0, 2);
-      return {
-        bbox: box,
-        feet: lowest.map((j) => px([p[3 * j], p[3 * j + 1], p[3 * j + 2]])),
-        feet_ground: lowest.map((j) => px([p[3 * j], gy, p[3 * j + 2]])),
-      };
-    });
-    return { figures, ground_y_px: px([cam.ground[0], gy, cam.ground[1]])[1] };
   }
 
   /** Frees the stage's WebGL resources. */

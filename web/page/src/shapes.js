@@ -54,11 +54,6 @@ export function sphereMesh(rings, sectors) {
   return { vertices: new Float32Array(v), indices: new Uint16Array(idx) };
 }
 
-/** Seconds from the first frame to one frame past the last. */
-export function clipDuration(clip) {
-  return clip.fps > 0 ? clip.frames / clip.fps : 0;
-}
-
 /**
  * Writes the joint positions of `clip` at `t` seconds into `out` (3 floats a joint): linear
  * between frame floor(t·fps) and the next, held at the first and last frames.
@@ -164,15 +159,6 @@ export function cameraAt(camera, aspect, t) {
   return { viewProj, eye, target, ground: [target[0], target[2]] };
 }
 
-/** `p` (world) through `m` to normalised device coordinates [x, y, z]. */
-export function project(m, p) {
-  const x = m[0] * p[0] + m[4] * p[1] + m[8] * p[2] + m[12];
-  const y = m[1] * p[0] + m[5] * p[1] + m[9] * p[2] + m[13];
-  const z = m[2] * p[0] + m[6] * p[1] + m[10] * p[2] + m[14];
-  const w = m[3] * p[0] + m[7] * p[1] + m[11] * p[2] + m[15];
-  return [x / w, y / w, z / w];
-}
-
 /**
  * A figure of a pane: its clip, sizes and placement, with scratch for its pose; `shapes`
  * writes its instances at a time.
@@ -194,25 +180,6 @@ export class Posed {
       : null;
     this.points = new Float32Array(3 * clip.joints);
     this.bones = clip.parents.filter((q, j) => q >= 0 && q < clip.joints && q !== j).length;
-    const children = new Array(clip.joints).fill(0);
-    for (const q of clip.parents) if (q >= 0 && q < clip.joints) children[q] += 1;
-    this.leaves = [];
-    for (let j = 0; j < clip.joints; j++) if (children[j] === 0) this.leaves.push(j);
-  }
-
-  /** Joint positions at `t` in the pane's coordinates (placed), 3 floats a joint. */
-  pointsAt(t) {
-    poseAt(this.clip, t, this.points);
-    if (this.placed) {
-      const p = this.points;
-      for (let j = 0; j < this.clip.joints; j++) {
-        const q = this.place([p[3 * j], p[3 * j + 1], p[3 * j + 2]]);
-        p[3 * j] = q[0];
-        p[3 * j + 1] = q[1];
-        p[3 * j + 2] = q[2];
-      }
-    }
-    return this.points;
   }
 
   /** A clip point moved into the pane (window: Placed::point). */
