@@ -54,6 +54,17 @@ fn page_ready() -> bool {
             .is_ok_and(|s| s.success())
 }
 
+/// One browser test at a time: each drives a Chromium drawing WebGL on the CPU, and several
+/// at once on a 2-core CI machine starve each other's frames and WebDriver round trips.
+static ONE_BROWSER: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+/// Holds [`ONE_BROWSER`] for the test (a failed test's poisoned lock still serializes).
+fn one_browser() -> std::sync::MutexGuard<'static, ()> {
+    ONE_BROWSER
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
 fn ready() -> bool {
     let ok = have("chromium") && have("chromedriver") && page_ready();
     if !ok {
@@ -837,6 +848,7 @@ fn a_browser_completes_mos_through_a_server_kill_and_a_foreign_token_is_refused(
     if !ready() {
         return;
     }
+    let _one = one_browser();
     let dir = temp_dir("mos");
     let study = write_study(&dir, MOS);
     let out = dir.join("results");
@@ -917,6 +929,7 @@ fn a_browser_completes_dscqs_and_a_live_staircase() {
     if !ready() {
         return;
     }
+    let _one = one_browser();
     let driver = Driver::start();
     for (name, body) in [("dscqs", DSCQS), ("stairs", STAIRCASE)] {
         let dir = temp_dir(name);
@@ -1005,6 +1018,7 @@ fn every_example_study_runs_in_the_browser_as_simulated() {
     if !ready() {
         return;
     }
+    let _one = one_browser();
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap();
     let mut examples: Vec<PathBuf> = std::fs::read_dir(root.join("examples"))
         .unwrap()
@@ -1029,8 +1043,8 @@ fn every_example_study_runs_in_the_browser_as_simulated() {
         // docs/serve.md beside the window's.
         if let Some(shots) = std::env::var_os("SCREENSHOTS") {
             b.wait(
-                "document.body.dataset.screen === 'trial' && document.body.dataset.show !== 'grey' \
-                 && (Number(document.body.dataset.clipTime) > 1.5 || document.body.dataset.open === '1')",
+                "document.body.dataset.screen === 'trial' && window.drawn && window.drawn.show !== 'grey' \
+                 && (window.drawn.clipTime > 1.5 || document.body.dataset.open === '1')",
                 60,
             );
             b.screenshot(&Path::new(&shots).join(format!("{name}-page.png")));
@@ -1225,8 +1239,8 @@ fn same_figures(what: &str, page: &Seen, window: &Seen) {
 fn freeze(b: &Browser, show: &str, path: &Path) -> (f64, Vec<(usize, Rect)>) {
     b.wait(
         &format!(
-            "document.body.dataset.screen === 'trial' && document.body.dataset.show === '{show}' \
-             && document.body.dataset.trial === '0' && Number(document.body.dataset.clipTime) > 0.8"
+            "document.body.dataset.screen === 'trial' && window.drawn && window.drawn.trial === 0 \
+             && window.drawn.show === '{show}' && window.drawn.clipTime > 0.8"
         ),
         60,
     );
@@ -1234,18 +1248,22 @@ fn freeze(b: &Browser, show: &str, path: &Path) -> (f64, Vec<(usize, Rect)>) {
     std::thread::sleep(Duration::from_millis(400));
     let v = b.js(
         "const r = document.getElementById('view').getBoundingClientRect(); \
-         const d = document.body.dataset; \
-         return [Number(d.clipTime), d.layout, d.trial, r.left, r.top, d.show];",
+         return [window.drawn, r.left, r.top];",
+    );
+    let drawn = &v[0];
+    assert_eq!(
+        drawn["show"].as_str(),
+        Some(show),
+        "the frame left on screen: {drawn}"
     );
     assert_eq!(
-        v[5].as_str(),
-        Some(show),
-        "the frame left on screen shows {show}"
+        drawn["trial"].as_u64(),
+        Some(0),
+        "the first trial is on screen: {drawn}"
     );
-    assert_eq!(v[2].as_str(), Some("0"), "the first trial is on screen");
     b.screenshot(path);
-    let (left, top) = (v[3].as_f64().unwrap(), v[4].as_f64().unwrap());
-    let layout: Vec<Vec<f64>> = serde_json::from_str(v[1].as_str().unwrap()).unwrap();
+    let (left, top) = (v[1].as_f64().unwrap(), v[2].as_f64().unwrap());
+    let layout: Vec<Vec<f64>> = serde_json::from_value(drawn["panes"].clone()).unwrap();
     let panes = layout
         .iter()
         .map(|r| {
@@ -1260,7 +1278,7 @@ fn freeze(b: &Browser, show: &str, path: &Path) -> (f64, Vec<(usize, Rect)>) {
             )
         })
         .collect();
-    (v[0].as_f64().unwrap(), panes)
+    (drawn["clipTime"].as_f64().unwrap(), panes)
 }
 
 /// The page draws what the window draws: the MOS example's trial and the crowd example's
@@ -1272,6 +1290,7 @@ fn the_page_draws_the_figures_the_window_draws() {
     if !ready() {
         return;
     }
+    let _one = one_browser();
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap();
     let driver = Driver::start();
     let dir = temp_dir("same-figures");

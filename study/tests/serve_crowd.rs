@@ -43,6 +43,12 @@ fn setup(dir: &Path) -> PathBuf {
         "<!doctype html><title>t</title>",
     )
     .unwrap();
+    // What the real page says it draws (the server checks the study against it).
+    std::fs::copy(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../web/page/src/capabilities.json"),
+        dir.join("page/capabilities.json"),
+    )
+    .unwrap();
     let study = dir.join("study.toml");
     std::fs::write(
         &study,

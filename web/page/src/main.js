@@ -622,17 +622,14 @@ function runTrial(info, t, clips) {
       if (f.finished && gateOpen === null) gateOpen = now;
       const rects = layout(screen, f.step, canvas.clientWidth, canvas.clientHeight);
       stage.draw(rects, f.clipTime);
-      // The clip time and the panes' places of the frame drawn (tests compare them with
-      // the window's drawing of the same).
-      document.body.dataset.clipTime = String(f.clipTime);
-      const placed = JSON.stringify(rects.map((r) => [r.pane, r.x, r.y, r.w, r.h]));
-      if (document.body.dataset.layout !== placed) document.body.dataset.layout = placed;
+      // What the frame drawn showed, when and where (tests compare it with the window's
+      // drawing of the same); a global, not the DOM, so nothing is restyled per frame.
+      window.drawn = { trial: t.index, show: f.step.show, clipTime: f.clipTime, panes: rects.map((r) => [r.pane, r.x, r.y, r.w, r.h]) };
       drawLabels(screen, f, rects);
       const open = pres.shownOnce;
       w.enable(open);
       document.body.dataset.open = open ? '1' : '0';
       document.body.dataset.trial = String(t.index);
-      document.body.dataset.show = f.step.show;
       replay.hidden = !pres.canReplay();
       $('watch').hidden = open;
       $('vote').hidden = !(f.past && f.step.show === 'grey');
@@ -647,7 +644,7 @@ async function trials(info) {
   for (;;) {
     const t = await call('GET', api('trial'), undefined, { retry: true });
     if (t.done) return t;
-    if (t.break_before && state.reached !== null && state.reached !== t.index) {
+    if (t.page.screen.break_before && state.reached !== null && state.reached !== t.index) {
       show('break');
       $('break-done').textContent = p.done(t.answered);
       $('break-bar').hidden = !p.exact;
