@@ -12,7 +12,10 @@
 //! the reference's view at their presentation time, so both panes move alike and appear at
 //! the same size and place. A crowd pane (thesis 6.5) is a [`Stage`] of several figures, each
 //! [`Placed`] on one ground and seen by the fixed camera and light of the study's `[scene]`
-//! ([`View::crowd`]). The renderer knows nothing of trials; this module knows nothing of wgpu.
+//! ([`View::crowd`]). A [`Casting`] says what each pane of a trial draws (which clip, sized
+//! by which view, placed where) and the camera the panes share: the study window builds its
+//! stages from it and `study serve` sends it to the browser page, so both draw the same. The
+//! renderer knows nothing of trials; this module knows nothing of wgpu.
 
 use std::sync::Arc;
 
