@@ -681,25 +681,10 @@ fn the_crowd_examples_simulate_and_report_fig_6_9() {
 fn figures_in(png_path: &Path, within: f64) -> Vec<(usize, usize, usize)> {
     let image = common::Rgb::read(png_path);
     let rows = (image.height as f64 * within) as usize;
-    let mut columns: BTreeMap<usize, (usize, usize)> = BTreeMap::new();
-    for y in 0..rows {
-        for x in 0..image.width {
-            if image.is_orange(x, y) {
-                let e = columns.entry(x).or_insert((y, y));
-                e.1 = y;
-            }
-        }
-    }
-    let mut groups: Vec<(usize, usize, usize, usize)> = Vec::new();
-    for (&x, &(top, bottom)) in &columns {
-        match groups.last_mut() {
-            Some(g) if x <= g.1 + 12 => *g = (g.0, x, g.2.min(top), g.3.max(bottom)),
-            _ => groups.push((x, x, top, bottom)),
-        }
-    }
-    groups
+    image
+        .orange_figures(0..image.width, 0..rows, 12)
         .into_iter()
-        .map(|(l, r, t, b)| (l, r, b - t))
+        .map(|f| (f.left, f.right, f.bottom - f.top))
         .collect()
 }
 

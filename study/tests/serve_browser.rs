@@ -58,13 +58,6 @@ fn page_ready() -> bool {
 /// at once on a 2-core CI machine starve each other's frames and WebDriver round trips.
 static ONE_BROWSER: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
-/// Holds [`ONE_BROWSER`] for the test (a failed test's poisoned lock still serializes).
-fn one_browser() -> std::sync::MutexGuard<'static, ()> {
-    ONE_BROWSER
-        .lock()
-        .unwrap_or_else(std::sync::PoisonError::into_inner)
-}
-
 fn ready() -> bool {
     let ok = have("chromium") && have("chromedriver") && page_ready();
     if !ok {
@@ -75,6 +68,16 @@ fn ready() -> bool {
         eprintln!("skipped: chromium, chromedriver or the built page is missing");
     }
     ok
+}
+
+/// Whether a browser test can run (see [`ready`]): then it holds [`ONE_BROWSER`] until it
+/// ends (a failed test's poisoned lock still serializes).
+fn browser_test() -> Option<std::sync::MutexGuard<'static, ()>> {
+    ready().then(|| {
+        ONE_BROWSER
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+    })
 }
 
 fn free_port() -> u16 {
@@ -845,10 +848,9 @@ fn manifest(out: &Path, subject: &str) -> results::SessionManifest {
 
 #[test]
 fn a_browser_completes_mos_through_a_server_kill_and_a_foreign_token_is_refused() {
-    if !ready() {
+    let Some(_one) = browser_test() else {
         return;
-    }
-    let _one = one_browser();
+    };
     let dir = temp_dir("mos");
     let study = write_study(&dir, MOS);
     let out = dir.join("results");
@@ -926,10 +928,9 @@ fn a_browser_completes_mos_through_a_server_kill_and_a_foreign_token_is_refused(
 
 #[test]
 fn a_browser_completes_dscqs_and_a_live_staircase() {
-    if !ready() {
+    let Some(_one) = browser_test() else {
         return;
-    }
-    let _one = one_browser();
+    };
     let driver = Driver::start();
     for (name, body) in [("dscqs", DSCQS), ("stairs", STAIRCASE)] {
         let dir = temp_dir(name);
@@ -1020,10 +1021,9 @@ const WHOLE_SESSIONS: [&str; 3] = ["acr-hr", "mushra", "groups"];
 /// MUSHRA's sliders, crowd scenes) comes from the one description the window draws.
 #[test]
 fn every_example_study_runs_in_the_browser_as_simulated() {
-    if !ready() {
+    let Some(_one) = browser_test() else {
         return;
-    }
-    let _one = one_browser();
+    };
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap();
     let mut examples: Vec<PathBuf> = std::fs::read_dir(root.join("examples"))
         .unwrap()
@@ -1152,35 +1152,19 @@ fn look(img: &Rgb, pane: Rect) -> Seen {
         ((pane.x + pane.w).round() as usize).min(img.width),
         ((pane.y + pane.h).round() as usize).min(img.height),
     );
-    let orange: Vec<(usize, usize)> = (y0..y1)
-        .flat_map(|y| (x0..x1).map(move |x| (x, y)))
-        .filter(|&(x, y)| img.is_orange(x, y))
-        .collect();
-    let mut xs: Vec<usize> = orange.iter().map(|p| p.0).collect();
-    xs.sort_unstable();
-    xs.dedup();
-    // Figures stand apart across the pane; a gap of 3 % of its height parts them.
-    let gap = (0.03 * pane.h) as usize;
     let (cx, cy) = (pane.x + 0.5 * pane.w, pane.y + 0.5 * pane.h);
-    let figures = runs(&xs, gap)
+    // Figures stand apart across the pane; a gap of 3 % of its height parts them.
+    let figures = img
+        .orange_figures(x0..x1, y0..y1, (0.03 * pane.h) as usize)
         .into_iter()
-        .map(|(lo, hi)| {
-            let mine: Vec<(usize, usize)> = orange
-                .iter()
-                .copied()
-                .filter(|p| (lo..=hi).contains(&p.0))
-                .collect();
-            let top = mine.iter().map(|p| p.1).min().unwrap();
-            let bottom = mine.iter().map(|p| p.1).max().unwrap();
+        .map(|f| {
+            let (top, bottom) = (f.top, f.bottom);
             let tall = (bottom - top).max(1);
             // The feet: the joints in the lowest 6 % of the figure, parted where apart.
-            let mut feet: Vec<usize> = mine
-                .iter()
-                .filter(|p| p.1 + tall * 6 / 100 >= bottom)
-                .map(|p| p.0)
+            let low = bottom.saturating_sub(tall * 6 / 100);
+            let feet: Vec<usize> = (f.left..=f.right)
+                .filter(|&x| (low..=bottom).any(|y| img.is_orange(x, y)))
                 .collect();
-            feet.sort_unstable();
-            feet.dedup();
             let shadows = runs(&feet, (0.02 * pane.h) as usize)
                 .into_iter()
                 .map(|(a, b)| {
@@ -1206,7 +1190,7 @@ fn look(img: &Rgb, pane: Rect) -> Seen {
                 })
                 .collect();
             Figure {
-                x: ((lo + hi) as f64 * 0.5 - cx) / pane.h,
+                x: ((f.left + f.right) as f64 * 0.5 - cx) / pane.h,
                 top: (top as f64 - cy) / pane.h,
                 bottom: (bottom as f64 - cy) / pane.h,
                 shadows,
@@ -1298,10 +1282,9 @@ fn freeze(b: &Browser, show: &str, path: &Path) -> (f64, Vec<(usize, Rect)>) {
 /// in the same place in its pane (within 5 % of its height), a shadow under each foot.
 #[test]
 fn the_page_draws_the_figures_the_window_draws() {
-    if !ready() {
+    let Some(_one) = browser_test() else {
         return;
-    }
-    let _one = one_browser();
+    };
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap();
     let driver = Driver::start();
     let dir = temp_dir("same-figures");

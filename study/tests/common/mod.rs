@@ -393,6 +393,15 @@ pub fn screenshot(env: &Env, path: &Path) {
     assert!(ok, "import could not take a screenshot");
 }
 
+/// Where a figure's joints are in an image, pixels ([`Rgb::orange_figures`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Figure {
+    pub left: usize,
+    pub right: usize,
+    pub top: usize,
+    pub bottom: usize,
+}
+
 /// An image read as 8-bit colour (ImageMagick may write 16-bit, paletted or, for a grey-only
 /// screen, grayscale PNGs).
 pub struct Rgb {
@@ -427,6 +436,37 @@ impl Rgb {
             return [self.buf[i]; 3];
         }
         [self.buf[i], self.buf[i + 1], self.buf[i + 2]]
+    }
+
+    /// The figures of the area `xs` × `ys`: the columns holding joint-orange pixels,
+    /// grouped where fewer than `gap` empty columns part them; each group's left and right
+    /// column and top and bottom row, left to right.
+    pub fn orange_figures(
+        &self,
+        xs: std::ops::Range<usize>,
+        ys: std::ops::Range<usize>,
+        gap: usize,
+    ) -> Vec<Figure> {
+        let mut out: Vec<Figure> = Vec::new();
+        for x in xs {
+            let mut rows = ys.clone().filter(|&y| self.is_orange(x, y));
+            let Some(top) = rows.next() else { continue };
+            let bottom = rows.next_back().unwrap_or(top);
+            match out.last_mut() {
+                Some(f) if x <= f.right + gap => {
+                    f.right = x;
+                    f.top = f.top.min(top);
+                    f.bottom = f.bottom.max(bottom);
+                }
+                _ => out.push(Figure {
+                    left: x,
+                    right: x,
+                    top,
+                    bottom,
+                }),
+            }
+        }
+        out
     }
 
     /// Whether the pixel at (x, y) is the joints' orange (red well above blue); never in a
