@@ -115,6 +115,7 @@ impl LiveStimuli {
             issues.push(StudyIssue {
                 key,
                 reason: chain(err),
+                line: None,
             });
         };
         let database = match &live.database {

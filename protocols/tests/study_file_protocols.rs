@@ -89,6 +89,66 @@ fn consent_and_instructions_are_read_and_checked() {
     assert!(example("mos.toml").session.consent.is_none());
 }
 
+/// `subject_fields` takes bare names (free text) and typed fields; every mistake in a typed
+/// field is named by its index and key.
+#[test]
+fn subject_fields_are_typed_and_checked() {
+    use protocols::study::{FieldKind, SubjectField};
+    let with = |fields: &str| {
+        example_text("mos.toml").replace(
+            "subject_fields = [\"age\", \"gender\", \"normal_vision\"]",
+            &format!("subject_fields = {fields}"),
+        )
+    };
+    let study = parse(&with(
+        "[\"handedness\", { name = \"age\", kind = \"number\", min = 18, max = 99, integer = true }, \
+         { name = \"v\", kind = \"yes_no\", label = \"Normal vision\" }]",
+    ))
+    .unwrap();
+    assert_eq!(
+        study.session.subject_fields,
+        vec![
+            SubjectField::text("handedness"),
+            SubjectField {
+                name: "age".into(),
+                label: "age".into(),
+                kind: FieldKind::Number {
+                    min: 18.0,
+                    max: 99.0,
+                    integer: true
+                }
+            },
+            SubjectField {
+                name: "v".into(),
+                label: "Normal vision".into(),
+                kind: FieldKind::YesNo
+            },
+        ]
+    );
+    let got = issues(&with(
+        "[{ name = \"age\", kind = \"nmuber\" }, { name = \"a\", kind = \"number\", min = 9, max = 1 }, \
+         { name = \"g\", kind = \"choice\", options = [] }, { name = \"h\", kind = \"choice\", options = [\"x\", \"X\"] }, \
+         { name = \"y\", kind = \"yes_no\", min = 1 }, { kind = \"text\" }, 3, \"n n\", \"y\"]",
+    ));
+    let has = |k: &str, r: &str| got.iter().any(|(gk, gr)| gk == k && gr.contains(r));
+    let p = "session.subject_fields";
+    assert!(has(&format!("{p}[0].kind"), "not a field kind"), "{got:#?}");
+    assert!(has(&format!("{p}[1].min"), "above max"), "{got:#?}");
+    assert!(
+        has(&format!("{p}[2].options"), "1 to 50 options"),
+        "{got:#?}"
+    );
+    assert!(has(&format!("{p}[3].options"), "distinct"), "{got:#?}");
+    assert!(has(&format!("{p}[4].min"), "unknown key"), "{got:#?}");
+    assert!(has(&format!("{p}[5].name"), "missing"), "{got:#?}");
+    assert!(
+        has(&format!("{p}[6]"), "a name or a field table"),
+        "{got:#?}"
+    );
+    assert!(has(&format!("{p}[7]"), "letters, digits or _"), "{got:#?}");
+    assert!(has(&format!("{p}[8]"), "listed twice"), "{got:#?}");
+}
+
 #[test]
 fn unknown_stimulus_and_wrong_types_in_mos() {
     let text = example_text("mos.toml")
@@ -283,7 +343,7 @@ fn mutated_study_files_give_errors_never_panics() {
                 Err(e) => {
                     // Every error names the file it is about, and says where or what.
                     let msg = e.to_string();
-                    assert!(msg.starts_with("test.toml: "), "{name}: {msg}");
+                    assert!(msg.starts_with("test.toml:"), "{name}: {msg}");
                     match &e {
                         StudyError::Syntax { line, column, .. } => {
                             assert!(*line >= 1 && *column >= 1, "{name}: {msg}");

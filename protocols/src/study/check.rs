@@ -35,20 +35,62 @@ pub(super) fn type_name(v: &Value) -> &'static str {
     }
 }
 
+/// Edit distance between `a` and `b` in characters: insertions, deletions, substitutions and
+/// swaps of two neighbours each count one (optimal string alignment).
+fn distance(a: &str, b: &str) -> usize {
+    let (a, b): (Vec<char>, Vec<char>) = (a.chars().collect(), b.chars().collect());
+    // Rows i - 2, i - 1 and i of the table of distances between prefixes.
+    let mut before: Vec<usize> = Vec::new();
+    let mut last: Vec<usize> = (0..=b.len()).collect();
+    for i in 1..=a.len() {
+        let mut row = vec![i; b.len() + 1];
+        for j in 1..=b.len() {
+            let cost = usize::from(a[i - 1] != b[j - 1]);
+            row[j] = (last[j] + 1).min(row[j - 1] + 1).min(last[j - 1] + cost);
+            if i > 1 && j > 1 && a[i - 1] == b[j - 2] && a[i - 2] == b[j - 1] {
+                row[j] = row[j].min(before[j - 2] + 1);
+            }
+        }
+        before = std::mem::replace(&mut last, row);
+    }
+    last[b.len()]
+}
+
+/// `, did you mean "name"?` when one of `allowed` is close enough to `given` to be what was
+/// meant (at most one edit per three characters, and at least one), else nothing; the
+/// closest wins, the first listed among equals.
+pub(super) fn did_you_mean(given: &str, allowed: &[&str]) -> String {
+    let limit = (given.chars().count() / 3).max(1);
+    allowed
+        .iter()
+        .map(|a| (distance(given, a), *a))
+        .filter(|(d, _)| *d <= limit)
+        .min_by_key(|(d, _)| *d)
+        .map(|(_, a)| format!(", did you mean {a:?}?"))
+        .unwrap_or_default()
+}
+
 impl Ctx {
     pub(super) fn err(&mut self, key: impl Into<String>, reason: impl Into<String>) {
         self.issues.push(StudyIssue {
             key: key.into(),
             reason: reason.into(),
+            line: None,
         });
     }
 
+    /// An error for every key of `t` not in `allowed`, suggesting the allowed key it is a
+    /// likely typo of.
     pub(super) fn known(&mut self, t: &Table, path: &str, allowed: &[&str]) {
         for k in t.keys() {
             if !allowed.contains(&k.as_str()) {
                 self.err(
                     join(path, k),
-                    format!("unknown key (allowed: {})", allowed.join(", ")),
+                    format!(
+                        "unknown key{} (allowed: {})",
+                        did_you_mean(k, allowed),
+                        allowed.join(", ")
+                    ),
                 );
             }
         }
@@ -207,7 +249,11 @@ impl Ctx {
         let names: Vec<&str> = options.iter().map(|(n, _)| *n).collect();
         self.err(
             join(path, key),
-            format!("expected one of {}, got {s:?}", names.join(", ")),
+            format!(
+                "expected one of {}, got {s:?}{}",
+                names.join(", "),
+                did_you_mean(&s, &names)
+            ),
         );
         None
     }
@@ -223,5 +269,43 @@ impl Ctx {
             self.err(join(path, key), "missing");
         }
         v
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{did_you_mean, distance};
+
+    #[test]
+    fn distance_counts_edits_and_swaps() {
+        assert_eq!(distance("name", "name"), 0);
+        assert_eq!(distance("nmae", "name"), 1);
+        assert_eq!(distance("gap_mss", "gap_ms"), 1);
+        assert_eq!(distance("nam", "name"), 1);
+        assert_eq!(distance("kitten", "sitting"), 3);
+        assert_eq!(distance("", "abc"), 3);
+        assert_eq!(distance("abc", ""), 3);
+        assert_eq!(distance("ca", "abc"), 3);
+    }
+
+    #[test]
+    fn a_close_key_is_suggested_a_far_one_is_not() {
+        let allowed = ["format_version", "name", "title", "seed", "stimuli"];
+        assert_eq!(did_you_mean("nmae", &allowed), ", did you mean \"name\"?");
+        assert_eq!(
+            did_you_mean("stimulus", &allowed),
+            ", did you mean \"stimuli\"?"
+        );
+        assert_eq!(
+            did_you_mean("fromat_version", &allowed),
+            ", did you mean \"format_version\"?"
+        );
+        assert_eq!(did_you_mean("colour", &allowed), "");
+        assert_eq!(did_you_mean("x", &allowed), "");
+        // The first listed among equally close keys.
+        assert_eq!(
+            did_you_mean("sead", &["seed", "read"]),
+            ", did you mean \"seed\"?"
+        );
     }
 }

@@ -11,6 +11,8 @@ mod check;
 mod conditions;
 mod crowdsourcing;
 mod design;
+mod fields;
+mod lines;
 mod live;
 mod mushra;
 mod presentation;
@@ -37,6 +39,7 @@ use crate::record::{Arrangement, Position, Protocol};
 use crate::staircase::StaircaseSettings;
 use check::Ctx;
 pub use crowdsourcing::{CrowdsourcingSettings, GoldTrial, HiddenRule};
+pub use fields::{FieldKind, MAX_FIELD_CHARS, SubjectField};
 pub use mushra::{AnchorRule, MushraSettings, screens as mushra_screens};
 pub use quest::domain as quest_domain;
 pub use rendering::RenderingSettings;
@@ -66,6 +69,9 @@ pub struct StudyIssue {
     pub key: String,
     /// What is wrong.
     pub reason: String,
+    /// 1-based line of the key in the file (of the table it belongs in when the file lacks
+    /// it); `None` when the file does not place it.
+    pub line: Option<usize>,
 }
 
 impl fmt::Display for StudyIssue {
@@ -101,7 +107,7 @@ pub enum StudyError {
         limit: u64,
     },
     /// Not valid TOML.
-    #[error("{}: line {line}, column {column}: {message}", path.display())]
+    #[error("{}:{line}:{column}: {message}", path.display())]
     Syntax {
         /// File.
         path: PathBuf,
@@ -112,15 +118,29 @@ pub enum StudyError {
         /// Parser message.
         message: String,
     },
-    /// Valid TOML with study problems, every one listed.
-    #[error("{}: {} problem(s):\n  {}", path.display(), issues.len(),
-        issues.iter().map(ToString::to_string).collect::<Vec<_>>().join("\n  "))]
+    /// Valid TOML with study problems, every one listed, each as `FILE:LINE: KEY: REASON`
+    /// (`FILE: KEY: REASON` when the file does not place the key).
+    #[error("{}: {} problem(s):{}", path.display(), issues.len(), listed(path, issues))]
     Invalid {
         /// File.
         path: PathBuf,
         /// All problems found.
         issues: Vec<StudyIssue>,
     },
+}
+
+/// `issues` one per line, each after the file and its line: `\n  study.toml:3: nmae: ...`.
+fn listed(path: &Path, issues: &[StudyIssue]) -> String {
+    use std::fmt::Write as _;
+    let mut out = String::new();
+    for issue in issues {
+        let _ = write!(out, "\n  {}", path.display());
+        if let Some(line) = issue.line {
+            let _ = write!(out, ":{line}");
+        }
+        let _ = write!(out, ": {issue}");
+    }
+    out
 }
 
 /// Where the reference goes.
@@ -280,8 +300,8 @@ pub struct SessionSettings {
     pub break_every_trials: Option<u32>,
     /// Hidden repeats inserted among the test trials (paper 000: 8).
     pub hidden_repeats: u32,
-    /// Subject fields a runner collects before the session.
-    pub subject_fields: Vec<String>,
+    /// Subject fields a runner collects before the session, each with its kind.
+    pub subject_fields: Vec<SubjectField>,
     /// Consent text the subject must accept before the session (none: no consent step).
     #[serde(default)]
     pub consent: Option<String>,
@@ -678,8 +698,7 @@ impl StudyDefinition {
         let manifest = |rel: &str| {
             let p = base.join(rel);
             let t = read_limited(&p, MAX_MANIFEST_BYTES).map_err(|e| e.to_string())?;
-            serde_json::from_str::<StimulusManifest>(&t)
-                .map_err(|e| format!("{}: {e}", p.display()))
+            serde_json::from_str::<StimulusManifest>(&t).map_err(|e| json_error(&p, &e))
         };
         let study = Self::parse(&text, path, manifest, codecs)?;
         Ok((study, text))
@@ -699,7 +718,7 @@ impl StudyDefinition {
         let table = parse_toml(text, path)?;
         let mut cx = Ctx::default();
         let def = top::parse_table(&table, &mut cx, manifest, codecs);
-        finish(def, cx, path, "study file is invalid")
+        finish(def, cx, path, text, "study file is invalid")
     }
 
     /// Sessions' time estimate per trial, ms (playbacks, gaps).
@@ -728,15 +747,23 @@ fn parse_toml(text: &str, path: &Path) -> Result<Table, StudyError> {
     })
 }
 
-/// What a parse of the file at `path` gave: the value when no problem was found, else every
-/// problem (`fallback` when the parse gave nothing and said nothing).
-fn finish<T>(value: Option<T>, mut cx: Ctx, path: &Path, fallback: &str) -> Result<T, StudyError> {
+/// What a parse of the file at `path` with `text` gave: the value when no problem was found,
+/// else every problem, each with its line (`fallback` when the parse gave nothing and said
+/// nothing).
+fn finish<T>(
+    value: Option<T>,
+    mut cx: Ctx,
+    path: &Path,
+    text: &str,
+    fallback: &str,
+) -> Result<T, StudyError> {
     match value {
         Some(v) if cx.issues.is_empty() => Ok(v),
         _ => {
             if cx.issues.is_empty() {
                 cx.err("", fallback);
             }
+            lines::locate(&mut cx.issues, text);
             Err(StudyError::Invalid {
                 path: path.to_path_buf(),
                 issues: cx.issues,
@@ -761,6 +788,18 @@ fn read_limited(path: &Path, limit: u64) -> Result<String, StudyError> {
         path: path.to_path_buf(),
         cause,
     })
+}
+
+/// A JSON file's error as `FILE:LINE:COLUMN: what` (serde_json says where after what).
+fn json_error(path: &Path, e: &serde_json::Error) -> String {
+    let text = e.to_string();
+    let at = format!(" at line {} column {}", e.line(), e.column());
+    match text.strip_suffix(&at) {
+        Some(what) if e.line() > 0 => {
+            format!("{}:{}:{}: {what}", path.display(), e.line(), e.column())
+        }
+        _ => format!("{}: {text}", path.display()),
+    }
 }
 
 /// 1-based line and column of byte offset `at` in `text`.

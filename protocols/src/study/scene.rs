@@ -181,7 +181,7 @@ impl SceneSettings {
         let scene = cx
             .table(&table, "", "scene")
             .and_then(|t| parse_scene(t, &mut cx));
-        finish(scene, cx, path, "the [scene] is invalid")
+        finish(scene, cx, path, &text, "the [scene] is invalid")
     }
 }
 

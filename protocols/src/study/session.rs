@@ -1,8 +1,6 @@
 //! `[session]`: time limit, breaks, hidden repeats, subject fields, consent and
 //! instructions, and how familiarization is asked for.
 
-use std::collections::BTreeSet;
-
 use toml::Table;
 
 use super::SessionSettings;
@@ -49,22 +47,7 @@ pub(super) fn parse_session(t: &Table, cx: &mut Ctx) -> (SessionSettings, FamSpe
         );
     }
     let hidden_repeats = cx.uint(t, P, "hidden_repeats", 100_000).unwrap_or(0);
-    let subject_fields = cx.strings(t, P, "subject_fields").unwrap_or_default();
-    let mut seen = BTreeSet::new();
-    for (i, f) in subject_fields.iter().enumerate() {
-        if f.is_empty() || !f.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
-            cx.err(
-                format!("{P}.subject_fields[{i}]"),
-                format!("{f:?} must be letters, digits or _"),
-            );
-        }
-        if !seen.insert(f) {
-            cx.err(
-                format!("{P}.subject_fields[{i}]"),
-                format!("{f:?} is listed twice"),
-            );
-        }
-    }
+    let subject_fields = super::fields::parse(t, P, cx);
     let mut text = |key: &str| {
         let v = cx.string(t, P, key)?;
         if v.trim().is_empty() {
