@@ -131,6 +131,20 @@ pub fn simulate_subject(
 /// Study file problems, an existing output without resume, a resume whose logged trials the
 /// study no longer regenerates, I/O and database errors.
 pub fn simulate(options: &SimulateOptions, report: &mut dyn FnMut(&str)) -> Result<()> {
+    simulate_with_progress(options, report, &mut |_, _| {})
+}
+
+/// As [`simulate`]; `progress(done, total)` is called as each session ends: `done` of the
+/// `options.subjects` sessions (into a database run: subject numbers given out, by any
+/// station).
+///
+/// # Errors
+/// As [`simulate`].
+pub fn simulate_with_progress(
+    options: &SimulateOptions,
+    report: &mut dyn FnMut(&str),
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<()> {
     let study = StudyFile::load(&options.study)?;
     // One stimulus source (and cache of encoded levels) for every simulated subject.
     let mut stimuli = source::open(&study)?;
@@ -155,6 +169,7 @@ pub fn simulate(options: &SimulateOptions, report: &mut dyn FnMut(&str)) -> Resu
                     report,
                 )?;
                 report(&summary);
+                progress(subject as usize + 1, options.subjects as usize);
             }
         }
         #[cfg(feature = "postgres")]
@@ -166,7 +181,14 @@ pub fn simulate(options: &SimulateOptions, report: &mut dyn FnMut(&str)) -> Resu
                 options.seed,
                 options.subjects,
             )?;
-            simulate_into_database(&study, options, &mut store, stimuli.as_mut(), report)?;
+            simulate_into_database(
+                &study,
+                options,
+                &mut store,
+                stimuli.as_mut(),
+                report,
+                progress,
+            )?;
         }
     }
     if let Some(s) = stimuli.summary() {
@@ -184,6 +206,7 @@ fn simulate_into_database(
     store: &mut PgStore,
     stimuli: &mut dyn StimulusSource,
     report: &mut dyn FnMut(&str),
+    progress: &mut dyn FnMut(usize, usize),
 ) -> Result<()> {
     let wait = options.patience;
     if options.resume {
@@ -252,18 +275,21 @@ fn simulate_into_database(
             report,
         )?;
         report(&summary);
+        progress(number as usize, options.subjects as usize);
     }
     Ok(())
 }
 
-/// What a simulated subject states in a new session's manifest: "simulated" for every
-/// subject field and the display.
+/// What a simulated subject states in a new session's manifest: a valid answer to every
+/// subject field ("simulated" for free text, numbers and options spread over the subjects)
+/// and "simulated" for the display.
 fn simulated(def: &protocols::StudyDefinition, m: &mut SessionManifest) {
+    let k = u64::from(m.subject_index);
     m.subject_fields = def
         .session
         .subject_fields
         .iter()
-        .map(|f| (f.clone(), "simulated".to_string()))
+        .map(|f| (f.name.clone(), f.simulated(k)))
         .collect();
     m.display = Some(DisplayInfo {
         description: "simulated".into(),

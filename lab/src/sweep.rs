@@ -128,6 +128,48 @@ struct Job {
     target: Target,
 }
 
+/// Fixed codec parameters written `KEY=VALUE` (`qp=9`), as `study encode --param` and `study
+/// crowd --param` take them.
+///
+/// # Errors
+/// An item without `=`, or a value that is not a number, naming the item.
+pub fn parse_params(items: &[String]) -> Result<Params> {
+    let mut p = Params::new();
+    for item in items {
+        let Some((k, v)) = item.split_once('=') else {
+            return Err(refused(format!("--param `{item}`: expected KEY=VALUE")));
+        };
+        let Ok(v) = v.trim().parse::<f64>() else {
+            return Err(refused(format!("--param `{item}`: not a number")));
+        };
+        p.insert(k.trim().to_string(), v);
+    }
+    Ok(p)
+}
+
+/// Values to vary written `KEY=V1,V2,...` (`--param qp=7,9,11` of `study sweep`, `--cr
+/// back=20,40` of `study crowd`), in the order given, for [`SweepOptions::params`]; `flag`
+/// names the option in messages.
+///
+/// # Errors
+/// An item without `=`, or a value that is not a number, naming the item.
+pub fn parse_grid(flag: &str, items: &[String]) -> Result<Vec<(String, Vec<f64>)>> {
+    items
+        .iter()
+        .map(|item| {
+            let Some((k, v)) = item.split_once('=') else {
+                return Err(refused(format!("{flag} `{item}`: expected KEY=V1,V2,...")));
+            };
+            let values = v.split(',').map(|x| {
+                x.trim()
+                    .parse::<f64>()
+                    .map_err(|_| refused(format!("{flag} `{item}`: `{x}` is not a number")))
+            });
+            Ok((k.trim().to_string(), values.collect::<Result<Vec<f64>>>()?))
+        })
+        .collect()
+}
+
 /// What became of one job.
 enum Outcome {
     /// Made: its manifest entry and `rd.csv` row.

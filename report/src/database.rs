@@ -156,7 +156,7 @@ fn load_archived(store: &mut results::pg::PgStore) -> Result<lab::StudyFile> {
     let _ = std::fs::remove_dir_all(&dir);
     loaded.with_context(|| {
         format!(
-            "loading the study file kept with {} (pass --study to name another)",
+            "the study file kept with {} (--study names another)",
             store.location()
         )
     })
@@ -172,14 +172,14 @@ pub(crate) fn open(
     let mut store = results::pg::PgStore::open(db, run)?;
     let heads = store.sessions()?;
     if heads.is_empty() {
-        bail!("{}: no sessions yet; nothing to report", store.location());
+        bail!(
+            "{} holds no sessions yet (nothing to report)",
+            store.location()
+        );
     }
     let (study_file, archived) = match study {
-        Some(path) => (
-            lab::StudyFile::load(path)
-                .with_context(|| format!("loading the study file {}", path.display()))?,
-            false,
-        ),
+        // Its errors name the file.
+        Some(path) => (lab::StudyFile::load(path)?, false),
         None => (load_archived(&mut store)?, true),
     };
     let source = Source {

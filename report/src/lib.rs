@@ -245,6 +245,19 @@ fn write_streamed(
 /// with trials missing without `allow_incomplete`, a study file that does not load, settings
 /// outside the study's scale, or an output that cannot be written.
 pub fn report(request: &Request, warn: &mut dyn FnMut(&str)) -> Result<Summary> {
+    report_with_progress(request, warn, &|_, _| {})
+}
+
+/// As [`report`]; `progress(read, total)` is called (from the reader threads, in session
+/// order) as each session has been read and checked, before the analysis and the writing.
+///
+/// # Errors
+/// As [`report`].
+pub fn report_with_progress(
+    request: &Request,
+    warn: &mut dyn FnMut(&str),
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Result<Summary> {
     let (source, sessions, study_file) = sessions::open(request)?;
     let run = &source.run;
     let options = report_options(&request.settings, &study_file.definition)?;
@@ -260,6 +273,7 @@ pub fn report(request: &Request, warn: &mut dyn FnMut(&str)) -> Result<Summary> 
         &sessions,
         options.fit.shape == Shape::Weibull,
         warn,
+        progress,
     )?;
     let study = study_file.definition;
     let (output, mode) = (&request.output, request.mode);

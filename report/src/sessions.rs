@@ -129,13 +129,15 @@ impl Sessions {
 
 /// Reads and checks sessions on [`READERS`] threads, each taking the next unread session
 /// ([`lab::integrity::Checker::check_alone`], the part that needs no other session), then,
-/// when every session before it has been taken, adds it (`take`) and drops it itself: one
-/// session per reader in memory, every row freed by the thread that read it.
+/// when every session before it has been taken, adds it (`take`), says so (`progress(taken,
+/// total)`) and drops it itself: one session per reader in memory, every row freed by the
+/// thread that read it.
 fn read_in_order<'a>(
     checker: &lab::integrity::Checker<'_>,
     sessions: &Sessions,
     taken: Taken<'a>,
     take: &(dyn Fn(&mut Taken<'a>, &results::SessionResults, Vec<lab::integrity::Problem>) + Sync),
+    progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<Taken<'a>> {
     let turns = Turns {
         taken: std::sync::Mutex::new(taken),
@@ -161,6 +163,7 @@ fn read_in_order<'a>(
                 Ok((session, found)) => {
                     take(&mut taken, &session, found);
                     taken.next += 1;
+                    progress(taken.next, count);
                     Some(session)
                 }
                 Err(e) => {
@@ -195,6 +198,7 @@ fn read_in_order<'a>(
 /// Reads the sessions and checks each before any statistic ([`lab::integrity`]): damage is
 /// refused, every problem named once; sessions with trials missing at the end are refused
 /// unless `--allow-incomplete`, and then warned about and returned for the report to list.
+/// `progress(read, total)` hears each session taken.
 pub(crate) fn read_logs(
     request: &Request,
     source: &Source,
@@ -202,6 +206,7 @@ pub(crate) fn read_logs(
     sessions: &Sessions,
     weibull: bool,
     warn: &mut dyn FnMut(&str),
+    progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<Logs> {
     use lab::integrity::Kind;
     let definition = &study.definition;
@@ -261,7 +266,7 @@ pub(crate) fn read_logs(
         exclusions,
         failed,
         ..
-    } = read_in_order(&checker, sessions, taken, &take)?;
+    } = read_in_order(&checker, sessions, taken, &take, progress)?;
     let refused: Vec<_> = problems
         .iter()
         .filter(|p| p.kind == Kind::Damage || !request.allow_incomplete)
@@ -334,7 +339,8 @@ pub(crate) fn open(request: &Request) -> Result<(Source, Sessions, lab::StudyFil
     }
     if !folder.join(results::store::RUN_FILE).is_file() {
         bail!(
-            "{}: not a results folder (it has no {}); `study run`, `study simulate` and `study serve` write one",
+            "{} holds no results: no {} (make results with `study run`, `study simulate` or \
+             `study serve`)",
             folder.display(),
             results::store::RUN_FILE
         );
@@ -342,21 +348,21 @@ pub(crate) fn open(request: &Request) -> Result<(Source, Sessions, lab::StudyFil
     let (run, dirs) = results::session_dirs(&folder)?;
     if dirs.is_empty() {
         bail!(
-            "{}: no sessions yet (no session folder holds a {}); nothing to report",
+            "{} holds no sessions yet: no session folder with a {} (nothing to report)",
             folder.display(),
             results::store::SESSION_FILE
         );
     }
-    let study_path = request
-        .study
-        .clone()
-        .unwrap_or_else(|| folder.join(&run.study_file));
-    let study_file = lab::StudyFile::load(&study_path).with_context(|| {
-        format!(
-            "loading the study file {} (pass --study to name another)",
-            study_path.display()
-        )
-    })?;
+    // The study file named, or the copy the results keep (the load's error names the file).
+    let study_file = match &request.study {
+        Some(path) => lab::StudyFile::load(path)?,
+        None => lab::StudyFile::load(&folder.join(&run.study_file)).with_context(|| {
+            format!(
+                "the study file {} names (--study names another)",
+                folder.join(results::store::RUN_FILE).display()
+            )
+        })?,
+    };
     let source = Source {
         location: folder.display().to_string(),
         folder: Some(folder),

@@ -4,13 +4,13 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result};
 use codecs::bitstream::Bitstream;
-use codecs::codec::{self, Params};
+use codecs::codec;
 use lab::Codecs;
 use lab::clips::{self, ClipOptions, stem_of};
 use lab::stimulus::{self, Request};
-use lab::sweep::SweepOptions;
+use lab::sweep::{SweepOptions, parse_grid, parse_params};
 use motion::{Skeleton, SkeletonFormat, asf, io};
 
 /// Arguments of `study encode`.
@@ -176,6 +176,40 @@ pub enum ShareArg {
     Importance,
 }
 
+/// A progress bar on stderr counting `what`, drawn only when stderr is a terminal (and not
+/// `quiet`), cleared when dropped.
+pub struct Progress(indicatif::ProgressBar);
+
+impl Progress {
+    pub fn new(what: &str, quiet: bool) -> Self {
+        use std::io::IsTerminal as _;
+        let template = format!("{{bar:40}} {{pos}}/{{len}} {what} {{elapsed}} {{msg}}");
+        Self(match indicatif::ProgressStyle::with_template(&template) {
+            Ok(style) if !quiet && std::io::stderr().is_terminal() => {
+                indicatif::ProgressBar::new(0).with_style(style)
+            }
+            _ => indicatif::ProgressBar::hidden(),
+        })
+    }
+
+    /// `done` of `total`.
+    pub fn set(&self, done: usize, total: usize) {
+        self.0.set_length(total as u64);
+        self.0.set_position(done as u64);
+    }
+
+    /// Prints `line` on stderr, above the bar.
+    pub fn say(&self, line: &str) {
+        self.0.suspend(|| eprintln!("{line}"));
+    }
+}
+
+impl Drop for Progress {
+    fn drop(&mut self) {
+        self.0.finish_and_clear();
+    }
+}
+
 /// `study codecs`: prints every codec (the `primitive` codec with a note that it needs
 /// `--db`).
 pub fn list() {
@@ -214,43 +248,6 @@ pub fn list() {
         );
     }
     print!("{out}");
-}
-
-fn parse_params(items: &[String]) -> Result<Params> {
-    let mut p = Params::new();
-    for item in items {
-        let Some((k, v)) = item.split_once('=') else {
-            bail!("--param `{item}`: expected KEY=VALUE");
-        };
-        let v: f64 = v
-            .trim()
-            .parse()
-            .with_context(|| format!("--param `{item}`: not a number"))?;
-        p.insert(k.trim().to_string(), v);
-    }
-    Ok(p)
-}
-
-/// `--param KEY=V1,V2,...` of `study sweep` (and `--cr GROUP=V1,V2,...` of `study crowd`), in
-/// the order given.
-fn parse_grid(flag: &str, items: &[String]) -> Result<Vec<(String, Vec<f64>)>> {
-    items
-        .iter()
-        .map(|item| {
-            let Some((k, v)) = item.split_once('=') else {
-                bail!("{flag} `{item}`: expected KEY=V1,V2,...");
-            };
-            let values = v
-                .split(',')
-                .map(|x| {
-                    x.trim()
-                        .parse::<f64>()
-                        .with_context(|| format!("{flag} `{item}`: `{x}` is not a number"))
-                })
-                .collect::<Result<Vec<f64>>>()?;
-            Ok((k.trim().to_string(), values))
-        })
-        .collect()
 }
 
 /// `study encode`.
@@ -469,7 +466,10 @@ pub fn crowd(args: &CrowdArgs) -> Result<()> {
         jobs: args.set.jobs(),
         force: args.set.force,
     };
-    let summary = lab::crowd::crowd(&options, &|_, _| {})?;
+    let bar = Progress::new("character stimuli", false);
+    let summary = lab::crowd::crowd(&options, &|done, total| bar.set(done, total));
+    drop(bar);
+    let summary = summary?;
     println!(
         "{} crowd scenes ({} character stimuli encoded) and a reference scene per level in {}; \
          manifest stimuli.json, per-character rd.csv",
@@ -508,20 +508,9 @@ pub fn sweep(args: &SweepArgs) -> Result<()> {
         database: args.db.clone(),
         force: args.set.force,
     };
-    let bar = if args.quiet {
-        indicatif::ProgressBar::hidden()
-    } else {
-        indicatif::ProgressBar::new(0)
-    };
-    bar.set_style(
-        indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} stimuli {elapsed} {msg}")
-            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-    );
-    let summary = lab::sweep::sweep(&options, &|done, total| {
-        bar.set_length(total as u64);
-        bar.set_position(done as u64);
-    });
-    bar.finish_and_clear();
+    let bar = Progress::new("stimuli", args.quiet);
+    let summary = lab::sweep::sweep(&options, &|done, total| bar.set(done, total));
+    drop(bar);
     let summary = summary?;
     println!(
         "{} stimuli ({} references) in {}; manifest stimuli.json, rate–distortion rd.csv",

@@ -9,6 +9,8 @@ use lab::StudyFile;
 use lab::live::LiveStimuli;
 use lab::simulate::SimulateOptions;
 
+use crate::codec_cmd::Progress;
+
 /// Arguments of `study check`.
 #[derive(Debug, Args)]
 pub struct CheckArgs {
@@ -77,23 +79,13 @@ pub fn check(args: &CheckArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// [`lab::preflight::verify`] with a progress line on stderr when it takes over a second.
+/// [`lab::preflight::verify`] with a progress bar on a terminal.
 ///
 /// # Errors
 /// Every stimulus problem, each naming its file.
 pub fn preflight(file: &StudyFile) -> anyhow::Result<lab::preflight::Checked> {
-    let start = std::time::Instant::now();
-    let shown = std::cell::Cell::new(false);
-    let checked = lab::preflight::verify(file, &|done, total| {
-        if start.elapsed() > Duration::from_secs(1) {
-            shown.set(true);
-            eprint!("\rchecking stimuli: {done}/{total}");
-        }
-    });
-    if shown.get() {
-        eprintln!();
-    }
-    Ok(checked?)
+    let bar = Progress::new("stimuli checked", false);
+    Ok(lab::preflight::verify(file, &|d, t| bar.set(d, t))?)
 }
 
 /// `study simulate`: runs `--subjects` complete simulated sessions into a results directory.
@@ -112,9 +104,11 @@ pub fn simulate(args: &SimulateArgs) -> anyhow::Result<()> {
         resume: args.resume,
         patience: Duration::from_secs(args.patience_s),
     };
+    let bar = Progress::new("sessions", false);
+    let say = &mut |line: &str| bar.say(line);
     match &args.subject {
-        Some(id) => lab::simulate::simulate_subject(&options, id, &mut |line| eprintln!("{line}"))?,
-        None => lab::simulate::simulate(&options, &mut |line| eprintln!("{line}"))?,
+        Some(id) => lab::simulate::simulate_subject(&options, id, say)?,
+        None => lab::simulate::simulate_with_progress(&options, say, &mut |d, t| bar.set(d, t))?,
     }
     Ok(())
 }

@@ -71,14 +71,14 @@ fn report_names_a_folder_without_results() {
         ]);
         let err = String::from_utf8_lossy(&out.stderr);
         assert!(!out.status.success(), "{err}");
-        let said = format!("{}: {reason}", results.display());
+        let said = format!("{}{reason}", results.display());
         assert_eq!(err.matches(&said).count(), 1, "{err}");
         assert!(!rep.join("report.md").exists());
     };
-    refused(&dir.join("nowhere"), "no such results folder");
+    refused(&dir.join("nowhere"), ": no such results folder");
     refused(
         &dir.join("empty"),
-        "not a results folder (it has no run.json)",
+        " holds no results: no run.json (make results with `study run`",
     );
     // A run begun and no session recorded: simulate made it, then its sessions are gone.
     let res = dir.join("res");
@@ -86,7 +86,7 @@ fn report_names_a_folder_without_results() {
     std::fs::remove_dir_all(res.join("S001_s1")).unwrap();
     refused(
         &res,
-        "no sessions yet (no session folder holds a session.json)",
+        " holds no sessions yet: no session folder with a session.json",
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
