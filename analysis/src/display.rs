@@ -36,6 +36,10 @@ pub struct SessionDisplay {
     pub viewing: Option<results::ViewingRecord>,
     /// The session's between-subject group (`[[design.groups]]`).
     pub group: Option<String>,
+    /// The subject's id.
+    pub subject: String,
+    /// What the subject answered on the welcome screen (`[session] subject_fields`).
+    pub subject_fields: std::collections::BTreeMap<String, String>,
 }
 
 /// One session's display figures, flagged when it dropped more than `drop_limit_percent` of
@@ -70,6 +74,8 @@ pub fn session_display(s: &SessionResults, drop_limit_percent: f64) -> SessionDi
         browser: m.browser.clone(),
         viewing: m.viewing.clone(),
         group: m.group.clone(),
+        subject: m.subject.clone(),
+        subject_fields: m.subject_fields.clone(),
     }
 }
 

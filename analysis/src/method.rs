@@ -27,22 +27,9 @@ pub struct Observers {
 /// `min`–`max` (or the one value) of the measured values, with `unit`, and in how many of
 /// `n` sessions it was measured; `None` when no session measured it.
 fn measured(values: &[f64], n: usize, unit: &str) -> Option<String> {
-    let lo = values.iter().copied().fold(f64::INFINITY, f64::min);
-    let hi = values.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-    if values.is_empty() {
-        return None;
-    }
-    let num = |v: f64| {
-        let s = format!("{v:.2}");
-        s.trim_end_matches('0').trim_end_matches('.').to_string()
-    };
-    let range = if (hi - lo).abs() < 1e-9 {
-        format!("{} {unit}", num(lo))
-    } else {
-        format!("{}–{} {unit}", num(lo), num(hi))
-    };
+    let range = measured_range(values)?;
     Some(format!(
-        "measured {range} in {} of {n} sessions",
+        "measured {range} {unit} in {} of {n} sessions",
         values.len()
     ))
 }
@@ -67,6 +54,9 @@ pub fn method_text(
         );
     }
     out.push(who);
+    if let Some(p) = participants_line(study, displays) {
+        out.push(p);
+    }
     let no_screening = crate::methods::of(study.protocol).no_screening();
     out.push(match (no_screening, observers.rejected) {
         (Some(why), _) => format!("Screening: none ({why})."),
@@ -85,6 +75,94 @@ pub fn method_text(
         out.push(groups);
     }
     out
+}
+
+/// What the subjects stated on the welcome screen, one clause per `[session] subject_fields`
+/// entry and counted once per subject (their first session read): a number field's range,
+/// mean and count, a choice's or yes/no's count per option in the study file's order, and how
+/// many answered a free-text field (its answers are not printed: they may identify someone).
+/// Answers the field's rules refuse (a log written before the field was typed) are counted
+/// apart, never folded into the figures. `None` for a study with no subject fields.
+fn participants_line(study: &StudyDefinition, displays: &[SessionDisplay]) -> Option<String> {
+    use protocols::study::FieldKind;
+    if study.session.subject_fields.is_empty() {
+        return None;
+    }
+    let mut seen = std::collections::BTreeSet::new();
+    let subjects: Vec<&SessionDisplay> = displays
+        .iter()
+        .filter(|d| seen.insert(d.subject.as_str()))
+        .collect();
+    let clauses: Vec<String> = study
+        .session
+        .subject_fields
+        .iter()
+        .map(|f| {
+            let mut valid = Vec::new();
+            let mut invalid = 0usize;
+            for d in &subjects {
+                match d.subject_fields.get(&f.name).map(|v| f.check(v)) {
+                    Some(Ok(v)) => valid.push(v),
+                    Some(Err(_)) => invalid += 1,
+                    None => {}
+                }
+            }
+            let n = valid.len();
+            let what = match &f.kind {
+                FieldKind::Number { .. } => {
+                    let xs: Vec<f64> = valid.iter().filter_map(|v| v.parse().ok()).collect();
+                    let mean = xs.iter().sum::<f64>() / xs.len().max(1) as f64;
+                    measured_range(&xs).map_or_else(
+                        || "no answers".to_string(),
+                        |r| format!("{r} (mean {}, n = {n})", trim_number(mean, 1)),
+                    )
+                }
+                FieldKind::Choice { .. } | FieldKind::YesNo => {
+                    let counts: Vec<String> = f
+                        .options()
+                        .iter()
+                        .map(|o| format!("{o} {}", valid.iter().filter(|v| *v == o).count()))
+                        .collect();
+                    counts.join(", ")
+                }
+                FieldKind::Text => format!("answered by {n}"),
+            };
+            let bad = if invalid > 0 {
+                format!(" (and {invalid} answer(s) outside the field's rules, left out)")
+            } else {
+                String::new()
+            };
+            format!("{}: {what}{bad}", f.label)
+        })
+        .collect();
+    Some(format!(
+        "Participants ({} subject(s), as stated before the session): {}.",
+        subjects.len(),
+        clauses.join("; ")
+    ))
+}
+
+/// `v` to at most `places` decimals, without trailing zeros.
+fn trim_number(v: f64, places: usize) -> String {
+    let s = format!("{v:.places$}");
+    if s.contains('.') {
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        s
+    }
+}
+
+/// `min–max` of `xs` (or the one value); `None` when empty.
+fn measured_range(xs: &[f64]) -> Option<String> {
+    let lo = xs.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = xs.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    if xs.is_empty() {
+        None
+    } else if (hi - lo).abs() < 1e-9 {
+        Some(trim_number(lo, 2))
+    } else {
+        Some(format!("{}–{}", trim_number(lo, 2), trim_number(hi, 2)))
+    }
 }
 
 /// The between-subject groups: each one's conditions, the sessions read of it and its quota.

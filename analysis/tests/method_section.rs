@@ -58,6 +58,8 @@ fn session(name: &str, hz: Option<f64>, viewing: Option<ViewingRecord>) -> Sessi
         browser: None,
         viewing,
         group: None,
+        subject: name.split(' ').next().unwrap_or(name).into(),
+        subject_fields: std::collections::BTreeMap::new(),
     }
 }
 
@@ -164,4 +166,70 @@ fn a_mushra_study_states_its_screens_panes_and_training() {
          shuffled per screen and subject; 1 training screen(s) first (BS.1534-3's training \
          phase), not analysed."
     );
+}
+
+/// Typed subject fields are summarised once per subject: a number's range, mean and count, a
+/// choice's and a yes/no's count per option in the study file's order, a text field's count;
+/// an answer the field refuses (a log written before the field was typed) is counted apart.
+#[test]
+fn the_method_summarises_the_subjects_fields_by_kind() {
+    let st = study(
+        "[session]\nsubject_fields = [\"handedness\", \
+         { name = \"age\", kind = \"number\", min = 18, max = 99, integer = true }, \
+         { name = \"gender\", kind = \"choice\", options = [\"female\", \"male\", \"another\"] }, \
+         { name = \"normal_vision\", kind = \"yes_no\", label = \"Normal vision\" }]\n",
+    );
+    let with = |name: &str, age: &str, gender: &str, vision: &str| {
+        let mut s = session(name, None, None);
+        s.subject_fields = [
+            ("handedness", "left"),
+            ("age", age),
+            ("gender", gender),
+            ("normal_vision", vision),
+        ]
+        .into_iter()
+        .map(|(k, v)| (k.to_string(), v.to_string()))
+        .collect();
+        s
+    };
+    let sessions = [
+        with("S01 session 1", "23", "female", "yes"),
+        with("S02 session 1", "41", "male", "yes"),
+        // The same subject's second session counts once.
+        with("S02 session 2", "41", "male", "yes"),
+        with("S03 session 1", "30", "female", "no"),
+        with("S04 session 1", "abc", "female", "yes"),
+    ];
+    let text = method_text(
+        &st,
+        Observers {
+            sessions: 5,
+            subjects: 4,
+            excluded_sessions: 0,
+            rejected: None,
+        },
+        &sessions,
+    );
+    let line = text
+        .iter()
+        .find(|l| l.starts_with("Participants"))
+        .unwrap_or_else(|| panic!("no participants line in {text:#?}"));
+    assert_eq!(
+        line,
+        "Participants (4 subject(s), as stated before the session): handedness: answered by 4; \
+         age: 23–41 (mean 31.3, n = 3) (and 1 answer(s) outside the field's rules, left out); \
+         gender: female 3, male 1, another 0; Normal vision: yes 3, no 1."
+    );
+    // A study without subject fields has no such line.
+    let plain = method_text(
+        &study(""),
+        Observers {
+            sessions: 1,
+            subjects: 1,
+            excluded_sessions: 0,
+            rejected: None,
+        },
+        &sessions[..1],
+    );
+    assert!(!plain.iter().any(|l| l.starts_with("Participants")));
 }
