@@ -13,9 +13,10 @@ use lab::results_dir::Destination;
 use lab::session::{self, Opened, Recorder};
 use results::{FolderStore, Store};
 
-use window::native::{self, WindowOptions, WindowReport};
+use window::native::{self, WindowOptions};
 use window::run;
-use window::screens::{Exit, Preflight, StudyUi};
+use window::screens::{Exit, StudyUi};
+use window::status::ExperimenterView;
 
 /// Window size `WxH`.
 fn parse_size(s: &str) -> Result<[f32; 2], String> {
@@ -102,6 +103,10 @@ pub struct RunArgs {
     /// (they are left as they are).
     #[arg(long)]
     pub force: bool,
+    /// No experimenter's view on standard error (where the session stands: trial k of n,
+    /// answers, dropped frames, elapsed time, breaks, pauses, the end).
+    #[arg(long, short = 'q')]
+    pub quiet: bool,
 }
 
 /// What the experimenter measured of the viewing conditions (a study with `[viewing]`): stored
@@ -215,6 +220,11 @@ pub fn run(args: &RunArgs) -> anyhow::Result<()> {
             args.study.display()
         );
     }
+    // Every stimulus the plan can show, before anything is written or shown.
+    let view = ExperimenterView::stderr(args.quiet);
+    let checked = lab::preflight::verify(&file, &|done, total| view.checking(done, total))
+        .with_context(|| format!("{}: nothing was written", args.study.display()))?;
+    view.note(format!("stimuli checked: {checked}"));
     // SIGINT (Ctrl+C in the experimenter's terminal) and SIGTERM stop the session the way
     // "Quit and save" does: state saved, session marked interrupted, resume command printed.
     let signalled = Arc::new(AtomicBool::new(false));
@@ -222,22 +232,19 @@ pub fn run(args: &RunArgs) -> anyhow::Result<()> {
         signal_hook::flag::register(sig, Arc::clone(&signalled))
             .context("installing the SIGINT/SIGTERM handler")?;
     }
-    let (mut store, location, subject) = open_store(args, &file, &destination)?;
+    let (store, location, subject) = open_store(args, &file, &destination)?;
+    let mut store = view.tap(store);
+    view.name(format!("{subject} s{}", args.session));
     let Some(recorder) = open_session(args, &file, store.as_mut(), &subject)? else {
         return Ok(());
     };
     let dir = recorder.path();
     let stimuli = lab::source::open(&file)?;
-    // Every stimulus the plan can show is checked while the welcome screen is up (Begin
-    // waits for it, with a progress bar when it takes a while).
-    let preflight = Preflight::start(file.clone());
-    let problems = preflight.failure();
     let study = Arc::new(file.definition);
-    let screens =
-        StudyUi::new(Arc::clone(&study), stimuli, recorder, true).with_preflight(preflight);
+    let screens = StudyUi::new(Arc::clone(&study), stimuli, recorder, true);
     // The title bar shows what subjects may read: the study's title, not its internal name.
     let options = args.window.options(study.title().to_owned());
-    let (report, exit) = match run::session(&options, screens, &signalled) {
+    let (report, exit) = match run::session(&options, screens, &signalled, view.watcher()) {
         Ok(r) => r,
         Err(e) => {
             // A window that never opened leaves no session behind (a resumed one is kept).
@@ -254,14 +261,8 @@ pub fn run(args: &RunArgs) -> anyhow::Result<()> {
             return Err(e);
         }
     };
-    print_timing(&report);
-    if let Some(problems) = problems.get() {
-        // Nothing was shown: the session goes, as for a window that never opened.
-        if !args.resume {
-            let _ = store.discard_unstarted(&subject, args.session);
-        }
-        bail!("{problems}\nno trial was shown; fix the stimuli and run the session again");
-    }
+    view.finish();
+    print!("{}", run::timing_text(&report));
     let resume = || {
         format!(
             "study run {} --subject {subject} --session {}{} --resume{}",
@@ -419,10 +420,6 @@ fn open_session(
             Some(recorder)
         }
     })
-}
-
-fn print_timing(report: &WindowReport) {
-    print!("{}", run::timing_text(report));
 }
 
 /// `study display-test`: two animated skeletons side by side for `--seconds`, then the

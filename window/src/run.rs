@@ -15,11 +15,13 @@ use crate::native::{self, DisplayFacts, Next, WindowOptions, WindowReport};
 use crate::render::{BACKGROUND, SkeletonCallback};
 use crate::scene::{Figure, FrameShapes, View};
 use crate::screens::{Exit, StudyUi};
+use crate::status::Watcher;
 use crate::timing::FrameClock;
 
 /// Runs the window over a subject's `screens` until the session ends or the window closes;
 /// returns the frame timing and how the session ended (`None`: the window closed first). A
-/// set `signalled` (SIGINT, SIGTERM) stops the session as "Quit and save" does.
+/// set `signalled` (SIGINT, SIGTERM) stops the session as "Quit and save" does. `watch`
+/// gets the screens' status once a frame (the experimenter's terminal, [`crate::status`]).
 ///
 /// # Errors
 /// The window or its adapter cannot be opened.
@@ -27,6 +29,7 @@ pub fn session(
     options: &WindowOptions,
     mut screens: StudyUi,
     signalled: &Arc<AtomicBool>,
+    mut watch: Watcher,
 ) -> anyhow::Result<(WindowReport, Option<Exit>)> {
     let signalled = Arc::clone(signalled);
     let exit = Rc::new(RefCell::new(None::<Exit>));
@@ -58,6 +61,7 @@ pub fn session(
         }
         screens.ui(ui, ctx.clock);
         ctx.screen = screens.screen(ui.input(|i| i.time), ctx.clock);
+        watch.frame(screens.status());
         if let Some(e) = screens.exit() {
             *exit_seen.borrow_mut() = Some(e.clone());
             // The end screen stays until the subject closes it (or the window is closed);
@@ -69,7 +73,7 @@ pub fn session(
             };
         }
         // Idle screens still need frames to measure the display before the first trial.
-        if screens.animating() || screens.checking() || !ctx.clock.calibrated() {
+        if screens.animating() || !ctx.clock.calibrated() {
             Next::Animate
         } else {
             Next::Idle
