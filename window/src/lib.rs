@@ -15,10 +15,13 @@ pub mod render;
 pub mod run;
 pub use lab::scene;
 pub mod screens;
+pub mod status;
 pub mod test_input;
 pub mod timing;
 pub mod viewing;
 
+#[cfg(test)]
+mod readable_tests;
 #[cfg(test)]
 mod render_tests;
 #[cfg(test)]

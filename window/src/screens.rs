@@ -15,7 +15,7 @@ use std::sync::Arc;
 use egui::{Align, Color32, Key, Layout, RichText, Ui, Vec2};
 use protocols::methods::{AnswerWidget, ChoiceOption};
 use protocols::record::{Answer, Arrangement, Block, Position, Response, Trial};
-use protocols::study::{RatingScale, ScaleKind};
+use protocols::study::{FieldKind, RatingScale, ScaleKind, SubjectField};
 use protocols::{FrameTiming, StimulusEncoding, StudyDefinition};
 
 use super::flow::{Frame, Presentation, Show};
@@ -33,6 +33,34 @@ use protocols::texts::{Planned, categories, format_rating, grade_word, planned_t
 const ACK_S: f64 = 1.0;
 /// Seconds between tries to commit an answer while the results database is unreachable.
 const RETRY_S: f64 = 1.0;
+
+/// Font size of what a subject reads (instructions, fields, consent, buttons), pixels at one
+/// pixel per point: at least 14 px at 1280×720 and 1920×1080 (issue 41; the text-size test
+/// in `readable_tests.rs` measures every screen).
+const TEXT_PX: f32 = 18.0;
+/// Font size of a scale's words (under grade buttons, beside scales and sliders), pixels.
+const WORD_PX: f32 = 16.0;
+/// Font size of headings (the title, "Consent"), pixels.
+const HEADING_PX: f32 = 24.0;
+/// Space between the parts of a screen, points.
+const SPACE: f32 = 16.0;
+
+/// The subject's text styles: nothing under [`WORD_PX`] (egui's defaults are 9 px for small
+/// text and 12.5 px for the body), and radio buttons and check boxes to match.
+fn readable(style: &mut egui::Style) {
+    use egui::{FontId, TextStyle};
+    style.text_styles = [
+        (TextStyle::Small, FontId::proportional(WORD_PX)),
+        (TextStyle::Body, FontId::proportional(TEXT_PX)),
+        (TextStyle::Button, FontId::proportional(TEXT_PX)),
+        (TextStyle::Heading, FontId::proportional(HEADING_PX)),
+        (TextStyle::Monospace, FontId::monospace(WORD_PX)),
+    ]
+    .into();
+    style.spacing.icon_width = 18.0;
+    style.spacing.icon_width_inner = 10.0;
+    style.spacing.interact_size.y = 26.0;
+}
 
 /// The end screen ignores Enter this long, seconds, so the Enter that confirmed the last
 /// answer cannot close it unseen.
@@ -134,7 +162,8 @@ pub struct StudyUi {
     screen: Screen,
     pause: Pause,
     exit: Option<Exit>,
-    fields: Vec<(String, String)>,
+    /// The welcome's subject fields and what the subject has entered or chosen.
+    fields: Vec<(SubjectField, String)>,
     consent: bool,
     views: HashMap<String, View>,
     planned: Planned,
@@ -145,8 +174,6 @@ pub struct StudyUi {
     end_since: Option<f64>,
     /// The subject (or experimenter) closed the end screen.
     closed: bool,
-    /// The stimulus check Begin waits for (`None`: nothing to wait for).
-    preflight: Option<Preflight>,
     /// A MUSHRA screen's answers still to be logged, one row each, in pane order.
     queued: VecDeque<Queued>,
 }
@@ -170,7 +197,7 @@ impl StudyUi {
                 let v = recorder
                     .manifest()
                     .subject_fields
-                    .get(f)
+                    .get(&f.name)
                     .cloned()
                     .unwrap_or_default();
                 (f.clone(), v)
@@ -205,22 +232,8 @@ impl StudyUi {
             ack_until: None,
             end_since: None,
             closed: false,
-            preflight: None,
             queued: VecDeque::new(),
         }
-    }
-
-    /// Begin waits for `preflight` (every stimulus of the plan checked), with a progress bar
-    /// once it takes over a second; problems end the session before its first trial.
-    #[must_use]
-    pub fn with_preflight(mut self, preflight: Preflight) -> StudyUi {
-        self.preflight = Some(preflight);
-        self
-    }
-
-    /// True while the stimulus check runs (the window repaints to show its progress).
-    pub fn checking(&self) -> bool {
-        self.preflight.as_ref().is_some_and(|p| p.outcome.is_none())
     }
 
     /// The session's stimulus source (UI tests wait for what it prepares).
@@ -233,6 +246,16 @@ impl StudyUi {
     #[cfg(test)]
     pub fn study_for_tests(&self) -> &StudyDefinition {
         &self.study
+    }
+
+    /// Answers every subject field as simulated subject 0 would, and ticks the consent box
+    /// (tests that look at the screens, not at the form).
+    #[cfg(test)]
+    pub fn fill_fields_for_tests(&mut self) {
+        for (f, v) in &mut self.fields {
+            *v = f.simulated(0);
+        }
+        self.consent = true;
     }
 
     /// Where the reference is in the trial on screen (UI tests answer right or wrong).
@@ -323,11 +346,7 @@ impl StudyUi {
             Screen::Viewing(_) => "viewing".into(),
             Screen::Welcome => {
                 let measured = clock.calibrated() || !self.gpu;
-                let checked = self
-                    .preflight
-                    .as_ref()
-                    .is_none_or(|p| matches!(p.outcome, Some(Ok(()))));
-                if measured && checked {
+                if measured {
                     "welcome/ready".into()
                 } else {
                     "welcome".into()
@@ -359,6 +378,7 @@ impl StudyUi {
     /// Draws the current screen and handles its input; `clock` is the window's frame clock
     /// (trial timing is read from it).
     pub fn ui(&mut self, ui: &mut Ui, clock: &mut FrameClock) {
+        readable(ui.style_mut());
         let now = ui.input(|i| i.time);
         let chord = ui.input(|i| super::native::ctrl_shift_pressed(i, Key::P));
         if chord && self.pause == Pause::None && self.exit.is_none() {
@@ -402,76 +422,64 @@ impl StudyUi {
         let mut begin = false;
         egui::CentralPanel::default().show(ui, |ui| {
             ui.vertical_centered(|ui| {
-                ui.add_space(24.0);
+                ui.add_space(SPACE);
                 ui.heading(self.study.title());
-                ui.add_space(12.0);
                 if self.recorder.answered() > 0 {
+                    ui.add_space(SPACE / 2.0);
                     ui.label(format!(
                         "Continuing the session: {} trials already done.",
                         self.recorder.answered()
                     ));
                 }
             });
-            ui.add_space(12.0);
+            ui.add_space(SPACE);
             let instructions = protocols::texts::instructions(&self.study);
-            ui.label(RichText::new(instructions).size(18.0));
-            ui.add_space(16.0);
+            ui.label(RichText::new(instructions).size(TEXT_PX));
+            ui.add_space(SPACE);
             if !self.fields.is_empty() {
-                egui::Grid::new("subject fields")
-                    .num_columns(2)
-                    .show(ui, |ui| {
-                        for (name, value) in &mut self.fields {
-                            let label = ui.label(name.replace('_', " "));
-                            ui.add_enabled(active, egui::TextEdit::singleline(value))
-                                .labelled_by(label.id);
-                            ui.end_row();
-                        }
-                    });
-                ui.add_space(12.0);
+                subject_fields(ui, &mut self.fields, active);
+                ui.add_space(SPACE);
             }
             if let Some(consent) = &self.study.session.consent {
-                ui.label(consent);
+                ui.label(RichText::new("Consent").strong().size(HEADING_PX));
+                ui.label(RichText::new(consent).size(TEXT_PX));
                 ui.add_enabled(
                     active,
-                    egui::Checkbox::new(&mut self.consent, "I agree to take part"),
+                    egui::Checkbox::new(
+                        &mut self.consent,
+                        RichText::new("I agree to take part").size(TEXT_PX),
+                    ),
                 );
-                ui.add_space(12.0);
+                ui.add_space(SPACE);
             }
             let missing = self.missing_to_begin();
-            let ready = missing.is_none();
+            let ready = missing.is_empty();
             // Trials start once the refresh period is known, so every trial's drop count is
             // against the measured period.
             let measured = clock.calibrated() || !self.gpu;
-            let checked = self.preflight.as_mut().is_none_or(|p| p.ui(ui));
             ui.vertical_centered(|ui| {
                 let button = egui::Button::new(RichText::new("Begin").size(20.0))
                     .min_size(Vec2::new(160.0, 44.0));
-                let can = active && ready && measured && checked;
+                let can = active && ready && measured;
                 if ui.add_enabled(can, button).clicked()
                     || (can && ui.input(|i| i.key_pressed(Key::Enter)))
                 {
                     begin = true;
                 }
-                if let Some(missing) = missing {
-                    ui.label(missing);
-                } else if !measured {
+                for line in &missing {
+                    ui.label(RichText::new(line).size(TEXT_PX));
+                }
+                if ready && !measured {
                     ui.label("Measuring the display…");
                 }
             });
         });
-        if let Some(Some(Err(problems))) = self.preflight.as_ref().map(|p| &p.outcome) {
-            let problems = problems.clone();
-            self.screen = Screen::Failed(format!(
-                "The stimuli have problems; the session cannot start.\n\n{problems}"
-            ));
-            self.exit = Some(Exit::Failed(problems));
-            return;
-        }
         if begin {
+            // Each field as its check writes it (Begin is only enabled when all pass).
             let fields: Vec<(String, String)> = self
                 .fields
                 .iter()
-                .map(|(k, v)| (k.clone(), v.trim().to_string()))
+                .filter_map(|(f, v)| f.check(v).ok().map(|v| (f.name.clone(), v)))
                 .collect();
             let consent = self.consent;
             let saved = self.recorder.update_manifest(|m| {
@@ -487,23 +495,19 @@ impl StudyUi {
         }
     }
 
-    /// What the subject still has to do before Begin: the empty fields by name, and the
-    /// consent box; `None` when nothing.
-    fn missing_to_begin(&self) -> Option<String> {
-        let empty: Vec<String> = self
+    /// What the subject still has to do before Begin, a line each: why each field's answer
+    /// is refused ([`SubjectField::check`]: "age: enter a whole number from 18 to 99"), and
+    /// the consent box; empty when nothing.
+    fn missing_to_begin(&self) -> Vec<String> {
+        let mut todo: Vec<String> = self
             .fields
             .iter()
-            .filter(|(_, v)| v.trim().is_empty())
-            .map(|(k, _)| k.replace('_', " "))
+            .filter_map(|(f, v)| f.check(v).err())
             .collect();
-        let mut todo = Vec::new();
-        if !empty.is_empty() {
-            todo.push(format!("fill in {}", empty.join(", ")));
-        }
         if self.study.session.consent.is_some() && !self.consent {
-            todo.push("tick “I agree to take part”".to_string());
+            todo.push("To begin, tick “I agree to take part”.".to_string());
         }
-        (!todo.is_empty()).then(|| format!("To begin, {}.", todo.join(" and ")))
+        todo
     }
 
     fn break_screen(&mut self, ui: &mut Ui, now: f64, active: bool, clock: &mut FrameClock) {
@@ -993,6 +997,53 @@ impl StudyUi {
     }
 }
 
+/// The welcome's subject fields, a row each: the label, then a text box (text, numbers) or a
+/// radio button per option (a choice; yes or no). A field shows what is stored for it, so a
+/// resumed session shows the answers given.
+fn subject_fields(ui: &mut Ui, fields: &mut [(SubjectField, String)], active: bool) {
+    egui::Grid::new("subject fields")
+        .num_columns(2)
+        .spacing(Vec2::new(SPACE, 10.0))
+        .show(ui, |ui| {
+            for (field, value) in fields.iter_mut() {
+                let label = ui.label(RichText::new(&field.label).size(TEXT_PX));
+                let options = field.options();
+                if options.is_empty() {
+                    let mut edit = egui::TextEdit::singleline(value).desired_width(320.0);
+                    if matches!(field.kind, FieldKind::Number { .. }) {
+                        edit = edit.hint_text(field.hint());
+                    }
+                    ui.add_enabled(active, edit).labelled_by(label.id);
+                } else {
+                    let chosen = field.check(value).ok();
+                    ui.horizontal_wrapped(|ui| {
+                        ui.spacing_mut().item_spacing.x = SPACE;
+                        for option in options {
+                            let shown = match field.kind {
+                                FieldKind::YesNo => capitalized(&option),
+                                _ => option.clone(),
+                            };
+                            let on = chosen.as_deref() == Some(option.as_str());
+                            let radio = egui::RadioButton::new(on, RichText::new(shown));
+                            if ui.add_enabled(active, radio).clicked() {
+                                *value = option;
+                            }
+                        }
+                    });
+                }
+                ui.end_row();
+            }
+        });
+}
+
+/// `s` with its first letter in upper case ("yes" → "Yes").
+fn capitalized(s: &str) -> String {
+    let mut c = s.chars();
+    c.next()
+        .map(|f| f.to_uppercase().chain(c).collect())
+        .unwrap_or_default()
+}
+
 /// Rating buttons of a categorical scale, or a slider for a continuous one.
 fn rating_row(
     ui: &mut Ui,
@@ -1005,22 +1056,52 @@ fn rating_row(
     match scale.kind {
         ScaleKind::Categorical => {
             let cats = categories(scale);
-            ui.horizontal(|ui| {
-                let per = 44.0 + ui.spacing().item_spacing.x;
-                ui.add_space(((ui.available_width() - per * cats.len() as f32) * 0.5).max(0.0));
-                for v in cats {
-                    ui.vertical(|ui| {
-                        let text = RichText::new(format_rating(v)).size(18.0);
-                        let button = egui::Button::new(text)
-                            .selected(*value == Some(v))
-                            .min_size(Vec2::new(44.0, 36.0));
-                        if ui.add_enabled(open, button).clicked() {
-                            *value = Some(v);
-                        }
-                        if let Some(label) = grade_word(words, scale, v) {
-                            ui.label(RichText::new(label).small());
-                        }
-                    });
+            let labels: Vec<Option<&str>> =
+                cats.iter().map(|&v| grade_word(words, scale, v)).collect();
+            // Every grade gets a column of the same width, its button centred over its word
+            // (wrapped when the row would not fit), so the buttons are evenly spaced however
+            // long their words are.
+            let font = egui::FontId::proportional(WORD_PX);
+            let widest = labels
+                .iter()
+                .flatten()
+                .map(|l| {
+                    ui.painter()
+                        .layout_no_wrap((*l).to_string(), font.clone(), Color32::WHITE)
+                        .size()
+                        .x
+                })
+                .fold(0.0, f32::max);
+            let n = cats.len().max(1) as f32;
+            let gap = 8.0;
+            let fit = (ui.available_width() - gap * (n - 1.0)) / n;
+            let col = (widest + 12.0).max(56.0).min(fit.max(56.0));
+            // Top-aligned: the buttons stay on one line whatever their words' heights.
+            ui.horizontal_top(|ui| {
+                ui.spacing_mut().item_spacing.x = gap;
+                ui.add_space(((ui.available_width() - n * col - gap * (n - 1.0)) * 0.5).max(0.0));
+                for (v, label) in cats.into_iter().zip(labels) {
+                    ui.allocate_ui_with_layout(
+                        Vec2::new(col, 0.0),
+                        Layout::top_down(Align::Center),
+                        |ui| {
+                            ui.set_width(col);
+                            let text = RichText::new(format_rating(v)).size(TEXT_PX);
+                            let button = egui::Button::new(text)
+                                .selected(*value == Some(v))
+                                .min_size(Vec2::new(48.0, 36.0));
+                            if ui.add_enabled(open, button).clicked() {
+                                *value = Some(v);
+                            }
+                            if let Some(label) = label {
+                                ui.add(
+                                    egui::Label::new(RichText::new(label).size(WORD_PX))
+                                        .halign(Align::Center)
+                                        .wrap(),
+                                );
+                            }
+                        },
+                    );
                 }
             });
         }
@@ -1307,7 +1388,9 @@ fn answer(
             words,
         } => dscqs_answer(ui, t, (scale, words), open, (question, names)),
         AnswerWidget::Choice { question, options } => choice(ui, question, options, open),
-        AnswerWidget::SliderGrid { question } => mushra_answer(ui, t, scale, question, open),
+        AnswerWidget::SliderGrid { question, words } => {
+            mushra_answer(ui, t, scale, question, words, open)
+        }
     }
 }
 
@@ -1633,33 +1716,55 @@ fn grid_panes<'a>(
     }
 }
 
-/// MUSHRA (BS.1534): a 0-100 slider per lettered pane, opened once every pane has played;
-/// Tab moves from slider to slider, the arrow keys move the focused one by a step, Page Up
-/// and Page Down by 10. Continue once every pane has a rating; the answer returned is the
-/// first pane's (the caller logs every pane's from `pane_ratings`).
+/// Width of a MUSHRA slider's column, points.
+const MUSHRA_COL: f32 = 76.0;
+/// Width of the column of scale words and of the 0 and 100 marks beside the sliders, points.
+const MUSHRA_WORDS: f32 = 150.0;
+/// Height of the band of letters above the sliders, and of the values under them, points.
+const MUSHRA_BAND: f32 = 28.0;
+/// How far below 0 an unrated slider's knob waits, points: apart from the scale, so that it
+/// never reads as a rating of 0.
+const MUSHRA_PARK: f32 = 30.0;
+
+/// Height of MUSHRA's sliders, points: what leaves the panes most of a small window.
+fn mushra_height(ui: &Ui) -> f32 {
+    (ui.ctx().content_rect().height() * 0.3).clamp(150.0, 320.0)
+}
+
+/// MUSHRA (BS.1534): a 0-100 slider per lettered pane, opened once every pane has played,
+/// beside BS.1534's words (Excellent … Bad, in five equal sections) with 0 and 100 marked;
+/// an unrated slider's knob waits below the scale, apart from 0. Tab moves from slider to
+/// slider, the arrow keys move the focused one by a step (from 0 when unrated), Page Up and
+/// Page Down by 10. Continue once every pane has a rating; the answer returned is the first
+/// pane's (the caller logs every pane's from `pane_ratings`).
 fn mushra_answer(
     ui: &mut Ui,
     t: &mut TrialScreen,
     scale: &RatingScale,
     question: &str,
+    words: &[String],
     open: bool,
 ) -> Option<Answer> {
-    ui.label(RichText::new(question).size(18.0));
-    let step = scale.step.unwrap_or(1.0);
+    ui.label(RichText::new(question).size(TEXT_PX));
     let n = t.panes.len();
-    let w = 64.0;
+    let h = mushra_height(ui);
+    let width = MUSHRA_WORDS + MUSHRA_COL * n as f32;
     ui.horizontal(|ui| {
-        ui.add_space(((ui.available_width() - w * n as f32) * 0.5).max(0.0));
-        for (pane, rating) in t.panes.iter().zip(t.pane_ratings.iter_mut()) {
+        ui.add_space(((ui.available_width() - width - MUSHRA_WORDS) * 0.5).max(0.0));
+        let size = Vec2::new(width, 2.0 * MUSHRA_BAND + h + MUSHRA_PARK + 20.0);
+        let (block, _) = ui.allocate_exact_size(size, egui::Sense::hover());
+        let top = block.top() + MUSHRA_BAND + 10.0;
+        let track = egui::Rangef::new(top, top + h);
+        mushra_scale(ui, block, track, words, open);
+        for (k, (pane, rating)) in t.panes.iter().zip(t.pane_ratings.iter_mut()).enumerate() {
             let name = protocols::screen::pane_letter(pane.reference_position).unwrap_or("?");
-            ui.allocate_ui_with_layout(
-                Vec2::new(w, 150.0),
-                Layout::top_down(Align::Center),
-                |ui| {
-                    ui.label(RichText::new(name).strong().size(18.0));
-                    mushra_slider(ui, scale, step, rating, open, name);
-                },
+            let x = block.left() + MUSHRA_WORDS + MUSHRA_COL * (k as f32 + 0.5);
+            let column = egui::Rangef::new(x - MUSHRA_COL * 0.5, x + MUSHRA_COL * 0.5);
+            ui.put(
+                egui::Rect::from_x_y_ranges(column, block.top()..=block.top() + MUSHRA_BAND),
+                egui::Label::new(RichText::new(name).strong().size(TEXT_PX)),
             );
+            mushra_slider(ui, scale, (x, track), rating, open, name);
         }
     });
     let missing: Vec<&str> = t
@@ -1681,41 +1786,160 @@ fn mushra_answer(
     None
 }
 
-/// One pane's vertical slider and its value ("–" until set). A pane counts as rated once its
-/// slider is clicked, dragged or moved by a key while focused.
+/// The scale beside MUSHRA's sliders: lines across every slider at 0, 20, … 100, BS.1534's
+/// words in the five sections between them, "100" and "0" at the ends.
+fn mushra_scale(ui: &mut Ui, block: egui::Rect, track: egui::Rangef, words: &[String], open: bool) {
+    let visuals = ui.visuals();
+    let line = if open {
+        visuals.weak_text_color()
+    } else {
+        visuals.widgets.noninteractive.bg_stroke.color
+    };
+    let section = track.span() / words.len().max(1) as f32;
+    let lines = block.left() + MUSHRA_WORDS - 34.0..=block.right();
+    for k in 0..=words.len() {
+        ui.painter().hline(
+            lines.clone(),
+            track.min + section * k as f32,
+            egui::Stroke::new(1.0, line),
+        );
+    }
+    let words_x = block.left()..=block.left() + MUSHRA_WORDS - 40.0;
+    for (k, word) in words.iter().enumerate() {
+        let y = track.min + section * (k as f32 + 0.5);
+        ui.put(
+            egui::Rect::from_x_y_ranges(words_x.clone(), y - 12.0..=y + 12.0),
+            egui::Label::new(RichText::new(word.as_str()).size(WORD_PX)),
+        );
+    }
+    let marks_x = block.left() + MUSHRA_WORDS - 40.0..=block.left() + MUSHRA_WORDS - 4.0;
+    for (mark, y) in [("100", track.min), ("0", track.max)] {
+        ui.put(
+            egui::Rect::from_x_y_ranges(marks_x.clone(), y - 12.0..=y + 12.0),
+            egui::Label::new(RichText::new(mark).size(WORD_PX)),
+        );
+    }
+}
+
+/// One pane's slider: a track at `x` over `track`, its knob at the rating (or waiting below
+/// the scale while unrated), its value under it ("–" until set). A pane counts as rated once
+/// its slider is clicked, dragged or moved by a key while focused. Screen readers see a
+/// slider "Rating of A" with no value until it is set.
 fn mushra_slider(
     ui: &mut Ui,
     scale: &RatingScale,
-    step: f64,
+    (x, track): (f32, egui::Rangef),
     rating: &mut Option<f64>,
     open: bool,
     name: &str,
 ) {
+    let step = scale.step.unwrap_or(1.0);
+    let id = ui.scope_id().with(("mushra slider", name));
+    let hit = egui::Rect::from_x_y_ranges(
+        x - MUSHRA_COL * 0.5 + 6.0..=x + MUSHRA_COL * 0.5 - 6.0,
+        track.min - 10.0..=track.max + 10.0,
+    );
+    let sense = if open {
+        egui::Sense::click_and_drag()
+    } else {
+        egui::Sense::hover()
+    };
+    let r = ui.interact(hit, id, sense);
     let mut v = rating.unwrap_or(scale.min);
-    let r = ui
-        .add_enabled(
-            open,
-            egui::Slider::new(&mut v, scale.min..=scale.max)
-                .vertical()
-                .step_by(step)
-                .show_value(false),
-        )
-        .on_hover_text(format!("Rating of {name}"));
-    let mut set = r.changed() || r.clicked() || r.drag_started();
+    let mut set = false;
+    if open
+        && (r.clicked() || r.dragged() || r.drag_started())
+        && let Some(pos) = r.interact_pointer_pos()
+    {
+        v = scale_value_at(scale, pos.y, track.min, track.max);
+        set = true;
+    }
     if open && r.has_focus() {
+        ui.memory_mut(|m| {
+            m.set_focus_lock_filter(
+                id,
+                egui::EventFilter {
+                    vertical_arrows: true,
+                    ..Default::default()
+                },
+            );
+        });
         ui.input(|i| {
-            let page = i.num_presses(Key::PageUp) as f64 - i.num_presses(Key::PageDown) as f64;
-            if page != 0.0 {
-                v = (v + 10.0 * page).clamp(scale.min, scale.max);
+            let arrows = i.num_presses(Key::ArrowUp) as f64 - i.num_presses(Key::ArrowDown) as f64;
+            let pages = i.num_presses(Key::PageUp) as f64 - i.num_presses(Key::PageDown) as f64;
+            let pressed = [Key::ArrowUp, Key::ArrowDown, Key::PageUp, Key::PageDown]
+                .into_iter()
+                .any(|k| i.key_pressed(k));
+            if pressed {
+                v = (v + arrows * step + pages * 10.0).clamp(scale.min, scale.max);
                 set = true;
             }
-            set |= i.key_pressed(Key::ArrowUp) || i.key_pressed(Key::ArrowDown);
         });
     }
     if set && open {
         *rating = Some(scale.snap(v));
     }
-    ui.label(rating.map_or_else(|| "–".to_string(), format_rating));
+    paint_mushra_slider(ui, scale, (x, track), *rating, r.has_focus() && open);
+    let value = rating.map_or_else(|| "–".to_string(), format_rating);
+    let below = track.max + MUSHRA_PARK + 12.0;
+    ui.put(
+        egui::Rect::from_x_y_ranges(
+            x - MUSHRA_COL * 0.5..=x + MUSHRA_COL * 0.5,
+            below..=below + MUSHRA_BAND,
+        ),
+        egui::Label::new(RichText::new(value).size(TEXT_PX)),
+    );
+    let marked = *rating;
+    let r = r.on_hover_text(format!("Rating of {name}"));
+    r.widget_info(|| {
+        let mut info = egui::WidgetInfo::labeled(
+            egui::accesskit::Role::Slider,
+            open,
+            format!("Rating of {name}"),
+        );
+        info.value = marked;
+        info
+    });
+    ui.ctx().accesskit_node_builder(id, |b| {
+        b.set_min_numeric_value(scale.min);
+        b.set_max_numeric_value(scale.max);
+        b.set_numeric_value_step(step);
+    });
+}
+
+/// A MUSHRA slider's rail at `x` over `track` and its knob: filled at the rating, or hollow
+/// below the scale while unrated; ringed while it has the keyboard's focus.
+fn paint_mushra_slider(
+    ui: &Ui,
+    scale: &RatingScale,
+    (x, track): (f32, egui::Rangef),
+    rating: Option<f64>,
+    focus: bool,
+) {
+    let visuals = ui.visuals();
+    let painter = ui.painter();
+    let rail = egui::Rect::from_x_y_ranges(x - 4.0..=x + 4.0, track);
+    painter.rect_filled(rail, 4.0, visuals.extreme_bg_color);
+    painter.rect_stroke(
+        rail,
+        4.0,
+        visuals.widgets.noninteractive.bg_stroke,
+        egui::StrokeKind::Outside,
+    );
+    let at = if let Some(v) = rating {
+        let f = ((v - scale.min) / (scale.max - scale.min)).clamp(0.0, 1.0) as f32;
+        let at = egui::pos2(x, track.max - f * track.span());
+        painter.circle_filled(at, 10.0, visuals.selection.bg_fill);
+        at
+    } else {
+        // Waiting below the scale, hollow: not a rating of 0.
+        let at = egui::pos2(x, track.max + MUSHRA_PARK);
+        painter.circle_stroke(at, 9.0, egui::Stroke::new(2.0, visuals.weak_text_color()));
+        at
+    };
+    if focus {
+        painter.circle_stroke(at, 14.0, egui::Stroke::new(2.0, visuals.text_color()));
+    }
 }
 
 fn draw_viewport(
@@ -1748,86 +1972,31 @@ fn draw_viewport(
     }
 }
 
-/// The stimulus preflight ([`lab::preflight`]) on a background thread, so the window stays
-/// responsive while a large stimulus set is read: the welcome screen shows its progress
-/// after a second, Begin waits for it, and its problems end the session before any trial.
-pub struct Preflight {
-    started: std::time::Instant,
-    /// (done, total).
-    progress: Arc<(
-        std::sync::atomic::AtomicUsize,
-        std::sync::atomic::AtomicUsize,
-    )>,
-    worker: Option<std::thread::JoinHandle<Result<(), String>>>,
-    /// The problems, set when the check found any (the runner reads it after the window).
-    failed: Arc<std::sync::OnceLock<String>>,
-    /// `Some` once the check has ended: `Err` holds every problem, one per line.
-    pub outcome: Option<Result<(), String>>,
-}
-
-impl Preflight {
-    /// Starts checking every stimulus `study`'s plan can show.
-    pub fn start(study: lab::StudyFile) -> Preflight {
-        use std::sync::atomic::{AtomicUsize, Ordering};
-        let progress = Arc::new((AtomicUsize::new(0), AtomicUsize::new(0)));
-        let shared = Arc::clone(&progress);
-        let failed = Arc::new(std::sync::OnceLock::new());
-        let failure = Arc::clone(&failed);
-        let worker = std::thread::spawn(move || {
-            let (_, problems) = lab::preflight::check(&study, &|done, total| {
-                shared.0.store(done, Ordering::Relaxed);
-                shared.1.store(total, Ordering::Relaxed);
-            });
-            if problems.is_empty() {
-                Ok(())
-            } else {
-                let text = lab::preflight::describe(&study, &problems);
-                let _ = failure.set(text.clone());
-                Err(text)
-            }
-        });
-        Preflight {
-            started: std::time::Instant::now(),
-            progress,
-            worker: Some(worker),
-            failed,
-            outcome: None,
+impl StudyUi {
+    /// Where the session stands, for the experimenter's terminal ([`crate::status`]): read
+    /// once a frame, so it copies a few words and nothing more.
+    pub fn status(&self) -> crate::status::SessionStatus {
+        use crate::status::{Ended, SessionStatus, Stage};
+        SessionStatus {
+            stage: match &self.screen {
+                Screen::Viewing(_) => Stage::Viewing,
+                Screen::Welcome => Stage::Welcome,
+                Screen::Break => Stage::Break,
+                Screen::Trial(t) => Stage::Trial(t.trial.index),
+                Screen::Gap(_) => Stage::Gap,
+                Screen::Waiting { .. } => Stage::Waiting,
+                Screen::End(_) | Screen::Failed(_) => Stage::End,
+            },
+            paused: self.pause != Pause::None,
+            answered: self.recorder.answered(),
+            planned: self.planned,
+            elapsed_ms: self.recorder.elapsed_ms(),
+            ended: self.exit.as_ref().map(|e| match e {
+                Exit::Finished(_) => Ended::Finished,
+                Exit::Quit { .. } => Ended::Quit,
+                Exit::Signalled { .. } => Ended::Signalled,
+                Exit::Failed(_) => Ended::Failed,
+            }),
         }
-    }
-
-    /// Where the problems appear if the check finds any.
-    pub fn failure(&self) -> Arc<std::sync::OnceLock<String>> {
-        Arc::clone(&self.failed)
-    }
-
-    /// Shows the progress while the check runs; true once it has ended without problems.
-    fn ui(&mut self, ui: &mut Ui) -> bool {
-        use std::sync::atomic::Ordering;
-        if self
-            .worker
-            .as_ref()
-            .is_some_and(std::thread::JoinHandle::is_finished)
-            && let Some(w) = self.worker.take()
-        {
-            self.outcome = Some(
-                w.join()
-                    .unwrap_or_else(|_| Err("the stimulus check stopped unexpectedly".into())),
-            );
-        }
-        if let Some(r) = &self.outcome {
-            return r.is_ok();
-        }
-        if self.started.elapsed() > std::time::Duration::from_secs(1) {
-            let done = self.progress.0.load(Ordering::Relaxed);
-            let total = self.progress.1.load(Ordering::Relaxed).max(1);
-            ui.vertical_centered(|ui| {
-                ui.add(
-                    egui::ProgressBar::new(done as f32 / total as f32)
-                        .desired_width(320.0)
-                        .text(format!("Checking the stimuli: {done} of {total}")),
-                );
-            });
-        }
-        false
     }
 }

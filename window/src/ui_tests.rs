@@ -21,9 +21,9 @@ use lab::session::{Opened, Recorder};
 /// Seconds per kittest step.
 const DT: f32 = 0.05;
 
-struct Fixture {
-    dir: PathBuf,
-    study_path: PathBuf,
+pub(super) struct Fixture {
+    pub(super) dir: PathBuf,
+    pub(super) study_path: PathBuf,
 }
 
 impl Drop for Fixture {
@@ -32,7 +32,7 @@ impl Drop for Fixture {
     }
 }
 
-fn fixture(name: &str, study_body: &str) -> Fixture {
+pub(super) fn fixture(name: &str, study_body: &str) -> Fixture {
     let dir = std::env::temp_dir().join(format!(
         "study-ui-{name}-{}-{}",
         std::process::id(),
@@ -69,6 +69,16 @@ const CONSENT: &str = "protocol = \"mos\"\n\
     [session]\nfamiliarization = 0\nhidden_repeats = 0\n\
     consent = \"Your answers are stored without your name.\"\n\
     instructions = \"Rate the motion on the right.\"\n";
+
+/// One MOS trial behind a welcome asking every kind of subject field, and a consent text.
+pub(super) const TYPED: &str = "protocol = \"mos\"\n\
+    [conditions]\nclips = [\"walk\"]\ncodecs = [\"spiht\"]\ntarget_cr = [10]\n\
+    [session]\nfamiliarization = 0\nhidden_repeats = 0\n\
+    consent = \"Your answers are stored without your name.\"\n\
+    subject_fields = [\"handedness\", \
+    { name = \"age\", kind = \"number\", min = 18, max = 99, integer = true }, \
+    { name = \"gender\", kind = \"choice\", options = [\"female\", \"male\", \"another\", \"prefer not to say\"] }, \
+    { name = \"normal_vision\", kind = \"yes_no\", label = \"Normal or corrected vision\" }]\n";
 
 const DSCQS: &str = "protocol = \"dscqs\"\n\
     [conditions]\nclips = [\"walk\"]\ncodecs = [\"spiht\"]\ntarget_cr = [10]\n\
@@ -132,7 +142,7 @@ fn harness_after(
     (h, Run { fx, session_dir })
 }
 
-fn fresh_manifest(study: &StudyDefinition) -> results::SessionManifest {
+pub(super) fn fresh_manifest(study: &StudyDefinition) -> results::SessionManifest {
     lab::session::new_manifest(
         study,
         lab::session::SessionOf {
@@ -514,11 +524,13 @@ fn a_mos_trial_says_which_motion_is_the_original() {
         "{instructions}"
     );
     assert!(h.query_by_label(&instructions).is_some());
-    // Begin names what is missing.
-    assert!(
-        h.query_by_label("To begin, fill in age, normal vision.")
-            .is_some()
-    );
+    // Begin names what is missing, a line for each field.
+    for line in [
+        "age: enter an answer (required)",
+        "normal vision: enter an answer (required)",
+    ] {
+        assert!(h.query_by_label(line).is_some(), "{line}");
+    }
     for (field, value) in [("age", "31"), ("normal vision", "yes")] {
         let node = h.get_by_role_and_label(Role::TextInput, field);
         node.focus();
@@ -529,7 +541,11 @@ fn a_mos_trial_says_which_motion_is_the_original() {
         if field == "age" {
             h.run_steps(1);
             assert!(
-                h.query_by_label("To begin, fill in normal vision.")
+                h.query_by_label("age: enter an answer (required)")
+                    .is_none()
+            );
+            assert!(
+                h.query_by_label("normal vision: enter an answer (required)")
                     .is_some()
             );
         }
@@ -891,6 +907,17 @@ fn a_dcr_trial_shows_the_reference_first_and_takes_an_impairment() {
     ] {
         assert!(h.query_by_label(words).is_some(), "{words}");
     }
+    // The grade buttons are evenly spaced on one line, however long their words.
+    let centres: Vec<egui::Pos2> = ["1", "2", "3", "4", "5"]
+        .iter()
+        .map(|k| h.get_by_role_and_label(Role::Button, k).rect().center())
+        .collect();
+    let gaps: Vec<f32> = centres.windows(2).map(|w| w[1].x - w[0].x).collect();
+    assert!(
+        gaps.iter().all(|g| (g - gaps[0]).abs() < 0.5)
+            && centres.iter().all(|c| (c.y - centres[0].y).abs() < 0.5),
+        "grade buttons at {centres:?}"
+    );
     watch(&mut h, 1.1);
     assert_eq!(label_rects(&h, "Compressed").len(), 1, "then the test");
     watch(&mut h, 1.0);
@@ -1165,5 +1192,232 @@ fn a_mushra_screen_resumed_part_way_shows_the_panes_left() {
             Answer::Rating(10.0)
         ]
     );
+    drop(run.fx);
+}
+
+fn begin_disabled(h: &Harness<'_, (StudyUi, FrameClock)>) -> bool {
+    h.get_by_label("Begin").accesskit_node().is_disabled()
+}
+
+/// Types `text` into the text box labelled `label` (after what it holds).
+fn type_into(h: &mut Harness<'_, (StudyUi, FrameClock)>, label: &str, text: &str) {
+    h.get_by_role_and_label(Role::TextInput, label).focus();
+    h.run_steps(1);
+    h.get_by_role_and_label(Role::TextInput, label)
+        .type_text(text);
+    h.run_steps(2);
+}
+
+/// The welcome draws each subject field by its kind: text boxes for a text and a number,
+/// radio buttons for a choice and for yes or no. A number that is not one ("abc") keeps Begin
+/// disabled, and the line under it says why in the field's check's words; once every field
+/// passes, Begin stores each answer as its check writes it (" 31 " as "31", "Yes" as "yes").
+#[test]
+fn typed_subject_fields_gate_begin_and_are_stored_as_checked() {
+    let (mut h, run) = harness(fixture("typed", TYPED));
+    h.run_steps(2);
+    assert!(begin_disabled(&h));
+    for option in [
+        "female",
+        "male",
+        "another",
+        "prefer not to say",
+        "Yes",
+        "No",
+    ] {
+        let node = h.get_by_role_and_label(Role::RadioButton, option);
+        assert_ne!(
+            node.accesskit_node().toggled(),
+            Some(egui::accesskit::Toggled::True)
+        );
+    }
+    type_into(&mut h, "handedness", "left");
+    type_into(&mut h, "age", "abc");
+    h.get_by_role_and_label(Role::RadioButton, "male").click();
+    h.run_steps(1);
+    h.get_by_role_and_label(Role::RadioButton, "Yes").click();
+    h.run_steps(1);
+    h.get_by_label("I agree to take part").click();
+    h.run_steps(2);
+    assert!(
+        h.query_by_label("age: enter a whole number from 18 to 99")
+            .is_some(),
+        "the reason under Begin"
+    );
+    assert!(begin_disabled(&h), "abc is not an age");
+    assert!(
+        h.query_by_label(
+            "gender: choose one of: female, male, another, prefer not to say (required)"
+        )
+        .is_none()
+    );
+    h.key_press(Key::Enter);
+    h.run_steps(2);
+    assert!(
+        h.query_by_label("Trial 1 of 1").is_none(),
+        "Enter does not begin"
+    );
+    // Out of range, then a whole number with spaces around it.
+    h.get_by_role_and_label(Role::TextInput, "age").focus();
+    h.run_steps(1);
+    for _ in 0..3 {
+        h.key_press(Key::Backspace);
+        h.run_steps(1);
+    }
+    type_into(&mut h, "age", "17");
+    assert!(begin_disabled(&h), "17 is under the minimum");
+    for _ in 0..2 {
+        h.key_press(Key::Backspace);
+        h.run_steps(1);
+    }
+    type_into(&mut h, "age", " 31 ");
+    assert!(
+        h.query_by_label("age: enter a whole number from 18 to 99")
+            .is_none()
+    );
+    assert!(!begin_disabled(&h));
+    h.get_by_label("Begin").click();
+    h.run_steps(2);
+    assert!(h.query_by_label("Trial 1 of 1").is_some());
+    let m: results::SessionManifest = read_json(&run.session_dir.join(SESSION_FILE)).unwrap();
+    let stored: Vec<(&str, &str)> = m
+        .subject_fields
+        .iter()
+        .map(|(k, v)| (k.as_str(), v.as_str()))
+        .collect();
+    for want in [
+        ("handedness", "left"),
+        ("age", "31"),
+        ("gender", "male"),
+        ("normal_vision", "yes"),
+        ("consent", "given"),
+    ] {
+        assert!(stored.contains(&want), "{want:?} in {stored:?}");
+    }
+    drop(run.fx);
+}
+
+/// A resumed session's welcome shows the answers stored for it: the typed ones in their
+/// boxes, the chosen options selected; Begin waits only for the consent box.
+#[test]
+fn a_resumed_welcome_shows_the_stored_field_values() {
+    let (mut h, run) = harness_after(fixture("typed-resume", TYPED), |recorder| {
+        recorder
+            .update_manifest(|m| {
+                for (k, v) in [
+                    ("handedness", "right"),
+                    ("age", "42"),
+                    ("gender", "prefer not to say"),
+                    ("normal_vision", "no"),
+                ] {
+                    m.subject_fields.insert(k.into(), v.into());
+                }
+            })
+            .unwrap();
+    });
+    h.run_steps(2);
+    let value = |h: &Harness<'_, (StudyUi, FrameClock)>, label: &str| {
+        h.get_by_role_and_label(Role::TextInput, label)
+            .accesskit_node()
+            .value()
+    };
+    assert_eq!(value(&h, "age").as_deref(), Some("42"));
+    assert_eq!(value(&h, "handedness").as_deref(), Some("right"));
+    for (option, on) in [
+        ("prefer not to say", true),
+        ("female", false),
+        ("No", true),
+        ("Yes", false),
+    ] {
+        let toggled = h
+            .get_by_role_and_label(Role::RadioButton, option)
+            .accesskit_node()
+            .toggled();
+        assert_eq!(
+            toggled == Some(egui::accesskit::Toggled::True),
+            on,
+            "{option}"
+        );
+    }
+    assert!(
+        h.query_by_label("To begin, tick “I agree to take part”.")
+            .is_some()
+    );
+    assert_eq!(
+        h.query_all_by_label_contains("enter").count()
+            + h.query_all_by_label_contains("choose").count(),
+        0,
+        "no field is refused"
+    );
+    h.get_by_label("I agree to take part").click();
+    h.run_steps(2);
+    assert!(!begin_disabled(&h));
+    drop(run.fx);
+}
+
+/// The MUSHRA sliders stand beside BS.1534's five words in equal sections, Excellent at the
+/// top, with 100 and 0 marked at the ends; an unrated slider's knob is drawn hollow below the
+/// 0 line (apart from a rating of 0) and reads as no value, a rated one on the scale.
+#[test]
+fn mushra_sliders_have_the_scale_words_and_unrated_knobs_apart_from_zero() {
+    let (mut h, run) = harness(fixture("mushra-scale", MUSHRA));
+    begin(&mut h);
+    watch(&mut h, 1.2);
+    let centre = |h: &Harness<'_, (StudyUi, FrameClock)>, text: &str| {
+        let r = label_rects(h, text);
+        assert_eq!(r.len(), 1, "{text}: {r:?}");
+        r[0].center()
+    };
+    let words: Vec<egui::Pos2> = ["Excellent", "Good", "Fair", "Poor", "Bad"]
+        .iter()
+        .map(|w| centre(&h, w))
+        .collect();
+    let (top, bottom) = (centre(&h, "100"), centre(&h, "0"));
+    let section = (bottom.y - top.y) / 5.0;
+    assert!(section > 30.0, "sections of {section} points");
+    for (k, w) in words.iter().enumerate() {
+        let want = top.y + section * (k as f32 + 0.5);
+        assert!((w.y - want).abs() < 1.0, "word {k} at {} not {want}", w.y);
+    }
+    let sliders = sliders(&h);
+    assert!(
+        words.iter().all(|w| w.x < sliders[0].0.left()),
+        "words beside the sliders"
+    );
+    let values = |h: &Harness<'_, (StudyUi, FrameClock)>| -> Vec<Option<f64>> {
+        let mut v: Vec<(f32, Option<f64>)> = h
+            .get_all_by_role(Role::Slider)
+            .map(|n| (n.rect().left(), n.accesskit_node().numeric_value()))
+            .collect();
+        v.sort_by(|a, b| a.0.total_cmp(&b.0));
+        v.into_iter().map(|(_, v)| v).collect()
+    };
+    assert_eq!(values(&h), [None, None, None]);
+    let hollow = |h: &Harness<'_, (StudyUi, FrameClock)>| -> Vec<egui::Pos2> {
+        h.output()
+            .shapes
+            .iter()
+            .filter_map(|c| match &c.shape {
+                // The knob, not the ring that marks the focused slider.
+                egui::epaint::Shape::Circle(c)
+                    if c.fill == egui::Color32::TRANSPARENT && c.radius < 12.0 =>
+                {
+                    Some(c.center)
+                }
+                _ => None,
+            })
+            .collect()
+    };
+    let parked = hollow(&h);
+    assert_eq!(parked.len(), 3, "{parked:?}");
+    assert!(
+        parked.iter().all(|p| p.y > bottom.y + 20.0),
+        "{parked:?} below 0 at {}",
+        bottom.y
+    );
+    // Rated 0 from the keys: the knob moves onto the 0 line, no longer hollow.
+    set_slider(&mut h, 0, &[Key::ArrowDown]);
+    assert_eq!(values(&h), [Some(0.0), None, None]);
+    assert_eq!(hollow(&h).len(), 2);
     drop(run.fx);
 }

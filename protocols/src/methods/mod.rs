@@ -79,10 +79,13 @@ pub enum AnswerWidget {
         /// The buttons, left to right.
         options: Vec<ChoiceOption>,
     },
-    /// One slider per lettered pane (a MUSHRA screen).
+    /// One slider per lettered pane (a MUSHRA screen), beside the scale's words.
     SliderGrid {
         /// The question above the sliders.
         question: String,
+        /// The words of the scale's equal sections, best first (BS.1534's Excellent … Bad,
+        /// [`crate::texts::scale_words`]).
+        words: Vec<String>,
     },
 }
 

@@ -33,11 +33,12 @@ impl Method for Mushra {
         Protocol::Mushra
     }
 
-    fn answer_widget(&self, _study: &StudyDefinition) -> AnswerWidget {
+    fn answer_widget(&self, study: &StudyDefinition) -> AnswerWidget {
         AnswerWidget::SliderGrid {
             question: "Rate each lettered motion against the reference, from 0 (bad) to 100 \
                        (excellent)"
                 .to_string(),
+            words: crate::texts::scale_words(study),
         }
     }
 
