@@ -319,6 +319,24 @@ impl Browser {
         );
     }
 
+    /// Makes the page's viewport (`innerWidth` × `innerHeight`) `width` × `height` CSS
+    /// pixels at a device pixel ratio of 1, as a screen of that size shows it (Chromium's
+    /// device metrics: a headless window cannot outgrow its virtual screen).
+    fn viewport(&self, width: u32, height: u32) {
+        self.cmd(
+            "POST",
+            "goog/cdp/execute",
+            Some(&json!({
+                "cmd": "Emulation.setDeviceMetricsOverride",
+                "params": { "width": width, "height": height, "deviceScaleFactor": 1, "mobile": false },
+            })),
+        );
+        self.wait(
+            &format!("innerWidth === {width} && innerHeight === {height}"),
+            10,
+        );
+    }
+
     fn text(&self, id: &str) -> String {
         self.js(&format!(
             "return document.getElementById('{id}').textContent;"
@@ -525,6 +543,15 @@ fn take_part(
 
 /// From the environment check through the welcome screen.
 fn welcome(b: &Browser) {
+    reach_welcome(b);
+    if b.screen() == "welcome" {
+        fill_welcome(b);
+        b.click("#begin");
+    }
+}
+
+/// From the environment check to the welcome screen (or a resumed session's trial).
+fn reach_welcome(b: &Browser) {
     if b.screen() != "welcome" {
         b.wait("document.body.dataset.checked === 'ok' || document.body.dataset.screen === 'welcome' || document.body.dataset.screen === 'trial'", 30);
         if b.screen() == "check" {
@@ -535,18 +562,30 @@ fn welcome(b: &Browser) {
         "['welcome', 'trial'].includes(document.body.dataset.screen)",
         30,
     );
-    if b.screen() == "welcome" {
-        if b.js("return !!document.querySelector('input[name=age]');") == Value::Bool(true) {
-            b.type_into("input[name=age]", "31");
-        }
-        // An example's other fields, whatever they are called.
-        b.js("for (const i of document.querySelectorAll('#welcome-fields input')) { \
-              if (!i.value) { i.value = 'x'; i.dispatchEvent(new Event('input', { bubbles: true })); } } \
-              return null;");
-        if b.js("return !document.getElementById('welcome-consent').hidden;") == Value::Bool(true) {
-            b.click("#consent");
-        }
-        b.click("#begin");
+}
+
+/// Answers every subject field of the welcome screen validly (an age typed as 31, another
+/// number its smallest value, a choice's or yes/no's first option, text "x") and ticks
+/// the consent box where there is one.
+fn fill_welcome(b: &Browser) {
+    if b.js("return !!document.querySelector('input[name=age]:not([type=radio])');")
+        == Value::Bool(true)
+    {
+        b.type_into("input[name=age]", "31");
+    }
+    // An example's other fields, whatever they are called.
+    b.js(
+        "for (const i of document.querySelectorAll('#welcome-fields input')) { \
+            if (i.type === 'radio') { \
+              if (!document.querySelector(`#welcome-fields input[name=\"${i.name}\"]:checked`)) { \
+                i.checked = true; i.dispatchEvent(new Event('change', { bubbles: true })); } \
+            } else if (!i.value) { \
+              i.value = i.type === 'number' ? (i.min || '1') : 'x'; \
+              i.dispatchEvent(new Event('input', { bubbles: true })); } } \
+          return null;",
+    );
+    if b.js("return !document.getElementById('welcome-consent').hidden;") == Value::Bool(true) {
+        b.click("#consent");
     }
 }
 
@@ -926,6 +965,137 @@ fn a_browser_completes_mos_through_a_server_kill_and_a_foreign_token_is_refused(
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// A MOS study asking a number, a choice and a yes/no question.
+const TYPED_FIELDS: &str = "name = \"web-fields\"\nprotocol = \"mos\"\n\
+    [conditions]\nclips = [\"walk\"]\ncodecs = [\"spiht\"]\ntarget_cr = [10, 20]\n\
+    [presentation]\ngap_ms = 100\nstimulus_duration_ms = 500\n\
+    [session]\nconsent = \"You agree to watch four short motions.\"\nsubject_fields = [\
+    { name = \"age\", kind = \"number\", min = 18, max = 99, integer = true, label = \"Age (years)\" }, \
+    { name = \"gender\", kind = \"choice\", options = [\"female\", \"male\", \"prefer not to say\"] }, \
+    { name = \"normal_vision\", kind = \"yes_no\", label = \"Normal or corrected vision\" }]\n";
+
+/// Types `text` into the empty field `css` (cleared first).
+fn retype(b: &Browser, css: &str, text: &str) {
+    let id = b.element(css);
+    b.cmd("POST", &format!("element/{id}/clear"), Some(&json!({})));
+    b.type_into(css, text);
+}
+
+/// The welcome form draws each subject field by its kind (a number box with the field's
+/// range, a radio button per option, each labelled and reached by the keyboard) and checks
+/// an answer by the server's rules before sending it: "abc" and 17 for an age from 18 to 99
+/// are refused on the page, the reason beside the field, and nothing is sent; an answer the
+/// server refuses anyway (the page's request altered on its way) shows the server's reason
+/// there too. Then 31, a choice and yes begin the session, and `session.json` holds them as
+/// the fields store them.
+#[test]
+fn the_welcome_form_checks_each_field_by_its_kind() {
+    let Some(_one) = browser_test() else {
+        return;
+    };
+    let dir = temp_dir("fields");
+    let study = write_study(&dir, TYPED_FIELDS);
+    let out = dir.join("results");
+    let port = free_port();
+    let _server = serve(&study, &out, port);
+    let driver = Driver::start();
+    let b = driver.browser(&dir.join("profile"));
+    b.go(&format!("http://127.0.0.1:{port}/?PROLIFIC_PID=pidF"));
+    reach_welcome(&b);
+    assert_eq!(b.screen(), "welcome");
+    let form = b.js(
+        "const age = document.querySelector('input[name=age]'); \
+         const radios = (n) => [...document.querySelectorAll(`input[type=radio][name=${n}]`)]; \
+         const said = (i) => document.querySelector(`label[for=\"${i.id}\"]`).textContent.trim(); \
+         return { age: [age.type, age.min, age.max, age.step, said(age)], \
+           gender: radios('gender').map(said), vision: radios('normal_vision').map(said), \
+           groups: [...document.querySelectorAll('[role=radiogroup]')].map((g) => \
+             document.getElementById(g.getAttribute('aria-labelledby')).textContent), \
+           reachable: radios('gender').concat(radios('normal_vision')).every((r) => r.tabIndex >= 0 && !r.disabled), \
+           consent: document.getElementById('consent-title').textContent };",
+    );
+    assert_eq!(
+        form,
+        json!({
+            "age": ["number", "18", "99", "1", "Age (years)"],
+            "gender": ["female", "male", "prefer not to say"],
+            "vision": ["yes", "no"],
+            "groups": ["gender", "Normal or corrected vision"],
+            "reachable": true,
+            "consent": "Consent",
+        })
+    );
+    // Every request to begin, counted; the next one altered to an age the server refuses.
+    b.js(
+        "window.begins = 0; window.alterBegin = false; const real = window.fetch; \
+         window.fetch = (path, init) => { \
+           if (init && init.method === 'POST' && String(path).endsWith('/begin')) { \
+             window.begins += 1; \
+             if (window.alterBegin) { window.alterBegin = false; \
+               const body = JSON.parse(init.body); body.fields.age = '17'; \
+               init = { ...init, body: JSON.stringify(body) }; } } \
+           return real(path, init); }; return null;",
+    );
+    // The choice by mouse, yes by keyboard (focus, Space), consent ticked.
+    b.click("label[for=field-gender-1]");
+    b.js("document.getElementById('field-normal_vision-0').focus(); return null;");
+    b.keys(&["\u{E00D}"]);
+    b.click("#consent");
+    let reason = "Age (years): enter a whole number from 18 to 99";
+    let session = out.join("pidF_s1/session.json");
+    for typed in ["abc", "17"] {
+        retype(&b, "input[name=age]", typed);
+        b.click("#begin");
+        b.wait(
+            &format!(
+                "document.getElementById('field-age-reason').textContent.startsWith('{reason}')"
+            ),
+            10,
+        );
+        assert_eq!(
+            b.js("return window.begins;"),
+            json!(0),
+            "{typed}: nothing sent"
+        );
+        assert_eq!(b.screen(), "welcome", "{typed}");
+        assert!(!session.exists(), "{typed}: no session begun");
+    }
+    // The page lets 31 through; the server refuses the 17 it receives instead, and its
+    // reason shows beside the field and under Begin.
+    retype(&b, "input[name=age]", "31");
+    b.wait(
+        "document.getElementById('field-age-reason').textContent === ''",
+        10,
+    );
+    b.js("window.alterBegin = true; return null;");
+    b.click("#begin");
+    b.wait(
+        &format!("document.getElementById('begin-error').textContent === '{reason}'"),
+        10,
+    );
+    assert_eq!(b.text("field-age-reason"), reason);
+    assert_eq!(b.js("return window.begins;"), json!(1));
+    assert_eq!(b.screen(), "welcome");
+    assert!(!session.exists(), "no session begun by the refused request");
+    b.click("#begin");
+    b.wait(
+        "['trial', 'gap'].includes(document.body.dataset.screen)",
+        30,
+    );
+    assert_eq!(b.js("return window.begins;"), json!(2));
+    let m = manifest(&out, "pidF");
+    for (k, v) in [
+        ("age", "31"),
+        ("gender", "male"),
+        ("normal_vision", "yes"),
+        ("consent", "given"),
+    ] {
+        assert_eq!(m.subject_fields.get(k).map(String::as_str), Some(v), "{k}");
+    }
+    drop(b);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 #[test]
 fn a_browser_completes_dscqs_and_a_live_staircase() {
     let Some(_one) = browser_test() else {
@@ -1015,6 +1185,55 @@ const EXAMPLE_SCREENS: u32 = 2;
 /// training screen, then the test), and between-subject groups.
 const WHOLE_SESSIONS: [&str; 3] = ["acr-hr", "mushra", "groups"];
 
+/// The example studies (`examples/*.toml`), sorted by name.
+fn examples() -> Vec<PathBuf> {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap();
+    let mut examples: Vec<PathBuf> = std::fs::read_dir(root.join("examples"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+        .collect();
+    examples.sort();
+    assert!(examples.len() >= 14, "{examples:?}");
+    examples
+}
+
+/// An example study's folder and the subject a browser takes part as (`ex` and the name
+/// without dashes); [`Example::open`] serves it and opens its Prolific link.
+struct Example {
+    study: PathBuf,
+    name: String,
+    dir: PathBuf,
+    out: PathBuf,
+    subject: String,
+}
+
+impl Example {
+    fn new(study: &Path, tag: &str) -> Example {
+        let name = study.file_stem().unwrap().to_string_lossy().into_owned();
+        let dir = temp_dir(&format!("{tag}-{name}"));
+        Example {
+            study: study.to_path_buf(),
+            out: dir.join("results"),
+            subject: format!("ex{}", name.replace('-', "")),
+            name,
+            dir,
+        }
+    }
+
+    /// The study served on a port of its own, and a fresh browser profile at its link.
+    fn open(&self, driver: &Driver) -> (Serve, Browser) {
+        let port = free_port();
+        let server = serve(&self.study, &self.out, port);
+        let b = driver.browser(&self.dir.join("profile"));
+        b.go(&format!(
+            "http://127.0.0.1:{port}/?PROLIFIC_PID={}",
+            self.subject
+        ));
+        (server, b)
+    }
+}
+
 /// Every example study `study serve` is given runs in Chromium as a participant takes it,
 /// and its rows equal `study simulate --subject` for the same subject, answer for answer:
 /// each method's screen (ratings, pairs, choices with and without "no preference",
@@ -1024,25 +1243,18 @@ fn every_example_study_runs_in_the_browser_as_simulated() {
     let Some(_one) = browser_test() else {
         return;
     };
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap();
-    let mut examples: Vec<PathBuf> = std::fs::read_dir(root.join("examples"))
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
-        .collect();
-    examples.sort();
-    assert!(examples.len() >= 14, "{examples:?}");
     let driver = Driver::start();
-    for study in &examples {
-        let name = study.file_stem().unwrap().to_string_lossy().into_owned();
-        let dir = temp_dir(&format!("example-{name}"));
-        let out = dir.join("results");
-        let port = free_port();
-        let subject = format!("ex{}", name.replace('-', ""));
-        let (simulated, script) = simulate(study, &dir, &subject, 3);
-        let _server = serve(study, &out, port);
-        let b = driver.browser(&dir.join("profile"));
-        b.go(&format!("http://127.0.0.1:{port}/?PROLIFIC_PID={subject}"));
+    for study in &examples() {
+        let ex = Example::new(study, "example");
+        let Example {
+            name,
+            dir,
+            out,
+            subject,
+            ..
+        } = &ex;
+        let (simulated, script) = simulate(study, dir, subject, 3);
+        let (_server, b) = ex.open(&driver);
         welcome(&b);
         // `SCREENSHOTS=DIR` (scripts/screenshots): the first trial as it plays, for
         // docs/serve.md beside the window's.
@@ -1098,8 +1310,110 @@ fn every_example_study_runs_in_the_browser_as_simulated() {
             }
         }
         drop(b);
-        let _ = std::fs::remove_dir_all(&dir);
+        let _ = std::fs::remove_dir_all(dir);
     }
+}
+
+/// Every text on the page a participant sees now, as `[text, where, font px, height px]`:
+/// each visible text node's computed font size and the height of its smallest rendered line
+/// box (`Range.getClientRects`), and each visible text or number input's font size and box
+/// height (what is typed into it).
+const VISIBLE_TEXTS: &str = "
+    const out = [];
+    const shown = (el) => el.checkVisibility({ checkOpacity: true, checkVisibilityCSS: true });
+    const px = (el) => parseFloat(getComputedStyle(el).fontSize);
+    const where = (el) => el.tagName.toLowerCase() + (el.id ? '#' + el.id : '')
+      + (el.className && typeof el.className === 'string' ? '.' + el.className.trim().split(/\\s+/).join('.') : '');
+    const walk = document.createTreeWalker(document.body, NodeFilter.SHOW_TEXT);
+    for (let n = walk.nextNode(); n; n = walk.nextNode()) {
+      const el = n.parentElement;
+      const text = n.textContent.trim();
+      if (!text || !el || el.closest('script, style') || !shown(el)) continue;
+      const range = document.createRange();
+      range.selectNodeContents(n);
+      const lines = [...range.getClientRects()].filter((r) => r.width > 0 && r.height > 0);
+      if (!lines.length) continue;
+      out.push([text.slice(0, 60), where(el), px(el), Math.min(...lines.map((r) => r.height))]);
+    }
+    for (const el of document.querySelectorAll('input[type=text], input[type=number], select, textarea')) {
+      if (!shown(el)) continue;
+      out.push([`<${el.name || el.id}>`, where(el), px(el), el.getBoundingClientRect().height]);
+    }
+    return out;";
+
+/// The smallest font a participant must read, CSS pixels.
+const MIN_TEXT_PX: f64 = 14.0;
+
+/// Measures every visible text now (see [`VISIBLE_TEXTS`]) at each viewport size; notes the
+/// smallest font and line of the screen and every text under [`MIN_TEXT_PX`] in `small`.
+fn measure_texts(b: &Browser, what: &str, sizes: &[(u32, u32)], small: &mut Vec<String>) {
+    for &(w, h) in sizes {
+        b.viewport(w, h);
+        let texts: Vec<(String, String, f64, f64)> =
+            serde_json::from_value(b.js(VISIBLE_TEXTS)).unwrap();
+        assert!(!texts.is_empty(), "{what} at {w}×{h}: no text seen");
+        let least = |k: fn(&(String, String, f64, f64)) -> f64| {
+            texts
+                .iter()
+                .min_by(|a, b| k(a).total_cmp(&k(b)))
+                .map(|t| (k(t), t.0.clone(), t.1.clone()))
+                .unwrap()
+        };
+        let (font, ft, fw) = least(|t| t.2);
+        let (line, lt, lw) = least(|t| t.3);
+        eprintln!(
+            "{what} at {w}×{h}: {} texts; smallest font {font} px ({ft:?} in {fw}), \
+             lowest line {line:.1} px ({lt:?} in {lw})",
+            texts.len()
+        );
+        for (text, at, px, height) in &texts {
+            if *px < MIN_TEXT_PX || *height < MIN_TEXT_PX {
+                small.push(format!(
+                    "{what} at {w}×{h}: {text:?} in {at}: font {px} px, line {height:.1} px"
+                ));
+            }
+        }
+    }
+}
+
+/// The page is readable at 1280×720 and 1920×1080: every text a participant must read on
+/// the welcome screen (title, instructions, field labels and answers, the consent heading
+/// and text) and on each example study's first vote screen (the question, the grade words
+/// under rating buttons, DCR's impairment words, a scale's words, MUSHRA's slider words and
+/// marks, the progress text) has a computed font of at least 14 px, and so does what is
+/// typed into a field. Every example is measured before the test fails, listing each text
+/// too small.
+#[test]
+fn every_text_a_participant_reads_is_at_least_14_px() {
+    let Some(_one) = browser_test() else {
+        return;
+    };
+    let sizes = [(1280, 720), (1920, 1080)];
+    let driver = Driver::start();
+    let mut small = Vec::new();
+    for study in &examples() {
+        let ex = Example::new(study, "sizes");
+        let (server, b) = ex.open(&driver);
+        reach_welcome(&b);
+        assert_eq!(b.screen(), "welcome", "{}", ex.name);
+        measure_texts(&b, &format!("{} welcome", ex.name), &sizes, &mut small);
+        fill_welcome(&b);
+        b.click("#begin");
+        b.wait(
+            "document.body.dataset.screen === 'trial' && document.body.dataset.open === '1'",
+            90,
+        );
+        measure_texts(&b, &format!("{} vote", ex.name), &sizes, &mut small);
+        drop(b);
+        drop(server);
+        let _ = std::fs::remove_dir_all(&ex.dir);
+    }
+    assert!(
+        small.is_empty(),
+        "{} texts under {MIN_TEXT_PX} px:\n{}",
+        small.len(),
+        small.join("\n")
+    );
 }
 
 /// A pane of an image: its top-left corner and size, pixels.

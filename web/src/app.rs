@@ -15,7 +15,9 @@ use lab::source::StimulusSource;
 use lab::{LabError, StudyFile};
 use protocols::record::{Answer, Arrangement, Block, Response, Trial};
 use protocols::screen::Screen;
-use protocols::study::{CrowdsourcingSettings, HiddenRule, ScaleKind, StudyDefinition};
+use protocols::study::{
+    CrowdsourcingSettings, HiddenRule, MAX_FIELD_CHARS, ScaleKind, StudyDefinition, SubjectField,
+};
 use protocols::{FrameTiming, StimulusEncoding, texts};
 use results::SessionManifest;
 use results::store::{BrowserInfo, DisplayInfo, SessionState};
@@ -329,6 +331,28 @@ fn unsupported(study: &StudyDefinition, page: &Page) -> Result<Vec<String>> {
     Ok(missing)
 }
 
+/// The welcome screen's fields as the page draws and checks them: each field as the study
+/// definition serializes it (`name`, `label`, `kind` and its bounds), with `hint` (what an
+/// answer must be, in the words a refusal gives), `options` (the buttons: a choice's
+/// options, yes and no; none for typed answers) and `max_chars`.
+fn fields_json(fields: &[SubjectField]) -> Vec<serde_json::Value> {
+    fields
+        .iter()
+        .map(|f| {
+            let mut v = serde_json::json!(f);
+            if let Some(o) = v.as_object_mut() {
+                o.insert("hint".into(), f.hint().into());
+                o.insert("max_chars".into(), MAX_FIELD_CHARS.into());
+                let options = f.options();
+                if !options.is_empty() {
+                    o.insert("options".into(), options.into());
+                }
+            }
+            v
+        })
+        .collect()
+}
+
 impl App {
     /// Loads the study, checks every stimulus its plan can show, opens the results
     /// directory (created on first use; a later run continues it) and the participants.
@@ -620,7 +644,7 @@ impl App {
             "title": def.title(),
             "instructions": texts::instructions(def),
             "consent": def.session.consent,
-            "fields": def.session.subject_fields,
+            "fields": fields_json(&def.session.subject_fields),
             "scale": {
                 "kind": scale.kind,
                 "min": scale.min,
@@ -639,12 +663,14 @@ impl App {
         }))
     }
 
-    /// Begins `p`'s session: the subject fields, consent and the browser's measurements go
+    /// Begins `p`'s session: the subject fields (each answer checked by its kind and stored
+    /// as [`SubjectField::check`] normalizes it), consent and the browser's measurements go
     /// into its manifest. A session already begun is left as it is.
     ///
     /// # Errors
-    /// 400 a missing field or consent, an environment that fails the check; the session
-    /// cannot be created.
+    /// 400 a field's answer its kind refuses (the reason `check` gives, which names the
+    /// field), an unknown field, missing consent, an environment that fails the check; the
+    /// session cannot be created.
     pub fn begin(&self, p: &Participant, req: &BeginRequest) -> ApiResult<()> {
         let mut slot = lock(&p.slot);
         self.ensure_open(p, &mut slot)?;
@@ -653,23 +679,16 @@ impl App {
         }
         let def = self.definition();
         let mut fields = BTreeMap::new();
-        for name in &def.session.subject_fields {
-            let v = req.fields.get(name).map_or("", |v| v.trim());
-            if v.is_empty() || v.len() > 200 || v.chars().any(char::is_control) {
-                return Err(ApiError::new(
-                    400,
-                    format!(
-                        "fill in {} (at most 200 characters)",
-                        name.replace('_', " ")
-                    ),
-                ));
-            }
-            fields.insert(name.clone(), v.to_string());
+        for f in &def.session.subject_fields {
+            let v = f
+                .check(req.fields.get(&f.name).map_or("", String::as_str))
+                .map_err(|why| ApiError::new(400, why))?;
+            fields.insert(f.name.clone(), v);
         }
         if let Some(unknown) = req
             .fields
             .keys()
-            .find(|k| !def.session.subject_fields.contains(k))
+            .find(|k| !def.session.subject_fields.iter().any(|f| &f.name == *k))
         {
             return Err(ApiError::new(
                 400,

@@ -362,3 +362,111 @@ fn studies_whose_screens_the_page_lacks_are_refused() {
     rt.block_on(server.stop()).unwrap();
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Typed subject fields: the session's JSON gives each field's kind, bounds, options and
+/// hint; `begin` refuses an answer the field's kind does not take (400, the reason naming
+/// the field, no session created) and stores the answer as the field normalizes it.
+#[test]
+fn subject_fields_are_checked_by_kind_and_stored_normalized() {
+    let dir = temp_dir("fields");
+    let options = setup(&dir);
+    let study = std::fs::read_to_string(&options.study).unwrap().replace(
+        "[session]\n",
+        "[session]\nsubject_fields = [\
+         { name = \"age\", kind = \"number\", min = 18, max = 99, integer = true }, \
+         { name = \"gender\", kind = \"choice\", options = [\"female\", \"male\", \"prefer not to say\"] }, \
+         { name = \"normal_vision\", kind = \"yes_no\", label = \"Normal vision\" }]\n",
+    );
+    std::fs::write(&options.study, study).unwrap();
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    let server = rt.block_on(web::start(options)).unwrap();
+    let mut a = Client::new(server.addr);
+    assert_eq!(
+        a.join(&params(&[("PROLIFIC_PID", "pf")])).unwrap().status,
+        200
+    );
+    let info = a
+        .request("GET", &a.session_path("session"), None)
+        .unwrap()
+        .json();
+    let fields = &info["fields"];
+    assert_eq!(
+        fields[0],
+        json!({ "name": "age", "label": "age", "kind": "number", "min": 18.0, "max": 99.0,
+                "integer": true, "hint": "enter a whole number from 18 to 99", "max_chars": 200 }),
+        "{info}"
+    );
+    assert_eq!(
+        fields[1]["hint"],
+        json!("choose one of: female, male, prefer not to say")
+    );
+    assert_eq!(
+        (&fields[2]["label"], &fields[2]["options"]),
+        (&json!("Normal vision"), &json!(["yes", "no"]))
+    );
+    let begin = |c: &mut Client, age: &str, gender: &str, vision: &str| {
+        let body = json!({
+            "fields": { "age": age, "gender": gender, "normal_vision": vision },
+            "consent": true, "environment": web::client::environment(),
+        });
+        let r = c
+            .request("POST", &c.session_path("begin"), Some(&body))
+            .unwrap();
+        (
+            r.status,
+            r.json()["error"].as_str().unwrap_or("").to_string(),
+        )
+    };
+    let session = dir.join("results/pf_s1/session.json");
+    for (age, gender, vision, why) in [
+        (
+            "abc",
+            "female",
+            "yes",
+            "age: enter a whole number from 18 to 99",
+        ),
+        (
+            "17",
+            "female",
+            "yes",
+            "age: enter a whole number from 18 to 99",
+        ),
+        (
+            "31.5",
+            "female",
+            "yes",
+            "age: enter a whole number from 18 to 99",
+        ),
+        (
+            "31",
+            "other",
+            "yes",
+            "gender: choose one of: female, male, prefer not to say",
+        ),
+        ("31", "female", "maybe", "Normal vision: choose yes or no"),
+        (
+            "31",
+            "female",
+            "",
+            "Normal vision: choose yes or no (required)",
+        ),
+    ] {
+        assert_eq!(
+            begin(&mut a, age, gender, vision),
+            (400, why.to_string()),
+            "{age} {gender} {vision}"
+        );
+        assert!(!session.exists(), "no session begun by a refused answer");
+    }
+    assert_eq!(begin(&mut a, " 31 ", "Female", "Y").0, 200);
+    let m: results::SessionManifest = results::store::read_manifest(&session).unwrap();
+    for (k, v) in [
+        ("age", "31"),
+        ("gender", "female"),
+        ("normal_vision", "yes"),
+    ] {
+        assert_eq!(m.subject_fields.get(k).map(String::as_str), Some(v), "{k}");
+    }
+    rt.block_on(server.stop()).unwrap();
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -196,6 +196,89 @@ function planned(info) {
   };
 }
 
+/** ASCII lower case: the server matches options and yes/no without regard to it. */
+const asciiLower = (s) => s.replace(/[A-Z]/g, (c) => c.toLowerCase());
+/** A number as the server reads one (a decimal, optionally signed, with an exponent). */
+const NUMBER = /^[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$/;
+const YES_NO = new Map([['yes', 'yes'], ['y', 'yes'], ['no', 'no'], ['n', 'no']]);
+
+/**
+ * The answer `raw` to subject field `f` as the server stores it (`{ value }`), or why the
+ * server would refuse it (`{ why }`): the server's own rules for the field's kind, in its
+ * words (`f.hint`). `unreadable`: the browser holds an entry it cannot read as a number.
+ */
+function checkField(f, raw, unreadable) {
+  const v = raw.trim();
+  const refuse = (why) => ({ why: `${f.label}: ${why}` });
+  if (!v && !unreadable) return refuse(`${f.hint} (required)`);
+  if ([...v].length > f.max_chars || /[\u0000-\u001f\u007f-\u009f]/.test(v)) {
+    return refuse(`at most ${f.max_chars} characters, on one line`);
+  }
+  if (f.kind === 'number') {
+    const x = NUMBER.test(v) ? Number(v) : NaN;
+    const ok = Number.isFinite(x) && (!f.integer || Number.isInteger(x)) && x >= f.min && x <= f.max;
+    return ok ? { value: v } : refuse(f.hint);
+  }
+  if (f.kind === 'choice') {
+    const o = f.options.find((x) => asciiLower(x) === asciiLower(v));
+    return o === undefined ? refuse(f.hint) : { value: o };
+  }
+  if (f.kind === 'yes_no') {
+    const a = YES_NO.get(asciiLower(v));
+    return a === undefined ? refuse(f.hint) : { value: a };
+  }
+  return { value: v };
+}
+
+/**
+ * The welcome form's row for subject field `f`: its label, its input (a text box, a number
+ * box with the field's range, or a radio button per option), and the line under it where a
+ * refusal's reason shows. Returns { field, els, raw(), unreadable(), given(), say(why), focus() }.
+ */
+function fieldRow(f) {
+  const id = `field-${f.name}`;
+  const reason = Object.assign(document.createElement('p'), { id: `${id}-reason`, className: 'field-reason warn' });
+  reason.setAttribute('aria-live', 'polite');
+  const say = (why) => { reason.textContent = why || ''; };
+  if (f.options) {
+    const label = Object.assign(document.createElement('span'), { id: `${id}-label`, className: 'field-label', textContent: f.label });
+    const group = Object.assign(document.createElement('div'), { className: 'options' });
+    group.setAttribute('role', 'radiogroup');
+    group.setAttribute('aria-labelledby', label.id);
+    group.setAttribute('aria-describedby', reason.id);
+    const radios = f.options.map((o, k) => {
+      const radio = Object.assign(document.createElement('input'), { type: 'radio', name: f.name, value: o, id: `${id}-${k}` });
+      const option = Object.assign(document.createElement('label'), { htmlFor: radio.id, className: 'option' });
+      option.append(radio, Object.assign(document.createElement('span'), { textContent: o }));
+      group.append(option);
+      return radio;
+    });
+    const picked = () => radios.find((r) => r.checked);
+    return {
+      field: f, els: [label, group, reason], say,
+      raw: () => (picked() ? picked().value : ''),
+      unreadable: () => false,
+      given: () => !!picked(),
+      focus: () => (picked() || radios[0]).focus(),
+    };
+  }
+  const label = Object.assign(document.createElement('label'), { htmlFor: id, className: 'field-label', textContent: f.label });
+  const input = Object.assign(document.createElement('input'), { id, name: f.name, type: 'text', maxLength: f.max_chars, autocomplete: 'off' });
+  if (f.kind === 'number') {
+    Object.assign(input, { type: 'number', min: f.min, max: f.max, step: f.integer ? '1' : 'any', inputMode: f.integer ? 'numeric' : 'decimal' });
+  }
+  input.setAttribute('aria-describedby', reason.id);
+  // A number box holds an entry it cannot read (`1e`) as an empty value.
+  const unreadable = () => !!(input.validity && input.validity.badInput);
+  return {
+    field: f, els: [label, input, reason], say,
+    raw: () => input.value,
+    unreadable,
+    given: () => input.value.trim() !== '' || unreadable(),
+    focus: () => input.focus(),
+  };
+}
+
 async function welcome(info) {
   show('welcome');
   $('welcome-title').textContent = info.title;
@@ -204,45 +287,69 @@ async function welcome(info) {
   const resumed = info.state === 'running';
   $('welcome-resume').hidden = !(resumed && info.answered > 0);
   $('welcome-resume').textContent = `Continuing the session: ${info.answered} trials already done.`;
+  const rows = resumed ? [] : info.fields.map(fieldRow);
   const fields = $('welcome-fields');
-  fields.replaceChildren();
-  if (!resumed) {
-    for (const f of info.fields) {
-      const label = document.createElement('label');
-      label.textContent = f.replace(/_/g, ' ');
-      label.htmlFor = `field-${f}`;
-      const input = Object.assign(document.createElement('input'), { id: `field-${f}`, name: f, type: 'text', maxLength: 200 });
-      fields.append(label, input);
-    }
-  }
+  fields.replaceChildren(...rows.flatMap((r) => r.els));
+  fields.hidden = rows.length === 0;
   $('welcome-consent').hidden = resumed || !info.consent;
   $('consent-text').textContent = info.consent || '';
+  $('begin-error').textContent = '';
   const missing = () => {
     const todo = [];
-    const empty = [...fields.querySelectorAll('input')].filter((i) => !i.value.trim()).map((i) => i.name.replace(/_/g, ' '));
-    if (empty.length) todo.push(`fill in ${empty.join(', ')}`);
+    const empty = rows.filter((r) => !r.given()).map((r) => r.field.label);
+    if (empty.length) todo.push(`answer ${empty.join(', ')}`);
     if (!resumed && info.consent && !$('consent').checked) todo.push('tick “I agree to take part”');
     return todo.length ? `To begin, ${todo.join(' and ')}.` : null;
   };
-  const update = () => {
-    const m = missing();
-    $('begin').disabled = !!m;
-    $('begin-missing').textContent = m || '';
+  const check = (r) => checkField(r.field, r.raw(), r.unreadable());
+  const update = () => { $('begin-missing').textContent = missing() || ''; };
+  // A reason shows once an answer is given (or Begin pressed) and goes once it is right.
+  fields.oninput = (e) => {
+    const r = rows.find((x) => x.els[1].contains(e.target));
+    if (r && r.els[2].textContent) r.say(check(r).why);
+    update();
   };
-  fields.oninput = update;
+  fields.onchange = (e) => {
+    const r = rows.find((x) => x.els[1].contains(e.target));
+    if (r && r.given()) r.say(check(r).why);
+    update();
+  };
   $('consent').onchange = update;
   update();
-  await new Promise((go) => {
-    $('begin').onclick = go;
-    document.onkeydown = (e) => { if (e.key === 'Enter' && !$('begin').disabled) go(); };
-  });
-  document.onkeydown = null;
-  if (!resumed) {
+  for (;;) {
+    $('begin').disabled = false;
+    await new Promise((go) => {
+      $('begin').onclick = go;
+      document.onkeydown = (e) => { if (e.key === 'Enter') { e.preventDefault(); go(); } };
+    });
+    document.onkeydown = null;
+    if (resumed) return;
+    // The server's rules, here first: nothing is sent while a field would be refused.
     const values = {};
-    for (const i of fields.querySelectorAll('input')) values[i.name] = i.value.trim();
+    let wrong = null;
+    for (const r of rows) {
+      const c = check(r);
+      r.say(c.why);
+      if (c.why && !wrong) wrong = r;
+      else if (!c.why) values[r.field.name] = c.value;
+    }
+    update();
+    $('begin-error').textContent = '';
+    if (wrong) { wrong.focus(); continue; }
+    if (info.consent && !$('consent').checked) { $('consent').focus(); continue; }
     if (!state.env) state.env = await environment();
     state.env.fullscreen = !!document.fullscreenElement;
-    await call('POST', api('begin'), { fields: values, consent: $('consent').checked, environment: state.env }, { retry: true });
+    $('begin').disabled = true;
+    try {
+      await call('POST', api('begin'), { fields: values, consent: $('consent').checked, environment: state.env }, { retry: true });
+      return;
+    } catch (e) {
+      if (e.status !== 400) throw e;
+      // Refused by the server: its reason, beside the field it names too.
+      $('begin-error').textContent = e.message;
+      const r = rows.find((x) => e.message.startsWith(`${x.field.label}:`));
+      if (r) { r.say(e.message); r.focus(); }
+    }
   }
 }
 
@@ -271,7 +378,7 @@ function widgets(info, screen, onChange) {
   $('question').textContent = w.question || '';
   $('continue').hidden = w.kind === 'choice';
   if (w.kind === 'choice') return choice(w, onChange);
-  if (w.kind === 'slider_grid') return sliders(info, screen, onChange);
+  if (w.kind === 'slider_grid') return sliders(info, screen, w.words, onChange);
   const scale = info.scale;
   const cats = scale.categories.map((c) => c.value);
   const range = scale.max - scale.min;
@@ -449,8 +556,32 @@ function choice(w, onChange) {
   };
 }
 
-/** MUSHRA: a slider per lettered pane on the study's scale; Continue once each is set. */
-function sliders(info, screen, onChange) {
+/** A scale value as the page writes it: whole numbers without a decimal point. */
+const scaleNumber = (v) => String(Math.round(v * 1000) / 1000);
+
+/**
+ * The sliders' scale, beside them: the widget's words (BS.1534's Excellent to Bad, best at
+ * the top), each in its equal part of the range, and the two ends marked with their values.
+ */
+function sliderScale(scale, words) {
+  const col = Object.assign(document.createElement('div'), { className: 'slider-scale' });
+  col.setAttribute('aria-hidden', 'true');
+  const ruler = Object.assign(document.createElement('div'), { className: 'ruler' });
+  for (const w of words) ruler.append(Object.assign(document.createElement('div'), { className: 'word', textContent: w }));
+  ruler.append(
+    Object.assign(document.createElement('span'), { className: 'end top', textContent: scaleNumber(scale.max) }),
+    Object.assign(document.createElement('span'), { className: 'end bottom', textContent: scaleNumber(scale.min) }),
+  );
+  col.append(document.createElement('span'), ruler, document.createElement('span'));
+  return col;
+}
+
+/**
+ * MUSHRA: a slider per lettered pane on the study's scale, beside the scale's words; a
+ * slider's knob shows only once the pane is rated (by a click, a drag or a key), so that an
+ * unrated pane never looks rated at the bottom. Continue once each is set.
+ */
+function sliders(info, screen, words, onChange) {
   const scale = info.scale;
   const step = scale.step || 1;
   const panes = screen.panes.filter((p) => p.position !== null);
@@ -458,6 +589,7 @@ function sliders(info, screen, onChange) {
   let open = false;
   const box = document.createElement('div');
   box.className = 'sliders';
+  box.append(sliderScale(scale, words));
   const inputs = panes.map((p, k) => {
     const col = document.createElement('label');
     col.className = 'slider';
@@ -465,7 +597,11 @@ function sliders(info, screen, onChange) {
     input.dataset.pane = k;
     input.setAttribute('aria-label', p.label || '');
     const shown = document.createElement('output');
-    input.oninput = () => { values[k] = Number(input.value); render(); };
+    const rate = () => { if (open) { values[k] = Number(input.value); render(); } };
+    input.oninput = rate;
+    // A click on the knob's unseen place, or a key that leaves the value, rates it too.
+    input.onpointerup = rate;
+    input.onkeyup = (e) => { if (e.key.startsWith('Arrow') || e.key.startsWith('Page') || e.key === 'Home' || e.key === 'End') rate(); };
     col.append(Object.assign(document.createElement('strong'), { textContent: p.label || '' }), input, shown);
     box.append(col);
     return { input, shown };
@@ -475,6 +611,7 @@ function sliders(info, screen, onChange) {
     inputs.forEach(({ input, shown }, k) => {
       input.disabled = !open;
       input.classList.toggle('unset', values[k] === null);
+      input.setAttribute('aria-valuetext', values[k] === null ? 'not rated' : String(values[k]));
       shown.textContent = values[k] === null ? '–' : String(values[k]);
     });
     const left = panes.filter((_, k) => values[k] === null).map((p) => p.label);
