@@ -33,6 +33,27 @@ fn demo_runs_every_protocol_and_says_observers_are_simulated() {
         "{text}"
     );
     assert!(text.contains("## Mean opinion scores") && text.contains("## Staircase thresholds"));
+    // A summary, not the reports: each step numbered once and in order, no heading printed
+    // without its table, and the end names every report.
+    let steps: Vec<&str> = text
+        .lines()
+        .filter_map(|l| l.strip_prefix('[')?.split(']').next())
+        .collect();
+    assert_eq!(steps, ["1/5", "2/5", "3/5", "4/5", "5/5"], "{text}");
+    assert!(text.lines().count() < 100, "{text}");
+    let lines: Vec<&str> = text.lines().collect();
+    for (i, l) in lines.iter().enumerate() {
+        if l.starts_with('#') {
+            assert!(
+                lines.get(i + 1).is_some_and(|n| n.starts_with('|')),
+                "heading {l:?} without its table:\n{text}"
+            );
+        }
+    }
+    let tail = lines[lines.len() - 3..].join("\n");
+    for p in ["mos", "dscqs", "staircase"] {
+        assert!(tail.contains(&format!("report-{p}/report.html")), "{tail}");
+    }
     for p in ["mos", "dscqs", "staircase"] {
         assert!(
             dir.join(format!("study-demo/report-{p}/report.html"))

@@ -28,6 +28,61 @@ fn examples() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples")
 }
 
+/// The keys that answer a study's subject fields on the welcome screen, Tab to each in order:
+/// "33" typed into a text field, a number's minimum, Space on a choice's or a yes/no field's
+/// first option (Tab then passes its other options, each a focusable radio button); with the
+/// answers `session.json` must then hold (a yes/no field stores `yes`).
+fn welcome_keys(study: &Path) -> (String, BTreeMap<String, String>) {
+    let text = std::fs::read_to_string(study).unwrap();
+    let table: toml::Table = toml::from_str(&text).unwrap();
+    let fields = table
+        .get("session")
+        .and_then(|s| s.get("subject_fields"))
+        .and_then(toml::Value::as_array)
+        .cloned()
+        .unwrap_or_default();
+    let mut keys = String::new();
+    let mut answers = BTreeMap::new();
+    let mut skip = 0;
+    for f in &fields {
+        keys += &" Tab".repeat(skip);
+        skip = 0;
+        let (name, kind) = match f {
+            toml::Value::String(name) => (name.as_str(), "text"),
+            f => (
+                f.get("name").and_then(toml::Value::as_str).unwrap(),
+                f.get("kind")
+                    .and_then(toml::Value::as_str)
+                    .unwrap_or("text"),
+            ),
+        };
+        let answer = match kind {
+            "number" => {
+                let min = f.get("min").unwrap();
+                let min = min
+                    .as_integer()
+                    .map_or_else(|| min.as_float().unwrap().to_string(), |i| i.to_string());
+                keys += &format!(" Tab \"{min}\"");
+                min
+            }
+            "choice" | "yes_no" => {
+                keys += " Tab Space";
+                let options = f.get("options").and_then(toml::Value::as_array);
+                skip = options.map_or(1, |o| o.len() - 1);
+                options
+                    .map_or("yes", |o| o[0].as_str().unwrap())
+                    .to_string()
+            }
+            _ => {
+                keys += " Tab \"33\"";
+                "33".to_string()
+            }
+        };
+        answers.insert(name.to_string(), answer);
+    }
+    (keys, answers)
+}
+
 /// The two generated motions of the examples: a walk and a livelier march, 4 s each at 30 Hz
 /// (BVH carries its rate): 120 frames, about 80 KB a file, the fewest with which the wavelet
 /// codecs still reach 30:1 with a sensible error and t_L still changes the primitive codec's
@@ -511,17 +566,12 @@ fn each_example_records_its_first_answer_in_the_window() {
         let started = Instant::now();
         let out = env.dir.join(format!("results-{name}"));
         let session = out.join("S01_s1");
-        let fields = std::fs::read_to_string(examples().join(name))
-            .unwrap()
-            .lines()
-            .find(|l| l.starts_with("subject_fields"))
-            .map_or(0, |l| l.matches('"').count() / 2);
-        // Welcome: Tab to each field and type into it; Escape leaves the last field and Enter
-        // begins (the screen is `welcome/ready` once the stimuli are checked and the display
-        // measured). Line 2: the first trial's answer.
+        // Welcome: Tab to each field and answer it; Escape leaves the last field and Enter
+        // begins (the screen is `welcome/ready` once the display is measured). Line 2: the
+        // first trial's answer.
+        let (keys, answers) = welcome_keys(&examples().join(name));
         let script = format!(
-            "welcome/ready:{} Escape Enter\ntrial/open once: {}\n",
-            " Tab \"33\"".repeat(fields),
+            "welcome/ready:{keys} Escape Enter\ntrial/open once: {}\n",
             first_answer_keys(name)
         );
         let mut run = run_scripted(&env, name, &examples().join(name), &[], &out, &script);
@@ -536,10 +586,12 @@ fn each_example_records_its_first_answer_in_the_window() {
         run.wait_line("done 2");
         let (_, stderr) = run.interrupt();
         assert!(!stderr.contains("test input: dropped"), "{name}: {stderr}");
-        let manifest = std::fs::read_to_string(session.join("session.json")).unwrap();
-        assert!(
-            fields == 0 || manifest.contains("\"age\": \"33\""),
-            "{name}: the typed fields are recorded: {manifest}"
+        let manifest: results::SessionManifest =
+            serde_json::from_str(&std::fs::read_to_string(session.join("session.json")).unwrap())
+                .unwrap();
+        assert_eq!(
+            manifest.subject_fields, answers,
+            "{name}: the fields as answered, each as its kind stores it"
         );
         let trials = results::trials::read_trials(&session.join("trials.csv")).unwrap();
         assert!(!trials.records.is_empty(), "{name}");
@@ -769,17 +821,14 @@ fn a_crowd_trial_shows_three_figures_at_their_distances_in_the_window() {
 fn measured_viewing_conditions_are_confirmed_recorded_and_reported() {
     let Some(env) = setup("viewing") else { return };
     let study = env.dir.join("viewing.toml");
-    let text = std::fs::read_to_string(examples().join("mos.toml"))
-        .unwrap()
-        .replace(
-            "stimuli = \"stimuli.json\"",
-            &format!("stimuli = {:?}", examples().join("stimuli.json")),
-        )
-        .replace(
-            "subject_fields = [\"age\", \"gender\", \"normal_vision\"]",
-            "",
-        )
-        + "\n[viewing]\ndistance_cm = 90\nscreen_diagonal_in = 24\nroom_illuminance_lux = 20\n";
+    // The example without its subject fields (their line and any continuation lines).
+    let example = std::fs::read_to_string(examples().join("mos.toml")).unwrap();
+    let (before, after) = example.split_once("subject_fields = [").unwrap();
+    let after = &after[after.find("]\n").unwrap() + 2..];
+    let text = format!("{before}{after}").replace(
+        "stimuli = \"stimuli.json\"",
+        &format!("stimuli = {:?}", examples().join("stimuli.json")),
+    ) + "\n[viewing]\ndistance_cm = 90\nscreen_diagonal_in = 24\nroom_illuminance_lux = 20\n";
     std::fs::write(&study, text).unwrap();
     let out = env.dir.join("results");
     let session = out.join("S01_s1");
