@@ -62,7 +62,9 @@ fn welcome_keys(study: &Path) -> (String, BTreeMap<String, String>) {
                 let min = min
                     .as_integer()
                     .map_or_else(|| min.as_float().unwrap().to_string(), |i| i.to_string());
-                keys += &format!(" Tab \"{min}\"");
+                keys += " Tab \"";
+                keys += &min;
+                keys += "\"";
                 min
             }
             "choice" | "yes_no" => {
