@@ -361,7 +361,7 @@ impl Screen {
                 position: Some(t.reference_position),
                 stimulus: t.stimulus.clone(),
                 reference: false,
-                label: pane_letter(t.reference_position).map(str::to_owned),
+                label: t.reference_position.pane_letter().map(String::from),
                 content: PaneContent::Figure,
             });
             screen.panes = std::iter::once(reference).chain(lettered).collect();
@@ -375,16 +375,6 @@ impl Screen {
             .iter()
             .find(|p| p.position == Some(position))
             .and_then(|p| p.label.as_deref())
-    }
-}
-
-/// The letter of a MUSHRA pane as the subject reads it ("A" for `Position::Pane(0)`).
-pub fn pane_letter(p: Position) -> Option<&'static str> {
-    const LETTERS: [&str; crate::record::MAX_PANES] =
-        ["A", "B", "C", "D", "E", "F", "G", "H", "I", "J", "K", "L"];
-    match p {
-        Position::Pane(i) => LETTERS.get(usize::from(i)).copied(),
-        _ => None,
     }
 }
 

@@ -1757,22 +1757,25 @@ fn mushra_answer(
         let track = egui::Rangef::new(top, top + h);
         mushra_scale(ui, block, track, words, open);
         for (k, (pane, rating)) in t.panes.iter().zip(t.pane_ratings.iter_mut()).enumerate() {
-            let name = protocols::screen::pane_letter(pane.reference_position).unwrap_or("?");
+            let name = pane
+                .reference_position
+                .pane_letter()
+                .map_or_else(|| "?".to_owned(), String::from);
             let x = block.left() + MUSHRA_WORDS + MUSHRA_COL * (k as f32 + 0.5);
             let column = egui::Rangef::new(x - MUSHRA_COL * 0.5, x + MUSHRA_COL * 0.5);
             ui.put(
                 egui::Rect::from_x_y_ranges(column, block.top()..=block.top() + MUSHRA_BAND),
-                egui::Label::new(RichText::new(name).strong().size(TEXT_PX)),
+                egui::Label::new(RichText::new(&name).strong().size(TEXT_PX)),
             );
-            mushra_slider(ui, scale, (x, track), rating, open, name);
+            mushra_slider(ui, scale, (x, track), rating, open, &name);
         }
     });
-    let missing: Vec<&str> = t
+    let missing: Vec<String> = t
         .panes
         .iter()
         .zip(&t.pane_ratings)
         .filter(|(_, r)| r.is_none())
-        .filter_map(|(p, _)| protocols::screen::pane_letter(p.reference_position))
+        .filter_map(|(p, _)| p.reference_position.pane_letter().map(String::from))
         .collect();
     let hint = format!("Rate {} to continue.", missing.join(", "));
     if confirmed(ui, open, missing.is_empty() && n > 0, &hint) {
