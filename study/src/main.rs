@@ -13,6 +13,7 @@ mod db_cmd;
 mod demo_cmd;
 mod markers_cmd;
 mod primitives_cmd;
+mod progress;
 mod report_cmd;
 mod run_cmd;
 mod serve_cmd;

@@ -169,7 +169,7 @@ impl ReportArgs {
 /// Unreadable or malformed results (named by file, line and column), a study file that does
 /// not load, or an output that cannot be written.
 pub fn run(args: &ReportArgs) -> Result<()> {
-    let bar = crate::codec_cmd::Progress::new("sessions read", false);
+    let bar = crate::progress::Progress::new("sessions read", false);
     let summary = report::report_with_progress(
         &args.request()?,
         &mut |w| bar.say(&format!("warning: {w}")),

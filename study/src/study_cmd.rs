@@ -9,7 +9,7 @@ use lab::StudyFile;
 use lab::live::LiveStimuli;
 use lab::simulate::SimulateOptions;
 
-use crate::codec_cmd::Progress;
+use crate::progress::Progress;
 
 /// Arguments of `study check`.
 #[derive(Debug, Args)]
