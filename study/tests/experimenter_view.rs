@@ -160,7 +160,8 @@ fn the_experimenter_sees_each_event_of_the_session_as_a_line() {
         );
     }
     let last = lines.last().unwrap();
-    let finished = format!("finished: 4 of 4 trials, {dropped} frames dropped, ");
+    let plural = if dropped == 1 { "" } else { "s" };
+    let finished = format!("finished: 4 of 4 trials, {dropped} frame{plural} dropped, ");
     assert!(last.starts_with(&finished), "{last:?}: {finished:?}");
     assert!(lines[2].ends_with(" elapsed") && lines[5].ends_with(" s (the trial starts again)"));
     // The summary still goes to standard output, after the view's last line.
