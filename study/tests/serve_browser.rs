@@ -337,6 +337,15 @@ impl Browser {
         );
     }
 
+    /// Gives the viewport back to the window's own size ([`Self::viewport`] undone).
+    fn window_viewport(&self) {
+        self.cmd(
+            "POST",
+            "goog/cdp/execute",
+            Some(&json!({ "cmd": "Emulation.clearDeviceMetricsOverride", "params": {} })),
+        );
+    }
+
     fn text(&self, id: &str) -> String {
         self.js(&format!(
             "return document.getElementById('{id}').textContent;"
@@ -1238,11 +1247,21 @@ impl Example {
 /// and its rows equal `study simulate --subject` for the same subject, answer for answer:
 /// each method's screen (ratings, pairs, choices with and without "no preference",
 /// MUSHRA's sliders, crowd scenes) comes from the one description the window draws.
+///
+/// On the way the page is measured at 1280×720 and 1920×1080: every text a participant
+/// must read on the welcome screen (title, instructions, field labels and answers, the
+/// consent heading and text) and on the first vote screen (the question, the grade words
+/// under rating buttons, DCR's impairment words, a scale's words, MUSHRA's slider words and
+/// marks, the progress text) has a computed font and line of at least 14 px, and so does
+/// what is typed into a field. Every example is measured before the test fails on a size,
+/// listing each text too small.
 #[test]
 fn every_example_study_runs_in_the_browser_as_simulated() {
     let Some(_one) = browser_test() else {
         return;
     };
+    let sizes = [(1280, 720), (1920, 1080)];
+    let mut small = Vec::new();
     let driver = Driver::start();
     for study in &examples() {
         let ex = Example::new(study, "example");
@@ -1255,7 +1274,12 @@ fn every_example_study_runs_in_the_browser_as_simulated() {
         } = &ex;
         let (simulated, script) = simulate(study, dir, subject, 3);
         let (_server, b) = ex.open(&driver);
-        welcome(&b);
+        reach_welcome(&b);
+        assert_eq!(b.screen(), "welcome", "{name}");
+        measure_texts(&b, &format!("{name} welcome"), &sizes, &mut small);
+        b.window_viewport();
+        fill_welcome(&b);
+        b.click("#begin");
         // `SCREENSHOTS=DIR` (scripts/screenshots): the first trial as it plays, for
         // docs/serve.md beside the window's.
         if let Some(shots) = std::env::var_os("SCREENSHOTS") {
@@ -1266,6 +1290,12 @@ fn every_example_study_runs_in_the_browser_as_simulated() {
             );
             b.screenshot(&Path::new(&shots).join(format!("{name}-page.png")));
         }
+        b.wait(
+            "document.body.dataset.screen === 'trial' && document.body.dataset.open === '1'",
+            90,
+        );
+        measure_texts(&b, &format!("{name} vote"), &sizes, &mut small);
+        b.window_viewport();
         let mut given = BTreeSet::new();
         let whole = WHOLE_SESSIONS.contains(&name.as_str());
         if whole {
@@ -1312,6 +1342,12 @@ fn every_example_study_runs_in_the_browser_as_simulated() {
         drop(b);
         let _ = std::fs::remove_dir_all(dir);
     }
+    assert!(
+        small.is_empty(),
+        "{} texts under {MIN_TEXT_PX} px:\n{}",
+        small.len(),
+        small.join("\n")
+    );
 }
 
 /// Every text on the page a participant sees now, as `[text, where, font px, height px]`:
@@ -1374,46 +1410,6 @@ fn measure_texts(b: &Browser, what: &str, sizes: &[(u32, u32)], small: &mut Vec<
             }
         }
     }
-}
-
-/// The page is readable at 1280×720 and 1920×1080: every text a participant must read on
-/// the welcome screen (title, instructions, field labels and answers, the consent heading
-/// and text) and on each example study's first vote screen (the question, the grade words
-/// under rating buttons, DCR's impairment words, a scale's words, MUSHRA's slider words and
-/// marks, the progress text) has a computed font of at least 14 px, and so does what is
-/// typed into a field. Every example is measured before the test fails, listing each text
-/// too small.
-#[test]
-fn every_text_a_participant_reads_is_at_least_14_px() {
-    let Some(_one) = browser_test() else {
-        return;
-    };
-    let sizes = [(1280, 720), (1920, 1080)];
-    let driver = Driver::start();
-    let mut small = Vec::new();
-    for study in &examples() {
-        let ex = Example::new(study, "sizes");
-        let (server, b) = ex.open(&driver);
-        reach_welcome(&b);
-        assert_eq!(b.screen(), "welcome", "{}", ex.name);
-        measure_texts(&b, &format!("{} welcome", ex.name), &sizes, &mut small);
-        fill_welcome(&b);
-        b.click("#begin");
-        b.wait(
-            "document.body.dataset.screen === 'trial' && document.body.dataset.open === '1'",
-            90,
-        );
-        measure_texts(&b, &format!("{} vote", ex.name), &sizes, &mut small);
-        drop(b);
-        drop(server);
-        let _ = std::fs::remove_dir_all(&ex.dir);
-    }
-    assert!(
-        small.is_empty(),
-        "{} texts under {MIN_TEXT_PX} px:\n{}",
-        small.len(),
-        small.join("\n")
-    );
 }
 
 /// A pane of an image: its top-left corner and size, pixels.
