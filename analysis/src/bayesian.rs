@@ -157,14 +157,21 @@ fn threshold_prior(m: f64, lo: f64, hi: f64) -> f64 {
 }
 
 /// psignifit's width prior (with `width_alpha` 0.05 the width is its own y).
+///
+/// psignifit assigns the three pieces in turn, each over the last: the flat part on
+/// (2·wmin, wmax), the rising cosine on [wmin, 2·wmin], the falling cosine on
+/// [wmax, 3·wmax]. Where the fall-offs overlap (2·wmin > wmax: a track that tested only two
+/// levels, whose smallest gap is the whole range) the falling one wins, and the flat part is
+/// empty: the prior is 0 below wmax and falls from 1 at wmax to 0 at 3·wmax. The order of the
+/// tests below is that precedence.
 fn width_prior(w: f64, wmin: f64, wmax: f64) -> f64 {
     use std::f64::consts::PI;
-    if 2.0 * wmin < w && w < wmax {
-        1.0
+    if wmax <= w && w <= 3.0 * wmax {
+        0.5 + 0.5 * (PI / 2.0 * (w - wmax) / wmax).cos()
     } else if wmin <= w && w <= 2.0 * wmin {
         (1.0 - (PI * (w - wmin) / wmin).cos()) / 2.0
-    } else if wmax <= w && w <= 3.0 * wmax {
-        0.5 + 0.5 * (PI / 2.0 * (w - wmax) / wmax).cos()
+    } else if 2.0 * wmin < w && w < wmax {
+        1.0
     } else {
         0.0
     }
@@ -497,7 +504,7 @@ pub fn fit(
 }
 
 /// The priors of [`fit`], in words, for a report's method section.
-pub const PRIORS: &str = "threshold uniform over the tested range with cosine fall-offs to 0 at half the range beyond each end; width uniform between twice the smallest gap between two levels and the range, falling off to 0 at that gap and at three times the range; lapse rate Beta(1, 10) on [0, 0.5]; overdispersion η Beta(1, 10) (psignifit 4's defaults)";
+pub const PRIORS: &str = "threshold uniform over the tested range with cosine fall-offs to 0 at half the range beyond each end; width uniform between twice the smallest gap between two levels and the range, falling off to 0 at that gap and at three times the range (with two levels tested, where the gap is the range, 0 below the range and falling from 1 at the range to 0 at three times it, as psignifit has it); lapse rate Beta(1, 10) on [0, 0.5]; overdispersion η Beta(1, 10) (psignifit 4's defaults)";
 
 #[cfg(test)]
 mod tests {

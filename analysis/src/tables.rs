@@ -401,10 +401,13 @@ pub fn dmos_table(
     }
 }
 
-/// Staircase threshold summary like thesis §5.4 (subjects, mean, SD, min, max, CI).
+/// Staircase threshold summary like thesis §5.4 (subjects, mean, SD, min, max, CI) of the
+/// study's k, to the grid's decimals plus one ([`ThresholdSummary::decimals`]).
 pub fn threshold_table(name: &str, caption: &str, t: &ThresholdSummary) -> Table {
     let s = t.summary.as_ref();
     let ci = s.and_then(|s| s.ci_t);
+    let d = t.decimals;
+    let percent = s.map_or(95.0, |s| s.confidence.percent());
     Table {
         name: name.to_owned(),
         caption: caption.to_owned(),
@@ -416,22 +419,114 @@ pub fn threshold_table(name: &str, caption: &str, t: &ThresholdSummary) -> Table
             "SD",
             "Min",
             "Max",
-            "95% CI lower",
-            "95% CI upper",
         ]
         .map(String::from)
-        .to_vec(),
+        .into_iter()
+        .chain([
+            format!("{percent:.0}% CI lower"),
+            format!("{percent:.0}% CI upper"),
+        ])
+        .collect(),
         rows: vec![vec![
             t.per_subject.len().to_string(),
             t.unconverged.len().to_string(),
             t.last_reversals.to_string(),
-            fmt_opt(s.map(|s| s.mean), 4),
-            fmt_opt(s.and_then(|s| s.sd), 4),
-            fmt_opt(t.min, 4),
-            fmt_opt(t.max, 4),
-            fmt_opt(ci.map(|c| c.lower), 4),
-            fmt_opt(ci.map(|c| c.upper), 4),
+            fmt_opt(s.map(|s| s.mean), d),
+            fmt_opt(s.and_then(|s| s.sd), d),
+            fmt_opt(t.min, d),
+            fmt_opt(t.max, d),
+            fmt_opt(ci.map(|c| c.lower), d),
+            fmt_opt(ci.map(|c| c.upper), d),
         ]],
+    }
+}
+
+/// Every up-down track's reversals and its two estimates side by side: the mean of the
+/// study's last k reversals and of the last even number (with the count used).
+pub fn staircase_tracks_table(
+    name: &str,
+    caption: &str,
+    t: &ThresholdSummary,
+    subject: &dyn Fn(u32) -> String,
+) -> Table {
+    let d = t.decimals;
+    Table {
+        name: name.to_owned(),
+        caption: caption.to_owned(),
+        columns: vec![
+            "Subject".to_owned(),
+            "Track".to_owned(),
+            "Reversals".to_owned(),
+            format!("Last {} reversals", t.last_reversals),
+            format!("Last {} reversals (even)", t.even_k),
+        ],
+        rows: t
+            .tracks
+            .iter()
+            .map(|r| {
+                vec![
+                    subject(r.subject),
+                    r.label.clone(),
+                    r.reversals.to_string(),
+                    fmt_opt(r.last_k, d),
+                    r.even.map_or_else(
+                        || UNDEFINED.to_owned(),
+                        |(k, v)| {
+                            if k == t.even_k {
+                                format!("{v:.d$}")
+                            } else {
+                                format!("{v:.d$} (last {k})")
+                            }
+                        },
+                    ),
+                ]
+            })
+            .collect(),
+    }
+}
+
+/// The threshold to cite per condition and across conditions: the even-k estimate's mean
+/// across subjects with its t interval and its nearest grid level, the study's k mean beside
+/// it.
+pub fn cited_threshold_table(name: &str, caption: &str, t: &ThresholdSummary) -> Table {
+    let d = t.decimals;
+    let percent = t
+        .cited
+        .first()
+        .map_or(95.0, |c| c.even.confidence.percent());
+    Table {
+        name: name.to_owned(),
+        caption: caption.to_owned(),
+        columns: vec![
+            "Condition".to_owned(),
+            "Subjects".to_owned(),
+            format!("Last {} reversals", t.last_reversals),
+            format!("Last {} reversals (cite)", t.even_k),
+            "SD".to_owned(),
+            format!("{percent:.0} % CI"),
+            "Nearest level".to_owned(),
+        ],
+        rows: t
+            .cited
+            .iter()
+            .map(|c| {
+                let ci = c.even.ci_t;
+                vec![
+                    c.condition
+                        .clone()
+                        .unwrap_or_else(|| "all conditions".to_owned()),
+                    c.even.n.to_string(),
+                    fmt_opt(c.last_k_mean, d),
+                    format!("{:.d$}", c.even.mean),
+                    fmt_opt(c.even.sd, d),
+                    ci.map_or_else(
+                        || UNDEFINED.to_owned(),
+                        |ci| format!("{:.d$} – {:.d$}", ci.lower, ci.upper),
+                    ),
+                    fmt_opt(c.on_grid, d - 1),
+                ]
+            })
+            .collect(),
     }
 }
 

@@ -7,8 +7,9 @@
 //! point rounding (and scipy's special functions against statrs'): the tolerance is 1e-6 of
 //! the fitted quantity's scale (the stimulus range for threshold and width, 1 for λ and η).
 //! Cases: a full method-of-constant-stimuli data set (logistic), one subject's QUEST+ track on
-//! `examples/quest.toml`'s levels (Weibull, psignifit on ln level) and a normal fit of data
-//! with more scatter than a binomial's.
+//! `examples/quest.toml`'s levels (Weibull, psignifit on ln level), four tracks that tested
+//! only two levels (Weibull, logistic, normal: the width prior's fall-offs overlap there) and a
+//! normal fit of data with more scatter than a binomial's.
 //!
 //! The Python is `$BAYES_PYTHON` (`scripts/test` points it at `target/bayes-env`), or that
 //! venv itself; under `CI` a missing interpreter or package fails the test, elsewhere it
@@ -65,6 +66,29 @@ fn cases() -> Vec<Case> {
                 (0.022, 3, 3),
                 (0.04, 1, 1),
             ],
+        ),
+        // Tracks that tested only two levels (12 of 33 QUEST+ fits of the examples did): the
+        // smallest gap is the whole range, the width prior's two fall-offs overlap and
+        // psignifit keeps the falling one (issue 39).
+        (
+            "two levels, a QUEST+ track, Weibull",
+            Sigmoid::Weibull,
+            vec![(0.01, 30, 22), (0.016, 10, 9)],
+        ),
+        (
+            "two levels, far apart, Weibull",
+            Sigmoid::Weibull,
+            vec![(0.004, 6, 4), (0.04, 14, 14)],
+        ),
+        (
+            "two levels, logistic",
+            Sigmoid::Logistic,
+            vec![(1.0, 20, 12), (2.0, 20, 17)],
+        ),
+        (
+            "two levels, all correct at the top, normal",
+            Sigmoid::Normal,
+            vec![(0.022, 25, 15), (0.028, 15, 15)],
         ),
         (
             "overdispersed, normal",

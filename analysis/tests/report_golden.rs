@@ -266,3 +266,26 @@ fn threshold_table_matches_numpy_and_scipy() {
     close(ci.lower, f(&n["lower"]), "threshold CI lower");
     close(ci.upper, f(&n["upper"]), "threshold CI upper");
 }
+
+/// Issue 39: the staircase report gives the thesis's last-3 estimate and the even-count
+/// (last-4) estimate side by side per track, and the threshold to cite per condition and
+/// over all (the even-count means across subjects, their t interval and the nearest grid
+/// level), every cell as `scripts/golden/report_tables.py` computes it with NumPy/SciPy.
+#[test]
+fn staircase_estimates_and_threshold_to_cite_match_numpy_and_scipy() {
+    let g = golden();
+    let data = data(&g);
+    let opts = options(&g, None);
+    let t = tables(&data, &opts);
+    check_cells(
+        &t["staircase_tracks"],
+        g["staircase_tracks"].as_array().unwrap(),
+    );
+    let cite = g["threshold_to_cite"].as_array().unwrap();
+    check_cells(&t["threshold_to_cite"], cite);
+    let th = analyze(&data, &opts).unwrap().thresholds.unwrap();
+    assert_eq!(th.even_k, 4);
+    for (c, e) in th.cited.iter().zip(cite) {
+        close(c.even.mean, f(&e["mean"]), "threshold to cite");
+    }
+}

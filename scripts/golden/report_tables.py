@@ -17,7 +17,11 @@ What the analysis must do, as this script does it:
   two-sided; with baseline B, "A scores higher than B" one-sided.
 - Staircase: reversal = the level moves the other way after a trial than the last move
   before it; threshold = mean of the last 3 reversal levels; per subject the mean of its
-  converged tracks; across subjects mean, SD, min, max and the Student-t interval.
+  converged tracks; across subjects mean, SD, min, max and the Student-t interval. Beside it
+  (issue 39) the mean of the last 4 reversals (the even count next to 3; a track with fewer
+  takes its largest even count, at least 2) per track, and the threshold to cite per
+  condition and over all: the even-count means averaged per subject, then mean, SD and
+  Student-t interval across subjects, and the mean rounded to the level grid.
 
 Install: pip install scipy statsmodels numpy
 Run from the repository root: python3 scripts/golden/report_tables.py
@@ -174,6 +178,73 @@ def threshold_table():
             "unconverged": unconverged, "numbers": s, "cells": cells}
 
 
+EVEN_K = LAST_REVERSALS + LAST_REVERSALS % 2  # the even count next to k: 4 for 3
+
+
+def even_estimate(rev):
+    """(count, mean) of the last EVEN_K reversals, or of the largest even count below it
+    (at least 2); None with fewer than 2."""
+    k = EVEN_K if len(rev) >= EVEN_K else len(rev) - len(rev) % 2
+    if k < 2:
+        return None
+    return k, float(np.mean(rev[-k:]))
+
+
+def staircase_tracks_table():
+    """Every track: reversals, the last-3 mean and the even-k mean side by side."""
+    rows = []
+    for subject, label, units in TRACKS:
+        rev = reversal_levels([u * 0.001 for u in units])
+        last = float(np.mean(rev[-LAST_REVERSALS:])) if len(rev) >= LAST_REVERSALS else None
+        even = even_estimate(rev)
+        rows.append({"cells": [
+            str(subject), label, str(len(rev)),
+            rust_fixed(last, 4) if last is not None else "n/a",
+            "n/a" if even is None else (
+                rust_fixed(even[1], 4) if even[0] == EVEN_K
+                else f"{rust_fixed(even[1], 4)} (last {even[0]})"),
+        ]})
+    return rows
+
+
+def threshold_cite_table():
+    """The threshold to cite per condition (labels sorted) and over all: per subject the mean
+    of its tracks' even-k estimates, then across subjects mean, SD, Student-t interval; the
+    last-3 mean beside it; the mean rounded to the grid (origin: the smallest level, step: the
+    smallest move)."""
+    levels = [u * 0.001 for _, _, units in TRACKS for u in units]
+    origin = min(levels)
+    step = min(abs(b - a) * 0.001 for _, _, units in TRACKS
+               for a, b in zip(units, units[1:]) if b != a)
+    rows = []
+    for condition in sorted({label for _, label, _ in TRACKS}) + [None]:
+        even, last = {}, {}
+        for subject, label, units in TRACKS:
+            if condition is not None and label != condition:
+                continue
+            rev = reversal_levels([u * 0.001 for u in units])
+            e = even_estimate(rev)
+            if e is not None:
+                even.setdefault(subject, []).append(e[1])
+            if len(rev) >= LAST_REVERSALS:
+                last.setdefault(subject, []).append(float(np.mean(rev[-LAST_REVERSALS:])))
+        values = [float(np.mean(v)) for _, v in sorted(even.items())]
+        lasts = [float(np.mean(v)) for _, v in sorted(last.items())]
+        mean = float(np.mean(values))
+        if len(values) >= 2:
+            s = interval(values)
+            sd, ci = rust_fixed(s["sd"], 4), f"{rust_fixed(s['lower'], 4)} – {rust_fixed(s['upper'], 4)}"
+        else:
+            sd, ci = "n/a", "n/a"
+        nearest = origin + round((mean - origin) / step) * step
+        rows.append({"mean": mean, "cells": [
+            condition if condition is not None else "all conditions", str(len(values)),
+            rust_fixed(float(np.mean(lasts)), 4) if lasts else "n/a",
+            rust_fixed(mean, 4), sd, ci, rust_fixed(nearest, 3),
+        ]})
+    return rows
+
+
 def main():
     out = {
         "generator": "scripts/golden/report_tables.py",
@@ -190,6 +261,8 @@ def main():
         "ttests_two_sided": ttest_table(None),
         "ttests_baseline_b": ttest_table("B"),
         "thresholds": threshold_table(),
+        "staircase_tracks": staircase_tracks_table(),
+        "threshold_to_cite": threshold_cite_table(),
     }
     with open("analysis/tests/data/report_tables_golden.json", "w") as f:
         json.dump(out, f, indent=1)
