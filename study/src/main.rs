@@ -67,6 +67,8 @@ enum Command {
     /// Every table and figure of a results directory: MOS / DMOS with CIs, t-tests, screening,
     /// thresholds, psychometric fit (report.md, report.html, CSV / Markdown / LaTeX, SVG / PNG).
     Report(report_cmd::ReportArgs),
+    /// Subjects needed for a power or a CI width: from stated effect sizes or a pilot's results.
+    Plan(report_cmd::PlanArgs),
     /// Write a database run's results as a results folder (the format `study run -o` writes).
     Export(db_cmd::ExportArgs),
     /// Load a results folder into a database run (refusing sessions it holds already).
@@ -97,6 +99,7 @@ fn main() -> ExitCode {
         Command::Check(args) => study_cmd::check(&args),
         Command::Simulate(args) => study_cmd::simulate(&args),
         Command::Report(args) => report_cmd::run(&args),
+        Command::Plan(args) => report_cmd::plan(&args),
         Command::Export(args) => db_cmd::export(&args),
         Command::Import(args) => db_cmd::import(&args),
         Command::DbInit(args) => db_cmd::init(&args),

@@ -180,3 +180,30 @@ pub fn run(args: &ReportArgs) -> Result<()> {
     println!("{summary}");
     Ok(())
 }
+
+/// Arguments of `study plan` (docs/analysis.md, "Sample size planning").
+#[derive(Debug, Clone, clap::Args)]
+pub struct PlanArgs {
+    /// A pilot's results folder: each comparison's observed effect, each track's threshold SD.
+    pub pilot: Option<PathBuf>,
+    #[arg(long, help = "Mean difference to detect (score units), with --sd")]
+    pub difference: Option<f64>,
+    #[arg(long, help = "SD of the differences (with --ci-width: of the values)")]
+    pub sd: Option<f64>,
+    #[arg(long, help = "Effect to detect as Cohen's d_z (difference / SD)")]
+    pub dz: Option<f64>,
+    #[arg(long, help = "Largest half-width of a mean's CI (level 1 - alpha)")]
+    pub ci_width: Option<f64>,
+    #[arg(long, default_value_t = 0.05, help = "Significance level")]
+    pub alpha: f64,
+    #[arg(long, default_value_t = 0.8, help = "Power to reach")]
+    pub power: f64,
+    #[arg(long, help = "One-sided test (default: two-sided)")]
+    pub one_sided: bool,
+}
+
+pub fn plan(a: &PlanArgs) -> Result<()> {
+    let stated = report::plan::Stated::new(a.difference, a.sd, a.dz, a.ci_width);
+    let goal = report::plan::Goal::new(a.alpha, a.power, !a.one_sided);
+    report::plan::plan(a.pilot.as_deref(), &stated, &goal).map(|text| print!("{text}"))
+}
