@@ -1,5 +1,6 @@
 //! Interoperability: ratings as a tidy long CSV (R, pandas) and as a Netflix `sureal` dataset
-//! file (so its MOS, DMOS and MLE subject models can be run on our data).
+//! file (so its MOS, DMOS and MLE subject models can be run on our data), and the data
+//! dictionary of CSV exports as a Frictionless Data Package ([`data_package`]).
 
 use std::collections::HashMap;
 use std::fmt::Write as _;
@@ -135,6 +136,222 @@ pub fn write_tidy_csv(
         out.spill()?;
     }
     out.finish()
+}
+
+/// The type of a column of a CSV export, as a Frictionless Table Schema names it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ColumnType {
+    /// Text.
+    String,
+    /// A whole number.
+    Integer,
+    /// A number (a float in its shortest round-trip decimal form, never an exponent).
+    Number,
+    /// `TRUE` or `FALSE` (as R writes them and R, pandas and the Table Schema read them).
+    Boolean,
+}
+
+impl ColumnType {
+    /// The Table Schema's name of the type.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::String => "string",
+            Self::Integer => "integer",
+            Self::Number => "number",
+            Self::Boolean => "boolean",
+        }
+    }
+}
+
+/// A column of a CSV export, described as a Frictionless Table Schema field
+/// (<https://specs.frictionlessdata.io/table-schema/>): name, type, description and the
+/// constraints known before any row is read. An empty value is a missing one.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Column {
+    /// The header's name.
+    pub name: String,
+    /// Its type.
+    pub kind: ColumnType,
+    /// What it holds, in words.
+    pub description: String,
+    /// Every row has a value.
+    pub required: bool,
+    /// The only values it takes (text columns), in order; empty: any.
+    pub values: Vec<String>,
+    /// Smallest value (numbers).
+    pub minimum: Option<f64>,
+    /// Largest value (numbers).
+    pub maximum: Option<f64>,
+}
+
+impl Column {
+    /// A column of `kind` without constraints.
+    pub fn new(name: impl Into<String>, kind: ColumnType, description: impl Into<String>) -> Self {
+        Self {
+            name: name.into(),
+            kind,
+            description: description.into(),
+            required: false,
+            values: Vec::new(),
+            minimum: None,
+            maximum: None,
+        }
+    }
+
+    /// The column, with a value in every row.
+    #[must_use]
+    pub fn required(mut self) -> Self {
+        self.required = true;
+        self
+    }
+
+    /// The column, taking only `values`.
+    #[must_use]
+    pub fn one_of<S: Into<String>>(mut self, values: impl IntoIterator<Item = S>) -> Self {
+        self.values = values.into_iter().map(Into::into).collect();
+        self
+    }
+
+    /// The column, at least `min`.
+    #[must_use]
+    pub fn at_least(mut self, min: f64) -> Self {
+        self.minimum = Some(min);
+        self
+    }
+
+    /// The column, within `min..=max`.
+    #[must_use]
+    pub fn within(mut self, min: f64, max: f64) -> Self {
+        self.minimum = Some(min);
+        self.maximum = Some(max);
+        self
+    }
+
+    /// The Table Schema field.
+    fn field(&self) -> serde_json::Value {
+        let mut field = serde_json::json!({
+            "name": self.name,
+            "type": self.kind.as_str(),
+            "description": self.description,
+        });
+        if self.kind == ColumnType::Boolean {
+            field["trueValues"] = serde_json::json!(["TRUE"]);
+            field["falseValues"] = serde_json::json!(["FALSE"]);
+        }
+        let mut constraints = serde_json::Map::new();
+        if self.required {
+            constraints.insert("required".into(), true.into());
+        }
+        if !self.values.is_empty() {
+            constraints.insert("enum".into(), self.values.clone().into());
+        }
+        let bound = |x: f64| -> serde_json::Value {
+            if self.kind == ColumnType::Integer && x.fract() == 0.0 && x.abs() < 9.0e15 {
+                serde_json::Value::from(x as i64)
+            } else {
+                serde_json::Value::from(x)
+            }
+        };
+        if let Some(x) = self.minimum {
+            constraints.insert("minimum".into(), bound(x));
+        }
+        if let Some(x) = self.maximum {
+            constraints.insert("maximum".into(), bound(x));
+        }
+        if !constraints.is_empty() {
+            field["constraints"] = constraints.into();
+        }
+        field
+    }
+}
+
+/// A CSV file of a data package: its file name, what it holds and its columns.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Resource<'a> {
+    /// File name, relative to the package's folder (`trials_tidy.csv`).
+    pub path: &'a str,
+    /// What a row is, in words.
+    pub description: &'a str,
+    /// Its columns, in order.
+    pub columns: &'a [Column],
+}
+
+/// A Frictionless Data Package (`datapackage.json`, profile `tabular-data-package`,
+/// <https://specs.frictionlessdata.io/data-package/>) describing CSV `resources`: each one's
+/// dialect (comma, header row, `"` quotes doubled), its Table Schema (every column's name,
+/// type, description and constraints) and that an empty value is a missing one. `name` is
+/// made a valid package name (lower case; letters, digits, `-`, `_`, `.`).
+pub fn data_package(name: &str, title: &str, resources: &[Resource<'_>]) -> String {
+    let slug = |s: &str| -> String {
+        s.chars()
+            .map(|c| {
+                let c = c.to_ascii_lowercase();
+                if c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.') {
+                    c
+                } else {
+                    '-'
+                }
+            })
+            .collect()
+    };
+    let resources: Vec<serde_json::Value> = resources
+        .iter()
+        .map(|r| {
+            serde_json::json!({
+                "name": slug(r.path.trim_end_matches(".csv")),
+                "path": r.path,
+                "profile": "tabular-data-resource",
+                "description": r.description,
+                "format": "csv",
+                "mediatype": "text/csv",
+                "encoding": "utf-8",
+                "dialect": {"delimiter": ",", "header": true, "doubleQuote": true, "quoteChar": "\""},
+                "schema": {
+                    "fields": r.columns.iter().map(Column::field).collect::<Vec<_>>(),
+                    "missingValues": [""],
+                },
+            })
+        })
+        .collect();
+    let package = serde_json::json!({
+        "profile": "tabular-data-package",
+        "name": slug(name),
+        "title": title,
+        "resources": resources,
+    });
+    // A `Value` always serializes.
+    serde_json::to_string_pretty(&package).unwrap_or_default() + "\n"
+}
+
+/// The columns of [`tidy_csv`] (`ratings.csv`), described.
+pub fn ratings_columns() -> Vec<Column> {
+    use ColumnType::{Integer, Number, String};
+    vec![
+        Column::new("subject", String, "Subject id, as the sessions record it.").required(),
+        Column::new(
+            "condition",
+            Integer,
+            "Condition number of the analysis (the report's \"Condition ids\" name each).",
+        )
+        .required()
+        .at_least(0.0),
+        Column::new(
+            "codec",
+            String,
+            "The condition's method: the codec, with its varied parameters when it has any; empty for an unknown condition.",
+        ),
+        Column::new(
+            "clip",
+            String,
+            "The source clip; empty for an unknown condition.",
+        ),
+        Column::new(
+            "compression_ratio",
+            Number,
+            "Compression ratio x of x:1; empty for a reference.",
+        ),
+        Column::new("score", Number, "The rating as the analysis takes it.").required(),
+    ]
 }
 
 fn py_str(s: &str) -> String {
@@ -803,5 +1020,51 @@ mod tests {
                 "seed {seed}"
             );
         }
+    }
+
+    /// The data dictionary is a Table Schema other tools read: each field's name, type and
+    /// description; booleans as `TRUE`/`FALSE`; an integer column's bounds as integers; the
+    /// enum and `required` under `constraints`; `""` as the missing value; a package name
+    /// made valid.
+    #[test]
+    fn data_package_describes_each_column() {
+        let columns = [
+            Column::new("age", ColumnType::Integer, "Age.").within(18.0, 99.0),
+            Column::new("side", ColumnType::String, "Side.")
+                .required()
+                .one_of(["left", "right"]),
+            Column::new("correct", ColumnType::Boolean, "Correct."),
+            Column::new("score", ColumnType::Number, "Score.").within(1.0, 4.5),
+        ];
+        let text = data_package(
+            "My Study 2",
+            "t",
+            &[Resource {
+                path: "trials_tidy.csv",
+                description: "rows",
+                columns: &columns,
+            }],
+        );
+        let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+        assert_eq!(v["profile"], "tabular-data-package");
+        assert_eq!(v["name"], "my-study-2");
+        let r = &v["resources"][0];
+        assert_eq!(r["name"], "trials_tidy");
+        assert_eq!(r["path"], "trials_tidy.csv");
+        assert_eq!(r["schema"]["missingValues"], serde_json::json!([""]));
+        let f = &r["schema"]["fields"];
+        assert_eq!(f[0]["type"], "integer");
+        assert_eq!(f[0]["constraints"]["minimum"], serde_json::json!(18));
+        assert!(f[0]["constraints"]["minimum"].is_i64());
+        assert_eq!(
+            f[1]["constraints"]["enum"],
+            serde_json::json!(["left", "right"])
+        );
+        assert_eq!(f[1]["constraints"]["required"], true);
+        assert_eq!(f[2]["trueValues"], serde_json::json!(["TRUE"]));
+        assert_eq!(f[2]["falseValues"], serde_json::json!(["FALSE"]));
+        assert!(f[2].get("constraints").is_none());
+        assert_eq!(f[3]["constraints"]["maximum"], serde_json::json!(4.5));
+        assert_eq!(f[3]["description"], "Score.");
     }
 }

@@ -28,13 +28,16 @@ fn check_weibull_levels(s: &results::SessionResults) -> Result<()> {
 }
 
 /// What reading a results directory gave: the analysis inputs, the sessions with trials
-/// missing (reported with `--allow-incomplete`) and every session's display record.
+/// missing (reported with `--allow-incomplete`), every session's display record and the
+/// tidy export's rows.
 pub(crate) struct Logs {
     pub(crate) converted: from_results::ConvertedResults,
     pub(crate) incomplete: Vec<lab::integrity::Problem>,
     pub(crate) displays: Vec<analysis::display::SessionDisplay>,
     /// What the study's `[crowdsourcing]` rules left out of the statistics.
     pub(crate) exclusions: Vec<analysis::exclusions::SessionExclusion>,
+    /// Every trial of every session, spooled for `trials_tidy.csv`.
+    pub(crate) tidy: crate::tidy::Spool,
 }
 
 /// Threads that read and check sessions.
@@ -52,6 +55,8 @@ struct Taken<'a> {
     displays: Vec<analysis::display::SessionDisplay>,
     /// What the study's `[crowdsourcing]` rules left out, per session.
     exclusions: Vec<analysis::exclusions::SessionExclusion>,
+    /// Every trial of every session, spooled for `trials_tidy.csv`.
+    tidy: crate::tidy::Spool,
     /// The first error converting a sound session; the log check's verdict comes first.
     failed: Option<anyhow::Error>,
 }
@@ -127,16 +132,27 @@ impl Sessions {
     }
 }
 
+/// What a reader makes of a session before its turn, besides the log check: the study's
+/// exclusions of it and its tidy rows.
+type Prepared = (analysis::exclusions::SessionExclusion, crate::tidy::Encoded);
+
+/// What adds a session, in session order: its log check's problems and what its reader
+/// prepared.
+type Take<'a, 't> = dyn Fn(&mut Taken<'a>, &results::SessionResults, Vec<lab::integrity::Problem>, Prepared)
+    + Sync
+    + 't;
+
 /// Reads and checks sessions on [`READERS`] threads, each taking the next unread session
-/// ([`lab::integrity::Checker::check_alone`], the part that needs no other session), then,
-/// when every session before it has been taken, adds it (`take`), says so (`progress(taken,
-/// total)`) and drops it itself: one session per reader in memory, every row freed by the
-/// thread that read it.
+/// ([`lab::integrity::Checker::check_alone`], the part that needs no other session, and
+/// `prepare`), then, when every session before it has been taken, adds it (`take`), says so
+/// (`progress(taken, total)`) and drops it itself: one session per reader in memory, every
+/// row freed by the thread that read it.
 fn read_in_order<'a>(
     checker: &lab::integrity::Checker<'_>,
     sessions: &Sessions,
     taken: Taken<'a>,
-    take: &(dyn Fn(&mut Taken<'a>, &results::SessionResults, Vec<lab::integrity::Problem>) + Sync),
+    prepare: &(dyn Fn(&results::SessionResults) -> Prepared + Sync),
+    take: &Take<'a, '_>,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<Taken<'a>> {
     let turns = Turns {
@@ -154,14 +170,15 @@ fn read_in_order<'a>(
             }
             let session = sessions.load(i).map(|session| {
                 let found = checker.check_alone(&session);
-                (session, found)
+                let prepared = prepare(&session);
+                (session, found, prepared)
             });
             let Some(mut taken) = turns.wait_for(i) else {
                 return;
             };
             let session = match session {
-                Ok((session, found)) => {
-                    take(&mut taken, &session, found);
+                Ok((session, found, prepared)) => {
+                    take(&mut taken, &session, found, prepared);
                     taken.next += 1;
                     progress(taken.next, count);
                     Some(session)
@@ -225,13 +242,19 @@ pub(crate) fn read_logs(
         problems: Vec::new(),
         displays: Vec::with_capacity(sessions.len()),
         exclusions: Vec::with_capacity(sessions.len()),
+        tidy: crate::tidy::Spool::new(),
         failed: None,
     };
+    // Before the session's turn, on its reader's thread: the crowdsourcing exclusions and
+    // the tidy rows.
+    let encoder = crate::tidy::Encoder::new(definition);
+    let prepare = |session: &results::SessionResults| encoder.prepare(session);
     // In session order: a session recorded twice, the display record, the crowdsourcing
-    // exclusions, the conversion.
+    // exclusions, the tidy rows, the conversion.
     let take = |taken: &mut Taken<'_>,
                 session: &results::SessionResults,
-                found: Vec<lab::integrity::Problem>| {
+                found: Vec<lab::integrity::Problem>,
+                (exclusion, rows): Prepared| {
         let found: Vec<_> = checker
             .check_repeat(session)
             .into_iter()
@@ -245,8 +268,8 @@ pub(crate) fn read_logs(
         ));
         // The crowd rules (gold trials, hidden pages) apply to sound logs only; the
         // integrity check saw every row.
-        let exclusion = analysis::exclusions::session_exclusion(session, &definition.crowdsourcing);
         let kept = analysis::exclusions::apply(session, &exclusion);
+        taken.tidy.add(rows);
         taken.exclusions.push(exclusion);
         let Some(session) = kept else { return };
         if taken.failed.is_none() && !damaged {
@@ -264,9 +287,10 @@ pub(crate) fn read_logs(
         problems,
         displays,
         exclusions,
+        tidy,
         failed,
         ..
-    } = read_in_order(&checker, sessions, taken, &take, progress)?;
+    } = read_in_order(&checker, sessions, taken, &prepare, &take, progress)?;
     let refused: Vec<_> = problems
         .iter()
         .filter(|p| p.kind == Kind::Damage || !request.allow_incomplete)
@@ -304,6 +328,7 @@ pub(crate) fn read_logs(
         incomplete: problems,
         displays,
         exclusions,
+        tidy,
     })
 }
 

@@ -98,6 +98,8 @@ fn simulated_sessions_give_every_table_and_figure() {
             "report.md",
             "report.html",
             "ratings.csv",
+            "trials_tidy.csv",
+            "datapackage.json",
             "sureal_dataset.py",
         ] {
             assert!(out.join(f).is_file(), "{name}: {f}");

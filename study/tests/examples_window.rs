@@ -10,6 +10,11 @@
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
 
 mod common;
+#[path = "../../scripts/golden/stats_python.rs"]
+#[allow(dead_code, reason = "the scripts' runner is for the statistics checks")]
+mod stats_python;
+#[path = "../../scripts/golden/tidy_readers.rs"]
+mod tidy_readers;
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -725,6 +730,7 @@ fn the_crowd_examples_simulate_and_report_fig_6_9() {
             assert!(svg.contains(legend), "{run}: no curve {legend:?}");
         }
         assert!(svg.contains("Compression ratio of the back characters (x:1)"));
+        tidy_readers::check_tidy(&results, &report, run);
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }

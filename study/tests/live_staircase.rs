@@ -4,6 +4,12 @@
 //! error recovered by the analysis within its confidence interval.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
 
+#[path = "../../scripts/golden/stats_python.rs"]
+#[allow(dead_code, reason = "the scripts' runner is for the statistics checks")]
+mod stats_python;
+#[path = "../../scripts/golden/tidy_readers.rs"]
+mod tidy_readers;
+
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -291,6 +297,9 @@ fn simulated_live_staircase_recovers_the_observers_true_threshold() {
         "{notice}"
     );
     assert!(report.join("figures/jnd.svg").is_file());
+    // The tidy export of live trials (stimuli made per trial, not in the manifest) reads in
+    // pandas and R.
+    tidy_readers::check_tidy(&out, &report, "live-staircase.toml");
 }
 
 /// QUEST+ live (codec-in-the-loop), with practice: the example's five clips in turn under a

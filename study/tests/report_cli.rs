@@ -330,6 +330,15 @@ fn report_refuses_logs_it_cannot_trust_naming_file_and_row() {
         "{md}"
     );
     assert!(ratings("truncated") < all_ratings);
+    // The tidy export holds every trial there is: the incomplete session's too.
+    let tidy = |name: &str| {
+        std::fs::read_to_string(dir.join(format!("{name}-report/trials_tidy.csv")))
+            .unwrap()
+            .lines()
+            .count()
+            - 1
+    };
+    assert_eq!(tidy("truncated"), tidy("clean") - 4);
     // Damage is refused even with --allow-incomplete.
     let out = report(
         &dir.join("duplicated"),

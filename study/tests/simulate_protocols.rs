@@ -1,6 +1,13 @@
 //! `study check` and `study simulate` end to end on the shipped examples: MOS, DSCQS,
-//! staircase, ACR-HR, DCR, pair comparison and MUSHRA runs write complete results directories that the readers load back.
+//! staircase, QUEST+, ACR-HR, DCR, pair comparison, MUSHRA and CCR runs write complete results directories that the readers load back,
+//! and their reports' tidy exports read in pandas and R with the documented columns.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
+
+#[path = "../../scripts/golden/stats_python.rs"]
+#[allow(dead_code, reason = "the scripts' runner is for the statistics checks")]
+mod stats_python;
+#[path = "../../scripts/golden/tidy_readers.rs"]
+mod tidy_readers;
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -23,12 +30,36 @@ fn study() -> Command {
     Command::new(env!("CARGO_BIN_EXE_study"))
 }
 
+/// `study report` of the results `out` (of example `file`), and its tidy export read by
+/// pandas and R.
+fn reported_tidy_reads(out: &Path, file: &str) {
+    let report = out.with_extension("report");
+    let st = study()
+        .arg("report")
+        .arg(out)
+        .args(["--no-png", "--bootstrap", "50", "-o"])
+        .arg(&report)
+        .output()
+        .unwrap();
+    assert!(
+        st.status.success(),
+        "{file}: {}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    tidy_readers::check_tidy(out, &report, file);
+}
+
 #[test]
+#[expect(
+    clippy::too_many_lines,
+    reason = "one loop over the examples: simulate, check the rows, report, read the export"
+)]
 fn simulate_writes_complete_results_for_every_protocol() {
     for (file, protocol, per_session) in [
         ("mos.toml", Protocol::Mos, Some(14)),
         ("dscqs.toml", Protocol::Dscqs, Some(10)),
         ("staircase.toml", Protocol::Staircase, None),
+        ("quest.toml", Protocol::Staircase, None),
         ("acr-hr.toml", Protocol::Acr, Some(14)),
         ("dcr.toml", Protocol::Dcr, Some(12)),
         ("pc.toml", Protocol::PairComparison, Some(22)),
@@ -109,7 +140,9 @@ fn simulate_writes_complete_results_for_every_protocol() {
                 Protocol::Ccr => ccr_session(s),
                 Protocol::Mushra => check_mushra(s),
                 Protocol::Staircase => {
-                    assert_eq!(s.manifest.thresholds.len(), 2);
+                    // The staircase example runs two tracks, the QUEST+ example one.
+                    let tracks = if file == "quest.toml" { 1 } else { 2 };
+                    assert_eq!(s.manifest.thresholds.len(), tracks, "{file}");
                     assert!(
                         s.manifest
                             .thresholds
@@ -119,6 +152,7 @@ fn simulate_writes_complete_results_for_every_protocol() {
                 }
             }
         }
+        reported_tidy_reads(&out, file);
         // Never overwritten.
         let again = study()
             .arg("simulate")
@@ -421,6 +455,7 @@ fn between_subject_groups_are_assigned_simulated_and_reported() {
         "{}",
         String::from_utf8_lossy(&st.stderr)
     );
+    tidy_readers::check_tidy(&out, &report, "groups.toml");
     let text = std::fs::read_to_string(report.join("report.md")).unwrap();
     assert!(
         text.contains(
