@@ -26,6 +26,7 @@
 
 pub mod bayesian;
 pub mod bradley_terry;
+pub mod clmm;
 mod confidence;
 pub mod crowd;
 pub mod descriptive;
@@ -39,14 +40,17 @@ pub mod findings;
 pub mod from_results;
 mod hashing;
 pub mod jnd;
+mod linalg;
 pub mod method;
 mod methods;
+pub mod mixed;
 pub mod mle;
 pub mod mushra;
 mod panel;
 pub mod plots;
 pub mod power;
 pub mod psychometric;
+pub mod reliability;
 pub mod report;
 pub mod screening;
 pub mod staircase;

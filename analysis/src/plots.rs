@@ -112,8 +112,8 @@ pub enum Figure {
         series: Vec<RateSeries>,
         /// A horizontal limit line (4.5 MOS, 0.2 DMOS), if any.
         limit: Option<f64>,
-        /// The y axis' span (the rating scale); widened only where data lie outside it.
-        /// `None`: the data's range.
+        /// The y axis' span (the rating scale): widened only where a mean or the limit lies
+        /// outside it, never for a CI (its bar is cut at the frame). `None`: the data's range.
         y_range: Option<(f64, f64)>,
     },
     /// Crowd scenes (thesis Fig. 6.9): MOS against the compression ratio of the characters
@@ -184,6 +184,19 @@ pub enum Figure {
         /// The y axis' span (the rating scale), if known.
         y_range: Option<(f64, f64)>,
     },
+    /// A forest plot of one model's effects: one row per effect (its name the row's label,
+    /// top to bottom in the given order), the estimate as a dot with its CI as a whisker, and
+    /// a vertical line at 0 (no effect). One model per figure: effects of models on different
+    /// scales never share an axis. A row whose CI is not finite is drawn without a whisker,
+    /// and one whose estimate is not finite with its label only.
+    Forest {
+        /// Title.
+        title: String,
+        /// X axis label (the effects' scale: "Effect on the score", "Effect (log odds)").
+        x_label: String,
+        /// (effect name, estimate, CI lower, CI upper).
+        rows: Vec<(String, f64, f64, f64)>,
+    },
 }
 
 type DrawResult<DB> = Result<(), DrawingAreaErrorKind<<DB as DrawingBackend>::ErrorType>>;
@@ -251,7 +264,9 @@ fn text_width(text: &str, size: f64) -> f64 {
         })
 }
 
-/// A plotting area: its pixel rectangle and the data ranges it spans.
+/// A plotting area: its pixel rectangle and the data ranges it spans. The frame drawn around
+/// it lies `pad` pixels outside on every side ([`Frame::padded`]), so that a marker at the
+/// edge of the data ranges (a rating at the top of the scale) is drawn whole inside the frame.
 #[derive(Debug, Clone, Copy)]
 struct Frame {
     left: f64,
@@ -260,9 +275,37 @@ struct Frame {
     bottom: f64,
     x: (f64, f64),
     y: (f64, f64),
+    pad: f64,
 }
 
+/// Half the size of a curve's marker, layout units.
+const MARKER_R: f64 = 3.4;
+/// The space between the data ranges and the frame, layout units: a marker's half-height
+/// (a triangle's 1.25 × [`MARKER_R`]) and half its outline.
+const MARKER_PAD: f64 = 6.0;
+
 impl Frame {
+    /// The data ranges spanning the frame `self` less `pad` pixels on every side; the frame
+    /// drawn stays where `self` is.
+    fn padded(self, pad: f64) -> Self {
+        Self {
+            left: self.left + pad,
+            top: self.top + pad,
+            right: self.right - pad,
+            bottom: self.bottom - pad,
+            pad: self.pad + pad,
+            ..self
+        }
+    }
+    /// The frame drawn: (left, top, right, bottom) in pixels.
+    fn outer(&self) -> (f64, f64, f64, f64) {
+        (
+            self.left - self.pad,
+            self.top - self.pad,
+            self.right + self.pad,
+            self.bottom + self.pad,
+        )
+    }
     fn px(&self, x: f64, y: f64) -> (f64, f64) {
         (
             self.left + (x - self.x.0) / (self.x.1 - self.x.0) * (self.right - self.left),
@@ -341,16 +384,20 @@ fn nice_range(lo: f64, hi: f64, target: usize) -> ((f64, f64), Vec<f64>) {
     ((a, b), nice_ticks(a, b, target))
 }
 
-/// The y span of a rate figure: the scale when given, widened to a tick step where a CI or
-/// the limit falls outside it; else the data's nice range.
+/// The y span of a rate figure: the scale when given, widened to a tick step only where a
+/// mean or the limit falls outside it (a DSCQS DMOS below 0: the test rated above its
+/// reference), never for a CI, whose bar is cut at the frame: a MOS axis never passes the
+/// scale. Without a scale, the nice range of the means and CIs.
 fn rate_y_range(
     y_range: Option<(f64, f64)>,
     series: &[RateSeries],
     limit: Option<f64>,
 ) -> ((f64, f64), Vec<f64>) {
     let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    let scaled = matches!(y_range, Some((a, b)) if b > a);
     for &(_, y, l, u) in series.iter().flat_map(|s| s.points.iter()) {
-        for v in [y, l, u] {
+        let values = if scaled { &[y][..] } else { &[y, l, u][..] };
+        for &v in values {
             if v.is_finite() {
                 lo = lo.min(v);
                 hi = hi.max(v);
@@ -648,7 +695,7 @@ fn draw_axes<DB: DrawingBackend>(
     y_ticks: &[(f64, String)],
     labels: Labels,
 ) -> DrawResult<DB> {
-    let (l, t, r, b) = (f.left, f.top, f.right, f.bottom);
+    let (l, t, r, b) = f.outer();
     for (v, _) in y_ticks {
         let (_, y) = f.px(f.x.0, *v);
         root.draw(&PathElement::new(
@@ -845,22 +892,36 @@ fn draw_rate_curve<DB: DrawingBackend>(
         color.stroke_width(c.w(1.5)),
     )?;
     let cap = 3.0 * c.s;
+    // A CI reaching past the axis (a t interval above the top of the scale) is cut at the
+    // frame, without a cap there: the cap marks where an interval ends.
+    let (_, top, _, bottom) = f.outer();
     for (p, &(x, _)) in s.points.iter().zip(&pts) {
         let (_, lo) = f.px(p.0, p.2);
         let (_, hi) = f.px(p.0, p.3);
+        let ends = [(lo, lo > bottom), (hi, hi < top)].map(|(y, cut)| (y.clamp(top, bottom), cut));
+        let (lo, hi) = (ends[0].0, ends[1].0);
         if (lo - hi).abs() > 0.5 {
             let bar = color.stroke_width(c.w(1.1));
             root.draw(&PathElement::new(vec![round((x, lo)), round((x, hi))], bar))?;
-            for yy in [lo, hi] {
-                root.draw(&PathElement::new(
-                    vec![round((x - cap, yy)), round((x + cap, yy))],
-                    bar,
-                ))?;
+            for (yy, cut) in ends {
+                if !cut {
+                    root.draw(&PathElement::new(
+                        vec![round((x - cap, yy)), round((x + cap, yy))],
+                        bar,
+                    ))?;
+                }
             }
         }
     }
     for &p in &pts {
-        draw_marker(root, round(p), style.marker, 3.4 * c.s, color, c.w(1.2))?;
+        draw_marker(
+            root,
+            round(p),
+            style.marker,
+            MARKER_R * c.s,
+            color,
+            c.w(1.2),
+        )?;
     }
     Ok(())
 }
@@ -873,14 +934,15 @@ fn draw_limit<DB: DrawingBackend>(
     lim: f64,
 ) -> DrawResult<DB> {
     let (_, y) = f.px(f.x.0, lim);
+    let (left, top, right, _) = f.outer();
     draw_dashed(
         root,
         c,
-        &[(f.left, y), (f.right, y)],
+        &[(left, y), (right, y)],
         &[4.0, 2.5],
         REFERENCE.stroke_width(c.w(1.0)),
     )?;
-    let above = y - f.top > 14.0 * c.s;
+    let above = y - top > 14.0 * c.s;
     root.draw_text(
         &format!("limit {}", tick_label(lim)),
         &c.font(8.5).color(&REFERENCE).pos(Pos::new(
@@ -888,7 +950,7 @@ fn draw_limit<DB: DrawingBackend>(
             if above { VPos::Bottom } else { VPos::Top },
         )),
         round((
-            f.right - 3.0 * c.s,
+            right - 3.0 * c.s,
             if above { y - 2.0 * c.s } else { y + 2.0 * c.s },
         )),
     )?;
@@ -989,7 +1051,9 @@ fn draw_rate<DB: DrawingBackend>(
             bottom: b * c.s,
             x: x_span,
             y: y_span,
-        };
+            pad: 0.0,
+        }
+        .padded(MARKER_PAD * c.s);
         let bottom_row = i + layout.cols >= rects.len();
         draw_axes(
             root,
@@ -1198,7 +1262,9 @@ fn draw_staircases<DB: DrawingBackend>(
             bottom: b * c.s,
             x: x_span,
             y: y_span,
-        };
+            pad: 0.0,
+        }
+        .padded(MARKER_PAD * c.s);
         draw_axes(
             root,
             c,
@@ -1218,8 +1284,9 @@ fn draw_staircases<DB: DrawingBackend>(
         )?;
         if let Some(th) = threshold {
             let (_, y) = f.px(0.0, th);
+            let (left, _, right, _) = f.outer();
             root.draw(&PathElement::new(
-                vec![round((f.left, y)), round((f.right, y))],
+                vec![round((left, y)), round((right, y))],
                 THRESHOLD.stroke_width(c.w(1.5)),
             ))?;
         }
@@ -1260,6 +1327,7 @@ fn draw_staircases<DB: DrawingBackend>(
 // Single-panel figures' layout.
 const SINGLE_PLOT_H: f64 = 250.0;
 
+/// The plot area of a single-panel figure, its data ranges [`MARKER_PAD`] inside the frame.
 fn single_frame(c: Ctx, x: (f64, f64), y: (f64, f64)) -> Frame {
     Frame {
         left: (LEFT + 6.0) * c.s,
@@ -1268,7 +1336,9 @@ fn single_frame(c: Ctx, x: (f64, f64), y: (f64, f64)) -> Frame {
         bottom: (TITLE_H + SINGLE_PLOT_H) * c.s,
         x,
         y,
+        pad: 0.0,
     }
+    .padded(MARKER_PAD * c.s)
 }
 
 fn single_height(legend: &[String]) -> f64 {
@@ -1385,7 +1455,7 @@ fn draw_threshold_bar<DB: DrawingBackend>(
     draw_dashed(
         root,
         c,
-        &[(tx, f.bottom), (tx, ty)],
+        &[(tx, f.outer().3), (tx, ty)],
         &[3.0, 2.0],
         INK.stroke_width(c.w(1.0)),
     )?;
@@ -1450,7 +1520,7 @@ fn draw_psychometric<DB: DrawingBackend>(
     draw_dashed(
         root,
         c,
-        &[(f.left, gy), (f.right, gy)],
+        &[(f.outer().0, gy), (f.outer().2, gy)],
         &[1.2, 2.2],
         REFERENCE.stroke_width(c.w(1.0)),
     )?;
@@ -1639,7 +1709,8 @@ fn draw_distributions<DB: DrawingBackend>(
         _ => nice_range(lo, hi, 5),
     };
     let columns = per_subject.len().max(1);
-    let f = single_frame(c, (-0.6, columns as f64 - 0.4), y_span);
+    // A dot's radius is up to 9 units: the frame stands clear of the largest at the scale's ends.
+    let f = single_frame(c, (-0.6, columns as f64 - 0.4), y_span).padded(4.0 * c.s);
     let every = columns.div_ceil(25);
     let x_ticks: Vec<(f64, String)> = per_subject
         .iter()
@@ -1711,6 +1782,209 @@ fn draw_distributions<DB: DrawingBackend>(
     )
 }
 
+// Forest plots' layout, in layout units.
+const FOREST_FONT: f64 = 9.0;
+/// Height of a one-line row.
+const FOREST_ROW_H: f64 = 20.0;
+/// Height of each further line of a wrapped label.
+const FOREST_LINE_H: f64 = 11.0;
+/// The widest a label column may grow: a longer name wraps onto more lines.
+const FOREST_LABEL_MAX: f64 = 0.55 * W;
+/// Space between the frame and the plot's top and bottom rows.
+const FOREST_PAD: f64 = 6.0;
+/// The space right of a row label: tick, gap, and the tick label's offset.
+const FOREST_LABEL_GAP: f64 = 3.5 + 2.0 + 4.0;
+
+/// Splits `name` into lines no wider than `max` at [`FOREST_FONT`]: after a `:` or a space
+/// where one falls in the line, else between characters. Every character is kept, in order
+/// (a line's trailing space included), so the lines joined are the name; a line is drawn
+/// without its trailing space.
+fn wrap_label(name: &str, max: f64) -> Vec<String> {
+    let mut lines = Vec::new();
+    let mut rest: &str = name;
+    while !rest.is_empty() {
+        if text_width(rest, FOREST_FONT) <= max {
+            lines.push(rest.to_owned());
+            break;
+        }
+        // The longest prefix that fits (at least one character).
+        let ends: Vec<usize> = rest
+            .char_indices()
+            .map(|(i, ch)| i + ch.len_utf8())
+            .collect();
+        let fit = ends
+            .iter()
+            .copied()
+            .take_while(|&e| text_width(&rest[..e], FOREST_FONT) <= max)
+            .last()
+            .unwrap_or(ends[0]);
+        let cut = rest[..fit]
+            .char_indices()
+            .filter(|&(i, ch)| (ch == ':' || ch == ' ') && i > 0)
+            .map(|(i, ch)| i + ch.len_utf8())
+            .next_back()
+            .filter(|&c| c < fit)
+            .unwrap_or(fit);
+        lines.push(rest[..cut].to_owned());
+        rest = &rest[cut..];
+    }
+    if lines.is_empty() {
+        lines.push(String::new());
+    }
+    lines
+}
+
+/// A forest plot's rows, labels and label column.
+#[derive(Debug)]
+struct ForestLayout {
+    /// Each row's label lines.
+    labels: Vec<Vec<String>>,
+    /// Left edge of the frame.
+    left: f64,
+    /// Each row's centre, from the frame's top, and the frame's inner height.
+    centres: Vec<f64>,
+    plot_h: f64,
+}
+
+impl ForestLayout {
+    fn new(rows: &[(String, f64, f64, f64)]) -> Self {
+        let labels: Vec<Vec<String>> = rows
+            .iter()
+            .map(|r| wrap_label(&r.0, FOREST_LABEL_MAX))
+            .collect();
+        let widest = labels
+            .iter()
+            .flatten()
+            .map(|l| text_width(l, FOREST_FONT))
+            .fold(0.0, f64::max);
+        let left = (widest + FOREST_LABEL_GAP + 8.0).max(LEFT + 6.0);
+        let mut centres = Vec::with_capacity(rows.len());
+        let mut y = FOREST_PAD;
+        for l in &labels {
+            let h = FOREST_ROW_H + FOREST_LINE_H * (l.len().max(1) - 1) as f64;
+            centres.push(y + h / 2.0);
+            y += h;
+        }
+        Self {
+            labels,
+            left,
+            centres,
+            plot_h: (y + FOREST_PAD).max(2.0 * FOREST_PAD + FOREST_ROW_H),
+        }
+    }
+    fn height(&self) -> f64 {
+        TITLE_H + self.plot_h + TICKS_H + AXIS_TITLE_H + 10.0
+    }
+}
+
+/// The x span and ticks of a forest plot: 0 and every finite estimate and CI end.
+fn forest_x_range(rows: &[(String, f64, f64, f64)]) -> ((f64, f64), Vec<f64>) {
+    let (mut lo, mut hi) = (0.0f64, 0.0f64);
+    for v in rows.iter().flat_map(|r| [r.1, r.2, r.3]) {
+        if v.is_finite() {
+            lo = lo.min(v);
+            hi = hi.max(v);
+        }
+    }
+    nice_range(lo, hi, 6)
+}
+
+/// Draws a forest plot: labels left of the frame, a dot and whisker per row, 0 marked.
+fn draw_forest<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    c: Ctx,
+    title: &str,
+    x_label: &str,
+    rows: &[(String, f64, f64, f64)],
+) -> DrawResult<DB> {
+    let layout = ForestLayout::new(rows);
+    let (x_span, x_ticks) = forest_x_range(rows);
+    let f = Frame {
+        left: layout.left * c.s,
+        top: TITLE_H * c.s,
+        right: (W - RIGHT) * c.s,
+        bottom: (TITLE_H + layout.plot_h) * c.s,
+        x: x_span,
+        // Rows are placed in pixels; y spans the frame one to one.
+        y: (0.0, layout.plot_h),
+        pad: 0.0,
+    }
+    .padded(MARKER_PAD * c.s);
+    // The y "ticks": each row's centre, as a data value measured up from the bottom.
+    let row_y = |i: usize| layout.plot_h - layout.centres[i];
+    let y_ticks: Vec<(f64, String)> = (0..rows.len()).map(|i| (row_y(i), String::new())).collect();
+    draw_axes(
+        root,
+        c,
+        &f,
+        &labelled(&x_ticks, tick_label),
+        &y_ticks,
+        Labels { x: true, y: false },
+    )?;
+    let (_, t, _, b) = f.outer();
+    let (zero, _) = f.px(0.0, 0.0);
+    root.draw(&PathElement::new(
+        vec![round((zero, t)), round((zero, b))],
+        REFERENCE.stroke_width(c.w(1.0)),
+    ))?;
+    let style = c.font(FOREST_FONT);
+    let (l, ..) = f.outer();
+    for (i, (row, lines)) in rows.iter().zip(&layout.labels).enumerate() {
+        let (_, y) = f.px(0.0, row_y(i));
+        let first = y - FOREST_LINE_H * c.s * (lines.len() as f64 - 1.0) / 2.0;
+        for (k, line) in lines.iter().enumerate() {
+            root.draw_text(
+                line.trim_end(),
+                &style.pos(Pos::new(HPos::Right, VPos::Center)),
+                round((
+                    l - (3.5 + 2.0) * c.s,
+                    first + FOREST_LINE_H * c.s * k as f64,
+                )),
+            )?;
+        }
+        let (_, estimate, lower, upper) = *row;
+        if lower.is_finite() && upper.is_finite() {
+            let (x0, _) = f.px(lower, 0.0);
+            let (x1, _) = f.px(upper, 0.0);
+            let cap = 3.5 * c.s;
+            let ink = PALETTE[0].stroke_width(c.w(1.4));
+            root.draw(&PathElement::new(vec![round((x0, y)), round((x1, y))], ink))?;
+            for x in [x0, x1] {
+                root.draw(&PathElement::new(
+                    vec![round((x, y - cap)), round((x, y + cap))],
+                    ink,
+                ))?;
+            }
+        }
+        if estimate.is_finite() {
+            let (x, _) = f.px(estimate, 0.0);
+            root.draw(&Circle::new(
+                round((x, y)),
+                c.w(MARKER_R),
+                PALETTE[0].filled(),
+            ))?;
+        }
+    }
+    // The title and x axis title as [`draw_titles`] draws them; the labels name the rows, so
+    // there is no y axis title.
+    root.draw_text(
+        title,
+        &TextStyle::from((FONT, 13.0 * c.s, FontStyle::Bold).into_font())
+            .color(&INK)
+            .pos(Pos::new(HPos::Center, VPos::Top)),
+        (c.p(W / 2.0), c.p(7.0)),
+    )?;
+    root.draw_text(
+        x_label,
+        &c.font(10.5).pos(Pos::new(HPos::Center, VPos::Top)),
+        (
+            c.p(f64::midpoint(layout.left, W - RIGHT)),
+            c.p(TITLE_H + layout.plot_h + TICKS_H + 1.0),
+        ),
+    )?;
+    Ok(())
+}
+
 impl Figure {
     /// The figure's title.
     pub fn title(&self) -> &str {
@@ -1720,7 +1994,8 @@ impl Figure {
             | Self::Staircases { title, .. }
             | Self::Psychometric { title, .. }
             | Self::Jnd { title, .. }
-            | Self::ScoreDistributions { title, .. } => title,
+            | Self::ScoreDistributions { title, .. }
+            | Self::Forest { title, .. } => title,
         }
     }
 
@@ -1755,6 +2030,7 @@ impl Figure {
                     .collect::<Vec<_>>(),
             ),
             Self::ScoreDistributions { .. } => single_height(&["a".to_owned()]),
+            Self::Forest { rows, .. } => ForestLayout::new(rows).height(),
         };
         (WIDTH_IN, h / SVG_UNITS_PER_IN)
     }
@@ -1914,6 +2190,11 @@ impl Figure {
                 per_subject,
                 y_range,
             } => draw_distributions(root, c, title, per_subject, *y_range),
+            Self::Forest {
+                title,
+                x_label,
+                rows,
+            } => draw_forest(root, c, title, x_label, rows),
         }
     }
 }

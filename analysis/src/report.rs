@@ -8,6 +8,17 @@ use crate::error::AnalysisError;
 use crate::plots::Figure;
 use crate::tables::{Table, html_escape};
 
+/// The HTML report's layout width, CSS pixels (its body's `max-width`, the 60 em it always
+/// had): a figure is shown this wide, its 650 viewBox units scaled up, so that its tick
+/// labels (9 layout units, which the SVG writes as a font size of 9 / 1.24 = 7.26 units)
+/// read at 7.26 × 960 / 650 ≈ 10.7 px, and no text of a figure is under 10 px.
+pub const HTML_WIDTH_PX: u32 = 960;
+
+/// The narrowest a figure is shown in the HTML report, CSS pixels (a narrower window scrolls
+/// it): tick labels stay at 7.26 × 900 / 650 ≈ 10.05 px, never the 5-7 px of a figure
+/// shrunk below its natural 650 px.
+pub const HTML_FIGURE_MIN_PX: u32 = 900;
+
 /// One element of a section.
 #[derive(Debug, Clone, PartialEq)]
 #[non_exhaustive]
@@ -147,7 +158,7 @@ impl Report {
         };
         let mut md = format!("# {}\n\n", self.title);
         let mut html = format!(
-            "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>{0}</title>\n<style>body{{font-family:sans-serif;max-width:60em;margin:auto}}table{{border-collapse:collapse;margin:1em 0}}td,th{{border:1px solid #aaa;padding:2px 6px;text-align:right}}caption{{font-weight:bold}}</style></head><body>\n<h1>{0}</h1>\n",
+            "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>{0}</title>\n<style>body{{font-family:sans-serif;max-width:{HTML_WIDTH_PX}px;margin:auto}}table{{border-collapse:collapse;margin:1em 0}}td,th{{border:1px solid #aaa;padding:2px 6px;text-align:right}}caption{{font-weight:bold}}figure{{margin:1em 0}}figure svg{{display:block;width:100%;min-width:{HTML_FIGURE_MIN_PX}px;height:auto}}</style></head><body>\n<h1>{0}</h1>\n",
             html_escape(&self.title)
         );
         for section in &self.sections {

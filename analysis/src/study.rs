@@ -194,6 +194,11 @@ pub struct StudyAnalysis {
     pub subject_model: Option<crate::mle::SubjectModel>,
     /// Bradley-Terry scale values of a pair comparison study.
     pub pair_comparison: Option<PairComparisonAnalysis>,
+    /// Inter-rater reliability (ICC, Krippendorff's α) of the per-subject means of a rating
+    /// study's scores, or of a DSCQS study's differences.
+    pub reliability: Option<crate::reliability::Reliability>,
+    /// Linear and ordinal mixed models of the ratings (subject and clip random effects).
+    pub mixed: Option<crate::mixed::MixedAnalysis>,
 }
 
 /// Most ratings the report fits the subject model to: sureal's iteration passes over every
@@ -328,6 +333,28 @@ fn bayesian_fits(data: &StudyData, options: &ReportOptions) -> BayesianFits {
     }
 }
 
+/// The DMOS of every test condition and its rate findings: DSCQS's (reference − test) where
+/// there are DSCQS pairs, else ACR-HR's against the hidden references, else none.
+fn dmos_statistics(
+    data: &StudyData,
+    options: &ReportOptions,
+) -> Result<(Vec<ConditionStats>, Vec<RateFinding>), AnalysisError> {
+    let dmos = if !data.dscqs.is_empty() {
+        dscqs_dmos(&data.dscqs, options.confidence)?
+    } else if !data.reference_of.is_empty() {
+        acr_hr_dmos(&data.ratings, &data.reference_of, options.confidence)?
+    } else {
+        Vec::new()
+    };
+    let findings = rate_findings(
+        &data.conditions,
+        &dmos,
+        Limit::DmosBelow(options.dmos_limit),
+        options.ci_method,
+    );
+    Ok((dmos, findings))
+}
+
 /// Computes every statistic the data allow.
 ///
 /// # Errors
@@ -406,19 +433,7 @@ pub fn analyze(data: &StudyData, options: &ReportOptions) -> Result<StudyAnalysi
         Limit::MosAtLeast(options.mos_limit),
         options.ci_method,
     );
-    let dmos = if !data.dscqs.is_empty() {
-        dscqs_dmos(&data.dscqs, options.confidence)?
-    } else if !data.reference_of.is_empty() {
-        acr_hr_dmos(&data.ratings, &data.reference_of, options.confidence)?
-    } else {
-        Vec::new()
-    };
-    let dmos_findings = rate_findings(
-        &data.conditions,
-        &dmos,
-        Limit::DmosBelow(options.dmos_limit),
-        options.ci_method,
-    );
+    let (dmos, dmos_findings) = dmos_statistics(data, options)?;
     let (thresholds, jnd, psychometric) = adaptive_statistics(data, options)?;
     Ok(StudyAnalysis {
         mos,
@@ -438,6 +453,8 @@ pub fn analyze(data: &StudyData, options: &ReportOptions) -> Result<StudyAnalysi
         bayes: (!data.staircases.is_empty()).then(|| bayesian_fits(data, options)),
         subject_model: subject_model(data)?,
         pair_comparison: pair_comparison(data, options)?,
+        reliability: crate::reliability::analyze(judged_means, options.confidence),
+        mixed: crate::mixed::analyze(&data.ratings, &data.conditions, options.confidence),
     })
 }
 
@@ -489,6 +506,7 @@ fn adaptive_statistics(
         Some(t) if !t.per_subject.is_empty() => Some(jnd_analysis(
             &t.per_subject,
             &data.encoded_levels,
+            crate::jnd::LevelGrid::of_tracks(&data.staircases, options.last_reversals),
             options.confidence,
         )?),
         _ => None,
@@ -691,12 +709,19 @@ impl StudyAnalysis {
         if let Some(screening) = &self.screening {
             screening_section(&mut report, screening, &self.repeats, data);
         }
+        crate::reliability::section(&mut report, self.reliability.as_ref(), data);
         if let Some(m) = &self.subject_model {
             subject_model_section(&mut report, m, data);
         }
         if !self.dmos.is_empty() {
             self.dmos_section(&mut report, data, options);
         }
+        crate::mixed::report_section(
+            &mut report,
+            self.mixed.as_ref(),
+            options.confidence,
+            options.figures,
+        );
         if let Some(pc) = &self.pair_comparison {
             crate::bradley_terry::report_section(&mut report, pc, options.confidence);
         }
@@ -1051,13 +1076,30 @@ fn thresholds_section(
     options: &ReportOptions,
 ) {
     let s = report.section("Staircase thresholds");
-    s.text(format!(
-        "Mean of the last {} reversals per staircase, averaged per subject (thesis §5.4).",
-        t.last_reversals
+    s.text(staircase_rule_text(t, options));
+    s.table(tables::staircase_tracks_table(
+        "staircase_tracks",
+        &format!(
+            "Threshold ({}) of every up-down track: the last {} and the last {} reversals",
+            options.level_label, t.last_reversals, t.even_k
+        ),
+        t,
+        &|id| data.subject_name(id),
+    ));
+    s.table(tables::cited_threshold_table(
+        "threshold_to_cite",
+        &format!(
+            "Threshold ({}) to cite per condition and over all conditions: the last {} reversals' mean across subjects",
+            options.level_label, t.even_k
+        ),
+        t,
     ));
     s.table(tables::threshold_table(
         "thresholds",
-        "Staircase thresholds across subjects",
+        &format!(
+            "Staircase thresholds across subjects, last {} reversals (thesis §5.4)",
+            t.last_reversals
+        ),
         t,
     ));
     if options.figures {
@@ -1074,6 +1116,50 @@ fn thresholds_section(
     }
 }
 
+/// The staircase section's opening: the rule the tracks follow, the bias of an odd count of
+/// reversals, the two estimates, and which threshold to cite.
+fn staircase_rule_text(t: &ThresholdSummary, options: &ReportOptions) -> String {
+    let k = t.last_reversals;
+    let even = t.even_k;
+    let label = &options.level_label;
+    // How far apart the two estimates came out here, over all conditions, in steps.
+    let here = match (t.cited.last(), t.grid) {
+        (Some(c), Some(g)) => c.last_k_mean.map_or_else(String::new, |m| {
+            let steps = (m - c.even.mean) / g.step;
+            format!(
+                " Here the last {k} reversals' mean over all conditions is {:.2} of a step {} the last {even}'s.",
+                steps.abs(),
+                if steps < 0.0 { "below" } else { "above" }
+            )
+        }),
+        _ => String::new(),
+    };
+    let parity = if k % 2 == 1 {
+        format!(
+            "Mean of the last {k} reversals per staircase, averaged per subject (thesis §5.4), and beside it the mean of the last {even}. Two-down-one-up tracks converge on the {label} answered correctly 70.7 % of the time (Levitt 1971). Their reversals alternate between peaks and troughs, and an odd count holds one more of one kind: the mean of the last {k} sits a fraction of a step off the 70.7 % point (about a sixth of a step below it with the thesis's settings, where the extra one is a trough). The mean of an even count holds as many peaks as troughs and centres on it: the last {even} reversals (a track with fewer gives the mean of its largest even count, noted beside it).{here}"
+        )
+    } else {
+        format!(
+            "Mean of the last {k} reversals per staircase, averaged per subject (thesis §5.4 takes 3). Two-down-one-up tracks converge on the {label} answered correctly 70.7 % of the time (Levitt 1971); an even count of reversals holds as many peaks as troughs and centres on that point (an odd one sits a fraction of a step off it), so both columns below give the last {k}."
+        )
+    };
+    let grid = t.grid.filter(|g| g.linear).map_or_else(
+        || "the grid is not linear, so no level is given".to_owned(),
+        |g| {
+            format!(
+                "the level grid steps by {:.d$}",
+                g.step,
+                d = t.decimals.saturating_sub(1)
+            )
+        },
+    );
+    format!(
+        "{parity} The threshold to cite per condition is the last {even} reversals' mean across subjects (each subject's tracks of the condition averaged) with its {conf} t interval, and beside it the nearest level the staircase presents ({grid}); over all conditions, the row 'all conditions'. Of the pooled thresholds in this report (this one, the maximum-likelihood psychometric fit and the pooled Bayesian fit), cite this one: the fits pool every subject's trials as if from one observer, so their intervals leave out the spread between subjects, and they read the {pc:.0} % point, not the 70.7 % one. Thresholds are printed to one decimal more than the level grid has.",
+        conf = percent_label(options.confidence),
+        pc = options.percent_correct * 100.0,
+    )
+}
+
 /// The psychometric section: the maximum-likelihood fit, its threshold with the bootstrap
 /// interval, and the fitted curve over the grouped 2AFC data.
 fn psychometric_section(
@@ -1084,8 +1170,10 @@ fn psychometric_section(
     options: &ReportOptions,
 ) {
     let s = report.section("Psychometric function");
+    let levels: Vec<f64> = data.two_afc.iter().map(|t| t.level).collect();
+    let d = crate::staircase::decimals_of_levels(&levels);
     s.text(format!(
-        "Maximum-likelihood {:?} fit to {} 2AFC trials (guess rate {}, lapse {:.4}); threshold at {:.0} % correct = {:.5}, {:.0} % parametric bootstrap CI [{:.5}, {:.5}] from {} replicates (seed {}).",
+        "Maximum-likelihood {:?} fit to {} 2AFC trials of all subjects pooled (guess rate {}, lapse {:.4}); threshold at {:.0} % correct = {:.d$}, {:.0} % parametric bootstrap CI [{:.d$}, {:.d$}] from {} replicates (seed {}). It describes the pooled psychometric function; the threshold to cite of a staircase study is in the staircase section.",
         fit.shape,
         fit.trials,
         fit.guess_rate,
@@ -1229,6 +1317,7 @@ fn bayes_section(
 ) {
     let conf = percent_label(options.confidence);
     let label = &options.level_label;
+    let d = crate::staircase::level_decimals(&data.staircases);
     let s = report.section("Bayesian psychometric fits");
     s.text(format!(
         "Beta-binomial fits of ψ(x) = 0.5 + (0.5 − λ)·S(x) with a {} sigmoid S, by psignifit 4's procedure (posterior on a grid, posterior means, equal-tailed {conf} credible intervals). Threshold: S = 0.5 (75 % correct without lapses){}; width: S from 0.05 to 0.95{}. Priors: {}. Every track's threshold: an up-down staircase's is the mean of its last {} reversals; a QUEST+ / Psi track's own estimate is the posterior mean of its Weibull or logistic α (session.json; a Weibull's α is its point of about 80 % correct, not the 75 % point the fit reports), and it is also fitted here.",
@@ -1246,9 +1335,12 @@ fn bayes_section(
         bayesian::PRIORS,
         options.last_reversals
     ));
-    s.table(tracks_table(b, data, &conf, label));
+    s.text(
+        "The pooled fit treats every subject's trials as one observer's: it describes the pooled psychometric function, its interval leaves out the spread between subjects, and it is not the threshold to cite (of an up-down study, the staircase section gives that; of a QUEST+ or Psi study, cite the fits per subject).",
+    );
+    s.table(tracks_table(b, data, &conf, label, d));
     let row = |who: String, f: &Option<BayesFit>| {
-        let (m, i) = threshold_cells(f.as_ref());
+        let (m, i) = threshold_cells(f.as_ref(), d);
         let est = |e: Option<bayesian::Estimate>| {
             e.map_or_else(String::new, |e| {
                 format!("{:.4} ({:.4} – {:.4})", e.mean, e.lower, e.upper)
@@ -1298,21 +1390,28 @@ fn bayes_section(
     }
 }
 
-/// A fit's threshold and its credible interval as table cells (`n/a` without a fit).
-fn threshold_cells(f: Option<&BayesFit>) -> (String, String) {
+/// A fit's threshold and its credible interval as table cells to `d` decimals (`n/a`
+/// without a fit).
+fn threshold_cells(f: Option<&BayesFit>, d: usize) -> (String, String) {
     f.map_or_else(
         || ("n/a".to_owned(), String::new()),
         |f| {
             (
-                format!("{:.5}", f.threshold.mean),
-                format!("{:.5} – {:.5}", f.threshold.lower, f.threshold.upper),
+                format!("{:.d$}", f.threshold.mean),
+                format!("{:.d$} – {:.d$}", f.threshold.lower, f.threshold.upper),
             )
         },
     )
 }
 
 /// The threshold of every adaptive track: reversal mean, session estimate, Bayesian fit.
-fn tracks_table(b: &BayesianFits, data: &StudyData, conf: &str, label: &str) -> tables::Table {
+fn tracks_table(
+    b: &BayesianFits,
+    data: &StudyData,
+    conf: &str,
+    label: &str,
+    d: usize,
+) -> tables::Table {
     tables::Table {
         name: "adaptive_tracks".to_owned(),
         caption: format!("Threshold ({label}) of every adaptive track"),
@@ -1330,14 +1429,14 @@ fn tracks_table(b: &BayesianFits, data: &StudyData, conf: &str, label: &str) -> 
             .per_track
             .iter()
             .map(|t| {
-                let (m, i) = threshold_cells(t.fit.as_ref());
+                let (m, i) = threshold_cells(t.fit.as_ref(), d);
                 vec![
                     data.subject_name(t.subject),
                     t.label.clone(),
                     if t.bayesian { "QUEST+/Psi" } else { "up-down" }.to_owned(),
                     t.trials.to_string(),
-                    fmt_opt(t.reversal_threshold, 5),
-                    fmt_opt(t.logged_threshold, 5),
+                    fmt_opt(t.reversal_threshold, d),
+                    fmt_opt(t.logged_threshold, d),
                     m,
                     i,
                 ]
@@ -1352,17 +1451,31 @@ fn jnd_section(report: &mut Report, j: &JndAnalysis, data: &StudyData, options: 
     let conf = percent_label(j.confidence);
     let label = &options.level_label;
     let s = report.section("Just-noticeable difference across viewers");
+    let d = crate::staircase::level_decimals(&data.staircases);
     let sd = j
         .summary
         .sd
-        .map_or_else(|| "n/a".to_owned(), |v| format!("{v:.4}"));
+        .map_or_else(|| "n/a".to_owned(), |v| format!("{v:.d$}"));
     let ci = j.summary.ci_t.map_or_else(
         || "n/a".to_owned(),
-        |c| format!("[{:.4}, {:.4}]", c.lower, c.upper),
+        |c| format!("[{:.d$}, {:.d$}]", c.lower, c.upper),
+    );
+    let ties = j.grid.map_or_else(
+        || "by the thresholds' values".to_owned(),
+        |g| {
+            format!(
+                "on the level grid (a threshold within {:.1e} of a level, half the smallest difference a mean of {} reversal levels on steps of {:.prec$} can have, equals it)",
+                g.tie_tolerance(),
+                g.levels_per_threshold,
+                g.step,
+                prec = d.saturating_sub(1)
+            )
+        },
     );
     s.text(format!(
-        "{} viewers: mean JND {label} = {:.4} (SD {sd}, {conf} CI of the mean {ci}), smallest {:.4}, largest {:.4} (thesis §5.4 layout). A viewer notices a level at or above their threshold; the share who would not notice is read from the thresholds (empirical) and from a normal model of them, with the exact normal-theory {conf} interval (noncentral t).",
+        "{} viewers, each viewer's threshold the mean of the last {} reversals of their tracks (the thesis's estimate; see the staircase section for the even count): mean JND {label} = {:.d$} (SD {sd}, {conf} CI of the mean {ci}), smallest {:.d$}, largest {:.d$} (thesis §5.4 layout). A viewer notices a level at or above their threshold, ties decided {ties}; the share who would notice is read from the thresholds (empirical) and from a normal model of them, with the exact normal-theory {conf} interval (noncentral t).",
         j.thresholds.len(),
+        options.last_reversals,
         j.summary.mean,
         j.min,
         j.max
@@ -1374,7 +1487,7 @@ fn jnd_section(report: &mut Report, j: &JndAnalysis, data: &StudyData, options: 
         rows: j
             .thresholds
             .iter()
-            .map(|(subject, t)| vec![data.subject_name(*subject), format!("{t:.4}")])
+            .map(|(subject, t)| vec![data.subject_name(*subject), format!("{t:.d$}")])
             .collect(),
     });
     let mut columns = vec![
@@ -1396,11 +1509,18 @@ fn jnd_section(report: &mut Report, j: &JndAnalysis, data: &StudyData, options: 
             .iter()
             .map(|r| {
                 let mut row = vec![
-                    format!("{:.4}", r.share.level),
+                    // A grid level to the grid's decimals (0.010, not 0.0100); any other to d.
+                    {
+                        let v = format!("{:.d$}", r.share.level);
+                        match v.strip_suffix('0') {
+                            Some(short) if v.contains('.') => short.to_owned(),
+                            _ => v,
+                        }
+                    },
                     pct(1.0 - r.share.empirical),
-                    r.share.model.map_or_else(String::new, |m| pct(1.0 - m)),
-                    r.share.model_ci.map_or_else(String::new, |(lo, hi)| {
-                        format!("{} – {}", pct(1.0 - hi), pct(1.0 - lo))
+                    r.share.notice.map_or_else(String::new, pct),
+                    r.share.notice_ci.map_or_else(String::new, |(lo, hi)| {
+                        format!("{} – {}", pct(lo), pct(hi))
                     }),
                 ];
                 row.extend(r.cr_per_clip.iter().map(|c| fmt_opt(*c, 1)));

@@ -229,8 +229,10 @@ fn rate_curves_are_small_multiples_on_the_scale() {
             .next()
             .unwrap_or_else(|| panic!("no y tick {s}"))
     };
-    assert!((label_y("5") - panels[0].1).abs() <= 1.0);
-    assert!((label_y("1") - panels[0].3).abs() <= 1.0);
+    // The scale's ends are the ends of the axis, a marker's size inside the frame (issue
+    // 39: a point at 5 was cut in half by the frame).
+    assert!((label_y("5") - panels[0].1 - 6.0).abs() <= 1.0);
+    assert!((panels[0].3 - label_y("1") - 6.0).abs() <= 1.0);
     for v in ["2", "3", "4"] {
         let y = label_y(v);
         assert!(y > panels[0].1 && y < panels[0].3);
@@ -520,4 +522,431 @@ fn one_clip_draws_one_panel_and_many_methods_stay_distinct() {
     assert_eq!(y, ["0", "20", "40", "60", "80", "100"]);
     let triples: BTreeSet<_> = (0..9).map(series_style).collect();
     assert_eq!(triples.len(), 9);
+}
+
+/// A MOS figure on a 1-5 scale whose points reach the scale's top: a mean of 5 (every rating
+/// 5) and a mean of 4.8 whose t interval runs past 5.
+fn mos_at_the_top() -> Figure {
+    Figure::RateCurves {
+        title: "MOS vs compression ratio".to_owned(),
+        y_label: "MOS".to_owned(),
+        series: ["perceptual", "wavelet", "pca"]
+            .iter()
+            .enumerate()
+            .map(|(k, m)| RateSeries {
+                label: (*m).to_owned(),
+                clip: "walk".to_owned(),
+                points: vec![
+                    (10.0, 5.0, 5.0, 5.0),
+                    (20.0, 4.8, 4.3, 5.3),
+                    (40.0, 1.0 + 0.1 * k as f64, 1.0, 1.4),
+                ],
+            })
+            .collect(),
+        limit: Some(4.5),
+        y_range: Some((1.0, 5.0)),
+    }
+}
+
+/// Issue 39: the MOS axis ran to 6 on a 1-5 scale (widened for a CI past the top). The top
+/// y tick is the scale's maximum, in the figure of a simulated study too, and the CI that
+/// runs past it is cut at the frame without a cap.
+#[test]
+fn the_mos_axis_never_passes_the_scale() {
+    for (name, fig) in [
+        ("constructed", mos_at_the_top()),
+        ("simulated", figure("mos_vs_cr")),
+    ] {
+        let svg = fig.render_svg().unwrap();
+        let tags = tags(&svg);
+        let y: Vec<f64> = texts(&tags)
+            .into_iter()
+            .filter(|t| t.get("text-anchor") == Some("end"))
+            .filter_map(|t| t.text.parse().ok())
+            .collect();
+        assert!(!y.is_empty(), "{name}: no y ticks");
+        let top = y.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let bottom = y.iter().copied().fold(f64::INFINITY, f64::min);
+        assert!(top <= 5.0, "{name}: y ticks {y:?} pass the scale's 5");
+        assert!(bottom >= 1.0, "{name}: y ticks {y:?} pass the scale's 1");
+        assert_eq!(
+            (bottom, top),
+            (1.0, 5.0),
+            "{name}: the scale's ends are ticks"
+        );
+    }
+}
+
+/// The points of a figure: its circles and polygons filled in palette colours (markers, not
+/// the legend's, which lie below `below`), as (left, top, right, bottom) boxes.
+fn markers(tags: &[Tag], below: f64) -> Vec<(f64, f64, f64, f64)> {
+    let palette: Vec<String> = PALETTE.iter().map(|c| hex(*c)).collect();
+    tags.iter()
+        .filter(|t| {
+            (t.name == "circle" || t.name == "polygon")
+                && t.get("fill")
+                    .is_some_and(|f| palette.iter().any(|p| p == f))
+        })
+        .map(|t| {
+            if t.name == "circle" {
+                let (x, y, r) = (t.num("cx"), t.num("cy"), t.num("r"));
+                (x - r, y - r, x + r, y + r)
+            } else {
+                let pts: Vec<(f64, f64)> = t
+                    .get("points")
+                    .unwrap()
+                    .split_whitespace()
+                    .map(|p| {
+                        let (x, y) = p.split_once(',').unwrap();
+                        (x.parse().unwrap(), y.parse().unwrap())
+                    })
+                    .collect();
+                pts.iter().fold(
+                    (
+                        f64::INFINITY,
+                        f64::INFINITY,
+                        f64::NEG_INFINITY,
+                        f64::NEG_INFINITY,
+                    ),
+                    |b, p| (b.0.min(p.0), b.1.min(p.1), b.2.max(p.0), b.3.max(p.1)),
+                )
+            }
+        })
+        .filter(|b| b.3 < below)
+        .collect()
+}
+
+/// Issue 39: points at the edge of the plot were cut in half by the frame. Every marker of a
+/// MOS figure with means at the scale's top and bottom, and every dot of the score
+/// distributions (ratings of 1 and 5), lies wholly inside its panel's frame.
+#[test]
+fn markers_at_the_scale_s_ends_lie_inside_the_frame() {
+    let distributions = Figure::ScoreDistributions {
+        title: "Scores per subject".to_owned(),
+        per_subject: vec![
+            ("S1".to_owned(), vec![5.0; 8]),
+            ("S2".to_owned(), vec![1.0, 1.0, 5.0, 3.0]),
+        ],
+        y_range: Some((1.0, 5.0)),
+    };
+    for (name, fig, expected) in [
+        ("mos", mos_at_the_top(), 9),
+        ("distributions", distributions, 4),
+    ] {
+        let svg = fig.render_svg().unwrap();
+        let tags = tags(&svg);
+        let frames = framed(&tags, FRAME);
+        assert_eq!(frames.len(), 1, "{name}: one panel");
+        let frame = frames[0];
+        let inside: Vec<_> = markers(&tags, frame.3 + 2.0);
+        assert_eq!(inside.len(), expected, "{name}: {inside:?}");
+        // A 5 is at the top of the frame, a 1 at its bottom: drawn whole inside it.
+        let top = inside.iter().map(|m| m.1).fold(f64::INFINITY, f64::min);
+        let bottom = inside.iter().map(|m| m.3).fold(f64::NEG_INFINITY, f64::max);
+        assert!(
+            top - frame.1 < 12.0 && frame.3 - bottom < 12.0,
+            "{name}: {inside:?}"
+        );
+        for m in &inside {
+            assert!(
+                m.0 >= frame.0 && m.1 >= frame.1 && m.2 <= frame.2 && m.3 <= frame.3,
+                "{name}: marker {m:?} crosses the frame {frame:?}"
+            );
+        }
+    }
+}
+
+/// Issue 39: the HTML report shrank figures until tick labels were 5-7 px. In `report.html`
+/// every figure is shown at the layout width its style gives (the body's `max-width`), and
+/// no narrower than the figure's `min-width`: its text's displayed size (font size × shown
+/// width / viewBox width) is at least 10 px at the layout width, and its tick labels stay at
+/// 10 px or more at the narrowest.
+#[test]
+fn html_figures_keep_tick_labels_at_10_px() {
+    let mut report = analysis::report::Report::new("Figures");
+    for (name, fig) in figures(&simulated(), &options()) {
+        report.section(&name).figure(name.clone(), fig);
+    }
+    let dir = std::env::temp_dir().join(format!("figures-html-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    report.write(&dir, false, files::Mode::New).unwrap();
+    let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
+    std::fs::remove_dir_all(&dir).unwrap();
+    let style = html
+        .split_once("<style>")
+        .and_then(|(_, s)| s.split_once("</style>"))
+        .unwrap()
+        .0;
+    let rule = |selector: &str| -> &str {
+        style
+            .split('}')
+            .find_map(|r| r.strip_prefix(selector).and_then(|r| r.strip_prefix('{')))
+            .unwrap_or_else(|| panic!("no rule for {selector} in {style}"))
+    };
+    let px = |rule: &str, property: &str| -> f64 {
+        rule.split(';')
+            .find_map(|d| d.strip_prefix(&format!("{property}:")))
+            .and_then(|v| v.strip_suffix("px"))
+            .unwrap_or_else(|| panic!("no {property} in px in {rule}"))
+            .parse()
+            .unwrap()
+    };
+    let layout = px(rule("body"), "max-width");
+    let figure_rule = rule("figure svg");
+    assert!(figure_rule.contains("width:100%"), "{figure_rule}");
+    let narrowest = px(figure_rule, "min-width");
+    // The figure takes the body's whole width: no side margins.
+    assert!(rule("figure").contains("margin:1em 0"), "{style}");
+    let svgs: Vec<&str> = html.split("<svg").skip(1).collect();
+    assert!(svgs.len() >= 6, "{} figures", svgs.len());
+    for svg in svgs {
+        let svg = svg.split("</svg>").next().unwrap();
+        let tags = tags(&format!("<svg{svg}"));
+        let view_box: Vec<f64> = tags[0]
+            .get("viewBox")
+            .unwrap()
+            .split_whitespace()
+            .map(|v| v.parse().unwrap())
+            .collect();
+        let units = view_box[2];
+        let sizes: Vec<(f64, bool)> = texts(&tags)
+            .iter()
+            .map(|t| {
+                let size: f64 = t.get("font-size").unwrap().parse().unwrap();
+                // Numbers right of a y axis or centred under an x axis (a forest plot has
+                // only the latter; its row names are drawn at the same size).
+                let tick = matches!(t.get("text-anchor"), Some("end" | "middle"))
+                    && t.text.parse::<f64>().is_ok();
+                (size, tick)
+            })
+            .collect();
+        assert!(sizes.iter().any(|s| s.1), "no tick labels");
+        for (size, tick) in sizes {
+            let shown = size * layout / units;
+            assert!(shown >= 10.0, "text of {size} units shown at {shown:.1} px");
+            if tick {
+                let least = size * narrowest / units;
+                assert!(
+                    least >= 10.0,
+                    "tick label shown at {least:.1} px at the narrowest"
+                );
+            }
+        }
+    }
+}
+
+fn forest(rows: &[(&str, f64, f64, f64)]) -> Figure {
+    Figure::Forest {
+        title: "Fixed effects".to_owned(),
+        x_label: "Effect on the score".to_owned(),
+        rows: rows
+            .iter()
+            .map(|&(n, e, l, u)| (n.to_owned(), e, l, u))
+            .collect(),
+    }
+}
+
+/// A polyline's points.
+fn points(t: &Tag) -> Vec<(f64, f64)> {
+    t.get("points")
+        .unwrap()
+        .split_whitespace()
+        .map(|p| {
+            let (x, y) = p.split_once(',').unwrap();
+            (x.parse().unwrap(), y.parse().unwrap())
+        })
+        .collect()
+}
+
+/// The polylines' point lists.
+fn polylines(tags: &[Tag]) -> Vec<Vec<(f64, f64)>> {
+    tags.iter()
+        .filter(|t| t.name == "polyline")
+        .map(points)
+        .collect()
+}
+
+/// The forest plot of the mixed models: each estimate's dot and its CI whisker's ends at
+/// their values on the x axis (read from the tick labels' positions), the zero line across
+/// the frame, every effect name drawn whole inside the figure, and a row without a finite CI
+/// drawn with its dot only.
+#[test]
+fn forest_rows_sit_at_their_values() {
+    let rows = [
+        ("methodwavelet", 0.42, 0.1, 0.74),
+        ("ratio16", -0.8, -1.25, -0.35),
+        (
+            "methodwavelet-long-variant-name:ratio16 (interaction)",
+            0.05,
+            -0.3,
+            0.4,
+        ),
+        ("methodpca", 1.1, f64::NEG_INFINITY, f64::NAN),
+        ("ratio8", 0.2, 0.0, f64::INFINITY),
+        ("ratio32", f64::NAN, f64::NAN, f64::NAN),
+    ];
+    let fig = forest(&rows);
+    let svg = fig.render_svg().unwrap();
+    fig.render_png().unwrap();
+    let tags = tags(&svg);
+    let frames = framed(&tags, FRAME);
+    assert_eq!(frames.len(), 1, "{frames:?}");
+    let (l, t, r, b) = frames[0];
+    // The x axis: tick labels under the frame, centred on their ticks.
+    let ticks: Vec<(f64, f64)> = texts(&tags)
+        .into_iter()
+        .filter(|tag| tag.get("text-anchor") == Some("middle") && tag.num("y") > b)
+        .filter_map(|tag| Some((tag.text.parse::<f64>().ok()?, tag.num("x"))))
+        .collect();
+    assert!(ticks.len() >= 3, "{ticks:?}");
+    let tick_size = texts(&tags)
+        .into_iter()
+        .find(|tag| tag.get("text-anchor") == Some("middle") && tag.num("y") > b)
+        .and_then(|tag| tag.get("font-size"));
+    let (v0, x0) = ticks[0];
+    let (v1, x1) = ticks[ticks.len() - 1];
+    let at = |v: f64| x0 + (v - v0) * (x1 - x0) / (v1 - v0);
+    for &(v, x) in &ticks {
+        assert!((at(v) - x).abs() <= 1.0, "tick {v} at {x}, not {}", at(v));
+    }
+    let lines = polylines(&tags);
+    for &(v, x) in &ticks {
+        assert!(
+            lines
+                .iter()
+                .any(|p| p.len() == 2 && p[0] == (x, b) && p[1].0 == x && p[1].1 > b),
+            "no tick mark under the label {v}"
+        );
+    }
+    // The zero line: vertical, across the whole frame, at 0.
+    assert!(
+        lines.iter().any(|p| p.len() == 2
+            && p[0].0 == p[1].0
+            && (p[0].0 - at(0.0)).abs() <= 1.0
+            && p[0].1.min(p[1].1) == t
+            && p[0].1.max(p[1].1) == b),
+        "no zero line at {}",
+        at(0.0)
+    );
+    let dots: Vec<(f64, f64)> = tags
+        .iter()
+        .filter(|tag| tag.name == "circle" && tag.get("fill") == Some(&hex(PALETTE[0])))
+        .map(|tag| (tag.num("cx"), tag.num("cy")))
+        .collect();
+    assert_eq!(dots.len(), 5, "one dot per finite estimate: {dots:?}");
+    assert!(
+        dots.iter().all(|d| d.0 > l && d.0 < r),
+        "{dots:?} outside the frame"
+    );
+    // Whiskers: horizontal lines in the dots' colour.
+    let horizontal: Vec<Vec<(f64, f64)>> = tags
+        .iter()
+        .filter(|tag| tag.name == "polyline" && tag.get("stroke") == Some(&hex(PALETTE[0])))
+        .map(points)
+        .filter(|p| p.len() == 2 && p[0].1 == p[1].1)
+        .collect();
+    assert_eq!(
+        horizontal.len(),
+        3,
+        "one whisker per finite CI: {horizontal:?}"
+    );
+    let font = plotters::style::IntoFont::into_font(("sans-serif", 9.0));
+    let mut previous = f64::NEG_INFINITY;
+    for (i, &(name, estimate, lower, upper)) in rows.iter().enumerate() {
+        // The name, whole, in one label right of the figure's edge and left of the frame.
+        let label = texts(&tags)
+            .into_iter()
+            .find(|tag| tag.text == name)
+            .unwrap_or_else(|| panic!("no label {name:?}"));
+        assert_eq!(label.get("text-anchor"), Some("end"), "{name}");
+        // As large as the axis' tick labels (which the HTML report keeps at 10 px or more).
+        assert_eq!(label.get("font-size"), tick_size, "{name}");
+        let width = f64::from(font.box_size(name).unwrap().0);
+        assert!(label.num("x") < l, "{name} overlaps the frame");
+        assert!(
+            label.num("x") - width >= 0.0,
+            "{name} is cut off at the left"
+        );
+        // Rows run top to bottom in the given order.
+        let y = label.num("y");
+        assert!(y > previous && y > t && y < b, "{name} at y {y}");
+        previous = y;
+        let dot = dots.iter().find(|d| (d.1 - y).abs() <= 6.0);
+        if estimate.is_finite() {
+            let dot = dot.unwrap_or_else(|| panic!("no dot for {name}"));
+            assert!(
+                (dot.0 - at(estimate)).abs() <= 1.0,
+                "{name}: dot at {}",
+                dot.0
+            );
+        } else {
+            assert!(dot.is_none(), "{name}: a dot without an estimate");
+        }
+        let whisker = horizontal.iter().find(|p| (p[0].1 - y).abs() <= 6.0);
+        if lower.is_finite() && upper.is_finite() {
+            let w = whisker.unwrap_or_else(|| panic!("no whisker for {name}"));
+            let (a, z) = (w[0].0.min(w[1].0), w[0].0.max(w[1].0));
+            assert!((a - at(lower)).abs() <= 1.0, "{name}: whisker from {a}");
+            assert!((z - at(upper)).abs() <= 1.0, "{name}: whisker to {z}");
+            assert_eq!(
+                w[0].1,
+                dots.iter().find(|d| (d.1 - y).abs() <= 6.0).unwrap().1
+            );
+        } else {
+            assert!(
+                whisker.is_none(),
+                "{name}: a whisker without a finite CI (row {i})"
+            );
+        }
+    }
+}
+
+/// A name wider than the label column wraps onto lines that, joined, are the name, each
+/// inside the figure and left of the frame; the figure grows with the rows.
+#[test]
+fn forest_wraps_long_names_whole() {
+    let long = "methodperceptual-codec-with-a-very-long-variant-description:ratio32 against the baseline of every other method and ratio in the study, spelled out";
+    let fig = forest(&[(long, 0.3, 0.1, 0.5), ("ratio8", -0.2, -0.4, 0.0)]);
+    let short = forest(&[("a", 0.3, 0.1, 0.5), ("ratio8", -0.2, -0.4, 0.0)]);
+    assert!(fig.size_in().1 > short.size_in().1);
+    let svg = fig.render_svg().unwrap();
+    let tags = tags(&svg);
+    let (l, ..) = framed(&tags, FRAME)[0];
+    let font = plotters::style::IntoFont::into_font(("sans-serif", 9.0));
+    let lines: Vec<&Tag> = texts(&tags)
+        .into_iter()
+        .filter(|tag| tag.get("text-anchor") == Some("end") && tag.num("x") < l)
+        .filter(|tag| tag.text != "ratio8")
+        .collect();
+    assert!(lines.len() >= 2, "not wrapped");
+    // The SVG's lines, joined, are the name (the spaces at the breaks are not drawn).
+    let joined: String = lines.iter().map(|tag| tag.text.as_str()).collect();
+    let bare = |s: &str| s.split_whitespace().collect::<String>();
+    assert_eq!(bare(&joined), bare(long));
+    for tag in lines {
+        let width = f64::from(font.box_size(&tag.text).unwrap().0);
+        assert!(tag.num("x") - width >= 0.0, "{:?} cut off", tag.text);
+    }
+}
+
+/// The report draws the two models' forest plots apart: the linear model's effects on the
+/// score scale, the ordinal model's in log odds, never on one axis.
+#[test]
+fn mixed_models_draw_one_forest_plot_each() {
+    let figs = figures(&simulated(), &options());
+    for name in ["mixed_forest_lmm", "mixed_forest_clmm"] {
+        let fig = figs
+            .iter()
+            .find(|f| f.0 == name)
+            .unwrap_or_else(|| panic!("no {name}"));
+        let Figure::Forest { rows, .. } = &fig.1 else {
+            panic!("{name} is not a forest plot");
+        };
+        assert!(!rows.is_empty(), "{name}");
+        assert!(
+            rows.iter()
+                .all(|r| !r.0.starts_with("clmm") && r.0 != "(Intercept)")
+        );
+    }
 }

@@ -1,14 +1,17 @@
 //! `study report`'s pipeline as one function, [`report`]: the sessions of a results folder or
 //! of a database run, read and checked before any statistic (damaged logs refused, naming
 //! the row), analyzed, and written as `report.md`, `report.html`, tables (CSV, Markdown,
-//! LaTeX), figures (SVG, PNG) and the exports (`ratings.csv`, `sureal_dataset.py`). The
+//! LaTeX), figures (SVG, PNG) and the exports (`ratings.csv`, `trials_tidy.csv` with its data
+//! dictionary `datapackage.json`, `sureal_dataset.py`). The
 //! command line's options arrive as a plain [`Request`], so that any front end can ask for a
 //! report.
 
 #[cfg(feature = "postgres")]
 mod database;
+pub mod plan;
 mod sections;
 mod sessions;
+mod tidy;
 
 use std::path::{Path, PathBuf};
 
@@ -221,6 +224,10 @@ fn report_options(settings: &Settings, study: &StudyDefinition) -> Result<Report
     })
 }
 
+/// Files the exports write beside the report: `ratings.csv`, `trials_tidy.csv`,
+/// `datapackage.json` and `sureal_dataset.py`.
+const EXPORTS: usize = 4;
+
 /// Writes `path` whole or not at all ([`files::AtomicFile`]) from `fill`, which streams it.
 fn write_streamed(
     path: &Path,
@@ -235,6 +242,55 @@ fn write_streamed(
     })?;
     file.commit()?;
     Ok(())
+}
+
+/// Writes the exports beside the report: `trials_tidy.csv` from the spooled rows, the last
+/// column whom `analysis`'s BT.500 screening rejected (empty where none ran), its
+/// `datapackage.json`, `ratings.csv` and `sureal_dataset.py`.
+fn write_exports(
+    request: &Request,
+    study: &StudyDefinition,
+    name: &str,
+    data: &analysis::study::StudyData,
+    tidy: tidy::Spool,
+    analysis: &analysis::study::StudyAnalysis,
+) -> Result<()> {
+    let (output, mode) = (&request.output, request.mode);
+    // Whom BT.500 screening rejected, by id (the tidy export's last column).
+    let screened: Option<std::collections::BTreeSet<String>> =
+        analysis.screening.as_ref().map(|s| {
+            s.rejected()
+                .into_iter()
+                .map(|i| {
+                    data.subjects
+                        .get(i as usize)
+                        .cloned()
+                        .unwrap_or_else(|| i.to_string())
+                })
+                .collect()
+        });
+    write_streamed(&output.join(tidy::TIDY_FILE), mode, |out| {
+        tidy.write(out, study, screened.as_ref())
+    })?;
+    files::write(
+        &output.join(tidy::PACKAGE_FILE),
+        tidy::data_package(study),
+        mode,
+    )?;
+    write_streamed(&output.join("ratings.csv"), mode, |out| {
+        export::write_tidy_csv(out, &data.subjects, &data.ratings, &data.conditions)
+    })?;
+    write_streamed(&output.join("sureal_dataset.py"), mode, |out| {
+        export::SurealDataset {
+            name,
+            subjects: &data.subjects,
+            ratings: &data.ratings,
+            dscqs: &data.dscqs,
+            conditions: &data.conditions,
+            ref_score: study.scale.max,
+        }
+        .write_python(out)
+    })
 }
 
 /// Makes the report `request` asks for; `warn` hears each warning (a session with trials
@@ -266,6 +322,7 @@ pub fn report_with_progress(
         incomplete,
         displays,
         exclusions,
+        tidy,
     } = sessions::read_logs(
         request,
         &source,
@@ -275,31 +332,17 @@ pub fn report_with_progress(
         warn,
         progress,
     )?;
-    let study = study_file.definition;
+    let study = &study_file.definition;
     let (output, mode) = (&request.output, request.mode);
     files::prepare_dir(output, mode)?;
     let analysis = analyze(&converted.data, &options)?;
-    let mushra = sections::mushra_analysis(&study, &converted, options.confidence)?;
+    let mushra = sections::mushra_analysis(study, &converted, options.confidence)?;
     let data = &converted.data;
-    // The two exports (10⁶ rows each at a million ratings) are written on a second thread
-    // while this one lays out and writes the report.
+    // The exports (10⁶ rows each at a million ratings) are written on a second thread while
+    // this one lays out and writes the report.
     let (written, exported) = std::thread::scope(|scope| {
-        let exports = scope.spawn(|| -> Result<()> {
-            write_streamed(&output.join("ratings.csv"), mode, |out| {
-                export::write_tidy_csv(out, &data.subjects, &data.ratings, &data.conditions)
-            })?;
-            write_streamed(&output.join("sureal_dataset.py"), mode, |out| {
-                export::SurealDataset {
-                    name: &run.study,
-                    subjects: &data.subjects,
-                    ratings: &data.ratings,
-                    dscqs: &data.dscqs,
-                    conditions: &data.conditions,
-                    ref_score: study.scale.max,
-                }
-                .write_python(out)
-            })
-        });
+        let exports =
+            scope.spawn(|| write_exports(request, study, &run.study, data, tidy, &analysis));
         let title = format!(
             "Study {} ({} protocol, {} sessions)",
             run.study,
@@ -307,12 +350,13 @@ pub fn report_with_progress(
             sessions.len()
         );
         let mut report = analysis.to_report(data, &options, &title);
+        plan::section(&mut report, &analysis, data, &options);
         if let Some(m) = &mushra {
             m.add_to(&mut report, &converted);
         }
         analysis::method::method_section(
             &mut report,
-            &study,
+            study,
             analysis::method::Observers {
                 sessions: displays.len(),
                 subjects: data.subjects.len(),
@@ -325,17 +369,30 @@ pub fn report_with_progress(
         sections::display(&mut report, &displays, request.settings.drop_limit, warn);
         sections::exclusions(&mut report, &exclusions, &study.crowdsourcing);
         let names = report.section("Subjects and stimuli");
-        names.text(format!(
-            "Subjects ({}): {}. Condition ids: {}.",
-            data.subjects.len(),
-            data.subjects.join(", "),
-            converted
+        // A staircase study has no condition ids: its tracks are named instead (issue 39: it
+        // printed "Condition ids: .").
+        let conditions = if converted.stimuli.is_empty() {
+            let tracks: std::collections::BTreeSet<&str> =
+                data.staircases.iter().map(|t| t.label.as_str()).collect();
+            if tracks.is_empty() {
+                String::new()
+            } else {
+                let tracks: Vec<&str> = tracks.into_iter().collect();
+                format!(" Staircase tracks: {}.", tracks.join(", "))
+            }
+        } else {
+            let ids: Vec<String> = converted
                 .stimuli
                 .iter()
                 .enumerate()
                 .map(|(i, s)| format!("{i} = {s}"))
-                .collect::<Vec<_>>()
-                .join(", ")
+                .collect();
+            format!(" Condition ids: {}.", ids.join(", "))
+        };
+        names.text(format!(
+            "Subjects ({}): {}.{conditions}",
+            data.subjects.len(),
+            data.subjects.join(", "),
         ));
         let written = report.write(output, request.png, mode);
         let exported = exports
@@ -347,7 +404,7 @@ pub fn report_with_progress(
     exported?;
     Ok(Summary {
         output: output.clone(),
-        files: written.files.len() + 2,
+        files: written.files.len() + EXPORTS,
         ratings: converted.data.ratings.len(),
         dscqs: converted.data.dscqs.len(),
         staircases: converted.data.staircases.len(),
