@@ -36,10 +36,16 @@ impl Matrix {
 }
 
 /// The lower-triangular Cholesky factor `L` of a symmetric positive definite matrix
-/// (`A = L Lᵀ`).
+/// (`A = L Lᵀ`). Row `i` of `L` is zero left of row `i` of `A`'s first nonzero (the
+/// envelope: a Cholesky factor fills in only within it), so the factorization and the solves
+/// skip those columns; the zeros they skip would add nothing, so the result is the dense
+/// algorithm's to the last bit. The mixed models' matrices are block diagonal with a border
+/// (subjects, then clips), which makes this nearly linear in the order.
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) struct Cholesky {
     l: Matrix,
+    /// Per row, its first nonzero column.
+    first: Vec<usize>,
 }
 
 impl Cholesky {
@@ -52,10 +58,13 @@ impl Cholesky {
             return None;
         }
         let scale = (0..n).map(|i| a.at(i, i).abs()).fold(0.0, f64::max);
+        let first: Vec<usize> = (0..n)
+            .map(|i| (0..i).find(|&j| a.at(i, j) != 0.0).unwrap_or(i))
+            .collect();
         let mut l = Matrix::zeros(n, n);
         for j in 0..n {
             let mut d = a.at(j, j);
-            for k in 0..j {
+            for k in first[j]..j {
                 d -= l.at(j, k) * l.at(j, k);
             }
             if d.is_nan() || d <= 1e-12 * scale || !d.is_finite() {
@@ -64,14 +73,17 @@ impl Cholesky {
             let d = d.sqrt();
             *l.at_mut(j, j) = d;
             for i in j + 1..n {
+                if first[i] > j {
+                    continue;
+                }
                 let mut s = a.at(i, j);
-                for k in 0..j {
+                for k in first[i].max(first[j])..j {
                     s -= l.at(i, k) * l.at(j, k);
                 }
                 *l.at_mut(i, j) = s / d;
             }
         }
-        Some(Self { l })
+        Some(Self { l, first })
     }
 
     /// The order of the matrix.
@@ -88,7 +100,7 @@ impl Cholesky {
     pub(crate) fn solve_l(&self, b: &mut [f64]) {
         for i in 0..self.n() {
             let mut s = b[i];
-            for k in 0..i {
+            for k in self.first[i]..i {
                 s -= self.l.at(i, k) * b[k];
             }
             b[i] = s / self.l.at(i, i);
@@ -101,7 +113,9 @@ impl Cholesky {
         for i in (0..n).rev() {
             let mut s = b[i];
             for k in i + 1..n {
-                s -= self.l.at(k, i) * b[k];
+                if self.first[k] <= i {
+                    s -= self.l.at(k, i) * b[k];
+                }
             }
             b[i] = s / self.l.at(i, i);
         }

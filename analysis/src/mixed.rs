@@ -530,25 +530,27 @@ impl Prepared {
         };
         let mut cu = lt(&|r| self.zty[r]);
         l.solve_l(&mut cu);
-        let mut rzx = Matrix::zeros(q, p);
+        // RZX stored by column (RZXᵀ, p × q): the products below run along its rows.
+        let mut rzx = Matrix::zeros(p, q);
         for j in 0..p {
             let mut c = lt(&|r| self.ztx.at(r, j));
             l.solve_l(&mut c);
-            for i in 0..q {
-                *rzx.at_mut(i, j) = c[i];
-            }
+            rzx.data[j * q..(j + 1) * q].copy_from_slice(&c);
         }
+        // XᵀX − RZXᵀ RZX, its lower triangle only (all the Cholesky factor reads).
         let mut xtx = self.xtx.clone();
         for j in 0..p {
-            for k in 0..p {
-                *xtx.at_mut(j, k) -= (0..q).map(|i| rzx.at(i, j) * rzx.at(i, k)).sum::<f64>();
+            let cj = &rzx.data[j * q..(j + 1) * q];
+            for k in 0..=j {
+                let ck = &rzx.data[k * q..(k + 1) * q];
+                *xtx.at_mut(j, k) -= cj.iter().zip(ck).map(|(a, b)| a * b).sum::<f64>();
             }
         }
         let rx = Cholesky::new(&xtx)?;
         // cβ = R_X⁻ᵀ (Xᵀy − RZXᵀ cu), β = R_X⁻¹ cβ, and the penalized residual sum of squares
         // r² = yᵀy − ‖cu‖² − ‖cβ‖² (the paper's eq. 25-27): O(q²) per evaluation, not O(n).
         let mut beta: Vec<f64> = (0..p)
-            .map(|j| self.xty[j] - (0..q).map(|i| rzx.at(i, j) * cu[i]).sum::<f64>())
+            .map(|j| self.xty[j] - (0..q).map(|i| rzx.at(j, i) * cu[i]).sum::<f64>())
             .collect();
         rx.solve_l(&mut beta);
         let r2 = self.yty
@@ -783,22 +785,40 @@ fn minimize_theta(prepared: &Prepared, lower: &[f64], reml: bool) -> (Vec<f64>, 
         }
         starts.push(default.iter().map(|&v| v * 0.3).collect());
     }
-    let mut objective = |theta: &[f64]| {
-        prepared
-            .solve(theta, reml)
-            .map_or(f64::INFINITY, |s| s.deviance)
-    };
-    let mut best: Option<(Vec<f64>, f64, bool)> = None;
-    let mut evaluations = 0;
-    for start in &starts {
-        let (theta, value, used, converged) = nelder_mead(
+    let run = |start: &Vec<f64>| {
+        let mut objective = |theta: &[f64]| {
+            prepared
+                .solve(theta, reml)
+                .map_or(f64::INFINITY, |s| s.deviance)
+        };
+        nelder_mead(
             &mut objective,
             start,
             lower,
             0.2,
             THETA_TOLERANCES,
             MAX_EVALUATIONS,
-        );
+        )
+    };
+    // The runs are independent: they share the starts out over two threads (each run is
+    // the sequential one, and the best is chosen in the starts' order as before).
+    let runs: Vec<_> = if starts.len() > 1 {
+        let half = starts.len().div_ceil(2);
+        std::thread::scope(|scope| {
+            let second = scope.spawn(|| starts[half..].iter().map(run).collect::<Vec<_>>());
+            let mut runs: Vec<_> = starts[..half].iter().map(run).collect();
+            runs.extend(second.join().unwrap_or_default());
+            runs
+        })
+    } else {
+        starts.iter().map(run).collect()
+    };
+    if runs.len() != starts.len() {
+        return (default, 0, false);
+    }
+    let mut best: Option<(Vec<f64>, f64, bool)> = None;
+    let mut evaluations = 0;
+    for (theta, value, used, converged) in runs {
         evaluations += used;
         if best.as_ref().is_none_or(|b| value < b.1) {
             best = Some((theta, value, converged));
