@@ -23,9 +23,8 @@ use analysis::Confidence;
 use analysis::bradley_terry::{TieMatrix, TiesOutcome, WinMatrix, fit_with_ties};
 use serde_json::{Value, json};
 
-#[path = "../../scripts/golden/bayes_python.rs"]
-#[allow(dead_code)] // run_script reads scripts/golden; this test pipes to scripts/reference
-mod bayes_python;
+#[path = "../../scripts/golden/venv_python.rs"]
+mod venv_python;
 
 const TOL_VALUE: f64 = 1e-6;
 const TOL_SE: f64 = 1e-5;
@@ -234,7 +233,7 @@ fn compare(c: &Case, r: &Value, worst: &mut [f64; 5]) {
 
 #[test]
 fn davidson_fit_equals_scipys() {
-    let Some(python) = bayes_python::python("scipy", "Davidson interop test") else {
+    let Some(python) = venv_python::BAYES.python("scipy", "Davidson interop test") else {
         return;
     };
     let cases = cases();

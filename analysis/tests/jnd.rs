@@ -129,8 +129,8 @@ fn jnd_table_reads_cr_per_clip_at_each_level() {
     assert!(curve.iter().all(|p| p.2 <= p.1 && p.1 <= p.3));
 }
 
-#[path = "../../scripts/golden/bayes_python.rs"]
-mod bayes_python;
+#[path = "../../scripts/golden/venv_python.rs"]
+mod venv_python;
 
 #[track_caller]
 fn relative(actual: f64, expected: f64, tol: f64, what: &str) -> f64 {
@@ -154,7 +154,7 @@ fn relative(actual: f64, expected: f64, tol: f64, what: &str) -> f64 {
 )]
 fn noncentral_t_and_share_intervals_equal_scipy() {
     use analysis::jnd::{noncentral_t_cdf, noncentral_t_sf};
-    let Some(python) = bayes_python::python("scipy", "noncentral t test") else {
+    let Some(python) = venv_python::BAYES.python("scipy", "noncentral t test") else {
         return;
     };
     // δ from -150 to 150 (n = 2,000 puts |δ| near 200 at shares of 1e-5), t around δ and far
@@ -181,9 +181,9 @@ fn noncentral_t_and_share_intervals_equal_scipy() {
                                "confidence": 0.95, "levels": levels(0.012, 0.0016)})
         })
         .collect();
-    let golden = bayes_python::run_script(
+    let golden = venv_python::run_script(
         &python,
-        "nct_golden.py",
+        "golden/nct_golden.py",
         "nct_golden",
         &serde_json::json!({"points": points, "shares": shares}),
     );

@@ -5,8 +5,8 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
-#[path = "../../scripts/golden/stats_python.rs"]
-mod stats_python;
+#[path = "../../scripts/golden/venv_python.rs"]
+mod venv_python;
 
 use analysis::Confidence;
 use analysis::power::{
@@ -29,7 +29,7 @@ fn close(ours: f64, theirs: f64, tol: f64, what: &str) {
 
 #[test]
 fn power_and_sample_sizes_match_statsmodels_and_scipy() {
-    let Some(python) = stats_python::python("statsmodels", "power interop test") else {
+    let Some(python) = venv_python::STATS.python("statsmodels", "power interop test") else {
         return;
     };
     let mut power_cases = Vec::new();
@@ -69,7 +69,12 @@ fn power_and_sample_sizes_match_statsmodels_and_scipy() {
         "solve": solve_cases.iter().map(|(d, a, p, _, alt)| json!({"effect_size": d, "alpha": a, "power": p, "alternative": alt})).collect::<Vec<_>>(),
         "ci": ci_cases.iter().map(|(sd, w, a)| json!({"sd": sd, "w": w, "alpha": a})).collect::<Vec<_>>(),
     });
-    let want = stats_python::run_script(&python, "power_reference.py", "power_interop", &cases);
+    let want = venv_python::run_script(
+        &python,
+        "reference/power_reference.py",
+        "power_interop",
+        &cases,
+    );
     for ((d, n, alpha, sides, alt), w) in power_cases.iter().zip(want["power"].as_array().unwrap())
     {
         let ours = paired_power(*d, *n, *alpha, *sides).unwrap();

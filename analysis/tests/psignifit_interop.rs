@@ -23,11 +23,11 @@ use serde_json::{Value, json};
 
 const TOL: f64 = 1e-6;
 
-#[path = "../../scripts/golden/bayes_python.rs"]
-mod bayes_python;
+#[path = "../../scripts/golden/venv_python.rs"]
+mod venv_python;
 
 fn python() -> Option<std::path::PathBuf> {
-    bayes_python::python("psignifit", "psignifit interop test")
+    venv_python::BAYES.python("psignifit", "psignifit interop test")
 }
 
 fn close(name: &str, what: &str, mine: f64, theirs: f64, scale: f64) {
@@ -123,9 +123,9 @@ fn posterior_means_and_intervals_equal_psignifit() {
             })
         })
         .collect();
-    let golden = bayes_python::run_script(
+    let golden = venv_python::run_script(
         &python,
-        "psignifit_golden.py",
+        "golden/psignifit_golden.py",
         "psignifit_interop",
         &Value::from(input),
     );

@@ -10,8 +10,8 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
-#[path = "../../scripts/golden/stats_python.rs"]
-mod stats_python;
+#[path = "../../scripts/golden/venv_python.rs"]
+mod venv_python;
 
 use analysis::reliability::{self, Metric};
 use analysis::{Confidence, Rating};
@@ -135,7 +135,7 @@ fn data_sets() -> Vec<(String, Vec<Rating>)> {
 
 #[test]
 fn icc_and_alpha_match_pingouin_and_krippendorff() {
-    let Some(python) = stats_python::python("pingouin", "reliability interop test") else {
+    let Some(python) = venv_python::STATS.python("pingouin", "reliability interop test") else {
         return;
     };
     let sets = data_sets();
@@ -145,9 +145,9 @@ fn icc_and_alpha_match_pingouin_and_krippendorff() {
             json!({"ratings": ratings.iter().map(|r| json!([r.subject, r.condition, r.score])).collect::<Vec<_>>()})
         })
         .collect();
-    let expected = stats_python::run_script(
+    let expected = venv_python::run_script(
         &python,
-        "reliability_reference.py",
+        "reference/reliability_reference.py",
         "reliability_interop",
         &Value::Array(cases),
     );

@@ -186,7 +186,11 @@ fn report_writes_every_table_and_figure() {
         // 6.5 in wide at 300 dpi; as tall as the figure's panels need (a forest plot's
         // rows: three effects here).
         assert_eq!(info.width, 1950, "{fig}");
-        let least = if fig.starts_with("mixed_forest") { 500 } else { 900 };
+        let least = if fig.starts_with("mixed_forest") {
+            500
+        } else {
+            900
+        };
         assert!(
             info.height > least && info.height < 2400,
             "{fig}: {}",

@@ -25,11 +25,11 @@ use serde_json::{Value, json};
 /// with the same formula in a different order of floating-point operations.
 const POSTERIOR_TOL: f64 = 1e-10;
 
-#[path = "../../scripts/golden/bayes_python.rs"]
-mod bayes_python;
+#[path = "../../scripts/golden/venv_python.rs"]
+mod venv_python;
 
 fn python() -> Option<std::path::PathBuf> {
-    bayes_python::python("questplus", "questplus golden test")
+    venv_python::BAYES.python("questplus", "questplus golden test")
 }
 
 fn log_grid(lo: f64, hi: f64, n: usize) -> Vec<f64> {
@@ -167,9 +167,9 @@ fn levels_and_posteriors_equal_questplus() {
         .zip(&runs)
         .map(|((_, s, _), r)| case_json(s, &r.answers))
         .collect();
-    let golden = bayes_python::run_script(
+    let golden = venv_python::run_script(
         &python,
-        "questplus_golden.py",
+        "golden/questplus_golden.py",
         "questplus_golden",
         &Value::from(input),
     );

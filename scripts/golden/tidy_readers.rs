@@ -1,6 +1,6 @@
 // A report's tidy export read by outside readers, shared by the tests that simulate and report
 // the examples (study/tests/simulate_protocols.rs, live_staircase.rs and examples_window.rs
-// include this file with `#[path]`, beside scripts/golden/stats_python.rs): `trials_tidy.csv` read with pandas (`$STATS_PYTHON`,
+// include this file with `#[path]`, beside scripts/golden/venv_python.rs): `trials_tidy.csv` read with pandas (`$STATS_PYTHON`,
 // scripts/reference/tidy_read.py) and with R's read.csv (`Rscript`,
 // scripts/reference/tidy_read.R), its columns and their inferred types checked against
 // `datapackage.json`, its rows against the sessions' own trial rows.
@@ -115,7 +115,7 @@ pub fn check_tidy(results: &Path, report: &Path, name: &str) {
         .flat_map(|s| s.trials.records.iter().map(move |r| (s, r)))
         .collect();
     assert!(!rows.is_empty(), "{name}: no trials");
-    if let Some(python) = crate::stats_python::python("pandas", "tidy export check (pandas)") {
+    if let Some(python) = crate::venv_python::STATS.python("pandas", "tidy export check (pandas)") {
         check_pandas(&python, &csv, &columns, &rows, name);
     }
     if let Some(rscript) = rscript("tidy export check (R)") {

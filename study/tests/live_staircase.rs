@@ -4,11 +4,10 @@
 //! error recovered by the analysis within its confidence interval.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
 
-#[path = "../../scripts/golden/stats_python.rs"]
-#[allow(dead_code, reason = "the scripts' runner is for the statistics checks")]
-mod stats_python;
 #[path = "../../scripts/golden/tidy_readers.rs"]
 mod tidy_readers;
+#[path = "../../scripts/golden/venv_python.rs"]
+mod venv_python;
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};

@@ -15,10 +15,9 @@
 //! `$BAYES_PYTHON` (pinned in `scripts/reference/bayes-requirements.txt`).
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
 
-#[path = "../../scripts/golden/bayes_python.rs"]
-#[allow(dead_code, reason = "this file runs its script itself")]
-mod bayes_python;
 mod common;
+#[path = "../../scripts/golden/venv_python.rs"]
+mod venv_python;
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -349,7 +348,7 @@ fn count_table(report: &Path, name: &str) -> Vec<Vec<u64>> {
 /// the largest error) has the lowest scale value of its clip.
 #[test]
 fn pair_comparison_report_equals_choix() {
-    let Some(python) = bayes_python::python("choix", "pair comparison golden") else {
+    let Some(python) = venv_python::BAYES.python("choix", "pair comparison golden") else {
         return;
     };
     let dir = scratch("pc");
@@ -393,7 +392,7 @@ fn pair_comparison_report_equals_choix() {
 /// qualities differ by less than half the noise SD: between 15 % and 45 % of the choices).
 #[test]
 fn pair_comparison_with_ties_report_equals_scipy_davidson() {
-    let Some(python) = bayes_python::python("choix", "pair comparison golden") else {
+    let Some(python) = venv_python::BAYES.python("choix", "pair comparison golden") else {
         return;
     };
     let dir = scratch("pc-ties");
@@ -475,7 +474,7 @@ fn assert_row(o: &[String], t: &serde_json::Value, labels: usize, what: &str) {
 /// largest error) has the lowest CMOS of its clip, below 0 with its whole interval.
 #[test]
 fn ccr_report_equals_scipy() {
-    let Some(python) = bayes_python::python("scipy", "CCR golden") else {
+    let Some(python) = venv_python::BAYES.python("scipy", "CCR golden") else {
         return;
     };
     let dir = scratch("ccr");

@@ -3,11 +3,10 @@
 //! and their reports' tidy exports read in pandas and R with the documented columns.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, missing_docs)]
 
-#[path = "../../scripts/golden/stats_python.rs"]
-#[allow(dead_code, reason = "the scripts' runner is for the statistics checks")]
-mod stats_python;
 #[path = "../../scripts/golden/tidy_readers.rs"]
 mod tidy_readers;
+#[path = "../../scripts/golden/venv_python.rs"]
+mod venv_python;
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
