@@ -205,13 +205,13 @@ impl MushraAnalysis {
             .assessors
             .iter()
             .filter(|a| a.excluded)
-            .map(|a| subject_name(a.subject))
+            .map(|a| crate::tables::md_escape(&subject_name(a.subject)))
             .collect();
         let listed: Vec<String> = self
             .assessors
             .iter()
             .filter(|a| a.fails_anchor && !a.excluded)
-            .map(|a| subject_name(a.subject))
+            .map(|a| crate::tables::md_escape(&subject_name(a.subject)))
             .collect();
         let pct = 100.0 * rules.max_fraction;
         let s = report.section("MUSHRA");

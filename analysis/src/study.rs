@@ -954,11 +954,12 @@ fn scale_unit(options: &ReportOptions) -> String {
         .map_or_else(String::new, |(lo, hi)| format!(" (scale {lo}–{hi})"))
 }
 
-/// Subject ids, comma-separated.
+/// Subject ids, comma-separated, for a paragraph (each escaped for Markdown: an id is text a
+/// participant may control).
 fn names_of(data: &StudyData, subjects: &BTreeSet<u32>) -> String {
     subjects
         .iter()
-        .map(|&s| data.subject_name(s))
+        .map(|&s| tables::md_escape(&data.subject_name(s)))
         .collect::<Vec<_>>()
         .join(", ")
 }
@@ -1233,7 +1234,7 @@ fn subject_model_section(report: &mut Report, m: &crate::mle::SubjectModel, data
         .subjects
         .iter()
         .filter(|e| e.inconsistency < 1e-6)
-        .map(|e| data.subject_name(e.subject))
+        .map(|e| tables::md_escape(&data.subject_name(e.subject)))
         .chain(
             m.contents
                 .iter()

@@ -73,12 +73,61 @@ pub(crate) fn csv_field(s: &str) -> String {
     String::from_utf8(bytes).unwrap_or_default()
 }
 
-/// Appends `s` as a Markdown table cell (`|` escaped, line breaks as spaces).
+/// Escapes `s` for Markdown (GitHub's) so that it reads as the text it is, in a paragraph or
+/// a table cell: nothing in it starts markup (emphasis, code, a link or image, an HTML tag,
+/// an entity, strikethrough, an address made a link) or ends a table cell, and line breaks
+/// become spaces. A backslash goes before `\\`, `` ` ``, `*`, `~`, `|`, `@`, `_` unless it is
+/// inside a word, `]` before `(` or `[`, `<` before a letter, `/`, `!` or `?`, `&` before a
+/// letter, digit or `#`, `:` before `//` and `.` after `www`; text without them (ids,
+/// numbers, "<0.001", "[0.2, 0.4]") is unchanged. For text a participant controls (subject
+/// ids, a browser's user agent), which the HTML report escapes with [`html_escape`].
+pub fn md_escape(s: &str) -> String {
+    let mut out = String::with_capacity(s.len());
+    push_md_cell(&mut out, s);
+    out
+}
+
+/// Appends [`md_escape`] of `s` to `out` (a table cell, a caption).
 fn push_md_cell(out: &mut String, s: &str) {
-    if s.contains(['|', '\n']) {
-        out.push_str(&s.replace('|', "\\|").replace('\n', " "));
-    } else {
+    let b = s.as_bytes();
+    let plain = !b.iter().any(|c| {
+        matches!(
+            c,
+            b'\\' | b'`' | b'*' | b'~' | b'|' | b'@' | b'_' | b']' | b'<' | b'&' | b'\n' | b'\r'
+        )
+    }) && !s.contains("://")
+        && !b.windows(4).any(|w| w.eq_ignore_ascii_case(b"www."));
+    if plain {
         out.push_str(s);
+        return;
+    }
+    let mut prev: Option<char> = None;
+    for (i, c) in s.char_indices() {
+        let rest = &s[i + c.len_utf8()..];
+        let next = rest.chars().next();
+        let escape = match c {
+            '\n' | '\r' => {
+                out.push(' ');
+                prev = Some(' ');
+                continue;
+            }
+            '\\' | '`' | '*' | '~' | '|' | '@' => true,
+            '_' => {
+                !(prev.is_some_and(char::is_alphanumeric)
+                    && next.is_some_and(char::is_alphanumeric))
+            }
+            ']' => matches!(next, Some('(' | '[')),
+            '<' => next.is_some_and(|n| n.is_ascii_alphabetic() || matches!(n, '/' | '!' | '?')),
+            '&' => next.is_some_and(|n| n.is_ascii_alphanumeric() || n == '#'),
+            ':' => rest.starts_with("//"),
+            '.' => i >= 3 && b[i - 3..i].eq_ignore_ascii_case(b"www"),
+            _ => false,
+        };
+        if escape {
+            out.push('\\');
+        }
+        out.push(c);
+        prev = Some(c);
     }
 }
 

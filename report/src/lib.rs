@@ -389,10 +389,15 @@ pub fn report_with_progress(
                 .collect();
             format!(" Condition ids: {}.", ids.join(", "))
         };
+        let subjects: Vec<String> = data
+            .subjects
+            .iter()
+            .map(|s| analysis::tables::md_escape(s))
+            .collect();
         names.text(format!(
             "Subjects ({}): {}.{conditions}",
-            data.subjects.len(),
-            data.subjects.join(", "),
+            subjects.len(),
+            subjects.join(", "),
         ));
         let written = report.write(output, request.png, mode);
         let exported = exports

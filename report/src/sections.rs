@@ -1,5 +1,9 @@
 //! The report's sections that are not the analysis's own: incomplete sessions, display,
-//! MUSHRA, exclusions.
+//! MUSHRA, exclusions. Text a participant controls (subject ids, so session names) goes into
+//! their paragraphs through [`md_escape`], as the tables' cells do, so that `report.md` shows
+//! it as it is and nothing in it is read as markup.
+
+use analysis::tables::md_escape;
 
 /// The "Incomplete sessions" section of a report made with `--allow-incomplete`.
 pub(crate) fn incomplete(
@@ -13,7 +17,7 @@ pub(crate) fn incomplete(
              the trials they logged are in every table.",
         );
         for p in incomplete {
-            section.text(p.to_string());
+            section.text(md_escape(&p.to_string()));
         }
     }
 }
@@ -26,10 +30,10 @@ pub(crate) fn display(
     drop_limit: f64,
     warn: &mut dyn FnMut(&str),
 ) {
-    let flagged: Vec<&str> = displays
+    let flagged: Vec<String> = displays
         .iter()
         .filter(|d| d.flagged)
-        .map(|d| d.session.as_str())
+        .map(|d| md_escape(&d.session))
         .collect();
     let display = report.section("Display");
     display.text(if flagged.is_empty() {
@@ -47,9 +51,10 @@ pub(crate) fn display(
     if let Some(t) = analysis::display::browser_table(displays) {
         display.table(t);
     }
-    for f in &flagged {
+    for d in displays.iter().filter(|d| d.flagged) {
         warn(&format!(
-            "{f} dropped more than {drop_limit} % of its frames"
+            "{} dropped more than {drop_limit} % of its frames",
+            d.session
         ));
     }
 }
@@ -129,10 +134,10 @@ pub(crate) fn exclusions(
     {
         return;
     }
-    let left_out: Vec<&str> = exclusions
+    let left_out: Vec<String> = exclusions
         .iter()
         .filter(|e| e.excluded)
-        .map(|e| e.session.as_str())
+        .map(|e| md_escape(&e.session))
         .collect();
     let section = report.section("Exclusions");
     section.text(format!(
@@ -146,4 +151,142 @@ pub(crate) fn exclusions(
         }
     ));
     section.table(analysis::exclusions::exclusions_table(exclusions, crowd));
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use analysis::display::SessionDisplay;
+    use analysis::exclusions::SessionExclusion;
+
+    /// What a participant can put in a session's name (their subject id, in a folder written
+    /// by hand or another tool) and in their browser's user agent.
+    const NASTY: [&str; 9] = [
+        "a|b",
+        "*bold*",
+        "<script>alert(1)</script>",
+        "line\nbreak",
+        "`code`",
+        "[link](http://x)",
+        "_em_",
+        "www.example.org",
+        "a@b.example",
+    ];
+
+    /// `|` not escaped by a backslash, in `line`.
+    fn cell_breaks(line: &str) -> usize {
+        let mut n = 0;
+        let mut backslashes = 0;
+        for c in line.chars() {
+            if c == '|' && backslashes % 2 == 0 {
+                n += 1;
+            }
+            backslashes = if c == '\\' { backslashes + 1 } else { 0 };
+        }
+        n
+    }
+
+    /// The display and exclusions sections (paragraphs naming sessions, the display and
+    /// browser tables, the exclusions table) over sessions named and browsed with Markdown:
+    /// in `report.md` every table row keeps its header's columns, line breaks stay inside
+    /// their line, and every character that would start markup is escaped.
+    #[test]
+    fn participant_text_reads_as_text_in_report_md() {
+        let displays: Vec<SessionDisplay> = NASTY
+            .iter()
+            .map(|s| SessionDisplay {
+                session: format!("{s} session 1"),
+                description: Some(format!("browser: {s}")),
+                refresh_hz: Some(60.0),
+                timed_trials: 1,
+                frames_shown: 90,
+                dropped: 10,
+                mean_interval_sd_ms: Some(1.0),
+                dropped_percent: Some(10.0),
+                flagged: true,
+                browser: Some(results::store::BrowserInfo {
+                    user_agent: (*s).to_string(),
+                    webgl_renderer: (*s).to_string(),
+                    screen_px: [1920, 1080],
+                    window_px: [1280, 800],
+                    device_pixel_ratio: 1.0,
+                    refresh_hz: 60.0,
+                    fullscreen: false,
+                    hidden_trials: Vec::new(),
+                    windowed_trials: Vec::new(),
+                }),
+                viewing: None,
+                group: None,
+                subject: (*s).to_string(),
+                subject_fields: std::collections::BTreeMap::new(),
+            })
+            .collect();
+        let excluded: Vec<SessionExclusion> = displays
+            .iter()
+            .map(|d| SessionExclusion {
+                session: d.session.clone(),
+                gold_trials: 0,
+                gold_failed: Vec::new(),
+                hidden_trials: vec![1],
+                excluded: true,
+            })
+            .collect();
+        let mut report = analysis::report::Report::new("escaping");
+        let mut warned = Vec::new();
+        display(&mut report, &displays, 5.0, &mut |w| {
+            warned.push(w.to_string());
+        });
+        exclusions(
+            &mut report,
+            &excluded,
+            &protocols::study::CrowdsourcingSettings::default(),
+        );
+        // Warnings go to a terminal, not to Markdown: as they are.
+        assert!(warned.iter().any(|w| w.starts_with("*bold* session 1")));
+        let dir = std::env::temp_dir().join(format!("report-md-escape-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        report
+            .write(&dir, false, files::Mode::Replace)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let md = std::fs::read_to_string(dir.join("report.md")).unwrap_or_default();
+        let _ = std::fs::remove_dir_all(&dir);
+
+        // Each table's rows have its header's columns.
+        let mut tables = 0;
+        let mut header: Option<usize> = None;
+        for line in md.lines() {
+            if line.starts_with('|') {
+                let n = cell_breaks(line);
+                let want = *header.get_or_insert(n);
+                assert_eq!(n, want, "{line}\n{md}");
+            } else if header.take().is_some() {
+                tables += 1;
+            }
+        }
+        assert_eq!(tables, 3, "display, browsers and exclusions: {md}");
+        assert!(
+            !md.contains("line\nbreak") && md.contains("line break"),
+            "{md}"
+        );
+        // Every opening of markup is preceded by its escape, wherever the text went (both
+        // paragraphs, every table).
+        for (raw, escaped) in [
+            ("<script", "\\<script"),
+            ("</script", "\\</script"),
+            ("*bold", "\\*bold"),
+            ("bold*", "bold\\*"),
+            ("`code", "\\`code"),
+            ("code`", "code\\`"),
+            ("](http", "\\](http"),
+            ("://", "\\://"),
+            ("_em", "\\_em"),
+            ("em_", "em\\_"),
+            ("www.", "www\\."),
+            ("@b", "\\@b"),
+        ] {
+            let unescaped = md.replace(escaped, "").contains(raw);
+            assert!(md.contains(escaped) && !unescaped, "{raw}\n{md}");
+        }
+        assert!(md.contains("Over 5 % of the frames dropped (--drop-limit): a\\|b session 1"));
+    }
 }
