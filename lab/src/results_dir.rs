@@ -40,6 +40,11 @@ fn run_manifest(study: &StudyFile, observer_seed: Option<u64>, subjects: u32) ->
 /// appended and fsynced before the participant gets their session link.
 pub const PARTICIPANTS_FILE: &str = "participants.csv";
 
+/// When a session served to a browser (`study serve`) first sent its pending trial, in the
+/// session's folder: a restarted server takes no answer sooner than the stimuli can have
+/// played since then.
+pub const TRIAL_SENT_FILE: &str = "trial_sent.json";
+
 /// Whether `name` is one of the files a results directory holds beside its sessions, or a
 /// temporary file one of its writers left behind.
 fn is_results_file(name: &str) -> bool {
@@ -75,8 +80,16 @@ fn is_session_dir(dir: &Path, name: &str) -> bool {
     };
     entries.flatten().all(|e| {
         let f = e.file_name().to_string_lossy().into_owned();
-        [SESSION_FILE, TRIALS_FILE, LOCK_FILE, FRAMES_FILE].contains(&f.as_str())
+        [
+            SESSION_FILE,
+            TRIALS_FILE,
+            LOCK_FILE,
+            FRAMES_FILE,
+            TRIAL_SENT_FILE,
+        ]
+        .contains(&f.as_str())
             || f.starts_with("trials.csv.torn-")
+            || f.starts_with(&format!(".{TRIAL_SENT_FILE}."))
             || f.starts_with(&format!(".{SESSION_FILE}."))
             || f.starts_with(&format!(".{TRIALS_FILE}."))
     })

@@ -23,7 +23,7 @@ use results::SessionManifest;
 use results::store::{BrowserInfo, DisplayInfo, SessionState};
 use serde::{Deserialize, Serialize};
 
-use crate::limits::{Bucket, Limits, MAX_INTERVALS};
+use crate::limits::{Bucket, Limits, MAX_INTERVALS, MAX_REPORTED_MS};
 use crate::participants::{Participant, Registry, identity};
 use crate::{Result, ServeOptions, WebError, clipdata, io, staging, timing};
 
@@ -88,10 +88,8 @@ struct Pending {
     /// The trials the screen answers: a MUSHRA screen's panes in order (the ones not yet
     /// answered), else `trial` alone.
     panes: Vec<Trial>,
-    /// When the page last asked for it: it cannot have played the stimuli for longer.
-    /// `None` for a trial this process never served (the page had it from a server that
-    /// was restarted since): then only the page's own account of the time counts.
-    served: Option<Instant>,
+    /// When it was sent: the page cannot have played the stimuli for longer.
+    sent: Sent,
     /// The clips the page draws, in the order the scene's figures name them.
     clips: Vec<Arc<Vec<u8>>>,
     /// What the page shows: the screen (`protocols::screen::Screen`) and the scene.
@@ -99,6 +97,75 @@ struct Pending {
     encoding: Option<StimulusEncoding>,
     /// When answers open, ms from the start of the first pass (the schedule's).
     answers_open_ms: f64,
+}
+
+/// When the pending trial was sent to the page.
+#[derive(Debug, Clone, Copy)]
+enum Sent {
+    /// Not yet: no answer to it is taken.
+    Never,
+    /// When the page last asked for it, by this process's monotonic clock.
+    At(Instant),
+    /// When it was first sent, by a server that was restarted since: ms since the Unix
+    /// epoch, from the session's [`SENT_FILE`].
+    Before(u64),
+}
+
+impl Sent {
+    /// Milliseconds since it was sent; `None` if it never was.
+    fn since_ms(self) -> Option<f64> {
+        match self {
+            Sent::Never => None,
+            Sent::At(t) => Some(t.elapsed().as_secs_f64() * 1e3),
+            // A wall clock set back since counts as no time at all.
+            Sent::Before(ms) => Some(lab::session::now_ms().saturating_sub(ms) as f64),
+        }
+    }
+}
+
+/// The session folder's record of when its pending trial was first sent (format version 1:
+/// `{"format_version": 1, "index": I, "sent_ms": T}`, T in ms since the Unix epoch), written
+/// whole (temporary name, fsync, rename) before the trial leaves the server, so that a
+/// restarted server still knows how long the page can have played it.
+pub const SENT_FILE: &str = lab::results_dir::TRIAL_SENT_FILE;
+
+#[derive(Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SentRecord {
+    format_version: u32,
+    index: u32,
+    sent_ms: u64,
+}
+
+/// When trial `index` of the session in `dir` was first sent, if [`SENT_FILE`] says.
+fn sent_before(dir: &Path, index: u32) -> ApiResult<Sent> {
+    let path = dir.join(SENT_FILE);
+    if !path.exists() {
+        return Ok(Sent::Never);
+    }
+    let bad = |why: String| ApiError::new(500, format!("{}: {why}", path.display()));
+    let bytes = results::store::read_limited(&path, 4096).map_err(|e| bad(e.to_string()))?;
+    let r: SentRecord = serde_json::from_slice(&bytes).map_err(|e| bad(e.to_string()))?;
+    if r.format_version != 1 {
+        return Err(bad(format!("format_version {} is not 1", r.format_version)));
+    }
+    Ok(if r.index == index {
+        Sent::Before(r.sent_ms)
+    } else {
+        Sent::Never
+    })
+}
+
+/// Records in `dir` that trial `index` is sent now.
+fn record_sent(dir: &Path, index: u32) -> ApiResult<()> {
+    let r = SentRecord {
+        format_version: 1,
+        index,
+        sent_ms: lab::session::now_ms(),
+    };
+    let bytes = serde_json::to_vec(&r).map_err(|e| ApiError::new(500, e.to_string()))?;
+    results::store::write_atomic(&dir.join(SENT_FILE), &bytes)
+        .map_err(|e| ApiError::new(500, e.to_string()))
 }
 
 /// What the page checked before the participant could join, and reports when the session
@@ -380,6 +447,22 @@ impl App {
             eprintln!("{note}");
         }
         let registry = Registry::open(&options.output)?;
+        // A session that is over keeps its place against a quota and in its group (an
+        // unfinished one holds it for the lease from its participant's next request).
+        let crowd = &study.definition.crowdsourcing;
+        if crowd.quota.is_some() || crowd.groups.is_some() {
+            for p in registry.all() {
+                let dir = session::session_dir(&options.output, &p.subject, 1);
+                let path = dir.join(results::store::SESSION_FILE);
+                if path.is_file() {
+                    let m: SessionManifest =
+                        results::store::read_manifest(&path).map_err(LabError::from)?;
+                    if matches!(m.status, SessionState::Complete | SessionState::TimeLimit) {
+                        p.set_finished();
+                    }
+                }
+            }
+        }
         let stimuli = lab::source::open(&study)?;
         let preloaded = stimuli.keep(&read);
         let clips = read
@@ -491,16 +574,19 @@ impl App {
                 "the study has all the participants it needs; thank you for your interest",
             )
         };
+        let (now_ms, lease_ms) = (lab::session::now_ms(), u64::from(crowd.lease_s) * 1000);
         let admit = |all: &[Arc<Participant>]| {
             if all.len() >= self.limits.max_participants {
                 return Err(full());
             }
-            // Quotas: the group with the fewest participants so far takes the next one, so
-            // every group gets its share; a group (or, without groups, the study) at its
-            // quota takes no more.
+            // Quotas count the places held: sessions that completed and participants active
+            // within the lease (a participant idle longer gives their place back). The group
+            // with the fewest places held takes the next one, so every group gets its share;
+            // a group (or, without groups, the study) at its quota takes no more.
+            let held = all.iter().filter(|p| p.holds_place(now_ms, lease_ms));
             if let Some(n) = crowd.groups {
                 let mut counts = vec![0u32; n as usize];
-                for p in all {
+                for p in held {
                     if let Some(c) = p.group.and_then(|g| counts.get_mut(g as usize)) {
                         *c += 1;
                     }
@@ -514,7 +600,7 @@ impl App {
                     return Err(full());
                 }
                 Ok(Some(g))
-            } else if crowd.quota.is_some_and(|q| all.len() >= q as usize) {
+            } else if crowd.quota.is_some_and(|q| held.count() >= q as usize) {
                 Err(full())
             } else {
                 Ok(None)
@@ -539,6 +625,8 @@ impl App {
             }
             None => return Err(ApiError::new(401, "unknown session link")),
         };
+        // Active: their place against a quota is kept for the lease from now.
+        p.seen(lab::session::now_ms());
         if !lock(&p.bucket).take(self.limits.participant_rate, self.limits.participant_burst) {
             return Err(ApiError::new(429, "too many requests; slow down"));
         }
@@ -588,7 +676,10 @@ impl App {
             fill,
         )?;
         Ok(match opened {
-            Opened::Finished(m) => Slot::Finished(m),
+            Opened::Finished(m) => {
+                p.set_finished();
+                Slot::Finished(m)
+            }
             Opened::Ready { recorder, resumed } => {
                 let last = if resumed > 0 {
                     let path = dir.join(results::store::TRIALS_FILE);
@@ -760,18 +851,25 @@ impl App {
             Slot::Finished(m) => return Ok(Self::done_info(m)),
             Slot::Live(l) => l,
         };
-        if !self.ensure_pending(live)? {
+        let dir = self.session_dir(p);
+        if !self.ensure_pending(live, &dir)? {
             live.rec.finish()?;
             let m = Box::new(live.rec.manifest().clone());
             let info = Self::done_info(&m);
             *slot = Slot::Finished(m);
+            p.set_finished();
             return Ok(info);
         }
         let answered = live.rec.answered();
         let Some(pending) = live.pending.as_mut() else {
             return Err(ApiError::new(500, "no pending trial"));
         };
-        pending.served = Some(Instant::now());
+        // Its first sending is on disk before the trial leaves; asked for again (a reload
+        // plays it from the start) the page cannot have played it longer than since then.
+        if matches!(pending.sent, Sent::Never) {
+            record_sent(&dir, pending.trial.index)?;
+        }
+        pending.sent = Sent::At(Instant::now());
         let t = &pending.trial;
         Ok(serde_json::json!({
             "done": false,
@@ -787,8 +885,9 @@ impl App {
     }
 
     /// Makes the engine's next trial the pending one, with its clips, unless one is pending;
-    /// false when the session has no next trial.
-    fn ensure_pending(&self, live: &mut Live) -> ApiResult<bool> {
+    /// false when the session has no next trial. `dir` is the session's folder, whose
+    /// [`SENT_FILE`] says whether an earlier server sent the trial already.
+    fn ensure_pending(&self, live: &mut Live, dir: &Path) -> ApiResult<bool> {
         if live.pending.is_some() {
             return Ok(true);
         }
@@ -837,6 +936,7 @@ impl App {
             .map(|(id, clip)| self.clip_bytes(id, clip))
             .collect();
         let encoding = shown.swap_remove(0).encoding;
+        let sent = sent_before(dir, trial.index)?;
         live.pending = Some(Pending {
             answers_open_ms: screen.schedule.answers_open_s * 1e3,
             screen: Arc::new(serde_json::json!({
@@ -845,7 +945,7 @@ impl App {
             })),
             trial,
             panes,
-            served: None,
+            sent,
             clips,
             encoding,
         });
@@ -880,7 +980,7 @@ impl App {
         let Slot::Live(live) = &mut *slot else {
             return Err(ApiError::new(404, "no trial is pending"));
         };
-        self.ensure_pending(live)?;
+        self.ensure_pending(live, &self.session_dir(p))?;
         match &live.pending {
             Some(pd) if pd.trial.index == index => {
                 pd.clips.get(slot_no).cloned().ok_or_else(|| {
@@ -922,7 +1022,7 @@ impl App {
             };
         }
         // After a restart the trial on the page is the engine's next one again.
-        self.ensure_pending(live)?;
+        self.ensure_pending(live, &self.session_dir(p))?;
         let Some(pending) = &live.pending else {
             return Err(ApiError::new(409, "the session has no trial left"));
         };
@@ -1075,17 +1175,32 @@ impl App {
         }
     }
 
-    /// Refuses an answer the pending trial cannot take: before its stimuli played (by the
-    /// server's clock and the page's), more replays than allowed, malformed frame records,
-    /// or a hidden page where the study shows the trial again.
+    /// Refuses an answer the pending trial cannot take: to a trial never sent (409), before
+    /// its stimuli played (by the server's clock since it sent the trial, and the page's),
+    /// times that are not finite, negative or over [`MAX_REPORTED_MS`], more replays than
+    /// allowed, malformed frame records, or a hidden page where the study shows the trial
+    /// again.
     fn check_answer(&self, pending: &Pending, req: &AnswerRequest) -> ApiResult<()> {
         let def = &self.study.definition;
         let need_ms = pending.answers_open_ms;
-        let since_served = pending
-            .served
-            .map_or(f64::INFINITY, |t| t.elapsed().as_secs_f64() * 1e3);
-        // The page cannot have played longer than since it asked for the trial; a little
-        // slack for clocks that tick at slightly different rates.
+        let Some(since_served) = pending.sent.since_ms() else {
+            return Err(ApiError::new(
+                409,
+                format!(
+                    "trial {} was never sent to this participant: ask for it and play it first",
+                    pending.trial.index
+                ),
+            ));
+        };
+        let in_range = |v: f64| v.is_finite() && (0.0..=MAX_REPORTED_MS).contains(&v);
+        if !in_range(req.played_ms) || !in_range(req.response_time_ms as f64) {
+            return Err(ApiError::new(
+                422,
+                format!("played_ms and response_time_ms must be from 0 to {MAX_REPORTED_MS} ms"),
+            ));
+        }
+        // The page cannot have played longer than since the trial was sent; a little slack
+        // for clocks that tick at slightly different rates.
         if req.played_ms + 50.0 < need_ms || since_served + 50.0 < need_ms {
             return Err(ApiError::new(
                 422,
@@ -1132,10 +1247,10 @@ impl App {
         if req.intervals.len() > MAX_INTERVALS || req.phases.len() > MAX_INTERVALS {
             return Err(ApiError::new(413, "too many frame intervals"));
         }
-        if req.intervals.iter().any(|v| !v.is_finite() || *v < 0.0) {
+        if !req.intervals.iter().all(|v| in_range(*v)) {
             return Err(ApiError::new(
                 422,
-                "frame intervals must be finite and not negative",
+                format!("frame intervals must be from 0 to {MAX_REPORTED_MS} ms"),
             ));
         }
         if req

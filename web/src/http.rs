@@ -1,6 +1,6 @@
-//! The HTTP interface: routes, authentication, body limits and the headers every response
-//! carries. Each handler checks the token, then runs the [`App`] call on the blocking pool
-//! (it may wait for a session lock or an fsync).
+//! The HTTP interface: routes, authentication, body limits (size, and the time to send it)
+//! and the headers every response carries. Each handler checks the token, then runs the
+//! [`App`] call on the blocking pool (it may wait for a session lock or an fsync).
 //!
 //! | route | what |
 //! | --- | --- |
@@ -19,9 +19,11 @@ use std::sync::Arc;
 
 use axum::Json;
 use axum::Router;
+use axum::body::Body;
 use axum::extract::rejection::JsonRejection;
-use axum::extract::{DefaultBodyLimit, Path, State};
+use axum::extract::{DefaultBodyLimit, Path, Request, State};
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
+use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
 use axum::routing::{get, post};
 use serde::Deserialize;
@@ -73,8 +75,52 @@ pub(crate) fn router(app: Arc<App>) -> Router {
         .route("/api/s/{subject}/answer", post(answer))
         .route("/api/dashboard", get(dashboard))
         .layer(DefaultBodyLimit::max(limit))
+        .layer(axum::middleware::from_fn_with_state(
+            Arc::clone(&app),
+            read_body,
+        ))
         .layer(axum::middleware::map_response(security_headers))
         .with_state(app)
+}
+
+/// Reads a request's whole body (at most the body limit) within the body timeout before the
+/// handler sees it: a client that sends it too slowly is answered 408, one over the limit
+/// 413, and neither holds a handler meanwhile.
+async fn read_body(State(app): Shared, req: Request, next: Next) -> Response {
+    let limits = *app.limits();
+    let (parts, body) = req.into_parts();
+    let declared = parts
+        .headers
+        .get(header::CONTENT_LENGTH)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.parse::<u64>().ok());
+    let too_large = || {
+        ApiError::new(
+            413,
+            format!("the request body is over {} bytes", limits.max_body_bytes),
+        )
+        .into_response()
+    };
+    if declared.is_some_and(|n| n > limits.max_body_bytes as u64) {
+        return too_large();
+    }
+    let read = axum::body::to_bytes(body, limits.max_body_bytes);
+    match tokio::time::timeout(limits.body_timeout, read).await {
+        Ok(Ok(bytes)) => {
+            next.run(Request::from_parts(parts, Body::from(bytes)))
+                .await
+        }
+        // Over the limit without a length given, or cut off (then nobody reads the reply).
+        Ok(Err(_)) => too_large(),
+        Err(_) => ApiError::new(
+            408,
+            format!(
+                "the request body was not sent within {} s",
+                limits.body_timeout.as_secs_f64()
+            ),
+        )
+        .into_response(),
+    }
 }
 
 /// Headers on every response: no caching of session data, no sniffing, no referrer (the

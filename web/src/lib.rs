@@ -18,7 +18,9 @@
 //!   the server resolves the manifest id, so no request names a path (or, in a blind design,
 //!   which slot holds the reference).
 //! - Limits ([`limits`]): request body size, requests per second per participant and joins
-//!   per second; the experimenter's dashboard needs the token given on the command line.
+//!   per second, the time a client may take to send a request's head and its body, and
+//!   connections per client address; the experimenter's dashboard needs the token given on
+//!   the command line.
 //!
 //! The page itself (`web/page/`, three.js built by `scripts/build-page`) is read from
 //! [`ServeOptions::page`] at start-up. Running behind a TLS reverse proxy: `docs/serve.md`.
@@ -32,9 +34,10 @@ pub mod participants;
 mod staging;
 pub mod timing;
 
-use std::net::SocketAddr;
+use std::collections::HashMap;
+use std::net::{IpAddr, SocketAddr};
 use std::path::PathBuf;
-use std::sync::Arc;
+use std::sync::{Arc, Mutex, PoisonError};
 
 pub use app::App;
 pub use limits::Limits;
@@ -137,22 +140,113 @@ pub async fn start(options: ServeOptions) -> Result<Server> {
     let addr = listener.local_addr().map_err(io("listening"))?;
     let (tx, rx) = tokio::sync::oneshot::channel::<()>();
     let router = http::router(Arc::clone(&app));
-    let task = tokio::spawn(async move {
-        axum::serve(
-            listener,
-            router.into_make_service_with_connect_info::<SocketAddr>(),
-        )
-        .with_graceful_shutdown(async move {
-            let _ = rx.await;
-        })
-        .await
-    });
+    let task = tokio::spawn(accept(listener, router, options.limits, rx));
     Ok(Server {
         addr,
         app,
         shutdown: Some(tx),
         task,
     })
+}
+
+/// Open connections per client address.
+type Open = Arc<Mutex<HashMap<IpAddr, usize>>>;
+
+/// A connection counted against its address until it is dropped.
+struct Counted {
+    open: Open,
+    ip: IpAddr,
+}
+
+impl Counted {
+    /// Counts a connection from `ip`, unless `cap` are open from it already.
+    fn new(open: &Open, ip: IpAddr, cap: usize) -> Option<Counted> {
+        let mut m = open.lock().unwrap_or_else(PoisonError::into_inner);
+        let n = m.entry(ip).or_insert(0);
+        if *n >= cap {
+            return None;
+        }
+        *n += 1;
+        Some(Counted {
+            open: Arc::clone(open),
+            ip,
+        })
+    }
+}
+
+impl Drop for Counted {
+    fn drop(&mut self) {
+        let mut m = self.open.lock().unwrap_or_else(PoisonError::into_inner);
+        if let Some(n) = m.get_mut(&self.ip) {
+            *n -= 1;
+            if *n == 0 {
+                m.remove(&self.ip);
+            }
+        }
+    }
+}
+
+/// Accepts connections until `stop`, then lets the requests in flight finish. Each
+/// connection is HTTP/1.1 with a header read timeout (`limits.header_timeout`, on hyper's
+/// timer: a client that has not sent a whole request head in time is disconnected, an idle
+/// kept-alive connection too); a client address with `limits.max_connections_per_address`
+/// open has its next connection closed at once.
+async fn accept(
+    listener: tokio::net::TcpListener,
+    router: axum::Router,
+    limits: Limits,
+    stop: tokio::sync::oneshot::Receiver<()>,
+) -> std::io::Result<()> {
+    let open: Open = Arc::default();
+    // Told to every connection when the server stops; its receivers all dropped once the
+    // last connection has ended.
+    let (close_tx, close_rx) = tokio::sync::watch::channel(());
+    let mut stop = std::pin::pin!(stop);
+    loop {
+        let accepted = tokio::select! {
+            _ = &mut stop => break,
+            r = listener.accept() => r,
+        };
+        // Out of file descriptors, or a connection reset before it was taken: the backlog
+        // waits a moment rather than spinning.
+        let Ok((stream, peer)) = accepted else {
+            tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+            continue;
+        };
+        let Some(counted) = Counted::new(&open, peer.ip(), limits.max_connections_per_address)
+        else {
+            drop(stream);
+            continue;
+        };
+        let service = hyper_util::service::TowerToHyperService::new(router.clone());
+        let mut closing = close_rx.clone();
+        tokio::spawn(async move {
+            let mut builder = hyper::server::conn::http1::Builder::new();
+            builder
+                .timer(hyper_util::rt::TokioTimer::new())
+                .header_read_timeout(limits.header_timeout);
+            let io = hyper_util::rt::TokioIo::new(stream);
+            let mut conn = std::pin::pin!(builder.serve_connection(io, service));
+            let mut shutting = false;
+            loop {
+                tokio::select! {
+                    _ = conn.as_mut() => break,
+                    r = closing.changed(), if !shutting => {
+                        let _ = r;
+                        shutting = true;
+                        conn.as_mut().graceful_shutdown();
+                    }
+                }
+            }
+            drop(counted);
+            drop(closing);
+        });
+    }
+    drop(listener);
+    drop(close_rx);
+    let _ = close_tx.send(());
+    close_tx.closed().await;
+    Ok(())
 }
 
 /// Runs the server until SIGINT or SIGTERM, then marks the open sessions interrupted.

@@ -1,7 +1,8 @@
 //! Bounds on what a request may cost: body size, requests per participant and joins per
-//! second (token buckets), and the lengths of what a page reports.
+//! second (token buckets), how long a client may take to send a request's head and body,
+//! connections per client address, and the lengths and sizes of what a page reports.
 
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 /// Request limits of a server.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -19,6 +20,15 @@ pub struct Limits {
     pub join_burst: f64,
     /// Most participants the server takes (the study's quota when it sets one is smaller).
     pub max_participants: usize,
+    /// Longest a client may take to send a request's line and headers, from its first byte
+    /// (or, on a kept-alive connection, from the end of the last reply): the connection is
+    /// closed after it.
+    pub header_timeout: Duration,
+    /// Longest a client may take to send a request's body once its head is in (408 after).
+    pub body_timeout: Duration,
+    /// Most connections open at once from one client address; more are closed as soon as
+    /// they are accepted. Behind a reverse proxy every connection comes from the proxy.
+    pub max_connections_per_address: usize,
 }
 
 impl Default for Limits {
@@ -30,12 +40,20 @@ impl Default for Limits {
             join_rate: 20.0,
             join_burst: 200.0,
             max_participants: 100_000,
+            header_timeout: Duration::from_secs(10),
+            body_timeout: Duration::from_secs(30),
+            max_connections_per_address: 512,
         }
     }
 }
 
 /// Most frame intervals one answer may carry (a 60-s presentation at 240 Hz is 14,400).
 pub const MAX_INTERVALS: usize = 20_000;
+
+/// Longest time an answer may report, ms (a day): each frame interval (a page left in a
+/// background tab has one long interval), the time played and the response time. Finite
+/// and not negative too, so that no sum over them overflows.
+pub const MAX_REPORTED_MS: f64 = 86_400_000.0;
 
 /// A token bucket: `burst` requests at once, then `rate` per second.
 #[derive(Debug, Clone)]

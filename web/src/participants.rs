@@ -11,6 +11,7 @@ use std::collections::{BTreeMap, HashMap};
 use std::fs::{File, OpenOptions};
 use std::io::{Read as _, Seek as _, Write as _};
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, PoisonError, RwLock, RwLockReadGuard};
 
 use sha2::{Digest as _, Sha256};
@@ -51,6 +52,10 @@ pub struct Participant {
     pub(crate) slot: Mutex<Slot>,
     /// Requests allowed.
     pub(crate) bucket: Mutex<Bucket>,
+    /// When they last made a request (joined, at first), ms since the Unix epoch.
+    last_seen_ms: AtomicU64,
+    /// Their session is over (complete or out of time).
+    finished: AtomicBool,
 }
 
 /// Who a join request says the participant is.
@@ -190,7 +195,7 @@ impl Appender {
 ///
 /// Two locks, so that finding a participant (every request does) never waits for a disk:
 /// the index is held only to look up or insert; the file is held by a join for its whole
-/// check, append and fsync, so joins take turns and a quota is never overrun.
+/// check, append and fsync, so joins take turns and never overrun a quota together.
 pub struct Registry {
     index: RwLock<Index>,
     file: Mutex<Appender>,
@@ -319,11 +324,12 @@ impl Registry {
         let token = new_token()?;
         let hash = token_hash(&token);
         let ids: Vec<String> = who.ids.iter().map(|(k, v)| format!("{k}={v}")).collect();
+        let created_ms = lab::session::now_ms();
         file.append(&encode_row(&[
             &subject,
             &hex(&hash),
             &who.source,
-            &lab::session::now_ms().to_string(),
+            &created_ms.to_string(),
             &group.map(|g| g.to_string()).unwrap_or_default(),
             &ids.join(";"),
         ])?)?;
@@ -333,7 +339,13 @@ impl Registry {
             .unwrap_or_else(PoisonError::into_inner)
             .insert(
                 hash,
-                Participant::new(subject, who.source.clone(), who.ids.clone(), group),
+                Participant::new(
+                    subject,
+                    who.source.clone(),
+                    who.ids.clone(),
+                    group,
+                    created_ms,
+                ),
             );
         Ok((p, token))
     }
@@ -345,6 +357,7 @@ impl Participant {
         source: String,
         ids: BTreeMap<String, String>,
         group: Option<u32>,
+        created_ms: u64,
     ) -> Participant {
         Participant {
             subject,
@@ -353,7 +366,26 @@ impl Participant {
             group,
             slot: Mutex::new(Slot::NotStarted),
             bucket: Mutex::new(Bucket::new(f64::MAX)),
+            last_seen_ms: AtomicU64::new(created_ms),
+            finished: AtomicBool::new(false),
         }
+    }
+
+    /// Notes a request of theirs at `now_ms` (ms since the Unix epoch).
+    pub(crate) fn seen(&self, now_ms: u64) {
+        self.last_seen_ms.fetch_max(now_ms, Ordering::Relaxed);
+    }
+
+    /// Notes that their session is over.
+    pub(crate) fn set_finished(&self) {
+        self.finished.store(true, Ordering::Relaxed);
+    }
+
+    /// Whether they hold a place against a quota at `now_ms`: their session is over, or
+    /// their last request (their join, before any) is less than `lease_ms` ago.
+    pub fn holds_place(&self, now_ms: u64, lease_ms: u64) -> bool {
+        self.finished.load(Ordering::Relaxed)
+            || now_ms.saturating_sub(self.last_seen_ms.load(Ordering::Relaxed)) < lease_ms
     }
 }
 
@@ -433,7 +465,7 @@ fn parse_row(fields: &csv::StringRecord) -> std::result::Result<(Participant, [u
     if !matches!(source, "prolific" | "mturk" | "generated") {
         return Err(format!("unknown source {source:?}"));
     }
-    created
+    let created_ms = created
         .parse::<u64>()
         .map_err(|_| format!("created_ms {created:?} is not a number"))?;
     let mut map = BTreeMap::new();
@@ -447,7 +479,7 @@ fn parse_row(fields: &csv::StringRecord) -> std::result::Result<(Participant, [u
         map.insert(k.to_string(), v.to_string());
     }
     Ok((
-        Participant::new(subject.into(), source.into(), map, group),
+        Participant::new(subject.into(), source.into(), map, group, created_ms),
         hash,
     ))
 }

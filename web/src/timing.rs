@@ -14,7 +14,10 @@ pub struct Stats {
 }
 
 /// The statistics of `intervals` (ms) against a refresh period of `period_ms`; `None` for
-/// fewer than two intervals.
+/// fewer than two intervals. Finite intervals can still overflow the sums (`[1e308, 0,
+/// 1e308]` has an infinite mean and deviation), so the server takes only intervals
+/// from 0 to [`crate::limits::MAX_REPORTED_MS`], at most [`crate::limits::MAX_INTERVALS`] of
+/// them: their sums stay far below `f64`'s range.
 pub fn stats(intervals: &[f64], period_ms: f64) -> Option<Stats> {
     if intervals.len() < 2 {
         return None;

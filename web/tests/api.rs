@@ -11,6 +11,7 @@
 )]
 
 use std::collections::BTreeMap;
+use std::net::{SocketAddr, TcpStream};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
@@ -467,6 +468,373 @@ fn subject_fields_are_checked_by_kind_and_stored_normalized() {
     ] {
         assert_eq!(m.subject_fields.get(k).map(String::as_str), Some(v), "{k}");
     }
+    rt.block_on(server.stop()).unwrap();
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A study whose trial plays for several seconds (`playback_count` plays of the 0.3-s walk),
+/// so that a restart takes less time than the stimuli play.
+fn long_presentation(options: &ServeOptions, plays: u32) {
+    let study = std::fs::read_to_string(&options.study).unwrap().replace(
+        "[session]\n",
+        &format!("[presentation]\nplayback_count = {plays}\n[session]\n"),
+    );
+    std::fs::write(&options.study, study).unwrap();
+}
+
+fn pending_trial(c: &mut Client) -> (u64, f64) {
+    let t = c
+        .request("GET", &c.session_path("trial"), None)
+        .unwrap()
+        .json();
+    (
+        t["index"].as_u64().unwrap(),
+        t["presentation_ms"].as_f64().unwrap(),
+    )
+}
+
+/// An answer is taken only for a trial the server sent, and no sooner than the stimuli's
+/// playing time after it sent it, by its own clock: a client that answers without asking for
+/// the trial is refused (409), one that answers at once claiming the stimuli played is
+/// refused (422), and so is the same right after a restart (the send time is on disk);
+/// once the stimuli have had time to play the answer is taken without asking again.
+#[test]
+fn answers_only_for_sent_trials_after_they_played_even_across_a_restart() {
+    let dir = temp_dir("sent");
+    let options = setup(&dir);
+    long_presentation(&options, 12);
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    let server = rt.block_on(web::start(options.clone())).unwrap();
+    let mut a = Client::new(server.addr);
+    assert_eq!(
+        a.join(&params(&[("PROLIFIC_PID", "ps")])).unwrap().status,
+        200
+    );
+    begin(&mut a);
+    // Every index a scripted client could guess, unasked for: never sent, refused.
+    for k in 0..4 {
+        let r = a
+            .request(
+                "POST",
+                &a.session_path("answer"),
+                Some(&answer(k, 4.0, 1e5)),
+            )
+            .unwrap();
+        assert_eq!(r.status, 409, "{:?}", r.json());
+        let why = r.json()["error"].as_str().unwrap_or("").to_string();
+        assert!(
+            why.contains("never sent") || why.contains("is not pending"),
+            "{why}"
+        );
+    }
+    let sent_file = dir.join("results/ps_s1").join(web::app::SENT_FILE);
+    assert!(!sent_file.exists(), "nothing sent yet");
+    let (k, need) = pending_trial(&mut a);
+    let sent_at = std::time::Instant::now();
+    assert!(need > 3000.0, "the trial plays for {need} ms");
+    let record: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&sent_file).unwrap()).unwrap();
+    assert_eq!(record["index"].as_u64(), Some(k), "{record}");
+    // Answered at once, claiming the stimuli played: the server's clock says they cannot have.
+    let path = a.session_path("answer");
+    let early = a
+        .request("POST", &path, Some(&answer(k, 4.0, need + 10.0)))
+        .unwrap();
+    assert_eq!(early.status, 422, "{:?}", early.json());
+
+    // A restart: the trial's send time is read back, so answering at once is still early.
+    rt.block_on(server.stop()).unwrap();
+    let server = rt.block_on(web::start(options.clone())).unwrap();
+    let mut again = Client::new(server.addr);
+    again.subject.clone_from(&a.subject);
+    again.token.clone_from(&a.token);
+    let after_restart = again
+        .request("POST", &path, Some(&answer(k, 4.0, need + 10.0)))
+        .unwrap();
+    assert!(
+        sent_at.elapsed().as_secs_f64() * 1e3 < need - 100.0,
+        "the restart took longer than the stimuli play"
+    );
+    assert_eq!(after_restart.status, 422, "{:?}", after_restart.json());
+    assert!(
+        after_restart.json()["error"]
+            .as_str()
+            .is_some_and(|e| e.contains("before the stimuli had played")),
+        "{:?}",
+        after_restart.json()
+    );
+    assert!(!dir.join("results/ps_s1/trials.csv").exists() || rows(&dir, "ps") == 0);
+    // Once they have had time to play since it was first sent: taken, without asking again.
+    std::thread::sleep(Duration::from_millis(need as u64 + 100).saturating_sub(sent_at.elapsed()));
+    let ok = again
+        .request("POST", &path, Some(&answer(k, 4.0, need + 10.0)))
+        .unwrap();
+    assert_eq!(ok.status, 200, "{:?}", ok.json());
+    assert_eq!(rows(&dir, "ps"), 1);
+    // The next trial the normal way: asked for, played, answered.
+    let (k2, need2) = pending_trial(&mut again);
+    assert_ne!(k2, k);
+    std::thread::sleep(Duration::from_millis(need2 as u64 + 60));
+    let next = again
+        .request("POST", &path, Some(&answer(k2, 3.0, need2 + 10.0)))
+        .unwrap();
+    assert_eq!(next.status, 200, "{:?}", next.json());
+    assert_eq!(rows(&dir, "ps"), 2);
+    rt.block_on(server.stop()).unwrap();
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Timing data that is finite but absurd (intervals whose sum overflows, a time played of
+/// 1e308 or negative, NaN sent as JSON's null, a response time of 10^19 ms) is refused with
+/// 422 and logs nothing; the trial stays pending and a sound answer is then taken.
+#[test]
+fn absurd_timing_is_refused_with_422() {
+    let dir = temp_dir("absurd");
+    let options = setup(&dir);
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    let server = rt.block_on(web::start(options)).unwrap();
+    let mut a = Client::new(server.addr);
+    assert_eq!(
+        a.join(&params(&[("PROLIFIC_PID", "px")])).unwrap().status,
+        200
+    );
+    begin(&mut a);
+    let (k, need) = pending_trial(&mut a);
+    std::thread::sleep(Duration::from_millis(need as u64 + 60));
+    let path = a.session_path("answer");
+    let with = |key: &str, v: serde_json::Value| {
+        let mut body = answer(k, 4.0, need + 10.0);
+        body[key] = v;
+        if key == "intervals" {
+            let n = body["intervals"].as_array().map_or(0, Vec::len);
+            body["phases"] = json!(vec!["both"; n]);
+        }
+        body
+    };
+    for (what, body) in [
+        (
+            "overflowing intervals",
+            with("intervals", json!([1e308, 0.0, 1e308])),
+        ),
+        ("one huge interval", with("intervals", json!([16.7, 1e300]))),
+        (
+            "a negative interval",
+            with("intervals", json!([16.7, -1.0])),
+        ),
+        ("played 1e308 ms", with("played_ms", json!(1e308))),
+        ("played NaN (null)", with("played_ms", json!(null))),
+        ("played a negative time", with("played_ms", json!(-5.0))),
+        (
+            "a response time of 10^19 ms",
+            with("response_time_ms", json!(10_000_000_000_000_000_000u64)),
+        ),
+    ] {
+        let r = a.request("POST", &path, Some(&body)).unwrap();
+        assert_eq!(r.status, 422, "{what}: {:?}", r.json());
+    }
+    assert!(!dir.join("results/px_s1/trials.csv").exists() || rows(&dir, "px") == 0);
+    let ok = a
+        .request("POST", &path, Some(&answer(k, 4.0, need + 10.0)))
+        .unwrap();
+    assert_eq!(ok.status, 200, "{:?}", ok.json());
+    assert_eq!(rows(&dir, "px"), 1);
+    rt.block_on(server.stop()).unwrap();
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A quota counts places held: sessions that completed and participants active within the
+/// lease. Five bare joins fill a quota of five only for the lease; then the places of those
+/// who made no request since go back to the pool, while one who kept asking keeps theirs.
+/// A participant whose lease ran out and who comes back continues their session.
+#[test]
+fn idle_participants_give_their_place_back_after_the_lease() {
+    let dir = temp_dir("lease");
+    let options = setup(&dir);
+    let study = std::fs::read_to_string(&options.study).unwrap()
+        + "[crowdsourcing]\nquota = 5\nlease_s = 3\n";
+    std::fs::write(&options.study, study).unwrap();
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    let server = rt.block_on(web::start(options)).unwrap();
+    let addr = server.addr;
+    let join = |id: &str| {
+        let mut c = Client::new(addr);
+        let status = c.join(&params(&[("PROLIFIC_PID", id)])).unwrap().status;
+        (status, c)
+    };
+    let mut first: Vec<Client> = (0..5)
+        .map(|i| {
+            let (status, c) = join(&format!("bare{i}"));
+            assert_eq!(status, 200, "join {i}");
+            c
+        })
+        .collect();
+    assert_eq!(
+        join("sixth").0,
+        503,
+        "the quota is full while the five hold it"
+    );
+    let start = std::time::Instant::now();
+    // One of them stays active; the other four make no request.
+    std::thread::sleep(Duration::from_millis(1500));
+    let active = &mut first[0];
+    let r = active
+        .request("GET", &active.session_path("session"), None)
+        .unwrap();
+    assert_eq!(r.status, 200);
+    std::thread::sleep(Duration::from_millis(3500).saturating_sub(start.elapsed()));
+    // Four places came back; the active participant keeps theirs.
+    for i in 0..4 {
+        assert_eq!(join(&format!("late{i}")).0, 200, "late join {i}");
+    }
+    assert!(
+        start.elapsed() < Duration::from_millis(4400),
+        "the active participant's lease may have run out meanwhile"
+    );
+    assert_eq!(join("over").0, 503);
+    // An idle participant who comes back continues (and holds a place again).
+    let back = &mut first[1];
+    let r = back
+        .request("GET", &back.session_path("session"), None)
+        .unwrap();
+    assert_eq!(
+        (r.status, r.json()["state"].as_str()),
+        (200, Some("welcome"))
+    );
+    assert_eq!(join("still-over").0, 503);
+    rt.block_on(server.stop()).unwrap();
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Whether the server has closed `s` (end of stream or reset); false while it is open.
+fn closed(s: &mut TcpStream) -> bool {
+    use std::io::Read as _;
+    s.set_nonblocking(true).unwrap();
+    let mut b = [0u8; 512];
+    match s.read(&mut b) {
+        Ok(0) => true,
+        // A reply (a 408 or 400 before closing) counts once read; the close follows.
+        Ok(_) => closed(s),
+        Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => false,
+        Err(_) => true,
+    }
+}
+
+/// A connection to `addr` from the loopback address `from` (127.0.0.2, ...: another client).
+fn connect_from(rt: &tokio::runtime::Runtime, from: &str, addr: SocketAddr) -> TcpStream {
+    let s = rt.block_on(async {
+        let socket = tokio::net::TcpSocket::new_v4().unwrap();
+        socket.bind(format!("{from}:0").parse().unwrap()).unwrap();
+        socket.connect(addr).await.unwrap().into_std().unwrap()
+    });
+    s.set_nonblocking(false).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
+    s
+}
+
+/// 300 connections from one address that send half a request line and stall: those over the
+/// per-address cap are closed at once, the rest when the header timeout runs out; meanwhile
+/// a participant from another address is served at once, and one from the same address once
+/// the stalled connections are gone. A kept-alive connection left idle is closed after the
+/// header timeout too. A body sent too slowly is answered 408.
+#[test]
+fn stalled_connections_are_capped_and_timed_out() {
+    use std::io::{Read as _, Write as _};
+    let dir = temp_dir("slow");
+    let mut options = setup(&dir);
+    options.limits = Limits {
+        header_timeout: Duration::from_secs(3),
+        body_timeout: Duration::from_secs(1),
+        max_connections_per_address: 100,
+        ..Limits::default()
+    };
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    let server = rt.block_on(web::start(options)).unwrap();
+    let addr = server.addr;
+    // A kept-alive connection from a third address, idle after one request.
+    let mut idle = connect_from(&rt, "127.0.0.3", addr);
+    idle.write_all(web::client::request_text("GET", "/api/study", addr, "", None).as_bytes())
+        .unwrap();
+    let mut got = [0u8; 12];
+    idle.read_exact(&mut got).unwrap();
+    assert_eq!(&got, b"HTTP/1.1 200");
+    let start = std::time::Instant::now();
+    let mut stalled: Vec<TcpStream> = (0..300)
+        .map(|_| {
+            let mut s = TcpStream::connect(addr).unwrap();
+            s.write_all(b"GET /api/stu").unwrap();
+            s
+        })
+        .collect();
+    // The 200 over the cap are closed as soon as they are taken.
+    let mut shut = 0;
+    while start.elapsed() < Duration::from_secs(2) {
+        shut = stalled.iter_mut().map(closed).filter(|c| *c).count();
+        if shut >= 200 {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    assert_eq!(shut, 200, "closed at once: those over the cap of 100");
+    // A participant from another address is served at once.
+    let asked = std::time::Instant::now();
+    let mut other = connect_from(&rt, "127.0.0.2", addr);
+    other
+        .write_all(
+            web::client::request_text("GET", "/api/study", addr, "", None)
+                .replace("HTTP/1.1\r\n", "HTTP/1.1\r\nConnection: close\r\n")
+                .as_bytes(),
+        )
+        .unwrap();
+    let mut reply = String::new();
+    other.read_to_string(&mut reply).unwrap();
+    assert!(reply.starts_with("HTTP/1.1 200"), "{reply}");
+    let waited = asked.elapsed();
+    assert!(
+        waited < Duration::from_secs(2),
+        "a normal request waited {waited:?}"
+    );
+    assert_eq!(
+        stalled.iter_mut().map(closed).filter(|c| *c).count(),
+        200,
+        "the 100 under the cap are still open, waiting for their head"
+    );
+    assert!(
+        !closed(&mut idle),
+        "the idle connection is kept alive for a while"
+    );
+    // After the header timeout every stalled connection is closed.
+    while start.elapsed() < Duration::from_secs(10) {
+        if stalled.iter_mut().all(closed) {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    assert!(
+        stalled.iter_mut().all(closed),
+        "stalled connections left open"
+    );
+    assert!(start.elapsed() >= Duration::from_secs(3));
+    assert!(closed(&mut idle), "an idle kept-alive connection left open");
+    // Their places under the cap are free again.
+    let mut a = Client::new(addr);
+    assert_eq!(a.join(&params(&[])).unwrap().status, 200);
+    // A body announced but sent too slowly: 408 after the body timeout.
+    let mut slow = TcpStream::connect(addr).unwrap();
+    slow.set_read_timeout(Some(Duration::from_secs(10)))
+        .unwrap();
+    let sent = std::time::Instant::now();
+    slow.write_all(
+        format!(
+            "POST /api/join HTTP/1.1\r\nHost: {addr}\r\nContent-Type: application/json\r\n\
+             Content-Length: 100\r\n\r\n{{\"params\""
+        )
+        .as_bytes(),
+    )
+    .unwrap();
+    let mut head = [0u8; 12];
+    slow.read_exact(&mut head).unwrap();
+    assert_eq!(&head, b"HTTP/1.1 408");
+    assert!(sent.elapsed() >= Duration::from_millis(900));
     rt.block_on(server.stop()).unwrap();
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -63,8 +63,23 @@ pub struct CrowdsourcingSettings {
     /// Plan groups: participants take subject indices 0..groups in turn (each group one
     /// counterbalanced plan); `None`: each participant's own plan, as `study run` gives.
     pub groups: Option<u32>,
-    /// Participants per group (or in all, without groups); the server refuses more.
+    /// Participants per group (or in all, without groups); the server refuses more. A quota
+    /// counts the sessions that completed and the participants active within `lease_s`.
     pub quota: Option<u32>,
+    /// How long a participant's place is kept since their last request, seconds: a
+    /// participant idle longer no longer counts against the quota.
+    #[serde(default = "default_lease_s")]
+    pub lease_s: u32,
+}
+
+/// `[crowdsourcing] lease_s` unless the study sets it: 30 minutes.
+pub const DEFAULT_LEASE_S: u32 = 1800;
+
+/// Longest `[crowdsourcing] lease_s`: a week.
+pub const MAX_LEASE_S: u32 = 7 * 24 * 3600;
+
+fn default_lease_s() -> u32 {
+    DEFAULT_LEASE_S
 }
 
 impl Default for CrowdsourcingSettings {
@@ -80,6 +95,7 @@ impl Default for CrowdsourcingSettings {
             max_gold_failures: 0,
             groups: None,
             quota: None,
+            lease_s: DEFAULT_LEASE_S,
         }
     }
 }
@@ -136,6 +152,7 @@ pub(super) fn parse_crowdsourcing(
             "max_gold_failures",
             "groups",
             "quota",
+            "lease_s",
         ],
     );
     let d = CrowdsourcingSettings::default();
@@ -197,14 +214,9 @@ pub(super) fn parse_crowdsourcing(
         );
     }
     let gold = parse_gold(t, C, "gold", protocol, conditions, cx);
-    let groups = cx.uint(t, C, "groups", 1 << 20);
-    if groups == Some(0) {
-        cx.err(join(C, "groups"), "must be at least 1");
-    }
-    let quota = cx.uint(t, C, "quota", 1 << 24);
-    if quota == Some(0) {
-        cx.err(join(C, "quota"), "must be at least 1");
-    }
+    let groups = positive(t, "groups", 1 << 20, cx);
+    let quota = positive(t, "quota", 1 << 24, cx);
+    let lease_s = positive(t, "lease_s", MAX_LEASE_S, cx);
     CrowdsourcingSettings {
         min_window_px,
         min_refresh_hz,
@@ -214,9 +226,19 @@ pub(super) fn parse_crowdsourcing(
         completion_url,
         gold,
         max_gold_failures: cx.uint(t, C, "max_gold_failures", 1 << 20).unwrap_or(0),
-        groups: groups.filter(|g| *g > 0),
-        quota: quota.filter(|q| *q > 0),
+        groups,
+        quota,
+        lease_s: lease_s.unwrap_or(DEFAULT_LEASE_S),
     }
+}
+
+/// `[crowdsourcing] key`: a whole number from 1 to `hi`, if given.
+fn positive(t: &Table, key: &str, hi: u32, cx: &mut Ctx) -> Option<u32> {
+    let v = cx.uint(t, C, key, hi);
+    if v == Some(0) {
+        cx.err(join(C, key), "must be at least 1");
+    }
+    v.filter(|v| *v > 0)
 }
 
 /// Catch (gold) trials at `table.key`: `[[crowdsourcing.gold]]`, or `[[design.catch]]`.
@@ -289,4 +311,44 @@ pub(super) fn parse_gold(
         out.push(GoldTrial { stimulus, min, max });
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn read(text: &str) -> (CrowdsourcingSettings, Vec<String>) {
+        let t: Table = text.parse().unwrap_or_else(|e| panic!("{e}"));
+        let mut cx = Ctx::default();
+        let c = parse_crowdsourcing(&t, None, &[], &mut cx);
+        let issues = cx
+            .issues
+            .iter()
+            .map(|i| format!("{}: {}", i.key, i.reason))
+            .collect();
+        (c, issues)
+    }
+
+    /// A quota's lease is 30 minutes unless the study sets it, in whole seconds from 1 s to
+    /// a week; anything else is named by its key.
+    #[test]
+    fn the_lease_is_read_and_checked() {
+        assert_eq!(read("").0.lease_s, DEFAULT_LEASE_S);
+        assert_eq!(read("quota = 5\nlease_s = 2").0.lease_s, 2);
+        for (bad, why) in [
+            ("lease_s = 0", "crowdsourcing.lease_s: must be at least 1"),
+            (
+                "lease_s = 604801",
+                "crowdsourcing.lease_s: 604801 is outside 0..=604800",
+            ),
+            ("lease_s = 1.5", "crowdsourcing.lease_s"),
+        ] {
+            let (c, issues) = read(bad);
+            assert_eq!(c.lease_s, DEFAULT_LEASE_S, "{bad}");
+            assert!(
+                issues.len() == 1 && issues[0].starts_with(why),
+                "{bad}: {issues:?}"
+            );
+        }
+    }
 }
