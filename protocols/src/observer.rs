@@ -266,7 +266,27 @@ impl Observer {
             crate::methods::of(self.protocol).simulate(self, trial, &test_error, &mut rng)?;
         let base = self.settings.response_time_ms as f64;
         let response_time_ms = (base * (0.5 + rng.unit_f64())).round() as u64;
-        let replays = u32::from(self.allow_replay && rng.below(10) == 0);
+        let replay = rng.below(10) == 0;
+        // A screen shown whole (MUSHRA) is replayed whole: its panes' trials share one draw,
+        // made from the screen (its reference and block), so each pane logs the screen's
+        // replays as the window and the page do.
+        let replay = if crate::methods::of(self.protocol).screens() {
+            let reference: Vec<u64> = trial.reference.bytes().map(u64::from).collect();
+            StudyRng::new(
+                self.seed,
+                &[
+                    u64::from(self.subject),
+                    purpose::OBSERVER_SCREEN,
+                    trial.block as u64,
+                    crate::rng::derive_seed(0, &reference),
+                ],
+            )
+            .below(10)
+                == 0
+        } else {
+            replay
+        };
+        let replays = u32::from(self.allow_replay && replay);
         Ok(Response {
             answer,
             response_time_ms,

@@ -19,6 +19,8 @@ pub mod purpose {
     pub const OBSERVER_SUBJECT: u64 = 0x6f62_7375;
     /// A simulated observer's answer to one trial.
     pub const OBSERVER_TRIAL: u64 = 0x6f62_7472;
+    /// A simulated observer's replays of one screen shown whole (MUSHRA).
+    pub const OBSERVER_SCREEN: u64 = 0x6f62_7363;
     /// The order of a live staircase's clips for one subject.
     pub const LIVE_CLIPS: u64 = 0x6c69_7665;
     /// Balanced reference sides of one pair of subjects.

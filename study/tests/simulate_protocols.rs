@@ -206,6 +206,50 @@ fn check_mushra(s: &results::SessionResults) {
     );
 }
 
+/// A simulated observer replays a MUSHRA screen whole, as the window and the page do (one
+/// Replay button per screen): every pane of a screen logs the same replays. Over 20
+/// subjects' 60 screens some are replayed and some are not (each is, one time in ten: none
+/// of 60 replayed has probability 0.2 %).
+#[test]
+fn simulated_mushra_screens_replay_whole() {
+    let out = scratch("mushra-replays");
+    let st = study()
+        .arg("simulate")
+        .arg(examples().join("mushra.toml"))
+        .args(["--subjects", "20", "--seed", "5", "-o"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    let (_, sessions) = results::read_results_dir(&out).unwrap();
+    let mut replayed = [0, 0];
+    for s in &sessions {
+        for screen in s.trials.records.chunk_by(|a, b| {
+            a.trial.reference == b.trial.reference && a.trial.block == b.trial.block
+        }) {
+            assert_eq!(screen.len(), 5, "{}", s.manifest.subject);
+            let replays = screen[0].response.replays;
+            assert!(
+                screen.iter().all(|r| r.response.replays == replays),
+                "{}: a screen's panes replayed apart: {:?}",
+                s.manifest.subject,
+                screen
+                    .iter()
+                    .map(|r| r.response.replays)
+                    .collect::<Vec<_>>()
+            );
+            replayed[usize::from(replays > 0)] += 1;
+        }
+    }
+    assert_eq!(replayed[0] + replayed[1], 60);
+    assert!(replayed[0] > 0 && replayed[1] > 0, "{replayed:?}");
+    let _ = std::fs::remove_dir_all(&out);
+}
+
 /// A simulated pair comparison session of the example: every pair of a clip's five
 /// conditions once, then two again with the sides swapped; each row's two stimuli are of one
 /// clip, and the score says which column's version won (1/2 for no preference).
