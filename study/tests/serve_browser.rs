@@ -519,8 +519,13 @@ fn give(b: &Browser, (answer, replays): (Answer, u32)) {
 }
 
 /// Rates every pane of an open MUSHRA screen as the script says (each slider moved to its
-/// value), then Continue.
+/// value) after the screen's replays (every pane's row logs them), then Continue.
 fn give_screen(b: &Browser, script: &Script, panes: &[u32]) {
+    let replays = script.get(&panes[0]).map_or(0, |a| a.1);
+    for _ in 0..replays {
+        b.wait("!document.getElementById('replay').hidden", 30);
+        b.click("#replay");
+    }
     for (k, index) in panes.iter().enumerate() {
         let Some((Answer::Rating(v), _)) = script.get(index) else {
             panic!("pane trial {index} has no rating in the simulated session");
@@ -1183,16 +1188,146 @@ fn a_browser_completes_dscqs_and_a_live_staircase() {
     }
 }
 
-/// Trials (screens) each example study is taken through in the browser: every example's
-/// screen, widget and figures on the real page, within CI's time (the examples' 4-second
-/// clips make their whole sessions about half an hour of playback together; the MOS, DSCQS
-/// and staircase tests above run sessions to their end).
-const EXAMPLE_SCREENS: u32 = 2;
+/// How many times shorter the examples' clips and grey screens are when their whole sessions
+/// run in the browser: their 3-4-second clips and 1-3-second greys make the 14 sessions about
+/// half an hour of playback, which CI's time cannot hold; an eighth of it takes a few minutes.
+/// What a session is (its trials, order, hidden repeats, groups, staircases, answers) does not
+/// depend on the clips' length. `SCREENSHOTS` (for docs/serve.md) takes the examples as they
+/// are.
+const SHORTER: usize = 8;
 
-/// The examples whose whole sessions play in about a minute or less, taken to their end
-/// screen: a single-stimulus method with its hidden references, MUSHRA's three screens (a
-/// training screen, then the test), and between-subject groups.
-const WHOLE_SESSIONS: [&str; 3] = ["acr-hr", "mushra", "groups"];
+/// Copies the example folder into `dir` with every stimulus clip (BVH, AMC) cut to its first
+/// 1/[`SHORTER`] of frames and every study's `grey_ms` and `gap_ms` divided by [`SHORTER`]
+/// (the live staircase's 3-s clips stay whole: it encodes them as it goes at up to 80:1,
+/// which a cut clip's stream headers cannot reach).
+/// The stimulus manifests keep their error metrics (which both the server and `study
+/// simulate` read) and drop their bitstreams, whose decodings the cut clips no longer are.
+/// Adds two variants the examples lack: `quest.toml` with Psi's rule (`psi.toml`) and
+/// `groups.toml` with catch trials, which every session gets whatever its group
+/// (`groups-catch.toml`). Returns the studies, sorted by name.
+fn short_examples(dir: &Path) -> Vec<PathBuf> {
+    fn copy(from: &Path, to: &Path) {
+        std::fs::create_dir_all(to).unwrap();
+        for e in std::fs::read_dir(from).unwrap() {
+            let path = e.unwrap().path();
+            let target = to.join(path.file_name().unwrap());
+            let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("");
+            if path.is_dir() {
+                copy(&path, &target);
+            } else if (ext == "bvh" || ext == "amc") && !from.ends_with("live/clips") {
+                let text = std::fs::read_to_string(&path).unwrap();
+                let cut = if ext == "bvh" {
+                    cut_bvh(&text)
+                } else {
+                    cut_amc(&text)
+                };
+                std::fs::write(&target, cut).unwrap();
+            } else if ext == "mcz" {
+                // A cut clip is no longer its bitstream's decoding (the manifest drops it).
+            } else if path.file_name().is_some_and(|n| n == "stimuli.json") {
+                let mut manifest: Value =
+                    serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+                for s in manifest["stimuli"].as_array_mut().unwrap() {
+                    if let Some(b) = s.get_mut("bitstream") {
+                        *b = Value::Null;
+                    }
+                }
+                std::fs::write(&target, manifest.to_string()).unwrap();
+            } else if ext == "toml" && from.file_name().is_some_and(|n| n == "examples") {
+                let text = std::fs::read_to_string(&path).unwrap();
+                let mut short = String::new();
+                for line in text.lines() {
+                    let cut = ["grey_ms = ", "gap_ms = "].into_iter().find_map(|key| {
+                        let ms: usize = line.strip_prefix(key)?.trim().parse().unwrap();
+                        Some(format!("{key}{}", ms / SHORTER))
+                    });
+                    short.push_str(cut.as_deref().unwrap_or(line));
+                    short.push('\n');
+                }
+                std::fs::write(&target, short).unwrap();
+            } else {
+                std::fs::copy(&path, &target).unwrap();
+            }
+        }
+    }
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap();
+    let to = dir.join("examples");
+    copy(&root.join("examples"), &to);
+    let quest = std::fs::read_to_string(to.join("quest.toml")).unwrap();
+    let psi = quest
+        .replace("name = \"quest-plus-t_l\"", "name = \"psi-t_l\"")
+        .replace("method = \"quest_plus\"", "method = \"psi\"");
+    assert_ne!(psi, quest, "quest.toml names its method as before");
+    std::fs::write(to.join("psi.toml"), psi).unwrap();
+    // Catch trials every session gets, whichever group it is in.
+    let groups = std::fs::read_to_string(to.join("groups.toml")).unwrap();
+    std::fs::write(
+        to.join("groups-catch.toml"),
+        format!(
+            "{}\n[[design.catch]]\nstimulus = \"walk/wavelet-standard/cr30\"\nmax = 4.5\n\n\
+             [[design.catch]]\nstimulus = \"march/wavelet-perceptual/cr10\"\nmin = 1.5\n",
+            groups.replace("name = \"mos-groups\"", "name = \"mos-groups-catch\"")
+        ),
+    )
+    .unwrap();
+    let mut studies: Vec<PathBuf> = std::fs::read_dir(&to)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+        .collect();
+    studies.sort();
+    assert!(studies.len() >= 16, "{studies:?}");
+    studies
+}
+
+/// A BVH clip cut to its first 1/[`SHORTER`] of frames (at least 2).
+fn cut_bvh(text: &str) -> String {
+    let mut out = String::new();
+    let mut keep = usize::MAX;
+    let mut motion = false;
+    for line in text.lines() {
+        if let Some(n) = line.trim().strip_prefix("Frames:") {
+            keep = (n.trim().parse::<usize>().unwrap() / SHORTER).max(2);
+            out.push_str("Frames: ");
+            out.push_str(&keep.to_string());
+            out.push('\n');
+            continue;
+        }
+        if motion {
+            if keep == 0 {
+                break;
+            }
+            keep -= 1;
+        }
+        if line.trim().starts_with("Frame Time:") {
+            motion = true;
+        }
+        out.push_str(line);
+        out.push('\n');
+    }
+    out
+}
+
+/// An AMC clip cut to its first 1/[`SHORTER`] of frames (at least 2): a frame begins at a
+/// line holding only its number.
+fn cut_amc(text: &str) -> String {
+    let is_frame = |l: &str| !l.trim().is_empty() && l.trim().bytes().all(|b| b.is_ascii_digit());
+    let frames = text.lines().filter(|l| is_frame(l)).count();
+    let keep = (frames / SHORTER).max(2);
+    let mut seen = 0;
+    let mut out = String::new();
+    for line in text.lines() {
+        if is_frame(line) {
+            seen += 1;
+            if seen > keep {
+                break;
+            }
+        }
+        out.push_str(line);
+        out.push('\n');
+    }
+    out
+}
 
 /// The example studies (`examples/*.toml`), sorted by name.
 fn examples() -> Vec<PathBuf> {
@@ -1244,9 +1379,12 @@ impl Example {
 }
 
 /// Every example study `study serve` is given runs in Chromium as a participant takes it,
-/// and its rows equal `study simulate --subject` for the same subject, answer for answer:
-/// each method's screen (ratings, pairs, choices with and without "no preference",
-/// MUSHRA's sliders, crowd scenes) comes from the one description the window draws.
+/// the whole session to its end screen, and its rows equal `study simulate --subject` for
+/// the same subject, answer for answer (replays too): each method's screen (ratings, pairs,
+/// choices with and without "no preference", MUSHRA's sliders, crowd scenes, up-down,
+/// QUEST+, Psi and live staircases, familiarization, hidden repeats, Latin squares, groups
+/// with catch trials) comes from the one description the window draws. The sessions run on
+/// [`short_examples`]: the examples with their clips and greys cut to an eighth.
 ///
 /// On the way the page is measured at 1280×720 and 1920×1080: every text a participant
 /// must read on the welcome screen (title, instructions, field labels and answers, the
@@ -1263,7 +1401,17 @@ fn every_example_study_runs_in_the_browser_as_simulated() {
     let sizes = [(1280, 720), (1920, 1080)];
     let mut small = Vec::new();
     let driver = Driver::start();
-    for study in &examples() {
+    // `SCREENSHOTS=DIR` (scripts/screenshots): each example as it is, to its first trial,
+    // for docs/serve.md beside the window's.
+    let shots = std::env::var_os("SCREENSHOTS");
+    let copies = temp_dir("short-examples");
+    let studies = if shots.is_some() {
+        examples()
+    } else {
+        short_examples(&copies)
+    };
+    for study in &studies {
+        let started = Instant::now();
         let ex = Example::new(study, "example");
         let Example {
             name,
@@ -1280,15 +1428,13 @@ fn every_example_study_runs_in_the_browser_as_simulated() {
         b.window_viewport();
         fill_welcome(&b);
         b.click("#begin");
-        // `SCREENSHOTS=DIR` (scripts/screenshots): the first trial as it plays, for
-        // docs/serve.md beside the window's.
-        if let Some(shots) = std::env::var_os("SCREENSHOTS") {
+        if let Some(shots) = &shots {
             b.wait(
                 "document.body.dataset.screen === 'trial' && window.drawn && window.drawn.show !== 'grey' \
                  && (window.drawn.clipTime > 1.5 || document.body.dataset.open === '1')",
                 60,
             );
-            b.screenshot(&Path::new(&shots).join(format!("{name}-page.png")));
+            b.screenshot(&Path::new(shots).join(format!("{name}-page.png")));
         }
         b.wait(
             "document.body.dataset.screen === 'trial' && document.body.dataset.open === '1'",
@@ -1297,17 +1443,11 @@ fn every_example_study_runs_in_the_browser_as_simulated() {
         measure_texts(&b, &format!("{name} vote"), &sizes, &mut small);
         b.window_viewport();
         let mut given = BTreeSet::new();
-        let whole = WHOLE_SESSIONS.contains(&name.as_str());
-        if whole {
+        if shots.is_some() {
+            answer_trials(&b, &script, Some(1), &mut given);
+        } else {
             answer_trials(&b, &script, None, &mut given);
             assert_eq!(b.screen(), "end", "{name}");
-            assert_eq!(given.len(), simulated.len(), "{name}: every trial answered");
-        }
-        let mut screens = 0;
-        while !whole && screens < EXAMPLE_SCREENS && b.screen() != "end" {
-            let before = given.len() as u32;
-            answer_trials(&b, &script, Some(before + 1), &mut given);
-            screens += 1;
         }
         let served = results::read_trials(&out.join(format!("{subject}_s1/trials.csv")))
             .unwrap()
@@ -1317,11 +1457,18 @@ fn every_example_study_runs_in_the_browser_as_simulated() {
             given.len(),
             "{name}: one row per answer given"
         );
-        assert!(!served.is_empty(), "{name}: nothing answered");
+        if shots.is_none() {
+            assert_eq!(
+                served.len(),
+                simulated.len(),
+                "{name}: every trial answered"
+            );
+        }
         for (got, want) in served.iter().zip(&simulated) {
             let at = format!("{name} trial {}", want.trial.index);
             assert_eq!(got.trial, want.trial, "{at}");
             assert_eq!(got.encoding, want.encoding, "{at}");
+            assert_eq!(got.response.replays, want.response.replays, "{at}");
             // A continuous scale without a step (the DSCQS example's BT.500 0-100) takes
             // marks to a hundredth of its range by keyboard: the simulated observer's
             // fraction is given to the nearest of them, and its score follows from it.
@@ -1340,8 +1487,14 @@ fn every_example_study_runs_in_the_browser_as_simulated() {
             }
         }
         drop(b);
+        eprintln!(
+            "{name}: {} trials in {:.1} s",
+            served.len(),
+            started.elapsed().as_secs_f64()
+        );
         let _ = std::fs::remove_dir_all(dir);
     }
+    let _ = std::fs::remove_dir_all(&copies);
     assert!(
         small.is_empty(),
         "{} texts under {MIN_TEXT_PX} px:\n{}",
