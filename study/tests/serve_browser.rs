@@ -272,18 +272,6 @@ impl Browser {
         self.cmd("DELETE", "actions", None);
     }
 
-    /// Whether `cond` (a JS expression) comes true within `secs`.
-    fn comes_true(&self, cond: &str, secs: u64) -> bool {
-        let deadline = Instant::now() + Duration::from_secs(secs);
-        while Instant::now() < deadline {
-            if self.js(&format!("return !!({cond});")) == Value::Bool(true) {
-                return true;
-            }
-            std::thread::sleep(Duration::from_millis(40));
-        }
-        false
-    }
-
     /// Waits until `cond` (a JS expression) is true.
     fn wait(&self, cond: &str, secs: u64) {
         let deadline = Instant::now() + Duration::from_secs(secs);
@@ -531,14 +519,9 @@ fn give(b: &Browser, (answer, replays): (Answer, u32)) {
 }
 
 /// Rates every pane of an open MUSHRA screen as the script says (each slider moved to its
-/// value) after the screen's replays (every pane's row logs them; none unless `replay`),
-/// then Continue.
-fn give_screen(b: &Browser, script: &Script, panes: &[u32], replay: bool) {
-    let replays = if replay {
-        script.get(&panes[0]).map_or(0, |a| a.1)
-    } else {
-        0
-    };
+/// value) after the screen's replays (every pane's row logs them), then Continue.
+fn give_screen(b: &Browser, script: &Script, panes: &[u32]) {
+    let replays = script.get(&panes[0]).map_or(0, |a| a.1);
     for _ in 0..replays {
         b.wait("!document.getElementById('replay').hidden", 30);
         b.click("#replay");
@@ -669,33 +652,19 @@ fn answer_trials(b: &Browser, script: &Script, stop_after: Option<u32>, given: &
             .collect();
         if panes.len() > 1 {
             given.extend(&panes);
-            give_screen(b, script, &panes, true);
+            give_screen(b, script, &panes);
         } else {
             given.insert(k);
             give(b, answer);
         }
         let refusals = &at[2];
-        let moved = format!(
-            "document.body.dataset.screen !== 'trial' || document.body.dataset.trial !== '{k}' \
-             || {REFUSALS} !== {refusals}"
+        b.wait(
+            &format!(
+                "document.body.dataset.screen !== 'trial' || document.body.dataset.trial !== '{k}' \
+                 || {REFUSALS} !== {refusals}"
+            ),
+            60,
         );
-        // The page closes a trial the moment it takes an answer (`open` 0, then the post).
-        // Still open after 15 s, it never got the answer: an input event WebDriver lost on
-        // a loaded machine (seen once in a CI-like run, a key press). Given once more, the
-        // replays aside (they were made).
-        if !b.comes_true(&moved, 15)
-            && b.js(&format!(
-                "return document.body.dataset.trial === '{k}' && document.body.dataset.open === '1';"
-            )) == Value::Bool(true)
-        {
-            eprintln!("trial {k}: the page took no answer in 15 s; given again");
-            if panes.len() > 1 {
-                give_screen(b, script, &panes, false);
-            } else {
-                give(b, (answer.0, 0));
-            }
-        }
-        b.wait(&moved, 60);
         if b.js(&format!("return {REFUSALS};")) != *refusals {
             // Refused: the same trial again, from the start.
             given.remove(&k);
