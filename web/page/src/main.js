@@ -713,6 +713,10 @@ function runTrial(info, t, clips) {
     const w = widgets(info, screen, (answer, paneRatings) => {
       if (answered || !pres.shownOnce) return;
       answered = true;
+      // Its handlers go now, not at this trial's next frame: a slow frame can come after
+      // the next trial has put its own in place, and would take those away.
+      document.onkeydown = null;
+      document.onvisibilitychange = null;
       // Closed once given; a refused answer opens again only after the trial replays.
       document.body.dataset.open = '0';
       const now = performance.now();
@@ -749,7 +753,7 @@ function runTrial(info, t, clips) {
     };
     const canvas = $('view');
     const frame = (now) => {
-      if (answered) { document.onkeydown = null; document.onvisibilitychange = null; return; }
+      if (answered) return;
       const f = pres.at(now);
       if (last !== null) {
         intervals.push(now - last);
