@@ -1256,8 +1256,18 @@ fn short_examples(dir: &Path) -> Vec<PathBuf> {
     let quest = std::fs::read_to_string(to.join("quest.toml")).unwrap();
     let psi = quest
         .replace("name = \"quest-plus-t_l\"", "name = \"psi-t_l\"")
-        .replace("method = \"quest_plus\"", "method = \"psi\"");
-    assert_ne!(psi, quest, "quest.toml names its method as before");
+        .replace("method = \"quest_plus\"", "method = \"psi\"")
+        // Psi fixes the lapse rate (QUEST+ puts it under the posterior).
+        .replace(
+            "lapse = { values = [0.0, 0.01, 0.02, 0.03, 0.04], prior = { kind = \"beta\", a = 1, b = 10 } }",
+            "lapse = { values = [0.02] }",
+        );
+    assert_eq!(
+        psi.matches("psi").count(),
+        quest.matches("psi").count() + 2,
+        "quest.toml names its method and lapse rates as before"
+    );
+    assert!(psi.contains("lapse = { values = [0.02] }"));
     std::fs::write(to.join("psi.toml"), psi).unwrap();
     // Catch trials every session gets, whichever group it is in.
     let groups = std::fs::read_to_string(to.join("groups.toml")).unwrap();
