@@ -1280,14 +1280,7 @@ fn short_examples(dir: &Path) -> Vec<PathBuf> {
         ),
     )
     .unwrap();
-    let mut studies: Vec<PathBuf> = std::fs::read_dir(&to)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
-        .collect();
-    studies.sort();
-    assert!(studies.len() >= 16, "{studies:?}");
-    studies
+    studies_in(&to, 16)
 }
 
 /// A BVH clip cut to its first 1/[`SHORTER`] of frames (at least 2).
@@ -1342,14 +1335,19 @@ fn cut_amc(text: &str) -> String {
 /// The example studies (`examples/*.toml`), sorted by name.
 fn examples() -> Vec<PathBuf> {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap();
-    let mut examples: Vec<PathBuf> = std::fs::read_dir(root.join("examples"))
+    studies_in(&root.join("examples"), 14)
+}
+
+/// The study files (`*.toml`) in `dir`, sorted by name; at least `least` of them.
+fn studies_in(dir: &Path, least: usize) -> Vec<PathBuf> {
+    let mut studies: Vec<PathBuf> = std::fs::read_dir(dir)
         .unwrap()
         .map(|e| e.unwrap().path())
         .filter(|p| p.extension().is_some_and(|e| e == "toml"))
         .collect();
-    examples.sort();
-    assert!(examples.len() >= 14, "{examples:?}");
-    examples
+    studies.sort();
+    assert!(studies.len() >= least, "{studies:?}");
+    studies
 }
 
 /// An example study's folder and the subject a browser takes part as (`ex` and the name
