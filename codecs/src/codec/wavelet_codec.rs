@@ -55,21 +55,33 @@
 //! **(d) The short last slice** (a clip whose length is not a multiple of `W`) is coded at the
 //! previous slice's operating point, not at its own share of α alone: under
 //! [`Allocation::Position`] it keeps every coefficient the previous slice's threshold keeps (or
-//! what its own share keeps, where that is more) and takes the previous slice's step (no
-//! coarser than the threshold, floored for its own value range); under the printed rule each
-//! channel also keeps every detail at least as large as the smallest that channel kept in the
-//! previous slice (QP bits per channel as before). Its own share broke it: a slice of `n`
-//! frames has fewer levels, so its always-kept approximation band is a large part of `α·N·n`
-//! (6 of 22 coefficients per channel with D4), which at 20:1 leaves no detail budget; the step
-//! then came from the largest weighted approximation coefficient (the root translation's) and
-//! every low-sensitivity channel's mean rounded to zero (a 1 558-frame clip: 37 of 62 channels
-//! at exactly 0 in its 22-frame tail). The same threshold and step is the same slope on the
-//! rate-distortion curve, so the tail gets the bits its content needs at the clip's quality and
-//! the rate search moves α for the rest. Merging the tail into the previous slice (the last
-//! slice `W..2W−1` frames) was measured too: lower clip RMS, but the clip's last frames then lie
-//! at the periodized edge of a long slice (a 2-frame tail up to 2.9× the clip's RMS at 60:1);
-//! overlapping windows code up to `W − 1` frames twice. Nothing in the payload changes (a
-//! slice's step and counts were in the stream already), so every decoder reads these streams.
+//! what its own share keeps, where that is more) and takes the previous slice's step (no coarser
+//! than the threshold, floored for its own value range); under the printed rule each channel also
+//! keeps every detail at least as large as `√(n/W)` times the smallest that channel kept in the
+//! previous slice (QP bits per channel as before). Its own share broke it: a slice of `n` frames
+//! has fewer levels, so its always-kept approximation band is a large part of `α·N·n` (6 of 22
+//! coefficients per channel with D4), which at 20:1 leaves no detail budget; the step then came
+//! from the largest weighted approximation coefficient (the root translation's) and every
+//! low-sensitivity channel's mean rounded to zero (a 1 558-frame clip: 37 of 62 channels at exactly
+//! 0 in its 22-frame tail). The same threshold and step is the same slope on the rate-distortion
+//! curve, so the tail gets the bits its content needs at the clip's quality and the rate search
+//! moves α for the rest. Merging the tail into the previous slice (the last slice `W..2W−1` frames)
+//! was measured too: lower clip RMS, but the clip's last frames then lie at the periodized edge of
+//! a long slice (a 2-frame tail up to 2.9× the clip's RMS at 60:1); overlapping windows code up to
+//! `W − 1` frames twice. Nothing in the payload changes (a slice's step and counts were in the
+//! stream already), so every decoder reads these streams.
+//!
+//! The printed rule's thresholds are per channel, so a channel that drifts through a short tail
+//! (the root moving forward, a limb turning) kept only its approximation band at the unscaled
+//! threshold, and the periodized ramp's edges then carried the tail's whole error:
+//! `wavelet-standard` at 48:1 on 268- and 280-frame cuts of the synthetic walk had tails of
+//! 3.0-3.2× the clip's RMS where no stretch of the same length inside the clip exceeded 1.2×
+//! (`tests/short_window.rs` found it). The scale makes a dropped detail cost the same error per
+//! frame as in the previous slice (its energy spreads over `n` frames, not `W`); it costs the
+//! baselines' clip RMS between −12 % and +16 % at 20:1 on the shared clips (up to +24 % at 40:1 on
+//! pirouette, where a 79-frame tail takes a larger part of a small budget). Under
+//! [`Allocation::Position`] the same scale was measured too and left out: it brought the worst tail
+//! from 2.25× to 1.07× but raised the clip RMS by up to 5 %.
 //!
 //! Rotation channels are unwrapped (jumps over 180° taken as wraps) before the transform and
 //! wrapped back into (−180°, 180°] after decoding, for the channels where unwrapping changed
@@ -550,6 +562,8 @@ impl WaveletCodec {
         let n_coef = e.bands.len();
         let sum_a: f64 = importance.iter().sum();
         let budget = s.alpha * (n_ch * n_coef) as f64;
+        // Decision (d), printed rule: the previous slice's thresholds scaled by √(n/W).
+        let tail_scale = (n_coef as f64 / s.window as f64).sqrt();
         // Shares are rounded by carrying the remainder from channel to channel, so the slice
         // keeps round(α·N·W) coefficients in total and the rate moves smoothly with α.
         let mut acc = 0.0f64;
@@ -564,7 +578,7 @@ impl WaveletCodec {
             acc += share;
             let co = &mut e.coeffs[c];
             let k_share = if borrow {
-                let thr = e.prev_thr[c];
+                let thr = e.prev_thr[c] * tail_scale;
                 k_share.max(n_approx + co[n_approx..].iter().filter(|v| v.abs() >= thr).count())
             } else {
                 k_share
