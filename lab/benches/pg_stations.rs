@@ -113,10 +113,16 @@ fn main() {
                 let mut mine = Vec::new();
                 let mut sessions = 0;
                 loop {
-                    let number = store.next_subject_number().unwrap();
-                    if number > subjects {
+                    let Some((number, _)) = store
+                        .take_subject_number(
+                            Some(subjects),
+                            &|n| lab::simulate::subject_id(n - 1),
+                            Some(seed),
+                        )
+                        .unwrap()
+                    else {
                         break;
-                    }
+                    };
                     let index = number - 1;
                     let mut fresh = lab::session::new_manifest(
                         def,

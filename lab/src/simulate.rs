@@ -209,6 +209,13 @@ fn simulate_into_database(
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<()> {
     let wait = options.patience;
+    // A session another station created or took over first.
+    let taken = |e: &LabError| {
+        matches!(e, LabError::Context { source, .. } if matches!(
+            **source,
+            LabError::Results(ResultsError::SessionBusy { .. } | ResultsError::Exists { .. })
+        ))
+    };
     if options.resume {
         let abandoned = session::retry_outage(wait, report, || Ok(store.abandoned()?))?;
         for m in abandoned {
@@ -234,38 +241,65 @@ fn simulate_into_database(
                 report,
             ) {
                 Ok(summary) => report(&summary),
-                // Another station resumed it first.
-                Err(LabError::Context { source, .. })
-                    if matches!(*source, LabError::Results(ResultsError::SessionBusy { .. })) =>
-                {
+                Err(e) if taken(&e) => {
                     report(&format!("{}: taken over by another station", m.subject));
+                }
+                Err(e) => return Err(e),
+            }
+        }
+        // Numbers this simulation took whose station stopped before creating the session.
+        let unclaimed = session::retry_outage(wait, report, || Ok(store.unclaimed_numbers()?))?;
+        for u in unclaimed {
+            if u.observer_seed != Some(options.seed)
+                || subject_number(&u.subject) != Some(u.number - 1)
+                || u.number > options.subjects
+            {
+                continue;
+            }
+            match run_subject(
+                study,
+                options,
+                &Subject::numbered(u.number - 1),
+                store,
+                false,
+                stimuli,
+                report,
+            ) {
+                Ok(summary) => report(&format!(
+                    "{summary} (number {} was taken by {} without a session)",
+                    u.number, u.station
+                )),
+                Err(e) if taken(&e) => {
+                    report(&format!("{}: created by another station", u.subject));
                 }
                 Err(e) => return Err(e),
             }
         }
     } else {
         let left = session::retry_outage(wait, report, || Ok(store.abandoned()?))?.len();
-        if left > 0 {
+        let unclaimed = session::retry_outage(wait, report, || Ok(store.unclaimed_numbers()?))?
+            .iter()
+            .filter(|u| u.observer_seed == Some(options.seed))
+            .count();
+        if left > 0 || unclaimed > 0 {
             report(&format!(
-                "note: {left} sessions of {} were left unfinished by a station; `--resume` continues them",
+                "note: {left} sessions of {} were left unfinished by a station and {unclaimed} \
+                 subject numbers taken without a session; `--resume` continues and creates them",
                 store.location()
             ));
         }
     }
-    loop {
-        let number = session::retry_outage(wait, report, || Ok(store.next_subject_number()?))?;
-        if number > options.subjects {
-            break;
-        }
+    let id_of = |n: u32| subject_id(n - 1);
+    while let Some((number, id)) = session::retry_outage(wait, report, || {
+        Ok(store.take_subject_number(Some(options.subjects), &id_of, Some(options.seed))?)
+    })? {
         let index = number - 1;
-        let found = session::retry_outage(wait, report, || {
-            Ok(store.find_session(&subject_id(index), 1)?)
-        })?;
+        let found = session::retry_outage(wait, report, || Ok(store.find_session(&id, 1)?))?;
         if found != Found::Absent {
             // Recorded already (imported under this id): the number is spent, take the next.
             continue;
         }
-        let summary = run_subject(
+        match run_subject(
             study,
             options,
             &Subject::numbered(index),
@@ -273,8 +307,12 @@ fn simulate_into_database(
             false,
             stimuli,
             report,
-        )?;
-        report(&summary);
+        ) {
+            Ok(summary) => report(&summary),
+            // A resuming station found the number before this one created the session.
+            Err(e) if taken(&e) => report(&format!("{id}: created by another station")),
+            Err(e) => return Err(e),
+        }
         progress(number as usize, options.subjects as usize);
     }
     Ok(())

@@ -163,11 +163,14 @@ fn load_archived(store: &mut results::pg::PgStore) -> Result<lab::StudyFile> {
 }
 
 /// The sessions of run `run` (`None`: the database's one run) of `db`, where they come from
-/// and the study file to report them with: `study`, else the copy the run keeps.
+/// and the study file to report them with: `study`, else the copy the run keeps. `warn` hears
+/// of subject numbers taken for a subject that has no session (a station stopped between
+/// the two): a subject the study planned that the report lacks.
 pub(crate) fn open(
     db: &results::pg::Database,
     run: Option<&str>,
     study: Option<&std::path::Path>,
+    warn: &mut dyn FnMut(&str),
 ) -> Result<(Source, Sessions, lab::StudyFile)> {
     let mut store = results::pg::PgStore::open(db, run)?;
     let heads = store.sessions()?;
@@ -176,6 +179,22 @@ pub(crate) fn open(
             "{} holds no sessions yet (nothing to report)",
             store.location()
         );
+    }
+    let unclaimed = store.unclaimed_numbers()?;
+    if !unclaimed.is_empty() {
+        let list: Vec<String> = unclaimed
+            .iter()
+            .map(|u| format!("{} ({}, by {})", u.number, u.subject, u.station))
+            .collect();
+        warn(&format!(
+            "{}: {} subject numbers were taken for subjects that have no session: {}; a station \
+             stopped between taking the number and starting the session, so the report lacks \
+             those subjects (`study simulate --resume` creates a simulation's, `study run \
+             --subject ID` a real subject's)",
+            store.location(),
+            unclaimed.len(),
+            list.join(", ")
+        ));
     }
     let (study_file, archived) = match study {
         // Its errors name the file.

@@ -314,7 +314,7 @@ pub fn report_with_progress(
     warn: &mut dyn FnMut(&str),
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<Summary> {
-    let (source, sessions, study_file) = sessions::open(request)?;
+    let (source, sessions, study_file) = sessions::open(request, warn)?;
     let run = &source.run;
     let options = report_options(&request.settings, &study_file.definition)?;
     let sessions::Logs {

@@ -473,7 +473,7 @@ fn pilot_plan(folder: &Path, ci_width: Option<f64>, goal: &Goal, out: &mut Strin
             ..crate::Settings::default()
         },
     };
-    let (source, sessions, study_file) = crate::sessions::open(&request)?;
+    let (source, sessions, study_file) = crate::sessions::open(&request, &mut |_| {})?;
     let options = crate::report_options(&request.settings, &study_file.definition)?;
     let logs = crate::sessions::read_logs(
         &request,

@@ -345,8 +345,16 @@ pub(crate) struct Source {
 }
 
 /// The sessions `request` names, where they come from and the study file to report them
-/// with.
-pub(crate) fn open(request: &Request) -> Result<(Source, Sessions, lab::StudyFile)> {
+/// with; `warn` hears what the source itself warns about (a database run's subject numbers
+/// taken without a session).
+pub(crate) fn open(
+    request: &Request,
+    #[cfg_attr(
+        not(feature = "postgres"),
+        expect(unused_variables, reason = "a folder warns of nothing here")
+    )]
+    warn: &mut dyn FnMut(&str),
+) -> Result<(Source, Sessions, lab::StudyFile)> {
     // Without the `postgres` feature a folder is the only source.
     #[cfg_attr(
         not(feature = "postgres"),
@@ -356,7 +364,7 @@ pub(crate) fn open(request: &Request) -> Result<(Source, Sessions, lab::StudyFil
         Destination::Folder(folder) => folder.clone(),
         #[cfg(feature = "postgres")]
         Destination::Database { db, run } => {
-            return crate::database::open(db, run.as_deref(), request.study.as_deref());
+            return crate::database::open(db, run.as_deref(), request.study.as_deref(), warn);
         }
     };
     if !folder.is_dir() {

@@ -140,7 +140,11 @@ fn two_stations_never_get_the_same_subject_number(server: &ScratchServer) {
                 (0..100)
                     .map(|_| {
                         barrier.wait();
-                        store.next_subject_number().unwrap()
+                        store
+                            .take_subject_number(None, &|n| format!("S{n:02}"), None)
+                            .unwrap()
+                            .unwrap()
+                            .0
                     })
                     .collect::<Vec<u32>>()
             })
@@ -392,7 +396,12 @@ fn roles_from_the_docs_allow_what_they_say(server: &ScratchServer) {
     };
     let station = as_role("study_station");
     let mut store = PgStore::open(&station, Some("pg-test")).unwrap();
-    assert_eq!(store.next_subject_number().unwrap(), 1);
+    assert_eq!(
+        store
+            .take_subject_number(None, &|n| format!("S{n:02}"), None)
+            .unwrap(),
+        Some((1, "S01".into()))
+    );
     let m = manifest("S02");
     let mut writer = store.create_session(&m).unwrap();
     writer.append(&record("S02", 0, 4.0)).unwrap();

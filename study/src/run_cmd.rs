@@ -359,7 +359,10 @@ fn open_store(
                     bail!("--resume continues a named subject's session: give its id, not auto");
                 }
                 loop {
-                    let id = lab::simulate::subject_id(store.next_subject_number()? - 1);
+                    let id_of = |n: u32| lab::simulate::subject_id(n - 1);
+                    let Some((_, id)) = store.take_subject_number(None, &id_of, None)? else {
+                        bail!("{}: no subject number left", store.location());
+                    };
                     if store.find_session(&id, args.session)? == results::backend::Found::Absent {
                         println!("subject number from {}: {id}", store.location());
                         break id;

@@ -1,6 +1,7 @@
 //! Stations writing one PostgreSQL database (a throw-away server started here): a station
 //! killed with SIGKILL mid-session is resumed by another and the record equals an
-//! uninterrupted run; the server restarted mid-study is reported and the station continues,
+//! uninterrupted run; a station stopped between taking a subject number and creating the
+//! session loses no subject; the server restarted mid-study is reported and the station continues,
 //! losing nothing; export then report from the folder equals the report from the database;
 //! import refuses duplicates; a password on the command line is refused and never printed.
 //! Under CI a missing server fails this test; elsewhere it says so and passes.
@@ -188,6 +189,61 @@ fn stations_share_one_database() {
     assert!(text.contains("S001: Complete"), "{text}");
     export(&url, "killed", &tmp.join("killed"));
     assert_eq!(records(&tmp.join("killed")), clean, "killed and resumed");
+
+    // A run with nothing left to do takes no subject number.
+    let numbers = |client: &mut postgres::Client, run: &str| -> i64 {
+        client
+            .query_one(
+                "SELECT count(*) FROM study_subject_numbers n JOIN study_runs r \
+                 ON r.id = n.run_id WHERE r.name = $1",
+                &[&run],
+            )
+            .unwrap()
+            .get(0)
+    };
+    assert_eq!(numbers(&mut client, "clean"), 3);
+    ok(&simulate(&url, "clean", 3, 0, false).output().unwrap());
+    assert_eq!(numbers(&mut client, "clean"), 3, "nothing to do, a number taken");
+
+    // A station stopped between taking a subject number and creating its session: what it
+    // leaves is the committed number (taken here as that station would). The report warns,
+    // a plain run says so and runs the others, `--resume` creates the session, and the
+    // record equals the uninterrupted run's.
+    {
+        let file = lab::StudyFile::load(&study()).unwrap();
+        let mut dead =
+            lab::results_dir::open_database_for_simulation(&db, Some("lost"), &file, 11, 3)
+                .unwrap();
+        let taken = dead
+            .take_subject_number(Some(3), &|n| lab::simulate::subject_id(n - 1), Some(11))
+            .unwrap();
+        assert_eq!(taken, Some((1, "S001".to_string())));
+    }
+    let text = ok(&simulate(&url, "lost", 3, 0, false).output().unwrap());
+    assert!(
+        text.contains("1 subject numbers taken without a session") && !text.contains("S001"),
+        "{text}"
+    );
+    let out = study_cmd(&url, &["report", "--store", "env", "--run", "lost"])
+        .args(["--bootstrap", "50", "--no-png", "-o"])
+        .arg(tmp.join("report-lost"))
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        out.status.success()
+            && text.contains("1 subject numbers were taken for subjects that have no session")
+            && text.contains("1 (S001, by study "),
+        "{text}"
+    );
+    let text = ok(&simulate(&url, "lost", 3, 0, true).output().unwrap());
+    assert!(
+        text.contains("S001: Complete") && text.contains("(number 1 was taken by study "),
+        "{text}"
+    );
+    assert_eq!(numbers(&mut client, "lost"), 3);
+    export(&url, "lost", &tmp.join("lost"));
+    assert_eq!(records(&tmp.join("lost")), clean, "a number taken, its session created");
 
     // The server restarted mid-study: the station says so, waits, and loses nothing.
     let mut station = simulate(&url, "restart", 3, 30, false)

@@ -365,6 +365,30 @@ fn from_json<T: for<'de> serde::Deserialize<'de>>(
     })
 }
 
+/// A subject number taken for a subject whose session was never created
+/// ([`PgStore::unclaimed_numbers`]).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct UnclaimedNumber {
+    /// The number.
+    pub number: u32,
+    /// The subject id it was taken for.
+    pub subject: String,
+    /// The station that took it ([`station`]).
+    pub station: String,
+    /// The simulated observer's seed, for a number a simulation took.
+    pub observer_seed: Option<u64>,
+}
+
+/// A `u64` seed as PostgreSQL's `bigint` (the same 64 bits).
+fn seed_to_sql(seed: u64) -> i64 {
+    i64::from_le_bytes(seed.to_le_bytes())
+}
+
+/// [`seed_to_sql`] undone.
+fn seed_from_sql(v: i64) -> u64 {
+    u64::from_le_bytes(v.to_le_bytes())
+}
+
 /// The runs of the database, by name.
 ///
 /// # Errors
@@ -611,28 +635,93 @@ impl PgStore {
         })
     }
 
-    /// A new subject number of the run, never given out before (to this or any station):
-    /// the run's counter is advanced and the number recorded in one statement.
+    /// A new subject number of the run, never given out before (to this or any station), and
+    /// the subject id `id_of(number)` it is taken for (with the simulated observer's seed, for
+    /// a simulated subject), recorded in one transaction;
+    /// `None` when the run's counter is past `limit` (nothing is taken then). A station that
+    /// stops before it creates the subject's session leaves the number in
+    /// [`Self::unclaimed_numbers`], where a resume finds it.
     ///
     /// # Errors
     /// Database errors.
-    pub fn next_subject_number(&mut self) -> Result<u32, ResultsError> {
+    pub fn take_subject_number(
+        &mut self,
+        limit: Option<u32>,
+        id_of: &dyn Fn(u32) -> String,
+        observer_seed: Option<u64>,
+    ) -> Result<Option<(u32, String)>, ResultsError> {
         let run_id = self.run_id;
-        let err = self.err("allocating a subject number");
-        let row = self
-            .conn()?
-            .query_one(
-                "WITH n AS (UPDATE study_runs SET next_subject = next_subject + 1 \
-                 WHERE id = $1 RETURNING next_subject - 1 AS number) \
-                 INSERT INTO study_subject_numbers (run_id, number, station) \
-                 SELECT $1, number, $2 FROM n RETURNING number",
-                &[&run_id, &station()],
+        let err = self.err("taking a subject number");
+        let limit = limit.map(|l| i32::try_from(l).unwrap_or(i32::MAX));
+        let mut tx = self.conn()?.transaction().map_err(&err)?;
+        // The row lock of the run's counter holds other stations until the commit.
+        let row = tx
+            .query_opt(
+                "UPDATE study_runs SET next_subject = next_subject + 1 \
+                 WHERE id = $1 AND ($2::integer IS NULL OR next_subject <= $2) \
+                 RETURNING next_subject - 1",
+                &[&run_id, &limit],
             )
-            .map_err(err)?;
-        let n: i32 = row
-            .try_get(0)
-            .map_err(self.err("allocating a subject number"))?;
-        u32::try_from(n).map_err(|_| refused(format!("subject number {n} is out of range")))
+            .map_err(&err)?;
+        let Some(row) = row else {
+            tx.commit().map_err(&err)?;
+            return Ok(None);
+        };
+        let n: i32 = row.try_get(0).map_err(&err)?;
+        let number =
+            u32::try_from(n).map_err(|_| refused(format!("subject number {n} is out of range")))?;
+        let subject = id_of(number);
+        tx.execute(
+            "INSERT INTO study_subject_numbers (run_id, number, station, subject, observer_seed) \
+             VALUES ($1, $2, $3, $4, $5)",
+            &[
+                &run_id,
+                &n,
+                &station(),
+                &subject,
+                &observer_seed.map(seed_to_sql),
+            ],
+        )
+        .map_err(&err)?;
+        tx.commit().map_err(err)?;
+        Ok(Some((number, subject)))
+    }
+
+    /// The subject numbers taken for a subject that has no session in the run (a station
+    /// stopped between taking the number and creating the session), with that subject and
+    /// the station that took it, by number. Numbers taken before schema version 3 name no
+    /// subject and are not listed.
+    ///
+    /// # Errors
+    /// Database errors.
+    pub fn unclaimed_numbers(&mut self) -> Result<Vec<UnclaimedNumber>, ResultsError> {
+        let run_id = self.run_id;
+        let err = self.err("reading the subject numbers");
+        let rows = self
+            .conn()?
+            .query(
+                "SELECT n.number, n.subject, n.station, n.observer_seed FROM study_subject_numbers n \
+                 WHERE n.run_id = $1 AND n.subject IS NOT NULL AND NOT EXISTS \
+                 (SELECT 1 FROM study_sessions s WHERE s.run_id = n.run_id AND s.subject = n.subject) \
+                 ORDER BY n.number",
+                &[&run_id],
+            )
+            .map_err(&err)?;
+        rows.iter()
+            .map(|r| {
+                let n: i32 = r.try_get(0).map_err(&err)?;
+                Ok(UnclaimedNumber {
+                    number: u32::try_from(n)
+                        .map_err(|_| refused(format!("subject number {n} is out of range")))?,
+                    subject: r.try_get(1).map_err(&err)?,
+                    station: r.try_get(2).map_err(&err)?,
+                    observer_seed: r
+                        .try_get::<_, Option<i64>>(3)
+                        .map_err(&err)?
+                        .map(seed_from_sql),
+                })
+            })
+            .collect()
     }
 
     /// The run's sessions that are not finished and that no writer holds (a station died or

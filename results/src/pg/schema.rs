@@ -9,7 +9,10 @@ use super::{LOCK_NAMESPACE, db_error};
 use crate::ResultsError;
 
 /// The migrations, in order; migration `i` (1-based) brings the schema to version `i`.
-/// Documented in `docs/postgres.md`. Version 2 added the between-subject group assignments.
+/// Documented in `docs/postgres.md`. Version 2 added the between-subject group assignments;
+/// version 3 the subject id each number was taken for and, for a simulated subject, the
+/// observer seed (numbers taken before it have neither), so that a number whose session was
+/// never created can be found and its session created.
 pub const MIGRATIONS: &[&str] = &[
     r"
 CREATE TABLE study_runs (
@@ -129,6 +132,9 @@ CREATE TABLE study_group_assignments (
     PRIMARY KEY (run_id, subject, session),
     UNIQUE (run_id, group_name, ordinal)
 );
+",
+    r"
+ALTER TABLE study_subject_numbers ADD COLUMN subject text, ADD COLUMN observer_seed bigint;
 ",
 ];
 
