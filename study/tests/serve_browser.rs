@@ -1190,14 +1190,23 @@ fn a_browser_completes_dscqs_and_a_live_staircase() {
 
 /// How many times shorter the examples' clips and grey screens are when their whole sessions
 /// run in the browser: their 3-4-second clips and 1-3-second greys make the 14 sessions about
-/// half an hour of playback, which CI's time cannot hold; an eighth of it takes a few minutes.
+/// half an hour of playback, which CI's time cannot hold; a sixteenth of it takes a few minutes.
 /// What a session is (its trials, order, hidden repeats, groups, staircases, answers) does not
 /// depend on the clips' length. `SCREENSHOTS` (for docs/serve.md) takes the examples as they
 /// are.
-const SHORTER: usize = 8;
+const SHORTER: usize = 16;
+
+/// How many times fewer trials a staircase may take (`max_trials`) in the shortened copy,
+/// and how many times fewer reversals end it (`stop_reversals`, no fewer than the examples'
+/// `threshold_reversals`): the staircases' 190 trials were half of the examples' whole
+/// sessions in the browser. Each staircase still turns, stops by its rule and is estimated.
+const FEWER_TRIALS: usize = 4;
+/// See [`FEWER_TRIALS`].
+const FEWER_REVERSALS: usize = 2;
 
 /// Copies the example folder into `dir` with every stimulus clip (BVH, AMC) cut to its first
-/// 1/[`SHORTER`] of frames and every study's `grey_ms` and `gap_ms` divided by [`SHORTER`]
+/// 1/[`SHORTER`] of frames, every study's `grey_ms` and `gap_ms` divided by [`SHORTER`], its
+/// `max_trials` by [`FEWER_TRIALS`] and its `stop_reversals` by [`FEWER_REVERSALS`]
 /// (the live staircase's 3-s clips stay whole: it encodes them as it goes at up to 80:1,
 /// which a cut clip's stream headers cannot reach).
 /// The stimulus manifests keep their error metrics (which both the server and `study
@@ -1237,9 +1246,16 @@ fn short_examples(dir: &Path) -> Vec<PathBuf> {
                 let text = std::fs::read_to_string(&path).unwrap();
                 let mut short = String::new();
                 for line in text.lines() {
-                    let cut = ["grey_ms = ", "gap_ms = "].into_iter().find_map(|key| {
-                        let ms: usize = line.strip_prefix(key)?.trim().parse().unwrap();
-                        Some(format!("{key}{}", ms / SHORTER))
+                    let cut = [
+                        ("grey_ms = ", SHORTER),
+                        ("gap_ms = ", SHORTER),
+                        ("max_trials = ", FEWER_TRIALS),
+                        ("stop_reversals = ", FEWER_REVERSALS),
+                    ]
+                    .into_iter()
+                    .find_map(|(key, by)| {
+                        let n: usize = line.strip_prefix(key)?.trim().parse().unwrap();
+                        Some(format!("{key}{}", n / by))
                     });
                     short.push_str(cut.as_deref().unwrap_or(line));
                     short.push('\n');
@@ -1392,7 +1408,8 @@ impl Example {
 /// choices with and without "no preference", MUSHRA's sliders, crowd scenes, up-down,
 /// QUEST+, Psi and live staircases, familiarization, hidden repeats, Latin squares, groups
 /// with catch trials) comes from the one description the window draws. The sessions run on
-/// [`short_examples`]: the examples with their clips and greys cut to an eighth.
+/// [`short_examples`]: the examples with their clips and greys cut to a sixteenth and their
+/// staircases shorter.
 ///
 /// On the way the page is measured at 1280×720 and 1920×1080: every text a participant
 /// must read on the welcome screen (title, instructions, field labels and answers, the
