@@ -112,17 +112,11 @@ fn main() {
                 let def = &study.definition;
                 let mut mine = Vec::new();
                 let mut sessions = 0;
-                loop {
-                    let Some((number, _)) = store
-                        .take_subject_number(
-                            Some(subjects),
-                            &|n| lab::simulate::subject_id(n - 1),
-                            Some(seed),
-                        )
-                        .unwrap()
-                    else {
-                        break;
-                    };
+                let id_of = |n: u32| lab::simulate::subject_id(n - 1);
+                while let Some((number, _)) = store
+                    .take_subject_number(Some(subjects), &id_of, Some(seed))
+                    .unwrap()
+                {
                     let index = number - 1;
                     let mut fresh = lab::session::new_manifest(
                         def,

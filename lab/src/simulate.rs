@@ -209,72 +209,8 @@ fn simulate_into_database(
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<()> {
     let wait = options.patience;
-    // A session another station created or took over first.
-    let taken = |e: &LabError| {
-        matches!(e, LabError::Context { source, .. } if matches!(
-            **source,
-            LabError::Results(ResultsError::SessionBusy { .. } | ResultsError::Exists { .. })
-        ))
-    };
     if options.resume {
-        let abandoned = session::retry_outage(wait, report, || Ok(store.abandoned()?))?;
-        for m in abandoned {
-            // Only this simulation's sessions: not a real subject's in the same run. A
-            // simulated subject's plan index is its number, or in a study with groups its
-            // place in its group.
-            let Some(index) = subject_number(&m.subject) else {
-                continue;
-            };
-            if m.session != 1
-                || m.observer_seed != Some(options.seed)
-                || (m.group.is_none() && m.subject_index != index)
-            {
-                continue;
-            }
-            match run_subject(
-                study,
-                options,
-                &Subject::numbered(index),
-                store,
-                true,
-                stimuli,
-                report,
-            ) {
-                Ok(summary) => report(&summary),
-                Err(e) if taken(&e) => {
-                    report(&format!("{}: taken over by another station", m.subject));
-                }
-                Err(e) => return Err(e),
-            }
-        }
-        // Numbers this simulation took whose station stopped before creating the session.
-        let unclaimed = session::retry_outage(wait, report, || Ok(store.unclaimed_numbers()?))?;
-        for u in unclaimed {
-            if u.observer_seed != Some(options.seed)
-                || subject_number(&u.subject) != Some(u.number - 1)
-                || u.number > options.subjects
-            {
-                continue;
-            }
-            match run_subject(
-                study,
-                options,
-                &Subject::numbered(u.number - 1),
-                store,
-                false,
-                stimuli,
-                report,
-            ) {
-                Ok(summary) => report(&format!(
-                    "{summary} (number {} was taken by {} without a session)",
-                    u.number, u.station
-                )),
-                Err(e) if taken(&e) => {
-                    report(&format!("{}: created by another station", u.subject));
-                }
-                Err(e) => return Err(e),
-            }
-        }
+        resume_in_database(study, options, store, stimuli, report)?;
     } else {
         let left = session::retry_outage(wait, report, || Ok(store.abandoned()?))?.len();
         let unclaimed = session::retry_outage(wait, report, || Ok(store.unclaimed_numbers()?))?
@@ -310,12 +246,94 @@ fn simulate_into_database(
         ) {
             Ok(summary) => report(&summary),
             // A resuming station found the number before this one created the session.
-            Err(e) if taken(&e) => report(&format!("{id}: created by another station")),
+            Err(e) if taken_by_another(&e) => report(&format!("{id}: created by another station")),
             Err(e) => return Err(e),
         }
         progress(number as usize, options.subjects as usize);
     }
     Ok(())
+}
+
+/// `study simulate --resume` into a database run: the run's simulated sessions no station
+/// holds, continued, then the sessions of the numbers this simulation took whose station
+/// stopped before creating them.
+#[cfg(feature = "postgres")]
+fn resume_in_database(
+    study: &StudyFile,
+    options: &SimulateOptions,
+    store: &mut PgStore,
+    stimuli: &mut dyn StimulusSource,
+    report: &mut dyn FnMut(&str),
+) -> Result<()> {
+    let wait = options.patience;
+    let abandoned = session::retry_outage(wait, report, || Ok(store.abandoned()?))?;
+    for m in abandoned {
+        // Only this simulation's sessions: not a real subject's in the same run. A
+        // simulated subject's plan index is its number, or in a study with groups its
+        // place in its group.
+        let Some(index) = subject_number(&m.subject) else {
+            continue;
+        };
+        if m.session != 1
+            || m.observer_seed != Some(options.seed)
+            || (m.group.is_none() && m.subject_index != index)
+        {
+            continue;
+        }
+        match run_subject(
+            study,
+            options,
+            &Subject::numbered(index),
+            store,
+            true,
+            stimuli,
+            report,
+        ) {
+            Ok(summary) => report(&summary),
+            Err(e) if taken_by_another(&e) => {
+                report(&format!("{}: taken over by another station", m.subject));
+            }
+            Err(e) => return Err(e),
+        }
+    }
+    // Numbers this simulation took whose station stopped before creating the session.
+    let unclaimed = session::retry_outage(wait, report, || Ok(store.unclaimed_numbers()?))?;
+    for u in unclaimed {
+        if u.observer_seed != Some(options.seed)
+            || subject_number(&u.subject) != Some(u.number - 1)
+            || u.number > options.subjects
+        {
+            continue;
+        }
+        match run_subject(
+            study,
+            options,
+            &Subject::numbered(u.number - 1),
+            store,
+            false,
+            stimuli,
+            report,
+        ) {
+            Ok(summary) => report(&format!(
+                "{summary} (number {} was taken by {} without a session)",
+                u.number, u.station
+            )),
+            Err(e) if taken_by_another(&e) => {
+                report(&format!("{}: created by another station", u.subject));
+            }
+            Err(e) => return Err(e),
+        }
+    }
+    Ok(())
+}
+
+/// Whether `e` says another station created the session, or holds it, first.
+#[cfg(feature = "postgres")]
+fn taken_by_another(e: &LabError) -> bool {
+    matches!(e, LabError::Context { source, .. } if matches!(
+        **source,
+        LabError::Results(ResultsError::SessionBusy { .. } | ResultsError::Exists { .. })
+    ))
 }
 
 /// What a simulated subject states in a new session's manifest: a valid answer to every
