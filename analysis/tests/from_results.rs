@@ -32,6 +32,8 @@ fn stimulus(id: &str, clip: &str, codec: &str, cr: f64) -> Stimulus {
         encode_ms: None,
         decode_ms: None,
         scene: None,
+        sha256: None,
+        bitstream_sha256: None,
     }
 }
 

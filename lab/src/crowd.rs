@@ -232,7 +232,7 @@ pub fn crowd(
         }
         manifest.stimuli.push(st);
     }
-    write_set(out, &csv, &manifest, mode)?;
+    write_set(out, &csv, &mut manifest, mode)?;
     Ok(CrowdSummary {
         manifest,
         scenes: specs.len(),
@@ -364,6 +364,8 @@ fn scene_stimulus(
         encode_ms: None,
         decode_ms: None,
         scene: Some(scene),
+        sha256: None,
+        bitstream_sha256: None,
     }
 }
 

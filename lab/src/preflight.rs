@@ -12,7 +12,14 @@
 //! - its bitstream, when the manifest names one, is a valid container for that skeleton,
 //!   frame count and rate, and decodes (with the codec its header names) to as many frames as
 //!   the file holds. A `primitive` stream needs its database, which a stimulus manifest does
-//!   not name: its container is checked, and it is counted as not decoded.
+//!   not name: its container is checked, and it is counted as not decoded;
+//! - its files are the ones the manifest was written with: their SHA-256 equal the
+//!   manifest's `sha256` and `bitstream_sha256` where it records them (`study sweep` and
+//!   `study crowd` do), so a file changed or swapped with another stimulus' since is found;
+//! - its `bytes` and `achieved_cr` are its bitstream's (`4 × channels × frames / bytes`);
+//! - a compressed stimulus is not byte-identical to its reference's file unless its metrics
+//!   say it has no error (a lossless codec): otherwise the subject would be shown the
+//!   reference twice while the analysis counts a compressed stimulus.
 //!
 //! A live staircase encodes per trial: its decoder context and reference clips are read
 //! ([`LiveStimuli::from_study`]), and every clip is encoded and decoded once at the first
@@ -181,8 +188,9 @@ pub fn check_keeping(
     let total = ids.len();
     let mut checked = Checked::default();
     let mut problems = Vec::new();
-    // Clips read so far (None: could not be read, already reported).
+    // Clips read so far (None: could not be read, already reported), and their files' SHA-256.
     let mut clips: HashMap<String, Option<Arc<Clip>>> = HashMap::new();
+    let mut hashes: HashMap<String, String> = HashMap::new();
     let ctx = CodecContext::default();
     for (done, (id, reference)) in ids.iter().enumerate() {
         let Some(st) = study.definition.manifest.get(id) else {
@@ -191,10 +199,26 @@ pub fn check_keeping(
         };
         checked.stimuli += 1;
         let clip = read(&base, st, &mut problems).map(Arc::new);
+        let file = base.join(&st.file);
+        if clip.is_some() {
+            let hash = hashed(&file, st.sha256.as_deref(), id, &mut problems);
+            if let Some(h) = &hash {
+                hashes.insert(id.clone(), h.clone());
+            }
+            if let (Some(h), Some(r)) = (&hash, reference)
+                && hashes.get(r) == Some(h)
+                && let Some(why) = same_as_reference(st)
+            {
+                problems.push(problem(
+                    &file,
+                    id,
+                    format!("is byte-identical to the file of its reference {r:?}{why}"),
+                ));
+            }
+        }
         if let (Some(clip), Some(r)) = (&clip, reference)
             && let Some(Some(reference)) = clips.get(r)
         {
-            let file = base.join(&st.file);
             for message in mismatch(clip, reference, r) {
                 problems.push(problem(&file, id, message));
             }
@@ -202,8 +226,17 @@ pub fn check_keeping(
         if let (Some(clip), Some(stream)) = (&clip, &st.bitstream) {
             let path = base.join(stream);
             match bitstream(&path, clip, &ctx) {
-                Ok(true) => checked.decoded += 1,
-                Ok(false) => checked.not_decoded += 1,
+                Ok(decoded) => {
+                    if decoded {
+                        checked.decoded += 1;
+                    } else {
+                        checked.not_decoded += 1;
+                    }
+                    hashed(&path, st.bitstream_sha256.as_deref(), id, &mut problems);
+                    for message in sizes(&path, clip, st) {
+                        problems.push(problem(&path, id, message));
+                    }
+                }
                 Err(message) => problems.push(problem(&path, id, message)),
             }
         } else if clip.is_none()
@@ -308,6 +341,84 @@ fn read(base: &Path, st: &Stimulus, problems: &mut Vec<Problem>) -> Option<Clip>
             None
         }
     }
+}
+
+/// Largest joint error, cm, below which a compressed stimulus may be byte-identical to its
+/// reference: a lossless codec's, or one whose error is below the digits the clip file keeps.
+const IDENTICAL_MAX_CM: f64 = 1e-3;
+
+/// The SHA-256 of the file at `path`, a problem where it is not `want` (the manifest's);
+/// `None` where it cannot be read (reported by the reader).
+fn hashed(
+    path: &Path,
+    want: Option<&str>,
+    id: &str,
+    problems: &mut Vec<Problem>,
+) -> Option<String> {
+    let got = crate::stimulus::sha256_file(path).ok()?;
+    if let Some(want) = want
+        && want != got
+    {
+        problems.push(problem(
+            path,
+            id,
+            format!(
+                "its content is not the file the manifest was written with (SHA-256 {}…, the \
+                 manifest's {}…): changed, or swapped with another file, since",
+                &got[..12],
+                want.get(..12).unwrap_or(want)
+            ),
+        ));
+    }
+    Some(got)
+}
+
+/// Why a compressed stimulus must not be byte-identical to its reference (`None`: a
+/// reference, or metrics that say it has no error).
+fn same_as_reference(st: &Stimulus) -> Option<String> {
+    if st.codec == protocols::manifest::REFERENCE_CODEC {
+        return None;
+    }
+    match &st.metrics {
+        Some(m) if m.max_cm <= IDENTICAL_MAX_CM => None,
+        Some(m) => Some(format!(
+            ", while the manifest gives it a largest error of {} cm: the subject would see the \
+             reference where the analysis counts {} (a file copied or swapped)",
+            m.max_cm, st.codec
+        )),
+        None => Some(format!(
+            ": the subject would see the reference where the analysis counts {} (metrics \
+             that say it has no error mark a lossless stimulus)",
+            st.codec
+        )),
+    }
+}
+
+/// Where the manifest's `bytes` or `achieved_cr` are not the bitstream's at `path` (read
+/// already: it parsed).
+fn sizes(path: &Path, clip: &Clip, st: &Stimulus) -> Vec<String> {
+    let Ok(size) = std::fs::metadata(path).map(|m| m.len()) else {
+        return Vec::new();
+    };
+    let mut out = Vec::new();
+    if st.bytes != size {
+        out.push(format!(
+            "bytes: the manifest says {}, the bitstream file holds {size}",
+            st.bytes
+        ));
+    }
+    let raw = 4.0 * clip.channel_count() as f64 * clip.frames() as f64;
+    let cr = raw / size.max(1) as f64;
+    if (st.achieved_cr - cr).abs() > 1e-6 * cr {
+        out.push(format!(
+            "achieved_cr: the manifest says {}, the bitstream gives {cr:.4} (4 bytes × {} \
+             channels × {} frames / {size} bytes)",
+            st.achieved_cr,
+            clip.channel_count(),
+            clip.frames()
+        ));
+    }
+    out
 }
 
 /// How `clip` differs from its reference: skeleton, frame count, frame rate.

@@ -146,6 +146,23 @@ pub fn write_clip_as(
     Ok((m, a))
 }
 
+/// SHA-256 of the file at `path`, as 64 lowercase hex digits (a stimulus' `sha256` in the
+/// manifest).
+///
+/// # Errors
+/// The file cannot be read (named).
+pub fn sha256_file(path: &Path) -> Result<String> {
+    use sha2::{Digest as _, Sha256};
+    let bytes = std::fs::read(path).map_err(crate::error::io_error(path))?;
+    Ok(Sha256::digest(&bytes)
+        .iter()
+        .fold(String::with_capacity(64), |mut hex, b| {
+            use std::fmt::Write as _;
+            let _ = write!(hex, "{b:02x}");
+            hex
+        }))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -264,7 +264,7 @@ pub fn sweep(
             }
         }
     }
-    write_set(out, &csv, &manifest, mode)?;
+    write_set(out, &csv, &mut manifest, mode)?;
     Ok(SweepSummary {
         manifest,
         references: sweep_clips.len(),
@@ -316,13 +316,22 @@ pub(crate) fn read_references(
 }
 
 /// Writes a set's `rd.csv`, then its manifest: a `stimuli.json` on disk means every file it
-/// names is complete.
+/// names is complete. Each stimulus' file and bitstream are hashed first, as written (their
+/// SHA-256 in the manifest, which every preflight checks).
 pub(crate) fn write_set(
     out: &Path,
     csv: &str,
-    manifest: &StimulusManifest,
+    manifest: &mut StimulusManifest,
     mode: files::Mode,
 ) -> Result<()> {
+    for st in &mut manifest.stimuli {
+        if !st.file.is_empty() {
+            st.sha256 = Some(stimulus::sha256_file(&out.join(&st.file))?);
+        }
+        if let Some(b) = &st.bitstream {
+            st.bitstream_sha256 = Some(stimulus::sha256_file(&out.join(b))?);
+        }
+    }
     files::write(&out.join(RD_FILE), csv, mode)?;
     let json = serde_json::to_string_pretty(manifest)?;
     files::write(&out.join(MANIFEST_FILE), json, mode)?;
@@ -473,6 +482,8 @@ pub(crate) fn reference_stimulus(
         encode_ms: None,
         decode_ms: None,
         scene: None,
+        sha256: None,
+        bitstream_sha256: None,
     }
 }
 
@@ -630,6 +641,8 @@ pub(crate) fn write_made(
         encode_ms: Some(made.encode_ms),
         decode_ms: Some(made.decode_ms),
         scene: None,
+        sha256: None,
+        bitstream_sha256: None,
     })
 }
 

@@ -108,3 +108,110 @@ fn a_stimulus_of_another_length_or_skeleton_is_refused() {
         "{err}"
     );
 }
+
+/// The manifest of the set at `dir`, edited by `edit` and written back.
+fn edit_manifest(dir: &Path, edit: impl FnOnce(&mut serde_json::Value)) {
+    let path = dir.join("stimuli/stimuli.json");
+    let mut m: serde_json::Value = serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+    edit(&mut m);
+    std::fs::write(&path, serde_json::to_vec_pretty(&m).unwrap()).unwrap();
+}
+
+/// The stimulus `id` of manifest `m`.
+fn entry<'m>(m: &'m mut serde_json::Value, id: &str) -> &'m mut serde_json::Value {
+    m["stimuli"]
+        .as_array_mut()
+        .unwrap()
+        .iter_mut()
+        .find(|s| s["id"] == id)
+        .unwrap()
+}
+
+/// Issue 38's manifest checks: files swapped after the sweep, a "compressed" stimulus whose
+/// file is its reference's, a ratio or size that is not its bitstream's, and metrics that
+/// cannot be true are each refused, naming the file or the manifest key.
+#[test]
+fn swapped_files_a_reference_as_stimulus_and_impossible_values_are_refused() {
+    // Swapped: the two test stimuli's decoded files trade places (both parse, both match
+    // the reference's skeleton, frames and rate: only their content tells them apart).
+    let dir = scratch("swapped");
+    let path = study(&dir);
+    let walk = dir.join("stimuli/walk");
+    let (a, b) = (walk.join("spiht-cr10.amc"), walk.join("spiht-cr20.amc"));
+    let (ta, tb) = (std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap());
+    assert_ne!(ta, tb);
+    std::fs::write(&a, &tb).unwrap();
+    std::fs::write(&b, &ta).unwrap();
+    let file = StudyFile::load(&path).unwrap();
+    let (_, problems) = lab::preflight::check(&file, &|_, _| {});
+    let swapped: Vec<&Path> = problems
+        .iter()
+        .filter(|p| {
+            p.message
+                .contains("is not the file the manifest was written with")
+        })
+        .map(|p| p.file.as_path())
+        .collect();
+    assert_eq!(swapped, [a.as_path(), b.as_path()], "{problems:#?}");
+
+    // The reference's file given as a compressed stimulus' (its hash recorded for it, as a
+    // hand-written manifest would): refused, its metrics claiming an error it cannot have.
+    let dir = scratch("reference-as-stimulus");
+    let path = study(&dir);
+    edit_manifest(&dir, |m| {
+        let reference = entry(m, "walk/reference").clone();
+        let s = entry(m, "walk/spiht/cr10");
+        s["file"] = reference["file"].clone();
+        s["sha256"] = reference["sha256"].clone();
+    });
+    let file = StudyFile::load(&path).unwrap();
+    let err = lab::preflight::verify(&file, &|_, _| {})
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("is byte-identical to the file of its reference \"walk/reference\"")
+            && err.contains("walk/spiht/cr10")
+            && err.contains("largest error of"),
+        "{err}"
+    );
+    assert_eq!(err.matches("byte-identical").count(), 1, "{err}");
+
+    // A ratio and a size that are not the bitstream's.
+    let dir = scratch("ratio");
+    let path = study(&dir);
+    edit_manifest(&dir, |m| {
+        let s = entry(m, "walk/spiht/cr20");
+        s["achieved_cr"] = serde_json::json!(40.0);
+        s["bytes"] = serde_json::json!(7);
+    });
+    let file = StudyFile::load(&path).unwrap();
+    let err = lab::preflight::verify(&file, &|_, _| {})
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("spiht-cr20.mcz")
+            && err.contains("achieved_cr: the manifest says 40, the bitstream gives")
+            && err.contains("bytes: the manifest says 7, the bitstream file holds"),
+        "{err}"
+    );
+
+    // Metrics that cannot be true: the study does not load, each value named by its key.
+    let dir = scratch("metrics");
+    let path = study(&dir);
+    edit_manifest(&dir, |m| {
+        let s = entry(m, "walk/spiht/cr10");
+        s["metrics"]["rms_cm"] = serde_json::json!(-0.5);
+        let s = entry(m, "walk/spiht/cr20");
+        s["metrics"]["max_cm"] = serde_json::json!(0.001);
+        s["sha256"] = serde_json::json!("not a hash");
+    });
+    let err = StudyFile::load(&path).unwrap_err().to_string();
+    for want in [
+        "stimuli.json: stimuli[1] (\"walk/spiht/cr10\").metrics.rms_cm: -0.5 is not a finite number 0 or more",
+        "(\"walk/spiht/cr20\").metrics.rms_cm:",
+        "is above metrics.max_cm 0.001",
+        "(\"walk/spiht/cr20\").sha256: \"not a hash\" is not 64 lowercase hex digits",
+    ] {
+        assert!(err.contains(want), "{want}\n{err}");
+    }
+}

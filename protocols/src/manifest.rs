@@ -12,9 +12,10 @@ use crate::record::StimulusEncoding;
 
 /// Current version of the `stimuli.json` format. Version 2 added a stimulus' `variant`,
 /// `target_max_error_cm` and the worst-window fields of its metrics; version 3 the crowd
-/// scenes of `study crowd` (a stimulus' `scene`, whose `file` is then empty). Every one of
-/// them is optional, so a version-1 or -2 manifest reads as a version-3 one without them.
-pub const MANIFEST_VERSION: u32 = 3;
+/// scenes of `study crowd` (a stimulus' `scene`, whose `file` is then empty); version 4 the
+/// SHA-256 of each stimulus' file and bitstream. Every one of them is optional, so an older
+/// manifest reads as a version-4 one without them.
+pub const MANIFEST_VERSION: u32 = 4;
 
 /// The oldest `stimuli.json` version this build reads.
 pub const MANIFEST_VERSION_MIN: u32 = 1;
@@ -74,6 +75,14 @@ pub struct Stimulus {
     /// Bitstream file relative to the manifest's folder.
     #[serde(default)]
     pub bitstream: Option<String>,
+    /// SHA-256 of `file` (64 lowercase hex digits), recorded by the command that wrote the file
+    /// (`study sweep`, `study crowd`): every preflight refuses a file whose content differs
+    /// (changed, or swapped with another stimulus' file since).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sha256: Option<String>,
+    /// SHA-256 of `bitstream`, likewise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bitstream_sha256: Option<String>,
     /// Objective error against the reference.
     #[serde(default)]
     pub metrics: Option<StimulusMetrics>,
@@ -187,6 +196,78 @@ impl Stimulus {
 }
 
 impl StimulusManifest {
+    /// Every value of the manifest that cannot be true, one line each naming the stimulus
+    /// (its place and id) and the key: a ratio, size, error, time or target that is not a
+    /// finite number in its range, an RMS error above its maximum, a SHA-256 that is not 64
+    /// hex digits. A hand-written or damaged manifest would otherwise
+    /// change the analysis (a negative RMS error changed simulated ratings).
+    pub fn problems(&self) -> Vec<String> {
+        /// `v` where it is not finite, or not above 0 (`zero_ok`: not 0 or more).
+        fn range(v: f64, zero_ok: bool) -> Option<String> {
+            let bad = !v.is_finite() || v < 0.0 || (!zero_ok && v == 0.0);
+            let range = if zero_ok { "0 or more" } else { "more than 0" };
+            bad.then(|| format!("{v} is not a finite number {range}"))
+        }
+        let mut out = Vec::new();
+        for (i, s) in self.stimuli.iter().enumerate() {
+            let mut values = vec![("achieved_cr", Some(s.achieved_cr), false)];
+            values.extend([
+                ("target_cr", s.target_cr, false),
+                ("target_max_error_cm", s.target_max_error_cm, false),
+                ("encode_ms", s.encode_ms, true),
+                ("decode_ms", s.decode_ms, true),
+            ]);
+            let mut found: Vec<(&str, String)> = Vec::new();
+            if let Some(m) = &s.metrics {
+                values.extend([
+                    ("metrics.rms_cm", Some(m.rms_cm), true),
+                    ("metrics.max_cm", Some(m.max_cm), true),
+                    ("metrics.mean_angle_deg", Some(m.mean_angle_deg), true),
+                    ("metrics.worst_window_rms_cm", m.worst_window_rms_cm, true),
+                ]);
+                // A difference (decoded − reference): any sign.
+                if let Some(v) = m.foot_slide_cm_s.filter(|v| !v.is_finite()) {
+                    found.push((
+                        "metrics.foot_slide_cm_s",
+                        format!("{v} is not a finite number"),
+                    ));
+                }
+                // The RMS of errors is never above their largest (a little slack for the
+                // digits JSON keeps).
+                if m.rms_cm.is_finite()
+                    && m.max_cm.is_finite()
+                    && m.rms_cm > m.max_cm * (1.0 + 1e-9) + 1e-9
+                {
+                    found.push((
+                        "metrics.rms_cm",
+                        format!("{} is above metrics.max_cm {}", m.rms_cm, m.max_cm),
+                    ));
+                }
+            }
+            for (key, v, zero_ok) in values {
+                if let Some(why) = v.and_then(|v| range(v, zero_ok)) {
+                    found.push((key, why));
+                }
+            }
+            for (key, hash) in [
+                ("sha256", &s.sha256),
+                ("bitstream_sha256", &s.bitstream_sha256),
+            ] {
+                if let Some(h) = hash
+                    && !(h.len() == 64 && h.bytes().all(|b| matches!(b, b'0'..=b'9' | b'a'..=b'f')))
+                {
+                    found.push((key, format!("\"{h}\" is not 64 lowercase hex digits")));
+                }
+            }
+            out.extend(
+                found
+                    .into_iter()
+                    .map(|(key, why)| format!("stimuli[{i}] (\"{}\").{key}: {why}", s.id)),
+            );
+        }
+        out
+    }
+
     /// What a trial row logs about crowd scene `id` (`trials.csv` columns 30-32): each
     /// character's compression ratio as `cr_<name>`, the scene's distance level as `level`
     /// (1-based, in the order of `levels`), the scene's ratio, and the root mean square of

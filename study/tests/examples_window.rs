@@ -249,6 +249,8 @@ fn primitive_stimuli(out: &Path, clips: &[(String, motion::Clip)]) -> Vec<Stimul
                 encode_ms: None,
                 decode_ms: None,
                 scene: None,
+                sha256: Some(lab::stimulus::sha256_file(&file).unwrap()),
+                bitstream_sha256: None,
             });
         }
     }

@@ -203,7 +203,11 @@ fn stations_share_one_database() {
     };
     assert_eq!(numbers(&mut client, "clean"), 3);
     ok(&simulate(&url, "clean", 3, 0, false).output().unwrap());
-    assert_eq!(numbers(&mut client, "clean"), 3, "nothing to do, a number taken");
+    assert_eq!(
+        numbers(&mut client, "clean"),
+        3,
+        "nothing to do, a number taken"
+    );
 
     // A station stopped between taking a subject number and creating its session: what it
     // leaves is the committed number (taken here as that station would). The report warns,
@@ -243,7 +247,11 @@ fn stations_share_one_database() {
     );
     assert_eq!(numbers(&mut client, "lost"), 3);
     export(&url, "lost", &tmp.join("lost"));
-    assert_eq!(records(&tmp.join("lost")), clean, "a number taken, its session created");
+    assert_eq!(
+        records(&tmp.join("lost")),
+        clean,
+        "a number taken, its session created"
+    );
 
     // The server restarted mid-study: the station says so, waits, and loses nothing.
     let mut station = simulate(&url, "restart", 3, 30, false)

@@ -1210,7 +1210,8 @@ const FEWER_REVERSALS: usize = 2;
 /// (the live staircase's 3-s clips stay whole: it encodes them as it goes at up to 80:1,
 /// which a cut clip's stream headers cannot reach).
 /// The stimulus manifests keep their error metrics (which both the server and `study
-/// simulate` read) and drop their bitstreams, whose decodings the cut clips no longer are.
+/// simulate` read) and drop their bitstreams, whose decodings the cut clips no longer are,
+/// and their files' SHA-256.
 /// Adds two variants the examples lack: `quest.toml` with Psi's rule (`psi.toml`) and
 /// `groups.toml` with catch trials, which every session gets whatever its group
 /// (`groups-catch.toml`). Returns the studies, sorted by name.
@@ -1240,6 +1241,10 @@ fn short_examples(dir: &Path) -> Vec<PathBuf> {
                     if let Some(b) = s.get_mut("bitstream") {
                         *b = Value::Null;
                     }
+                    // The cut files are no longer the files the manifest was written with.
+                    let s = s.as_object_mut().unwrap();
+                    s.remove("sha256");
+                    s.remove("bitstream_sha256");
                 }
                 std::fs::write(&target, manifest.to_string()).unwrap();
             } else if ext == "toml" && from.file_name().is_some_and(|n| n == "examples") {

@@ -583,6 +583,9 @@ fn check_manifest(path: &str, m: &StimulusManifest, cx: &mut Ctx) {
             ),
         );
     }
+    for problem in m.problems() {
+        cx.err("stimuli", format!("{path}: {problem}"));
+    }
     let mut seen = BTreeSet::new();
     for (i, s) in m.stimuli.iter().enumerate() {
         if !seen.insert(s.id.as_str()) {
