@@ -10,7 +10,8 @@
 //!   or under one budget shared uniformly, by distance (eq. 6.4-6.5) or by importance.
 //! - [`sweep`]: a stimulus set (clips × codecs × parameter variants × rates or error bounds)
 //!   with `stimuli.json` and `rd.csv`;
-//!   [`generated`] makes one from the generated walk.
+//!   [`generated`] makes one from the generated walk; [`added`] adds clips decoded by a
+//!   codec made elsewhere, measured the same way.
 //! - [`study`]: a study file as a run uses it (bytes, hash, definition, archived copy).
 //! - [`results_dir`]: a study's results directory, created and checked.
 //! - [`integrity`]: whether a results directory's logs can be trusted, before any statistic.
@@ -21,6 +22,7 @@
 //! - [`simulate`]: whole sessions with simulated observers.
 //! - [`error`]: the crate's error type, [`LabError`].
 
+pub mod added;
 pub mod bounded;
 pub mod catalog;
 pub mod clips;

@@ -422,7 +422,7 @@ fn sizes(path: &Path, clip: &Clip, st: &Stimulus) -> Vec<String> {
 }
 
 /// How `clip` differs from its reference: skeleton, frame count, frame rate.
-fn mismatch(clip: &Clip, reference: &Clip, reference_id: &str) -> Vec<String> {
+pub(crate) fn mismatch(clip: &Clip, reference: &Clip, reference_id: &str) -> Vec<String> {
     let mut out = Vec::new();
     if let Some(why) = skeleton_difference(&clip.skeleton, &reference.skeleton) {
         out.push(format!(

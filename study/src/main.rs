@@ -17,6 +17,7 @@ mod progress;
 mod report_cmd;
 mod run_cmd;
 mod serve_cmd;
+mod stimuli_cmd;
 mod store_args;
 mod study_cmd;
 
@@ -55,6 +56,10 @@ enum Command {
     Decode(codec_cmd::DecodeArgs),
     /// Build a stimulus set (clips × codecs × rates) with stimuli.json and rd.csv.
     Sweep(codec_cmd::SweepArgs),
+    /// Stimulus sets made elsewhere: add a clip decoded by a codec of your own, measured as
+    /// the sweep measures its own.
+    #[command(subcommand)]
+    Stimuli(stimuli_cmd::StimuliCommand),
     /// Compress the crowd scenes of a study's `[scene]` (thesis 6.5): a ratio per group, or
     /// one budget per scene shared uniformly, by distance (eq. 6.4-6.5) or by importance.
     Crowd(codec_cmd::CrowdArgs),
@@ -92,6 +97,7 @@ fn main() -> ExitCode {
         Command::Decode(args) => codec_cmd::decode(&args),
         Command::Sweep(args) => codec_cmd::sweep(&args),
         Command::Crowd(args) => codec_cmd::crowd(&args),
+        Command::Stimuli(cmd) => stimuli_cmd::run(cmd),
         Command::Codecs => {
             codec_cmd::list();
             Ok(())
