@@ -361,6 +361,45 @@ fn search_knob(
     })
 }
 
+impl Bounded {
+    /// What the search for a max error within `bound` cm found, in one line (`study encode
+    /// --max-error-cm`).
+    pub fn describe(&self, bound: f64) -> String {
+        let key = self.knob.key;
+        let next = match &self.smaller {
+            Some(p) => format!(
+                "one step smaller ({key} {:.6}, {} bytes) has max {:.3} cm",
+                p.value, p.bytes, p.max_cm
+            ),
+            None => format!("the codec's smallest stream along {key}"),
+        };
+        let qp = if self.qp_tried.is_empty() {
+            String::new()
+        } else {
+            let tried: Vec<String> = self
+                .qp_tried
+                .iter()
+                .map(|(q, bytes)| match bytes {
+                    Some(n) => format!("{q}: {n} bytes"),
+                    None => format!("{q}: out of reach"),
+                })
+                .collect();
+            let kept = self
+                .made
+                .stream
+                .params
+                .get(codecs::codec::keys::QP)
+                .copied()
+                .unwrap_or(f64::NAN);
+            format!(" at qp {kept} (tried {})", tried.join(", "))
+        };
+        format!(
+            "max error ≤ {bound} cm: {key} {:.6}{qp} after {} encodes; {next}",
+            self.value, self.encodes
+        )
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

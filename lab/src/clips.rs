@@ -96,3 +96,55 @@ pub fn stem_of(p: &Path) -> String {
     p.file_stem()
         .map_or_else(|| "clip".into(), |s| s.to_string_lossy().into_owned())
 }
+
+/// FK positions as CSV `frame,joint,x,y,z` (`study clip positions`), each value times `scale`.
+pub fn positions_csv(pos: &motion::fk::Positions, scale: f64) -> String {
+    let mut w = csv::Writer::from_writer(Vec::with_capacity(pos.frames() * pos.joint_count() * 48));
+    // Writing into memory cannot fail.
+    let _ = w.write_record(["frame", "joint", "x", "y", "z"]);
+    for f in 0..pos.frames() {
+        let frame = f.to_string();
+        for (j, name) in pos.names.iter().enumerate() {
+            let p = pos.point(f, j);
+            let _ = w.write_record([
+                frame.as_str(),
+                name,
+                &(p[0] * scale).to_string(),
+                &(p[1] * scale).to_string(),
+                &(p[2] * scale).to_string(),
+            ]);
+        }
+    }
+    String::from_utf8(w.into_inner().unwrap_or_default()).unwrap_or_default()
+}
+
+/// A NumPy v1.0 `.npy` file of little-endian float64, shape (frames, joints, 3).
+///
+/// # Errors
+/// A header longer than the format holds (65,535 bytes).
+pub fn positions_npy(pos: &motion::fk::Positions, scale: f64) -> Result<Vec<u8>> {
+    let mut header = format!(
+        "{{'descr': '<f8', 'fortran_order': False, 'shape': ({}, {}, 3), }}",
+        pos.frames(),
+        pos.joint_count()
+    );
+    // Magic (6) + version (2) + header length (2) + header, padded with spaces to a multiple
+    // of 64 and ended by a newline.
+    let total = 10 + header.len() + 1;
+    header.push_str(&" ".repeat((64 - total % 64) % 64));
+    header.push('\n');
+    let mut bytes = Vec::with_capacity(10 + header.len() + pos.frames() * pos.joint_count() * 24);
+    bytes.extend_from_slice(b"\x93NUMPY\x01\x00");
+    let len = u16::try_from(header.len())
+        .map_err(|_| crate::error::refused("an .npy header over 65,535 bytes"))?;
+    bytes.extend_from_slice(&len.to_le_bytes());
+    bytes.extend_from_slice(header.as_bytes());
+    for f in 0..pos.frames() {
+        for p in pos.frame(f) {
+            for v in p {
+                bytes.extend_from_slice(&(v * scale).to_le_bytes());
+            }
+        }
+    }
+    Ok(bytes)
+}

@@ -146,6 +146,30 @@ pub fn write_clip_as(
     Ok((m, a))
 }
 
+/// `worst 1-s window RMS 0.412 cm, max 1.210 cm, at 12.93 s (frames 1552-1671)`
+/// (docs/codecs.md).
+pub fn worst_window_text(worst: Option<WindowError>, frame_rate_hz: f64) -> String {
+    let Some(w) = worst else {
+        return "no frames".to_string();
+    };
+    let span = if w.frames == window_frames(frame_rate_hz) {
+        "1-s window".to_string()
+    } else {
+        format!(
+            "window (the whole {:.2}-s clip)",
+            w.frames as f64 / frame_rate_hz
+        )
+    };
+    format!(
+        "worst {span} RMS {:.3} cm, max {:.3} cm, at {:.2} s (frames {}-{})",
+        w.rms_cm,
+        w.max_cm,
+        w.start_frame as f64 / frame_rate_hz,
+        w.start_frame,
+        w.start_frame + w.frames - 1
+    )
+}
+
 /// SHA-256 of the file at `path`, as 64 lowercase hex digits (a stimulus' `sha256` in the
 /// manifest).
 ///

@@ -1,6 +1,5 @@
 //! `study clip ...`: inspect, convert and export motion clips.
 
-use std::fmt::Write as _;
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -129,6 +128,34 @@ pub enum ClipCommand {
     /// An `.svg` output labels each pane with its name and time as text (for papers); a
     /// `.png` output is the bare pixels.
     Render(RenderArgs),
+    /// A video (MP4, H.264 by Debian's ffmpeg) of the clips side by side as the study window
+    /// draws them (the offscreen renderer of `study clip render`), at the first clip's frame
+    /// rate or `--fps`, for the whole of the longest clip: a stimulus beside its reference for
+    /// supplementary material, or to play a stimulus set before subjects come.
+    Video(VideoArgs),
+}
+
+/// Arguments of `study clip video`.
+#[derive(Debug, clap::Args)]
+pub struct VideoArgs {
+    #[command(flatten)]
+    input: ClipInput,
+    /// Frames per second of the video (default: the first clip's frame rate).
+    #[arg(long)]
+    fps: Option<f64>,
+    /// Size of one pane, pixels (its height and width; even, as H.264's 4:2:0 needs).
+    #[arg(long, default_value_t = 480)]
+    pane: u32,
+    /// Draw no ground shadow.
+    #[arg(long)]
+    no_shadow: bool,
+    /// Output video, `.mp4`.
+    #[arg(short, long, value_name = "OUT")]
+    output: PathBuf,
+    /// Replace the output if it exists (atomically); without it an existing output is
+    /// refused.
+    #[arg(long)]
+    force: bool,
 }
 
 /// Arguments of `study clip render`.
@@ -195,11 +222,11 @@ pub fn run(cmd: ClipCommand) -> Result<()> {
                 // Both refused before either is written.
                 files::check_new(&path, mode)?;
                 files::check_new(&names, mode)?;
-                files::write(&path, npy_bytes(&pos, scale)?, mode)?;
+                files::write(&path, lab::clips::positions_npy(&pos, scale)?, mode)?;
                 files::write(&names, pos.names.join("\n") + "\n", mode)?;
                 return Ok(());
             }
-            let text = positions_csv(&pos, scale);
+            let text = lab::clips::positions_csv(&pos, scale);
             match csv {
                 Some(path) => files::write(&path, text, mode)?,
                 None => std::io::stdout().lock().write_all(text.as_bytes())?,
@@ -229,6 +256,7 @@ pub fn run(cmd: ClipCommand) -> Result<()> {
             Ok(())
         }
         ClipCommand::Render(args) => render_command(args),
+        ClipCommand::Video(args) => video_command(&args),
     }
 }
 
@@ -278,7 +306,9 @@ fn render_command(args: RenderArgs) -> Result<()> {
         (render(&clips, &still)?, names)
     };
     if svg {
-        files::write(&output, labelled_svg(&image, &names, &still)?, mode)?;
+        let sizes = (still.width(), still.pane);
+        let svg = window::render::labelled_svg(&image, &names, still.times, sizes)?;
+        files::write(&output, svg, mode)?;
     } else {
         image.write_png(&output, mode)?;
     }
@@ -405,8 +435,6 @@ fn draw_panes(
     view: &window::scene::View,
     still: &Still<'_>,
 ) -> Result<window::render::Image> {
-    use window::render::{Offscreen, Pane};
-    use window::scene::FrameShapes;
     let (times, pane) = (still.times, still.pane);
     if stages.is_empty() {
         bail!("nothing to render");
@@ -423,145 +451,44 @@ fn draw_panes(
     }
     let mut shapes = Vec::new();
     for t in times {
-        for stage in &mut stages {
-            let mut s = FrameShapes::default();
-            stage.shapes_at(*t, &mut s);
-            shapes.push(s);
-        }
+        window::render::shapes_at(&mut stages, *t, &mut shapes);
     }
-    let panes: Vec<Pane<'_>> = shapes
-        .iter()
-        .enumerate()
-        .map(|(k, s)| Pane {
-            x: (k as u32 % cols) * width,
-            y: (k as u32 / cols) * pane,
-            width,
-            height: pane,
-            view,
-            shapes: s,
-        })
-        .collect();
-    let mut offscreen = Offscreen::new(4)?;
+    let panes = window::render::panes_of(&shapes, view, cols, width, pane);
+    let mut offscreen = window::render::Offscreen::new(4)?;
     let image = offscreen.render(cols * width, rows * pane, &panes)?;
     eprintln!("rendered with adapter {}", offscreen.adapter().name);
     Ok(image)
 }
 
-/// An SVG of `image` (embedded as PNG) with each pane's name and time written over it as
-/// text, so a paper's figure keeps its labels sharp and editable.
-fn labelled_svg(
-    image: &window::render::Image,
-    names: &[String],
-    still: &Still<'_>,
-) -> Result<String> {
-    let png = image.png_bytes()?;
-    let (w, h, pane, width) = (image.width, image.height, still.pane, still.width());
-    let size = (f64::from(pane) / 16.0).clamp(10.0, 32.0);
-    let mut s = String::new();
-    let _ = writeln!(
-        s,
-        r#"<svg xmlns="http://www.w3.org/2000/svg" xmlns:xlink="http://www.w3.org/1999/xlink" width="{w}" height="{h}" viewBox="0 0 {w} {h}">"#
+/// `study clip video` ([`window::video`]).
+fn video_command(args: &VideoArgs) -> Result<()> {
+    let mode = files::Mode::from_force(args.force);
+    if !args
+        .output
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("mp4"))
+    {
+        bail!("{}: expected an .mp4 output", args.output.display());
+    }
+    let settings = window::video::Settings {
+        pane: args.pane,
+        fps: args.fps,
+        shadow: !args.no_shadow,
+    };
+    settings.check()?;
+    // Refused before the (slow) render.
+    files::check_new(&args.output, mode)?;
+    let clips = args.input.load()?;
+    let clips: Vec<&Clip> = clips.iter().map(|c| &c.clip).collect();
+    let made = window::video::write_mp4(&clips, &settings, &args.output)?;
+    eprintln!(
+        "wrote {} ({} frames at {} fps, {} × {}, {} pane(s))",
+        args.output.display(),
+        made.frames,
+        made.fps,
+        made.width,
+        made.height,
+        clips.len()
     );
-    let _ = writeln!(
-        s,
-        r#"<image x="0" y="0" width="{w}" height="{h}" xlink:href="data:image/png;base64,{}"/>"#,
-        base64::Engine::encode(&base64::engine::general_purpose::STANDARD, &png)
-    );
-    let _ = writeln!(
-        s,
-        r##"<g font-family="Helvetica, Arial, sans-serif" font-size="{size:.0}" fill="#f2f2f2">"##
-    );
-    for (row, t) in still.times.iter().enumerate() {
-        for (col, name) in names.iter().enumerate() {
-            let (x, y) = (col as u32 * width, row as u32 * pane);
-            let pad = size * 0.6;
-            let _ = writeln!(
-                s,
-                r#"<text class="pane" x="{:.1}" y="{:.1}">{}</text>"#,
-                f64::from(x) + pad,
-                f64::from(y) + pad + size,
-                xml_escape(name)
-            );
-            let _ = writeln!(
-                s,
-                r#"<text class="time" x="{:.1}" y="{:.1}" text-anchor="end">t = {t:.2} s</text>"#,
-                f64::from(x + width) - pad,
-                f64::from(y) + pad + size
-            );
-        }
-    }
-    s.push_str("</g>\n</svg>\n");
-    Ok(s)
-}
-
-fn xml_escape(text: &str) -> String {
-    let mut out = String::with_capacity(text.len());
-    for c in text.chars() {
-        match c {
-            '&' => out.push_str("&amp;"),
-            '<' => out.push_str("&lt;"),
-            '>' => out.push_str("&gt;"),
-            '"' => out.push_str("&quot;"),
-            '\'' => out.push_str("&apos;"),
-            c if c.is_control() => out.push(' '),
-            c => out.push(c),
-        }
-    }
-    out
-}
-
-fn positions_csv(pos: &fk::Positions, scale: f64) -> String {
-    let mut w = csv::Writer::from_writer(Vec::with_capacity(pos.frames() * pos.joint_count() * 48));
-    // Writing into memory cannot fail.
-    let _ = w.write_record(["frame", "joint", "x", "y", "z"]);
-    for f in 0..pos.frames() {
-        let frame = f.to_string();
-        for (j, name) in pos.names.iter().enumerate() {
-            let p = pos.point(f, j);
-            let _ = w.write_record([
-                frame.as_str(),
-                name,
-                &(p[0] * scale).to_string(),
-                &(p[1] * scale).to_string(),
-                &(p[2] * scale).to_string(),
-            ]);
-        }
-    }
-    String::from_utf8(w.into_inner().unwrap_or_default()).unwrap_or_default()
-}
-
-/// A NumPy v1.0 `.npy` file of little-endian float64, shape (frames, joints, 3).
-fn npy_bytes(pos: &fk::Positions, scale: f64) -> Result<Vec<u8>> {
-    let mut header = format!(
-        "{{'descr': '<f8', 'fortran_order': False, 'shape': ({}, {}, 3), }}",
-        pos.frames(),
-        pos.joint_count()
-    );
-    // Magic (6) + version (2) + header length (2) + header, padded with spaces to a multiple
-    // of 64 and ended by a newline.
-    let total = 10 + header.len() + 1;
-    header.push_str(&" ".repeat((64 - total % 64) % 64));
-    header.push('\n');
-    let mut bytes = Vec::with_capacity(10 + header.len() + pos.frames() * pos.joint_count() * 24);
-    bytes.extend_from_slice(b"\x93NUMPY\x01\x00");
-    bytes.extend_from_slice(&u16::try_from(header.len())?.to_le_bytes());
-    bytes.extend_from_slice(header.as_bytes());
-    for f in 0..pos.frames() {
-        for p in pos.frame(f) {
-            for v in p {
-                bytes.extend_from_slice(&(v * scale).to_le_bytes());
-            }
-        }
-    }
-    Ok(bytes)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::xml_escape;
-
-    #[test]
-    fn labels_are_escaped_for_xml() {
-        assert_eq!(xml_escape("a<b>&\"c'"), "a&lt;b&gt;&amp;&quot;c&apos;");
-    }
+    Ok(())
 }

@@ -250,7 +250,7 @@ pub fn encode(args: &EncodeArgs) -> Result<()> {
     }
     let (made, search) = if let Some(bound) = args.max_error_cm {
         let b = lab::bounded::make_within(c.as_ref(), &loaded.clip, &params, bound)?;
-        let line = bounded_line(&b, bound);
+        let line = b.describe(bound);
         (b.made, Some(line))
     } else {
         let request = Request {
@@ -271,7 +271,7 @@ pub fn encode(args: &EncodeArgs) -> Result<()> {
         made.achieved_cr(),
         m.rms_cm,
         m.max_cm,
-        worst_window_text(&made, loaded.clip.frame_rate_hz),
+        stimulus::worst_window_text(made.worst_window, loaded.clip.frame_rate_hz),
         m.mean_angle_deg,
         made.encode_ms,
         made.decode_ms,
@@ -281,66 +281,6 @@ pub fn encode(args: &EncodeArgs) -> Result<()> {
     }
     println!("wrote {} and {}", mcz.display(), motion.display());
     Ok(())
-}
-
-/// `worst 1-s window RMS 0.412 cm, max 1.210 cm, at 12.93 s (frames 1552-1671)`
-/// (docs/codecs.md).
-fn worst_window_text(made: &stimulus::Made, frame_rate_hz: f64) -> String {
-    let Some(w) = made.worst_window else {
-        return "no frames".to_string();
-    };
-    let span = if w.frames == stimulus::window_frames(frame_rate_hz) {
-        "1-s window".to_string()
-    } else {
-        format!(
-            "window (the whole {:.2}-s clip)",
-            w.frames as f64 / frame_rate_hz
-        )
-    };
-    format!(
-        "worst {span} RMS {:.3} cm, max {:.3} cm, at {:.2} s (frames {}-{})",
-        w.rms_cm,
-        w.max_cm,
-        w.start_frame as f64 / frame_rate_hz,
-        w.start_frame,
-        w.start_frame + w.frames - 1
-    )
-}
-
-/// What an error-bounded search found, in one line.
-fn bounded_line(b: &lab::bounded::Bounded, bound: f64) -> String {
-    let key = b.knob.key;
-    let next = match &b.smaller {
-        Some(p) => format!(
-            "one step smaller ({key} {:.6}, {} bytes) has max {:.3} cm",
-            p.value, p.bytes, p.max_cm
-        ),
-        None => format!("the codec's smallest stream along {key}"),
-    };
-    let qp = if b.qp_tried.is_empty() {
-        String::new()
-    } else {
-        let tried: Vec<String> = b
-            .qp_tried
-            .iter()
-            .map(|(q, bytes)| match bytes {
-                Some(n) => format!("{q}: {n} bytes"),
-                None => format!("{q}: out of reach"),
-            })
-            .collect();
-        let kept = b
-            .made
-            .stream
-            .params
-            .get(codec::keys::QP)
-            .copied()
-            .unwrap_or(f64::NAN);
-        format!(" at qp {kept} (tried {})", tried.join(", "))
-    };
-    format!(
-        "max error ≤ {bound} cm: {key} {:.6}{qp} after {} encodes; {next}",
-        b.value, b.encodes
-    )
 }
 
 fn read_skeleton(path: &Path) -> Result<Skeleton> {

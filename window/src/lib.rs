@@ -6,8 +6,8 @@
 //! (wgpu pipelines, also offscreen), [`flow`] (a trial's presentation schedule), [`timing`]
 //! (frame intervals and drops), [`screens`] (egui screens over a session, driven by
 //! `egui_kittest` in tests), [`native`] (the native window), [`run`] (a session's screens and
-//! the display test in that window) and [`test_input`] (keys from a test's script, for the
-//! window's end-to-end tests).
+//! the display test in that window), [`test_input`] (keys from a test's script, for the
+//! window's end-to-end tests) and [`video`] (clips drawn offscreen to an MP4).
 
 pub mod flow;
 pub mod native;
@@ -18,6 +18,7 @@ pub mod screens;
 pub mod status;
 pub mod test_input;
 pub mod timing;
+pub mod video;
 pub mod viewing;
 
 #[cfg(test)]

@@ -567,6 +567,108 @@ impl Image {
     }
 }
 
+/// The shapes of every stage (a row of panes) at clip time `t_s`, appended to `shapes`.
+pub fn shapes_at(stages: &mut [crate::scene::Stage], t_s: f64, shapes: &mut Vec<FrameShapes>) {
+    for stage in stages {
+        let mut s = FrameShapes::default();
+        stage.shapes_at(t_s, &mut s);
+        shapes.push(s);
+    }
+}
+
+/// `shapes` as panes of `width` × `height` pixels, `cols` to a row, seen through `view`.
+pub fn panes_of<'a>(
+    shapes: &'a [FrameShapes],
+    view: &'a View,
+    cols: u32,
+    width: u32,
+    height: u32,
+) -> Vec<Pane<'a>> {
+    shapes
+        .iter()
+        .enumerate()
+        .map(|(k, s)| Pane {
+            x: (k as u32 % cols) * width,
+            y: (k as u32 / cols) * height,
+            width,
+            height,
+            view,
+            shapes: s,
+        })
+        .collect()
+}
+
+/// An SVG of `image` (embedded as PNG) with each pane's name and time written over it as
+/// text, so a paper's figure keeps its labels sharp and editable.
+///
+/// `names` label the columns and `times` (seconds) the rows of panes `width` × `pane` pixels.
+///
+/// # Errors
+/// The image does not encode as PNG.
+pub fn labelled_svg(
+    image: &Image,
+    names: &[String],
+    times: &[f64],
+    (width, pane): (u32, u32),
+) -> anyhow::Result<String> {
+    use std::fmt::Write as _;
+    let png = image.png_bytes()?;
+    let (w, h) = (image.width, image.height);
+    let size = (f64::from(pane) / 16.0).clamp(10.0, 32.0);
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        r#"<svg xmlns="http://www.w3.org/2000/svg" xmlns:xlink="http://www.w3.org/1999/xlink" width="{w}" height="{h}" viewBox="0 0 {w} {h}">"#
+    );
+    let _ = writeln!(
+        s,
+        r#"<image x="0" y="0" width="{w}" height="{h}" xlink:href="data:image/png;base64,{}"/>"#,
+        base64::Engine::encode(&base64::engine::general_purpose::STANDARD, &png)
+    );
+    let _ = writeln!(
+        s,
+        r##"<g font-family="Helvetica, Arial, sans-serif" font-size="{size:.0}" fill="#f2f2f2">"##
+    );
+    for (row, t) in times.iter().enumerate() {
+        for (col, name) in names.iter().enumerate() {
+            let (x, y) = (col as u32 * width, row as u32 * pane);
+            let pad = size * 0.6;
+            let _ = writeln!(
+                s,
+                r#"<text class="pane" x="{:.1}" y="{:.1}">{}</text>"#,
+                f64::from(x) + pad,
+                f64::from(y) + pad + size,
+                xml_escape(name)
+            );
+            let _ = writeln!(
+                s,
+                r#"<text class="time" x="{:.1}" y="{:.1}" text-anchor="end">t = {t:.2} s</text>"#,
+                f64::from(x + width) - pad,
+                f64::from(y) + pad + size
+            );
+        }
+    }
+    s.push_str("</g>\n</svg>\n");
+    Ok(s)
+}
+
+/// `text` for XML text and attributes (control characters as spaces).
+fn xml_escape(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    for c in text.chars() {
+        match c {
+            '&' => out.push_str("&amp;"),
+            '<' => out.push_str("&lt;"),
+            '>' => out.push_str("&gt;"),
+            '"' => out.push_str("&quot;"),
+            '\'' => out.push_str("&apos;"),
+            c if c.is_control() => out.push(' '),
+            c => out.push(c),
+        }
+    }
+    out
+}
+
 /// One viewport of an offscreen frame.
 pub struct Pane<'a> {
     /// Left edge, pixels.
@@ -818,4 +920,14 @@ struct FrameTargets {
     /// Multisampled colour target resolved into `resolved`, when MSAA is on.
     msaa: Option<wgpu::TextureView>,
     depth: wgpu::TextureView,
+}
+
+#[cfg(test)]
+mod svg_tests {
+    use super::xml_escape;
+
+    #[test]
+    fn labels_are_escaped_for_xml() {
+        assert_eq!(xml_escape("a<b>&\"c'"), "a&lt;b&gt;&amp;&quot;c&apos;");
+    }
 }
