@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 
 use motion::Clip;
 use protocols::manifest::{
-    MANIFEST_VERSION, REFERENCE_CODEC, Stimulus, StimulusManifest, StimulusMetrics, variant_label,
+    MANIFEST_VERSION, REFERENCE_CODEC, Stimulus, StimulusManifest, variant_label,
 };
 
 use crate::error::{Context as _, Result, io_error, refused};
@@ -237,15 +237,7 @@ fn decoded(dir: &Path, m: &StimulusManifest, clip: &str, d: &Decoded<'_>) -> Res
         bitstream: None,
         sha256: Some(stimulus::sha256_file(d.file)?),
         bitstream_sha256: stream_sha256,
-        metrics: Some(StimulusMetrics {
-            rms_cm: metrics.rms_cm,
-            max_cm: metrics.max_cm,
-            mean_angle_deg: metrics.mean_angle_deg,
-            foot_slide_cm_s: metrics.foot_slide_cm_s,
-            worst_window_rms_cm: w.map(|w| w.rms_cm),
-            worst_window_start_frame: w.map(|w| w.start_frame as u64),
-            worst_window_frames: w.map(|w| w.frames as u64),
-        }),
+        metrics: Some(stimulus::manifest_metrics(&metrics, w)),
         encode_ms: None,
         decode_ms: None,
         scene: None,

@@ -146,6 +146,23 @@ pub fn write_clip_as(
     Ok((m, a))
 }
 
+/// A stimulus' metrics as the manifest records them: the clip-wide errors of `m` and the
+/// worst window `worst`.
+pub fn manifest_metrics(
+    m: &Metrics,
+    worst: Option<WindowError>,
+) -> protocols::manifest::StimulusMetrics {
+    protocols::manifest::StimulusMetrics {
+        rms_cm: m.rms_cm,
+        max_cm: m.max_cm,
+        mean_angle_deg: m.mean_angle_deg,
+        foot_slide_cm_s: m.foot_slide_cm_s,
+        worst_window_rms_cm: worst.map(|w| w.rms_cm),
+        worst_window_start_frame: worst.map(|w| w.start_frame as u64),
+        worst_window_frames: worst.map(|w| w.frames as u64),
+    }
+}
+
 /// `worst 1-s window RMS 0.412 cm, max 1.210 cm, at 12.93 s (frames 1552-1671)`
 /// (docs/codecs.md).
 pub fn worst_window_text(worst: Option<WindowError>, frame_rate_hz: f64) -> String {

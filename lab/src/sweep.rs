@@ -18,7 +18,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use codecs::codec::{CodecError, Params, RateControl};
 use motion::Clip;
 use protocols::manifest::{
-    MANIFEST_VERSION, REFERENCE_CODEC, Stimulus, StimulusManifest, StimulusMetrics, variant_label,
+    MANIFEST_VERSION, REFERENCE_CODEC, Stimulus, StimulusManifest, variant_label,
 };
 
 use crate::bounded;
@@ -610,8 +610,6 @@ pub(crate) fn write_made(
     let mcz = m.dir.join(format!("{stem}.mcz"));
     files::write(&mcz, &made.bytes, mode)?;
     let (file, _) = stimulus::write_clip_as(&made.decoded, m.dir, &stem, m.skeleton, mode)?;
-    let metrics = &made.metrics;
-    let w = made.worst_window;
     let (target_cr, target_max_error_cm) = match m.target {
         Target::Cr(t) => (Some(t), None),
         Target::MaxErrorCm(e) => (None, Some(e)),
@@ -629,15 +627,7 @@ pub(crate) fn write_made(
         file: rel(out, &file),
         skeleton: m.skeleton.map(|s| rel(out, s)),
         bitstream: Some(rel(out, &mcz)),
-        metrics: Some(StimulusMetrics {
-            rms_cm: metrics.rms_cm,
-            max_cm: metrics.max_cm,
-            mean_angle_deg: metrics.mean_angle_deg,
-            foot_slide_cm_s: metrics.foot_slide_cm_s,
-            worst_window_rms_cm: w.map(|w| w.rms_cm),
-            worst_window_start_frame: w.map(|w| w.start_frame as u64),
-            worst_window_frames: w.map(|w| w.frames as u64),
-        }),
+        metrics: Some(stimulus::manifest_metrics(&made.metrics, made.worst_window)),
         encode_ms: Some(made.encode_ms),
         decode_ms: Some(made.decode_ms),
         scene: None,

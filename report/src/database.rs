@@ -187,10 +187,11 @@ pub(crate) fn open(
             .map(|u| format!("{} ({}, by {})", u.number, u.subject, u.station))
             .collect();
         warn(&format!(
-            "{}: {} subject numbers were taken for subjects that have no session: {}; a station \
-             stopped between taking the number and starting the session, so the report lacks \
-             those subjects (`study simulate --resume` creates a simulation's, `study run \
-             --subject ID` a real subject's)",
+            "{}: {} subject numbers were taken for subjects that have no session: {}; no \
+             session was begun under them (a station stopped before creating it, or a window \
+             closed before the first answer), so the report lacks those subjects (`study \
+             simulate --resume` creates a simulation's, `study run --subject ID` a real \
+             subject's)",
             store.location(),
             unclaimed.len(),
             list.join(", ")

@@ -24,7 +24,7 @@ use std::time::Instant;
 use codecs::codec::CodecContext;
 use codecs::primitives::{Database, SegmentParams, TrainParams};
 use motion::synth::{WalkParams, walking_clip};
-use protocols::manifest::{Stimulus, StimulusManifest, StimulusMetrics};
+use protocols::manifest::{Stimulus, StimulusManifest};
 
 use common::{Env, Scripted, setup, study_ok};
 
@@ -218,8 +218,6 @@ fn primitive_stimuli(out: &Path, clips: &[(String, motion::Clip)]) -> Vec<Stimul
                 files::Mode::New,
             )
             .unwrap();
-            let m = &made.metrics;
-            let w = made.worst_window;
             made_here.push(Stimulus {
                 id: format!("{name}/primitive/{label}"),
                 clip: name.clone(),
@@ -237,15 +235,10 @@ fn primitive_stimuli(out: &Path, clips: &[(String, motion::Clip)]) -> Vec<Stimul
                     .replace('\\', "/"),
                 skeleton: None,
                 bitstream: None,
-                metrics: Some(StimulusMetrics {
-                    rms_cm: m.rms_cm,
-                    max_cm: m.max_cm,
-                    mean_angle_deg: m.mean_angle_deg,
-                    foot_slide_cm_s: m.foot_slide_cm_s,
-                    worst_window_rms_cm: w.map(|w| w.rms_cm),
-                    worst_window_start_frame: w.map(|w| w.start_frame as u64),
-                    worst_window_frames: w.map(|w| w.frames as u64),
-                }),
+                metrics: Some(lab::stimulus::manifest_metrics(
+                    &made.metrics,
+                    made.worst_window,
+                )),
                 encode_ms: None,
                 decode_ms: None,
                 scene: None,

@@ -72,6 +72,32 @@ fn logs(dir: &Path) -> Vec<(String, Vec<TrialRecord>)> {
     out
 }
 
+/// Bytes of every session's `trials.csv` under `dir` (read without parsing: a runner may be
+/// writing one).
+fn logged_bytes(dir: &Path) -> u64 {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return 0;
+    };
+    entries
+        .filter_map(|e| std::fs::metadata(e.ok()?.path().join("trials.csv")).ok())
+        .map(|m| m.len())
+        .sum()
+}
+
+/// Waits (at most a minute) until `child` has logged past `before` bytes or ended: a kill
+/// then strikes a session, not the stimulus preflight that runs first (a live staircase
+/// encodes every clip there, which under load outlasted every random delay: 20 kills, no
+/// session struck).
+fn wait_for_a_row(dir: &Path, before: u64, child: &mut Child) {
+    let deadline = std::time::Instant::now() + Duration::from_secs(60);
+    while logged_bytes(dir) <= before
+        && child.try_wait().unwrap().is_none()
+        && std::time::Instant::now() < deadline
+    {
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
 fn kill(child: &mut Child) -> bool {
     let running = child.try_wait().unwrap().is_none();
     child.kill().unwrap(); // SIGKILL on Unix
@@ -98,6 +124,7 @@ fn kill_and_resume(study_name: &str, min_kills: u32) {
         let mut child = simulate(&study, &out, 4, false).spawn().unwrap();
         let mut previous = 0;
         loop {
+            wait_for_a_row(&out, logged_bytes(&out), &mut child);
             std::thread::sleep(Duration::from_millis(5 + rng.below(120)));
             if kill(&mut child) {
                 kills += 1;

@@ -326,7 +326,12 @@ fn studies_whose_screens_the_page_lacks_are_refused() {
             std::fs::write(dir.join("page/capabilities.json"), page).unwrap();
             rt.block_on(web::start(ServeOptions {
                 study: path.clone(),
-                output: dir.join(format!("results-{}", path.display().to_string().len())),
+                // One folder per study, by its name (a folder named by the path's length
+                // was shared by two studies whenever their paths were as long).
+                output: dir.join(format!(
+                    "results-{}",
+                    path.file_stem().unwrap().to_string_lossy()
+                )),
                 ..options.clone()
             }))
         };
