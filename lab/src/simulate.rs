@@ -235,20 +235,12 @@ fn simulate_into_database(
             // Recorded already (imported under this id): the number is spent, take the next.
             continue;
         }
-        match run_subject(
-            study,
-            options,
-            &Subject::numbered(index),
-            store,
-            false,
-            stimuli,
-            report,
-        ) {
-            Ok(summary) => report(&summary),
-            // A resuming station found the number before this one created the session.
-            Err(e) if taken_by_another(&e) => report(&format!("{id}: created by another station")),
-            Err(e) => return Err(e),
-        }
+        // A resuming station may have found the number before this one created the session.
+        let said = match run_unless_taken(study, options, index, store, false, stimuli, report)? {
+            Some(summary) => summary,
+            None => format!("{id}: created by another station"),
+        };
+        report(&said);
         progress(number as usize, options.subjects as usize);
     }
     Ok(())
@@ -280,21 +272,11 @@ fn resume_in_database(
         {
             continue;
         }
-        match run_subject(
-            study,
-            options,
-            &Subject::numbered(index),
-            store,
-            true,
-            stimuli,
-            report,
-        ) {
-            Ok(summary) => report(&summary),
-            Err(e) if taken_by_another(&e) => {
-                report(&format!("{}: taken over by another station", m.subject));
-            }
-            Err(e) => return Err(e),
-        }
+        let said = match run_unless_taken(study, options, index, store, true, stimuli, report)? {
+            Some(summary) => summary,
+            None => format!("{}: taken over by another station", m.subject),
+        };
+        report(&said);
     }
     // Numbers this simulation took whose station stopped before creating the session.
     let unclaimed = session::retry_outage(wait, report, || Ok(store.unclaimed_numbers()?))?;
@@ -305,35 +287,51 @@ fn resume_in_database(
         {
             continue;
         }
-        match run_subject(
-            study,
-            options,
-            &Subject::numbered(u.number - 1),
-            store,
-            false,
-            stimuli,
-            report,
-        ) {
-            Ok(summary) => report(&format!(
+        let index = u.number - 1;
+        let said = match run_unless_taken(study, options, index, store, false, stimuli, report)? {
+            Some(summary) => format!(
                 "{summary} (number {} was taken by {} without a session)",
                 u.number, u.station
-            )),
-            Err(e) if taken_by_another(&e) => {
-                report(&format!("{}: created by another station", u.subject));
-            }
-            Err(e) => return Err(e),
-        }
+            ),
+            None => format!("{}: created by another station", u.subject),
+        };
+        report(&said);
     }
     Ok(())
 }
 
-/// Whether `e` says another station created the session, or holds it, first.
+/// [`run_subject`] for simulated subject `index` in a database run; `None` where another
+/// station created the session, or holds it, first (not an error: that station runs it).
 #[cfg(feature = "postgres")]
-fn taken_by_another(e: &LabError) -> bool {
-    matches!(e, LabError::Context { source, .. } if matches!(
-        **source,
-        LabError::Results(ResultsError::SessionBusy { .. } | ResultsError::Exists { .. })
-    ))
+fn run_unless_taken(
+    study: &StudyFile,
+    options: &SimulateOptions,
+    index: u32,
+    store: &mut PgStore,
+    resume: bool,
+    stimuli: &mut dyn StimulusSource,
+    report: &mut dyn FnMut(&str),
+) -> Result<Option<String>> {
+    match run_subject(
+        study,
+        options,
+        &Subject::numbered(index),
+        store,
+        resume,
+        stimuli,
+        report,
+    ) {
+        Ok(summary) => Ok(Some(summary)),
+        Err(LabError::Context { source, .. })
+            if matches!(
+                *source,
+                LabError::Results(ResultsError::SessionBusy { .. } | ResultsError::Exists { .. })
+            ) =>
+        {
+            Ok(None)
+        }
+        Err(e) => Err(e),
+    }
 }
 
 /// What a simulated subject states in a new session's manifest: a valid answer to every
