@@ -3,7 +3,7 @@
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context as _, Result, bail};
+use anyhow::{Result, bail};
 use lab::clips::ClipOptions;
 use motion::{Clip, SkeletonFormat, fk, io, synth};
 
@@ -284,7 +284,7 @@ fn render_command(args: RenderArgs) -> Result<()> {
     };
     // Refused before the (slow) offscreen render.
     files::check_new(&output, mode)?;
-    let still = Still {
+    let still = window::stills::Still {
         times: &times,
         pane,
         wide: study.is_some(),
@@ -299,11 +299,15 @@ fn render_command(args: RenderArgs) -> Result<()> {
         } else {
             pane_names_given(&labels, scenes.len(), "scene")?
         };
-        (render_scenes(&study, &scenes, &still)?, names)
+        (
+            window::stills::crowd_scenes(&study, &scenes, &still)?,
+            names,
+        )
     } else {
         let clips = input.load()?;
         let names = pane_names(&clips, &labels)?;
-        (render(&clips, &still)?, names)
+        let clips: Vec<&Clip> = clips.iter().map(|c| &c.clip).collect();
+        (window::stills::clips(&clips, &still)?, names)
     };
     if svg {
         let sizes = (still.width(), still.pane);
@@ -319,27 +323,6 @@ fn render_command(args: RenderArgs) -> Result<()> {
         times.len()
     );
     Ok(())
-}
-
-/// What `study clip render` draws: times (rows), pane size, shadow.
-struct Still<'a> {
-    times: &'a [f64],
-    /// Pane height, pixels (`--pane`).
-    pane: u32,
-    /// Wide panes (16:9, the window's stimulus pane: crowd scenes), else square.
-    wide: bool,
-    shadow: bool,
-}
-
-impl Still<'_> {
-    /// Pane width, pixels.
-    fn width(&self) -> u32 {
-        if self.wide {
-            self.pane * 16 / 9
-        } else {
-            self.pane
-        }
-    }
 }
 
 /// The name of each pane column: `--labels` when given (one per clip), else the file's stem.
@@ -366,98 +349,6 @@ fn pane_names_given(labels: &[String], panes: usize, what: &str) -> Result<Vec<S
         );
     }
     Ok(labels.to_vec())
-}
-
-/// Draws crowd scenes of `study` (columns) at every time (rows), each with the study's
-/// `[scene]` camera and light, each character framed by its clip in the level's reference
-/// scene, as the study window draws them.
-fn render_scenes(
-    study: &Path,
-    scenes: &[String],
-    still: &Still<'_>,
-) -> Result<window::render::Image> {
-    use window::scene::{Cast, Stage, View};
-    let file = lab::StudyFile::load(study)?;
-    let Some(settings) = file.definition.scene.as_ref() else {
-        bail!("{}: has no [scene] to draw", study.display());
-    };
-    let source = lab::source::ManifestStimuli::new(&file);
-    let mut crowds = Vec::new();
-    for id in scenes {
-        let st = source
-            .manifest()
-            .get(id)
-            .filter(|s| s.scene.is_some())
-            .with_context(|| format!("--scenes: {id:?} is not a crowd scene of the study"))?;
-        let reference = source
-            .manifest()
-            .reference_of(&st.clip)
-            .with_context(|| format!("--scenes: {id:?} has no reference scene"))?;
-        crowds.push(source.crowd_pair(id, &reference.id)?);
-    }
-    let far = crowds
-        .iter()
-        .flatten()
-        .map(|c| c.placement.distance_cm)
-        .fold(0.0, f64::max);
-    let view = View::crowd(&settings.camera, &settings.light, far).with_shadow(still.shadow);
-    let stages: Vec<Stage> = crowds
-        .iter()
-        .map(|crowd| {
-            let casts: Vec<Cast> = crowd
-                .iter()
-                .map(|c| Cast::in_crowd(&c.name, &c.test, &c.reference, &c.placement, still.shadow))
-                .collect();
-            Stage::of(&casts)
-        })
-        .collect();
-    draw_panes(stages, &view, still)
-}
-
-/// Draws every clip (columns) at every time (rows) with the first clip's camera at that time,
-/// so a reference and its stimuli are framed alike.
-fn render(clips: &[Loaded], still: &Still<'_>) -> Result<window::render::Image> {
-    use window::scene::{Figure, Stage, View};
-    let Some(first) = clips.first() else {
-        bail!("no clip to render");
-    };
-    let view = View::framing(&first.clip).with_shadow(still.shadow);
-    let stages = clips
-        .iter()
-        .map(|c| Stage::single(Figure::new(&c.clip, &view)))
-        .collect();
-    draw_panes(stages, &view, still)
-}
-
-/// Draws `stages` (columns) at every time of `still` (rows) with `view`, offscreen.
-fn draw_panes(
-    mut stages: Vec<window::scene::Stage>,
-    view: &window::scene::View,
-    still: &Still<'_>,
-) -> Result<window::render::Image> {
-    let (times, pane) = (still.times, still.pane);
-    if stages.is_empty() {
-        bail!("nothing to render");
-    }
-    if !(64..=4096).contains(&pane) {
-        bail!("--pane {pane}: expected 64..=4096 pixels");
-    }
-    if let Some(t) = times.iter().find(|t| !t.is_finite() || **t < 0.0) {
-        bail!("--times: {t} is not a time in seconds");
-    }
-    let (cols, rows, width) = (stages.len() as u32, times.len() as u32, still.width());
-    if u64::from(cols * width) * u64::from(rows * pane) > 1 << 26 {
-        bail!("{cols}×{rows} panes of {pane} px is too large an image");
-    }
-    let mut shapes = Vec::new();
-    for t in times {
-        window::render::shapes_at(&mut stages, *t, &mut shapes);
-    }
-    let panes = window::render::panes_of(&shapes, view, cols, width, pane);
-    let mut offscreen = window::render::Offscreen::new(4)?;
-    let image = offscreen.render(cols * width, rows * pane, &panes)?;
-    eprintln!("rendered with adapter {}", offscreen.adapter().name);
-    Ok(image)
 }
 
 /// `study clip video` ([`window::video`]).

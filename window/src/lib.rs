@@ -16,6 +16,7 @@ pub mod run;
 pub use lab::scene;
 pub mod screens;
 pub mod status;
+pub mod stills;
 pub mod test_input;
 pub mod timing;
 pub mod video;
