@@ -39,6 +39,7 @@ fn bench(c: &mut Criterion) {
         output: dir.join(format!("jobs{jobs}")),
         jobs,
         database: None,
+        codec_defs: None,
         // Every iteration rewrites the same folder.
         force: true,
     };

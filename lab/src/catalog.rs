@@ -29,11 +29,27 @@ impl Codecs {
     /// # Errors
     /// The database cannot be read (the error names the file).
     pub fn with_database(db: Option<&Path>) -> Result<Codecs> {
-        let Some(path) = db else {
-            return Ok(Codecs::default());
+        Codecs::with_files(db, None)
+    }
+
+    /// The codecs with the primitive database at `db` and the command-defined codecs of the
+    /// definitions file `defs` ([`crate::codec_defs`]), each if named.
+    ///
+    /// # Errors
+    /// Either file cannot be read or has problems (the error names the file, and the key).
+    pub fn with_files(db: Option<&Path>, defs: Option<&Path>) -> Result<Codecs> {
+        let primitives = match db {
+            Some(path) => Some(Arc::new(Database::read(path)?)),
+            None => None,
         };
-        let d = Database::read(path)?;
-        Ok(Codecs::new(CodecContext::with_primitives(Arc::new(d))))
+        let external = match defs {
+            Some(path) => crate::codec_defs::read(path)?,
+            None => Vec::new(),
+        };
+        Ok(Codecs::new(CodecContext {
+            primitives,
+            external,
+        }))
     }
 
     /// The decoder context.

@@ -37,6 +37,7 @@ pub fn walk_stimuli(
         output: dir.join("stimuli"),
         jobs: std::thread::available_parallelism().map_or(1, usize::from),
         database: None,
+        codec_defs: None,
         force: false,
     };
     sweep::sweep(&options, &|_, _| {})

@@ -26,6 +26,7 @@ pub mod added;
 pub mod bounded;
 pub mod catalog;
 pub mod clips;
+pub mod codec_defs;
 pub mod crowd;
 pub mod error;
 pub mod generated;

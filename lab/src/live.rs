@@ -128,6 +128,13 @@ impl LiveStimuli {
             },
             None => None,
         };
+        let external = match &live.codecs {
+            Some(f) => crate::codec_defs::read(&study.dir().join(f)).unwrap_or_else(|e| {
+                issue("staircase.live.codecs".into(), &e);
+                Vec::new()
+            }),
+            None => Vec::new(),
+        };
         let manifest_dir = study.manifest_dir();
         let mut clips = Vec::with_capacity(live.clips.len());
         for (i, c) in live.clips.iter().enumerate() {
@@ -145,6 +152,7 @@ impl LiveStimuli {
         }
         let codecs = Codecs::new(CodecContext {
             primitives: database,
+            external,
         });
         Ok(Some(LiveStimuli {
             encoder: Arc::new(Encoder {

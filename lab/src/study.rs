@@ -32,6 +32,44 @@ pub struct StudyFile {
     pub definition: StudyDefinition,
 }
 
+/// The codecs a study file at `path` is checked against: the built-in ones, and those of the
+/// command-defined codecs file its `[staircase.live] codecs` names. A file that does not parse
+/// gets the built-in ones (the study's own check then says what is wrong with it).
+///
+/// # Errors
+/// The codec definitions file cannot be read or has problems: a study problem keyed
+/// `staircase.live.codecs`.
+fn study_codecs(path: &Path) -> Result<Codecs> {
+    let Ok(text) = fs::read_to_string(path) else {
+        return Ok(Codecs::default());
+    };
+    let Ok(table) = text.parse::<toml::Table>() else {
+        return Ok(Codecs::default());
+    };
+    let file = table
+        .get("staircase")
+        .and_then(|s| s.get("live"))
+        .and_then(|l| l.get("codecs"))
+        .and_then(toml::Value::as_str);
+    match file {
+        None => Ok(Codecs::default()),
+        Some(f) => {
+            let dir = path.parent().unwrap_or(Path::new("."));
+            Codecs::with_files(None, Some(&dir.join(f))).map_err(|e| {
+                protocols::StudyError::Invalid {
+                    path: path.to_path_buf(),
+                    issues: vec![protocols::StudyIssue {
+                        key: "staircase.live.codecs".into(),
+                        reason: crate::error::chain(&e),
+                        line: None,
+                    }],
+                }
+                .into()
+            })
+        }
+    }
+}
+
 impl StudyFile {
     /// Reads and checks the study file at `path` and its stimulus manifest, the codec settings
     /// against the codec registry included: every problem comes back in one
@@ -40,7 +78,7 @@ impl StudyFile {
     /// # Errors
     /// The study's problems (an unreadable file among them).
     pub fn load(path: &Path) -> Result<StudyFile> {
-        let (definition, text) = StudyDefinition::load_text(path, &Codecs::default())?;
+        let (definition, text) = StudyDefinition::load_text(path, &study_codecs(path)?)?;
         Ok(StudyFile {
             path: path.to_path_buf(),
             hash: content_hash(text.as_bytes()),
@@ -123,15 +161,19 @@ impl StudyFile {
             st.bitstream = st.bitstream.as_deref().map(absolute);
         }
         table.insert("stimuli".into(), toml::Value::String(MANIFEST_COPY.into()));
-        // A live staircase's decoder context is named relative to the study file: point the
-        // copy at the original so the copy still loads it.
-        if let Some(toml::Value::String(db)) = table
+        // A live staircase's decoder context and codec definitions are named relative to the
+        // study file: point the copy at the originals so the copy still loads them.
+        if let Some(live) = table
             .get_mut("staircase")
             .and_then(|s| s.get_mut("live"))
-            .and_then(|l| l.get_mut("database"))
+            .and_then(toml::Value::as_table_mut)
         {
-            let p = base.join(db.as_str());
-            *db = fs::canonicalize(&p).unwrap_or(p).display().to_string();
+            for key in ["database", "codecs"] {
+                if let Some(toml::Value::String(file)) = live.get_mut(key) {
+                    let p = base.join(file.as_str());
+                    *file = fs::canonicalize(&p).unwrap_or(p).display().to_string();
+                }
+            }
         }
         let body =
             toml::to_string(&table).map_err(|e| refused(format!("writing the study copy: {e}")))?;

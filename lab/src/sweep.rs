@@ -59,6 +59,8 @@ pub struct SweepOptions {
     pub jobs: usize,
     /// Primitive database for the `primitive` codec.
     pub database: Option<PathBuf>,
+    /// A file of command-defined codecs ([`crate::codec_defs`]) the sweep may name.
+    pub codec_defs: Option<PathBuf>,
     /// Write into an output folder that holds files, replacing those of the same names
     /// (atomically, each whole); without it such a folder is refused before anything is
     /// made. Files of an earlier sweep that this one does not make are left as they are.
@@ -194,8 +196,7 @@ pub fn sweep(
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<SweepSummary> {
     let targets = check_targets(options)?;
-    let codecs = Codecs::with_database(options.database.as_deref())
-        .context(|| "reading the primitive database".to_string())?;
+    let codecs = Codecs::with_files(options.database.as_deref(), options.codec_defs.as_deref())?;
     for name in &options.codecs {
         if codecs.get(name)?.rate_control() == RateControl::None {
             return Err(refused(format!(

@@ -35,6 +35,7 @@ fn sweep_two_shared_clips_three_codecs_four_rates() {
         output: out.clone(),
         jobs: 2,
         database: None,
+        codec_defs: None,
         force: false,
     };
     let calls = std::sync::atomic::AtomicUsize::new(0);
@@ -116,6 +117,7 @@ fn walk_sweep(clips: &[PathBuf], out: &Path, force: bool) -> lab::Result<lab::sw
         output: out.to_path_buf(),
         jobs: 1,
         database: None,
+        codec_defs: None,
         force,
     };
     sweep(&options, &|_, _| {})
@@ -233,6 +235,7 @@ fn one_and_two_workers_write_the_same_sweep() {
             output: out.clone(),
             jobs,
             database: None,
+            codec_defs: None,
             force: false,
         };
         let mut manifest = sweep(&options, &|_, _| {}).unwrap().manifest;

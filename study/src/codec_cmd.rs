@@ -38,9 +38,8 @@ pub struct EncodeArgs {
     /// Codec parameter `key=value` (repeatable), e.g. `--param qp=9 --param window=256`.
     #[arg(long = "param", value_name = "KEY=VALUE")]
     pub params: Vec<String>,
-    /// Primitive database (`study primitives train`) for the `primitive` codec.
-    #[arg(long, value_name = "FILE")]
-    pub db: Option<PathBuf>,
+    #[command(flatten)]
+    pub codec_files: CodecFiles,
     /// Output folder.
     #[arg(short, long)]
     pub output: PathBuf,
@@ -58,9 +57,8 @@ pub struct DecodeArgs {
     /// The skeleton the stream was made for: an `.asf`, or a `.bvh` whose skeleton is used.
     #[arg(long, value_name = "ASF_OR_BVH")]
     pub skeleton: PathBuf,
-    /// Primitive database the stream was coded with (`primitive` streams).
-    #[arg(long, value_name = "FILE")]
-    pub db: Option<PathBuf>,
+    #[command(flatten)]
+    pub codec_files: CodecFiles,
     /// Output folder.
     #[arg(short, long)]
     pub output: PathBuf,
@@ -102,9 +100,31 @@ pub struct SweepArgs {
     /// Hide the progress bar.
     #[arg(long)]
     pub quiet: bool,
-    /// Primitive database for the `primitive` codec.
+    #[command(flatten)]
+    pub codec_files: CodecFiles,
+}
+
+/// Codecs beyond the built-in ones: `--db`, `--codec-defs`.
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct CodecFiles {
+    /// Primitive database (`study primitives train`) for the `primitive` codec (its streams
+    /// decode only with the database they were coded with).
     #[arg(long, value_name = "FILE")]
     pub db: Option<PathBuf>,
+    /// A file of command-defined codecs: a lab's own encoder and decoder run as commands
+    /// (docs/codecs.md, "A codec of your own").
+    #[arg(long, value_name = "TOML")]
+    pub codec_defs: Option<PathBuf>,
+}
+
+impl CodecFiles {
+    /// The codec registry with these files' codecs.
+    fn codecs(&self) -> Result<Codecs> {
+        Ok(Codecs::with_files(
+            self.db.as_deref(),
+            self.codec_defs.as_deref(),
+        )?)
+    }
 }
 
 /// Where a stimulus set goes (`study sweep`, `study crowd`).
@@ -179,10 +199,13 @@ pub enum ShareArg {
 }
 
 /// `study codecs`: prints every codec (the `primitive` codec with a note that it needs
-/// `--db`).
-pub fn list() {
+/// `--db`), and those of `--codec-defs`.
+///
+/// # Errors
+/// The definitions file cannot be read or has problems.
+pub fn list(files: &CodecFiles) -> Result<()> {
     let mut out = String::new();
-    for c in Codecs::default().all() {
+    for c in files.codecs()?.all() {
         let params: Vec<String> = c
             .default_params()
             .iter()
@@ -216,6 +239,7 @@ pub fn list() {
         );
     }
     print!("{out}");
+    Ok(())
 }
 
 /// `study encode`.
@@ -229,9 +253,7 @@ pub fn encode(args: &EncodeArgs) -> Result<()> {
         bvh_unit_cm: None,
     };
     let loaded = clips::load_one(&args.input, &options)?;
-    let codecs = Codecs::with_database(args.db.as_deref())
-        .context("reading the primitive database (--db)")?;
-    let c = codecs.get(&args.codec)?;
+    let c = args.codec_files.codecs()?.get(&args.codec)?;
     let params = parse_params(&args.params)?;
     if args.max_error_cm.is_some() {
         lab::bounded::check_params(c.as_ref(), &params)?;
@@ -304,19 +326,19 @@ pub fn decode(args: &DecodeArgs) -> Result<()> {
     let stream =
         Bitstream::from_bytes(&bytes).with_context(|| format!("{}", args.bitstream.display()))?;
     let skeleton = read_skeleton(&args.skeleton)?;
-    let codecs = Codecs::with_database(args.db.as_deref())
-        .context("reading the primitive database (--db)")?;
+    let codecs = args.codec_files.codecs()?;
     let clip =
-        codec::decode_any_in(&stream, &skeleton, codecs.context()).with_context(
-            || match &args.db {
-                Some(db) => format!(
-                    "decoding {} with the database {}",
-                    args.bitstream.display(),
-                    db.display()
-                ),
-                None => format!("decoding {}", args.bitstream.display()),
-            },
-        )?;
+        codec::decode_any_in(&stream, &skeleton, codecs.context()).with_context(|| match &args
+            .codec_files
+            .db
+        {
+            Some(db) => format!(
+                "decoding {} with the database {}",
+                args.bitstream.display(),
+                db.display()
+            ),
+            None => format!("decoding {}", args.bitstream.display()),
+        })?;
     std::fs::create_dir_all(&args.output)
         .with_context(|| format!("creating {}", args.output.display()))?;
     // An ASF clip refers to the skeleton it was decoded for; only the motion is written.
@@ -413,7 +435,8 @@ pub fn sweep(args: &SweepArgs) -> Result<()> {
         params: parse_grid("--param", &args.params)?,
         output: args.set.output.clone(),
         jobs: args.set.jobs(),
-        database: args.db.clone(),
+        database: args.codec_files.db.clone(),
+        codec_defs: args.codec_files.codec_defs.clone(),
         force: args.set.force,
     };
     let bar = Progress::new("stimuli", args.quiet);

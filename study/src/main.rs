@@ -63,8 +63,8 @@ enum Command {
     /// Compress the crowd scenes of a study's `[scene]` (thesis 6.5): a ratio per group, or
     /// one budget per scene shared uniformly, by distance (eq. 6.4-6.5) or by importance.
     Crowd(codec_cmd::CrowdArgs),
-    /// List the codecs and their parameters.
-    Codecs,
+    /// List the codecs and their parameters (with `--codec-defs`, a lab's own too).
+    Codecs(codec_cmd::CodecFiles),
     /// Validate a study file and list every problem at once.
     Check(study_cmd::CheckArgs),
     /// Dry-run sessions with simulated observers into a results directory.
@@ -98,10 +98,7 @@ fn main() -> ExitCode {
         Command::Sweep(args) => codec_cmd::sweep(&args),
         Command::Crowd(args) => codec_cmd::crowd(&args),
         Command::Stimuli(cmd) => stimuli_cmd::run(cmd),
-        Command::Codecs => {
-            codec_cmd::list();
-            Ok(())
-        }
+        Command::Codecs(files) => codec_cmd::list(&files),
         Command::Check(args) => study_cmd::check(&args),
         Command::Simulate(args) => study_cmd::simulate(&args),
         Command::Report(args) => report_cmd::run(&args),

@@ -34,6 +34,10 @@ impl Still<'_> {
 /// Draws crowd scenes of `study` (columns) at every time (rows), each with the study's
 /// `[scene]` camera and light, each character framed by its clip in the level's reference
 /// scene, as the study window draws them.
+///
+/// # Errors
+/// The study cannot be loaded or has no `[scene]`, a scene id is not one of its crowd scenes
+/// or has no reference scene, or the image cannot be drawn (as [`clips`]).
 pub fn crowd_scenes(study: &Path, scenes: &[String], still: &Still<'_>) -> Result<Image> {
     use crate::scene::{Cast, Stage, View};
     let file = lab::StudyFile::load(study)?;
@@ -75,6 +79,10 @@ pub fn crowd_scenes(study: &Path, scenes: &[String], still: &Still<'_>) -> Resul
 
 /// Draws every clip (columns) at every time (rows) with the first clip's camera at that time,
 /// so a reference and its stimuli are framed alike.
+///
+/// # Errors
+/// No clip, a pane size outside 64-4096 pixels, a time that is not a non-negative number of
+/// seconds, an image over 64 M pixels, or no GPU adapter for the offscreen render.
 pub fn clips(clips: &[&Clip], still: &Still<'_>) -> Result<Image> {
     use crate::scene::{Figure, Stage, View};
     let Some(first) = clips.first() else {

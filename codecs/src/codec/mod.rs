@@ -11,6 +11,7 @@
 //! | `spiht-uniform` | 7 | 1-D SPIHT with equal bit shares (allocation ablation) |
 //! | `primitive` | 8 | thesis ch. 5: primitive database + incremental CDF 9/7 differences, knob `t_l` |
 //! | `rhythmic` | 9 | thesis ch. 4: whole-body segments as references to the clip's primitives, blended at the joins |
+//! | a lab's own | 255 | an encode and a decode command ([`external`]), found through [`CodecContext::external`] |
 //!
 //! Every lossy codec but `rhythmic` takes either its native parameters or `cr` (a target
 //! compression ratio); [`crate::rate::encode_to_cr`] reaches a target within ±2 % where the
@@ -30,6 +31,7 @@ use crate::bitstream::{Bitstream, BitstreamError, StreamLimits};
 use crate::primitives::Database;
 use motion::clip::{Clip, ClipError, Skeleton};
 
+pub mod external;
 mod prep;
 pub mod primitive;
 pub mod raw;
@@ -177,6 +179,16 @@ pub enum CodecError {
         /// Fingerprint of the database in the context.
         given: u32,
     },
+    /// A command of a command-defined codec ([`external`]) failed.
+    #[error("codec `{codec}`: command `{command}`: {detail}")]
+    External {
+        /// Codec name.
+        codec: &'static str,
+        /// The command line, placeholders replaced.
+        command: String,
+        /// What went wrong (its exit status and the end of its standard error).
+        detail: String,
+    },
     /// A target compression ratio cannot be reached.
     #[error("codec `{codec}`: target CR {target} not reachable (closest {closest:.3})")]
     Rate {
@@ -260,12 +272,15 @@ pub trait Codec: Send + Sync {
 /// What [`Codec::rate_encoder`] returns: an encode of one clip with the parameters given.
 pub type RateEncoder<'a> = Box<dyn FnMut(&Params) -> Result<Bitstream, CodecError> + 'a>;
 
-/// What a codec may need besides the stream: today the primitive database of the `primitive`
-/// codec (thesis ch. 5), shared by encoder and decoder. `Default` is an empty context.
+/// What a codec may need besides the stream: the primitive database of the `primitive`
+/// codec (thesis ch. 5), shared by encoder and decoder, and a lab's command-defined codecs
+/// ([`external`]). `Default` is an empty context.
 #[derive(Debug, Clone, Default)]
 pub struct CodecContext {
     /// The primitive database, if one is loaded.
     pub primitives: Option<Arc<Database>>,
+    /// Command-defined codecs, found by name beside the built-in ones.
+    pub external: Vec<Arc<external::Definition>>,
 }
 
 impl CodecContext {
@@ -273,7 +288,16 @@ impl CodecContext {
     pub fn with_primitives(db: Arc<Database>) -> CodecContext {
         CodecContext {
             primitives: Some(db),
+            external: Vec::new(),
         }
+    }
+
+    /// The command-defined codec called `name`.
+    fn external(&self, name: &str) -> Option<Box<dyn Codec>> {
+        self.external
+            .iter()
+            .find(|d| d.name == name)
+            .map(|d| Box::new(external::ExternalCodec::new(Arc::clone(d))) as Box<dyn Codec>)
     }
 }
 
@@ -293,11 +317,13 @@ pub fn registry() -> Vec<Box<dyn Codec>> {
 }
 
 /// Every codec, in id order, with `ctx` (the `primitive` codec is listed with or without a
-/// database; without one it refuses to encode and decode).
+/// database; without one it refuses to encode and decode), then the context's
+/// command-defined codecs in their order.
 pub fn registry_in(ctx: &CodecContext) -> Vec<Box<dyn Codec>> {
     let mut r = registry();
     r.push(primitive_in(ctx));
     r.sort_by_key(|c| c.id());
+    r.extend(ctx.external.iter().filter_map(|d| ctx.external(&d.name)));
     r
 }
 
@@ -320,10 +346,14 @@ pub fn by_name_in(name: &str, ctx: &CodecContext) -> Option<Box<dyn Codec>> {
     if name == primitive::NAME {
         return Some(primitive_in(ctx));
     }
-    registry().into_iter().find(|c| c.name() == name)
+    registry()
+        .into_iter()
+        .find(|c| c.name() == name)
+        .or_else(|| ctx.external(name))
 }
 
-/// The codec with bitstream id `id` (empty context).
+/// The codec with bitstream id `id` (empty context; a command-defined codec's stream,
+/// [`external::ID`], is found by [`decode_any_in`] by the name it carries).
 pub fn by_id(id: u8) -> Option<Box<dyn Codec>> {
     by_id_in(id, &CodecContext::default())
 }
@@ -354,11 +384,23 @@ pub fn decode_any_in(
     skeleton: &Skeleton,
     ctx: &CodecContext,
 ) -> Result<Clip, CodecError> {
-    let codec = by_id_in(stream.codec_id, ctx).ok_or(CodecError::WrongCodec {
-        codec: "any",
-        expected: 0,
-        found: stream.codec_id,
-    })?;
+    let codec = if stream.codec_id == external::ID {
+        let name = external::stream_codec_name(stream).unwrap_or_default();
+        ctx.external(&name).ok_or_else(|| CodecError::Payload {
+            codec: "any",
+            offset: 0,
+            detail: format!(
+                "the stream was made by the command-defined codec `{name}`, which is not defined here \
+                 (in `study`: --codec-defs FILE)"
+            ),
+        })?
+    } else {
+        by_id_in(stream.codec_id, ctx).ok_or(CodecError::WrongCodec {
+            codec: "any",
+            expected: 0,
+            found: stream.codec_id,
+        })?
+    };
     codec.decode(stream, skeleton)
 }
 

@@ -1,5 +1,5 @@
 //! `[staircase.live]`: a codec-in-the-loop staircase's clips, their order, the codec's fixed
-//! parameters and its decoder context file.
+//! parameters, its decoder context file and the file of command-defined codecs it may name.
 
 use std::collections::{BTreeMap, BTreeSet};
 
@@ -27,7 +27,7 @@ pub(super) fn parse_live(
     codecs: &dyn CodecCatalog,
     cx: &mut Ctx,
 ) -> Option<LiveStaircase> {
-    cx.known(t, P, &["clips", "order", "params", "database"]);
+    cx.known(t, P, &["clips", "order", "params", "database", "codecs"]);
     let names = cx.strings(t, P, "clips");
     let names = cx.required(names, t, P, "clips");
     let mut clips = Vec::new();
@@ -78,6 +78,10 @@ pub(super) fn parse_live(
     if database.as_deref().is_some_and(|d| d.trim().is_empty()) {
         cx.err(join(P, "database"), "must name a file");
     }
+    let codec_file = cx.string(t, P, "codecs");
+    if codec_file.as_deref().is_some_and(|d| d.trim().is_empty()) {
+        cx.err(join(P, "codecs"), "must name a codec definitions file");
+    }
     if let Some(codec) = codec {
         check_codec(codecs, codec, param, &params, database.as_deref(), cx);
     }
@@ -87,6 +91,7 @@ pub(super) fn parse_live(
         order,
         params,
         database,
+        codecs: codec_file,
     })
 }
 

@@ -430,6 +430,9 @@ pub struct LiveStaircase {
     /// Decoder context file (e.g. a primitive database) as written, relative to the study
     /// file.
     pub database: Option<String>,
+    /// A file of command-defined codecs (the lab's own encoder and decoder), relative to the
+    /// study file: `[staircase] codec` may name one of them.
+    pub codecs: Option<String>,
 }
 
 /// Psychometric function family of the simulated 2AFC observer.
