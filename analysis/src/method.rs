@@ -71,6 +71,9 @@ pub fn method_text(
     });
     viewing_lines(study, displays, &mut out);
     out.push(design_line(study));
+    if let Some(cr) = cr_line(study) {
+        out.push(cr);
+    }
     if let Some(groups) = groups_line(study, displays) {
         out.push(groups);
     }
@@ -309,6 +312,30 @@ fn design_line(study: &StudyDefinition) -> String {
         ));
     }
     format!("Design: {}.", design.join("; "))
+}
+
+/// Which channels the compression ratios count, where the study shows coded stimuli: the
+/// manifest's basis, or every channel of the file for a live staircase (its stimuli are coded
+/// per trial, on the file basis).
+fn cr_line(study: &StudyDefinition) -> Option<String> {
+    let live = study.staircase.as_ref().is_some_and(|s| s.live.is_some());
+    let coded = study
+        .manifest
+        .stimuli
+        .iter()
+        .any(|s| s.codec != protocols::manifest::REFERENCE_CODEC);
+    if !(live || coded) {
+        return None;
+    }
+    let basis = if live {
+        protocols::manifest::CrBasis::File
+    } else {
+        study.manifest.cr_basis
+    };
+    Some(format!(
+        "Compression ratios (CR): 4 bytes × channels × frames / stream bytes, on the {}.",
+        basis.words()
+    ))
 }
 
 /// Adds the "Method" section, before the results.

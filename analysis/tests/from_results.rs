@@ -40,6 +40,7 @@ fn stimulus(id: &str, clip: &str, codec: &str, cr: f64) -> Stimulus {
 fn manifest() -> StimulusManifest {
     StimulusManifest {
         version: 1,
+        cr_basis: protocols::manifest::CrBasis::File,
         stimuli: vec![
             stimulus("walk/ref", "walk", "reference", 1.0),
             stimulus("walk/p/cr20", "walk", "perceptual", 20.0),
@@ -384,6 +385,7 @@ fn variant_study() -> analysis::from_results::ConvertedResults {
     };
     let m = StimulusManifest {
         version: 2,
+        cr_basis: protocols::manifest::CrBasis::File,
         stimuli: vec![
             stimulus("walk/ref", "walk", "reference", 1.0),
             variant("walk/wavelet-perceptual/qp9/cr20", 9.0),

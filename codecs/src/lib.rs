@@ -20,6 +20,7 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+pub mod basis;
 pub mod bitstream;
 pub mod codec;
 pub mod entropy;

@@ -40,6 +40,7 @@ fn bench(c: &mut Criterion) {
         jobs,
         database: None,
         codec_defs: None,
+        cr_basis: codecs::basis::CrBasis::File,
         // Every iteration rewrites the same folder.
         force: true,
     };

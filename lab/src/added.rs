@@ -76,6 +76,7 @@ pub fn add(manifest: &Path, clip: &str, what: &Added) -> Result<Stimulus> {
     } else if matches!(what, Added::Reference { .. }) {
         StimulusManifest {
             version: MANIFEST_VERSION,
+            cr_basis: protocols::manifest::CrBasis::File,
             stimuli: Vec::new(),
         }
     } else {
@@ -209,7 +210,11 @@ fn decoded(dir: &Path, m: &StimulusManifest, clip: &str, d: &Decoded<'_>) -> Res
         ))
     })?;
     let w = stimulus::worst_window(&metrics, reference.frame_rate_hz);
-    let raw = 4.0 * reference.channel_count() as f64 * reference.frames() as f64;
+    // The manifest's basis: a set made with `--cr-basis seed` counts the seeds' channels.
+    let channels = crate::sweep::codec_basis(m.cr_basis)
+        .channels(&reference.skeleton)
+        .map_err(|e| refused(format!("{}: {e}", reference_file.display())))?;
+    let raw = 4.0 * channels as f64 * reference.frames() as f64;
     let id = d.id.map_or_else(
         || {
             if d.params.is_empty() {

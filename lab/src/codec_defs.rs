@@ -346,10 +346,17 @@ rate = { param = "step", min = 0.001, max = 10, cr = "grows" }
         assert_eq!(defs.len(), 1);
         assert_eq!(defs[0].name, "q");
         assert_eq!(defs[0].timeout, Duration::from_secs(60));
-        assert!(matches!(
+        assert_eq!(
             defs[0].rate,
-            RateControl::SearchIncreasing { key: "step", min, max, .. } if min == 0.001 && max == 10.0
-        ));
+            RateControl::SearchIncreasing {
+                key: "step",
+                min: 0.001,
+                max: 10.0,
+                slope: 1.0
+            }
+        );
+        // Rate control sets `cr` among the parameters, as for the built-in codecs.
+        assert_eq!(defs[0].params.get("cr"), Some(&0.0));
     }
 
     #[test]

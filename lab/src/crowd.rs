@@ -206,6 +206,7 @@ pub fn crowd(
     let read: BTreeMap<String, SweepClip> = read.into_iter().map(|c| (c.name.clone(), c)).collect();
     let mut manifest = StimulusManifest {
         version: MANIFEST_VERSION,
+        cr_basis: protocols::manifest::CrBasis::File,
         stimuli: references,
     };
     let raw = |clip: &str| read.get(clip).map_or(0.0, |c| raw_size(&c.clip));
@@ -324,6 +325,7 @@ fn encode_members(
                         target: Target::Cr(j.target),
                         dir: &f.dir,
                         skeleton: f.skeleton.as_deref(),
+                        cr_factor: 1.0,
                     };
                     write_made(&m, member, out, mode)
                 });

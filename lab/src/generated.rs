@@ -38,6 +38,7 @@ pub fn walk_stimuli(
         jobs: std::thread::available_parallelism().map_or(1, usize::from),
         database: None,
         codec_defs: None,
+        cr_basis: codecs::basis::CrBasis::File,
         force: false,
     };
     sweep::sweep(&options, &|_, _| {})

@@ -192,6 +192,7 @@ pub fn check_keeping(
     let mut clips: HashMap<String, Option<Arc<Clip>>> = HashMap::new();
     let mut hashes: HashMap<String, String> = HashMap::new();
     let ctx = CodecContext::default();
+    let manifest_basis = study.definition.manifest.cr_basis;
     for (done, (id, reference)) in ids.iter().enumerate() {
         let Some(st) = study.definition.manifest.get(id) else {
             // The study loader checks every id against the manifest.
@@ -233,7 +234,7 @@ pub fn check_keeping(
                         checked.not_decoded += 1;
                     }
                     hashed(&path, st.bitstream_sha256.as_deref(), id, &mut problems);
-                    for message in sizes(&path, clip, st) {
+                    for message in sizes(&path, clip, st, manifest_basis) {
                         problems.push(problem(&path, id, message));
                     }
                 }
@@ -395,8 +396,13 @@ fn same_as_reference(st: &Stimulus) -> Option<String> {
 }
 
 /// Where the manifest's `bytes` or `achieved_cr` are not the bitstream's at `path` (read
-/// already: it parsed).
-fn sizes(path: &Path, clip: &Clip, st: &Stimulus) -> Vec<String> {
+/// already: it parsed), its CR counted on the manifest's `basis`.
+fn sizes(
+    path: &Path,
+    clip: &Clip,
+    st: &Stimulus,
+    basis: protocols::manifest::CrBasis,
+) -> Vec<String> {
     let Ok(size) = std::fs::metadata(path).map(|m| m.len()) else {
         return Vec::new();
     };
@@ -407,14 +413,21 @@ fn sizes(path: &Path, clip: &Clip, st: &Stimulus) -> Vec<String> {
             st.bytes
         ));
     }
-    let raw = 4.0 * clip.channel_count() as f64 * clip.frames() as f64;
+    let channels = match crate::sweep::codec_basis(basis).channels(&clip.skeleton) {
+        Ok(n) => n,
+        Err(e) => {
+            out.push(format!("achieved_cr: {e}"));
+            return out;
+        }
+    };
+    let raw = 4.0 * channels as f64 * clip.frames() as f64;
     let cr = raw / size.max(1) as f64;
     if (st.achieved_cr - cr).abs() > 1e-6 * cr {
         out.push(format!(
-            "achieved_cr: the manifest says {}, the bitstream gives {cr:.4} (4 bytes × {} \
-             channels × {} frames / {size} bytes)",
+            "achieved_cr: the manifest says {}, the bitstream gives {cr:.4} (4 bytes × {channels} \
+             channels ({} basis) × {} frames / {size} bytes)",
             st.achieved_cr,
-            clip.channel_count(),
+            crate::sweep::codec_basis(basis).name(),
             clip.frames()
         ));
     }
@@ -505,7 +518,9 @@ fn bitstream(path: &Path, clip: &Clip, ctx: &CodecContext) -> std::result::Resul
             decoded.frames(),
             clip.frames()
         )),
-        Err(CodecError::NoDatabase { .. }) => Ok(false),
+        // Streams of the primitive codec without its database, or of a command-defined codec
+        // the preflight does not run: their decoded files are checked, the streams not decoded.
+        Err(CodecError::NoDatabase { .. } | CodecError::Undefined { .. }) => Ok(false),
         Err(e) => Err(format!("does not decode: {}", chain(&e))),
     }
 }

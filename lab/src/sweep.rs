@@ -15,6 +15,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
+use codecs::basis::CrBasis;
 use codecs::codec::{CodecError, Params, RateControl};
 use motion::Clip;
 use protocols::manifest::{
@@ -32,7 +33,7 @@ pub const MANIFEST_FILE: &str = "stimuli.json";
 /// The rate–distortion table a sweep writes.
 pub const RD_FILE: &str = "rd.csv";
 /// Header of [`RD_FILE`] (columns in `docs/codecs.md`, "rd.csv").
-const RD_HEADER: &str = "clip,codec,params,target_cr,target_max_error_cm,status,achieved_cr,bytes,rms_cm,max_cm,worst_window_rms_cm,worst_window_start_frame,mean_angle_deg,foot_slide_cm_s,encode_ms,decode_ms,id,reason\n";
+const RD_HEADER: &str = "clip,codec,params,target_cr,target_max_error_cm,status,achieved_cr,bytes,rms_cm,max_cm,worst_window_rms_cm,worst_window_start_frame,mean_angle_deg,foot_slide_cm_s,encode_ms,decode_ms,id,reason,cr_basis\n";
 
 /// What a sweep makes.
 #[derive(Debug, Clone, Default)]
@@ -61,6 +62,9 @@ pub struct SweepOptions {
     pub database: Option<PathBuf>,
     /// A file of command-defined codecs ([`crate::codec_defs`]) the sweep may name.
     pub codec_defs: Option<PathBuf>,
+    /// Which channels the targets and the achieved ratios count ([`CrBasis`]): the seed
+    /// basis aims each target at the seeds' raw size and records it in the manifest.
+    pub cr_basis: CrBasis,
     /// Write into an output folder that holds files, replacing those of the same names
     /// (atomically, each whole); without it such a folder is refused before anything is
     /// made. Files of an earlier sweep that this one does not make are left as they are.
@@ -121,6 +125,8 @@ pub(crate) struct SweepClip {
     pub clip: Clip,
     pub skeleton: Option<PathBuf>,
     pub dir: PathBuf,
+    /// A file-basis CR times this is the CR on the sweep's basis ([`CrBasis::factor`]).
+    pub cr_factor: f64,
 }
 
 struct Job {
@@ -213,15 +219,22 @@ pub fn sweep(
     let out = &options.output;
     let mode = files::Mode::from_force(options.force);
     files::prepare_dir(out, mode)?;
-    let (sweep_clips, references) = read_references(
+    let (mut sweep_clips, references) = read_references(
         &inputs,
         options.clip_options.bvh_unit_cm,
         out,
         options.jobs,
         mode,
     )?;
+    for c in &mut sweep_clips {
+        c.cr_factor = options
+            .cr_basis
+            .factor(&c.clip.skeleton)
+            .map_err(|e| refused(format!("{}: {e}", c.name)))?;
+    }
     let mut manifest = StimulusManifest {
         version: MANIFEST_VERSION,
+        cr_basis: manifest_basis(options.cr_basis),
         stimuli: references,
     };
     let mut jobs = Vec::new();
@@ -256,11 +269,11 @@ pub fn sweep(
     for r in results {
         match r? {
             Outcome::Made(stimulus, row) => {
-                csv.push_str(&row.to_csv());
+                csv.push_str(&row.to_csv(options.cr_basis));
                 manifest.stimuli.push(*stimulus);
             }
             Outcome::Unreachable(u, row) => {
-                csv.push_str(&row.to_csv());
+                csv.push_str(&row.to_csv(options.cr_basis));
                 unreachable.push(u);
             }
         }
@@ -297,6 +310,7 @@ pub(crate) fn read_references(
                 clip,
                 skeleton,
                 dir,
+                cr_factor: 1.0,
             };
             Ok((c, file))
         },
@@ -502,6 +516,22 @@ pub fn stimulus_id(clip: &str, codec: &str, variant: &Params, target: Target) ->
     }
 }
 
+/// The manifest's name of a CR basis.
+pub fn manifest_basis(basis: CrBasis) -> protocols::manifest::CrBasis {
+    match basis {
+        CrBasis::File => protocols::manifest::CrBasis::File,
+        CrBasis::Seed => protocols::manifest::CrBasis::Seed,
+    }
+}
+
+/// The counting of a manifest's CR basis.
+pub fn codec_basis(basis: protocols::manifest::CrBasis) -> CrBasis {
+    match basis {
+        protocols::manifest::CrBasis::File => CrBasis::File,
+        protocols::manifest::CrBasis::Seed => CrBasis::Seed,
+    }
+}
+
 /// One stimulus and its CSV row, or its target recorded as unreachable.
 fn make_job(
     job: &Job,
@@ -514,12 +544,14 @@ fn make_job(
     let codec = codecs.get(&job.codec)?;
     let id = stimulus_id(&c.name, &job.codec, &job.variant, job.target);
     let made = match job.target {
+        // The rate control counts the file's channels: a target on another basis is
+        // aimed at the same bytes.
         Target::Cr(t) => stimulus::make(
             codec.as_ref(),
             &c.clip,
             &Request {
                 params: job.variant.clone(),
-                target_cr: Some(t),
+                target_cr: Some(t / c.cr_factor),
             },
         ),
         Target::MaxErrorCm(e) => {
@@ -565,6 +597,7 @@ fn make_job(
             target: job.target,
             dir: &c.dir,
             skeleton: c.skeleton.as_deref(),
+            cr_factor: c.cr_factor,
         },
         out,
         mode,
@@ -588,6 +621,8 @@ pub(crate) struct Member<'a> {
     pub dir: &'a Path,
     /// The clip's ASF in the output (AMC clips).
     pub skeleton: Option<&'a Path>,
+    /// The factor from the stream's (file-basis) CR to the manifest's basis.
+    pub cr_factor: f64,
 }
 
 /// Writes `made`'s bitstream and decoded clip into `m.dir` (`<codec>[-<variant>]-<target>`,
@@ -623,7 +658,7 @@ pub(crate) fn write_made(
         variant: m.variant.clone(),
         target_cr,
         target_max_error_cm,
-        achieved_cr: made.achieved_cr(),
+        achieved_cr: made.achieved_cr() * m.cr_factor,
         bytes: made.bytes.len() as u64,
         file: rel(out, &file),
         skeleton: m.skeleton.map(|s| rel(out, s)),
@@ -697,7 +732,7 @@ impl RdRow {
             params: Self::params_cell(&job.variant),
             target: job.target,
             status: "made",
-            achieved_cr: Some(made.achieved_cr()),
+            achieved_cr: Some(made.achieved_cr() * c.cr_factor),
             bytes: Some(made.bytes.len()),
             rms_cm: Some(m.rms_cm),
             max_cm: Some(m.max_cm),
@@ -735,7 +770,7 @@ impl RdRow {
     }
 
     /// The row as a CSV line (with its newline).
-    fn to_csv(&self) -> String {
+    fn to_csv(&self, basis: CrBasis) -> String {
         let num =
             |v: Option<f64>, digits: usize| v.map_or_else(String::new, |v| format!("{v:.digits$}"));
         let (target_cr, bound) = match self.target {
@@ -762,6 +797,7 @@ impl RdRow {
             num(self.decode_ms, 3),
             self.id.clone(),
             self.reason.clone(),
+            basis.name().to_string(),
         ];
         csv_record(&cells)
     }

@@ -36,6 +36,7 @@ fn sweep_two_shared_clips_three_codecs_four_rates() {
         jobs: 2,
         database: None,
         codec_defs: None,
+        cr_basis: codecs::basis::CrBasis::File,
         force: false,
     };
     let calls = std::sync::atomic::AtomicUsize::new(0);
@@ -118,6 +119,7 @@ fn walk_sweep(clips: &[PathBuf], out: &Path, force: bool) -> lab::Result<lab::sw
         jobs: 1,
         database: None,
         codec_defs: None,
+        cr_basis: codecs::basis::CrBasis::File,
         force,
     };
     sweep(&options, &|_, _| {})
@@ -236,6 +238,7 @@ fn one_and_two_workers_write_the_same_sweep() {
             jobs,
             database: None,
             codec_defs: None,
+            cr_basis: codecs::basis::CrBasis::File,
             force: false,
         };
         let mut manifest = sweep(&options, &|_, _| {}).unwrap().manifest;

@@ -29,8 +29,43 @@ pub const REFERENCE_CODEC: &str = "reference";
 pub struct StimulusManifest {
     /// Format version, [`MANIFEST_VERSION`].
     pub version: u32,
+    /// Which channels every `achieved_cr` and `target_cr` of the manifest counts (absent:
+    /// [`CrBasis::File`]).
+    #[serde(default, skip_serializing_if = "CrBasis::is_file")]
+    pub cr_basis: CrBasis,
     /// Every stimulus, references included.
     pub stimuli: Vec<Stimulus>,
+}
+
+/// Which channels a compression ratio counts (`codecs::basis` counts them): every channel of
+/// the clip's file, or the degrees of freedom the seeds count (a CMU skeleton's 56).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CrBasis {
+    /// `4 bytes × every channel of the file × frames / bytes`.
+    #[default]
+    File,
+    /// `4 bytes × the seeds' DOF × frames / bytes`.
+    Seed,
+}
+
+impl CrBasis {
+    /// Whether this is the file basis (the default, not written).
+    pub fn is_file(&self) -> bool {
+        *self == CrBasis::File
+    }
+
+    /// How reports name it.
+    pub fn words(self) -> &'static str {
+        match self {
+            CrBasis::File => {
+                "file basis: every channel of the clip's file (62 for a CMU AMC clip, 96 for a CMU BVH)"
+            }
+            CrBasis::Seed => {
+                "seed basis: the seeds' 56 DOF of a CMU skeleton (fingers and thumbs left out)"
+            }
+        }
+    }
 }
 
 /// One stimulus: a clip file a subject can be shown.
@@ -199,8 +234,9 @@ impl StimulusManifest {
     /// Every value of the manifest that cannot be true, one line each naming the stimulus
     /// (its place and id) and the key: a ratio, size, error, time or target that is not a
     /// finite number in its range, an RMS error above its maximum, a SHA-256 that is not 64
-    /// hex digits. A hand-written or damaged manifest would otherwise
-    /// change the analysis (a negative RMS error changed simulated ratings).
+    /// hex digits; and the manifest's own: a version this build does not read, an id listed
+    /// twice, a crowd scene named like a clip. A hand-written or damaged manifest would
+    /// otherwise change the analysis (a negative RMS error changed simulated ratings).
     pub fn problems(&self) -> Vec<String> {
         /// `v` where it is not finite, or not above 0 (`zero_ok`: not 0 or more).
         fn range(v: f64, zero_ok: bool) -> Option<String> {
@@ -264,6 +300,46 @@ impl StimulusManifest {
                     .into_iter()
                     .map(|(key, why)| format!("stimuli[{i}] (\"{}\").{key}: {why}", s.id)),
             );
+        }
+        out.extend(self.whole_problems());
+        out
+    }
+
+    /// What is wrong with the manifest as a whole: a version this build does not read, an id
+    /// listed twice, a crowd scene whose level is also the name of a clip.
+    fn whole_problems(&self) -> Vec<String> {
+        let mut out = Vec::new();
+        if !(MANIFEST_VERSION_MIN..=MANIFEST_VERSION).contains(&self.version) {
+            out.push(format!(
+                "manifest version {} is not supported (this build reads \
+                 {MANIFEST_VERSION_MIN} to {MANIFEST_VERSION})",
+                self.version,
+            ));
+        }
+        let mut seen = std::collections::BTreeSet::new();
+        for (i, s) in self.stimuli.iter().enumerate() {
+            if !seen.insert(s.id.as_str()) {
+                out.push(format!(
+                    "stimuli[{i}]: stimulus id {:?} is listed twice",
+                    s.id
+                ));
+            }
+        }
+        // A crowd scene's clip is its level: a clip of one figure by that name would make the
+        // scene's reference ambiguous.
+        let plain: std::collections::BTreeSet<&str> = self
+            .stimuli
+            .iter()
+            .filter(|s| s.scene.is_none())
+            .map(|s| s.clip.as_str())
+            .collect();
+        for (i, s) in self.stimuli.iter().enumerate() {
+            if s.scene.is_some() && plain.contains(s.clip.as_str()) {
+                out.push(format!(
+                    "stimuli[{i}]: crowd scene {:?} is of level {:?}, also the name of a clip",
+                    s.id, s.clip
+                ));
+            }
         }
         out
     }

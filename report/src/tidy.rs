@@ -194,12 +194,12 @@ pub(crate) fn columns(study: &StudyDefinition) -> Vec<Column> {
             String,
             "The stimulus' codec parameters as key=value;key=value (keys sorted): the encoding the runner logged for the trial, else the manifest's.",
         ),
-        Column::new("target_cr", Number, "The compression ratio the stimulus was made for; empty when none.")
+        Column::new("target_cr", Number, "The compression ratio the stimulus was made for, on the stimulus manifest's cr_basis (every channel of the file unless it says seed); empty when none.")
             .at_least(0.0),
         Column::new(
             "compression_ratio",
             Number,
-            "Compression ratio reached, x of x:1 (1 for a reference).",
+            "Compression ratio reached, x of x:1 (1 for a reference), on the same basis as target_cr (a live staircase's: every channel of the file).",
         )
         .at_least(0.0),
         Column::new(

@@ -5,6 +5,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
+use codecs::basis::CrBasis;
 use codecs::bitstream::Bitstream;
 use codecs::codec;
 use lab::Codecs;
@@ -31,6 +32,10 @@ pub struct EncodeArgs {
     /// Target compression ratio (4 bytes × channels × frames / bitstream bytes).
     #[arg(long, conflicts_with = "max_error_cm")]
     pub cr: Option<f64>,
+    /// Which channels a CR counts: `file` (every channel of the file) or `seed` (the seeds'
+    /// 56 DOF of a CMU skeleton; docs/codecs.md, "CR basis").
+    #[arg(long, value_parser = parse_basis, default_value = "file")]
+    pub cr_basis: CrBasis,
     /// Error bound: the smallest stream whose largest joint position error is at most this
     /// many cm (a search over the codec's rate knob, at most 13 encodes; docs/codecs.md).
     #[arg(long, value_name = "CM")]
@@ -86,6 +91,10 @@ pub struct SweepArgs {
     /// Target compression ratios, comma separated.
     #[arg(long, value_delimiter = ',', required_unless_present = "max_error_cm")]
     pub cr: Vec<f64>,
+    /// Which channels the targets and ratios count: `file` or `seed` (recorded in the
+    /// manifest and rd.csv; docs/codecs.md, "CR basis").
+    #[arg(long, value_parser = parse_basis, default_value = "file")]
+    pub cr_basis: CrBasis,
     /// Error bounds in cm, comma separated: for each, the smallest stream whose largest joint
     /// position error stays within it (ids `clip/codec/max0.5cm`).
     #[arg(long, value_delimiter = ',', value_name = "CM")]
@@ -102,6 +111,11 @@ pub struct SweepArgs {
     pub quiet: bool,
     #[command(flatten)]
     pub codec_files: CodecFiles,
+}
+
+/// `--cr-basis`.
+fn parse_basis(s: &str) -> Result<CrBasis, String> {
+    CrBasis::parse(s).ok_or_else(|| format!("{s:?}: expected file or seed"))
 }
 
 /// Codecs beyond the built-in ones: `--db`, `--codec-defs`.
@@ -253,6 +267,10 @@ pub fn encode(args: &EncodeArgs) -> Result<()> {
         bvh_unit_cm: None,
     };
     let loaded = clips::load_one(&args.input, &options)?;
+    let factor = args
+        .cr_basis
+        .factor(&loaded.clip.skeleton)
+        .with_context(|| format!("--cr-basis {}", args.cr_basis))?;
     let c = args.codec_files.codecs()?.get(&args.codec)?;
     let params = parse_params(&args.params)?;
     if args.max_error_cm.is_some() {
@@ -275,9 +293,10 @@ pub fn encode(args: &EncodeArgs) -> Result<()> {
         let line = b.describe(bound);
         (b.made, Some(line))
     } else {
+        // Rate control counts the file's channels: the same bytes, another raw size.
         let request = Request {
             params,
-            target_cr: args.cr,
+            target_cr: args.cr.map(|t| t / factor),
         };
         (stimulus::make(c.as_ref(), &loaded.clip, &request)?, None)
     };
@@ -287,10 +306,14 @@ pub fn encode(args: &EncodeArgs) -> Result<()> {
     let (motion, _) = stimulus::write_clip_as(&made.decoded, &args.output, &stem, None, mode)?;
     let m = &made.metrics;
     println!(
-        "{}: {} bytes, CR {:.2}, joint RMS {:.3} cm, max {:.3} cm, {}, angle {:.3}°, encode {:.2} ms, decode {:.2} ms",
+        "{}: {} bytes, CR {:.2}{}, joint RMS {:.3} cm, max {:.3} cm, {}, angle {:.3}°, encode {:.2} ms, decode {:.2} ms",
         c.name(),
         made.bytes.len(),
-        made.achieved_cr(),
+        made.achieved_cr() * factor,
+        match args.cr_basis {
+            CrBasis::File => String::new(),
+            CrBasis::Seed => format!(" ({})", args.cr_basis.describe(&loaded.clip.skeleton)?),
+        },
         m.rms_cm,
         m.max_cm,
         stimulus::worst_window_text(made.worst_window, loaded.clip.frame_rate_hz),
@@ -437,6 +460,7 @@ pub fn sweep(args: &SweepArgs) -> Result<()> {
         jobs: args.set.jobs(),
         database: args.codec_files.db.clone(),
         codec_defs: args.codec_files.codec_defs.clone(),
+        cr_basis: args.cr_basis,
         force: args.set.force,
     };
     let bar = Progress::new("stimuli", args.quiet);

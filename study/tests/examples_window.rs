@@ -171,6 +171,7 @@ fn make_example_stimuli(root: &Path) {
     }
     let manifest = StimulusManifest {
         version: protocols::manifest::MANIFEST_VERSION,
+        cr_basis: protocols::manifest::CrBasis::File,
         stimuli,
     };
     let json = serde_json::to_string_pretty(&manifest).unwrap() + "\n";

@@ -130,7 +130,7 @@ fn walks(dir: &Path) -> (PathBuf, PathBuf, PathBuf) {
 }
 
 #[test]
-fn a_command_defined_codec_encodes_to_a_target_decodes_and_sweeps() {
+fn a_command_defined_codec_encodes_to_a_target_and_decodes() {
     let dir = scratch("encode");
     let defs = dir.join("codecs.toml");
     let d = s(&defs);
@@ -202,8 +202,14 @@ fn a_command_defined_codec_encodes_to_a_target_decodes_and_sweeps() {
             "{e}"
         );
     }
+}
 
-    // A sweep over it beside a built-in codec: every target reached, measured alike.
+#[test]
+fn a_sweep_over_it_reaches_every_target_beside_a_built_in_codec() {
+    let dir = scratch("sweep");
+    let defs = dir.join("codecs.toml");
+    let d = s(&defs);
+    let (amc, asf, _) = walks(&dir);
     let set = dir.join("set");
     let said = ok(&[
         "sweep",
@@ -385,7 +391,7 @@ fn a_failing_or_hanging_command_is_an_error_naming_it() {
     // Nothing is left in the temporary folder by either.
     let left: Vec<_> = std::fs::read_dir(std::env::temp_dir())
         .unwrap()
-        .filter_map(|e| e.ok())
+        .filter_map(Result::ok)
         .map(|e| e.file_name().to_string_lossy().into_owned())
         .filter(|n| n.starts_with("study-codec-broken-") || n.starts_with("study-codec-slow-"))
         .collect();

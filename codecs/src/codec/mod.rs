@@ -179,6 +179,15 @@ pub enum CodecError {
         /// Fingerprint of the database in the context.
         given: u32,
     },
+    /// The stream was made by a command-defined codec ([`external`]) the context does not
+    /// define.
+    #[error(
+        "the stream was made by the command-defined codec `{name}`, which is not defined here (in `study`: --codec-defs FILE)"
+    )]
+    Undefined {
+        /// The codec's name, as the stream carries it.
+        name: String,
+    },
     /// A command of a command-defined codec ([`external`]) failed.
     #[error("codec `{codec}`: command `{command}`: {detail}")]
     External {
@@ -386,14 +395,7 @@ pub fn decode_any_in(
 ) -> Result<Clip, CodecError> {
     let codec = if stream.codec_id == external::ID {
         let name = external::stream_codec_name(stream).unwrap_or_default();
-        ctx.external(&name).ok_or_else(|| CodecError::Payload {
-            codec: "any",
-            offset: 0,
-            detail: format!(
-                "the stream was made by the command-defined codec `{name}`, which is not defined here \
-                 (in `study`: --codec-defs FILE)"
-            ),
-        })?
+        ctx.external(&name).ok_or(CodecError::Undefined { name })?
     } else {
         by_id_in(stream.codec_id, ctx).ok_or(CodecError::WrongCodec {
             codec: "any",

@@ -1,8 +1,6 @@
 //! The top-level table of a study file: its header keys, the stimulus manifest, and which
 //! sections each protocol takes.
 
-use std::collections::BTreeSet;
-
 use toml::{Table, Value};
 
 use super::check::Ctx;
@@ -572,50 +570,7 @@ fn check_live_metric(t: &Table, simulation: &SimulationSettings, cx: &mut Ctx) {
 /// The manifest's own problems, each naming its file (`path`, as the `stimuli` key gives it)
 /// and the entry.
 fn check_manifest(path: &str, m: &StimulusManifest, cx: &mut Ctx) {
-    use crate::manifest::{MANIFEST_VERSION, MANIFEST_VERSION_MIN};
-    if !(MANIFEST_VERSION_MIN..=MANIFEST_VERSION).contains(&m.version) {
-        cx.err(
-            "stimuli",
-            format!(
-                "{path}: manifest version {} is not supported (this build reads \
-                 {MANIFEST_VERSION_MIN} to {MANIFEST_VERSION})",
-                m.version,
-            ),
-        );
-    }
     for problem in m.problems() {
         cx.err("stimuli", format!("{path}: {problem}"));
-    }
-    let mut seen = BTreeSet::new();
-    for (i, s) in m.stimuli.iter().enumerate() {
-        if !seen.insert(s.id.as_str()) {
-            cx.err(
-                "stimuli",
-                format!(
-                    "{path}: stimuli[{i}]: stimulus id {:?} is listed twice",
-                    s.id
-                ),
-            );
-        }
-    }
-    // A crowd scene's clip is its level: a clip of one figure by that name would make the
-    // scene's reference ambiguous.
-    let plain: BTreeSet<&str> = m
-        .stimuli
-        .iter()
-        .filter(|s| s.scene.is_none())
-        .map(|s| s.clip.as_str())
-        .collect();
-    for (i, s) in m.stimuli.iter().enumerate() {
-        if s.scene.is_some() && plain.contains(s.clip.as_str()) {
-            cx.err(
-                "stimuli",
-                format!(
-                    "{path}: stimuli[{i}]: crowd scene {:?} is of level {:?}, also the name of \
-                     a clip",
-                    s.id, s.clip
-                ),
-            );
-        }
     }
 }
