@@ -119,6 +119,17 @@ impl ManifestStimuli {
         }
     }
 
+    /// The stimuli of `manifest`, its file paths relative to `base` (its folder), without a
+    /// study: no crowd scene can be drawn ([`Self::crowd_pair`] needs the study's `[scene]`).
+    pub fn of_manifest(base: PathBuf, manifest: StimulusManifest) -> ManifestStimuli {
+        ManifestStimuli {
+            base,
+            manifest,
+            scene: None,
+            clips: Mutex::default(),
+        }
+    }
+
     /// The clip of stimulus `id`.
     ///
     /// # Errors

@@ -12,6 +12,7 @@ mod codec_cmd;
 mod db_cmd;
 mod demo_cmd;
 mod markers_cmd;
+mod preview_cmd;
 mod primitives_cmd;
 mod progress;
 mod report_cmd;
@@ -56,6 +57,9 @@ enum Command {
     Decode(codec_cmd::DecodeArgs),
     /// Build a stimulus set (clips × codecs × rates) with stimuli.json and rd.csv.
     Sweep(codec_cmd::SweepArgs),
+    /// Play a manifest's stimuli in the study window, each beside its reference, with its
+    /// metrics (codec, parameters, compression ratio, joint errors) beside them.
+    Preview(preview_cmd::PreviewArgs),
     /// Stimulus sets made elsewhere: add a clip decoded by a codec of your own, measured as
     /// the sweep measures its own.
     #[command(subcommand)]
@@ -98,6 +102,7 @@ fn main() -> ExitCode {
         Command::Sweep(args) => codec_cmd::sweep(&args),
         Command::Crowd(args) => codec_cmd::crowd(&args),
         Command::Stimuli(cmd) => stimuli_cmd::run(cmd),
+        Command::Preview(args) => preview_cmd::run(&args),
         Command::Codecs(files) => codec_cmd::list(&files),
         Command::Check(args) => study_cmd::check(&args),
         Command::Simulate(args) => study_cmd::simulate(&args),

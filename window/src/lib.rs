@@ -11,6 +11,7 @@
 
 pub mod flow;
 pub mod native;
+pub mod preview;
 pub mod render;
 pub mod run;
 pub use lab::scene;
