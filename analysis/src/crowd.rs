@@ -103,7 +103,8 @@ impl CrowdDesign {
                         distance_cm: c.distance_cm,
                         achieved_cr: manifest
                             .get(&c.stimulus)
-                            .map_or(f64::NAN, |m| m.achieved_cr),
+                            .and_then(|m| m.achieved_cr)
+                            .unwrap_or(f64::NAN),
                     })
                     .collect();
                 let of_group: Vec<&protocols::manifest::SceneMember> = scene
@@ -117,7 +118,7 @@ impl CrowdDesign {
                         of_group.iter().map(|c| c.distance_cm).sum::<f64>() / of_group.len() as f64,
                     ),
                     None => (
-                        st.achieved_cr,
+                        st.achieved_cr?,
                         characters.iter().map(|c| c.distance_cm).fold(0.0, f64::max),
                     ),
                 };
@@ -126,7 +127,7 @@ impl CrowdDesign {
                     level: scene.level.clone(),
                     distance_cm,
                     x,
-                    scene_cr: st.achieved_cr,
+                    scene_cr: st.achieved_cr?,
                     characters,
                 })
             })

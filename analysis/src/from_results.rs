@@ -261,6 +261,20 @@ impl<'a> Converter<'a> {
                 });
             };
             let reference = s.codec == REFERENCE_CODEC;
+            // The study loader refuses a shown stimulus of unknown CR; a results folder whose
+            // manifest copy has one cannot be placed on any rate axis.
+            let compression_ratio = if reference {
+                None
+            } else {
+                Some(s.target_cr.or(s.achieved_cr).ok_or_else(|| AnalysisError::BadRecord {
+                    path: PathBuf::from("stimuli.json"),
+                    line: 0,
+                    column: "achieved_cr",
+                    message: format!(
+                        "stimulus {name:?} is rated in the results but its compression ratio is unknown"
+                    ),
+                })?)
+            };
             data.conditions.push(ConditionInfo {
                 id: id as u32,
                 codec: s.codec.clone(),
@@ -269,7 +283,7 @@ impl<'a> Converter<'a> {
                 // The nominal (target) ratio groups codecs made for the same rate, as the
                 // seeds' tables do ("20:1"); the achieved ratio stands in when there was no
                 // target.
-                compression_ratio: (!reference).then_some(s.target_cr.unwrap_or(s.achieved_cr)),
+                compression_ratio,
             });
         }
         // Crowd scenes (thesis 6.5): a scene's ratio on the rate curves is that of the
@@ -327,7 +341,7 @@ fn encoded_level(record: &TrialRecord, manifest: &StimulusManifest) -> Option<En
         (e.achieved_cr, Some(e.rms_cm))
     } else {
         let s = manifest.get(&record.trial.stimulus)?;
-        (s.achieved_cr, s.metrics.map(|m| m.rms_cm))
+        (s.achieved_cr?, s.metrics.map(|m| m.rms_cm))
     };
     Some(EncodedLevel {
         clip,

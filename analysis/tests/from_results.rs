@@ -23,7 +23,7 @@ fn stimulus(id: &str, clip: &str, codec: &str, cr: f64) -> Stimulus {
         variant: BTreeMap::new(),
         target_cr: None,
         target_max_error_cm: None,
-        achieved_cr: cr,
+        achieved_cr: Some(cr),
         bytes: 0,
         file: format!("{id}.amc"),
         skeleton: None,

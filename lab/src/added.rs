@@ -28,6 +28,9 @@ pub enum Size {
     Stream(PathBuf),
     /// The stream's size in bytes, where the file is not at hand.
     Bytes(u64),
+    /// Not known: the stimulus is measured and can be previewed, but its compression ratio
+    /// is `null` ("CR unknown") and no study shows it until its size is given.
+    Unknown,
 }
 
 /// What to add to a manifest.
@@ -192,13 +195,14 @@ fn decoded(dir: &Path, m: &StimulusManifest, clip: &str, d: &Decoded<'_>) -> Res
             (meta.len(), Some(stimulus::sha256_file(path)?))
         }
         Size::Bytes(n) => (*n, None),
+        Size::Unknown => (0, None),
     };
-    if bytes == 0 {
+    if bytes == 0 && *d.size != Size::Unknown {
         return Err(refused(format!(
             "{}: a stream of 0 bytes has no compression ratio",
             match d.size {
                 Size::Stream(p) => p.display().to_string(),
-                Size::Bytes(_) => "--bytes".to_string(),
+                Size::Bytes(_) | Size::Unknown => "--bytes".to_string(),
             }
         )));
     }
@@ -233,7 +237,7 @@ fn decoded(dir: &Path, m: &StimulusManifest, clip: &str, d: &Decoded<'_>) -> Res
         variant: d.params.clone(),
         target_cr: None,
         target_max_error_cm: None,
-        achieved_cr: raw / bytes as f64,
+        achieved_cr: (bytes > 0).then(|| raw / bytes as f64),
         bytes,
         file,
         skeleton: d.skeleton.map(|s| rel(dir, s)).transpose()?,

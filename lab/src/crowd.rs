@@ -357,7 +357,7 @@ fn scene_stimulus(
         variant: BTreeMap::new(),
         target_cr: cr.0,
         target_max_error_cm: None,
-        achieved_cr: cr.1,
+        achieved_cr: Some(cr.1),
         bytes,
         file: String::new(),
         skeleton: None,
@@ -462,7 +462,8 @@ fn assemble(
             opt(member.score),
             cents(member.budget_bytes),
             target.to_string(),
-            format!("{:.4}", m.achieved_cr),
+            m.achieved_cr
+                .map_or_else(String::new, |c| format!("{c:.4}")),
             m.bytes.to_string(),
             metric(|x| Some(x.rms_cm)),
             metric(|x| Some(x.max_cm)),

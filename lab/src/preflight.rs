@@ -422,11 +422,12 @@ fn sizes(
     };
     let raw = 4.0 * channels as f64 * clip.frames() as f64;
     let cr = raw / size.max(1) as f64;
-    if (st.achieved_cr - cr).abs() > 1e-6 * cr {
+    if st.achieved_cr.is_none_or(|a| (a - cr).abs() > 1e-6 * cr) {
         out.push(format!(
             "achieved_cr: the manifest says {}, the bitstream gives {cr:.4} (4 bytes × {channels} \
              channels ({} basis) × {} frames / {size} bytes)",
-            st.achieved_cr,
+            st.achieved_cr
+                .map_or_else(|| "null (unknown)".to_string(), |a| a.to_string()),
             crate::sweep::codec_basis(basis).name(),
             clip.frames()
         ));

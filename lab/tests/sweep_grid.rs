@@ -82,7 +82,7 @@ fn a_grid_makes_every_variant_and_records_unreachable_targets_without_aborting()
         }
         assert!(s.target_max_error_cm.is_none());
         let t = s.target_cr.unwrap();
-        assert!((s.achieved_cr / t - 1.0).abs() <= 0.02, "{}", s.id);
+        assert!((s.achieved_cr.unwrap() / t - 1.0).abs() <= 0.02, "{}", s.id);
         let m = s.metrics.unwrap();
         assert!(m.max_cm >= m.rms_cm, "{}", s.id);
         let ww = m.worst_window_rms_cm.unwrap();

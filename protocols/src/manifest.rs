@@ -23,6 +23,16 @@ pub const MANIFEST_VERSION_MIN: u32 = 1;
 /// The codec name that marks an unprocessed reference clip.
 pub const REFERENCE_CODEC: &str = "reference";
 
+/// `Option<T>` that must be present, `null` allowed (serde treats a missing `Option` field
+/// as `None` unless it is deserialized by a function of its own).
+fn required_nullable<'de, D, T>(d: D) -> Result<Option<T>, D::Error>
+where
+    D: serde::Deserializer<'de>,
+    T: Deserialize<'de>,
+{
+    Option::<T>::deserialize(d)
+}
+
 /// The whole `stimuli.json` file.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -95,8 +105,12 @@ pub struct Stimulus {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub target_max_error_cm: Option<f64>,
     /// Compression ratio reached (4 bytes × channels × frames / bitstream bytes); 1 for a
-    /// reference.
-    pub achieved_cr: f64,
+    /// reference. `null` ("CR unknown") only for a stimulus made elsewhere whose stream size
+    /// was not given (`study stimuli add` without `--stream` or `--bytes`): such a stimulus
+    /// is shown and rated, but no table, fit or staircase that needs its ratio takes it. The
+    /// key is required: a manifest that leaves it out is refused, not read as unknown.
+    #[serde(deserialize_with = "required_nullable")]
+    pub achieved_cr: Option<f64>,
     /// Bitstream size in bytes (0 for a reference).
     #[serde(default)]
     pub bytes: u64,
@@ -246,7 +260,7 @@ impl StimulusManifest {
         }
         let mut out = Vec::new();
         for (i, s) in self.stimuli.iter().enumerate() {
-            let mut values = vec![("achieved_cr", Some(s.achieved_cr), false)];
+            let mut values = vec![("achieved_cr", s.achieved_cr, false)];
             values.extend([
                 ("target_cr", s.target_cr, false),
                 ("target_max_error_cm", s.target_max_error_cm, false),
@@ -254,6 +268,19 @@ impl StimulusManifest {
                 ("decode_ms", s.decode_ms, true),
             ]);
             let mut found: Vec<(&str, String)> = Vec::new();
+            if s.achieved_cr.is_none()
+                && (s.codec == REFERENCE_CODEC
+                    || s.bitstream.is_some()
+                    || s.bytes > 0
+                    || s.scene.is_some())
+            {
+                found.push((
+                    "achieved_cr",
+                    "is null (CR unknown), but a reference's is 1 and a stimulus with a \
+                     stream, a size or a scene has one"
+                        .into(),
+                ));
+            }
             if let Some(m) = &s.metrics {
                 values.extend([
                     ("metrics.rms_cm", Some(m.rms_cm), true),
@@ -357,12 +384,12 @@ impl StimulusManifest {
         let mut squares = 0.0;
         for c in &scene.characters {
             let m = self.get(&c.stimulus)?;
-            codec_params.insert(format!("cr_{}", c.name), m.achieved_cr);
+            codec_params.insert(format!("cr_{}", c.name), m.achieved_cr?);
             squares += m.metrics.map_or(0.0, |x| x.rms_cm * x.rms_cm);
         }
         Some(StimulusEncoding {
             codec_params,
-            achieved_cr: s.achieved_cr,
+            achieved_cr: s.achieved_cr?,
             rms_cm: (squares / scene.characters.len().max(1) as f64).sqrt(),
         })
     }

@@ -614,7 +614,7 @@ fn stimulus_fields(s: &Stimulus) -> [String; 8] {
         s.method(),
         results::trials::format_codec_params(&s.params).unwrap_or_default(),
         opt(s.target_cr),
-        s.achieved_cr.to_string(),
+        opt(s.achieved_cr),
         opt(s.metrics.map(|m| m.rms_cm)),
         flag(s.codec == REFERENCE_CODEC).to_owned(),
     ]

@@ -40,7 +40,8 @@ pub struct AddArgs {
     /// read, only hashed).
     #[arg(long, value_name = "FILE", conflicts_with = "bytes")]
     pub stream: Option<PathBuf>,
-    /// The stream's size in bytes, where the file is not at hand.
+    /// The stream's size in bytes, where the file is not at hand. Without --stream or
+    /// --bytes the stimulus is added with its CR unknown: measured, previewable, not studied.
     #[arg(long, value_name = "N")]
     pub bytes: Option<u64>,
     /// A codec parameter the clip was made with (repeatable): `--param q=8`. Parameters tell
@@ -72,10 +73,7 @@ fn add(args: &AddArgs) -> Result<()> {
             let size = match (&args.stream, args.bytes) {
                 (Some(path), _) => Size::Stream(path.clone()),
                 (None, Some(n)) => Size::Bytes(n),
-                (None, None) => bail!(
-                    "give the stream's size: --stream FILE (the file the codec wrote) or \
-                     --bytes N; without it a stimulus has no compression ratio"
-                ),
+                (None, None) => Size::Unknown,
             };
             Added::Decoded {
                 codec: codec.clone(),
@@ -91,10 +89,11 @@ fn add(args: &AddArgs) -> Result<()> {
     let st = lab::added::add(&args.manifest, &args.clip, &what)?;
     match &st.metrics {
         Some(m) => println!(
-            "{}: {} bytes, CR {:.2}, joint RMS {:.3} cm, max {:.3} cm, worst 1-s window RMS {}, angle {:.3}°",
+            "{}: {} bytes, CR {}, joint RMS {:.3} cm, max {:.3} cm, worst 1-s window RMS {}, angle {:.3}°",
             st.id,
             st.bytes,
-            st.achieved_cr,
+            st.achieved_cr
+                .map_or_else(|| "unknown".to_string(), |c| format!("{c:.2}")),
             m.rms_cm,
             m.max_cm,
             m.worst_window_rms_cm

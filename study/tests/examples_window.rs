@@ -227,7 +227,7 @@ fn primitive_stimuli(out: &Path, clips: &[(String, motion::Clip)]) -> Vec<Stimul
                 variant: BTreeMap::new(),
                 target_cr: None,
                 target_max_error_cm: None,
-                achieved_cr: made.achieved_cr(),
+                achieved_cr: Some(made.achieved_cr()),
                 bytes: made.bytes.len() as u64,
                 file: file
                     .strip_prefix(out)

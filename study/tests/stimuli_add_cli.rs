@@ -259,6 +259,55 @@ fn a_codec_of_your_own_is_added_measured_checked_simulated_and_reported() {
     std::fs::write(&q2, &t2).unwrap();
     ok(&["check", s(&toml)]);
 
+    // Without the stream's size: measured, its CR unknown (null), and no study shows it.
+    let said = ok(&[
+        "stimuli",
+        "add",
+        m,
+        "--clip",
+        "walk",
+        "--codec",
+        "quant",
+        "--file",
+        s(&q1),
+        "--id",
+        "walk/quant/no-size",
+    ]);
+    assert!(
+        said.contains("walk/quant/no-size: 0 bytes, CR unknown, joint RMS "),
+        "{said}"
+    );
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&manifest).unwrap()).unwrap();
+    let unknown = json["stimuli"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|st| st["id"] == "walk/quant/no-size")
+        .unwrap();
+    assert!(unknown["achieved_cr"].is_null(), "{unknown}");
+    assert!(unknown["metrics"]["rms_cm"].as_f64().unwrap() > 0.0);
+    let unsized_study = dir.join("unknown.toml");
+    std::fs::write(
+        &unsized_study,
+        std::fs::read_to_string(&toml)
+            .unwrap()
+            .replace("\"walk/quant/q2\"", "\"walk/quant/no-size\""),
+    )
+    .unwrap();
+    let err = refused(&["check", s(&unsized_study)]);
+    assert!(
+        err.contains("\"walk/quant/no-size\" has no compression ratio (CR unknown"),
+        "{err}"
+    );
+    // The study that does not show it still loads; a manifest without the key is refused.
+    ok(&["check", s(&toml)]);
+    let text = std::fs::read_to_string(&manifest).unwrap();
+    std::fs::write(&manifest, text.replacen("\"achieved_cr\": null,", "", 1)).unwrap();
+    let err = refused(&["check", s(&toml)]);
+    assert!(err.contains("achieved_cr"), "{err}");
+    std::fs::write(&manifest, &text).unwrap();
+
     // A negative error in the manifest: the study does not load, the key named.
     let text = std::fs::read_to_string(&manifest).unwrap();
     let at = text.find("\"rms_cm\": ").unwrap() + "\"rms_cm\": ".len();

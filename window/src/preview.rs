@@ -218,7 +218,10 @@ pub fn metrics(entry: &Entry) -> Vec<(String, String)> {
     };
     rows.push((
         "achieved CR".into(),
-        format!("{:.2}:1 ({basis})", s.achieved_cr),
+        s.achieved_cr.map_or_else(
+            || "unknown (no stream size given)".to_string(),
+            |c| format!("{c:.2}:1 ({basis})"),
+        ),
     ));
     if s.bytes > 0 {
         rows.push(("stream".into(), format!("{} bytes", s.bytes)));
@@ -267,12 +270,13 @@ fn shown_line(k: usize, n: usize, entry: &Entry) -> String {
         format!(", RMS {:.3} cm, max {:.3} cm", m.rms_cm, m.max_cm)
     });
     format!(
-        "preview {}/{n}: {} against {} ({}, CR {:.2}:1{errors})",
+        "preview {}/{n}: {} against {} ({}, CR {}{errors})",
         k + 1,
         s.id,
         entry.reference,
         s.method(),
         s.achieved_cr
+            .map_or_else(|| "unknown".to_string(), |c| format!("{c:.2}:1"))
     )
 }
 
@@ -779,7 +783,7 @@ mod tests {
                 format!("Stimulus {} of 2", k + 1),
                 s.id.clone(),
                 "spiht".to_string(),
-                format!("{:.2}:1 (file basis)", s.achieved_cr),
+                format!("{:.2}:1 (file basis)", s.achieved_cr.unwrap()),
                 format!("{:.3} cm", m.rms_cm),
                 format!("{:.3} cm", m.max_cm),
                 format!("{:.3}°", m.mean_angle_deg),
@@ -889,7 +893,7 @@ mod tests {
         assert_eq!(set.entries().len(), 2);
         // Values that cannot be true are refused as a study file's manifest is.
         let mut m = walk.manifest.clone();
-        m.stimuli[2].achieved_cr = -1.0;
+        m.stimuli[2].achieved_cr = Some(-1.0);
         let e = format!("{:#}", walk.open(&[], Some(m)).err().unwrap());
         assert!(
             e.starts_with(&format!(

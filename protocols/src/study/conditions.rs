@@ -386,7 +386,12 @@ pub(super) fn resolve_familiarization(
             // pick evenly spaced ranks of the achieved ratio.
             let mut ranked: Vec<&Condition> = conditions.iter().collect();
             ranked.sort_by(|a, b| {
-                let cr = |c: &Condition| m.get(&c.stimulus).map_or(0.0, |s| s.achieved_cr);
+                // A stimulus of unknown CR ranks first, as if it were the lowest.
+                let cr = |c: &Condition| {
+                    m.get(&c.stimulus)
+                        .and_then(|s| s.achieved_cr)
+                        .unwrap_or(0.0)
+                };
                 cr(a)
                     .total_cmp(&cr(b))
                     .then_with(|| a.stimulus.cmp(&b.stimulus))

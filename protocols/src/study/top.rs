@@ -1,6 +1,8 @@
 //! The top-level table of a study file: its header keys, the stimulus manifest, and which
 //! sections each protocol takes.
 
+use std::collections::BTreeSet;
+
 use toml::{Table, Value};
 
 use super::check::Ctx;
@@ -147,6 +149,9 @@ pub(super) fn parse_table(
         None => {}
     }
 
+    if let Some(m) = &manifest {
+        check_known_ratios(&conditions, &familiarization, staircase.as_ref(), m, cx);
+    }
     let mut crowdsourcing = parse_crowdsourcing(
         cx.table(t, "", "crowdsourcing").unwrap_or(&empty),
         protocol,
@@ -185,6 +190,39 @@ pub(super) fn parse_table(
         mushra,
         manifest: manifest?,
     })
+}
+
+/// Every stimulus a study shows must have a known compression ratio: its tables, rate
+/// findings, fits and thresholds are all per ratio. A stimulus added without its stream's size
+/// (`achieved_cr: null`, "CR unknown") can be previewed and measured, not studied.
+fn check_known_ratios(
+    conditions: &[Condition],
+    familiarization: &[Condition],
+    staircase: Option<&StaircaseStudy>,
+    m: &StimulusManifest,
+    cx: &mut Ctx,
+) {
+    let conditioned = conditions
+        .iter()
+        .chain(familiarization)
+        .flat_map(|c| [c.stimulus.as_str(), c.reference.as_str()]);
+    let tracked = staircase
+        .into_iter()
+        .flat_map(|s| &s.tracks)
+        .flat_map(|t| t.levels.iter().map(|(_, id)| id.as_str()));
+    let mut seen = BTreeSet::new();
+    for id in conditioned.chain(tracked) {
+        if m.get(id).is_some_and(|s| s.achieved_cr.is_none()) && seen.insert(id) {
+            cx.err(
+                "stimuli",
+                format!(
+                    "stimulus {id:?} has no compression ratio (CR unknown: it was added without \
+                     its stream's size); give it with `study stimuli add --stream FILE` or \
+                     `--bytes N` before a study shows it"
+                ),
+            );
+        }
+    }
 }
 
 /// The top-level keys before the sections (`None` where missing or invalid, with the problem
