@@ -302,7 +302,7 @@ impl CodecContext {
     }
 
     /// The command-defined codec called `name`.
-    fn external(&self, name: &str) -> Option<Box<dyn Codec>> {
+    fn external_codec(&self, name: &str) -> Option<Box<dyn Codec>> {
         self.external
             .iter()
             .find(|d| d.name == name)
@@ -332,7 +332,11 @@ pub fn registry_in(ctx: &CodecContext) -> Vec<Box<dyn Codec>> {
     let mut r = registry();
     r.push(primitive_in(ctx));
     r.sort_by_key(|c| c.id());
-    r.extend(ctx.external.iter().filter_map(|d| ctx.external(&d.name)));
+    r.extend(
+        ctx.external
+            .iter()
+            .filter_map(|d| ctx.external_codec(&d.name)),
+    );
     r
 }
 
@@ -358,7 +362,7 @@ pub fn by_name_in(name: &str, ctx: &CodecContext) -> Option<Box<dyn Codec>> {
     registry()
         .into_iter()
         .find(|c| c.name() == name)
-        .or_else(|| ctx.external(name))
+        .or_else(|| ctx.external_codec(name))
 }
 
 /// The codec with bitstream id `id` (empty context; a command-defined codec's stream,
@@ -395,7 +399,8 @@ pub fn decode_any_in(
 ) -> Result<Clip, CodecError> {
     let codec = if stream.codec_id == external::ID {
         let name = external::stream_codec_name(stream).unwrap_or_default();
-        ctx.external(&name).ok_or(CodecError::Undefined { name })?
+        ctx.external_codec(&name)
+            .ok_or(CodecError::Undefined { name })?
     } else {
         by_id_in(stream.codec_id, ctx).ok_or(CodecError::WrongCodec {
             codec: "any",
