@@ -112,6 +112,7 @@ fn the_method_states_targets_measurements_observers_and_design() {
         "Viewing conditions confirmed by the experimenter before 2 of 3 sessions.",
         "Design: conditions ordered by a balanced Latin square (Williams design, 6 rows); \
          reference position counterbalanced within and across subjects.",
+        "Compression ratios (CR): 4 bytes × channels × frames / stream bytes, on the file basis: every channel of the clip's file (62 for a CMU AMC clip, 96 for a CMU BVH).",
     ];
     assert_eq!(text, want);
 }
@@ -132,9 +133,14 @@ fn a_study_without_viewing_conditions_says_so() {
         text[2].starts_with("Viewing conditions: not stated by the study file"),
         "{text:?}"
     );
+    // The design, then which channels the ratios count.
+    assert_eq!(
+        text[text.len() - 2],
+        "Design: conditions in a random order per subject; reference position random per trial."
+    );
     assert_eq!(
         text.last().unwrap(),
-        "Design: conditions in a random order per subject; reference position random per trial."
+        "Compression ratios (CR): 4 bytes × channels × frames / stream bytes, on the file basis: every channel of the clip's file (62 for a CMU AMC clip, 96 for a CMU BVH)."
     );
 }
 
@@ -160,7 +166,7 @@ fn a_mushra_study_states_its_screens_panes_and_training() {
         &[session("S1 session 1", None, None)],
     );
     assert_eq!(
-        text.last().unwrap(),
+        text[text.len() - 2],
         "Design: screens (one per clip) ordered by a balanced Latin square (Williams design, 2 \
          rows); on each screen the tests, the hidden reference and the anchor in lettered panes \
          shuffled per screen and subject; 1 training screen(s) first (BS.1534-3's training \

@@ -134,10 +134,8 @@ pub struct CodecFiles {
 impl CodecFiles {
     /// The codec registry with these files' codecs.
     fn codecs(&self) -> Result<Codecs> {
-        Ok(Codecs::with_files(
-            self.db.as_deref(),
-            self.codec_defs.as_deref(),
-        )?)
+        Codecs::with_files(self.db.as_deref(), self.codec_defs.as_deref())
+            .context("reading the codecs' files (--db, --codec-defs)")
     }
 }
 
