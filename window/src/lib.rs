@@ -7,7 +7,9 @@
 //! (frame intervals and drops), [`screens`] (egui screens over a session, driven by
 //! `egui_kittest` in tests), [`native`] (the native window), [`run`] (a session's screens and
 //! the display test in that window), [`test_input`] (keys from a test's script, for the
-//! window's end-to-end tests) and [`video`] (clips drawn offscreen to an MP4).
+//! window's end-to-end tests), [`stills`] and [`video`] (clips drawn offscreen to a PNG, an
+//! SVG or an MP4) and [`preview`] (a manifest's stimuli beside their references, with their
+//! metrics, before a study is written).
 
 pub mod flow;
 pub mod native;

@@ -13,14 +13,13 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use anyhow::{Context as _, bail};
-use eframe::egui_wgpu;
 use egui::{Color32, Key, RichText};
 use lab::source::ManifestStimuli;
 use protocols::manifest::{CrBasis, REFERENCE_CODEC, Stimulus, StimulusManifest};
 use protocols::study::{MAX_MANIFEST_BYTES, RenderingSettings};
 
 use crate::native::{self, Next, WindowOptions, WindowReport};
-use crate::render::{BACKGROUND, SkeletonCallback};
+
 use crate::scene::{Cast, FrameShapes, Stage, View};
 
 /// One stimulus of the preview and the reference it is played against.
@@ -546,7 +545,7 @@ impl PreviewUi {
                         let mut inner = ui.new_child(egui::UiBuilder::new().max_rect(column));
                         inner.label(RichText::new(title).strong());
                         let rect = inner.available_rect_before_wrap();
-                        paint(
+                        crate::render::paint_pane(
                             ui.painter(),
                             gpu,
                             k,
@@ -596,43 +595,6 @@ fn metrics_column(ui: &mut egui::Ui, entry: &Entry, manifest: &str) {
         });
     ui.add_space(8.0);
     ui.weak(manifest);
-}
-
-/// Paints pane `k` (its background, and its skeletons at time `t_s` when `gpu`).
-#[allow(
-    clippy::too_many_arguments,
-    reason = "one pane's parts, as the frame holds them"
-)]
-fn paint(
-    painter: &egui::Painter,
-    gpu: bool,
-    k: usize,
-    rect: egui::Rect,
-    view: &View,
-    stage: &mut Stage,
-    shapes: &mut Arc<FrameShapes>,
-    t_s: f64,
-) {
-    let bg = Color32::from_rgb(
-        (BACKGROUND[0] * 255.0) as u8,
-        (BACKGROUND[1] * 255.0) as u8,
-        (BACKGROUND[2] * 255.0) as u8,
-    );
-    painter.rect_filled(rect, 0.0, bg);
-    let mut frame = FrameShapes::default();
-    stage.shapes_at(t_s, &mut frame);
-    *shapes = Arc::new(frame);
-    if gpu {
-        painter.add(egui_wgpu::Callback::new_paint_callback(
-            rect,
-            SkeletonCallback {
-                slot: k,
-                view: *view,
-                aspect: rect.width() / rect.height().max(1.0),
-                shapes: Arc::clone(shapes),
-            },
-        ));
-    }
 }
 
 /// Runs the preview of `set` in the native window until the viewer quits or closes it.

@@ -922,6 +922,44 @@ struct FrameTargets {
     depth: wgpu::TextureView,
 }
 
+/// Paints pane `k` of an egui frame: its background, and when `gpu` its skeletons posed at
+/// time `t_s` through [`SkeletonCallback`] (the study window's trials and the preview alike).
+#[allow(
+    clippy::too_many_arguments,
+    reason = "one pane's parts, as the frame holds them"
+)]
+pub(crate) fn paint_pane(
+    painter: &egui::Painter,
+    gpu: bool,
+    k: usize,
+    rect: egui::Rect,
+    view: &crate::scene::View,
+    stage: &mut crate::scene::Stage,
+    shapes: &mut Arc<crate::scene::FrameShapes>,
+    t_s: f64,
+) {
+    let bg = egui::Color32::from_rgb(
+        (BACKGROUND[0] * 255.0) as u8,
+        (BACKGROUND[1] * 255.0) as u8,
+        (BACKGROUND[2] * 255.0) as u8,
+    );
+    painter.rect_filled(rect, 0.0, bg);
+    let mut frame = crate::scene::FrameShapes::default();
+    stage.shapes_at(t_s, &mut frame);
+    *shapes = Arc::new(frame);
+    if gpu {
+        painter.add(egui_wgpu::Callback::new_paint_callback(
+            rect,
+            SkeletonCallback {
+                slot: k,
+                view: *view,
+                aspect: rect.width() / rect.height().max(1.0),
+                shapes: Arc::clone(shapes),
+            },
+        ));
+    }
+}
+
 #[cfg(test)]
 mod svg_tests {
     use super::xml_escape;

@@ -19,7 +19,7 @@ use protocols::study::{FieldKind, RatingScale, ScaleKind, SubjectField};
 use protocols::{FrameTiming, StimulusEncoding, StudyDefinition};
 
 use super::flow::{Frame, Presentation, Show};
-use super::render::{BACKGROUND, SkeletonCallback};
+
 use super::scene::{Casting, FrameShapes, Stage, View};
 use super::timing::FrameClock;
 use super::viewing::ViewingForm;
@@ -1953,26 +1953,16 @@ fn draw_viewport(
     rect: egui::Rect,
     clip_time_s: f64,
 ) {
-    let bg = Color32::from_rgb(
-        (BACKGROUND[0] * 255.0) as u8,
-        (BACKGROUND[1] * 255.0) as u8,
-        (BACKGROUND[2] * 255.0) as u8,
+    crate::render::paint_pane(
+        painter,
+        gpu,
+        k,
+        rect,
+        &t.view,
+        &mut t.stages[k],
+        &mut t.shapes[k],
+        clip_time_s,
     );
-    painter.rect_filled(rect, 0.0, bg);
-    let mut shapes = FrameShapes::default();
-    t.stages[k].shapes_at(clip_time_s, &mut shapes);
-    t.shapes[k] = Arc::new(shapes);
-    if gpu {
-        painter.add(egui_wgpu::Callback::new_paint_callback(
-            rect,
-            SkeletonCallback {
-                slot: k,
-                view: t.view,
-                aspect: rect.width() / rect.height().max(1.0),
-                shapes: Arc::clone(&t.shapes[k]),
-            },
-        ));
-    }
 }
 
 impl StudyUi {
