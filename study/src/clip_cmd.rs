@@ -149,6 +149,16 @@ pub struct VideoArgs {
     /// Draw no ground shadow.
     #[arg(long)]
     no_shadow: bool,
+    /// A session folder of a results directory: draw its trial `--trial` as the subject saw
+    /// it (its schedule, panes and labels, as the study window lays them out), not clips.
+    #[arg(long, value_name = "DIR", requires = "trial")]
+    session: Option<PathBuf>,
+    /// The trial's index in `--session` (0-based, as trials.csv logs it).
+    #[arg(long, requires = "session")]
+    trial: Option<u32>,
+    /// Frame size of a trial's video, `WIDTHxHEIGHT` (even numbers).
+    #[arg(long, value_name = "WxH", default_value = "1280x720", value_parser = parse_frame)]
+    size: (u32, u32),
     /// Output video, `.mp4`.
     #[arg(short, long, value_name = "OUT")]
     output: PathBuf,
@@ -156,6 +166,14 @@ pub struct VideoArgs {
     /// refused.
     #[arg(long)]
     force: bool,
+}
+
+/// `--size WxH` of a trial's video.
+fn parse_frame(s: &str) -> Result<(u32, u32), String> {
+    let parsed = s
+        .split_once('x')
+        .and_then(|(w, h)| Some((w.trim().parse().ok()?, h.trim().parse().ok()?)));
+    parsed.ok_or_else(|| format!("{s:?}: expected WIDTHxHEIGHT, e.g. 1280x720"))
 }
 
 /// Arguments of `study clip render`.
@@ -369,6 +387,23 @@ fn video_command(args: &VideoArgs) -> Result<()> {
     settings.check()?;
     // Refused before the (slow) render.
     files::check_new(&args.output, mode)?;
+    if let (Some(session), Some(index)) = (&args.session, args.trial) {
+        if !args.input.files.is_empty() || !args.input.amc.is_empty() || args.input.demo {
+            bail!("--session draws a logged trial: give no clip files or --demo");
+        }
+        let (study, trial) = window::video::logged_trial(session, index)?;
+        let fps = args.fps.unwrap_or(60.0);
+        let made = window::video::write_trial_mp4(&study, &trial, args.size, fps, &args.output)?;
+        eprintln!(
+            "wrote {} (trial {index} of {}: {} frames at {fps} fps, {} × {})",
+            args.output.display(),
+            session.display(),
+            made.frames,
+            made.width,
+            made.height
+        );
+        return Ok(());
+    }
     let clips = args.input.load()?;
     let clips: Vec<&Clip> = clips.iter().map(|c| &c.clip).collect();
     let made = window::video::write_mp4(&clips, &settings, &args.output)?;

@@ -208,3 +208,146 @@ fn a_video_is_refused_before_anything_is_drawn() {
     assert_eq!(std::fs::read(&video).unwrap(), b"kept");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Pixels of an RGB image (`w` wide) in rows `rows` that are the figures' orange joints.
+fn orange(rgb: &[u8], w: u32, rows: std::ops::Range<u32>) -> usize {
+    rows.flat_map(|y| (0..w).map(move |x| ((y * w + x) * 3) as usize))
+        .filter(|&i| {
+            let (r, g, b) = (rgb[i], rgb[i + 1], rgb[i + 2]);
+            r > 170 && (70..170).contains(&g) && b < 90
+        })
+        .count()
+}
+
+/// Pixels in rows `rows` that are white text.
+fn white(rgb: &[u8], w: u32, rows: std::ops::Range<u32>) -> usize {
+    rows.flat_map(|y| (0..w).map(move |x| ((y * w + x) * 3) as usize))
+        .filter(|&i| rgb[i] > 220 && rgb[i + 1] > 220 && rgb[i + 2] > 220)
+        .count()
+}
+
+/// Issue 38, item 5: a logged trial drawn as the subject saw it. The DCR example's first
+/// trial, sequential: the reference (4 s, the walk's 120 frames at 30 Hz) labelled
+/// "Reference", 1 s of grey, the test labelled "Compressed", then the grey field with the
+/// question, where answers open (9 s); the video goes on 1 s past that. Each phase is checked
+/// in the frames at its time, by what the window draws there: figures or none, and the white
+/// label or question.
+#[test]
+fn a_logged_trial_plays_its_schedule_with_its_labels() {
+    if !have_ffmpeg() {
+        return;
+    }
+    let dir = scratch("trial");
+    let examples = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples");
+    let walk = motion::io::read_clip(None, &examples.join("stimuli/walk/reference.bvh")).unwrap();
+    assert_eq!(
+        (walk.frames(), walk.frame_rate_hz.round() as u32),
+        (120, 30)
+    );
+    let res = dir.join("res");
+    let dcr = examples.join("dcr.toml");
+    ok(&[
+        "simulate",
+        dcr.to_str().unwrap(),
+        "--subjects",
+        "1",
+        "-o",
+        res.to_str().unwrap(),
+    ]);
+    let session = res.join("S001_s1");
+    let trials = std::fs::read_to_string(session.join("trials.csv")).unwrap();
+    // The trial chosen is one of the walk's (the march clip lasts as long; either serves).
+    assert!(
+        trials.lines().nth(1).unwrap().contains(",sequential,"),
+        "{trials}"
+    );
+    let video = dir.join("trial0.mp4");
+    let v = video.to_str().unwrap();
+    let said = ok(&[
+        "clip",
+        "video",
+        "--session",
+        session.to_str().unwrap(),
+        "--trial",
+        "0",
+        "--size",
+        "320x180",
+        "--fps",
+        "10",
+        "-o",
+        v,
+    ]);
+    // 4 s + 1 s + 4 s to the answer, and 1 s more: 100 frames at 10 fps.
+    assert!(said.contains("100 frames at 10 fps, 320 × 180"), "{said}");
+    let probe = Command::new("ffprobe")
+        .args(["-v", "error", "-count_frames", "-select_streams", "v:0"])
+        .args(["-show_entries", "stream=width,height,nb_read_frames"])
+        .args(["-of", "default=noprint_wrappers=1", v])
+        .output()
+        .unwrap();
+    let probe = String::from_utf8(probe.stdout).unwrap();
+    for want in ["width=320", "height=180", "nb_read_frames=100"] {
+        assert!(probe.lines().any(|l| l == want), "{want}:\n{probe}");
+    }
+    let at = |n: u32| {
+        let png = dir.join(format!("frame{n}.png"));
+        ffmpeg(
+            &[
+                "-i",
+                v,
+                "-vf",
+                &format!(r"select=eq(n\,{n})"),
+                "-frames:v",
+                "1",
+            ],
+            &png,
+        );
+        rgb(&png)
+    };
+    let (first, w, h) = at(10);
+    let (grey, _, _) = at(45);
+    let (second, _, _) = at(60);
+    let (question, _, _) = at(95);
+    let band = 0..h / 6;
+    // The reference and the test each show a figure under their label.
+    for (name, frame) in [("reference", &first), ("test", &second)] {
+        assert!(orange(frame, w, 0..h) > 30, "{name}: no figure");
+        assert!(white(frame, w, band.clone()) > 20, "{name}: no label");
+    }
+    // "Reference" and "Compressed" are not the same word.
+    assert_ne!(
+        white(&first, w, band.clone()),
+        white(&second, w, band.clone())
+    );
+    // Between them and after them: grey, no figure; after them, the question in the middle.
+    assert_eq!(orange(&grey, w, 0..h), 0);
+    assert_eq!(white(&grey, w, 0..h), 0);
+    assert_eq!(orange(&question, w, 0..h), 0);
+    assert!(white(&question, w, h / 3..2 * h / 3) > 20, "no question");
+    refused_beside(&session, &dir);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// A trial the session did not log, and clips beside `--session`, are refused by name.
+fn refused_beside(session: &Path, dir: &Path) {
+    let s = session.to_str().unwrap();
+    for (args, want) in [
+        (vec!["--trial", "999"], "none with index 999"),
+        (
+            vec!["--trial", "0", "--demo"],
+            "give no clip files or --demo",
+        ),
+    ] {
+        let mut all = vec!["clip", "video", "--session", s, "-o"];
+        let out = dir.join("refused.mp4");
+        all.push(out.to_str().unwrap());
+        all.extend(args);
+        let done = study(&all);
+        let err = String::from_utf8_lossy(&done.stderr);
+        assert!(
+            !done.status.success() && err.contains(want),
+            "{want}: {err}"
+        );
+        assert!(!out.exists());
+    }
+}

@@ -692,6 +692,9 @@ pub struct Offscreen {
     info: wgpu::AdapterInfo,
     renderer: SkeletonRenderer,
     samples: u32,
+    /// egui's renderer for [`Offscreen::render_ui`], made on first use, with its own
+    /// skeleton renderer for the frames' paint callbacks.
+    ui: Option<egui_wgpu::Renderer>,
 }
 
 /// Colour format of offscreen frames.
@@ -730,6 +733,106 @@ impl Offscreen {
             info: adapter.get_info(),
             renderer,
             samples,
+            ui: None,
+        })
+    }
+
+    /// Renders one egui frame, `output` of `ctx`'s [`egui::Context::run_ui`], into a
+    /// `width × height` image, as the study window's egui pass draws it: its paint callbacks
+    /// ([`SkeletonCallback`]) find a skeleton renderer in the callback resources.
+    ///
+    /// # Errors
+    /// The frame cannot be read back.
+    pub fn render_ui(
+        &mut self,
+        ctx: &egui::Context,
+        output: egui::FullOutput,
+        width: u32,
+        height: u32,
+    ) -> anyhow::Result<Image> {
+        let targets = self.targets(width, height);
+        let samples = self.samples;
+        let mut ui = self.ui.take().unwrap_or_else(|| {
+            let mut r = egui_wgpu::Renderer::new(
+                &self.device,
+                OFFSCREEN_FORMAT,
+                egui_wgpu::RendererOptions {
+                    msaa_samples: samples,
+                    depth_stencil_format: Some(OFFSCREEN_DEPTH),
+                    dithering: false,
+                    predictable_texture_filtering: false,
+                },
+            );
+            r.callback_resources.insert(SkeletonRenderer::new(
+                &self.device,
+                Targets {
+                    color: OFFSCREEN_FORMAT,
+                    depth: Some(OFFSCREEN_DEPTH),
+                    samples,
+                },
+            ));
+            r
+        });
+        let egui::FullOutput {
+            shapes,
+            mut textures_delta,
+            pixels_per_point: ppp,
+            ..
+        } = output;
+        for (id, deltas) in &textures_delta.set {
+            for delta in deltas {
+                ui.update_texture(&self.device, &self.queue, *id, delta);
+            }
+        }
+        let jobs = ctx.tessellate(shapes, ppp);
+        let screen = egui_wgpu::ScreenDescriptor {
+            size_in_pixels: [width, height],
+            pixels_per_point: ppp,
+        };
+        let mut encoder = self
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
+        let commands = ui.update_buffers(&self.device, &self.queue, &mut encoder, &jobs, &screen);
+        {
+            let (view, resolve_target) = match &targets.msaa {
+                Some(m) => (m, Some(&targets.resolved_view)),
+                None => (&targets.resolved_view, None),
+            };
+            let pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("offscreen egui"),
+                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                    view,
+                    depth_slice: None,
+                    resolve_target,
+                    ops: wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
+                        store: wgpu::StoreOp::Store,
+                    },
+                })],
+                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                    view: &targets.depth,
+                    depth_ops: Some(wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(1.0),
+                        store: wgpu::StoreOp::Discard,
+                    }),
+                    stencil_ops: None,
+                }),
+                ..wgpu::RenderPassDescriptor::default()
+            });
+            ui.render(&mut pass.forget_lifetime(), &jobs, &screen);
+        }
+        self.queue.submit(commands);
+        for id in &textures_delta.free {
+            ui.free_texture(id);
+        }
+        // Applied: egui checks that no delta is dropped unapplied.
+        textures_delta.clear();
+        self.ui = Some(ui);
+        let rgba = self.read_back(encoder, &targets.resolved, width, height)?;
+        Ok(Image {
+            width,
+            height,
+            rgba,
         })
     }
 

@@ -47,7 +47,7 @@ const SPACE: f32 = 16.0;
 
 /// The subject's text styles: nothing under [`WORD_PX`] (egui's defaults are 9 px for small
 /// text and 12.5 px for the body), and radio buttons and check boxes to match.
-fn readable(style: &mut egui::Style) {
+pub(crate) fn readable(style: &mut egui::Style) {
     use egui::{FontId, TextStyle};
     style.text_styles = [
         (TextStyle::Small, FontId::proportional(WORD_PX)),
@@ -747,7 +747,7 @@ impl StudyUi {
                 (answer, replay_row(ui, t, active))
             })
             .inner;
-        stimuli_panel(ui, t, &frame, self.gpu);
+        stimuli_panel(ui, t.as_mut(), &frame, self.gpu);
         // One phase per frame, as the clock keeps one interval per frame (frames.csv).
         t.phases.push(frame.phase());
         if replay {
@@ -1570,13 +1570,64 @@ const LABEL_BAND: f32 = 44.0;
 /// The stimuli as the presentation schedule shows them now: both side by side, one of them,
 /// or the grey between, with the position's label; where the study labels the reference
 /// (MOS), "Original" and "Compressed" (its texts) above or before the motions instead.
-fn stimuli_panel(ui: &mut Ui, t: &mut TrialScreen, frame: &Frame, gpu: bool) {
+/// What a trial's stimulus panes draw, for [`stimuli_panel`]: the study window's trial, or a
+/// trial drawn to video ([`crate::video::write_trial_mp4`]), so both lay it out alike.
+pub(crate) trait Panes {
+    /// The trial's screen as described for every front end (its panes' labels).
+    fn described(&self) -> Arc<protocols::screen::Screen>;
+    /// The position of the left (or first) pane.
+    fn first(&self) -> Position;
+    /// How many panes (figures or scenes) there are.
+    fn count(&self) -> usize;
+    /// Paints pane `k` into `rect`, posed at `clip_time_s`.
+    fn draw(
+        &mut self,
+        painter: &egui::Painter,
+        gpu: bool,
+        k: usize,
+        rect: egui::Rect,
+        clip_time_s: f64,
+    );
+}
+
+impl Panes for TrialScreen {
+    fn described(&self) -> Arc<protocols::screen::Screen> {
+        Arc::clone(&self.described)
+    }
+    fn first(&self) -> Position {
+        self.first
+    }
+    fn count(&self) -> usize {
+        self.stages.len()
+    }
+    fn draw(
+        &mut self,
+        painter: &egui::Painter,
+        gpu: bool,
+        k: usize,
+        rect: egui::Rect,
+        clip_time_s: f64,
+    ) {
+        crate::render::paint_pane(
+            painter,
+            gpu,
+            k,
+            rect,
+            &self.view,
+            &mut self.stages[k],
+            &mut self.shapes[k],
+            clip_time_s,
+        );
+    }
+}
+
+pub(crate) fn stimuli_panel(ui: &mut Ui, t: &mut dyn Panes, frame: &Frame, gpu: bool) {
     egui::CentralPanel::default()
         .frame(egui::Frame::new().fill(Color32::from_gray(96)))
         .show(ui, |ui| {
             let full = ui.available_rect_before_wrap();
             let painter = ui.painter().clone();
-            let described = Arc::clone(&t.described);
+            let described = t.described();
             let labelled = described.panes.iter().any(|p| p.label.is_some());
             let mut names: Vec<(egui::Rect, &str)> = Vec::new();
             match frame.show {
@@ -1602,8 +1653,9 @@ fn stimuli_panel(ui: &mut Ui, t: &mut TrialScreen, frame: &Frame, gpu: bool) {
                         let left = full.left() + k as f32 * (w + gap);
                         let rect =
                             egui::Rect::from_min_size(egui::pos2(left, top), Vec2::new(w, h));
-                        draw_viewport(&painter, gpu, t, k, rect, frame.clip_time_s);
-                        let p = if k == 0 { t.first } else { t.first.other() };
+                        t.draw(&painter, gpu, k, rect, frame.clip_time_s);
+                        let first = t.first();
+                        let p = if k == 0 { first } else { first.other() };
                         if let Some(name) = described.label(p) {
                             let above = egui::Rect::from_min_max(
                                 egui::pos2(rect.left(), top - band),
@@ -1615,7 +1667,7 @@ fn stimuli_panel(ui: &mut Ui, t: &mut TrialScreen, frame: &Frame, gpu: bool) {
                 }
                 Show::One(_) | Show::Test => {
                     let k = match frame.show {
-                        Show::One(p) => usize::from(p != t.first),
+                        Show::One(p) => usize::from(p != t.first()),
                         _ => 0,
                     };
                     let h = full.height() - 40.0;
@@ -1624,7 +1676,7 @@ fn stimuli_panel(ui: &mut Ui, t: &mut TrialScreen, frame: &Frame, gpu: bool) {
                         full.center() + Vec2::new(0.0, 20.0),
                         Vec2::new(w, h),
                     );
-                    draw_viewport(&painter, gpu, t, k, rect, frame.clip_time_s);
+                    t.draw(&painter, gpu, k, rect, frame.clip_time_s);
                 }
             }
             for (rect, name) in names {
@@ -1684,13 +1736,13 @@ fn grid_columns(n: usize, w: f32, h: f32) -> usize {
 fn grid_panes<'a>(
     painter: &egui::Painter,
     gpu: bool,
-    t: &mut TrialScreen,
+    t: &mut dyn Panes,
     described: &'a protocols::screen::Screen,
     full: egui::Rect,
     clip_time_s: f64,
     names: &mut Vec<(egui::Rect, &'a str)>,
 ) {
-    let n = t.stages.len();
+    let n = t.count();
     let (gap, band) = (8.0, 26.0);
     let cols = grid_columns(n, full.width(), full.height());
     let rows = n.div_ceil(cols);
@@ -1706,7 +1758,7 @@ fn grid_panes<'a>(
             min + Vec2::new(0.0, band),
             Vec2::new(cell.x, (cell.y - band).max(1.0)),
         );
-        draw_viewport(painter, gpu, t, k, rect, clip_time_s);
+        t.draw(painter, gpu, k, rect, clip_time_s);
         let name = described
             .panes
             .get(k)
@@ -1943,26 +1995,6 @@ fn paint_mushra_slider(
     if focus {
         painter.circle_stroke(at, 14.0, egui::Stroke::new(2.0, visuals.text_color()));
     }
-}
-
-fn draw_viewport(
-    painter: &egui::Painter,
-    gpu: bool,
-    t: &mut TrialScreen,
-    k: usize,
-    rect: egui::Rect,
-    clip_time_s: f64,
-) {
-    crate::render::paint_pane(
-        painter,
-        gpu,
-        k,
-        rect,
-        &t.view,
-        &mut t.stages[k],
-        &mut t.shapes[k],
-        clip_time_s,
-    );
 }
 
 impl StudyUi {

@@ -88,6 +88,32 @@ pub fn write_mp4(clips: &[&Clip], settings: &Settings, out: &Path) -> Result<Mad
     if u64::from(width) * u64::from(pane) > 1 << 26 {
         bail!("{cols} panes of {pane} px is too large a video");
     }
+    let mut offscreen = Offscreen::new(4)?;
+    let mut shapes = Vec::new();
+    encode(out, (width, pane), fps, frames, |k| {
+        shapes.clear();
+        shapes_at(&mut stages, k as f64 / fps, &mut shapes);
+        Ok(offscreen
+            .render(width, pane, &panes_of(&shapes, &view, cols, pane, pane))?
+            .rgba)
+    })?;
+    Ok(Made {
+        frames,
+        fps,
+        width,
+        height: pane,
+    })
+}
+
+/// Writes `frames` frames of `size` at `fps`, each drawn by `draw(k)` (RGBA rows), to `out`
+/// as MP4 through ffmpeg, under a temporary name beside it, renamed when complete.
+fn encode(
+    out: &Path,
+    (width, height): (u32, u32),
+    fps: f64,
+    frames: u64,
+    mut draw: impl FnMut(u64) -> Result<Vec<u8>>,
+) -> Result<()> {
     let dir = out
         .parent()
         .filter(|d| !d.as_os_str().is_empty())
@@ -96,18 +122,12 @@ pub fn write_mp4(clips: &[&Clip], settings: &Settings, out: &Path) -> Result<Mad
         .file_name()
         .map_or_else(String::new, |n| n.to_string_lossy().into_owned());
     let temp = dir.join(format!(".{name}.{}.tmp.mp4", std::process::id()));
-    let mut ffmpeg = spawn_ffmpeg(width, pane, fps, &temp)?;
+    let mut ffmpeg = spawn_ffmpeg(width, height, fps, &temp)?;
     let drawn = (|| -> Result<()> {
-        let mut offscreen = Offscreen::new(4)?;
         let mut stdin = ffmpeg.stdin.take().context("ffmpeg's input")?;
-        let mut shapes = Vec::new();
         for k in 0..frames {
-            shapes.clear();
-            shapes_at(&mut stages, k as f64 / fps, &mut shapes);
-            let image =
-                offscreen.render(width, pane, &panes_of(&shapes, &view, cols, pane, pane))?;
             stdin
-                .write_all(&image.rgba)
+                .write_all(&draw(k)?)
                 .context("writing a frame to ffmpeg")?;
         }
         Ok(())
@@ -124,12 +144,164 @@ pub fn write_mp4(clips: &[&Clip], settings: &Settings, out: &Path) -> Result<Mad
     }
     std::fs::rename(&temp, out)
         .with_context(|| format!("renaming {} to {}", temp.display(), out.display()))?;
+    Ok(())
+}
+
+/// How long a trial video goes on after the presentation: the screen while answers are open
+/// (the held or looping stimuli, or the grey field with its question), seconds.
+pub const ANSWER_HOLD_S: f64 = 1.0;
+
+/// A logged or planned trial of `study` drawn as the study window shows it (issue 38): its
+/// presentation schedule ([`protocols::screen::Schedule`], the one every front end plays)
+/// from the first frame to [`ANSWER_HOLD_S`] after answers open, each frame laid out by the
+/// window's own trial panel (panes, labels, the grey between and the "Please answer below"
+/// after) and drawn offscreen at `width × height`, `fps` frames per second. A MUSHRA screen
+/// is refused (its panes are several trials).
+///
+/// # Errors
+/// A MUSHRA trial; a size or rate out of range; the trial's clips cannot be read; no GPU
+/// adapter; ffmpeg missing or failing. Nothing is left at `out` on an error.
+pub fn write_trial_mp4(
+    study: &lab::StudyFile,
+    trial: &protocols::Trial,
+    (width, height): (u32, u32),
+    fps: f64,
+    out: &Path,
+) -> Result<Made> {
+    use std::collections::HashMap;
+    use std::sync::Arc;
+    if trial.arrangement == protocols::Arrangement::Grid {
+        bail!(
+            "trial {}: a MUSHRA screen shows several trials at once; draw its clips with \
+             `study clip video`",
+            trial.index
+        );
+    }
+    if !(64..=4096).contains(&width)
+        || !(64..=4096).contains(&height)
+        || width % 2 == 1
+        || height % 2 == 1
+    {
+        bail!("--size {width}x{height}: expected even sizes of 64..=4096 pixels");
+    }
+    Settings {
+        pane: 64,
+        fps: Some(fps),
+        shadow: true,
+    }
+    .check()?;
+    let source = lab::source::open(study)?;
+    let shown = source.stimuli(trial)?;
+    let mut views: HashMap<String, View> = HashMap::new();
+    let cast = lab::scene::Casting::of(&study.definition, trial, &shown, &mut |id, clip| {
+        *views
+            .entry(id.to_owned())
+            .or_insert_with(|| View::framing(clip))
+    })?;
+    let described = Arc::new(protocols::screen::Screen::of(
+        &study.definition,
+        trial,
+        cast.duration_s(),
+    ));
+    let mut presentation = crate::flow::Presentation::new(described.schedule.clone(), 0.0);
+    let stages = cast.stages();
+    let mut panes = TrialPanes {
+        shapes: vec![Arc::default(); stages.len()],
+        described: Arc::clone(&described),
+        first: lab::scene::Casting::first(trial.arrangement),
+        view: cast.view,
+        stages,
+    };
+    let total = described.schedule.answers_open_s + ANSWER_HOLD_S;
+    let frames = ((total * fps).round() as u64).max(1);
+    let ctx = egui::Context::default();
+    let mut offscreen = Offscreen::new(4)?;
+    encode(out, (width, height), fps, frames, |k| {
+        let t = k as f64 / fps;
+        let frame = presentation.at(t);
+        let input = egui::RawInput {
+            screen_rect: Some(egui::Rect::from_min_size(
+                egui::Pos2::ZERO,
+                egui::vec2(width as f32, height as f32),
+            )),
+            time: Some(t),
+            ..egui::RawInput::default()
+        };
+        let output = ctx.run_ui(input, |ui| {
+            crate::screens::readable(ui.style_mut());
+            crate::screens::stimuli_panel(ui, &mut panes, &frame, true);
+        });
+        Ok(offscreen.render_ui(&ctx, output, width, height)?.rgba)
+    })?;
     Ok(Made {
         frames,
         fps,
         width,
-        height: pane,
+        height,
     })
+}
+
+/// The study and the trial with index `index` as session folder `session` (of a results
+/// directory, which keeps the study's copy) logged it: what [`write_trial_mp4`] draws.
+///
+/// # Errors
+/// The session or the study copy cannot be read, or the session logged no such trial.
+pub fn logged_trial(session: &Path, index: u32) -> Result<(lab::StudyFile, protocols::Trial)> {
+    let s = results::store::read_session(session)?;
+    let Some(record) = s.trials.records.iter().find(|r| r.trial.index == index) else {
+        bail!(
+            "{}: logged {} trial(s), none with index {index} (0-based, as trials.csv counts)",
+            session.display(),
+            s.trials.records.len()
+        );
+    };
+    let copy = session
+        .parent()
+        .unwrap_or(Path::new("."))
+        .join(lab::study::STUDY_COPY);
+    let study = lab::StudyFile::load(&copy)
+        .with_context(|| format!("the study kept with {}", session.display()))?;
+    Ok((study, record.trial.clone()))
+}
+
+/// A trial's panes drawn to video: the figures [`lab::scene::Casting`] made of its clips.
+struct TrialPanes {
+    described: std::sync::Arc<protocols::screen::Screen>,
+    first: protocols::record::Position,
+    view: View,
+    stages: Vec<Stage>,
+    shapes: Vec<std::sync::Arc<crate::scene::FrameShapes>>,
+}
+
+impl crate::screens::Panes for TrialPanes {
+    fn described(&self) -> std::sync::Arc<protocols::screen::Screen> {
+        std::sync::Arc::clone(&self.described)
+    }
+    fn first(&self) -> protocols::record::Position {
+        self.first
+    }
+    fn count(&self) -> usize {
+        self.stages.len()
+    }
+    fn draw(
+        &mut self,
+        painter: &egui::Painter,
+        gpu: bool,
+        k: usize,
+        rect: egui::Rect,
+        clip_time_s: f64,
+    ) {
+        crate::render::paint_pane(
+            painter,
+            gpu,
+            k,
+            rect,
+            &self.view,
+            &mut self.stages[k],
+            &mut self.shapes[k],
+            clip_time_s,
+        );
+    }
 }
 
 /// ffmpeg reading raw RGBA frames of `width` × `height` at `fps` on its standard input and
