@@ -178,6 +178,11 @@ fn definition(
                 &format!(".params.{k}"),
                 "a parameter name is 1-32 letters, digits or _".into(),
             );
+        } else if PLACEHOLDERS.contains(&k.as_str()) {
+            count(
+                &format!(".params.{k}"),
+                format!("{{{k}}} is a file placeholder; name the parameter otherwise"),
+            );
         } else if !v.is_finite() {
             count(&format!(".params.{k}"), format!("{v} is not finite"));
         }
@@ -371,7 +376,7 @@ decode = ["x", "{input}", "{output}"]
 encode = []
 decode = ["x", "{input}", "{out}"]
 timeout_s = 0
-params = { cr = 3 }
+params = { cr = 3, input = 1 }
 rate = { param = "q", min = 1, max = 2, cr = "falls" }
 "#,
         );
@@ -384,8 +389,9 @@ rate = { param = "q", min = 1, max = 2, cr = "falls" }
             "codec.a b.decode: never names {output}",
             "codec.a b.timeout_s: 0",
             "codec.a b.params.cr:",
+            "codec.a b.params.input: {input} is a file placeholder",
             "codec.a b.rate.param: \"q\" is not one",
-            "8 problems",
+            "9 problems",
         ] {
             assert!(e.contains(needle), "{needle:?} not in {e}");
         }
