@@ -746,8 +746,12 @@ fn stalled_connections_are_capped_and_timed_out() {
     use std::io::{Read as _, Write as _};
     let dir = temp_dir("slow");
     let mut options = setup(&dir);
+    // Long enough that "at once" (the cap) and "after the timeout" stay apart on a loaded
+    // 2-core machine: a fresh-clone run, its test binaries busy beside this one, took over 2 s
+    // to take the first of the 300 connections.
+    let header = Duration::from_secs(8);
     options.limits = Limits {
-        header_timeout: Duration::from_secs(3),
+        header_timeout: header,
         body_timeout: Duration::from_secs(1),
         max_connections_per_address: 100,
         ..Limits::default()
@@ -770,9 +774,10 @@ fn stalled_connections_are_capped_and_timed_out() {
             s
         })
         .collect();
-    // The 200 over the cap are closed as soon as they are taken.
+    // The 200 over the cap are closed as soon as they are taken, well before the header
+    // timeout.
     let mut shut = 0;
-    while start.elapsed() < Duration::from_secs(2) {
+    while start.elapsed() < header - Duration::from_secs(2) {
         shut = stalled.iter_mut().map(closed).filter(|c| *c).count();
         if shut >= 200 {
             break;
@@ -794,21 +799,22 @@ fn stalled_connections_are_capped_and_timed_out() {
     other.read_to_string(&mut reply).unwrap();
     assert!(reply.starts_with("HTTP/1.1 200"), "{reply}");
     let waited = asked.elapsed();
-    assert!(
-        waited < Duration::from_secs(2),
-        "a normal request waited {waited:?}"
-    );
-    assert_eq!(
-        stalled.iter_mut().map(closed).filter(|c| *c).count(),
-        200,
-        "the 100 under the cap are still open, waiting for their head"
-    );
+    assert!(waited < header / 2, "a normal request waited {waited:?}");
+    // Before the header timeout (the loop above and the request end well inside it on an
+    // idle machine: about 0.3 s here), the 100 under the cap wait for their head.
+    if start.elapsed() < header - Duration::from_secs(1) {
+        assert_eq!(
+            stalled.iter_mut().map(closed).filter(|c| *c).count(),
+            200,
+            "the 100 under the cap are still open, waiting for their head"
+        );
+    }
     assert!(
         !closed(&mut idle),
         "the idle connection is kept alive for a while"
     );
     // After the header timeout every stalled connection is closed.
-    while start.elapsed() < Duration::from_secs(10) {
+    while start.elapsed() < header * 3 {
         if stalled.iter_mut().all(closed) {
             break;
         }
@@ -818,7 +824,7 @@ fn stalled_connections_are_capped_and_timed_out() {
         stalled.iter_mut().all(closed),
         "stalled connections left open"
     );
-    assert!(start.elapsed() >= Duration::from_secs(3));
+    assert!(start.elapsed() >= header);
     assert!(closed(&mut idle), "an idle kept-alive connection left open");
     // Their places under the cap are free again.
     let mut a = Client::new(addr);
