@@ -116,16 +116,11 @@ pub enum Exit {
 
 struct TrialScreen {
     trial: Trial,
-    /// What the subject sees, as described once for every front end: the panes' labels,
-    /// the schedule (run by `presentation`) and the answer widget.
-    described: Arc<protocols::screen::Screen>,
-    presentation: Presentation,
-    /// What the panes draw: at the arrangement's first and second position a figure each, or
-    /// a crowd scene each; on a MUSHRA screen the labelled reference, then one per pane of
+    /// What the panes show: on a MUSHRA screen the labelled reference, then one per pane of
     /// [`TrialScreen::panes`].
-    stages: Vec<Stage>,
-    view: View,
-    first: Position,
+    shown: TrialPanes,
+    /// Plays `shown.described`'s schedule.
+    presentation: Presentation,
     rating: Option<f64>,
     rating_b: Option<f64>,
     /// DSCQS keyboard: number keys now rate B.
@@ -133,7 +128,6 @@ struct TrialScreen {
     gate_open_s: Option<f64>,
     /// The phase of every frame drawn since the trial's frame count started (`frames.csv`).
     phases: Vec<&'static str>,
-    shapes: Vec<Arc<FrameShapes>>,
     /// How the test stimulus was encoded for this trial (live staircase).
     encoding: Option<StimulusEncoding>,
     /// MUSHRA: the screen's trials not yet answered, in pane order (the pending one first);
@@ -627,7 +621,6 @@ impl StudyUi {
         if trial.arrangement == Arrangement::Grid {
             return self.load_grid(trial, now);
         }
-        let first = Casting::first(trial.arrangement);
         // A live trial's test stimulus is encoded now unless it was prepared (cached by
         // level); others are files.
         let shown = self.stimuli.stimuli(&trial)?;
@@ -636,33 +629,22 @@ impl StudyUi {
         self.stimuli
             .prepare(&self.recorder.lookahead(self.recorder.elapsed_ms()));
         let views = &mut self.views;
-        let cast = Casting::of(&self.study, &trial, &shown, &mut |id, clip| {
+        let panes = TrialPanes::of_trial(&self.study, &trial, &shown, &mut |id, clip| {
             *views
                 .entry(id.to_owned())
                 .or_insert_with(|| View::framing(clip))
         })?;
-        let (view, stages, encoding) = (cast.view, cast.stages(), shown.encoding);
-        // What the subject sees, as every front end is told it, timed by the clips' length.
-        let described = Arc::new(protocols::screen::Screen::of(
-            &self.study,
-            &trial,
-            cast.duration_s(),
-        ));
-        let presentation = Presentation::new(described.schedule.clone(), now);
+        let presentation = Presentation::new(panes.described.schedule.clone(), now);
         Ok(TrialScreen {
             trial,
-            described,
+            shown: panes,
             presentation,
-            stages,
-            view,
-            first,
             rating: None,
             rating_b: None,
             editing_b: false,
             gate_open_s: None,
             phases: Vec::new(),
-            shapes: vec![Arc::default(), Arc::default()],
-            encoding,
+            encoding: shown.encoding,
             panes: Vec::new(),
             pane_ratings: Vec::new(),
         })
@@ -699,20 +681,15 @@ impl StudyUi {
                 .map(Arc::new)
                 .ok_or_else(|| lab::LabError::Refused("a MUSHRA screen without panes".into()))?;
         let presentation = Presentation::new(described.schedule.clone(), now);
-        let n = stages.len();
         Ok(TrialScreen {
             trial,
-            described,
+            shown: TrialPanes::new(described, Position::Pane(0), &view, stages),
             presentation,
-            stages,
-            view,
-            first: Position::Pane(0),
             rating: None,
             rating_b: None,
             editing_b: false,
             gate_open_s: None,
             phases: Vec::new(),
-            shapes: vec![Arc::default(); n],
             encoding: None,
             pane_ratings: vec![None; panes.len()],
             panes,
@@ -740,14 +717,14 @@ impl StudyUi {
                 ui.add_space(8.0);
                 let answer = ui
                     .vertical_centered(|ui| {
-                        let described = Arc::clone(&t.described);
+                        let described = Arc::clone(&t.shown.described);
                         answer(ui, &described.answer, t, scale, open)
                     })
                     .inner;
                 (answer, replay_row(ui, t, active))
             })
             .inner;
-        stimuli_panel(ui, t.as_mut(), &frame, self.gpu);
+        stimuli_panel(ui, &mut t.shown, &frame, self.gpu);
         // One phase per frame, as the clock keeps one interval per frame (frames.csv).
         t.phases.push(frame.phase());
         if replay {
@@ -1567,39 +1544,62 @@ fn replay_row(ui: &mut Ui, t: &TrialScreen, active: bool) -> bool {
 /// Height of the band above side-by-side viewports that holds their labels, points.
 const LABEL_BAND: f32 = 44.0;
 
-/// The stimuli as the presentation schedule shows them now: both side by side, one of them,
-/// or the grey between, with the position's label; where the study labels the reference
-/// (MOS), "Original" and "Compressed" (its texts) above or before the motions instead.
-/// What a trial's stimulus panes draw, for [`stimuli_panel`]: the study window's trial, or a
-/// trial drawn to video ([`crate::video::write_trial_mp4`]), so both lay it out alike.
-pub(crate) trait Panes {
-    /// The trial's screen as described for every front end (its panes' labels).
-    fn described(&self) -> Arc<protocols::screen::Screen>;
-    /// The position of the left (or first) pane.
-    fn first(&self) -> Position;
-    /// How many panes (figures or scenes) there are.
-    fn count(&self) -> usize;
-    /// Paints pane `k` into `rect`, posed at `clip_time_s`.
-    fn draw(
-        &mut self,
-        painter: &egui::Painter,
-        gpu: bool,
-        k: usize,
-        rect: egui::Rect,
-        clip_time_s: f64,
-    );
+/// What a trial's stimulus panes show: the screen as described for every front end (the
+/// panes' labels, the schedule, the answer widget), the position of the first pane, and at
+/// the arrangement's first and second position a figure each, or a crowd scene each. The
+/// study window's trial and a trial drawn to video ([`crate::video::write_trial_mp4`]) both
+/// draw theirs with [`stimuli_panel`], so both lay it out alike.
+pub(crate) struct TrialPanes {
+    pub(crate) described: Arc<protocols::screen::Screen>,
+    first: Position,
+    view: View,
+    stages: Vec<Stage>,
+    shapes: Vec<Arc<FrameShapes>>,
 }
 
-impl Panes for TrialScreen {
-    fn described(&self) -> Arc<protocols::screen::Screen> {
-        Arc::clone(&self.described)
+impl TrialPanes {
+    fn new(
+        described: Arc<protocols::screen::Screen>,
+        first: Position,
+        view: &View,
+        stages: Vec<Stage>,
+    ) -> TrialPanes {
+        TrialPanes {
+            shapes: vec![Arc::default(); stages.len()],
+            described,
+            first,
+            view: *view,
+            stages,
+        }
     }
-    fn first(&self) -> Position {
-        self.first
+
+    /// The panes of a one-trial screen (not a MUSHRA screen): `trial`'s clips `shown`, cast
+    /// with the framing `framing` gives each clip, and described as every front end is told
+    /// it, timed by the clips' length.
+    ///
+    /// # Errors
+    /// The clips cannot be cast (a crowd scene's characters missing).
+    pub(crate) fn of_trial(
+        study: &StudyDefinition,
+        trial: &Trial,
+        shown: &lab::TrialStimuli,
+        framing: &mut dyn FnMut(&str, &motion::Clip) -> View,
+    ) -> lab::Result<TrialPanes> {
+        let cast = Casting::of(study, trial, shown, framing)?;
+        let described = Arc::new(protocols::screen::Screen::of(
+            study,
+            trial,
+            cast.duration_s(),
+        ));
+        Ok(TrialPanes::new(
+            described,
+            Casting::first(trial.arrangement),
+            &cast.view,
+            cast.stages(),
+        ))
     }
-    fn count(&self) -> usize {
-        self.stages.len()
-    }
+
+    /// Paints pane `k` into `rect`, posed at `clip_time_s`.
     fn draw(
         &mut self,
         painter: &egui::Painter,
@@ -1621,13 +1621,16 @@ impl Panes for TrialScreen {
     }
 }
 
-pub(crate) fn stimuli_panel(ui: &mut Ui, t: &mut dyn Panes, frame: &Frame, gpu: bool) {
+/// The stimuli as the presentation schedule shows them now: both side by side, one of them,
+/// or the grey between, with the position's label; where the study labels the reference
+/// (MOS), "Original" and "Compressed" (its texts) above or before the motions instead.
+pub(crate) fn stimuli_panel(ui: &mut Ui, t: &mut TrialPanes, frame: &Frame, gpu: bool) {
     egui::CentralPanel::default()
         .frame(egui::Frame::new().fill(Color32::from_gray(96)))
         .show(ui, |ui| {
             let full = ui.available_rect_before_wrap();
             let painter = ui.painter().clone();
-            let described = t.described();
+            let described = Arc::clone(&t.described);
             let labelled = described.panes.iter().any(|p| p.label.is_some());
             let mut names: Vec<(egui::Rect, &str)> = Vec::new();
             match frame.show {
@@ -1654,8 +1657,7 @@ pub(crate) fn stimuli_panel(ui: &mut Ui, t: &mut dyn Panes, frame: &Frame, gpu: 
                         let rect =
                             egui::Rect::from_min_size(egui::pos2(left, top), Vec2::new(w, h));
                         t.draw(&painter, gpu, k, rect, frame.clip_time_s);
-                        let first = t.first();
-                        let p = if k == 0 { first } else { first.other() };
+                        let p = if k == 0 { t.first } else { t.first.other() };
                         if let Some(name) = described.label(p) {
                             let above = egui::Rect::from_min_max(
                                 egui::pos2(rect.left(), top - band),
@@ -1667,7 +1669,7 @@ pub(crate) fn stimuli_panel(ui: &mut Ui, t: &mut dyn Panes, frame: &Frame, gpu: 
                 }
                 Show::One(_) | Show::Test => {
                     let k = match frame.show {
-                        Show::One(p) => usize::from(p != t.first()),
+                        Show::One(p) => usize::from(p != t.first),
                         _ => 0,
                     };
                     let h = full.height() - 40.0;
@@ -1736,13 +1738,13 @@ fn grid_columns(n: usize, w: f32, h: f32) -> usize {
 fn grid_panes<'a>(
     painter: &egui::Painter,
     gpu: bool,
-    t: &mut dyn Panes,
+    t: &mut TrialPanes,
     described: &'a protocols::screen::Screen,
     full: egui::Rect,
     clip_time_s: f64,
     names: &mut Vec<(egui::Rect, &'a str)>,
 ) {
-    let n = t.count();
+    let n = t.stages.len();
     let (gap, band) = (8.0, 26.0);
     let cols = grid_columns(n, full.width(), full.height());
     let rows = n.div_ceil(cols);

@@ -169,7 +169,6 @@ pub fn write_trial_mp4(
     out: &Path,
 ) -> Result<Made> {
     use std::collections::HashMap;
-    use std::sync::Arc;
     if trial.arrangement == protocols::Arrangement::Grid {
         bail!(
             "trial {}: a MUSHRA screen shows several trials at once; draw its clips with \
@@ -193,26 +192,15 @@ pub fn write_trial_mp4(
     let source = lab::source::open(study)?;
     let shown = source.stimuli(trial)?;
     let mut views: HashMap<String, View> = HashMap::new();
-    let cast = lab::scene::Casting::of(&study.definition, trial, &shown, &mut |id, clip| {
-        *views
-            .entry(id.to_owned())
-            .or_insert_with(|| View::framing(clip))
-    })?;
-    let described = Arc::new(protocols::screen::Screen::of(
-        &study.definition,
-        trial,
-        cast.duration_s(),
-    ));
-    let mut presentation = crate::flow::Presentation::new(described.schedule.clone(), 0.0);
-    let stages = cast.stages();
-    let mut panes = TrialPanes {
-        shapes: vec![Arc::default(); stages.len()],
-        described: Arc::clone(&described),
-        first: lab::scene::Casting::first(trial.arrangement),
-        view: cast.view,
-        stages,
-    };
-    let total = described.schedule.answers_open_s + ANSWER_HOLD_S;
+    let mut panes =
+        crate::screens::TrialPanes::of_trial(&study.definition, trial, &shown, &mut |id, clip| {
+            *views
+                .entry(id.to_owned())
+                .or_insert_with(|| View::framing(clip))
+        })?;
+    let schedule = panes.described.schedule.clone();
+    let mut presentation = crate::flow::Presentation::new(schedule.clone(), 0.0);
+    let total = schedule.answers_open_s + ANSWER_HOLD_S;
     let frames = ((total * fps).round() as u64).max(1);
     let ctx = egui::Context::default();
     let mut offscreen = Offscreen::new(4)?;
@@ -262,46 +250,6 @@ pub fn logged_trial(session: &Path, index: u32) -> Result<(lab::StudyFile, proto
     let study = lab::StudyFile::load(&copy)
         .with_context(|| format!("the study kept with {}", session.display()))?;
     Ok((study, record.trial.clone()))
-}
-
-/// A trial's panes drawn to video: the figures [`lab::scene::Casting`] made of its clips.
-struct TrialPanes {
-    described: std::sync::Arc<protocols::screen::Screen>,
-    first: protocols::record::Position,
-    view: View,
-    stages: Vec<Stage>,
-    shapes: Vec<std::sync::Arc<crate::scene::FrameShapes>>,
-}
-
-impl crate::screens::Panes for TrialPanes {
-    fn described(&self) -> std::sync::Arc<protocols::screen::Screen> {
-        std::sync::Arc::clone(&self.described)
-    }
-    fn first(&self) -> protocols::record::Position {
-        self.first
-    }
-    fn count(&self) -> usize {
-        self.stages.len()
-    }
-    fn draw(
-        &mut self,
-        painter: &egui::Painter,
-        gpu: bool,
-        k: usize,
-        rect: egui::Rect,
-        clip_time_s: f64,
-    ) {
-        crate::render::paint_pane(
-            painter,
-            gpu,
-            k,
-            rect,
-            &self.view,
-            &mut self.stages[k],
-            &mut self.shapes[k],
-            clip_time_s,
-        );
-    }
 }
 
 /// ffmpeg reading raw RGBA frames of `width` × `height` at `fps` on its standard input and
