@@ -656,34 +656,19 @@ mod tests {
     struct Walk {
         dir: PathBuf,
         manifest: StimulusManifest,
-    }
-
-    impl Drop for Walk {
-        fn drop(&mut self) {
-            let _ = std::fs::remove_dir_all(&self.dir);
-        }
+        /// Removes the folder when dropped.
+        _fixture: crate::ui_tests::Fixture,
     }
 
     impl Walk {
+        /// The ui tests' one-second walk swept with SPIHT at 10:1 and 20:1 (its study file is
+        /// not read here).
         fn new(name: &str) -> Walk {
-            let dir = std::env::temp_dir().join(format!(
-                "study-preview-{name}-{}-{}",
-                std::process::id(),
-                std::time::SystemTime::now()
-                    .duration_since(std::time::UNIX_EPOCH)
-                    .map_or(0, |d| d.as_nanos())
-            ));
-            std::fs::create_dir_all(&dir).unwrap();
-            let walk = motion::synth::WalkParams {
-                duration_s: 1.0,
-                frame_rate_hz: 120.0,
-                ..motion::synth::WalkParams::default()
-            };
-            let summary =
-                lab::generated::walk_stimuli(&dir, &walk, &["spiht"], &[10.0, 20.0]).unwrap();
+            let fixture = crate::ui_tests::fixture(&format!("preview-{name}"), "");
             Walk {
-                dir,
-                manifest: summary.manifest,
+                dir: fixture.dir.clone(),
+                manifest: fixture.manifest.clone(),
+                _fixture: fixture,
             }
         }
 

@@ -794,31 +794,7 @@ impl Offscreen {
             .create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
         let commands = ui.update_buffers(&self.device, &self.queue, &mut encoder, &jobs, &screen);
         {
-            let (view, resolve_target) = match &targets.msaa {
-                Some(m) => (m, Some(&targets.resolved_view)),
-                None => (&targets.resolved_view, None),
-            };
-            let pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("offscreen egui"),
-                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                    view,
-                    depth_slice: None,
-                    resolve_target,
-                    ops: wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
-                        store: wgpu::StoreOp::Store,
-                    },
-                })],
-                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                    view: &targets.depth,
-                    depth_ops: Some(wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(1.0),
-                        store: wgpu::StoreOp::Discard,
-                    }),
-                    stencil_ops: None,
-                }),
-                ..wgpu::RenderPassDescriptor::default()
-            });
+            let pass = targets.pass(&mut encoder, "offscreen egui", wgpu::Color::BLACK);
             ui.render(&mut pass.forget_lifetime(), &jobs, &screen);
         }
         self.queue.submit(commands);
@@ -917,36 +893,13 @@ impl Offscreen {
         targets: &FrameTargets,
         panes: &[Pane<'_>],
     ) {
-        let (view, resolve_target) = match &targets.msaa {
-            Some(m) => (m, Some(&targets.resolved_view)),
-            None => (&targets.resolved_view, None),
+        let background = wgpu::Color {
+            r: f64::from(BACKGROUND[0]),
+            g: f64::from(BACKGROUND[1]),
+            b: f64::from(BACKGROUND[2]),
+            a: 1.0,
         };
-        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some("offscreen"),
-            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                view,
-                depth_slice: None,
-                resolve_target,
-                ops: wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(wgpu::Color {
-                        r: f64::from(BACKGROUND[0]),
-                        g: f64::from(BACKGROUND[1]),
-                        b: f64::from(BACKGROUND[2]),
-                        a: 1.0,
-                    }),
-                    store: wgpu::StoreOp::Store,
-                },
-            })],
-            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                view: &targets.depth,
-                depth_ops: Some(wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(1.0),
-                    store: wgpu::StoreOp::Discard,
-                }),
-                stencil_ops: None,
-            }),
-            ..wgpu::RenderPassDescriptor::default()
-        });
+        let mut pass = targets.pass(encoder, "offscreen", background);
         for (k, p) in panes.iter().enumerate() {
             pass.set_viewport(
                 p.x as f32,
@@ -1023,6 +976,43 @@ struct FrameTargets {
     /// Multisampled colour target resolved into `resolved`, when MSAA is on.
     msaa: Option<wgpu::TextureView>,
     depth: wgpu::TextureView,
+}
+
+impl FrameTargets {
+    /// A render pass into these targets (through the MSAA target when there is one),
+    /// cleared to `clear` and a depth of 1, the depth not kept.
+    fn pass<'e>(
+        &self,
+        encoder: &'e mut wgpu::CommandEncoder,
+        label: &str,
+        clear: wgpu::Color,
+    ) -> wgpu::RenderPass<'e> {
+        let (view, resolve_target) = match &self.msaa {
+            Some(m) => (m, Some(&self.resolved_view)),
+            None => (&self.resolved_view, None),
+        };
+        encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some(label),
+            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                view,
+                depth_slice: None,
+                resolve_target,
+                ops: wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(clear),
+                    store: wgpu::StoreOp::Store,
+                },
+            })],
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: &self.depth,
+                depth_ops: Some(wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(1.0),
+                    store: wgpu::StoreOp::Discard,
+                }),
+                stencil_ops: None,
+            }),
+            ..wgpu::RenderPassDescriptor::default()
+        })
+    }
 }
 
 /// Paints pane `k` of an egui frame: its background, and when `gpu` its skeletons posed at

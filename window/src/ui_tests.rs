@@ -24,6 +24,8 @@ const DT: f32 = 0.05;
 pub(super) struct Fixture {
     pub(super) dir: PathBuf,
     pub(super) study_path: PathBuf,
+    /// The stimuli's manifest (`dir/stimuli/stimuli.json`).
+    pub(super) manifest: protocols::manifest::StimulusManifest,
 }
 
 impl Drop for Fixture {
@@ -47,7 +49,7 @@ pub(super) fn fixture(name: &str, study_body: &str) -> Fixture {
         frame_rate_hz: 120.0,
         ..motion::synth::WalkParams::default()
     };
-    lab::generated::walk_stimuli(&dir, &walk, &["spiht"], &[10.0, 20.0]).unwrap();
+    let made = lab::generated::walk_stimuli(&dir, &walk, &["spiht"], &[10.0, 20.0]).unwrap();
     let study_path = dir.join("study.toml");
     std::fs::write(
         &study_path,
@@ -56,7 +58,11 @@ pub(super) fn fixture(name: &str, study_body: &str) -> Fixture {
         ),
     )
     .unwrap();
-    Fixture { dir, study_path }
+    Fixture {
+        dir,
+        study_path,
+        manifest: made.manifest,
+    }
 }
 
 const MOS: &str = "protocol = \"mos\"\n\
