@@ -128,13 +128,6 @@ impl LiveStimuli {
             },
             None => None,
         };
-        let external = match &live.codecs {
-            Some(f) => crate::codec_defs::read(&study.dir().join(f)).unwrap_or_else(|e| {
-                issue("staircase.live.codecs".into(), &e);
-                Vec::new()
-            }),
-            None => Vec::new(),
-        };
         let manifest_dir = study.manifest_dir();
         let mut clips = Vec::with_capacity(live.clips.len());
         for (i, c) in live.clips.iter().enumerate() {
@@ -152,7 +145,7 @@ impl LiveStimuli {
         }
         let codecs = Codecs::new(CodecContext {
             primitives: database,
-            external,
+            external: study.external_codecs.clone(),
         });
         Ok(Some(LiveStimuli {
             encoder: Arc::new(Encoder {

@@ -3,7 +3,9 @@
 
 use std::fs;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
+use codecs::codec::external::Definition;
 use protocols::StudyDefinition;
 use protocols::study::content_hash;
 use results::store::write_new;
@@ -30,6 +32,9 @@ pub struct StudyFile {
     pub manifest_hash: String,
     /// The checked definition.
     pub definition: StudyDefinition,
+    /// The command-defined codecs its `[staircase.live] codecs` file defines, read once when
+    /// the study was loaded and checked against them (empty without the key).
+    pub external_codecs: Vec<Arc<Definition>>,
 }
 
 /// The codecs a study file at `path` is checked against: the built-in ones, and those of the
@@ -78,8 +83,10 @@ impl StudyFile {
     /// # Errors
     /// The study's problems (an unreadable file among them).
     pub fn load(path: &Path) -> Result<StudyFile> {
-        let (definition, text) = StudyDefinition::load_text(path, &study_codecs(path)?)?;
+        let codecs = study_codecs(path)?;
+        let (definition, text) = StudyDefinition::load_text(path, &codecs)?;
         Ok(StudyFile {
+            external_codecs: codecs.context().external.clone(),
             path: path.to_path_buf(),
             hash: content_hash(text.as_bytes()),
             manifest_hash: content_hash(&serde_json::to_vec(&definition.manifest)?),
