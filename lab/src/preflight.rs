@@ -413,7 +413,8 @@ fn sizes(
             st.bytes
         ));
     }
-    let channels = match crate::sweep::codec_basis(basis).channels(&clip.skeleton) {
+    let counting = crate::sweep::codec_basis(basis);
+    let channels = match counting.channels(&clip.skeleton) {
         Ok(n) => n,
         Err(e) => {
             out.push(format!("achieved_cr: {e}"));
@@ -428,7 +429,7 @@ fn sizes(
              channels ({} basis) × {} frames / {size} bytes)",
             st.achieved_cr
                 .map_or_else(|| "null (unknown)".to_string(), |a| a.to_string()),
-            crate::sweep::codec_basis(basis).name(),
+            counting.name(),
             clip.frames()
         ));
     }

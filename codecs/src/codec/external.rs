@@ -25,7 +25,6 @@
 //! counts the whole container, as for every codec.
 
 use std::collections::BTreeSet;
-use std::fmt::Write as _;
 use std::io::Read as _;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -405,6 +404,14 @@ impl Codec for ExternalCodec {
     }
 }
 
+/// The name a stream's payload starts with and the encoder's bytes after it; `None` for a
+/// payload shorter than the name it announces (an empty one included).
+fn split_payload(stream: &Bitstream) -> Option<(&[u8], &[u8])> {
+    let (&len, rest) = stream.payload.split_first()?;
+    let len = usize::from(len);
+    (rest.len() >= len).then(|| rest.split_at(len))
+}
+
 /// The encoder's bytes in `stream`, after the name it must carry.
 fn payload_of<'a>(name: &'static str, stream: &'a Bitstream) -> Result<&'a [u8], CodecError> {
     let corrupt = |detail: String| CodecError::Payload {
@@ -412,16 +419,13 @@ fn payload_of<'a>(name: &'static str, stream: &'a Bitstream) -> Result<&'a [u8],
         offset: 0,
         detail,
     };
-    let Some((&len, rest)) = stream.payload.split_first() else {
-        return Err(corrupt("empty payload".into()));
+    let Some((own, data)) = split_payload(stream) else {
+        return Err(corrupt(if stream.payload.is_empty() {
+            "empty payload".into()
+        } else {
+            "the payload is shorter than the codec name it starts with".into()
+        }));
     };
-    let len = usize::from(len);
-    if rest.len() < len {
-        return Err(corrupt(
-            "the payload is shorter than the codec name it starts with".into(),
-        ));
-    }
-    let (own, data) = rest.split_at(len);
     if own != name.as_bytes() {
         return Err(corrupt(format!(
             "the stream was made by codec `{}`",
@@ -436,8 +440,7 @@ pub fn stream_codec_name(stream: &Bitstream) -> Option<String> {
     if stream.codec_id != ID {
         return None;
     }
-    let (&len, rest) = stream.payload.split_first()?;
-    let name = rest.get(..usize::from(len))?;
+    let (name, _) = split_payload(stream)?;
     Some(String::from_utf8_lossy(name).into_owned())
 }
 
@@ -449,9 +452,7 @@ fn read_bounded(path: &Path, max: u64) -> Result<Vec<u8>, String> {
         .read_to_end(&mut bytes)
         .map_err(|e| format!("{}: {e}", path.display()))?;
     if bytes.len() as u64 > max {
-        let mut m = String::new();
-        let _ = write!(m, "{} is over {max} bytes", path.display());
-        return Err(m);
+        return Err(format!("{} is over {max} bytes", path.display()));
     }
     Ok(bytes)
 }
