@@ -12,8 +12,8 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use protocols::{
-    FrameTiming, Outcome, Response, Session, SessionStatus, StimulusEncoding, StudyDefinition,
-    Trial, TrialRecord,
+    Answer, FrameTiming, Outcome, Response, Session, SessionStatus, StimulusEncoding,
+    StudyDefinition, Trial, TrialRecord,
 };
 use results::backend::{Found, SessionWriter, Store};
 use results::store::SessionState;
@@ -425,6 +425,8 @@ pub struct Recorder {
     clock_base_ms: u64,
     monotonic_base_ms: u64,
     started: Instant,
+    /// The trial index and answer of the last row replayed when the session was opened.
+    resumed_last: Option<(u32, Answer)>,
 }
 
 /// What opening a session found.
@@ -532,6 +534,7 @@ impl Recorder {
                 clock_base_ms: last.map_or(0, |r| r.elapsed_ms),
                 monotonic_base_ms: last.map_or(0, |r| r.monotonic_ms),
                 started: Instant::now(),
+                resumed_last: last.map(|r| (r.trial.index, r.response.answer)),
             }),
         })
     }
@@ -605,6 +608,18 @@ impl Recorder {
     /// The session clock: time already logged plus this process's running time, ms.
     pub fn elapsed_ms(&self) -> u64 {
         self.clock_base_ms + self.started.elapsed().as_millis() as u64
+    }
+
+    /// Rows committed (replayed ones included).
+    pub fn rows(&self) -> u32 {
+        self.log.rows()
+    }
+
+    /// The trial index and answer of the last row the session held when it was opened
+    /// (`None` for a new session): a repeated post of that answer is known again after a
+    /// resume.
+    pub fn resumed_last(&self) -> Option<(u32, Answer)> {
+        self.resumed_last
     }
 
     /// Trials answered so far (including replayed ones).

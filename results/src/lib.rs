@@ -130,6 +130,17 @@ pub enum ResultsError {
         /// Who holds it, as the database knows it.
         holder: String,
     },
+    /// Another process moved this session on since this writer last wrote (a participant's
+    /// request reached another server): nothing was written; open the session again.
+    #[error("{}: {found} answers are committed, this writer expected {expected}; the session moved on elsewhere", session.display())]
+    Moved {
+        /// The session.
+        session: PathBuf,
+        /// Rows committed.
+        found: u32,
+        /// Rows this writer knew of.
+        expected: u32,
+    },
     /// The database's schema is not one this build can use.
     #[error("{location}: {message}")]
     Schema {

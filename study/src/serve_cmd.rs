@@ -27,6 +27,14 @@ pub struct ServeArgs {
     /// no dashboard.
     #[arg(long)]
     pub dashboard_token: Option<String>,
+    /// Sessions and participants in a PostgreSQL database instead of a folder: any number
+    /// of `study serve` processes with the same study and `--store` serve one run, behind a
+    /// load balancer (docs/serve.md, "Several servers").
+    #[command(flatten)]
+    pub store: crate::store_args::StoreArgs,
+    /// Most database connections this server opens at once (with a database).
+    #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u16).range(1..=1000))]
+    pub connections: u16,
 }
 
 /// Serves `args.study` until SIGINT or SIGTERM.
@@ -41,10 +49,9 @@ pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
         );
     }
     let file = StudyFile::load(&args.study)?;
-    let output = args
-        .output
-        .clone()
-        .unwrap_or_else(|| file.dir().join(format!("results-{}", file.definition.name)));
+    let results = args.store.destination(args.output.as_deref(), || {
+        Some(file.dir().join(format!("results-{}", file.definition.name)))
+    })?;
     let page = match &args.page {
         Some(p) => p.clone(),
         None => std::env::current_exe()?
@@ -54,7 +61,8 @@ pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
     };
     let options = web::ServeOptions {
         study: args.study.clone(),
-        output: output.clone(),
+        results,
+        connections: usize::from(args.connections),
         bind: args.bind,
         page,
         dashboard_token: args.dashboard_token.clone(),
@@ -70,7 +78,7 @@ pub fn run(args: &ServeArgs) -> anyhow::Result<()> {
             "serving {} ({}) on http://{addr}/ ; results in {}{ready}",
             app.definition().name,
             app.definition().protocol,
-            output.display()
+            app.location()
         );
         if app.has_dashboard() {
             // The token is the experimenter's to add; it stays out of logs.

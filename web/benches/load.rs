@@ -70,7 +70,8 @@ fn setup(dir: &Path, clip_s: f64) -> ServeOptions {
     .unwrap();
     ServeOptions {
         study: dir.join("study.toml"),
-        output: dir.join("results"),
+        results: lab::results_dir::Destination::Folder(dir.join("results")),
+        connections: 16,
         bind: "127.0.0.1:0".parse().unwrap(),
         page: dir.join("page"),
         dashboard_token: None,

@@ -9,22 +9,26 @@ use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex, MutexGuard, OnceLock, PoisonError};
 use std::time::Instant;
 
+use lab::results_dir::Destination;
 use lab::scene::{Casting, View};
 use lab::session::{self, Opened, Recorder};
 use lab::source::StimulusSource;
 use lab::{LabError, StudyFile};
+use protocols::TrialRecord;
 use protocols::record::{Answer, Arrangement, Block, Response, Trial};
 use protocols::screen::Screen;
 use protocols::study::{
     CrowdsourcingSettings, HiddenRule, MAX_FIELD_CHARS, ScaleKind, StudyDefinition, SubjectField,
 };
 use protocols::{FrameTiming, StimulusEncoding, texts};
-use results::SessionManifest;
+use results::pg::participants as participants_db;
 use results::store::{BrowserInfo, DisplayInfo, SessionState};
+use results::{SessionManifest, SessionResults};
 use serde::{Deserialize, Serialize};
 
+use crate::database::Db;
 use crate::limits::{Bucket, Limits, MAX_INTERVALS, MAX_REPORTED_MS};
-use crate::participants::{Participant, Registry, identity};
+use crate::participants::{Participant, Places, Registry, identity};
 use crate::{Result, ServeOptions, WebError, clipdata, io, staging, timing};
 
 /// A refused request: the HTTP status and the reason the page shows.
@@ -55,9 +59,20 @@ impl From<WebError> for ApiError {
     }
 }
 
+impl From<results::ResultsError> for ApiError {
+    fn from(e: results::ResultsError) -> ApiError {
+        LabError::from(e).into()
+    }
+}
+
 impl From<LabError> for ApiError {
     fn from(e: LabError) -> ApiError {
         match e {
+            // Another server moved the session on meanwhile (asked again, this server
+            // replays it first), or the database is away for now: the page asks again.
+            LabError::Results(
+                results::ResultsError::Moved { .. } | results::ResultsError::Unavailable { .. },
+            ) => ApiError::new(503, format!("{}; try again", lab::error::chain(&e))),
             LabError::Engine(_) => ApiError::new(422, lab::error::chain(&e)),
             e => ApiError::new(500, lab::error::chain(&e)),
         }
@@ -81,6 +96,17 @@ pub(crate) struct Live {
     pending: Option<Pending>,
     /// The last logged trial's index and answer (a repeated post of it is acknowledged).
     last: Option<(u32, Answer)>,
+    /// With a database: the trial it says was sent last, and when (by this process's
+    /// clock), as read at the start of the request.
+    db_sent: Option<(u32, Instant)>,
+}
+
+/// Where the sessions and participants are.
+enum Place {
+    /// A results folder.
+    Folder(PathBuf),
+    /// A database run shared with other servers.
+    Db(Arc<Db>),
 }
 
 struct Pending {
@@ -290,18 +316,26 @@ pub struct AnswerReply {
     pub answered: u32,
 }
 
+/// A participant, their session's state, manifest and committed rows (the dashboard's).
+type Overview = (
+    Arc<Participant>,
+    &'static str,
+    Option<SessionManifest>,
+    Vec<TrialRecord>,
+);
+
 /// A stimulus' joint positions as served, made by whichever request needs them first.
 type ClipCell = Arc<OnceLock<Arc<Vec<u8>>>>;
 
 /// The study, its stimuli, participants and sessions.
 pub struct App {
     study: StudyFile,
-    out: PathBuf,
+    place: Place,
     page: Page,
     stimuli: Mutex<Box<dyn StimulusSource>>,
     /// Reference stimulus id → the view that frames it (every frame of it walked once).
     views: Mutex<HashMap<String, View>>,
-    /// Held while a session is opened (created or resumed).
+    /// Held while a session of a results folder is opened (created or resumed).
     opening: Mutex<()>,
     /// Stimulus id → its joint positions as served, each made once (the first request for
     /// an id makes it; others for the same id wait for that one instead of making it too).
@@ -443,16 +477,28 @@ impl App {
         // memory, its joint positions made, before the first participant (200 first trials
         // at once would otherwise queue behind the file reads and the forward kinematics).
         let (_, read) = lab::preflight::verify_keeping(&study, &|_, _| {})?;
-        for note in lab::results_dir::open_for_subjects(&options.output, &study, false)? {
+        let out = match &options.results {
+            Destination::Folder(out) => out.clone(),
+            Destination::Database { db, run } => {
+                let (db, notes) = Db::open(db, run.as_deref(), &study, options.connections)?;
+                for note in notes {
+                    eprintln!("{note}");
+                }
+                let db = Arc::new(db);
+                let place = Place::Db(Arc::clone(&db));
+                return Self::with(options, study, page, read, place, Registry::shared(db));
+            }
+        };
+        for note in lab::results_dir::open_for_subjects(&out, &study, false)? {
             eprintln!("{note}");
         }
-        let registry = Registry::open(&options.output)?;
+        let registry = Registry::open(&out)?;
         // A session that is over keeps its place against a quota and in its group (an
         // unfinished one holds it for the lease from its participant's next request).
         let crowd = &study.definition.crowdsourcing;
         if crowd.quota.is_some() || crowd.groups.is_some() {
-            for p in registry.all() {
-                let dir = session::session_dir(&options.output, &p.subject, 1);
+            for p in registry.local() {
+                let dir = session::session_dir(&out, &p.subject, 1);
                 let path = dir.join(results::store::SESSION_FILE);
                 if path.is_file() {
                     let m: SessionManifest =
@@ -463,6 +509,19 @@ impl App {
                 }
             }
         }
+        Self::with(options, study, page, read, Place::Folder(out), registry)
+    }
+
+    /// The server over `study` (whose clips the preflight `read`), its sessions at
+    /// `place`.
+    fn with(
+        options: &ServeOptions,
+        study: StudyFile,
+        page: Page,
+        read: Vec<(String, Arc<motion::Clip>)>,
+        place: Place,
+        registry: Registry,
+    ) -> Result<App> {
         let stimuli = lab::source::open(&study)?;
         let preloaded = stimuli.keep(&read);
         let clips = read
@@ -474,7 +533,7 @@ impl App {
             })
             .collect();
         Ok(App {
-            out: options.output.clone(),
+            place,
             page,
             stimuli: Mutex::new(stimuli),
             views: Mutex::new(HashMap::new()),
@@ -502,9 +561,12 @@ impl App {
         self.preloaded
     }
 
-    /// The results directory.
-    pub fn output(&self) -> &Path {
-        &self.out
+    /// Where the sessions are: the results folder, or the database run (no password).
+    pub fn location(&self) -> String {
+        match &self.place {
+            Place::Folder(out) => out.display().to_string(),
+            Place::Db(db) => db.location.clone(),
+        }
     }
 
     /// The limits.
@@ -574,21 +636,19 @@ impl App {
                 "the study has all the participants it needs; thank you for your interest",
             )
         };
-        let (now_ms, lease_ms) = (lab::session::now_ms(), u64::from(crowd.lease_s) * 1000);
-        let admit = |all: &[Arc<Participant>]| {
-            if all.len() >= self.limits.max_participants {
+        let admit = |places: &Places| {
+            if places.total >= self.limits.max_participants as u64 {
                 return Err(full());
             }
             // Quotas count the places held: sessions that completed and participants active
             // within the lease (a participant idle longer gives their place back). The group
             // with the fewest places held takes the next one, so every group gets its share;
             // a group (or, without groups, the study) at its quota takes no more.
-            let held = all.iter().filter(|p| p.holds_place(now_ms, lease_ms));
             if let Some(n) = crowd.groups {
                 let mut counts = vec![0u32; n as usize];
-                for p in held {
-                    if let Some(c) = p.group.and_then(|g| counts.get_mut(g as usize)) {
-                        *c += 1;
+                for (g, held) in &places.held {
+                    if let Some(c) = g.and_then(|g| counts.get_mut(g as usize)) {
+                        *c += held;
                     }
                 }
                 let (g, count) = counts
@@ -600,13 +660,16 @@ impl App {
                     return Err(full());
                 }
                 Ok(Some(g))
-            } else if crowd.quota.is_some_and(|q| held.count() >= q as usize) {
+            } else if crowd
+                .quota
+                .is_some_and(|q| places.held.values().sum::<u32>() >= q)
+            {
                 Err(full())
             } else {
                 Ok(None)
             }
         };
-        let (p, token) = self.registry.join(&who, admit)?;
+        let (p, token) = self.registry.join(&who, crowd.lease_s, admit)?;
         Ok((p.subject.clone(), token))
     }
 
@@ -615,7 +678,7 @@ impl App {
     /// # Errors
     /// 401 unknown token, 403 a token of another participant, 429 over the rate.
     pub fn authorize(&self, subject: &str, token: &str) -> ApiResult<Arc<Participant>> {
-        let p = match self.registry.by_token(token) {
+        let p = match self.registry.by_token(token)? {
             Some(p) if p.subject == subject => p,
             Some(_) => {
                 return Err(ApiError::new(
@@ -633,20 +696,77 @@ impl App {
         Ok(p)
     }
 
-    fn session_dir(&self, p: &Participant) -> PathBuf {
-        session::session_dir(&self.out, &p.subject, 1)
-    }
-
-    /// Opens (resuming from disk) the session of `p` if it was begun and is not open.
+    /// Opens (resuming it) the session of `p` if it was begun and is not open. With a
+    /// database, first reads what it holds of the session: a session another server moved
+    /// on is opened again (replayed), and the time the pending trial was last sent is the
+    /// database's.
     fn ensure_open(&self, p: &Participant, slot: &mut Slot) -> ApiResult<()> {
-        if !matches!(slot, Slot::NotStarted) {
-            return Ok(());
-        }
-        let dir = self.session_dir(p);
-        if dir.exists() {
+        let begun = match &self.place {
+            Place::Folder(out) => {
+                if !matches!(slot, Slot::NotStarted) {
+                    return Ok(());
+                }
+                session::session_dir(out, &p.subject, 1).exists()
+            }
+            Place::Db(db) => {
+                let seen =
+                    participants_db::touch(&mut *db.conn()?, db.run_id, &db.location, &p.subject)?;
+                if let (Slot::Live(l), Some((rows, status))) = (&*slot, &seen.session)
+                    && (*rows != l.rec.rows() || status == "complete" || status == "time_limit")
+                {
+                    *slot = Slot::NotStarted;
+                }
+                if matches!(slot, Slot::NotStarted) && seen.session.is_some() {
+                    *slot = self.open_session(p, &|_| {})?;
+                }
+                if let Slot::Live(l) = slot {
+                    let now = Instant::now();
+                    l.db_sent = seen.sent.map(|(i, ago_ms)| {
+                        let ago = std::time::Duration::from_secs_f64(ago_ms / 1e3);
+                        (i, now.checked_sub(ago).unwrap_or(now))
+                    });
+                    if let (Some(pd), Some((i, at))) = (&mut l.pending, l.db_sent)
+                        && pd.trial.index == i
+                    {
+                        pd.sent = Sent::At(at);
+                    }
+                }
+                return Ok(());
+            }
+        };
+        if begun {
             *slot = self.open_session(p, &|_| {})?;
         }
         Ok(())
+    }
+
+    /// Notes that `p`'s session is over (their place against a quota is kept).
+    fn set_finished(&self, p: &Participant) -> ApiResult<()> {
+        p.set_finished();
+        if let Place::Db(db) = &self.place {
+            participants_db::set_finished(&mut *db.conn()?, db.run_id, &db.location, &p.subject)
+                .map_err(LabError::from)?;
+        }
+        Ok(())
+    }
+
+    /// The committed rows of `p`'s session.
+    fn records(&self, p: &Participant) -> ApiResult<Vec<TrialRecord>> {
+        let fail = |e: &dyn std::fmt::Display| ApiError::new(500, e.to_string());
+        match &self.place {
+            Place::Folder(out) => {
+                let path =
+                    session::session_dir(out, &p.subject, 1).join(results::store::TRIALS_FILE);
+                if !path.exists() {
+                    return Ok(Vec::new());
+                }
+                Ok(results::read_trials(&path).map_err(|e| fail(&e))?.records)
+            }
+            Place::Db(db) => db
+                .store()?
+                .session_records(&p.subject, 1)
+                .map_err(|e| fail(&e)),
+        }
     }
 
     /// Opens `p`'s session (one per participant): resumed from disk when it was begun, else
@@ -657,7 +777,6 @@ impl App {
         p: &Participant,
         fill: &dyn Fn(&mut SessionManifest),
     ) -> ApiResult<Slot> {
-        let dir = self.session_dir(p);
         let who = session::SessionFor {
             subject: &p.subject,
             session: 1,
@@ -666,35 +785,27 @@ impl App {
             observer_seed: None,
             resume: true,
         };
-        // One session opened at a time: a study with between-subject groups assigns each new
-        // one from those already in the results folder.
-        let _opening = lock(&self.opening);
-        let (opened, _) = session::open_subject(
-            &self.study,
-            &mut results::FolderStore::new(&self.out),
-            &who,
-            fill,
-        )?;
+        let (opened, _) = match &self.place {
+            Place::Folder(out) => {
+                // One session opened at a time: a study with between-subject groups assigns
+                // each new one from those already in the results folder.
+                let _opening = lock(&self.opening);
+                session::open_subject(&self.study, &mut results::FolderStore::new(out), &who, fill)?
+            }
+            // The database orders group assignments itself (a lock on the run's row).
+            Place::Db(db) => session::open_subject(&self.study, &mut db.store()?, &who, fill)?,
+        };
         Ok(match opened {
             Opened::Finished(m) => {
-                p.set_finished();
+                self.set_finished(p)?;
                 Slot::Finished(m)
             }
-            Opened::Ready { recorder, resumed } => {
-                let last = if resumed > 0 {
-                    let path = dir.join(results::store::TRIALS_FILE);
-                    let t = results::read_trials(&path)
-                        .map_err(|e| ApiError::new(500, e.to_string()))?;
-                    t.records.last().map(|r| (r.trial.index, r.response.answer))
-                } else {
-                    None
-                };
-                Slot::Live(Box::new(Live {
-                    rec: recorder,
-                    pending: None,
-                    last,
-                }))
-            }
+            Opened::Ready { recorder, .. } => Slot::Live(Box::new(Live {
+                last: recorder.resumed_last(),
+                rec: recorder,
+                pending: None,
+                db_sent: None,
+            })),
         })
     }
 
@@ -851,13 +962,12 @@ impl App {
             Slot::Finished(m) => return Ok(Self::done_info(m)),
             Slot::Live(l) => l,
         };
-        let dir = self.session_dir(p);
-        if !self.ensure_pending(live, &dir)? {
+        if !self.ensure_pending(live, p)? {
             live.rec.finish()?;
             let m = Box::new(live.rec.manifest().clone());
             let info = Self::done_info(&m);
             *slot = Slot::Finished(m);
-            p.set_finished();
+            self.set_finished(p)?;
             return Ok(info);
         }
         let answered = live.rec.answered();
@@ -866,8 +976,23 @@ impl App {
         };
         // Its first sending is on disk before the trial leaves; asked for again (a reload
         // plays it from the start) the page cannot have played it longer than since then.
-        if matches!(pending.sent, Sent::Never) {
-            record_sent(&dir, pending.trial.index)?;
+        // A database holds every sending (another server may be asked next).
+        match &self.place {
+            Place::Folder(out) if matches!(pending.sent, Sent::Never) => {
+                record_sent(
+                    &session::session_dir(out, &p.subject, 1),
+                    pending.trial.index,
+                )?;
+            }
+            Place::Folder(_) => {}
+            Place::Db(db) => participants_db::record_sent(
+                &mut *db.conn()?,
+                db.run_id,
+                &db.location,
+                &p.subject,
+                pending.trial.index,
+            )
+            .map_err(LabError::from)?,
         }
         pending.sent = Sent::At(Instant::now());
         let t = &pending.trial;
@@ -885,9 +1010,9 @@ impl App {
     }
 
     /// Makes the engine's next trial the pending one, with its clips, unless one is pending;
-    /// false when the session has no next trial. `dir` is the session's folder, whose
-    /// [`SENT_FILE`] says whether an earlier server sent the trial already.
-    fn ensure_pending(&self, live: &mut Live, dir: &Path) -> ApiResult<bool> {
+    /// false when the session has no next trial. Whether an earlier server sent the trial
+    /// already is the session folder's [`SENT_FILE`], or the database's.
+    fn ensure_pending(&self, live: &mut Live, p: &Participant) -> ApiResult<bool> {
         if live.pending.is_some() {
             return Ok(true);
         }
@@ -936,7 +1061,15 @@ impl App {
             .map(|(id, clip)| self.clip_bytes(id, clip))
             .collect();
         let encoding = shown.swap_remove(0).encoding;
-        let sent = sent_before(dir, trial.index)?;
+        let sent = match &self.place {
+            Place::Folder(out) => {
+                sent_before(&session::session_dir(out, &p.subject, 1), trial.index)?
+            }
+            Place::Db(_) => match live.db_sent {
+                Some((i, at)) if i == trial.index => Sent::At(at),
+                _ => Sent::Never,
+            },
+        };
         live.pending = Some(Pending {
             answers_open_ms: screen.schedule.answers_open_s * 1e3,
             screen: Arc::new(serde_json::json!({
@@ -980,7 +1113,7 @@ impl App {
         let Slot::Live(live) = &mut *slot else {
             return Err(ApiError::new(404, "no trial is pending"));
         };
-        self.ensure_pending(live, &self.session_dir(p))?;
+        self.ensure_pending(live, p)?;
         match &live.pending {
             Some(pd) if pd.trial.index == index => {
                 pd.clips.get(slot_no).cloned().ok_or_else(|| {
@@ -1022,7 +1155,7 @@ impl App {
             };
         }
         // After a restart the trial on the page is the engine's next one again.
-        self.ensure_pending(live, &self.session_dir(p))?;
+        self.ensure_pending(live, p)?;
         let Some(pending) = &live.pending else {
             return Err(ApiError::new(409, "the session has no trial left"));
         };
@@ -1164,9 +1297,7 @@ impl App {
         m: &SessionManifest,
         req: &AnswerRequest,
     ) -> ApiResult<AnswerReply> {
-        let path = self.session_dir(p).join(results::store::TRIALS_FILE);
-        let t = results::read_trials(&path).map_err(|e| ApiError::new(500, e.to_string()))?;
-        match t.records.iter().find(|r| r.trial.index == req.index) {
+        match self.records(p)?.iter().find(|r| r.trial.index == req.index) {
             Some(r) if r.response.answer == req.answer => Ok(AnswerReply {
                 duplicate: true,
                 answered: m.trials_logged,
@@ -1275,32 +1406,18 @@ impl App {
     /// # Errors
     /// A session log that cannot be read.
     pub fn dashboard(&self) -> ApiResult<serde_json::Value> {
-        let participants = self.registry.all();
+        let sessions = self.overview()?;
         let mut rows = Vec::new();
         let mut scores: BTreeMap<String, (f64, u32)> = BTreeMap::new();
         let mut states: BTreeMap<&str, u32> = BTreeMap::new();
         let mut last_answer_ms: Option<u64> = None;
-        for p in &participants {
-            let dir = self.session_dir(p);
-            let (state, manifest) = match &*lock(&p.slot) {
-                Slot::NotStarted if !dir.exists() => ("joined", None),
-                Slot::Live(l) => ("running", Some(l.rec.manifest().clone())),
-                Slot::Finished(m) => ("finished", Some((**m).clone())),
-                Slot::NotStarted => ("begun", None),
-            };
-            let trials = dir.join(results::store::TRIALS_FILE);
-            let records = if trials.exists() {
-                results::read_trials(&trials)
-                    .map_err(|e| ApiError::new(500, e.to_string()))?
-                    .records
-            } else {
-                Vec::new()
-            };
+        for (p, state, manifest, records) in &sessions {
+            let state = *state;
             *states.entry(state).or_default() += 1;
             last_answer_ms = last_answer_ms.max(records.iter().map(|r| r.wall_clock_ms).max());
             let crowd = &self.definition().crowdsourcing;
             let mut gold_failed = 0u32;
-            for r in &records {
+            for r in records {
                 if crowd.gold_verdict(r).is_some_and(|(_, passed)| !passed) {
                     gold_failed += 1;
                 }
@@ -1335,10 +1452,10 @@ impl App {
             "protocol": self.definition().protocol,
             "states": states,
             // Share of participants whose session is complete.
-            "complete_share": if participants.is_empty() {
+            "complete_share": if sessions.is_empty() {
                 0.0
             } else {
-                f64::from(states.get("finished").copied().unwrap_or(0)) / participants.len() as f64
+                f64::from(states.get("finished").copied().unwrap_or(0)) / sessions.len() as f64
             },
             // When the last answer was logged, ms since the Unix epoch.
             "last_answer_ms": last_answer_ms,
@@ -1353,17 +1470,71 @@ impl App {
     /// # Errors
     /// A manifest that cannot be written (the others are still marked).
     pub fn interrupt_all(&self) -> Result<()> {
-        let participants = self.registry.all();
         let mut first = Ok(());
-        for p in participants {
+        for p in self.registry.local() {
             if let Slot::Live(l) = &mut *lock(&p.slot)
                 && let Err(e) = l.rec.interrupt()
+                // A session another server moved on is that server's to mark.
+                && !matches!(e, LabError::Results(results::ResultsError::Moved { .. }))
                 && first.is_ok()
             {
                 first = Err(e.into());
             }
         }
         first
+    }
+
+    /// Every participant with their session's state (`joined`, `begun`, `running`,
+    /// `finished`), manifest and committed rows: a folder's as this server holds them, a
+    /// database run's as the database does (whichever server drives each).
+    fn overview(&self) -> ApiResult<Vec<Overview>> {
+        let db = match &self.place {
+            Place::Folder(out) => {
+                let mut all = Vec::new();
+                for p in self.registry.local() {
+                    let dir = session::session_dir(out, &p.subject, 1);
+                    let (state, manifest) = match &*lock(&p.slot) {
+                        Slot::NotStarted if !dir.exists() => ("joined", None),
+                        Slot::Live(l) => ("running", Some(l.rec.manifest().clone())),
+                        Slot::Finished(m) => ("finished", Some((**m).clone())),
+                        Slot::NotStarted => ("begun", None),
+                    };
+                    let records = self.records(&p)?;
+                    all.push((p, state, manifest, records));
+                }
+                return Ok(all);
+            }
+            Place::Db(db) => db,
+        };
+        let fail = |e: results::ResultsError| ApiError::new(500, e.to_string());
+        let mut store = db.store()?;
+        let heads = store.sessions().map_err(fail)?;
+        let mut by_subject: HashMap<String, SessionResults> = store
+            .read(&heads)
+            .map_err(fail)?
+            .into_iter()
+            .filter(|s| s.manifest.session == 1)
+            .map(|s| (s.manifest.subject.clone(), s))
+            .collect();
+        let everyone = participants_db::all(store.client().map_err(fail)?, db.run_id, &db.location)
+            .map_err(fail)?;
+        Ok(everyone
+            .into_iter()
+            .map(|row| {
+                let session = by_subject.remove(&row.subject);
+                let p = Arc::new(Participant::from_row(row));
+                match session {
+                    None => (p, "joined", None, Vec::new()),
+                    Some(s) => {
+                        let state = match s.manifest.status {
+                            SessionState::Complete | SessionState::TimeLimit => "finished",
+                            _ => "running",
+                        };
+                        (p, state, Some(s.manifest), s.trials.records)
+                    }
+                }
+            })
+            .collect())
     }
 }
 

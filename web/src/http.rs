@@ -1,6 +1,6 @@
 //! The HTTP interface: routes, authentication, body limits (size, and the time to send it)
-//! and the headers every response carries. Each handler checks the token, then runs the
-//! [`App`] call on the blocking pool (it may wait for a session lock or an fsync).
+//! and the headers every response carries. Each handler checks the token and runs the [`App`]
+//! call on the blocking pool (either may wait for a session lock, an fsync or the database).
 //!
 //! | route | what |
 //! | --- | --- |
@@ -193,8 +193,8 @@ async fn session(
     Path(subject): Path<String>,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
-    let p = app.authorize(&subject, bearer(&headers)?)?;
-    let info = blocking(move || app.session_info(&p)).await?;
+    let token = bearer(&headers)?.to_owned();
+    let info = blocking(move || app.session_info(&*app.authorize(&subject, &token)?)).await?;
     Ok(Json(info).into_response())
 }
 
@@ -204,9 +204,13 @@ async fn begin(
     headers: HeaderMap,
     body: Result<Json<BeginRequest>, JsonRejection>,
 ) -> Result<Response, ApiError> {
-    let p = app.authorize(&subject, bearer(&headers)?)?;
-    let Json(req) = body.map_err(|e| bad_json(&e))?;
-    blocking(move || app.begin(&p, &req)).await?;
+    let token = bearer(&headers)?.to_owned();
+    blocking(move || {
+        let p = app.authorize(&subject, &token)?;
+        let Json(req) = body.map_err(|e| bad_json(&e))?;
+        app.begin(&p, &req)
+    })
+    .await?;
     Ok(Json(serde_json::json!({ "begun": true })).into_response())
 }
 
@@ -215,8 +219,8 @@ async fn trial(
     Path(subject): Path<String>,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
-    let p = app.authorize(&subject, bearer(&headers)?)?;
-    let info = blocking(move || app.trial(&p)).await?;
+    let token = bearer(&headers)?.to_owned();
+    let info = blocking(move || app.trial(&*app.authorize(&subject, &token)?)).await?;
     Ok(Json(info).into_response())
 }
 
@@ -225,8 +229,8 @@ async fn clip(
     Path((subject, index, slot)): Path<(String, u32, usize)>,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
-    let p = app.authorize(&subject, bearer(&headers)?)?;
-    let bytes = blocking(move || app.clip(&p, index, slot)).await?;
+    let token = bearer(&headers)?.to_owned();
+    let bytes = blocking(move || app.clip(&*app.authorize(&subject, &token)?, index, slot)).await?;
     Ok((
         [(header::CONTENT_TYPE, "application/octet-stream")],
         bytes.as_ref().clone(),
@@ -240,9 +244,13 @@ async fn answer(
     headers: HeaderMap,
     body: Result<Json<AnswerRequest>, JsonRejection>,
 ) -> Result<Response, ApiError> {
-    let p = app.authorize(&subject, bearer(&headers)?)?;
-    let Json(req) = body.map_err(|e| bad_json(&e))?;
-    let reply = blocking(move || app.answer(&p, &req)).await?;
+    let token = bearer(&headers)?.to_owned();
+    let reply = blocking(move || {
+        let p = app.authorize(&subject, &token)?;
+        let Json(req) = body.map_err(|e| bad_json(&e))?;
+        app.answer(&p, &req)
+    })
+    .await?;
     Ok(Json(reply).into_response())
 }
 

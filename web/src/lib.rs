@@ -28,8 +28,10 @@
 pub mod app;
 pub mod client;
 pub mod clipdata;
+pub mod database;
 mod http;
 pub mod limits;
+pub mod nginx;
 pub mod participants;
 mod staging;
 pub mod timing;
@@ -62,6 +64,12 @@ pub enum WebError {
     Refused(String),
 }
 
+impl From<results::ResultsError> for WebError {
+    fn from(e: results::ResultsError) -> WebError {
+        WebError::Lab(e.into())
+    }
+}
+
 /// The crate's result type.
 pub type Result<T, E = WebError> = std::result::Result<T, E>;
 
@@ -75,8 +83,11 @@ fn io(what: impl Into<String>) -> impl FnOnce(std::io::Error) -> WebError {
 pub struct ServeOptions {
     /// The study file.
     pub study: PathBuf,
-    /// The results directory (created on first use; later runs continue its sessions).
-    pub output: PathBuf,
+    /// Where the sessions go: a results folder (created on first use; later runs continue
+    /// its sessions), or a database run that any number of servers share.
+    pub results: lab::results_dir::Destination,
+    /// Most connections to the database this server opens at once (with a database).
+    pub connections: usize,
     /// Address to listen on (`127.0.0.1:8080` unless told otherwise).
     pub bind: SocketAddr,
     /// The built page (`target/page`, made by `scripts/build-page`).

@@ -191,15 +191,29 @@ impl Appender {
     }
 }
 
-/// Every participant, found by token or subject, and the file they are appended to.
+/// Where participants are kept: `participants.csv` of a results folder, or the
+/// `study_participants` table of a database run that several servers share.
+enum Backing {
+    /// The file, held by a join for its whole check, append and fsync.
+    File(Mutex<Appender>),
+    /// The database (a join's check and insert are one transaction there).
+    Db(Arc<crate::database::Db>),
+}
+
+/// Every participant, found by token or subject, and where they are kept.
 ///
 /// Two locks, so that finding a participant (every request does) never waits for a disk:
-/// the index is held only to look up or insert; the file is held by a join for its whole
-/// check, append and fsync, so joins take turns and never overrun a quota together.
+/// the index is held only to look up or insert; a folder's file is held by a join for its
+/// whole check, append and fsync, so joins take turns and never overrun a quota together.
+/// With a database the index holds the participants this server has met; one another
+/// server admitted is read from the database on their first request here.
 pub struct Registry {
     index: RwLock<Index>,
-    file: Mutex<Appender>,
+    backing: Backing,
 }
+
+/// What a participant's place against a quota is measured with: the study's lease.
+pub type Places = results::pg::participants::Places;
 
 impl Registry {
     /// Opens (or creates) `participants.csv` in `dir`, reading every participant in it. A
@@ -266,54 +280,138 @@ impl Registry {
         }
         Ok(Registry {
             index: RwLock::new(index),
-            file: Mutex::new(appender),
+            backing: Backing::File(Mutex::new(appender)),
         })
+    }
+
+    /// The participants of a database run, shared with every other server of the run.
+    pub(crate) fn shared(db: Arc<crate::database::Db>) -> Registry {
+        Registry {
+            index: RwLock::new(Index::default()),
+            backing: Backing::Db(db),
+        }
     }
 
     fn index(&self) -> RwLockReadGuard<'_, Index> {
         self.index.read().unwrap_or_else(PoisonError::into_inner)
     }
 
-    /// The participant a token belongs to.
-    pub fn by_token(&self, token: &str) -> Option<Arc<Participant>> {
-        self.index().by_hash.get(&token_hash(token)).cloned()
+    fn remember(
+        &self,
+        hash: [u8; 32],
+        row: results::pg::participants::ParticipantRow,
+    ) -> Arc<Participant> {
+        let mut index = self.index.write().unwrap_or_else(PoisonError::into_inner);
+        if let Some(p) = index.by_hash.get(&hash) {
+            return Arc::clone(p);
+        }
+        index.insert(hash, Participant::from_row(row))
     }
 
-    /// Every participant, in the order they joined.
-    pub fn all(&self) -> Vec<Arc<Participant>> {
+    /// The participant a token belongs to.
+    ///
+    /// # Errors
+    /// The database cannot be read.
+    pub fn by_token(&self, token: &str) -> Result<Option<Arc<Participant>>> {
+        let hash = token_hash(token);
+        if let Some(p) = self.index().by_hash.get(&hash) {
+            return Ok(Some(Arc::clone(p)));
+        }
+        let Backing::Db(db) = &self.backing else {
+            return Ok(None);
+        };
+        let row =
+            results::pg::participants::by_token(&mut *db.conn()?, db.run_id, &db.location, &hash)
+                .map_err(lab::LabError::from)?;
+        Ok(row.map(|r| self.remember(hash, r)))
+    }
+
+    /// The participants this server has met, in the order it met them (a folder's: every
+    /// participant).
+    pub fn local(&self) -> Vec<Arc<Participant>> {
         self.index().order.clone()
     }
 
     /// Adds a participant of identity `who` (a generated id when no platform names one)
-    /// and returns it with its token, after its row is on disk. `admit` sees every
-    /// participant so far (no other join can add one meanwhile) and gives the newcomer's
-    /// group, or refuses them.
+    /// and returns it with its token, after it is on disk or committed. `admit` sees the
+    /// places held, counted with a lease of `lease_s` seconds (no other join can add one
+    /// meanwhile, on this server or another), and gives the newcomer's group, or refuses
+    /// them.
     ///
     /// # Errors
     /// `admit` refuses, the id already took part (one session per participant), or the row
     /// cannot be written.
-    pub fn join<E: From<WebError>>(
+    pub fn join<E: From<WebError> + From<results::ResultsError>>(
         &self,
         who: &Identity,
-        admit: impl FnOnce(&[Arc<Participant>]) -> std::result::Result<Option<u32>, E>,
+        lease_s: u32,
+        admit: impl FnOnce(&Places) -> std::result::Result<Option<u32>, E>,
     ) -> std::result::Result<(Arc<Participant>, String), E> {
-        let mut file = self.file.lock().unwrap_or_else(PoisonError::into_inner);
+        let taken = |s: &str| {
+            WebError::Refused(format!(
+                "participant {s} already has a session: continue it from its link"
+            ))
+        };
+        let token = new_token()?;
+        let hash = token_hash(&token);
+        let file = match &self.backing {
+            Backing::File(file) => file,
+            Backing::Db(db) => {
+                let subject = match &who.subject {
+                    Some(s) => s.clone(),
+                    None => generated_id()?,
+                };
+                let mut row = results::pg::participants::ParticipantRow {
+                    subject,
+                    source: who.source.clone(),
+                    ids: who.ids.clone(),
+                    group: None,
+                    finished: false,
+                };
+                let mut conn = db.conn()?;
+                row.group = results::pg::participants::join(
+                    &mut conn,
+                    db.run_id,
+                    &db.location,
+                    lease_s,
+                    &row,
+                    &hash,
+                    |places, is_taken| {
+                        if is_taken {
+                            return Err(E::from(taken(&row.subject)));
+                        }
+                        admit(places)
+                    },
+                )?;
+                return Ok((self.remember(hash, row), token));
+            }
+        };
+        let mut file = file.lock().unwrap_or_else(PoisonError::into_inner);
         let (subject, group) = {
             let index = self.index();
-            let group = admit(&index.order)?;
+            let now_ms = lab::session::now_ms();
+            let lease_ms = u64::from(lease_s) * 1000;
+            let mut places = Places {
+                total: index.order.len() as u64,
+                ..Places::default()
+            };
+            for p in index
+                .order
+                .iter()
+                .filter(|p| p.holds_place(now_ms, lease_ms))
+            {
+                *places.held.entry(p.group).or_default() += 1;
+            }
+            let group = admit(&places)?;
             let subject = match &who.subject {
                 Some(s) => {
                     if index.by_subject.contains_key(s) {
-                        return Err(WebError::Refused(format!(
-                            "participant {s} already has a session: continue it from its link"
-                        ))
-                        .into());
+                        return Err(taken(s).into());
                     }
                     s.clone()
                 }
                 None => loop {
-                    let t = new_token()?;
-                    let s = format!("W{}", &t[..12]);
+                    let s = generated_id()?;
                     if !index.by_subject.contains_key(&s) {
                         break s;
                     }
@@ -321,8 +419,6 @@ impl Registry {
             };
             (subject, group)
         };
-        let token = new_token()?;
-        let hash = token_hash(&token);
         let ids: Vec<String> = who.ids.iter().map(|(k, v)| format!("{k}={v}")).collect();
         let created_ms = lab::session::now_ms();
         file.append(&encode_row(&[
@@ -351,6 +447,12 @@ impl Registry {
     }
 }
 
+/// A generated subject id: `W` and 12 hex digits from the OS random source.
+fn generated_id() -> Result<String> {
+    let t = new_token()?;
+    Ok(format!("W{}", &t[..12]))
+}
+
 impl Participant {
     fn new(
         subject: String,
@@ -369,6 +471,21 @@ impl Participant {
             last_seen_ms: AtomicU64::new(created_ms),
             finished: AtomicBool::new(false),
         }
+    }
+
+    /// A participant as a database run holds them.
+    pub(crate) fn from_row(row: results::pg::participants::ParticipantRow) -> Participant {
+        let p = Participant::new(
+            row.subject,
+            row.source,
+            row.ids,
+            row.group,
+            lab::session::now_ms(),
+        );
+        if row.finished {
+            p.set_finished();
+        }
+        p
     }
 
     /// Notes a request of theirs at `now_ms` (ms since the Unix epoch).
@@ -609,10 +726,10 @@ mod tests {
         let token = {
             let reg = Registry::open(&dir).unwrap_or_else(|e| panic!("{e}"));
             let (_, token) = reg
-                .join::<WebError>(&who, |_| Ok(Some(3)))
+                .join::<WebError>(&who, 60, |_| Ok(Some(3)))
                 .unwrap_or_else(|e| panic!("{e}"));
             // One session per participant.
-            assert!(reg.join::<WebError>(&who, |_| Ok(Some(1))).is_err());
+            assert!(reg.join::<WebError>(&who, 60, |_| Ok(Some(1))).is_err());
             token
         };
         // A crash in the middle of the next row.
@@ -624,10 +741,11 @@ mod tests {
         f.write_all(b"W12,abc").unwrap_or_else(|e| panic!("{e}"));
         drop(f);
         let reg = Registry::open(&dir).unwrap_or_else(|e| panic!("{e}"));
-        assert_eq!(reg.all().len(), 1);
-        let p = reg.by_token(&token).map(|p| (p.subject.clone(), p.group));
+        assert_eq!(reg.local().len(), 1);
+        let found = |t: &str| reg.by_token(t).unwrap_or_else(|e| panic!("{e}"));
+        let p = found(&token).map(|p| (p.subject.clone(), p.group));
         assert_eq!(p, Some(("A1".to_string(), Some(3))));
-        assert!(reg.by_token(&new_token().unwrap_or_default()).is_none());
+        assert!(found(&new_token().unwrap_or_default()).is_none());
         let text = std::fs::read_to_string(&path).unwrap_or_default();
         assert!(text.ends_with('\n') && !text.contains(&token), "{text}");
         let _ = std::fs::remove_dir_all(&dir);
@@ -647,11 +765,11 @@ mod tests {
                     s.spawn(move || {
                         let who = identity(&params(&[("PROLIFIC_PID", &format!("q{k}"))]))
                             .unwrap_or_else(|e| panic!("{e}"));
-                        reg.join(&who, |all| {
-                            if all.len() >= 10 {
+                        reg.join(&who, 60, |places| {
+                            if places.total >= 10 {
                                 Err(WebError::Refused("full".into()))
                             } else {
-                                Ok(Some(u32::try_from(all.len()).unwrap_or(0)))
+                                Ok(Some(u32::try_from(places.total).unwrap_or(0)))
                             }
                         })
                         .ok()
@@ -665,7 +783,7 @@ mod tests {
                 .collect()
         });
         assert_eq!(admitted.len(), 10);
-        let mut groups: Vec<Option<u32>> = reg.all().iter().map(|p| p.group).collect();
+        let mut groups: Vec<Option<u32>> = reg.local().iter().map(|p| p.group).collect();
         groups.sort_unstable();
         assert_eq!(groups, (0..10).map(Some).collect::<Vec<_>>());
         let rows = std::fs::read_to_string(dir.join(lab::results_dir::PARTICIPANTS_FILE))
@@ -677,11 +795,19 @@ mod tests {
         // While a join holds the file (its append and fsync), every participant is still
         // found: a request never waits for another participant's disk write.
         let (subject, token) = &admitted[0];
-        let held = reg.file.lock().unwrap_or_else(PoisonError::into_inner);
+        let Backing::File(file) = &reg.backing else {
+            panic!("a folder's registry")
+        };
+        let held = file.lock().unwrap_or_else(PoisonError::into_inner);
         let (tx, rx) = std::sync::mpsc::channel();
         std::thread::scope(|s| {
             s.spawn(|| {
-                let _ = tx.send(reg.by_token(token).map(|p| p.subject.clone()));
+                let _ = tx.send(
+                    reg.by_token(token)
+                        .ok()
+                        .flatten()
+                        .map(|p| p.subject.clone()),
+                );
             });
             let found = rx.recv_timeout(std::time::Duration::from_secs(10));
             drop(held);

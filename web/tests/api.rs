@@ -51,7 +51,8 @@ fn setup(dir: &Path) -> ServeOptions {
     std::fs::copy(capabilities(), dir.join("page/capabilities.json")).unwrap();
     ServeOptions {
         study: dir.join("study.toml"),
-        output: dir.join("results"),
+        results: lab::results_dir::Destination::Folder(dir.join("results")),
+        connections: 16,
         bind: "127.0.0.1:0".parse().unwrap(),
         page: dir.join("page"),
         dashboard_token: Some("dashboard-token-0123456789".into()),
@@ -328,10 +329,10 @@ fn studies_whose_screens_the_page_lacks_are_refused() {
                 study: path.clone(),
                 // One folder per study, by its name (a folder named by the path's length
                 // was shared by two studies whenever their paths were as long).
-                output: dir.join(format!(
+                results: lab::results_dir::Destination::Folder(dir.join(format!(
                     "results-{}",
                     path.file_stem().unwrap().to_string_lossy()
-                )),
+                ))),
                 ..options.clone()
             }))
         };

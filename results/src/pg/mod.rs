@@ -23,14 +23,21 @@
 //! Every value goes to the server as a query parameter; the connection string's password is
 //! never printed ([`Database`] shows the rest).
 
+pub mod participants;
+pub mod pool;
 pub mod schema;
 pub mod scratch;
 
+mod leased;
 mod rows;
+
+pub use leased::LeasedWriter;
+use pool::{Pool, Pooled};
 
 use std::collections::{HashMap, HashSet};
 use std::fmt;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::time::Duration;
 
 use postgres::{Client, NoTls, Statement};
@@ -435,12 +442,39 @@ pub struct SessionHead {
 /// One run of a database as a results store ([`Store`]): sessions created, resumed, read.
 pub struct PgStore {
     db: Database,
-    client: Client,
+    client: Conn,
+    /// Set on a store of [`PgStore::leased`]: its sessions are written by [`LeasedWriter`]s.
+    pool: Option<Arc<Pool>>,
     run_id: i32,
     name: String,
     run: RunManifest,
     /// Bytes of the last [`PgStore::read_rows`], to size the next one's buffer.
     last_batch_bytes: usize,
+}
+
+/// A store's connection: its own, or one lent by a [`Pool`].
+enum Conn {
+    Own(Client),
+    Lent(Pooled),
+}
+
+impl std::ops::Deref for Conn {
+    type Target = Client;
+    fn deref(&self) -> &Client {
+        match self {
+            Conn::Own(c) => c,
+            Conn::Lent(c) => c,
+        }
+    }
+}
+
+impl std::ops::DerefMut for Conn {
+    fn deref_mut(&mut self) -> &mut Client {
+        match self {
+            Conn::Own(c) => c,
+            Conn::Lent(c) => c,
+        }
+    }
 }
 
 impl fmt::Debug for PgStore {
@@ -512,7 +546,8 @@ impl PgStore {
         let run = from_json(row.try_get(1).map_err(err)?, &path)?;
         Ok(Some(Self {
             db: db.clone(),
-            client,
+            client: Conn::Own(client),
+            pool: None,
             run_id,
             name: name.to_owned(),
             run,
@@ -554,6 +589,39 @@ impl PgStore {
         Ok((store, created == 1))
     }
 
+    /// The same run on a connection lent by `pool`, for one request of a server that shares
+    /// its sessions with other processes: the sessions it creates or resumes are written by
+    /// [`LeasedWriter`]s (each write one transaction holding the session's lock), so no
+    /// session holds a connection between requests. The connection goes back to the pool
+    /// when the store is dropped.
+    ///
+    /// # Errors
+    /// No connection could be had.
+    pub fn leased(&self, pool: &Arc<Pool>) -> Result<Self, ResultsError> {
+        Ok(Self {
+            db: self.db.clone(),
+            client: Conn::Lent(pool.get()?),
+            pool: Some(Arc::clone(pool)),
+            run_id: self.run_id,
+            name: self.name.clone(),
+            run: self.run.clone(),
+            last_batch_bytes: 0,
+        })
+    }
+
+    /// The run's id in the database.
+    pub fn run_id(&self) -> i32 {
+        self.run_id
+    }
+
+    /// The store's connection, for queries of the run's other tables.
+    ///
+    /// # Errors
+    /// The server cannot be reached.
+    pub fn client(&mut self) -> Result<&mut Client, ResultsError> {
+        self.conn()
+    }
+
     /// The run's manifest.
     pub fn run(&self) -> &RunManifest {
         &self.run
@@ -572,7 +640,10 @@ impl PgStore {
     /// The store's connection, made again when the server closed it (a restart).
     fn conn(&mut self) -> Result<&mut Client, ResultsError> {
         if self.client.is_closed() {
-            self.client = self.db.open()?;
+            self.client = match &self.pool {
+                Some(pool) => Conn::Lent(pool.get()?),
+                None => Conn::Own(self.db.open()?),
+            };
         }
         Ok(&mut self.client)
     }
@@ -973,6 +1044,45 @@ impl PgStore {
     }
 }
 
+impl PgStore {
+    /// The committed rows of `subject`'s `session` (none when it does not exist).
+    ///
+    /// # Errors
+    /// Database errors.
+    pub fn session_records(
+        &mut self,
+        subject: &str,
+        session: u32,
+    ) -> Result<Vec<TrialRecord>, ResultsError> {
+        let path = self.session_path(subject, session);
+        match self.session_id(subject, session)? {
+            Some(id) => self.committed(subject, session, id, &path),
+            None => Ok(Vec::new()),
+        }
+    }
+
+    /// The committed rows of session `id` (`subject`'s `session`, named `path`).
+    fn committed(
+        &mut self,
+        subject: &str,
+        session: u32,
+        id: i32,
+        path: &Path,
+    ) -> Result<Vec<TrialRecord>, ResultsError> {
+        let head = SessionHead {
+            id,
+            version: TRIALS_FORMAT_VERSION,
+            dir: path.to_path_buf(),
+            manifest: match self.find_session(subject, session)? {
+                Found::Present(Some(m)) => *m,
+                _ => return Err(refused(format!("{}: no such session", path.display()))),
+            },
+        };
+        let mut read = self.read(std::slice::from_ref(&head))?;
+        Ok(read.pop().map(|s| s.trials.records).unwrap_or_default())
+    }
+}
+
 fn describe_holder(row: Result<Option<postgres::Row>, postgres::Error>) -> String {
     match row {
         Ok(Some(r)) => {
@@ -1025,7 +1135,11 @@ impl Store for PgStore {
         let path = self.session_path(&manifest.subject, manifest.session);
         let location = self.location();
         let err = |e: postgres::Error| db_error(&location, "creating the session", &e);
-        let mut client = self.db.connect()?;
+        let leased = self.pool.clone();
+        let mut client = match &leased {
+            Some(pool) => Conn::Lent(pool.get()?),
+            None => Conn::Own(self.db.connect()?),
+        };
         let session =
             i32::try_from(manifest.session).map_err(|_| refused("session number too large"))?;
         let version = TRIALS_FORMAT_VERSION as i32;
@@ -1052,10 +1166,17 @@ impl Store for PgStore {
             return Err(ResultsError::Exists { path });
         };
         let id: i32 = row.try_get(0).map_err(err)?;
+        if let Some(pool) = leased {
+            tx.commit().map_err(err)?;
+            return Ok(Box::new(LeasedWriter::new(pool, id, 0, path)));
+        }
         // Taken before the row is visible to anyone: no other station can hold it first.
         tx.execute("SELECT pg_advisory_lock($1, $2)", &[&LOCK_NAMESPACE, &id])
             .map_err(err)?;
         tx.commit().map_err(err)?;
+        let Conn::Own(client) = client else {
+            return Err(refused("a station's session on a lent connection"));
+        };
         Ok(Box::new(PgWriter::new(
             self.db.clone(),
             client,
@@ -1074,6 +1195,15 @@ impl Store for PgStore {
         let Some(id) = self.session_id(subject, session)? else {
             return Err(refused(format!("{}: no such session", path.display())));
         };
+        if let Some(pool) = self.pool.clone() {
+            let records = self.committed(subject, session, id, &path)?;
+            let rows = records.len() as u32;
+            return Ok(ResumedSession {
+                writer: Box::new(LeasedWriter::new(pool, id, rows, path)),
+                records,
+                torn: None,
+            });
+        }
         let location = self.location();
         let err = |e: postgres::Error| db_error(&location, "resuming the session", &e);
         let mut client = self.db.connect()?;
@@ -1090,17 +1220,7 @@ impl Store for PgStore {
                 holder: self.holder(id),
             });
         }
-        let head = SessionHead {
-            id,
-            version: TRIALS_FORMAT_VERSION,
-            dir: path.clone(),
-            manifest: match self.find_session(subject, session)? {
-                Found::Present(Some(m)) => *m,
-                _ => return Err(refused(format!("{}: no such session", path.display()))),
-            },
-        };
-        let mut read = self.read(std::slice::from_ref(&head))?;
-        let records = read.pop().map(|s| s.trials.records).unwrap_or_default();
+        let records = self.committed(subject, session, id, &path)?;
         let rows = records.len() as u32;
         Ok(ResumedSession {
             writer: Box::new(PgWriter::new(self.db.clone(), client, id, rows, path)),
@@ -1385,16 +1505,7 @@ impl SessionWriter for PgWriter {
             }
         }
         if self.append.is_none() {
-            let sql = format!(
-                "WITH row AS (INSERT INTO study_trials (session_id, row_number, {}) VALUES ($1, $2, {})) \
-                 UPDATE study_sessions SET trials_logged = $2 + 1 WHERE id = $1",
-                rows::COLUMNS,
-                (3..=36)
-                    .map(|i| format!("${i}"))
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            );
-            let prepared = self.client()?.prepare(&sql);
+            let prepared = self.client()?.prepare(&rows::append_sql());
             match prepared {
                 Ok(s) => self.append = Some(s),
                 Err(e) => return Err(self.fail("preparing the answer's insert", &e)),

@@ -21,6 +21,19 @@ pub const COLUMNS: &str = "study, subject, session, trial_index, block, protocol
     reversal, response_time_ms, replays, dropped_frames, elapsed_ms, wall_clock_ms, \
     monotonic_ms, codec_params, achieved_cr, rms_cm, frames_shown, interval_sd_ms";
 
+/// The statement that commits one answer: its row (`$1` session id, `$2` row number, then
+/// [`COLUMNS`]) and the session's count of rows, in one statement.
+pub fn append_sql() -> String {
+    format!(
+        "WITH row AS (INSERT INTO study_trials (session_id, row_number, {COLUMNS}) VALUES ($1, $2, {})) \
+         UPDATE study_sessions SET trials_logged = $2 + 1 WHERE id = $1",
+        (3..COLUMN_COUNT + 3)
+            .map(|i| format!("${i}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    )
+}
+
 /// Columns read back, `session_id` and `row_number` first.
 pub const SELECT_COLUMNS: &str = "session_id, row_number, study, subject, session, trial_index, \
     block, protocol, condition, stimulus, reference, arrangement, reference_position, \

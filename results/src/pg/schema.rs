@@ -136,6 +136,26 @@ CREATE TABLE study_group_assignments (
     r"
 ALTER TABLE study_subject_numbers ADD COLUMN subject text, ADD COLUMN observer_seed bigint;
 ",
+    // `study serve --store`: the participants of a run served in browsers, shared by every
+    // server of the run. Times are the database server's clock, the one clock all servers
+    // share: when the participant last made a request (their place against a quota is held
+    // for the study's lease from then) and when their pending trial was last sent.
+    r"
+CREATE TABLE study_participants (
+    run_id integer NOT NULL REFERENCES study_runs (id),
+    subject text NOT NULL,
+    token_sha256 bytea NOT NULL UNIQUE CHECK (length(token_sha256) = 32),
+    source text NOT NULL,
+    ids jsonb NOT NULL,
+    plan_group integer CHECK (plan_group >= 0),
+    joined_at timestamptz NOT NULL DEFAULT clock_timestamp(),
+    last_seen timestamptz NOT NULL DEFAULT clock_timestamp(),
+    finished boolean NOT NULL DEFAULT false,
+    sent_index integer,
+    sent_at timestamptz,
+    PRIMARY KEY (run_id, subject)
+);
+",
 ];
 
 /// The schema version this build writes and reads.
