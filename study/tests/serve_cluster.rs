@@ -39,6 +39,18 @@ impl Drop for Proc {
     }
 }
 
+/// nginx, stopped with SIGQUIT when dropped (its workers outlive a SIGKILLed master).
+struct Nginx(std::process::Child);
+
+impl Drop for Nginx {
+    fn drop(&mut self) {
+        let _ = std::process::Command::new("kill")
+            .args(["-QUIT", &self.0.id().to_string()])
+            .status();
+        let _ = self.0.wait();
+    }
+}
+
 fn setup(dir: &Path) -> PathBuf {
     let walk = motion::synth::WalkParams {
         duration_s: 0.3,
@@ -95,7 +107,7 @@ fn serve(study: &Path, page: &Path, url: &str, args: &[&str]) -> (Proc, SocketAd
 
 /// nginx on a free loopback port in front of `upstreams`, round robin, with the documented
 /// configuration (`web::nginx`).
-fn nginx(dir: &Path, upstreams: &[SocketAddr]) -> (Proc, SocketAddr) {
+fn nginx(dir: &Path, upstreams: &[SocketAddr]) -> (Nginx, SocketAddr) {
     let port = TcpListener::bind("127.0.0.1:0")
         .unwrap()
         .local_addr()
@@ -125,7 +137,7 @@ fn nginx(dir: &Path, upstreams: &[SocketAddr]) -> (Proc, SocketAddr) {
         );
         std::thread::sleep(Duration::from_millis(20));
     }
-    (Proc(child), addr)
+    (Nginx(child), addr)
 }
 
 /// The rating participant `k` gives trial `index` (the same wherever it is served).

@@ -15,7 +15,10 @@
 //! Bounded: 200 participants × 20 trials, and the run gives up after 300 s. Loopback only.
 //!
 //! `cargo bench -p web --bench load` (participants with `LOAD_PARTICIPANTS`, the clip length
-//! in seconds with `LOAD_CLIP_S`).
+//! in seconds with `LOAD_CLIP_S`). `LOAD_SERVERS=3`: three `serve` processes (this binary,
+//! re-run as each) on one throw-away PostgreSQL server behind nginx (`web::nginx`, round robin;
+//! `LOAD_BALANCE=participant` for consistent hashing by participant), the answers read back
+//! from the database; `LOAD_KILL_AT_S=T` SIGKILLs one of them T seconds into the run.
 #![allow(
     clippy::unwrap_used,
     clippy::expect_used,
@@ -115,18 +118,26 @@ impl Reply {
 }
 
 impl Participant {
-    /// Sends one request (reconnecting once if the kept-alive connection was closed).
+    /// Sends one request, asked again (as the page does) on a new connection while the
+    /// server cannot be reached or answers 429, 502, 503 or 504, for up to 120 s (2,000
+    /// joins at once take their turns on the run's row in the database).
     async fn request(
         &mut self,
         method: &str,
         path: &str,
         body: Option<&Value>,
     ) -> std::io::Result<Reply> {
-        if let Ok(r) = self.try_request(method, path, body).await {
-            return Ok(r);
+        let start = Instant::now();
+        loop {
+            let last = self.try_request(method, path, body).await;
+            match last {
+                Ok(r) if !matches!(r.status, 429 | 502..=504) => return Ok(r),
+                last if start.elapsed() > Duration::from_secs(120) => return last,
+                _ => {}
+            }
+            self.conn = None;
+            tokio::time::sleep(Duration::from_millis(50)).await;
         }
-        self.conn = None;
-        self.try_request(method, path, body).await
     }
 
     async fn try_request(
@@ -214,15 +225,20 @@ async fn participant(
     assert_eq!(r.status, 200);
     while t0.elapsed() < DEADLINE {
         let asked = Instant::now();
-        let t = c
+        let r = c
             .request("GET", &c.session_path("trial"), None)
             .await
-            .unwrap()
-            .json();
+            .unwrap();
+        let t = r.json();
         if t["done"] == json!(true) {
             break;
         }
-        let index = t["index"].as_u64().unwrap();
+        let Some(index) = t["index"].as_u64().filter(|_| r.status == 200) else {
+            local
+                .errors
+                .push(format!("p{k:04} trial: {} {t}", r.status));
+            break;
+        };
         for slot in 0..2 {
             let r = c
                 .request(
@@ -232,7 +248,13 @@ async fn participant(
                 )
                 .await
                 .unwrap();
-            assert_eq!(r.status, 200);
+            if r.status != 200 {
+                local.errors.push(format!(
+                    "p{k:04} clip {index}/{slot}: {} {:?}",
+                    r.status,
+                    r.json()
+                ));
+            }
         }
         local.next_ms.push(asked.elapsed().as_secs_f64() * 1e3);
         let need = t["presentation_ms"].as_f64().unwrap();
@@ -269,16 +291,188 @@ async fn participant(
     o.errors.extend(local.errors);
 }
 
+/// The environment variable that makes this binary one `serve` process of a cluster run:
+/// `STUDY_FILE DATABASE_URL` (it prints its address and serves until killed).
+const CHILD: &str = "LOAD_SERVE_CHILD";
+const NGINX: &str = "/usr/sbin/nginx";
+
+/// One `serve` process of a cluster run (see [`CHILD`]).
+fn child(spec: &str) {
+    let (study, url) = spec.split_once(' ').unwrap();
+    let options = ServeOptions {
+        study: study.into(),
+        results: lab::results_dir::Destination::Database {
+            db: Box::new(results::pg::Database::from_argument(url).unwrap()),
+            run: None,
+        },
+        connections: 16,
+        bind: "127.0.0.1:0".parse().unwrap(),
+        page: Path::new(study).parent().unwrap().join("page"),
+        dashboard_token: None,
+        limits: Limits::default(),
+    };
+    web::serve(options, |_, addr| println!("{addr}")).unwrap();
+}
+
+/// A child process killed when dropped.
+struct Proc(std::process::Child);
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// nginx, stopped with SIGQUIT when dropped (its workers outlive a SIGKILLed master).
+struct Nginx(std::process::Child);
+
+impl Drop for Nginx {
+    fn drop(&mut self) {
+        let _ = std::process::Command::new("kill")
+            .args(["-QUIT", &self.0.id().to_string()])
+            .status();
+        let _ = self.0.wait();
+    }
+}
+
+/// What a cluster run started: PostgreSQL, the `serve` processes and nginx, whose address
+/// the participants use.
+struct Cluster {
+    pg: results::pg::scratch::ScratchServer,
+    db: results::pg::Database,
+    servers: Vec<Proc>,
+    _nginx: Nginx,
+    front: SocketAddr,
+}
+
+fn cluster(dir: &Path, options: &ServeOptions, servers: usize) -> Cluster {
+    let pg = results::pg::scratch::ScratchServer::start(dir, &["max_connections=400"]).unwrap();
+    let db = pg.create_database("load").unwrap();
+    let url = pg.url("load");
+    let mut procs = Vec::new();
+    let mut addrs = Vec::new();
+    for _ in 0..servers {
+        let mut c = std::process::Command::new(std::env::current_exe().unwrap())
+            .env(CHILD, format!("{} {url}", options.study.display()))
+            .stdout(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let mut line = String::new();
+        std::io::BufRead::read_line(
+            &mut std::io::BufReader::new(c.stdout.take().unwrap()),
+            &mut line,
+        )
+        .unwrap();
+        addrs.push(line.trim().parse::<SocketAddr>().unwrap());
+        procs.push(Proc(c));
+    }
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let front: SocketAddr = ([127, 0, 0, 1], port).into();
+    let balance = if std::env::var("LOAD_BALANCE").as_deref() == Ok("participant") {
+        web::nginx::Balance::Participant
+    } else {
+        web::nginx::Balance::RoundRobin
+    };
+    let conf = dir.join("nginx.conf");
+    std::fs::write(&conf, web::nginx::config(&addrs, front, balance, dir)).unwrap();
+    let nginx = std::process::Command::new(NGINX)
+        .arg("-c")
+        .arg(&conf)
+        .arg("-p")
+        .arg(dir)
+        .arg("-e")
+        .arg(dir.join("nginx-error.log"))
+        .spawn()
+        .unwrap();
+    while std::net::TcpStream::connect(front).is_err() {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    Cluster {
+        pg,
+        db,
+        servers: procs,
+        _nginx: Nginx(nginx),
+        front,
+    }
+}
+
+/// Trial indices logged per participant (`p0000`, ...), from a folder or a database.
+fn logged(dir: &Path, cluster: Option<&Cluster>, n: usize) -> Vec<Vec<u32>> {
+    let Some(c) = cluster else {
+        return (0..n)
+            .map(|k| {
+                let path = dir.join(format!("results/p{k:04}_s1/trials.csv"));
+                results::read_trials(&path)
+                    .map(|t| t.records.iter().map(|r| r.trial.index).collect())
+                    .unwrap_or_default()
+            })
+            .collect();
+    };
+    let mut client = c.db.connect().unwrap();
+    let mut out = vec![Vec::new(); n];
+    for r in client
+        .query(
+            "SELECT s.subject, t.trial_index FROM study_trials t JOIN study_sessions s \
+             ON s.id = t.session_id ORDER BY s.subject, t.row_number",
+            &[],
+        )
+        .unwrap()
+    {
+        let subject: String = r.get(0);
+        let index: i32 = r.get(1);
+        if let Some(k) = subject
+            .strip_prefix('p')
+            .and_then(|k| k.parse::<usize>().ok())
+            && k < n
+        {
+            out[k].push(index as u32);
+        }
+    }
+    out
+}
+
 fn main() {
+    if let Ok(spec) = std::env::var(CHILD) {
+        child(&spec);
+        return;
+    }
     let n: usize = env_or("LOAD_PARTICIPANTS", 200);
     let clip_s: f64 = env_or("LOAD_CLIP_S", 1.0);
+    let servers: usize = env_or("LOAD_SERVERS", 0);
+    let kill_at: f64 = env_or("LOAD_KILL_AT_S", f64::INFINITY);
     let dir = std::env::temp_dir().join(format!("web-load-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     let options = setup(&dir, clip_s);
     let rt = tokio::runtime::Runtime::new().unwrap();
-    let server = rt.block_on(web::start(options)).unwrap();
-    let addr = server.addr;
+    // LOAD_SERVERS=k: k `serve` processes on one PostgreSQL behind nginx; else one
+    // in-process server on a results folder.
+    let mut cluster = (servers > 0).then(|| cluster(&dir, &options, servers));
+    let server = if cluster.is_none() {
+        Some(rt.block_on(web::start(options)).unwrap())
+    } else {
+        None
+    };
+    let addr = cluster
+        .as_ref()
+        .map_or_else(|| server.as_ref().unwrap().addr, |c| c.front);
+    if let Some(c) = cluster.as_mut()
+        && kill_at.is_finite()
+    {
+        // One server SIGKILLed mid-run.
+        let mut victim = c.servers.remove(0);
+        std::thread::spawn(move || {
+            std::thread::sleep(Duration::from_secs_f64(kill_at));
+            victim.0.kill().unwrap();
+            victim.0.wait().unwrap();
+            println!("  (one serve process killed at {kill_at} s)");
+        });
+    }
     let out = Arc::new(Mutex::new(Timings::default()));
     let start = Arc::new(Barrier::new(n));
     let t0 = Instant::now();
@@ -298,30 +492,36 @@ fn main() {
         }
     });
     let wall = t0.elapsed();
-    rt.block_on(server.stop()).unwrap();
+    if let Some(server) = server {
+        rt.block_on(server.stop()).unwrap();
+    }
 
     // Every acknowledged answer must be in its session's log exactly once.
     let (mut rows, mut lost, mut duplicated) = (0usize, 0usize, 0usize);
-    for k in 0..n {
-        let path = dir.join(format!("results/p{k:04}_s1/trials.csv"));
-        let records = results::read_trials(&path)
-            .map(|t| t.records)
-            .unwrap_or_default();
+    for indices in logged(&dir, cluster.as_ref(), n) {
         let mut seen = std::collections::BTreeSet::new();
-        for r in &records {
-            if !seen.insert(r.trial.index) {
+        for i in &indices {
+            if !seen.insert(*i) {
                 duplicated += 1;
             }
         }
-        rows += records.len();
+        rows += indices.len();
         lost += TRIALS.saturating_sub(seen.len());
     }
+    let place = match &cluster {
+        Some(c) => format!(
+            "{servers} serve processes on one PostgreSQL ({}) behind nginx",
+            c.pg.port()
+        ),
+        None => "one server".to_owned(),
+    };
+    drop(cluster);
     let o = out.lock().unwrap();
     let mut ack = o.ack_ms.clone();
     let mut next = o.next_ms.clone();
     ack.sort_by(f64::total_cmp);
     next.sort_by(f64::total_cmp);
-    println!("load: {n} participants x {TRIALS}-trial MOS, {clip_s} s clips, one server, loopback");
+    println!("load: {n} participants x {TRIALS}-trial MOS, {clip_s} s clips, {place}, loopback");
     println!(
         "  answers acknowledged {} of {}, rows logged {rows}, lost {lost}, duplicated {duplicated}, errors {}",
         o.acked,

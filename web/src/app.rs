@@ -54,6 +54,7 @@ impl From<WebError> for ApiError {
     fn from(e: WebError) -> ApiError {
         match e {
             WebError::Refused(m) => ApiError::new(409, m),
+            WebError::Lab(e) => e.into(),
             e => ApiError::new(500, lab::error::chain(&e)),
         }
     }

@@ -33,8 +33,14 @@ pub fn config(
     let d = prefix.display();
     let mut servers = String::new();
     for a in upstreams {
-        // A server that failed once is left out for 30 s (nginx tries it again then).
-        let _ = writeln!(servers, "        server {a} max_fails=1 fail_timeout=30s;");
+        // A server that failed once is left out for 30 s (nginx tries it again then). At
+        // most 256 requests in flight to each, under the server's cap of 512 connections
+        // per address (a request over it gets 502, which the page asks again, instead of a
+        // closed connection that would count as the server's failure).
+        let _ = writeln!(
+            servers,
+            "        server {a} max_fails=1 fail_timeout=30s max_conns=256;"
+        );
     }
     let hash = match balance {
         Balance::RoundRobin => "",
@@ -43,11 +49,11 @@ pub fn config(
     format!(
         "daemon off;
 worker_processes 1;
-worker_rlimit_nofile 65536;
+worker_rlimit_nofile 16384;
 pid {d}/nginx.pid;
 error_log {d}/nginx-error.log warn;
 events {{
-    worker_connections 16384;
+    worker_connections 8192;
 }}
 http {{
     access_log off;
