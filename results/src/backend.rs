@@ -370,6 +370,23 @@ pub fn frame_rows(index: u32, intervals: &[f64], phases: &[&str], phased: bool) 
     String::from_utf8(w.into_inner().unwrap_or_default()).unwrap_or_default()
 }
 
+/// What one answer appends to [`FRAMES_FILE`]: [`FRAMES_HEADER`] when the file begins with
+/// it (`first`), then the trial's [`frame_rows`].
+pub fn frames_text(
+    first: bool,
+    index: u32,
+    intervals: &[f64],
+    phases: &[&str],
+    phased: bool,
+) -> String {
+    let mut text = String::new();
+    if first {
+        text.push_str(FRAMES_HEADER);
+    }
+    text.push_str(&frame_rows(index, intervals, phases, phased));
+    text
+}
+
 fn io(path: &Path) -> impl FnOnce(std::io::Error) -> ResultsError {
     let path = path.to_path_buf();
     move |cause| ResultsError::Io {
@@ -577,11 +594,7 @@ impl SessionWriter for FolderWriter {
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => (true, true),
             Err(e) => return Err(read(e)),
         };
-        let mut text = String::new();
-        if new {
-            text.push_str(FRAMES_HEADER);
-        }
-        text.push_str(&frame_rows(index, intervals, phases, phased));
+        let text = frames_text(new, index, intervals, phases, phased);
         let mut f = fs::OpenOptions::new()
             .create(true)
             .append(true)

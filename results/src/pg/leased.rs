@@ -15,7 +15,7 @@ use protocols::TrialRecord;
 
 use super::pool::{Pool, Pooled};
 use super::{LOCK_NAMESPACE, db_error, json, refused, rows, state_name};
-use crate::backend::{FRAMES_FILE, FRAMES_HEADER, SessionWriter, frame_rows};
+use crate::backend::{FRAMES_FILE, SessionWriter, frames_text};
 use crate::{ResultsError, SessionManifest};
 
 /// How long a write waits for another process's transaction on the same session.
@@ -173,7 +173,6 @@ impl SessionWriter for LeasedWriter {
         phases: &[&str],
     ) -> Result<(), ResultsError> {
         let id = self.id;
-        let rows = frame_rows(index, intervals, phases, true);
         self.with_session("appending to frames.csv", None, |tx, _| {
             let part: i32 = tx
                 .query_one(
@@ -181,11 +180,7 @@ impl SessionWriter for LeasedWriter {
                     &[&id, &FRAMES_FILE],
                 )?
                 .try_get(0)?;
-            let mut text = String::new();
-            if part == 0 {
-                text.push_str(FRAMES_HEADER);
-            }
-            text.push_str(&rows);
+            let text = frames_text(part == 0, index, intervals, phases, true);
             tx.execute(
                 "INSERT INTO study_session_files (session_id, name, part, bytes) VALUES ($1, $2, $3, $4)",
                 &[&id, &FRAMES_FILE, &part, &text.as_bytes()],

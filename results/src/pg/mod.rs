@@ -44,9 +44,9 @@ use postgres::{Client, NoTls, Statement};
 use protocols::TrialRecord;
 
 use crate::backend::{
-    AssignedRow, Assignment, FRAMES_FILE, FRAMES_HEADER, Found, GROUPS_FILE, GroupQuota,
-    ResumedSession, SessionWriter, Store, assignments_csv, choose_group, frame_rows,
-    read_assignments, session_name,
+    AssignedRow, Assignment, FRAMES_FILE, Found, GROUPS_FILE, GroupQuota, ResumedSession,
+    SessionWriter, Store, assignments_csv, choose_group, frames_text, read_assignments,
+    session_name,
 };
 use crate::store::{
     MAX_SESSIONS, RUN_FILE, SESSION_FILE, SessionState, TRIALS_FILE, read_limited, read_manifest,
@@ -1557,11 +1557,7 @@ impl SessionWriter for PgWriter {
             self.frame_parts = Some(n);
         }
         let part = self.frame_parts.unwrap_or(0);
-        let mut text = String::new();
-        if part == 0 {
-            text.push_str(FRAMES_HEADER);
-        }
-        text.push_str(&frame_rows(index, intervals, phases, true));
+        let text = frames_text(part == 0, index, intervals, phases, true);
         let result = self.client()?.execute(
             "INSERT INTO study_session_files (session_id, name, part, bytes) VALUES ($1, $2, $3, $4)",
             &[&id, &FRAMES_FILE, &part, &text.as_bytes()],
