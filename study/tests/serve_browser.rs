@@ -135,6 +135,12 @@ impl Driver {
     }
 
     fn browser(&self, profile: &Path) -> Browser {
+        self.browser_at(profile, 1.0)
+    }
+
+    /// A browser whose screen has `scale` device pixels per CSS pixel (what WebGL draws
+    /// scales with its square; CSS sizes do not change).
+    fn browser_at(&self, profile: &Path, scale: f64) -> Browser {
         let caps = json!({ "capabilities": { "alwaysMatch": {
             "browserName": "chrome",
             "goog:chromeOptions": {
@@ -147,6 +153,7 @@ impl Driver {
                     "--disable-sync", "--no-first-run", "--disable-quic",
                     "--window-size=1024,720",
                     format!("--user-data-dir={}", profile.display()),
+                    format!("--force-device-scale-factor={scale}"),
                 ],
             },
         }}});
@@ -1204,6 +1211,10 @@ const FEWER_TRIALS: usize = 4;
 /// See [`FEWER_TRIALS`].
 const FEWER_REVERSALS: usize = 2;
 
+/// How many example sessions run at once, each with its own server and browser (see
+/// [`every_example_study_runs_in_the_browser_as_simulated`]).
+const SESSIONS_AT_ONCE: usize = 2;
+
 /// Copies the example folder into `dir` with every stimulus clip (BVH, AMC) cut to its first
 /// 1/[`SHORTER`] of frames, every study's `grey_ms` and `gap_ms` divided by [`SHORTER`], its
 /// `max_trials` by [`FEWER_TRIALS`] and its `stop_reversals` by [`FEWER_REVERSALS`]
@@ -1398,13 +1409,109 @@ impl Example {
     fn open(&self, driver: &Driver) -> (Serve, Browser) {
         let port = free_port();
         let server = serve(&self.study, &self.out, port);
-        let b = driver.browser(&self.dir.join("profile"));
+        // Half a device pixel per CSS pixel: SwiftShader draws a quarter of the pixels, which
+        // was most of the CPU two sessions at once took; the texts measured are CSS pixels.
+        let b = driver.browser_at(&self.dir.join("profile"), 0.5);
         b.go(&format!(
             "http://127.0.0.1:{port}/?PROLIFIC_PID={}",
             self.subject
         ));
         (server, b)
     }
+}
+
+/// One example's whole session in a browser of its own (see
+/// [`every_example_study_runs_in_the_browser_as_simulated`]); texts under [`MIN_TEXT_PX`] are
+/// noted in `small`.
+fn run_example(
+    driver: &Driver,
+    study: &Path,
+    sizes: &[(u32, u32)],
+    shots: Option<&std::ffi::OsStr>,
+    small: &mut Vec<String>,
+) {
+    let started = Instant::now();
+    let ex = Example::new(study, "example");
+    let Example {
+        name,
+        dir,
+        out,
+        subject,
+        ..
+    } = &ex;
+    let (simulated, script) = simulate(study, dir, subject, 3);
+    let (_server, b) = ex.open(driver);
+    reach_welcome(&b);
+    assert_eq!(b.screen(), "welcome", "{name}");
+    measure_texts(&b, &format!("{name} welcome"), sizes, small);
+    b.window_viewport();
+    fill_welcome(&b);
+    b.click("#begin");
+    if let Some(shots) = shots {
+        b.wait(
+            "document.body.dataset.screen === 'trial' && window.drawn && window.drawn.show !== 'grey' \
+             && (window.drawn.clipTime > 1.5 || document.body.dataset.open === '1')",
+            60,
+        );
+        b.screenshot(&Path::new(shots).join(format!("{name}-page.png")));
+    }
+    b.wait(
+        "document.body.dataset.screen === 'trial' && document.body.dataset.open === '1'",
+        90,
+    );
+    measure_texts(&b, &format!("{name} vote"), sizes, small);
+    b.window_viewport();
+    let mut given = BTreeSet::new();
+    if shots.is_some() {
+        answer_trials(&b, &script, Some(1), &mut given);
+    } else {
+        answer_trials(&b, &script, None, &mut given);
+        assert_eq!(b.screen(), "end", "{name}");
+    }
+    let served = results::read_trials(&out.join(format!("{subject}_s1/trials.csv")))
+        .unwrap()
+        .records;
+    assert_eq!(
+        served.len(),
+        given.len(),
+        "{name}: one row per answer given"
+    );
+    if shots.is_none() {
+        assert_eq!(
+            served.len(),
+            simulated.len(),
+            "{name}: every trial answered"
+        );
+    }
+    for (got, want) in served.iter().zip(&simulated) {
+        let at = format!("{name} trial {}", want.trial.index);
+        assert_eq!(got.trial, want.trial, "{at}");
+        assert_eq!(got.encoding, want.encoding, "{at}");
+        assert_eq!(got.response.replays, want.response.replays, "{at}");
+        // A continuous scale without a step (the DSCQS example's BT.500 0-100) takes
+        // marks to a hundredth of its range by keyboard: the simulated observer's
+        // fraction is given to the nearest of them, and its score follows from it.
+        let (a, b) = (got.response.answer, want.response.answer);
+        match (a, b) {
+            (Answer::Pair { a: ga, b: gb }, Answer::Pair { a: wa, b: wb }) if a != b => {
+                assert!(
+                    (ga - wa).abs() <= 0.5 && (gb - wb).abs() <= 0.5,
+                    "{at}: {a:?} {b:?}"
+                );
+            }
+            _ => {
+                assert_eq!(a, b, "{at}");
+                assert_eq!(got.outcome, want.outcome, "{at}");
+            }
+        }
+    }
+    drop(b);
+    eprintln!(
+        "{name}: {} trials in {:.1} s",
+        served.len(),
+        started.elapsed().as_secs_f64()
+    );
+    let _ = std::fs::remove_dir_all(dir);
 }
 
 /// Every example study `study serve` is given runs in Chromium as a participant takes it,
@@ -1429,7 +1536,7 @@ fn every_example_study_runs_in_the_browser_as_simulated() {
         return;
     };
     let sizes = [(1280, 720), (1920, 1080)];
-    let mut small = Vec::new();
+    let small = Vec::new();
     let driver = Driver::start();
     // `SCREENSHOTS=DIR` (scripts/screenshots): each example as it is, to its first trial,
     // for docs/serve.md beside the window's.
@@ -1440,90 +1547,33 @@ fn every_example_study_runs_in_the_browser_as_simulated() {
     } else {
         short_examples(&copies)
     };
-    for study in &studies {
-        let started = Instant::now();
-        let ex = Example::new(study, "example");
-        let Example {
-            name,
-            dir,
-            out,
-            subject,
-            ..
-        } = &ex;
-        let (simulated, script) = simulate(study, dir, subject, 3);
-        let (_server, b) = ex.open(&driver);
-        reach_welcome(&b);
-        assert_eq!(b.screen(), "welcome", "{name}");
-        measure_texts(&b, &format!("{name} welcome"), &sizes, &mut small);
-        b.window_viewport();
-        fill_welcome(&b);
-        b.click("#begin");
-        if let Some(shots) = &shots {
-            b.wait(
-                "document.body.dataset.screen === 'trial' && window.drawn && window.drawn.show !== 'grey' \
-                 && (window.drawn.clipTime > 1.5 || document.body.dataset.open === '1')",
-                60,
-            );
-            b.screenshot(&Path::new(shots).join(format!("{name}-page.png")));
-        }
-        b.wait(
-            "document.body.dataset.screen === 'trial' && document.body.dataset.open === '1'",
-            90,
-        );
-        measure_texts(&b, &format!("{name} vote"), &sizes, &mut small);
-        b.window_viewport();
-        let mut given = BTreeSet::new();
-        if shots.is_some() {
-            answer_trials(&b, &script, Some(1), &mut given);
-        } else {
-            answer_trials(&b, &script, None, &mut given);
-            assert_eq!(b.screen(), "end", "{name}");
-        }
-        let served = results::read_trials(&out.join(format!("{subject}_s1/trials.csv")))
-            .unwrap()
-            .records;
-        assert_eq!(
-            served.len(),
-            given.len(),
-            "{name}: one row per answer given"
-        );
-        if shots.is_none() {
-            assert_eq!(
-                served.len(),
-                simulated.len(),
-                "{name}: every trial answered"
-            );
-        }
-        for (got, want) in served.iter().zip(&simulated) {
-            let at = format!("{name} trial {}", want.trial.index);
-            assert_eq!(got.trial, want.trial, "{at}");
-            assert_eq!(got.encoding, want.encoding, "{at}");
-            assert_eq!(got.response.replays, want.response.replays, "{at}");
-            // A continuous scale without a step (the DSCQS example's BT.500 0-100) takes
-            // marks to a hundredth of its range by keyboard: the simulated observer's
-            // fraction is given to the nearest of them, and its score follows from it.
-            let (a, b) = (got.response.answer, want.response.answer);
-            match (a, b) {
-                (Answer::Pair { a: ga, b: gb }, Answer::Pair { a: wa, b: wb }) if a != b => {
-                    assert!(
-                        (ga - wa).abs() <= 0.5 && (gb - wb).abs() <= 0.5,
-                        "{at}: {a:?} {b:?}"
-                    );
+    // Two sessions at a time, each with its own server and browser: a session mostly waits
+    // for its stimuli to play (about a fifth of a core each), so two at once halve the
+    // test's time without starving either's frames on a 2-core machine.
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let small = std::sync::Mutex::new(small);
+    std::thread::scope(|scope| {
+        for _ in 0..SESSIONS_AT_ONCE {
+            scope.spawn(|| {
+                loop {
+                    let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                    let Some(study) = studies.get(i) else {
+                        return;
+                    };
+                    let mut mine = Vec::new();
+                    run_example(&driver, study, &sizes, shots.as_deref(), &mut mine);
+                    small
+                        .lock()
+                        .unwrap_or_else(std::sync::PoisonError::into_inner)
+                        .extend(mine);
                 }
-                _ => {
-                    assert_eq!(a, b, "{at}");
-                    assert_eq!(got.outcome, want.outcome, "{at}");
-                }
-            }
+            });
         }
-        drop(b);
-        eprintln!(
-            "{name}: {} trials in {:.1} s",
-            served.len(),
-            started.elapsed().as_secs_f64()
-        );
-        let _ = std::fs::remove_dir_all(dir);
-    }
+    });
+    let mut small = small
+        .into_inner()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    small.sort();
     let _ = std::fs::remove_dir_all(&copies);
     assert!(
         small.is_empty(),
