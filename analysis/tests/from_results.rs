@@ -557,3 +557,63 @@ fn bayesian_tracks_are_told_apart_and_keep_their_session_threshold() {
     assert!(!c.data.staircases[0].bayesian);
     assert_eq!(c.data.staircases[0].logged_threshold, None);
 }
+
+/// Issue 37: answers sooner after the answer before them than their stimuli play (here 4 s
+/// each) are found when both clocks say so; a session taken over by another server (its
+/// monotonic clock restarted) or a stepped wall clock is not flagged, a MUSHRA screen's rows
+/// are one answer, simulated sessions and trials of unknown length are not checked, and only
+/// `too_fast = "exclude"` excludes.
+#[test]
+fn answers_sooner_than_the_stimuli_play_are_found_by_both_clocks() {
+    use analysis::exclusions::{session_exclusion, too_fast};
+    use protocols::study::{CrowdsourcingSettings, TooFastRule};
+    let timed = |times: &[(u64, u64)]| {
+        let mut s = mos_session("A", [3.0, 4.0, 5.0]);
+        s.manifest.started_ms = 1_000_000;
+        s.trials.records.truncate(times.len());
+        for (r, &(wall, mono)) in s.trials.records.iter_mut().zip(times) {
+            r.wall_clock_ms = 1_000_000 + wall;
+            r.monotonic_ms = mono;
+        }
+        s
+    };
+    let need = |_: &TrialRecord| Some(4000.0);
+    let flagged =
+        |s: &SessionResults| -> Vec<u32> { too_fast(s, &need).iter().map(|t| t.trial).collect() };
+    let paced = timed(&[(5000, 5000), (10_000, 10_000), (15_000, 15_000)]);
+    assert_eq!(flagged(&paced), Vec::<u32>::new());
+    let scripted = timed(&[(10, 10), (20, 20), (4030, 4030)]);
+    assert_eq!(flagged(&scripted), [0, 1]);
+    let t = too_fast(&scripted, &need);
+    assert_eq!((t[1].after_ms, t[1].need_ms), (10.0, 4000.0));
+    // Within the slack (50 ms) of the need: not flagged (the third row above).
+    // Taken over: the next server's monotonic clock counts from its replay.
+    let taken_over = timed(&[(5000, 5000), (10_000, 5010), (15_000, 5020)]);
+    assert_eq!(flagged(&taken_over), Vec::<u32>::new());
+    // The wall clock stepped back 3 s between two answers.
+    let stepped = timed(&[(5000, 5000), (7000, 10_000), (12_000, 15_000)]);
+    assert_eq!(flagged(&stepped), Vec::<u32>::new());
+    // The first answer counts from the session's start.
+    let first = timed(&[(900, 900), (6000, 6000)]);
+    assert_eq!(flagged(&first), [0]);
+    // A MUSHRA screen: its rows come together; the next screen (another reference) is checked.
+    let mut grid = timed(&[(5000, 5000), (5001, 5001), (5002, 5002), (5003, 5003)]);
+    for (i, r) in grid.trials.records.iter_mut().enumerate() {
+        r.trial.arrangement = Arrangement::Grid;
+        r.trial.block = Block::Test;
+        r.trial.reference = if i < 3 { "walk/ref" } else { "run/ref" }.into();
+    }
+    assert_eq!(flagged(&grid), [3]);
+    // Simulated sessions and trials whose length is unknown are not checked.
+    let mut simulated = scripted.clone();
+    simulated.manifest.observer_seed = Some(3);
+    assert_eq!(flagged(&simulated), Vec::<u32>::new());
+    assert!(too_fast(&scripted, &|_| None).is_empty());
+    // Flagged, kept; excluded only where the study says so.
+    let mut crowd = CrowdsourcingSettings::default();
+    let e = session_exclusion(&scripted, &crowd, &need);
+    assert!(e.any() && !e.excluded && e.too_fast.len() == 2);
+    crowd.too_fast = TooFastRule::Exclude;
+    assert!(session_exclusion(&scripted, &crowd, &need).excluded);
+    assert!(!session_exclusion(&paced, &crowd, &need).excluded);
+}

@@ -23,6 +23,7 @@
 //! - [`error`]: the crate's error type, [`LabError`].
 
 pub mod added;
+pub mod answer_times;
 pub mod bounded;
 pub mod catalog;
 pub mod clips;

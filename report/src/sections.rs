@@ -139,6 +139,11 @@ pub(crate) fn exclusions(
         .filter(|e| e.excluded)
         .map(|e| md_escape(&e.session))
         .collect();
+    let fast: Vec<String> = exclusions
+        .iter()
+        .filter(|e| !e.too_fast.is_empty())
+        .map(|e| md_escape(&e.session))
+        .collect();
     let section = report.section("Exclusions");
     section.text(format!(
         "The study's crowd rules ([crowdsourcing] in the study file) left out {} of {} sessions{}.",
@@ -150,6 +155,26 @@ pub(crate) fn exclusions(
             format!(" ({})", left_out.join(", "))
         }
     ));
+    if !fast.is_empty() {
+        section.text(format!(
+            "{} answered trials sooner after the answer before than their stimuli play, which \
+             no subject watching them can ({}); {} (too_fast = \"{}\").",
+            if fast.len() == 1 {
+                "One session".to_owned()
+            } else {
+                format!("{} sessions", fast.len())
+            },
+            fast.join(", "),
+            match crowd.too_fast {
+                protocols::study::TooFastRule::Exclude => "they are left out",
+                protocols::study::TooFastRule::Flag => "they are kept, flagged",
+            },
+            match crowd.too_fast {
+                protocols::study::TooFastRule::Exclude => "exclude",
+                protocols::study::TooFastRule::Flag => "flag",
+            }
+        ));
+    }
     section.table(analysis::exclusions::exclusions_table(exclusions, crowd));
 }
 
@@ -228,6 +253,11 @@ mod tests {
                 gold_trials: 0,
                 gold_failed: Vec::new(),
                 hidden_trials: vec![1],
+                too_fast: vec![analysis::exclusions::TooFast {
+                    trial: 2,
+                    after_ms: 10.0,
+                    need_ms: 4000.0,
+                }],
                 excluded: true,
             })
             .collect();

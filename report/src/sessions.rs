@@ -212,6 +212,43 @@ fn read_in_order<'a>(
     }
 }
 
+/// Refuses logs with damage, or with trials missing unless `allow_incomplete`, naming every
+/// problem once.
+fn refuse(
+    source: &Source,
+    problems: &[lab::integrity::Problem],
+    allow_incomplete: bool,
+) -> Result<()> {
+    use lab::integrity::Kind;
+    let refused: Vec<_> = problems
+        .iter()
+        .filter(|p| p.kind == Kind::Damage || !allow_incomplete)
+        .collect();
+    if !refused.is_empty() {
+        let damaged = refused.iter().any(|p| p.kind == Kind::Damage);
+        bail!(
+            "{} cannot be reported: {}\n  {}{}",
+            source.location,
+            if damaged {
+                "its logs are damaged (no statistic is drawn from logs that contradict themselves or the study)"
+            } else {
+                "sessions have trials missing"
+            },
+            refused
+                .iter()
+                .map(ToString::to_string)
+                .collect::<Vec<_>>()
+                .join("\n  "),
+            if damaged {
+                ""
+            } else {
+                "\n(--allow-incomplete reports the trials that are there and lists what is missing)"
+            }
+        );
+    }
+    Ok(())
+}
+
 /// Reads the sessions and checks each before any statistic ([`lab::integrity`]): damage is
 /// refused, every problem named once; sessions with trials missing at the end are refused
 /// unless `--allow-incomplete`, and then warned about and returned for the report to list.
@@ -247,7 +284,8 @@ pub(crate) fn read_logs(
     };
     // Before the session's turn, on its reader's thread: the crowdsourcing exclusions and
     // the tidy rows.
-    let encoder = crate::tidy::Encoder::new(definition);
+    let answer_times = lab::answer_times::AnswerTimes::new(study);
+    let encoder = crate::tidy::Encoder::new(definition, &answer_times);
     let prepare = |session: &results::SessionResults| encoder.prepare(session);
     // In session order: a session recorded twice, the display record, the crowdsourcing
     // exclusions, the tidy rows, the conversion.
@@ -291,37 +329,18 @@ pub(crate) fn read_logs(
         failed,
         ..
     } = read_in_order(&checker, sessions, taken, &prepare, &take, progress)?;
-    let refused: Vec<_> = problems
-        .iter()
-        .filter(|p| p.kind == Kind::Damage || !request.allow_incomplete)
-        .collect();
-    if !refused.is_empty() {
-        let damaged = refused.iter().any(|p| p.kind == Kind::Damage);
-        bail!(
-            "{} cannot be reported: {}\n  {}{}",
-            source.location,
-            if damaged {
-                "its logs are damaged (no statistic is drawn from logs that contradict themselves or the study)"
-            } else {
-                "sessions have trials missing"
-            },
-            refused
-                .iter()
-                .map(ToString::to_string)
-                .collect::<Vec<_>>()
-                .join("\n  "),
-            if damaged {
-                ""
-            } else {
-                "\n(--allow-incomplete reports the trials that are there and lists what is missing)"
-            }
-        );
-    }
+    refuse(source, &problems, request.allow_incomplete)?;
     if let Some(e) = failed {
         return Err(e);
     }
     for p in &problems {
         warn(&p.to_string());
+    }
+    if let Some((n, why)) = answer_times.unchecked() {
+        warn(&format!(
+            "the answer times of {n} kinds of trial were not checked against their stimuli' \
+             playing time (the stimuli could not be read: {why})"
+        ));
     }
     Ok(Logs {
         converted: converter.finish()?,

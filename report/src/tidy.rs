@@ -338,12 +338,18 @@ pub(crate) struct Encoded {
 pub(crate) struct Encoder<'a> {
     study: &'a StudyDefinition,
     stimuli: HashMap<&'a str, [String; 8]>,
+    /// Each trial's time before answers open, which its answer is checked against.
+    answer_times: &'a lab::answer_times::AnswerTimes<'a>,
 }
 
 impl<'a> Encoder<'a> {
-    pub(crate) fn new(study: &'a StudyDefinition) -> Self {
+    pub(crate) fn new(
+        study: &'a StudyDefinition,
+        answer_times: &'a lab::answer_times::AnswerTimes<'a>,
+    ) -> Self {
         Encoder {
             study,
+            answer_times,
             stimuli: study
                 .manifest
                 .stimuli
@@ -355,7 +361,10 @@ impl<'a> Encoder<'a> {
 
     /// What the study's `[crowdsourcing]` rules decide about session `s`, and its rows.
     pub(crate) fn prepare(&self, s: &SessionResults) -> (SessionExclusion, Encoded) {
-        let exclusion = analysis::exclusions::session_exclusion(s, &self.study.crowdsourcing);
+        let exclusion =
+            analysis::exclusions::session_exclusion(s, &self.study.crowdsourcing, &|r| {
+                self.answer_times.need_ms(r)
+            });
         let rows = self.encode(s, &exclusion);
         (exclusion, rows)
     }

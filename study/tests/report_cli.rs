@@ -553,3 +553,172 @@ fn report_tables_agree_and_say_what_they_are() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// The stimuli of `examples/FILE`'s trial: one pass of a side-by-side trial lasts its
+/// reference clip, `Frames` × `Frame Time` of its BVH file, seconds.
+fn bvh_seconds(file: &Path) -> f64 {
+    let text = std::fs::read_to_string(file).unwrap();
+    let value = |key: &str| -> f64 {
+        text.lines()
+            .find_map(|l| l.trim().strip_prefix(key))
+            .unwrap()
+            .trim()
+            .parse()
+            .unwrap()
+    };
+    value("Frames:") * value("Frame Time:")
+}
+
+/// Issue 37: a log whose answers came sooner after the one before than the trial's stimuli
+/// play (as a scripted client of an older server wrote them) is flagged by `study report`,
+/// naming the session, the trial and both times; `[crowdsourcing] too_fast = "exclude"`
+/// leaves such sessions out of every statistic. The three sessions are simulated, then made
+/// to look taken by subjects: no observer seed, and answer times rewritten on both clocks:
+/// S001 a minute apart, S002 20 ms apart, S003 a minute apart but trial 5 20 ms after trial 4.
+#[test]
+#[expect(
+    clippy::too_many_lines,
+    reason = "two runs, each made to look taken by subjects and reported"
+)]
+fn report_flags_answers_sooner_than_the_stimuli_play_and_the_study_can_exclude_them() {
+    let dir = std::env::temp_dir().join(format!("study-report-too-fast-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let examples = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples");
+    let excluding = dir.join("mos-excluding.toml");
+    let text = std::fs::read_to_string(examples.join("mos.toml"))
+        .unwrap()
+        .replace(
+            "stimuli = \"stimuli.json\"",
+            &format!(
+                "stimuli = {:?}",
+                examples.join("stimuli.json").display().to_string()
+            ),
+        );
+    std::fs::write(
+        &excluding,
+        text + "\n[crowdsourcing]\ntoo_fast = \"exclude\"\n",
+    )
+    .unwrap();
+    let humanize = |res: &Path| {
+        for (subject, gaps) in [
+            ("S001", None),
+            ("S002", Some(0..usize::MAX)),
+            ("S003", Some(5..6)),
+        ] {
+            let session = res.join(format!("{subject}_s1"));
+            let mut m: serde_json::Value =
+                serde_json::from_slice(&std::fs::read(session.join("session.json")).unwrap())
+                    .unwrap();
+            m["observer_seed"] = serde_json::Value::Null;
+            let start = m["started_ms"].as_u64().unwrap();
+            std::fs::write(session.join("session.json"), m.to_string()).unwrap();
+            let text = std::fs::read_to_string(session.join("trials.csv")).unwrap();
+            let header = csv_fields(text.lines().next().unwrap());
+            let (wall, mono) = (col(&header, "wall_clock_ms"), col(&header, "monotonic_ms"));
+            let (mut at_wall, mut at_mono) = (start, 0);
+            edit_rows(&session.join("trials.csv"), |rows| {
+                for (i, row) in rows.iter_mut().enumerate() {
+                    let step = if gaps.as_ref().is_some_and(|g| g.contains(&i)) {
+                        20
+                    } else {
+                        60_000
+                    };
+                    at_wall += step;
+                    at_mono += step;
+                    let mut f = csv_fields(row);
+                    assert!(f.iter().all(|x| !x.contains([',', '"'])), "{row}");
+                    f[wall] = at_wall.to_string();
+                    f[mono] = at_mono.to_string();
+                    *row = f.join(",");
+                }
+            });
+        }
+    };
+    let report = |res: &Path, name: &str| {
+        let rep = dir.join(name);
+        let out = study(&[
+            "report",
+            res.to_str().unwrap(),
+            "-o",
+            rep.to_str().unwrap(),
+            "--no-png",
+        ]);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let md = std::fs::read_to_string(rep.join("report.md")).unwrap();
+        let ratings = std::fs::read_to_string(rep.join("ratings.csv"))
+            .unwrap()
+            .lines()
+            .count()
+            - 1;
+        (rep, md, ratings)
+    };
+    let flagged = dir.join("flagged");
+    simulate("mos.toml", &flagged, &["--subjects", "3", "--seed", "5"]);
+    let (_, _, all_ratings) = report(&flagged, "simulated");
+    humanize(&flagged);
+    let (rep, md, ratings) = report(&flagged, "flagged-report");
+    assert!(
+        md.contains(
+            "2 sessions answered trials sooner after the answer before than their stimuli play"
+        ) && md.contains("S002 session 1, S003 session 1")
+            && md.contains("they are kept, flagged"),
+        "{md}"
+    );
+    assert_eq!(ratings, all_ratings, "flagged sessions are kept");
+    let (header, rows) = table(&rep, "exclusions");
+    let fast = col(&header, "Answered too fast");
+    let sessions: Vec<&str> = rows.iter().map(|r| r[0].as_str()).collect();
+    assert_eq!(sessions, ["S002 session 1", "S003 session 1"]);
+    // S003's trial 5 shows a reference clip whose one pass (side by side, played once) is
+    // what it must have played before the answer.
+    let s3 = results::read_session(&flagged.join("S003_s1")).unwrap();
+    let trial5 = &s3.trials.records[5].trial;
+    let manifest: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(examples.join("stimuli.json")).unwrap()).unwrap();
+    let file = manifest["stimuli"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|s| s["id"] == trial5.reference.as_str())
+        .unwrap()["file"]
+        .as_str()
+        .unwrap();
+    let need = bvh_seconds(&examples.join(file));
+    assert!(need > 1.0, "{need}");
+    assert_eq!(rows[1][fast], format!("trial 5 (0.0 s of {need:.1} s)"));
+    assert!(
+        rows[0][fast].starts_with("trial 0 (0.0 s of ") && rows[0][fast].ends_with(" 11 more"),
+        "{:?}",
+        rows[0][fast]
+    );
+    assert!(rows.iter().all(|r| r[col(&header, "Excluded")].is_empty()));
+
+    let excluded = dir.join("excluded");
+    let o = study(&[
+        "simulate",
+        excluding.to_str().unwrap(),
+        "-o",
+        excluded.to_str().unwrap(),
+        "--subjects",
+        "3",
+        "--seed",
+        "5",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    humanize(&excluded);
+    let (rep, md, ratings) = report(&excluded, "excluded-report");
+    assert!(
+        md.contains("left out 2 of 3 sessions (S002 session 1, S003 session 1)")
+            && md.contains("they are left out"),
+        "{md}"
+    );
+    assert_eq!(ratings * 3, all_ratings, "only S001's ratings");
+    let (header, rows) = table(&rep, "exclusions");
+    assert!(rows.iter().all(|r| r[col(&header, "Excluded")] == "yes"));
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -22,6 +22,18 @@ pub enum HiddenRule {
     Exclude,
 }
 
+/// What `study report` does with a session that answered a trial sooner after its previous
+/// answer than the trial's stimuli take to play (`[crowdsourcing] too_fast`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TooFastRule {
+    /// The session is listed in the report's exclusions section, and kept.
+    #[default]
+    Flag,
+    /// The session is listed and left out of every statistic.
+    Exclude,
+}
+
 /// A gold (catch) trial: a condition whose answer is known, e.g. an identical pair (a
 /// lossless stimulus, rated at least `min`) or an obvious degradation (rated at most `max`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -70,6 +82,9 @@ pub struct CrowdsourcingSettings {
     /// participant idle longer no longer counts against the quota.
     #[serde(default = "default_lease_s")]
     pub lease_s: u32,
+    /// Sessions with answers sooner than their stimuli play: flagged or excluded.
+    #[serde(default)]
+    pub too_fast: TooFastRule,
 }
 
 /// `[crowdsourcing] lease_s` unless the study sets it: 30 minutes.
@@ -96,6 +111,7 @@ impl Default for CrowdsourcingSettings {
             groups: None,
             quota: None,
             lease_s: DEFAULT_LEASE_S,
+            too_fast: TooFastRule::Flag,
         }
     }
 }
@@ -132,6 +148,12 @@ fn code_ok(s: &str) -> bool {
             .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
 }
 
+fn url_ok(u: &str) -> bool {
+    u.starts_with("https://")
+        && u.len() <= 2000
+        && !u.chars().any(|c| c.is_whitespace() || c.is_control())
+}
+
 pub(super) fn parse_crowdsourcing(
     t: &Table,
     protocol: Option<Protocol>,
@@ -153,6 +175,7 @@ pub(super) fn parse_crowdsourcing(
             "groups",
             "quota",
             "lease_s",
+            "too_fast",
         ],
     );
     let d = CrowdsourcingSettings::default();
@@ -184,17 +207,24 @@ pub(super) fn parse_crowdsourcing(
         }
         None => d.min_refresh_hz,
     };
-    let hidden = match cx.string(t, C, "hidden").as_deref() {
-        None | Some("repeat") => HiddenRule::Repeat,
-        Some("exclude") => HiddenRule::Exclude,
-        Some(other) => {
-            cx.err(
-                join(C, "hidden"),
-                format!("expected \"repeat\" or \"exclude\", got {other:?}"),
-            );
-            HiddenRule::Repeat
-        }
-    };
+    let hidden = word(
+        t,
+        "hidden",
+        [
+            ("repeat", HiddenRule::Repeat),
+            ("exclude", HiddenRule::Exclude),
+        ],
+        cx,
+    );
+    let too_fast = word(
+        t,
+        "too_fast",
+        [
+            ("flag", TooFastRule::Flag),
+            ("exclude", TooFastRule::Exclude),
+        ],
+        cx,
+    );
     let completion_code = cx.string(t, C, "completion_code");
     if completion_code.as_deref().is_some_and(|c| !code_ok(c)) {
         cx.err(
@@ -203,11 +233,7 @@ pub(super) fn parse_crowdsourcing(
         );
     }
     let completion_url = cx.string(t, C, "completion_url");
-    if completion_url.as_deref().is_some_and(|u| {
-        !u.starts_with("https://")
-            || u.len() > 2000
-            || u.chars().any(|c| c.is_whitespace() || c.is_control())
-    }) {
+    if completion_url.as_deref().is_some_and(|u| !url_ok(u)) {
         cx.err(
             join(C, "completion_url"),
             "expected an https:// address without spaces",
@@ -229,6 +255,24 @@ pub(super) fn parse_crowdsourcing(
         groups,
         quota,
         lease_s: lease_s.unwrap_or(DEFAULT_LEASE_S),
+        too_fast,
+    }
+}
+
+/// `[crowdsourcing] key`: one of two words, the first the default.
+fn word<T: Copy>(t: &Table, key: &str, words: [(&str, T); 2], cx: &mut Ctx) -> T {
+    match cx.string(t, C, key) {
+        None => words[0].1,
+        Some(w) => words.iter().find(|(name, _)| *name == w).map_or_else(
+            || {
+                cx.err(
+                    join(C, key),
+                    format!("expected {:?} or {:?}, got {w:?}", words[0].0, words[1].0),
+                );
+                words[0].1
+            },
+            |(_, v)| *v,
+        ),
     }
 }
 

@@ -38,7 +38,7 @@ use crate::manifest::StimulusManifest;
 use crate::record::{Arrangement, Position, Protocol};
 use crate::staircase::StaircaseSettings;
 use check::Ctx;
-pub use crowdsourcing::{CrowdsourcingSettings, GoldTrial, HiddenRule};
+pub use crowdsourcing::{CrowdsourcingSettings, GoldTrial, HiddenRule, TooFastRule};
 pub use fields::{FieldKind, MAX_FIELD_CHARS, SubjectField};
 pub use mushra::{AnchorRule, MushraSettings, screens as mushra_screens};
 pub use quest::domain as quest_domain;
