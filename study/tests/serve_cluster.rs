@@ -94,9 +94,10 @@ fn serve(study: &Path, page: &Path, url: &str, args: &[&str]) -> (Proc, SocketAd
         .spawn()
         .unwrap();
     let mut line = String::new();
-    BufReader::new(child.stdout.take().unwrap())
-        .read_line(&mut line)
-        .unwrap();
+    let mut out = BufReader::new(child.stdout.take().unwrap());
+    out.read_line(&mut line).unwrap();
+    // The rest (what it says when stopped) is read to the end: a closed pipe would fail it.
+    std::thread::spawn(move || std::io::copy(&mut out, &mut std::io::sink()));
     let addr = line
         .split("http://")
         .nth(1)
@@ -454,6 +455,24 @@ fn three_servers_behind_nginx_lose_nothing_when_one_is_killed() {
 
     // The two servers left refuse answers no page could give.
     cheaters_are_refused(front, &[servers[0].1, servers[1].1]);
+    // Stopped as an experimenter stops them (SIGTERM): each marks its open sessions
+    // interrupted, lets its database connections go and exits 0 (closing them on an async
+    // worker once panicked at exit).
+    for (p, _) in &mut servers {
+        let pid = p.0.id().to_string();
+        assert!(
+            Command::new("kill")
+                .args(["-TERM", &pid])
+                .status()
+                .unwrap()
+                .success()
+        );
+        let status = p.0.wait().unwrap();
+        assert!(
+            status.success(),
+            "a server stopped by SIGTERM exited with {status}"
+        );
+    }
     drop(servers);
     let _ = std::fs::remove_dir_all(&dir);
 }

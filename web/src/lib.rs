@@ -126,10 +126,16 @@ impl Server {
             Ok(r) => r.map_err(io("serving"))?,
             Err(e) => return Err(WebError::Refused(format!("the server task failed: {e}"))),
         }
-        let app = Arc::clone(&self.app);
-        tokio::task::spawn_blocking(move || app.interrupt_all())
-            .await
-            .map_err(|e| WebError::Refused(format!("the server task failed: {e}")))?
+        // The state is let go on a blocking thread too: a database's synchronous clients block
+        // on a runtime of their own when they close, which panics on an async worker.
+        let app = self.app;
+        tokio::task::spawn_blocking(move || {
+            let interrupted = app.interrupt_all();
+            drop(app);
+            interrupted
+        })
+        .await
+        .map_err(|e| WebError::Refused(format!("the server task failed: {e}")))?
     }
 }
 

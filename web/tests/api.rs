@@ -850,3 +850,88 @@ fn stalled_connections_are_capped_and_timed_out() {
     rt.block_on(server.stop()).unwrap();
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The same rule across servers (issue 37): two servers of one database run share its
+/// places. Five bare joins, taken in turn by the two, fill a quota of five for the lease;
+/// a participant who asks again (through the other server) keeps their place while the four
+/// idle ones give theirs back; an idle one who comes back continues. The database notes a
+/// request at most every 2 s, so the active participant asks after that.
+#[test]
+fn two_servers_of_one_database_share_the_quota_and_the_lease() {
+    let pg = match results::pg::scratch::ScratchServer::start(&std::env::temp_dir(), &["fsync=off"])
+    {
+        Ok(s) => s,
+        Err(e) if std::env::var_os("CI").is_none() && results::pg::scratch::bin_dir().is_err() => {
+            eprintln!("skipped: {e}");
+            return;
+        }
+        Err(e) => panic!("{e}"),
+    };
+    let dir = temp_dir("db-lease");
+    let mut options = setup(&dir);
+    let study = std::fs::read_to_string(&options.study).unwrap()
+        + "[crowdsourcing]\nquota = 5\nlease_s = 3\n";
+    std::fs::write(&options.study, study).unwrap();
+    options.results = lab::results_dir::Destination::Database {
+        db: Box::new(pg.create_database("lease").unwrap()),
+        run: None,
+    };
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    let a = rt.block_on(web::start(options.clone())).unwrap();
+    let b = rt.block_on(web::start(options)).unwrap();
+    let addrs = [a.addr, b.addr];
+    let turn = std::cell::Cell::new(0);
+    // A join through the next server in turn: its status, the client and the server's turn.
+    let join = |id: &str| {
+        let server = turn.get() % 2;
+        turn.set(turn.get() + 1);
+        let mut c = Client::new(addrs[server]);
+        let status = c.join(&params(&[("PROLIFIC_PID", id)])).unwrap().status;
+        (status, (c, server))
+    };
+    // A participant through the server that did not take their join.
+    let elsewhere = |(c, server): &(Client, usize)| {
+        let mut other = Client::new(addrs[1 - server]);
+        other.subject.clone_from(&c.subject);
+        other.token.clone_from(&c.token);
+        other
+    };
+    let start = std::time::Instant::now();
+    let first: Vec<(Client, usize)> = (0..5)
+        .map(|i| {
+            let (status, c) = join(&format!("bare{i}"));
+            assert_eq!(status, 200, "join {i}");
+            c
+        })
+        .collect();
+    for _ in 0..2 {
+        assert_eq!(join("sixth").0, 503, "the quota is full on both servers");
+    }
+    std::thread::sleep(Duration::from_millis(2300).saturating_sub(start.elapsed()));
+    let mut active = elsewhere(&first[0]);
+    let r = active
+        .request("GET", &active.session_path("session"), None)
+        .unwrap();
+    assert_eq!(r.status, 200, "{:?}", r.json());
+    std::thread::sleep(Duration::from_millis(3600).saturating_sub(start.elapsed()));
+    for i in 0..4 {
+        assert_eq!(join(&format!("late{i}")).0, 200, "late join {i}");
+    }
+    assert!(
+        start.elapsed() < Duration::from_secs(5),
+        "the active participant's lease may have run out meanwhile"
+    );
+    assert_eq!(join("over").0, 503);
+    let mut back = elsewhere(&first[1]);
+    let r = back
+        .request("GET", &back.session_path("session"), None)
+        .unwrap();
+    assert_eq!(
+        (r.status, r.json()["state"].as_str()),
+        (200, Some("welcome"))
+    );
+    assert_eq!(join("still-over").0, 503);
+    rt.block_on(a.stop()).unwrap();
+    rt.block_on(b.stop()).unwrap();
+    let _ = std::fs::remove_dir_all(&dir);
+}
