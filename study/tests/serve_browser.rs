@@ -1211,10 +1211,6 @@ const FEWER_TRIALS: usize = 4;
 /// See [`FEWER_TRIALS`].
 const FEWER_REVERSALS: usize = 2;
 
-/// How many example sessions run at once, each with its own server and browser (see
-/// [`every_example_study_runs_in_the_browser_as_simulated`]).
-const SESSIONS_AT_ONCE: usize = 2;
-
 /// Copies the example folder into `dir` with every stimulus clip (BVH, AMC) cut to its first
 /// 1/[`SHORTER`] of frames, every study's `grey_ms` and `gap_ms` divided by [`SHORTER`], its
 /// `max_trials` by [`FEWER_TRIALS`] and its `stop_reversals` by [`FEWER_REVERSALS`]
@@ -1410,7 +1406,7 @@ impl Example {
         let port = free_port();
         let server = serve(&self.study, &self.out, port);
         // Half a device pixel per CSS pixel: SwiftShader draws a quarter of the pixels, which
-        // was most of the CPU two sessions at once took; the texts measured are CSS pixels.
+        // was most of the CPU a browser took; the texts measured are CSS pixels.
         let b = driver.browser_at(&self.dir.join("profile"), 0.5);
         b.go(&format!(
             "http://127.0.0.1:{port}/?PROLIFIC_PID={}",
@@ -1536,7 +1532,7 @@ fn every_example_study_runs_in_the_browser_as_simulated() {
         return;
     };
     let sizes = [(1280, 720), (1920, 1080)];
-    let small = Vec::new();
+    let mut small = Vec::new();
     let driver = Driver::start();
     // `SCREENSHOTS=DIR` (scripts/screenshots): each example as it is, to its first trial,
     // for docs/serve.md beside the window's.
@@ -1547,33 +1543,9 @@ fn every_example_study_runs_in_the_browser_as_simulated() {
     } else {
         short_examples(&copies)
     };
-    // Two sessions at a time, each with its own server and browser: a session mostly waits
-    // for its stimuli to play (about a fifth of a core each), so two at once halve the
-    // test's time without starving either's frames on a 2-core machine.
-    let next = std::sync::atomic::AtomicUsize::new(0);
-    let small = std::sync::Mutex::new(small);
-    std::thread::scope(|scope| {
-        for _ in 0..SESSIONS_AT_ONCE {
-            scope.spawn(|| {
-                loop {
-                    let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                    let Some(study) = studies.get(i) else {
-                        return;
-                    };
-                    let mut mine = Vec::new();
-                    run_example(&driver, study, &sizes, shots.as_deref(), &mut mine);
-                    small
-                        .lock()
-                        .unwrap_or_else(std::sync::PoisonError::into_inner)
-                        .extend(mine);
-                }
-            });
-        }
-    });
-    let mut small = small
-        .into_inner()
-        .unwrap_or_else(std::sync::PoisonError::into_inner);
-    small.sort();
+    for study in &studies {
+        run_example(&driver, study, &sizes, shots.as_deref(), &mut small);
+    }
     let _ = std::fs::remove_dir_all(&copies);
     assert!(
         small.is_empty(),
