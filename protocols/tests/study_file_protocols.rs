@@ -617,7 +617,7 @@ fn crowdsourcing_settings_are_read_and_every_mistake_is_listed() {
         "{base}\n[crowdsourcing]\nmin_window = [1024, 600]\nmin_refresh_hz = 59\nfullscreen = true\n\
          hidden = \"exclude\"\ncompletion_code = \"C0DE-1\"\n\
          completion_url = \"https://app.prolific.com/submissions/complete?cc=C0DE-1\"\n\
-         max_gold_failures = 1\ngroups = 4\nquota = 25\n\
+         max_gold_failures = 1\ngroups = 4\nquota = 25\ntoo_fast = \"exclude\"\n\
          [[crowdsourcing.gold]]\nstimulus = \"{first}\"\nmax = 2\n"
     ))
     .unwrap();
@@ -627,6 +627,7 @@ fn crowdsourcing_settings_are_read_and_every_mistake_is_listed() {
         ([1024, 600], 59.0, true)
     );
     assert_eq!(c.hidden, HiddenRule::Exclude);
+    assert_eq!(c.too_fast, protocols::study::TooFastRule::Exclude);
     assert_eq!(
         (c.groups, c.quota, c.max_gold_failures),
         (Some(4), Some(25), 1)
@@ -636,13 +637,18 @@ fn crowdsourcing_settings_are_read_and_every_mistake_is_listed() {
     // Without the table: the defaults (a 50 Hz display, 800 x 500, repeat a hidden trial).
     let d = example("mos.toml").crowdsourcing;
     assert_eq!(
-        (d.min_refresh_hz, d.min_window_px, d.hidden),
-        (50.0, [800, 500], HiddenRule::Repeat)
+        (d.min_refresh_hz, d.min_window_px, d.hidden, d.too_fast),
+        (
+            50.0,
+            [800, 500],
+            HiddenRule::Repeat,
+            protocols::study::TooFastRule::Flag
+        )
     );
 
     let got = issues(&format!(
         "{base}\n[crowdsourcing]\nmin_window = [10]\nhidden = \"skip\"\ncompletion_code = \"a b\"\n\
-         completion_url = \"http://x\"\ngroups = 0\ncolour = 1\n\
+         completion_url = \"http://x\"\ngroups = 0\ncolour = 1\ntoo_fast = \"warn\"\n\
          [[crowdsourcing.gold]]\nstimulus = \"nope\"\n"
     ));
     let has = |k: &str, r: &str| got.iter().any(|(gk, gr)| gk == k && gr.contains(r));
@@ -660,6 +666,13 @@ fn crowdsourcing_settings_are_read_and_every_mistake_is_listed() {
     );
     assert!(has("crowdsourcing.completion_url", "https://"), "{got:#?}");
     assert!(has("crowdsourcing.groups", "at least 1"), "{got:#?}");
+    assert!(
+        has(
+            "crowdsourcing.too_fast",
+            "expected \"flag\" or \"exclude\", got \"warn\""
+        ),
+        "{got:#?}"
+    );
     assert!(has("crowdsourcing.colour", "unknown key"), "{got:#?}");
     assert!(has("crowdsourcing.gold[0]", "give min"), "{got:#?}");
     assert!(
@@ -669,7 +682,7 @@ fn crowdsourcing_settings_are_read_and_every_mistake_is_listed() {
         ),
         "{got:#?}"
     );
-    assert_eq!(got.len(), 8, "{got:#?}");
+    assert_eq!(got.len(), 9, "{got:#?}");
 }
 
 /// The repository's crowd example (thesis 6.5) with `edit` applied to its text, over its own

@@ -169,10 +169,7 @@ pub(crate) fn exclusions(
                 protocols::study::TooFastRule::Exclude => "they are left out",
                 protocols::study::TooFastRule::Flag => "they are kept, flagged",
             },
-            match crowd.too_fast {
-                protocols::study::TooFastRule::Exclude => "exclude",
-                protocols::study::TooFastRule::Flag => "flag",
-            }
+            crowd.too_fast.word()
         ));
     }
     section.table(analysis::exclusions::exclusions_table(exclusions, crowd));

@@ -34,6 +34,22 @@ pub enum TooFastRule {
     Exclude,
 }
 
+impl TooFastRule {
+    /// The study file's word for each rule, the default first.
+    pub const WORDS: [(&'static str, TooFastRule); 2] = [
+        ("flag", TooFastRule::Flag),
+        ("exclude", TooFastRule::Exclude),
+    ];
+
+    /// The study file's word for the rule (`too_fast = "..."`).
+    pub fn word(self) -> &'static str {
+        match self {
+            TooFastRule::Flag => "flag",
+            TooFastRule::Exclude => "exclude",
+        }
+    }
+}
+
 /// A gold (catch) trial: a condition whose answer is known, e.g. an identical pair (a
 /// lossless stimulus, rated at least `min`) or an obvious degradation (rated at most `max`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
