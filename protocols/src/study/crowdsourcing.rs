@@ -35,12 +35,6 @@ pub enum TooFastRule {
 }
 
 impl TooFastRule {
-    /// The study file's word for each rule, the default first.
-    pub const WORDS: [(&'static str, TooFastRule); 2] = [
-        ("flag", TooFastRule::Flag),
-        ("exclude", TooFastRule::Exclude),
-    ];
-
     /// The study file's word for the rule (`too_fast = "..."`).
     pub fn word(self) -> &'static str {
         match self {
@@ -235,10 +229,7 @@ pub(super) fn parse_crowdsourcing(
     let too_fast = word(
         t,
         "too_fast",
-        [
-            ("flag", TooFastRule::Flag),
-            ("exclude", TooFastRule::Exclude),
-        ],
+        [TooFastRule::Flag, TooFastRule::Exclude].map(|r| (r.word(), r)),
         cx,
     );
     let completion_code = cx.string(t, C, "completion_code");
